@@ -1,0 +1,3 @@
+fn main() -> miette::Result<()> {
+    host_compiler::cli::main()
+}
