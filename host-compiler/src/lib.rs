@@ -3,9 +3,20 @@
 //! One concept per module; each module's doc comment says what it owns.
 #![allow(non_snake_case)]
 
+// The BLAS/LAPACK symbols clarabel's SDP support links against come from this crate.
+extern crate lapack_faer;
+
 pub mod benchkit;
 pub mod caf;
+pub mod certify;
 pub mod cli;
+pub mod coverage;
+pub mod emit;
 pub mod geometry;
+pub mod linalg;
 pub mod model;
 pub mod robustness;
+pub mod spec;
+// pub mod synth; (enabled once model::zoh, caf and report land)
+pub mod trajectory;
+pub mod verify;

@@ -1,4 +1,13 @@
-//! `host-compiler inspect IMAGE [--json]`: decode, validate and print a controller image.
+//! `host-compiler inspect IMAGE [--json]`: decode and validate a controller image with the same decoder the
+//! firmware runs, then print its whole content (header, K, P, balls, tables, fallback, terminal, CRC,
+//! size) as JSON, or as a readable summary. A rejected image is reported with what is wrong with it.
+#![allow(non_snake_case)]
+
+use std::fmt::Write as _;
+use std::io::Write as _;
+
+use serde::Serialize;
+use shared_types::image::{decode, Fallback, Header, Image, ImageError, Mode, Terminal, MAGIC};
 
 /// Arguments of `inspect`.
 #[derive(clap::Args, Debug)]
@@ -10,6 +19,333 @@ pub struct InspectArgs {
     pub json: bool,
 }
 
-pub fn run(_a: &InspectArgs) -> miette::Result<()> {
-    Err(miette::miette!("inspect: not built yet"))
+/// Why an image could not be inspected.
+#[derive(Debug, thiserror::Error, miette::Diagnostic)]
+pub enum InspectError {
+    /// The file could not be read.
+    #[error("cannot read {path}")]
+    Read {
+        /// File.
+        path: String,
+        /// Cause.
+        source: std::io::Error,
+    },
+    /// The bytes are not a valid image.
+    #[error("{path}: image rejected: {error}")]
+    Rejected {
+        /// File.
+        path: String,
+        /// What the decoder found.
+        error: ImageError,
+        /// Header summary, when the header itself could be read.
+        #[help]
+        header: Option<String>,
+    },
+}
+
+/// Entry point of the subcommand.
+pub fn run(a: &InspectArgs) -> miette::Result<()> {
+    let path = a.image.display().to_string();
+    let bytes = std::fs::read(&a.image).map_err(|source| InspectError::Read {
+        path: path.clone(),
+        source,
+    })?;
+    let out = render(&bytes, &path, a.json)?;
+    // Write, not println!: a closed pipe (`inspect x | head`) must end quietly, not panic.
+    let mut stdout = std::io::stdout().lock();
+    match writeln!(stdout, "{out}") {
+        Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => {
+            Err(miette::miette!("cannot write to stdout: {e}"))
+        }
+        _ => Ok(()),
+    }
+}
+
+/// Decodes `bytes` and renders the content (JSON if `json`), or explains why the image is rejected.
+pub fn render(bytes: &[u8], path: &str, json: bool) -> Result<String, InspectError> {
+    let img = decode(bytes).map_err(|error| InspectError::Rejected {
+        path: path.to_string(),
+        error,
+        header: Header::parse(bytes)
+            .ok()
+            .map(|h| header_line(&h, bytes.len())),
+    })?;
+    // decode succeeded, so the header parses.
+    let h = Header::parse(bytes).map_err(|error| InspectError::Rejected {
+        path: path.to_string(),
+        error,
+        header: None,
+    })?;
+    let report = Report::new(&img, &h, bytes.len());
+    if json {
+        Ok(serde_json::to_string_pretty(&report)
+            .unwrap_or_else(|e| format!("{{\"error\": \"{e}\"}}")))
+    } else {
+        Ok(summary(&report, path))
+    }
+}
+
+fn header_line(h: &Header, size: usize) -> String {
+    format!(
+        "header: version {}, mode {}, n {}, m {}, locations {}, trajectories {}, partitions {}, period {} s, \
+         payload {} bytes, CRC {:#010x}; file {} bytes",
+        h.version,
+        h.mode,
+        h.dims.n,
+        h.dims.m,
+        h.dims.n_locations,
+        h.dims.n_trajectories,
+        h.dims.n_partitions,
+        h.period,
+        h.payload_len,
+        h.crc,
+        size
+    )
+}
+
+#[derive(Serialize)]
+struct HeaderJson {
+    magic: String,
+    version: u16,
+    mode: &'static str,
+    mode_value: u8,
+    n: usize,
+    m: usize,
+    locations: usize,
+    trajectories: usize,
+    partitions: usize,
+    period: f32,
+    payload_len: u32,
+    crc: String,
+    size: usize,
+}
+
+#[derive(Serialize)]
+struct LocationJson {
+    index: usize,
+    K: Vec<Vec<f32>>,
+    P: Vec<Vec<f32>>,
+}
+
+#[derive(Serialize)]
+struct TrajectoryJson {
+    index: usize,
+    centre: Vec<f32>,
+    delta: f32,
+    first_row: usize,
+    steps: usize,
+    location: Vec<usize>,
+    v: Vec<Vec<f32>>,
+}
+
+#[derive(Serialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+enum FallbackJson {
+    Hold,
+    Zero,
+    Linear {
+        K: Vec<Vec<f32>>,
+        x_ref: Vec<f32>,
+        u_ref: Vec<f32>,
+    },
+}
+
+#[derive(Serialize)]
+struct BoxJson {
+    lo: Vec<f32>,
+    hi: Vec<f32>,
+}
+
+#[derive(Serialize)]
+struct Report {
+    header: HeaderJson,
+    total_steps: usize,
+    terminal: &'static str,
+    fallback: FallbackJson,
+    input_box: Option<BoxJson>,
+    locations: Vec<LocationJson>,
+    trajectories: Vec<TrajectoryJson>,
+}
+
+fn matrix(rows: usize, cols: usize, at: impl Fn(usize, usize) -> f32) -> Vec<Vec<f32>> {
+    (0..rows)
+        .map(|r| (0..cols).map(|c| at(r, c)).collect())
+        .collect()
+}
+
+impl Report {
+    fn new(img: &Image<'_>, h: &Header, size: usize) -> Report {
+        let (n, m) = (img.n(), img.m());
+        Report {
+            header: HeaderJson {
+                magic: String::from_utf8_lossy(&MAGIC).into_owned(),
+                version: h.version,
+                mode: match img.mode() {
+                    Mode::Feedforward => "feedforward",
+                    Mode::PwaFeedback => "pwa_feedback",
+                },
+                mode_value: img.mode() as u8,
+                n,
+                m,
+                locations: img.n_locations(),
+                trajectories: img.n_trajectories(),
+                partitions: img.dims().n_partitions,
+                period: img.period(),
+                payload_len: h.payload_len,
+                crc: format!("{:#010x}", h.crc),
+                size,
+            },
+            total_steps: img.total_steps(),
+            terminal: match img.terminal() {
+                Terminal::HoldLast => "hold_last",
+                Terminal::Fallback => "fallback",
+            },
+            fallback: match img.fallback() {
+                Fallback::Hold => FallbackJson::Hold,
+                Fallback::Zero => FallbackJson::Zero,
+                Fallback::Linear { .. } => FallbackJson::Linear {
+                    K: matrix(m, n, |r, c| img.fallback_K(r, c)),
+                    x_ref: (0..n).map(|i| img.fallback_x_ref(i)).collect(),
+                    u_ref: (0..m).map(|j| img.fallback_u_ref(j)).collect(),
+                },
+            },
+            input_box: img.has_input_box().then(|| {
+                let b: Vec<(f32, f32)> = (0..m).filter_map(|j| img.input_bounds(j)).collect();
+                BoxJson {
+                    lo: b.iter().map(|p| p.0).collect(),
+                    hi: b.iter().map(|p| p.1).collect(),
+                }
+            }),
+            locations: (0..img.n_locations())
+                .map(|l| LocationJson {
+                    index: l,
+                    K: matrix(m, n, |r, c| img.K(l, r, c)),
+                    P: matrix(n, n, |r, c| img.P(l, r, c)),
+                })
+                .collect(),
+            trajectories: (0..img.n_trajectories())
+                .map(|t| {
+                    let (first_row, steps) = img.trajectory_rows(t);
+                    TrajectoryJson {
+                        index: t,
+                        centre: (0..n).map(|i| img.centre(t, i)).collect(),
+                        delta: img.delta(t),
+                        first_row,
+                        steps,
+                        location: (0..steps).map(|s| img.location(t, s)).collect(),
+                        v: matrix(steps, m, |s, j| img.v(t, s, j)),
+                    }
+                })
+                .collect(),
+        }
+    }
+}
+
+fn vec_str(v: &[f32]) -> String {
+    let parts: Vec<String> = v.iter().map(|x| x.to_string()).collect();
+    format!("[{}]", parts.join(", "))
+}
+
+/// Rows of the v table printed per trajectory in the summary (the JSON has all of them).
+const SUMMARY_ROWS: usize = 6;
+
+fn summary(r: &Report, path: &str) -> String {
+    let h = &r.header;
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "{path}: valid controller image, {} bytes (header 32 + payload {}), format {} v{}, CRC {} ok",
+        h.size, h.payload_len, h.magic, h.version, h.crc
+    );
+    let _ = writeln!(
+        s,
+        "mode: {} ({}), sample period {} s",
+        h.mode, h.mode_value, h.period
+    );
+    let _ = writeln!(
+        s,
+        "n = {}, m = {}, locations = {}, trajectories = {}, table rows = {}, partitions = {}",
+        h.n, h.m, h.locations, h.trajectories, r.total_steps, h.partitions
+    );
+    let _ = writeln!(
+        s,
+        "terminal: {}",
+        match r.terminal {
+            "hold_last" => "hold the last row (u = K x + v_last)",
+            _ => "apply the fallback",
+        }
+    );
+    match &r.fallback {
+        FallbackJson::Hold => {
+            let _ = writeln!(s, "fallback: hold the last applied input");
+        }
+        FallbackJson::Zero => {
+            let _ = writeln!(s, "fallback: zero input");
+        }
+        FallbackJson::Linear { K, x_ref, u_ref } => {
+            let _ = writeln!(
+                s,
+                "fallback: u = K_fb (x - x_ref) + u_ref{}",
+                if r.input_box.is_some() {
+                    ", saturated to the input box"
+                } else {
+                    ""
+                }
+            );
+            for (i, row) in K.iter().enumerate() {
+                let _ = writeln!(s, "  K_fb[{i}] = {}", vec_str(row));
+            }
+            let _ = writeln!(s, "  x_ref = {}", vec_str(x_ref));
+            let _ = writeln!(s, "  u_ref = {}", vec_str(u_ref));
+        }
+    }
+    match &r.input_box {
+        Some(b) => {
+            let _ = writeln!(
+                s,
+                "input box: lo = {}, hi = {}",
+                vec_str(&b.lo),
+                vec_str(&b.hi)
+            );
+        }
+        None => {
+            let _ = writeln!(s, "input box: none");
+        }
+    }
+    for l in &r.locations {
+        let _ = writeln!(s, "location {}:", l.index);
+        for (i, row) in l.K.iter().enumerate() {
+            let _ = writeln!(s, "  K[{i}] = {}", vec_str(row));
+        }
+        for (i, row) in l.P.iter().enumerate() {
+            let _ = writeln!(s, "  P[{i}] = {}", vec_str(row));
+        }
+    }
+    for t in &r.trajectories {
+        let _ = writeln!(
+            s,
+            "trajectory {}: ball centre {}, delta {}, {} steps (rows {}..{})",
+            t.index,
+            vec_str(&t.centre),
+            t.delta,
+            t.steps,
+            t.first_row,
+            t.first_row + t.steps
+        );
+        for (k, row) in t.v.iter().enumerate().take(SUMMARY_ROWS) {
+            let _ = writeln!(s, "  v({k}) = {}  location {}", vec_str(row), t.location[k]);
+        }
+        if t.steps > SUMMARY_ROWS {
+            let last = t.steps - 1;
+            let _ = writeln!(
+                s,
+                "  ... {} more rows; v({last}) = {}  location {} (all rows with --json)",
+                t.steps - SUMMARY_ROWS,
+                vec_str(&t.v[last]),
+                t.location[last]
+            );
+        }
+    }
+    s.truncate(s.trim_end().len());
+    s
 }

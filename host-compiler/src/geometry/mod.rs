@@ -2,6 +2,69 @@
 //! output coordinates, each with distance, depth and signed distance in a PSD metric ‖·‖_R.
 //!
 //! Sign convention (Def 2.16, (2.8)): `signed_dist(x) = depth(x)` when x ∈ S (≥ 0) and `-dist(x)` when x ∉ S.
+//!
+//! When R is only positive semidefinite, ‖·‖_R is a seminorm: moving along the null space of R costs nothing,
+//! so distances can be zero between distinct points (a pseudometric, Def 2.15). Every set here handles that
+//! case exactly as §7.2.2 does for ellipsoids, and as documented per type.
+//!
+//! Submodules:
+//! - [`ellipsoid_distance`]: the §7.2 algorithm (standard form (7.5), degenerate reductions §7.2.2,
+//!   Theorem 7.6, Algorithm 7 with Lemma 7.9 / (7.45)), factored once per (Q, R) with an allocation-free
+//!   per-point path (Remark 7.11);
+//! - [`ellipsoid`]: [`Ellipsoid`] and CAF [`Ball`] regions built on it;
+//! - [`polytope`]: [`Polytope`] {x : Ax ≤ b}, distance by the QP (7.1), depth by facets;
+//! - [`combinators`]: [`Union`], [`Complement`], [`InOutput`] (sets given in output coordinates y = Cx).
+
+pub mod combinators;
+pub mod ellipsoid;
+pub mod ellipsoid_distance;
+pub mod polytope;
+
+mod cache;
+pub(crate) mod linalg;
+
+pub use combinators::{Complement, InOutput, Union};
+pub use ellipsoid::{Ball, Ellipsoid};
+pub use ellipsoid_distance::{
+    BoundaryDistanceSettings, BoundarySolution, BoundaryWorkspace, EllipsoidBoundaryDistance, OptimumKind,
+    StandardForm,
+};
+pub use polytope::Polytope;
+
+/// Bad input to a geometry constructor or query: says what was wrong and where.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum GeometryError {
+    #[error("{what}: expected {expected} entries, got {got}")]
+    Dimension { what: &'static str, expected: usize, got: usize },
+    #[error("{what}: entry {index} is not finite ({value})")]
+    NotFinite { what: &'static str, index: usize, value: f64 },
+    #[error("{what}: not symmetric, entry ({i},{j}) = {a} but ({j},{i}) = {b}")]
+    NotSymmetric { what: &'static str, i: usize, j: usize, a: f64, b: f64 },
+    #[error("{what}: not positive semidefinite (smallest eigenvalue {min_eigenvalue:e})")]
+    NotPsd { what: &'static str, min_eigenvalue: f64 },
+    #[error("{what}: must not be the zero matrix")]
+    ZeroMatrix { what: &'static str },
+    #[error("{what}: must be positive and finite, got {value}")]
+    NotPositive { what: &'static str, value: f64 },
+    #[error("{what}: has rank {rank}, needs full row rank {expected}")]
+    RankDeficient { what: &'static str, rank: usize, expected: usize },
+    #[error("{what}: the dimension must be at least 1")]
+    ZeroDimension { what: &'static str },
+    #[error("eigendecomposition of {what} did not converge")]
+    EigenNoConvergence { what: &'static str },
+    #[error("polytope: every row of A is zero, so the set is all of ℝⁿ (or empty); give at least one nonzero row")]
+    NoConstraints,
+    #[error("polytope: the set {{x : Ax ≤ b}} is empty")]
+    EmptyPolytope,
+    #[error("union: needs at least one member")]
+    EmptyUnion,
+    #[error("{what}: member {index} lives in ℝ^{got}, expected ℝ^{expected}")]
+    MemberDimension { what: &'static str, index: usize, expected: usize, got: usize },
+    #[error("{what}: quadratic-programming solver ended with status {status}")]
+    Solver { what: &'static str, status: String },
+    #[error("{what}: {reason}")]
+    Degenerate { what: &'static str, reason: String },
+}
 
 /// A positive semidefinite weight R defining the (semi)norm ‖v‖_R = sqrt(vᵀ R v). Row-major n×n.
 #[derive(Clone, Debug, PartialEq)]
@@ -20,6 +83,36 @@ impl Metric {
         }
         Self { n, R }
     }
+
+    /// A validated metric: `R` row-major n×n, finite, symmetric (to 1e-9 relative; stored symmetrised) and
+    /// positive semidefinite (to 1e-10 relative). A zero R is allowed (every distance is then 0).
+    pub fn new(n: usize, R: Vec<f64>) -> Result<Self, GeometryError> {
+        let m = Self { n, R };
+        let (R, _) = m.validated()?;
+        Ok(Self { n, R })
+    }
+
+    /// Check this metric (dimension ≥ 1, shape, finiteness, symmetry, PSD); return the symmetrised matrix and its
+    /// eigendecomposition. Public fields can hold anything, so every factorisation goes through here.
+    pub(crate) fn validated(&self) -> Result<(Vec<f64>, linalg::SymEig), GeometryError> {
+        if self.n == 0 {
+            return Err(GeometryError::ZeroDimension { what: "metric R" });
+        }
+        let R = linalg::symmetrize_checked("metric R", self.n, &self.R)?;
+        let eig = linalg::SymEig::new("metric R", self.n, &R)?;
+        eig.check_psd("metric R")?;
+        Ok((R, eig))
+    }
+
+    /// ‖v‖_R = sqrt(max(0, vᵀRv)) (no validation; `v.len()` must be n).
+    pub fn norm(&self, v: &[f64]) -> f64 {
+        linalg::quad_form(&self.R, v).max(0.0).sqrt()
+    }
+
+    /// ‖x − y‖_R (no validation; lengths must be n).
+    pub fn distance(&self, x: &[f64], y: &[f64]) -> f64 {
+        linalg::quad_form_shifted(&self.R, x, y).max(0.0).sqrt()
+    }
 }
 
 /// A distance together with the point of the set (or of its complement's closure) that attains it.
@@ -32,7 +125,27 @@ pub struct Witness {
     pub point: Vec<f64>,
 }
 
+impl Witness {
+    /// The witness reported by the infallible [`Region`] methods when the query itself is invalid (wrong
+    /// dimension, bad metric): value NaN and no point. Use the `try_*` methods to get the error instead.
+    pub fn invalid() -> Self {
+        Self { value: f64::NAN, point: Vec::new() }
+    }
+
+    /// Convert a `try_*` result to the infallible form, logging the error.
+    pub(crate) fn or_invalid(r: Result<Witness, GeometryError>) -> Witness {
+        r.unwrap_or_else(|e| {
+            tracing::warn!(error = %e, "geometry query on invalid input; returning NaN witness");
+            Witness::invalid()
+        })
+    }
+}
+
 /// A closed set in ℝⁿ with distance, depth and signed distance in a metric (Def 2.16).
+///
+/// The infallible methods return [`Witness::invalid`] (value NaN) on a bad query (point of the wrong
+/// dimension, metric not symmetric PSD of the right size); the `try_*` methods return the error instead.
+/// `contains` returns false for a point of the wrong dimension.
 pub trait Region: Send + Sync {
     /// Dimension of the ambient state space.
     fn dim(&self) -> usize;
@@ -51,5 +164,51 @@ pub trait Region: Send + Sync {
             w.value = -w.value;
             w
         }
+    }
+    /// [`Region::dist`] with errors reported.
+    fn try_dist(&self, x: &[f64], metric: &Metric) -> Result<Witness, GeometryError> {
+        Ok(self.dist(x, metric))
+    }
+    /// [`Region::depth`] with errors reported.
+    fn try_depth(&self, x: &[f64], metric: &Metric) -> Result<Witness, GeometryError> {
+        Ok(self.depth(x, metric))
+    }
+    /// [`Region::signed_dist`] with errors reported.
+    fn try_signed_dist(&self, x: &[f64], metric: &Metric) -> Result<Witness, GeometryError> {
+        check_query(self.dim(), x, metric)?;
+        if self.contains(x) {
+            self.try_depth(x, metric)
+        } else {
+            let mut w = self.try_dist(x, metric)?;
+            w.value = -w.value;
+            Ok(w)
+        }
+    }
+}
+
+/// Check a query point and a metric against the ambient dimension (shape and finiteness only; the metric's
+/// symmetry and PSD are checked when a set factors it).
+pub(crate) fn check_query(n: usize, x: &[f64], metric: &Metric) -> Result<(), GeometryError> {
+    linalg::check_vector("query point", x, n)?;
+    if metric.n != n {
+        return Err(GeometryError::Dimension { what: "metric dimension", expected: n, got: metric.n });
+    }
+    linalg::check_vector("metric R", &metric.R, n * n)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn metric_new_validates() {
+        assert!(Metric::new(2, vec![1.0, 0.0, 0.0, 1.0]).is_ok());
+        assert!(matches!(Metric::new(2, vec![1.0, 2.0, 2.0, 1.0]), Err(GeometryError::NotPsd { .. })));
+        assert!(matches!(Metric::new(2, vec![1.0, 0.0, 0.0]), Err(GeometryError::Dimension { .. })));
+        assert!(matches!(Metric::new(0, vec![]), Err(GeometryError::ZeroDimension { .. })));
+        // PSD but singular is allowed: a seminorm.
+        let m = Metric::new(2, vec![1.0, 0.0, 0.0, 0.0]).unwrap();
+        assert_eq!(m.distance(&[0.0, 0.0], &[0.0, 5.0]), 0.0);
+        assert_eq!(m.distance(&[0.0, 0.0], &[3.0, 5.0]), 3.0);
     }
 }

@@ -1,0 +1,120 @@
+//! Build script of the firmware:
+//! 1. copies the board's memory map `../memory.x` into `OUT_DIR` (cortex-m-rt's `link.x` includes it);
+//! 2. embeds the controller image: the file named by `CONTROLLER_IMAGE` (a path, relative paths taken from
+//!    `firmware/`), else a default test image generated here (see [`default_image`]);
+//! 3. writes the build-time fallback used when the image is rejected at boot: a zero input of dimension
+//!    `CONTROLLER_REJECTED_M` if set, else the `m` the image's header declares (if the header is readable at
+//!    all), else 0.
+//!
+//! `FIRMWARE_FAULT_INJECTION=panic|hardfault` builds a test firmware that faults on purpose at boot.
+//!
+//! The default image is generated rather than committed so that it always matches the current image format
+//! (a committed file would silently go stale when `FORMAT_VERSION` changes).
+#![allow(non_snake_case)]
+
+use shared_types::capacity::{MAX_IMAGE_LEN, MAX_M};
+use shared_types::image::{self, Dims, Fallback, Header, Image, Mode, Payload, Terminal};
+use std::path::{Path, PathBuf};
+
+fn main() {
+    let out = PathBuf::from(std::env::var_os("OUT_DIR").expect("cargo sets OUT_DIR"));
+    let manifest = PathBuf::from(std::env::var_os("CARGO_MANIFEST_DIR").expect("cargo sets it"));
+
+    let memory_x = manifest.join("..").join("memory.x");
+    std::fs::copy(&memory_x, out.join("memory.x")).expect("copy ../memory.x");
+    println!("cargo:rustc-link-search={}", out.display());
+    println!("cargo:rerun-if-changed={}", memory_x.display());
+    println!("cargo:rerun-if-changed=build.rs");
+    println!("cargo:rerun-if-env-changed=CONTROLLER_IMAGE");
+    println!("cargo:rerun-if-env-changed=CONTROLLER_REJECTED_M");
+    println!("cargo:rerun-if-env-changed=FIRMWARE_FAULT_INJECTION");
+
+    // Test-only builds that fault on purpose at boot, to check that faults exit QEMU with failure.
+    println!("cargo::rustc-check-cfg=cfg(fault_injection, values(\"panic\", \"hardfault\"))");
+    match std::env::var("FIRMWARE_FAULT_INJECTION").as_deref() {
+        Ok(kind @ ("panic" | "hardfault")) => {
+            println!("cargo:rustc-cfg=fault_injection=\"{kind}\"")
+        }
+        Ok("") | Err(_) => {}
+        Ok(other) => panic!("FIRMWARE_FAULT_INJECTION={other:?}: expected panic or hardfault"),
+    }
+
+    let bytes = match std::env::var_os("CONTROLLER_IMAGE") {
+        Some(p) => {
+            let path = manifest.join(Path::new(&p));
+            println!("cargo:rerun-if-changed={}", path.display());
+            std::fs::read(&path)
+                .unwrap_or_else(|e| panic!("CONTROLLER_IMAGE={}: {e}", path.display()))
+        }
+        None => default_image(),
+    };
+    // The image region is sized by the capacities; a larger file cannot be a valid image, but it is still
+    // embedded as given so that the firmware's own check refuses it at boot (and says so).
+    if bytes.len() > MAX_IMAGE_LEN {
+        println!(
+            "cargo:warning=controller image is {} bytes, more than MAX_IMAGE_LEN = {MAX_IMAGE_LEN}",
+            bytes.len()
+        );
+    }
+    std::fs::write(out.join("image.bin"), &bytes).expect("write image.bin");
+
+    let rejected_m = match std::env::var("CONTROLLER_REJECTED_M") {
+        Ok(s) => s
+            .trim()
+            .parse::<usize>()
+            .unwrap_or_else(|e| panic!("CONTROLLER_REJECTED_M={s:?}: {e}")),
+        Err(_) => Header::parse(&bytes).map(|h| h.dims.m).unwrap_or(0),
+    }
+    .min(MAX_M);
+    std::fs::write(
+        out.join("build_config.rs"),
+        format!(
+            "/// Input dimension of the zero input applied when the image is rejected (set by build.rs).\n\
+             pub const REJECTED_M: usize = {rejected_m};\n"
+        ),
+    )
+    .expect("write build_config.rs");
+}
+
+fn f32_bytes(xs: &[f32]) -> Vec<u8> {
+    xs.iter().flat_map(|x| x.to_le_bytes()).collect()
+}
+
+/// The default test image: the double integrator `ẍ = u` sampled at h = 0.1 s, under the gain
+/// `K = [-4, -3.8]`, which places both closed-loop poles of the zero-order-hold model
+/// (`Ad = [[1, h], [0, 1]]`, `Bd = [h²/2, h]`) at 0.8. One trajectory: the ball of radius 10 (metric `P = I`)
+/// around the origin, with a one-row table `v = 0` held past its end, so `u = K x` throughout; the fallback
+/// is zero input.
+fn default_image() -> Vec<u8> {
+    let K = f32_bytes(&[-4.0, -3.8]);
+    let P = f32_bytes(&[1.0, 0.0, 0.0, 1.0]);
+    let traj_end = 1u32.to_le_bytes();
+    let centre = f32_bytes(&[0.0, 0.0]);
+    let delta = f32_bytes(&[10.0]);
+    let v = f32_bytes(&[0.0]);
+    let location = [0u8];
+    let payload = Payload {
+        K: &K,
+        P: &P,
+        traj_end: &traj_end,
+        centre: &centre,
+        delta: &delta,
+        v: &v,
+        location: &location,
+        fallback: Fallback::Zero,
+        input_box: None,
+        terminal: Terminal::HoldLast,
+    };
+    let dims = Dims {
+        n: 2,
+        m: 1,
+        n_locations: 1,
+        n_trajectories: 1,
+        n_partitions: 0,
+    };
+    let img = Image::new(Mode::Feedforward, dims, 0.1, payload).expect("default image is valid");
+    let mut buf = vec![0u8; MAX_IMAGE_LEN];
+    let len = image::encode(&img, &mut buf).expect("default image encodes");
+    buf.truncate(len);
+    buf
+}

@@ -1,0 +1,323 @@
+//! Certification of what actually runs (DESIGN §5): the certified radius of a nominal trajectory for the
+//! sampled loop evaluated in f32 with the exact tables shipped.
+//!
+//! For one nominal trajectory x̃ of the loop x⁺ = A x + B (K̂ x + v̂(κ)) + g (K̂, v̂ the f32 values shipped):
+//!
+//! 1. **Theorem 4.7 at the samples.** δ_Goal = max_κ depth_P(x̃(κ), Goal) at κ* (4.12–4.13);
+//!    δ_Unsafe = min_κ dist_P(x̃(κ), Unsafe) (4.14); δ_Input = min_κ dist_P(x̃(κ), {x : K̂x + v̂(κ) ∉ Input'})
+//!    (4.15), with Input' the input set shrunk by the f32 rounding bound (so the input the firmware applies,
+//!    not only the ideal one, is in Input). Unsafe and Input are checked over the whole table (κ = 0..N),
+//!    which is stronger than the [0, t*] of the theorem.
+//! 2. **Between samples** (continuous-time plants under zero-order hold). With a = ‖A_c‖_P and
+//!    φ(h) = (e^{ah} − 1)/a, Grönwall's inequality on ẋ = A_c x + B_c u + c over one period gives
+//!    ‖x(κh+s) − x(κh)‖_P ≤ φ(h)‖A_c x(κh) + B_c u(κ) + c‖_P. With x(κh) = x̃(κ) + e, ‖e‖_P ≤ r, and
+//!    u = ũ + K̂e + ε this is at most γr + ρ_κ + φ(h)β ε̄ after the sample, where γ = 1 + φ(h)‖A_c + B_cK̂‖_P,
+//!    ρ_κ = φ(h)‖A_c x̃(κ) + B_c ũ(κ) + c‖_P and β = ‖P^{1/2}B_c‖₂. So the tube clears Unsafe between
+//!    samples when r < (dist_P(x̃(κ), Unsafe) − ρ_κ − φβε̄)/γ.
+//! 3. **f32 arithmetic as a bounded input disturbance** (Theorem 3.21). The evaluator computes
+//!    u_i = (Σ_j K̂_ij x̂_j) + v̂_i in f32 by recursive summation, with x̂ = fl32(x). Its error against
+//!    K̂x + v̂ is at most u|K̂||x| + γ_{n+1}(|K̂||x̂| + |v̂|) componentwise (u = 2⁻²⁴, γ_k = ku/(1−ku);
+//!    Higham, *Accuracy and Stability of Numerical Algorithms*, §3.1), evaluated with the largest |x_j| in
+//!    the tube. ε̄ is the largest 2-norm of that bound. r_crit (3.83–3.87) must stay below the radius.
+//! 4. **Ball selection in f32.** The firmware accepts x when fl32((x̂−c)ᵀP̂(x̂−c)) ≤ fl32(δ̂²); the stored δ̂
+//!    is shrunk so that every accepted x lies in the certified ball (bound derived in [`selection_radius`]).
+
+use crate::geometry::{Metric, Region};
+use crate::linalg::{mat_vec, p_norm, sym_eigenvalues, PdRoots};
+use crate::trajectory::generate::InputBound;
+use crate::trajectory::Nominal;
+use faer::{Mat, MatRef};
+
+/// Unit roundoff of f32 (round to nearest).
+pub const U32: f64 = 5.960_464_477_539_063e-8; // 2^-24
+/// Smallest positive normal f32: below it rounding is absolute (at most half the subnormal spacing).
+const F32_ABS: f64 = 1.0e-45;
+
+/// γ_k = k u / (1 − k u).
+fn gamma_k(k: usize) -> f64 {
+    let ku = k as f64 * U32;
+    ku / (1.0 - ku)
+}
+
+/// The continuous-time plant behind a sampled loop, for the inter-sample bound.
+#[derive(Clone, Debug)]
+pub struct ContinuousPart {
+    pub Ac: Mat<f64>,
+    pub Bc: Mat<f64>,
+    pub c: Vec<f64>,
+    /// Sample period h.
+    pub h: f64,
+}
+
+/// The loop being certified.
+pub struct Loop<'a> {
+    /// Discrete plant x⁺ = A x + B u + g.
+    pub A: MatRef<'a, f64>,
+    pub B: MatRef<'a, f64>,
+    pub g: &'a [f64],
+    /// The gain as shipped (f32 values widened exactly to f64).
+    pub K: MatRef<'a, f64>,
+    /// The CAF metric.
+    pub P: MatRef<'a, f64>,
+    pub continuous: Option<&'a ContinuousPart>,
+    pub goal: &'a dyn Region,
+    pub unsafe_set: Option<&'a dyn Region>,
+    pub input: &'a InputBound,
+}
+
+/// Constants of a loop that do not depend on the trajectory.
+#[derive(Clone, Debug)]
+pub struct LoopConstants {
+    pub roots: PdRoots,
+    /// σ_min(P − ÃᵀPÃ) for Ã = A + B K̂ (Theorem 3.21 needs it > 0).
+    pub sigma_min: f64,
+    /// ‖ÃᵀPB‖₂ and ‖BᵀPB‖₂ of (3.83), λ_max(P) of (3.85).
+    pub atpb: f64,
+    pub btpb: f64,
+    pub lambda_max: f64,
+    /// Inter-sample constants: φ(h), γ, β (1, 0, 0 for discrete-time plants).
+    pub phi: f64,
+    pub gamma: f64,
+    pub beta: f64,
+    /// sqrt((P⁻¹)_jj): the largest |e_j| over ‖e‖_P ≤ 1.
+    pub axis: Vec<f64>,
+}
+
+/// Why a loop cannot be certified at all.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum CertifyError {
+    #[error("the CAF matrix P is not positive definite")]
+    MetricNotPd,
+    #[error("with the shipped (f32) gain, P − ÃᵀPÃ is not positive definite (σ_min = {0:.3e}): no robustness to rounding (Theorem 3.21)")]
+    NotContracting(f64),
+}
+
+impl LoopConstants {
+    pub fn new(lp: &Loop<'_>) -> Result<Self, CertifyError> {
+        let roots = PdRoots::new(lp.P).ok_or(CertifyError::MetricNotPd)?;
+        let At = lp.A + lp.B * lp.K;
+        let M = lp.P - At.transpose() * lp.P * &At;
+        let sigma_min = sym_eigenvalues(M.as_ref()).and_then(|e| e.first().copied()).unwrap_or(f64::NAN);
+        if !(sigma_min > 0.0) {
+            return Err(CertifyError::NotContracting(sigma_min));
+        }
+        let atpb = crate::linalg::spectral_norm((At.transpose() * lp.P * lp.B).as_ref());
+        let btpb = crate::linalg::spectral_norm((lp.B.transpose() * lp.P * lp.B).as_ref());
+        let lambda_max = sym_eigenvalues(lp.P).and_then(|e| e.last().copied()).unwrap_or(f64::INFINITY);
+        let (phi, gamma, beta) = match lp.continuous {
+            None => (0.0, 1.0, 0.0),
+            Some(cp) => {
+                let a = roots.induced_norm(cp.Ac.as_ref());
+                let phi = if a * cp.h < 1e-12 { cp.h } else { (a * cp.h).exp_m1() / a };
+                let Acl = &cp.Ac + &cp.Bc * lp.K;
+                (phi, 1.0 + phi * roots.induced_norm(Acl.as_ref()), roots.norm_into(cp.Bc.as_ref()))
+            }
+        };
+        let n = lp.P.nrows();
+        let axis = (0..n).map(|j| roots.inv[(j, j)].max(0.0).sqrt()).collect();
+        Ok(Self { roots, sigma_min, atpb, btpb, lambda_max, phi, gamma, beta, axis })
+    }
+
+    /// r_crit of Theorem 3.21, (3.83)–(3.87), for a disturbance bound ε̄ (2-norm per step).
+    pub fn r_crit(&self, eps: f64) -> f64 {
+        let s = self.sigma_min;
+        let rho = (self.atpb + (self.atpb * self.atpb + s * self.btpb).sqrt()) / s * eps;
+        let r_tilde = rho * self.lambda_max.sqrt();
+        (r_tilde * r_tilde + (self.atpb * self.atpb / s + self.btpb) * eps * eps).sqrt()
+    }
+}
+
+/// The certificate of one trajectory.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct Certificate {
+    /// Theorem 4.7 at the samples, before margins.
+    pub delta_goal: f64,
+    pub k_star: usize,
+    pub delta_unsafe: f64,
+    pub k_unsafe: usize,
+    pub delta_input: f64,
+    pub k_input: usize,
+    /// Unsafe after the inter-sample bound.
+    pub delta_unsafe_intersample: f64,
+    /// Componentwise f32 rounding bound (max over the table) and its 2-norm ε̄.
+    pub eps_components: Vec<f64>,
+    pub eps_f32: f64,
+    pub r_crit: f64,
+    /// The certified radius of the ball of initial states (0 if none).
+    pub delta: f64,
+    /// The radius to store in the image (f32, rounded down), accounting for selection in f32.
+    pub delta_stored: f32,
+}
+
+impl Certificate {
+    pub fn is_certified(&self) -> bool {
+        self.delta > 0.0 && self.delta_stored > 0.0
+    }
+}
+
+/// Largest absolute state components over the tube of radius r around x̃(κ).
+fn tube_abs(x: &[f64], r: f64, axis: &[f64]) -> Vec<f64> {
+    x.iter().zip(axis).map(|(&xi, &a)| xi.abs() + r * a).collect()
+}
+
+/// Componentwise bound on the f32 evaluator's error for states with |x_j| ≤ X_j (module doc, item 3).
+pub fn evaluator_error_bound(K: MatRef<'_, f64>, v: &[f64], X: &[f64]) -> Vec<f64> {
+    let (m, n) = (K.nrows(), K.ncols());
+    let g = gamma_k(n + 1);
+    (0..m)
+        .map(|i| {
+            let kx: f64 = (0..n).map(|j| K[(i, j)].abs() * X[j]).sum();
+            let quant: f64 = (0..n).map(|j| K[(i, j)].abs() * (U32 * X[j] + F32_ABS)).sum();
+            quant + g * (kx * (1.0 + U32) + v[i].abs()) + F32_ABS
+        })
+        .collect()
+}
+
+/// Distance in the P-metric from x̃ to {x : K x + v ∉ Input'} — exact for a box (the nearest violated face),
+/// and the lower bound (ρ − ‖ũ‖)/‖K P^{-1/2}‖₂ for a 2-norm ball. `eps` is the componentwise rounding
+/// bound by which Input is shrunk. Negative when ũ itself violates Input'.
+pub fn input_distance(K: MatRef<'_, f64>, roots: &PdRoots, u: &[f64], input: &InputBound, eps: &[f64]) -> f64 {
+    let (m, n) = (K.nrows(), K.ncols());
+    match input {
+        InputBound::Box { lo, hi } => {
+            let mut d = f64::INFINITY;
+            for i in 0..m {
+                let Ki: Vec<f64> = (0..n).map(|j| K[(i, j)]).collect();
+                let s = roots.dual_norm(&Ki);
+                let slack = (hi[i] - eps[i] - u[i]).min(u[i] - lo[i] - eps[i]);
+                let di = if s > 0.0 { slack / s } else if slack >= 0.0 { f64::INFINITY } else { slack };
+                d = d.min(di);
+            }
+            d
+        }
+        InputBound::Norm2 { center, max } => {
+            let e2 = eps.iter().map(|e| e * e).sum::<f64>().sqrt();
+            let un = u.iter().zip(center).map(|(a, c)| (a - c) * (a - c)).sum::<f64>().sqrt();
+            let s = roots.norm_from(K);
+            let slack = max - e2 - un;
+            if s > 0.0 {
+                slack / s
+            } else if slack >= 0.0 {
+                f64::INFINITY
+            } else {
+                slack
+            }
+        }
+    }
+}
+
+/// The radius to store so that every state the f32 selection test accepts lies in the certified ball of
+/// radius `delta` (module doc, item 4). The test computes e = fl(x̂ − c) and d² = Σ_i e_i fl(Σ_j P̂_ij e_j) in
+/// f32. Each e_i carries a relative error ≤ u from the subtraction plus the quantisation of x (≤ u|x_i|);
+/// P̂_ij = P_ij(1 + θ) with |θ| ≤ u; the two sums add γ_{n+1}. Hence
+/// |fl(d²) − eᵀPe| ≤ γ_{n+4}·|e|ᵀ|P||e| + terms in u|x|, and |e|ᵀ|P||e| ≤ ‖|P|‖₂/λ_min(P)·‖e‖²_P.
+/// Shrinking δ² by the factor (1 − γ_{n+4}κ)(1 − 2u) and subtracting the quantisation term keeps
+/// acceptance inside the ball. Returns the f32 value, rounded down.
+pub fn selection_radius(P: MatRef<'_, f64>, center: &[f64], delta: f64) -> f32 {
+    let n = P.nrows();
+    let absP = Mat::from_fn(n, n, |i, j| P[(i, j)].abs());
+    let ev = sym_eigenvalues(P).unwrap_or_default();
+    let (lmin, lmax) = (ev.first().copied().unwrap_or(0.0), ev.last().copied().unwrap_or(f64::INFINITY));
+    if !(lmin > 0.0) || !(delta > 0.0) {
+        return 0.0;
+    }
+    let kappa = crate::linalg::spectral_norm(absP.as_ref()) / lmin;
+    let rel = gamma_k(n + 4) * kappa;
+    if rel >= 0.5 {
+        return 0.0;
+    }
+    // Quantisation of x: ‖x − x̂‖_P ≤ sqrt(λ_max)·u·(‖c‖∞ + δ·max axis) (per component bound, n of them).
+    let xmax = center.iter().fold(0.0f64, |a, c| a.max(c.abs())) + delta / lmin.sqrt();
+    let quant = lmax.sqrt() * (n as f64).sqrt() * (U32 * xmax + F32_ABS);
+    let d = (delta * ((1.0 - rel) * (1.0 - 2.0 * U32)).sqrt() - 2.0 * quant).max(0.0);
+    round_down_f32(d)
+}
+
+/// The largest f32 not above x (x ≥ 0).
+pub fn round_down_f32(x: f64) -> f32 {
+    let f = x as f32;
+    if (f as f64) > x {
+        f32::from_bits(f.to_bits() - 1)
+    } else {
+        f
+    }
+}
+
+/// Certify one nominal trajectory (simulated with the shipped K̂, v̂) for the loop.
+pub fn certify(lp: &Loop<'_>, lc: &LoopConstants, nom: &Nominal) -> Certificate {
+    let metric = Metric { n: lp.P.nrows(), R: crate::linalg::to_row_major(lp.P) };
+    let N = nom.steps();
+    // 1. Goal (4.12)–(4.13): the sample of greatest depth.
+    let mut delta_goal = f64::NEG_INFINITY;
+    let mut k_star = 0;
+    for (k, x) in nom.x.iter().enumerate() {
+        let d = lp.goal.signed_dist(x, &metric).value;
+        if d > delta_goal {
+            delta_goal = d;
+            k_star = k;
+        }
+    }
+    // Rounding bound over the table, with the tube radius at its largest possible value δ_Goal.
+    let r_max = delta_goal.max(0.0);
+    let m = lp.K.nrows();
+    let mut eps_components = vec![0.0f64; m];
+    for k in 0..N {
+        let X = tube_abs(&nom.x[k], r_max, &lc.axis);
+        for (e, b) in eps_components.iter_mut().zip(evaluator_error_bound(lp.K, &nom.v[k], &X)) {
+            *e = e.max(b);
+        }
+    }
+    let eps_f32 = eps_components.iter().map(|e| e * e).sum::<f64>().sqrt();
+    // 2. Unsafe (4.14) at samples and between them.
+    let (mut delta_unsafe, mut k_unsafe, mut delta_unsafe_is) = (f64::INFINITY, 0, f64::INFINITY);
+    if let Some(us) = lp.unsafe_set {
+        for (k, x) in nom.x.iter().enumerate() {
+            let d = -us.signed_dist(x, &metric).value; // dist outside (> 0), −depth inside
+            if d < delta_unsafe {
+                delta_unsafe = d;
+                k_unsafe = k;
+            }
+            let di = match lp.continuous {
+                Some(cp) if k < N => {
+                    let f: Vec<f64> = {
+                        let ax = mat_vec(cp.Ac.as_ref(), x);
+                        let bu = mat_vec(cp.Bc.as_ref(), &nom.u[k]);
+                        (0..x.len()).map(|i| ax[i] + bu[i] + cp.c[i]).collect()
+                    };
+                    let rho = lc.phi * p_norm(lp.P, &f);
+                    (d - rho - lc.phi * lc.beta * eps_f32) / lc.gamma
+                }
+                _ => d,
+            };
+            delta_unsafe_is = delta_unsafe_is.min(di);
+        }
+    }
+    // 3. Input (4.15) with the rounding margin.
+    let (mut delta_input, mut k_input) = (f64::INFINITY, 0);
+    for k in 0..N {
+        let d = input_distance(lp.K, &lc.roots, &nom.u[k], lp.input, &eps_components);
+        if d < delta_input {
+            delta_input = d;
+            k_input = k;
+        }
+    }
+    let r_crit = lc.r_crit(eps_f32);
+    let d47 = delta_goal.min(delta_unsafe_is).min(delta_input);
+    // Theorem 3.21: any r in [r_crit, d47) works; the strict inequalities of Lemma 4.4 need r < d47.
+    let delta = if d47 > 0.0 && r_crit < d47 { d47 * (1.0 - 1e-9) } else { 0.0 };
+    let delta_stored = selection_radius(lp.P, &nom.x[0], delta);
+    Certificate {
+        delta_goal,
+        k_star,
+        delta_unsafe,
+        k_unsafe,
+        delta_input,
+        k_input,
+        delta_unsafe_intersample: delta_unsafe_is,
+        eps_components,
+        eps_f32,
+        r_crit,
+        delta,
+        delta_stored,
+    }
+}

@@ -1,0 +1,72 @@
+//! `host-compiler simulate SPEC IMAGE --x0 …`: one closed-loop run through the shared f32 evaluator,
+//! written as CSV (t, x…, u…, status).
+
+use crate::synth::sampled_plant;
+use miette::IntoDiagnostic;
+use shared_types::eval::Controller;
+use std::io::Write;
+use std::path::PathBuf;
+
+/// Arguments of `simulate`.
+#[derive(clap::Args, Debug)]
+pub struct SimulateArgs {
+    /// Task spec (TOML).
+    pub spec: PathBuf,
+    /// Controller image.
+    pub image: PathBuf,
+    /// Initial state, comma separated (n values).
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true, required = true)]
+    pub x0: Vec<f64>,
+    /// Number of steps (default: the spec's horizon).
+    #[arg(long)]
+    pub steps: Option<usize>,
+    /// Write the CSV here instead of standard output.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+}
+
+pub fn run(a: &SimulateArgs) -> miette::Result<()> {
+    let problem = crate::spec::load(&a.spec)?;
+    let bytes = std::fs::read(&a.image).into_diagnostic()?;
+    let img = shared_types::image::decode(&bytes)
+        .map_err(|e| miette::miette!("{}: the image is rejected: {e:?}", a.image.display()))?;
+    let n = problem.plant.n();
+    if a.x0.len() != n || img.n() != n {
+        return Err(miette::miette!("--x0 has {} values; the spec has n = {n} and the image n = {}", a.x0.len(), img.n()));
+    }
+    let plant = sampled_plant(&problem).map_err(|e| miette::miette!("{e}"))?;
+    let steps = a.steps.unwrap_or(problem.horizon_steps());
+    let mut ctl = Controller::new(img);
+    let mut out: Box<dyn Write> = match &a.out {
+        Some(p) => Box::new(std::fs::File::create(p).into_diagnostic()?),
+        None => Box::new(std::io::stdout().lock()),
+    };
+    let m = problem.plant.m();
+    let head: Vec<String> = std::iter::once("t".to_string())
+        .chain((1..=n).map(|i| format!("x{i}")))
+        .chain((1..=m).map(|i| format!("u{i}")))
+        .chain(std::iter::once("status".to_string()))
+        .collect();
+    writeln!(out, "{}", head.join(",")).into_diagnostic()?;
+    let mut x = a.x0.clone();
+    let mut last = shared_types::eval::Input::zero(m);
+    for k in 0..=steps {
+        let xf: Vec<f32> = x.iter().map(|&v| v as f32).collect();
+        let (u, status) = match ctl.step(&xf) {
+            Ok(u) => (u, "ok".to_string()),
+            Err(s) => (ctl.fallback(&xf, &last), format!("{s}")),
+        };
+        last = u;
+        let uf: Vec<f64> = u.as_slice().iter().map(|&v| v as f64).collect();
+        let row: Vec<String> = std::iter::once(format!("{}", k as f64 * problem.plant.period))
+            .chain(x.iter().map(|v| format!("{v}")))
+            .chain(uf.iter().map(|v| format!("{v}")))
+            .chain(std::iter::once(status))
+            .collect();
+        writeln!(out, "{}", row.join(",")).into_diagnostic()?;
+        let ax = crate::linalg::mat_vec(plant.A.as_ref(), &x);
+        let bu = crate::linalg::mat_vec(plant.B.as_ref(), &uf);
+        x = (0..n).map(|i| ax[i] + bu[i] + plant.g[i]).collect();
+    }
+    Ok(())
+}

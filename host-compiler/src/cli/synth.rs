@@ -1,0 +1,81 @@
+//! `host-compiler synth SPEC --out DIR`: the whole pipeline, writing the image, the report and the
+//! certificate data.
+
+use crate::synth::{report_data, synthesize, SynthOptions};
+use miette::{IntoDiagnostic, WrapErr};
+use std::path::PathBuf;
+
+/// Arguments of `synth`.
+#[derive(clap::Args, Debug)]
+pub struct SynthArgs {
+    /// Task spec (TOML); see examples/README.md for the format.
+    pub spec: PathBuf,
+    /// Output directory: controller.img, report.html and certificate.json are written there.
+    #[arg(long, default_value = "out")]
+    pub out: PathBuf,
+    /// Monte Carlo runs from the certified cover in the final verification.
+    #[arg(long, default_value_t = 10_000)]
+    pub verify_runs: usize,
+    /// Hide progress bars.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+pub fn run(a: &SynthArgs) -> miette::Result<()> {
+    let problem = crate::spec::load(&a.spec)?;
+    let opts = SynthOptions { verify_interior: a.verify_runs, progress: !a.quiet, ..SynthOptions::default() };
+    let s = synthesize(&problem, &opts).map_err(|e| miette::miette!("{e}"))?;
+    std::fs::create_dir_all(&a.out).into_diagnostic().wrap_err_with(|| format!("creating {}", a.out.display()))?;
+    let img_path = a.out.join("controller.img");
+    std::fs::write(&img_path, &s.image).into_diagnostic().wrap_err("writing the image")?;
+    let data = report_data(&problem, &a.spec.display().to_string(), &s, &img_path.display().to_string());
+    let report = crate::report::write_report(&data, &a.out).into_diagnostic().wrap_err("writing the report")?;
+    let cert = serde_json::json!({
+        "spec": a.spec.display().to_string(),
+        "seed": problem.seed,
+        "stop": s.stop.to_string(),
+        "coverage": s.coverage,
+        "verify": s.verify,
+        "sigma_min": s.constants.sigma_min,
+        "K": crate::linalg::to_rows(s.K.as_ref()),
+        "P": crate::linalg::to_rows(s.P.as_ref()),
+        "trajectories": s.trajectories.iter().map(|t| serde_json::json!({
+            "source": t.source, "x0": t.nominal.x[0], "certificate": t.certificate,
+        })).collect::<Vec<_>>(),
+        "timings": s.timings,
+    });
+    std::fs::write(a.out.join("certificate.json"), serde_json::to_string_pretty(&cert).into_diagnostic()?)
+        .into_diagnostic()?;
+    let deltas: Vec<f64> = s.trajectories.iter().map(|t| t.certificate.delta_stored as f64).collect();
+    let (dmin, dmax) = deltas.iter().fold((f64::INFINITY, 0.0f64), |(a, b), &d| (a.min(d), b.max(d)));
+    println!("trajectories      {}", s.trajectories.len());
+    println!("delta range       {dmin:.4} .. {dmax:.4} (CAF metric)");
+    println!(
+        "coverage          {:.5} (lower bound {:.5}, upper {:.5} at {:.0}% confidence, {} samples)",
+        s.coverage.mean,
+        s.coverage.lower,
+        s.coverage.upper,
+        100.0 * s.coverage.confidence,
+        s.coverage.samples
+    );
+    println!("stop              {}", s.stop);
+    println!(
+        "verification      {} runs ({} interior, {} boundary), {} violations",
+        s.verify.interior_runs + s.verify.boundary_runs - s.verify.boundary_rejected,
+        s.verify.interior_runs,
+        s.verify.boundary_runs - s.verify.boundary_rejected,
+        s.verify.violations
+    );
+    println!("image             {} ({} bytes)", img_path.display(), s.image.len());
+    println!("report            {}", report.display());
+    for (k, v) in &s.timings {
+        println!("time {k:<20} {v:.3} s");
+    }
+    for w in &s.warnings {
+        eprintln!("warning: {w}");
+    }
+    if s.verify.violations > 0 {
+        return Err(miette::miette!("verification found {} violations", s.verify.violations));
+    }
+    Ok(())
+}

@@ -1,0 +1,88 @@
+//! `host-compiler verify SPEC IMAGE`: closed-loop Monte Carlo of an image against its spec through the
+//! shared f32 evaluator.
+
+use crate::synth::sampled_plant;
+use crate::verify::{monte_carlo, Judge};
+use miette::IntoDiagnostic;
+use std::path::PathBuf;
+
+/// Arguments of `verify`.
+#[derive(clap::Args, Debug)]
+pub struct VerifyArgs {
+    /// Task spec (TOML).
+    pub spec: PathBuf,
+    /// Controller image.
+    pub image: PathBuf,
+    /// Initial states drawn uniformly in the certified cover (the part of Init the image accepts).
+    #[arg(long, default_value_t = 10_000)]
+    pub runs: usize,
+    /// Initial states on the boundary of each ball.
+    #[arg(long, default_value_t = 32)]
+    pub per_ball: usize,
+    /// Seed of the Monte Carlo draw (default: the spec's seed).
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Print the result as JSON.
+    #[arg(long)]
+    pub json: bool,
+}
+
+pub fn run(a: &VerifyArgs) -> miette::Result<()> {
+    let problem = crate::spec::load(&a.spec)?;
+    let bytes = std::fs::read(&a.image).into_diagnostic()?;
+    let img = shared_types::image::decode(&bytes)
+        .map_err(|e| miette::miette!("{}: the image is rejected: {e:?}", a.image.display()))?;
+    if img.n() != problem.plant.n() || img.m() != problem.plant.m() {
+        return Err(miette::miette!(
+            "the image is for n = {}, m = {} but the spec has n = {}, m = {}",
+            img.n(),
+            img.m(),
+            problem.plant.n(),
+            problem.plant.m()
+        ));
+    }
+    let plant = sampled_plant(&problem).map_err(|e| miette::miette!("{e}"))?;
+    let goal = problem.goal_region()?;
+    let unsafe_set = problem.unsafe_region()?;
+    let input = crate::synth::input_bound(&problem.input);
+    let judge = Judge {
+        A: plant.A.as_ref(),
+        B: plant.B.as_ref(),
+        g: &plant.g,
+        sub: plant.sub.as_ref().map(|(a, b, g, s)| (a.as_ref(), b.as_ref(), g.as_slice(), *s)),
+        goal: goal.as_ref(),
+        unsafe_set: unsafe_set.as_deref(),
+        input: &input,
+        steps: problem.horizon_steps(),
+        init_lo: &problem.init.lo,
+        init_hi: &problem.init.hi,
+    };
+    let r = monte_carlo(&judge, &img, a.runs, a.per_ball, a.seed.unwrap_or(problem.seed ^ 0x7e51f1));
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&r).into_diagnostic()?);
+    } else {
+        println!(
+            "runs {} interior + {} boundary ({} boundary points not accepted by the f32 selection)",
+            r.interior_runs, r.boundary_runs, r.boundary_rejected
+        );
+        println!(
+            "worst margins: goal depth {:.4e}, unsafe distance {:.4e}, input slack {:.4e}",
+            r.worst_goal_margin, r.worst_unsafe_margin, r.worst_input_margin
+        );
+        for v in &r.first_violations {
+            println!("violation from x0 = {:?}: {v:?}", v.x0);
+        }
+        println!("violations {}", r.violations);
+    }
+    if r.violations > 0 {
+        return Err(miette::miette!("{} violations", r.violations));
+    }
+    if r.interior_runs < a.runs {
+        return Err(miette::miette!(
+            "only {} of {} initial states could be drawn in the certified cover",
+            r.interior_runs,
+            a.runs
+        ));
+    }
+    Ok(())
+}

@@ -1,0 +1,418 @@
+//! Polyhedra {x : Ax ≤ b} as [`Region`]s (§7.1).
+//!
+//! - **Distance** from an outside point: the quadratic program (7.1) in the metric R, written in the step
+//!   d = x' − x as min ½dᵀRd s.t. A d ≤ b − Ax, solved with clarabel (tight tolerances) and then polished by
+//!   solving the equality-constrained QP on the active set the interior-point solution identifies; the polished
+//!   point is kept only when it is feasible and no worse. R may be singular (a seminorm).
+//! - **Depth** of an inside point: ℝⁿ \ S is the union of the open half-spaces {aᵢᵀy > bᵢ}, so
+//!   depth_R(x, S) = minᵢ dist_R(x, {aᵢᵀy ≥ bᵢ}), and the distance to a half-space that x does not violate is
+//!   the distance to its hyperplane. Derivation, with sᵢ = bᵢ − aᵢᵀx ≥ 0: minimise dᵀRd subject to aᵢᵀd = sᵢ.
+//!   * If aᵢ has a component a_N in the null space of R, the step d = sᵢ a_N/(aᵢᵀa_N) satisfies the constraint at
+//!     zero cost: the distance is 0 (the hyperplane is reachable for free, as in §7.2.2).
+//!   * Otherwise aᵢ ∈ range(R); by Cauchy–Schwarz in the R-inner product, sᵢ = aᵢᵀd = (R⁺aᵢ)ᵀR d ≤
+//!     ‖R⁺aᵢ‖_R ‖d‖_R = sqrt(aᵢᵀR⁺aᵢ) ‖d‖_R, with equality at d = sᵢ R⁺aᵢ/(aᵢᵀR⁺aᵢ). So the distance is
+//!     sᵢ / sqrt(aᵢᵀR⁺aᵢ); for R positive definite this is the familiar (bᵢ − aᵢᵀx)/sqrt(aᵢᵀR⁻¹aᵢ).
+//!   A component counts as "in the null space" when ‖a_N‖ > 1e-12‖aᵢ‖, the null space being the eigenvectors of
+//!   R with eigenvalue ≤ 1e-13·λmax(R). The witness is the first boundary crossing on the segment from x to the
+//!   minimising step (which is the step's end point whenever the depth is positive).
+
+use super::cache::MetricCache;
+use super::linalg::{self, SymEig};
+use super::{check_query, GeometryError, Metric, Region, Witness};
+use clarabel::algebra::CscMatrix;
+use clarabel::solver::{DefaultSettings, DefaultSolver, IPSolver, SolverStatus, SupportedConeT};
+// clarabel's dense kernels call Fortran BLAS/LAPACK symbols; lapack-faer provides them at link time.
+extern crate lapack_faer as _;
+
+/// A row's normal counts as having a null-space component of R when ‖a_N‖ > FREE_TOL · ‖a‖.
+const FREE_TOL: f64 = 1e-12;
+
+/// {x ∈ ℝⁿ : Ax ≤ b}, A row-major k×n. Nonempty, with at least one nonzero row (validated).
+pub struct Polytope {
+    n: usize,
+    k: usize,
+    A: Vec<f64>,
+    b: Vec<f64>,
+    cache: MetricCache<FacetSteps>,
+}
+
+impl Clone for Polytope {
+    fn clone(&self) -> Self {
+        Self { n: self.n, k: self.k, A: self.A.clone(), b: self.b.clone(), cache: MetricCache::default() }
+    }
+}
+
+impl std::fmt::Debug for Polytope {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Polytope").field("n", &self.n).field("A", &self.A).field("b", &self.b).finish()
+    }
+}
+
+/// Per-metric data for the depth: for each row, how to reach its hyperplane.
+#[derive(Debug)]
+struct FacetSteps {
+    rows: Vec<FacetStep>,
+    /// The symmetrised metric matrix (for the QP).
+    R: Vec<f64>,
+}
+
+#[derive(Debug)]
+enum FacetStep {
+    /// a = 0: never violated.
+    Never,
+    /// Reachable at zero cost: step per unit slack, a_N/(aᵀa_N).
+    Free(Vec<f64>),
+    /// Step per unit slack R⁺a/(aᵀR⁺a); distance = slack / dual, dual = sqrt(aᵀR⁺a).
+    Norm { dual: f64, step: Vec<f64> },
+}
+
+impl Polytope {
+    /// {x ∈ ℝⁿ : Ax ≤ b} with A row-major k×n (k ≥ 1) and b of length k, all finite. Errors when a length is
+    /// wrong, an entry is not finite, every row of A is zero, or the set is empty (checked with an LP).
+    pub fn new(n: usize, A: Vec<f64>, b: Vec<f64>) -> Result<Self, GeometryError> {
+        if n == 0 {
+            return Err(GeometryError::ZeroDimension { what: "polytope" });
+        }
+        let k = b.len();
+        if k == 0 {
+            return Err(GeometryError::NoConstraints);
+        }
+        linalg::check_vector("polytope A", &A, k * n)?;
+        linalg::check_finite("polytope b", &b)?;
+        let mut any = false;
+        for i in 0..k {
+            if A[i * n..(i + 1) * n].iter().all(|a| *a == 0.0) {
+                if b[i] < 0.0 {
+                    return Err(GeometryError::EmptyPolytope);
+                }
+            } else {
+                any = true;
+            }
+        }
+        if !any {
+            return Err(GeometryError::NoConstraints);
+        }
+        let p = Self { n, k, A, b, cache: MetricCache::default() };
+        p.check_nonempty()?;
+        Ok(p)
+    }
+
+    /// Ambient dimension n.
+    pub fn n(&self) -> usize {
+        self.n
+    }
+    /// Number of rows k.
+    pub fn rows(&self) -> usize {
+        self.k
+    }
+    /// A, row-major k×n.
+    pub fn A(&self) -> &[f64] {
+        &self.A
+    }
+    /// b.
+    pub fn b(&self) -> &[f64] {
+        &self.b
+    }
+    /// The largest violation maxᵢ (aᵢᵀx − bᵢ) (≤ 0 inside). No length check beyond a debug assertion.
+    pub fn max_violation(&self, x: &[f64]) -> f64 {
+        (0..self.k).map(|i| linalg::dot(&self.A[i * self.n..(i + 1) * self.n], x) - self.b[i]).fold(f64::NEG_INFINITY, f64::max)
+    }
+
+    fn check_nonempty(&self) -> Result<(), GeometryError> {
+        let n = self.n;
+        let P = CscMatrix::new(n, n, vec![0; n + 1], vec![], vec![]);
+        let Ac = csc_from_dense(self.k, n, |i, j| self.A[i * n + j], false);
+        let q = vec![0.0; n];
+        let settings = qp_settings();
+        let mut solver = DefaultSolver::new(&P, &q, &Ac, &self.b, &[SupportedConeT::NonnegativeConeT(self.k)], settings)
+            .map_err(|e| GeometryError::Solver { what: "polytope feasibility LP", status: e.to_string() })?;
+        solver.solve();
+        match solver.solution.status {
+            SolverStatus::Solved | SolverStatus::AlmostSolved => Ok(()),
+            SolverStatus::PrimalInfeasible | SolverStatus::AlmostPrimalInfeasible => Err(GeometryError::EmptyPolytope),
+            s => Err(GeometryError::Solver { what: "polytope feasibility LP", status: s.to_string() }),
+        }
+    }
+
+    fn steps(&self, metric: &Metric) -> Result<std::sync::Arc<FacetSteps>, GeometryError> {
+        self.cache.get_or_try_insert(metric, || {
+            let (R, er) = metric.validated()?;
+            let Rp = er.pinv();
+            let (N, nk) = er.null_basis();
+            let n = self.n;
+            let mut rows = Vec::with_capacity(self.k);
+            for i in 0..self.k {
+                let a = &self.A[i * n..(i + 1) * n];
+                let na = a.iter().map(|v| v * v).sum::<f64>().sqrt();
+                if na == 0.0 {
+                    rows.push(FacetStep::Never);
+                    continue;
+                }
+                // a_N = N Nᵀ a
+                let mut aN = vec![0.0; n];
+                for c in 0..nk {
+                    let coef: f64 = (0..n).map(|j| N[j * nk + c] * a[j]).sum();
+                    for j in 0..n {
+                        aN[j] += coef * N[j * nk + c];
+                    }
+                }
+                let nN = aN.iter().map(|v| v * v).sum::<f64>().sqrt();
+                if nN > FREE_TOL * na {
+                    let s = linalg::dot(a, &aN);
+                    rows.push(FacetStep::Free(aN.iter().map(|v| v / s).collect()));
+                    continue;
+                }
+                let mut g = vec![0.0; n];
+                linalg::matvec(&Rp, n, n, a, &mut g);
+                let aRa = linalg::dot(a, &g);
+                if aRa > 0.0 && aRa.is_finite() {
+                    rows.push(FacetStep::Norm { dual: aRa.sqrt(), step: g.iter().map(|v| v / aRa).collect() });
+                } else {
+                    // R⁺a vanished numerically: a is (numerically) in the null space after all.
+                    let s = linalg::dot(a, a);
+                    rows.push(FacetStep::Free(a.iter().map(|v| v / s).collect()));
+                }
+            }
+            Ok(FacetSteps { rows, R })
+        })
+    }
+
+    /// The QP (7.1) from an outside point: the nearest point of S in ‖·‖_R and its distance.
+    fn project(&self, x: &[f64], R: &[f64]) -> Result<Witness, GeometryError> {
+        let (n, k) = (self.n, self.k);
+        // rhs = b − A x; constraint A d ≤ rhs.
+        let rhs: Vec<f64> = (0..k).map(|i| self.b[i] - linalg::dot(&self.A[i * n..(i + 1) * n], x)).collect();
+        let P = csc_from_dense(n, n, |i, j| R[i * n + j], true);
+        let Ac = csc_from_dense(k, n, |i, j| self.A[i * n + j], false);
+        let q = vec![0.0; n];
+        let mut solver =
+            DefaultSolver::new(&P, &q, &Ac, &rhs, &[SupportedConeT::NonnegativeConeT(k)], qp_settings())
+                .map_err(|e| GeometryError::Solver { what: "polytope distance QP (7.1)", status: e.to_string() })?;
+        solver.solve();
+        let sol = &solver.solution;
+        match sol.status {
+            SolverStatus::Solved | SolverStatus::AlmostSolved => {}
+            s => return Err(GeometryError::Solver { what: "polytope distance QP (7.1)", status: s.to_string() }),
+        }
+        let d_ipm = sol.x.clone();
+        let obj_ipm = linalg::quad_form(R, &d_ipm);
+        let viol = |d: &[f64]| -> f64 {
+            (0..k).map(|i| linalg::dot(&self.A[i * n..(i + 1) * n], d) - rhs[i]).fold(f64::NEG_INFINITY, f64::max)
+        };
+        let scale = 1.0 + linalg::max_abs(&rhs);
+        let mut d = d_ipm.clone();
+        // Polish on the active set {i : zᵢ > sᵢ} (complementarity picks the larger of dual and slack).
+        let active: Vec<usize> = (0..k).filter(|&i| sol.z[i] > sol.s[i]).collect();
+        if let Some(dp) = polish(n, R, &self.A, &rhs, &active) {
+            let obj_p = linalg::quad_form(R, &dp);
+            if viol(&dp) <= 1e-12 * scale && obj_p <= obj_ipm + 1e-12 * (1.0 + obj_ipm) {
+                d = dp;
+            }
+        }
+        let value = linalg::quad_form(R, &d).max(0.0).sqrt();
+        let point: Vec<f64> = x.iter().zip(&d).map(|(a, b)| a + b).collect();
+        Ok(Witness { value, point })
+    }
+
+    fn depth_inside(&self, x: &[f64], steps: &FacetSteps) -> Witness {
+        let n = self.n;
+        let slack: Vec<f64> = (0..self.k).map(|i| self.b[i] - linalg::dot(&self.A[i * n..(i + 1) * n], x)).collect();
+        let mut best: Option<(f64, usize)> = None;
+        for (i, st) in steps.rows.iter().enumerate() {
+            let s = slack[i].max(0.0);
+            let v = match st {
+                FacetStep::Never => continue,
+                FacetStep::Free(_) => 0.0,
+                FacetStep::Norm { dual, .. } => s / dual,
+            };
+            if best.is_none_or(|(bv, _)| v < bv) {
+                best = Some((v, i));
+            }
+        }
+        let Some((value, i)) = best else {
+            // Unreachable: construction guarantees a nonzero row.
+            return Witness { value: f64::INFINITY, point: Vec::new() };
+        };
+        let s = slack[i].max(0.0);
+        let step: Vec<f64> = match &steps.rows[i] {
+            FacetStep::Free(g) | FacetStep::Norm { step: g, .. } => g.iter().map(|v| v * s).collect(),
+            FacetStep::Never => vec![0.0; n],
+        };
+        // First crossing of the boundary on the segment x → x + step.
+        let mut t = 1.0_f64;
+        for j in 0..self.k {
+            let ad = linalg::dot(&self.A[j * n..(j + 1) * n], &step);
+            if ad > 0.0 {
+                t = t.min(slack[j].max(0.0) / ad);
+            }
+        }
+        let point = x.iter().zip(&step).map(|(a, d)| a + t * d).collect();
+        Witness { value, point }
+    }
+}
+
+/// Tight interior-point settings for the small QPs here.
+fn qp_settings() -> DefaultSettings<f64> {
+    DefaultSettings::<f64> {
+        verbose: false,
+        tol_gap_abs: 1e-11,
+        tol_gap_rel: 1e-11,
+        tol_feas: 1e-11,
+        max_iter: 200,
+        ..DefaultSettings::default()
+    }
+}
+
+/// Row/column-major dense → CSC (optionally the upper triangle only, as clarabel wants for P).
+fn csc_from_dense(m: usize, n: usize, get: impl Fn(usize, usize) -> f64, upper: bool) -> CscMatrix<f64> {
+    let mut colptr = Vec::with_capacity(n + 1);
+    let mut rowval = Vec::new();
+    let mut nzval = Vec::new();
+    colptr.push(0);
+    for j in 0..n {
+        for i in 0..m {
+            if upper && i > j {
+                continue;
+            }
+            let v = get(i, j);
+            if v != 0.0 {
+                rowval.push(i);
+                nzval.push(v);
+            }
+        }
+        colptr.push(rowval.len());
+    }
+    CscMatrix::new(m, n, colptr, rowval, nzval)
+}
+
+/// Solve min ½dᵀRd s.t. A_J d = rhs_J through the symmetric KKT system [[R, A_Jᵀ], [A_J, 0]] by a pseudo-inverse
+/// (so dependent active rows are tolerated); `None` if the system is inconsistent.
+fn polish(n: usize, R: &[f64], A: &[f64], rhs: &[f64], active: &[usize]) -> Option<Vec<f64>> {
+    let m = active.len();
+    let N = n + m;
+    let mut K = vec![0.0; N * N];
+    for i in 0..n {
+        for j in 0..n {
+            K[i * N + j] = R[i * n + j];
+        }
+    }
+    for (r, &i) in active.iter().enumerate() {
+        for j in 0..n {
+            K[(n + r) * N + j] = A[i * n + j];
+            K[j * N + n + r] = A[i * n + j];
+        }
+    }
+    let mut f = vec![0.0; N];
+    for (r, &i) in active.iter().enumerate() {
+        f[n + r] = rhs[i];
+    }
+    let e = SymEig::new("polish KKT", N, &K).ok()?;
+    let Kp = e.pinv();
+    let mut sol = vec![0.0; N];
+    linalg::matvec(&Kp, N, N, &f, &mut sol);
+    // Consistency: K sol = f.
+    let mut res = vec![0.0; N];
+    linalg::matvec(&K, N, N, &sol, &mut res);
+    let err = res.iter().zip(&f).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+    if !(err <= 1e-10 * (1.0 + linalg::max_abs(&f))) {
+        return None;
+    }
+    sol.truncate(n);
+    Some(sol)
+}
+
+impl Region for Polytope {
+    fn dim(&self) -> usize {
+        self.n
+    }
+    fn contains(&self, x: &[f64]) -> bool {
+        x.len() == self.n && (0..self.k).all(|i| linalg::dot(&self.A[i * self.n..(i + 1) * self.n], x) <= self.b[i])
+    }
+    fn dist(&self, x: &[f64], metric: &Metric) -> Witness {
+        Witness::or_invalid(self.try_dist(x, metric))
+    }
+    fn depth(&self, x: &[f64], metric: &Metric) -> Witness {
+        Witness::or_invalid(self.try_depth(x, metric))
+    }
+    fn try_dist(&self, x: &[f64], metric: &Metric) -> Result<Witness, GeometryError> {
+        check_query(self.n, x, metric)?;
+        let steps = self.steps(metric)?;
+        if self.contains(x) {
+            return Ok(Witness { value: 0.0, point: x.to_vec() });
+        }
+        self.project(x, &steps.R)
+    }
+    fn try_depth(&self, x: &[f64], metric: &Metric) -> Result<Witness, GeometryError> {
+        check_query(self.n, x, metric)?;
+        let steps = self.steps(metric)?;
+        if !self.contains(x) {
+            return Ok(Witness { value: 0.0, point: x.to_vec() });
+        }
+        Ok(self.depth_inside(x, &steps))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn unit_box(n: usize) -> Polytope {
+        let mut A = vec![0.0; 2 * n * n];
+        let mut b = vec![1.0; 2 * n];
+        for i in 0..n {
+            A[(2 * i) * n + i] = 1.0;
+            A[(2 * i + 1) * n + i] = -1.0;
+            b[2 * i] = 1.0;
+        }
+        Polytope::new(n, A, b).unwrap()
+    }
+
+    #[test]
+    fn box_distance_and_depth_euclidean() {
+        let p = unit_box(2);
+        let m = Metric::euclidean(2);
+        let w = p.dist(&[3.0, 4.0], &m);
+        assert!((w.value - 13.0_f64.sqrt()).abs() < 1e-10, "{}", w.value);
+        assert!((w.point[0] - 1.0).abs() < 1e-10 && (w.point[1] - 1.0).abs() < 1e-10);
+        let w = p.depth(&[0.5, -0.2], &m);
+        assert!((w.value - 0.5).abs() < 1e-15);
+        assert_eq!(w.point, vec![1.0, -0.2]);
+        assert!((p.signed_dist(&[2.0, 0.0], &m).value + 1.0).abs() < 1e-10);
+    }
+
+    #[test]
+    fn depth_in_singular_metric_is_zero_through_free_facets() {
+        let p = unit_box(2);
+        // ‖·‖_R only sees x₀: the facets x₁ = ±1 are reachable for free.
+        let m = Metric::new(2, vec![1.0, 0.0, 0.0, 0.0]).unwrap();
+        let w = p.depth(&[0.0, 0.5], &m);
+        assert_eq!(w.value, 0.0);
+        assert!((w.point[1].abs() - 1.0).abs() < 1e-15 && w.point[0] == 0.0);
+        // Distance from outside only counts the x₀ excursion.
+        let w = p.dist(&[3.0, 7.0], &m);
+        assert!((w.value - 2.0).abs() < 1e-9, "{}", w.value);
+    }
+
+    #[test]
+    fn weighted_depth_matches_formula() {
+        // Half-plane x₀ + x₁ ≤ 1 intersected with a far box; R = diag(4, 1).
+        let p = Polytope::new(2, vec![1.0, 1.0, -1.0, 0.0, 0.0, -1.0], vec![1.0, 10.0, 10.0]).unwrap();
+        let m = Metric::new(2, vec![4.0, 0.0, 0.0, 1.0]).unwrap();
+        let x = [0.0, 0.0];
+        let expect = 1.0 / (0.25_f64 + 1.0).sqrt();
+        let w = p.depth(&x, &m);
+        assert!((w.value - expect).abs() < 1e-15);
+        assert!((w.point[0] + w.point[1] - 1.0).abs() < 1e-15);
+        assert!((m.distance(&x, &w.point) - expect).abs() < 1e-15);
+    }
+
+    #[test]
+    fn constructor_errors() {
+        assert!(matches!(Polytope::new(2, vec![1.0, 0.0], vec![1.0, 2.0]), Err(GeometryError::Dimension { .. })));
+        assert!(matches!(Polytope::new(1, vec![0.0], vec![1.0]), Err(GeometryError::NoConstraints)));
+        assert!(matches!(Polytope::new(1, vec![0.0], vec![-1.0]), Err(GeometryError::EmptyPolytope)));
+        assert!(matches!(Polytope::new(1, vec![1.0, -1.0], vec![0.0, -1.0]), Err(GeometryError::EmptyPolytope)));
+        assert!(matches!(Polytope::new(1, vec![f64::INFINITY], vec![1.0]), Err(GeometryError::NotFinite { .. })));
+        assert!(Polytope::new(1, vec![1.0, -1.0], vec![0.0, 0.0]).is_ok()); // a single point is fine
+    }
+}

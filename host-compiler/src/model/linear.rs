@@ -1,0 +1,176 @@
+//! Linear affine plants (3.1)/(3.60) and their exact zero-order-hold discretisation.
+
+use super::{check_finite, check_len, expm, ModelError};
+use faer::{Mat, MatRef};
+
+/// ẋ = A x + B u + c (3.1).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ContinuousPlant {
+    /// n×n.
+    pub A: Mat<f64>,
+    /// n×m.
+    pub B: Mat<f64>,
+    /// Affine term, length n.
+    pub c: Vec<f64>,
+}
+
+/// x⁺ = A x + B u + g (3.60), one step every `period` seconds.
+#[derive(Clone, Debug, PartialEq)]
+pub struct DiscretePlant {
+    /// n×n.
+    pub A: Mat<f64>,
+    /// n×m.
+    pub B: Mat<f64>,
+    /// Affine term, length n.
+    pub g: Vec<f64>,
+    /// Seconds per step, > 0.
+    pub period: f64,
+}
+
+/// What the firmware controls: always a discrete-time plant (DESIGN §5), plus the continuous plant it was
+/// sampled from when the spec is in continuous time (needed for the inter-sample excursion bound).
+#[derive(Clone, Debug, PartialEq)]
+pub struct SampledPlant {
+    pub discrete: DiscretePlant,
+    pub continuous: Option<ContinuousPlant>,
+}
+
+fn check_AB(A: MatRef<'_, f64>, B: MatRef<'_, f64>) -> Result<(), ModelError> {
+    let n = A.nrows();
+    if A.ncols() != n {
+        return Err(ModelError::Dimension { what: "A", expected: "a square matrix".into(), got: format!("{}×{}", n, A.ncols()) });
+    }
+    if B.nrows() != n {
+        return Err(ModelError::Dimension { what: "B", expected: format!("{n} rows"), got: format!("{} rows", B.nrows()) });
+    }
+    check_finite("A", A)?;
+    check_finite("B", B)
+}
+
+fn mat_vec(M: MatRef<'_, f64>, x: &[f64]) -> Vec<f64> {
+    (0..M.nrows()).map(|i| (0..M.ncols()).map(|j| M[(i, j)] * x[j]).sum()).collect()
+}
+
+impl ContinuousPlant {
+    /// Checked constructor: A square, B with n rows, c of length n, all finite.
+    pub fn new(A: Mat<f64>, B: Mat<f64>, c: Vec<f64>) -> Result<Self, ModelError> {
+        check_AB(A.as_ref(), B.as_ref())?;
+        check_len("c", &c, A.nrows())?;
+        Ok(Self { A, B, c })
+    }
+
+    /// State dimension n.
+    pub fn n(&self) -> usize {
+        self.A.nrows()
+    }
+
+    /// Input dimension m.
+    pub fn m(&self) -> usize {
+        self.B.ncols()
+    }
+
+    /// The vector field A x + B u + c.
+    pub fn f(&self, x: &[f64], u: &[f64]) -> Vec<f64> {
+        let ax = mat_vec(self.A.as_ref(), x);
+        let bu = mat_vec(self.B.as_ref(), u);
+        (0..self.n()).map(|i| ax[i] + bu[i] + self.c[i]).collect()
+    }
+
+    /// One classical Runge–Kutta step of length `dt` with u held constant (a reference integrator for tests and
+    /// fine simulation; the exact sampled map is [`ContinuousPlant::zoh`]).
+    pub fn rk4_step(&self, x: &[f64], u: &[f64], dt: f64) -> Vec<f64> {
+        let add = |x: &[f64], k: &[f64], s: f64| -> Vec<f64> { x.iter().zip(k).map(|(a, b)| a + s * b).collect() };
+        let k1 = self.f(x, u);
+        let k2 = self.f(&add(x, &k1, dt / 2.0), u);
+        let k3 = self.f(&add(x, &k2, dt / 2.0), u);
+        let k4 = self.f(&add(x, &k3, dt), u);
+        (0..x.len()).map(|i| x[i] + dt / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])).collect()
+    }
+
+    /// Exact zero-order-hold discretisation with period `h`; see [`zoh`].
+    pub fn zoh(&self, h: f64) -> Result<DiscretePlant, ModelError> {
+        zoh(self, h)
+    }
+}
+
+/// Exact zero-order-hold discretisation of ẋ = A x + B u + c with u held over each period h:
+/// `A_d = e^{Ah}`, `B_d = (∫₀ʰ e^{As} ds) B`, `g_d = (∫₀ʰ e^{As} ds) c`.
+///
+/// All three come from one exponential of the augmented matrix (Van Loan's construction):
+/// `exp([[A, B, c], [0, 0, 0], [0, 0, 0]]·h) = [[A_d, B_d, g_d], [0, I, 0], [0, 0, 1]]`, because the
+/// augmented state (x, u, 1) has u and 1 constant, so its flow over h is exactly the held-input solution.
+pub fn zoh(plant: &ContinuousPlant, h: f64) -> Result<DiscretePlant, ModelError> {
+    if !(h.is_finite() && h > 0.0) {
+        return Err(ModelError::Period(h));
+    }
+    check_AB(plant.A.as_ref(), plant.B.as_ref())?;
+    let (n, m) = (plant.n(), plant.m());
+    check_len("c", &plant.c, n)?;
+    let size = n + m + 1;
+    let aug = Mat::from_fn(size, size, |i, j| {
+        if i >= n {
+            0.0
+        } else if j < n {
+            plant.A[(i, j)] * h
+        } else if j < n + m {
+            plant.B[(i, j - n)] * h
+        } else {
+            plant.c[i] * h
+        }
+    });
+    let e = expm(aug.as_ref())?;
+    Ok(DiscretePlant {
+        A: Mat::from_fn(n, n, |i, j| e[(i, j)]),
+        B: Mat::from_fn(n, m, |i, j| e[(i, n + j)]),
+        g: (0..n).map(|i| e[(i, n + m)]).collect(),
+        period: h,
+    })
+}
+
+impl DiscretePlant {
+    /// Checked constructor: A square, B with n rows, g of length n, all finite, period > 0.
+    pub fn new(A: Mat<f64>, B: Mat<f64>, g: Vec<f64>, period: f64) -> Result<Self, ModelError> {
+        check_AB(A.as_ref(), B.as_ref())?;
+        check_len("g", &g, A.nrows())?;
+        if !(period.is_finite() && period > 0.0) {
+            return Err(ModelError::Period(period));
+        }
+        Ok(Self { A, B, g, period })
+    }
+
+    /// State dimension n.
+    pub fn n(&self) -> usize {
+        self.A.nrows()
+    }
+
+    /// Input dimension m.
+    pub fn m(&self) -> usize {
+        self.B.ncols()
+    }
+
+    /// x⁺ = A x + B u + g.
+    pub fn step(&self, x: &[f64], u: &[f64]) -> Vec<f64> {
+        let ax = mat_vec(self.A.as_ref(), x);
+        let bu = mat_vec(self.B.as_ref(), u);
+        (0..self.n()).map(|i| ax[i] + bu[i] + self.g[i]).collect()
+    }
+}
+
+impl SampledPlant {
+    /// The model of a validated spec plant: a continuous plant is discretised with its period (ZOH), a
+    /// discrete plant is taken as is.
+    pub fn from_spec(p: &crate::spec::Plant) -> Result<Self, ModelError> {
+        let A = p.A.to_faer();
+        let B = p.B.to_faer();
+        match p.time {
+            crate::spec::TimeDomain::Continuous => {
+                let c = ContinuousPlant::new(A, B, p.offset.clone())?;
+                let discrete = c.zoh(p.period)?;
+                Ok(Self { discrete, continuous: Some(c) })
+            }
+            crate::spec::TimeDomain::Discrete => {
+                Ok(Self { discrete: DiscretePlant::new(A, B, p.offset.clone(), p.period)?, continuous: None })
+            }
+        }
+    }
+}

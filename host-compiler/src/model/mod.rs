@@ -1,0 +1,52 @@
+//! Plant models: linear affine plants in continuous time (ẋ = A x + B u + c, with a sample period) and
+//! discrete time (x⁺ = A x + B u + g); the exact zero-order-hold discretisation ([`zoh`], via the matrix
+//! exponential [`expm`]); closed-loop simulation with the feedback law u = K x + v(κ) of (3.5)/(3.63); and the
+//! inter-sample excursion bound ([`InterSampleBound`]) the certification uses to account for what the
+//! continuous plant does between samples.
+//!
+//! Matrices are faer `Mat<f64>`, vectors `Vec<f64>` / `&[f64]`.
+
+mod expm;
+mod intersample;
+mod linear;
+mod sim;
+
+pub use expm::expm;
+pub use intersample::InterSampleBound;
+pub use linear::{zoh, ContinuousPlant, DiscretePlant, SampledPlant};
+pub use sim::{reference_inputs, simulate_closed_loop, ClosedLoopRun};
+
+/// Bad input to a model constructor or helper (dimensions, non-finite numbers, periods).
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum ModelError {
+    /// A matrix or vector has the wrong shape.
+    #[error("{what}: expected {expected}, got {got}")]
+    Dimension { what: &'static str, expected: String, got: String },
+    /// A NaN or infinity where a finite number is required.
+    #[error("{what} contains a non-finite entry")]
+    NonFinite { what: &'static str },
+    /// The sample period must be finite and > 0.
+    #[error("sample period must be finite and > 0, got {0}")]
+    Period(f64),
+}
+
+pub(crate) fn check_finite(what: &'static str, m: faer::MatRef<'_, f64>) -> Result<(), ModelError> {
+    for j in 0..m.ncols() {
+        for i in 0..m.nrows() {
+            if !m[(i, j)].is_finite() {
+                return Err(ModelError::NonFinite { what });
+            }
+        }
+    }
+    Ok(())
+}
+
+pub(crate) fn check_len(what: &'static str, v: &[f64], n: usize) -> Result<(), ModelError> {
+    if v.len() != n {
+        return Err(ModelError::Dimension { what, expected: format!("length {n}"), got: format!("length {}", v.len()) });
+    }
+    if v.iter().any(|x| !x.is_finite()) {
+        return Err(ModelError::NonFinite { what });
+    }
+    Ok(())
+}

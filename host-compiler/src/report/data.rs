@@ -1,0 +1,101 @@
+//! Plot-ready data of one synthesis run: everything the HTML report shows, already projected onto the
+//! plotting planes, so that rendering needs no control theory.
+
+use serde::Serialize;
+
+/// An ellipse {c + M w : ‖w‖₂ ≤ 1} in a plotting plane.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Ellipse2 {
+    pub center: [f64; 2],
+    /// Columns map the unit circle onto the ellipse.
+    pub M: [[f64; 2]; 2],
+}
+
+/// A set drawn in a plotting plane.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub enum Shape2 {
+    Ellipse(Ellipse2),
+    /// {y : a_i · y ≤ b_i for all i} — clip to the plot's bounding box before drawing (may be unbounded).
+    HalfPlanes { a: Vec<[f64; 2]>, b: Vec<f64> },
+    /// An axis-aligned box [lo, hi].
+    Box { lo: [f64; 2], hi: [f64; 2] },
+}
+
+/// One certified trajectory.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct TrajectoryReport {
+    pub id: usize,
+    /// Where it came from: "generated", "csv:<path>", …
+    pub source: String,
+    /// Initial state x̃(0).
+    pub x0: Vec<f64>,
+    /// Certified radius δ (CAF metric) of the ball of initial states, as shipped.
+    pub delta: f64,
+    /// Theorem 4.7 parts before the f32/sampling margins: δ_Goal, δ_Unsafe, δ_Input.
+    pub delta_goal: f64,
+    pub delta_unsafe: f64,
+    pub delta_input: f64,
+    /// Critical time t* (s) at which Goal is certified.
+    pub t_star: f64,
+    /// Sample times (s), nominal path in the plotting plane, and the robust tube at each sample.
+    pub times: Vec<f64>,
+    pub path: Vec<[f64; 2]>,
+    pub tube: Vec<Ellipse2>,
+    /// Applied nominal inputs ũ(κ) (one row per sample period).
+    pub u: Vec<Vec<f64>>,
+    /// The largest input any state in the tube can apply at each step (same norm as the bound).
+    pub u_worst: Vec<f64>,
+}
+
+/// Summary of the closed-loop Monte Carlo re-check.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct VerifySummary {
+    pub runs: usize,
+    pub violations: usize,
+    pub worst_goal_margin: f64,
+    pub worst_unsafe_margin: f64,
+    pub worst_input_margin: f64,
+}
+
+/// Everything `report.html` shows.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct ReportData {
+    pub title: String,
+    pub spec_path: String,
+    /// State, input and output dimensions, sample period (s), horizon T (s).
+    pub n: usize,
+    pub m: usize,
+    pub period: f64,
+    pub horizon: f64,
+    /// Axis labels of the workspace plane (e.g. "x1", "x2").
+    pub plane_labels: [String; 2],
+    pub init_plane: Option<Shape2>,
+    pub goal_plane: Vec<Shape2>,
+    pub unsafe_plane: Vec<Shape2>,
+    pub trajectories: Vec<TrajectoryReport>,
+    /// Axis labels of the Init plane (its two free coordinates) and the Init box there.
+    pub init_labels: [String; 2],
+    pub init_box: Shape2,
+    /// Cross-sections of the certified balls with the Init plane.
+    pub balls: Vec<Ellipse2>,
+    /// Coverage samples that no ball covers, in the Init plane.
+    pub uncovered: Vec<[f64; 2]>,
+    pub coverage: crate::coverage::CoverageEstimate,
+    /// "covered at the requested confidence" or why the loop stopped.
+    pub stop_reason: String,
+    /// Input bound description (e.g. "‖u‖₂ ≤ 1") and its value for plotting.
+    pub input_bound_label: String,
+    pub input_bound: f64,
+    pub K: Vec<Vec<f64>>,
+    pub P: Vec<Vec<f64>>,
+    /// σ_min(P − ÃᵀPÃ) of the shipped (f32) gain, the f32 disturbance bound and r_crit (Thm 3.21).
+    pub sigma_min: f64,
+    pub eps_f32: f64,
+    pub r_crit: f64,
+    pub image_bytes: usize,
+    pub image_path: String,
+    pub verify: Option<VerifySummary>,
+    /// (phase, seconds).
+    pub timings: Vec<(String, f64)>,
+    pub warnings: Vec<String>,
+}

@@ -1,0 +1,171 @@
+//! Streaming sliding-window aggregates over windows whose two ends move forward monotonically, each in
+//! amortised O(1) per sample:
+//!
+//! * [`sliding_max`] / [`sliding_min`]: the monotone-deque (wedge) algorithm of Lemire's streaming
+//!   max-min filter, generalised from fixed-width windows to any windows `[lo(k), hi(k)]` with `lo`
+//!   and `hi` non-decreasing in k (as produced by time windows on non-uniform sample times);
+//! * [`ClampQueue`]: a two-stack FIFO aggregating the composition of the monotone maps
+//!   f_j(x) = max(ψ_j, min(φ_j, x)), which is how bounded until is evaluated in linear time.
+
+/// Time windows: for each sample k the index range `lo[k]..=hi[k]` of samples j with
+/// `t[j] − t[k] ∈ [a, b]` (computed in f64 exactly as written). Empty when `lo[k] > hi[k]`.
+///
+/// Both ends are non-decreasing in k: rounded subtraction is monotone, so `fl(t[j] − t[k])` is
+/// non-decreasing in j and non-increasing in k for strictly increasing times.
+pub(crate) struct Windows {
+    pub lo: Vec<usize>,
+    /// `hi[k] + 1` (exclusive end), so that empty windows need no negative index.
+    pub hi_end: Vec<usize>,
+}
+
+impl Windows {
+    pub fn new(t: &[f64], a: f64, b: f64) -> Self {
+        let n = t.len();
+        let mut lo = Vec::with_capacity(n);
+        let mut hi_end = Vec::with_capacity(n);
+        let (mut l, mut h) = (0usize, 0usize);
+        for k in 0..n {
+            // First j with t[j] − t[k] ≥ a (j ≥ k since a ≥ 0 and t strictly increases).
+            l = l.max(k);
+            while l < n && t[l] - t[k] < a {
+                l += 1;
+            }
+            // One past the last j with t[j] − t[k] ≤ b.
+            h = h.max(k);
+            while h < n && t[h] - t[k] <= b {
+                h += 1;
+            }
+            lo.push(l);
+            hi_end.push(h);
+        }
+        Self { lo, hi_end }
+    }
+}
+
+/// A monotone deque of indices into `v`: values strictly "better" towards the front. `better(x, y)`
+/// true means x dominates y (x ≥ y for max, x ≤ y for min), so y can be dropped when x arrives later.
+struct Wedge {
+    buf: Vec<usize>,
+    head: usize,
+}
+
+impl Wedge {
+    fn with_capacity(n: usize) -> Self {
+        Self { buf: Vec::with_capacity(n), head: 0 }
+    }
+    #[inline(always)]
+    fn push(&mut self, v: &[f64], j: usize, dominates: impl Fn(f64, f64) -> bool) {
+        let x = v[j];
+        while self.buf.len() > self.head && dominates(x, v[*self.buf.last().unwrap_or(&0)]) {
+            self.buf.pop();
+        }
+        self.buf.push(j);
+    }
+    #[inline(always)]
+    fn expire(&mut self, lo: usize) {
+        while self.head < self.buf.len() && self.buf[self.head] < lo {
+            self.head += 1;
+        }
+    }
+    #[inline(always)]
+    fn front(&self) -> Option<usize> {
+        self.buf.get(self.head).copied()
+    }
+}
+
+fn sliding(v: &[f64], w: &Windows, empty: f64, dominates: impl Fn(f64, f64) -> bool + Copy) -> Vec<f64> {
+    let n = v.len();
+    let mut out = Vec::with_capacity(n);
+    let mut q = Wedge::with_capacity(n);
+    let mut pushed = 0usize;
+    for k in 0..n {
+        let (lo, end) = (w.lo[k], w.hi_end[k]);
+        while pushed < end {
+            q.push(v, pushed, dominates);
+            pushed += 1;
+        }
+        q.expire(lo);
+        out.push(if lo < end { q.front().map_or(empty, |j| v[j]) } else { empty });
+    }
+    out
+}
+
+/// out[k] = max of v over window k, −∞ for an empty window.
+pub(crate) fn sliding_max(v: &[f64], w: &Windows) -> Vec<f64> {
+    sliding(v, w, f64::NEG_INFINITY, |x, y| x >= y)
+}
+
+/// out[k] = min of v over window k, +∞ for an empty window.
+pub(crate) fn sliding_min(v: &[f64], w: &Windows) -> Vec<f64> {
+    sliding(v, w, f64::INFINITY, |x, y| x <= y)
+}
+
+/// The map x ↦ max(alpha, min(beta, x)). These maps are closed under composition:
+/// (f∘g)(x) = max(α_f, min(β_f, α_g), min(β_f, β_g, x)).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct Clamp {
+    pub alpha: f64,
+    pub beta: f64,
+}
+
+impl Clamp {
+    pub const ID: Clamp = Clamp { alpha: f64::NEG_INFINITY, beta: f64::INFINITY };
+    /// self ∘ g.
+    #[inline(always)]
+    pub fn then(self, g: Clamp) -> Clamp {
+        Clamp { alpha: self.alpha.max(self.beta.min(g.alpha)), beta: self.beta.min(g.beta) }
+    }
+}
+
+/// FIFO of indexed [`Clamp`] maps with the aggregate f_front ∘ … ∘ f_back in amortised O(1)
+/// (two stacks: the front stack stores suffix compositions, the back stack a running composition).
+pub(crate) struct ClampQueue {
+    /// Front stack, top = last element = oldest; each entry (index, composition of it and all newer
+    /// entries of the front stack).
+    front: Vec<(usize, Clamp)>,
+    /// Back stack elements in arrival order.
+    back: Vec<(usize, Clamp)>,
+    back_agg: Clamp,
+}
+
+impl ClampQueue {
+    pub fn new() -> Self {
+        Self { front: Vec::new(), back: Vec::new(), back_agg: Clamp::ID }
+    }
+    #[inline(always)]
+    pub fn push(&mut self, j: usize, f: Clamp) {
+        self.back.push((j, f));
+        self.back_agg = self.back_agg.then(f);
+    }
+    /// Drop every element with index < lo.
+    pub fn expire(&mut self, lo: usize) {
+        loop {
+            if self.front.is_empty() {
+                if self.back.first().is_none_or(|&(j, _)| j >= lo) {
+                    return;
+                }
+                // Flip: move the back stack onto the front stack, newest first.
+                let mut agg = Clamp::ID;
+                while let Some((j, f)) = self.back.pop() {
+                    agg = f.then(agg);
+                    self.front.push((j, agg));
+                }
+                self.back_agg = Clamp::ID;
+            }
+            match self.front.last() {
+                Some(&(j, _)) if j < lo => {
+                    self.front.pop();
+                }
+                _ => return,
+            }
+        }
+    }
+    /// Composition of all queued maps, oldest outermost.
+    #[inline(always)]
+    pub fn aggregate(&self) -> Clamp {
+        match self.front.last() {
+            Some(&(_, f)) => f.then(self.back_agg),
+            None => self.back_agg,
+        }
+    }
+}

@@ -1,0 +1,450 @@
+//! Safety robustness of one sampled nominal trajectory: the radius δ₀ of Theorem 4.7 and its parts.
+//!
+//! Given the nominal samples x̃(κ) at times t_κ, a time bound T, the sets Goal and Unsafe, per-sample
+//! input constraints and the CAF metric ψ (as a [`Metric`]), Theorem 4.7 certifies every closed-loop
+//! trajectory that stays ψ-closer than δ₀ to the nominal one, where
+//!
+//! * t* = argmax over samples with t_κ ≤ T of depth_ψ(x̃(κ), Goal)                        (4.12)
+//! * δ_Goal = depth_ψ(x̃(t*), Goal)                                                      (4.13)
+//! * δ_Unsafe = min over κ ≤ κ* of dist_ψ(x̃(κ), Unsafe)                                  (4.14)
+//! * δ_Input = min over κ ≤ κ* of dist_ψ(x̃(κ), {x : k(κ, x) ∉ Input})                    (4.15)
+//! * δ₀ = min(δ_Goal, δ_Unsafe, δ_Input)                                                 (4.11)
+//!
+//! Goal is a *max* over time (the trajectory only has to be in Goal once, at t*), while Unsafe and Input
+//! are *mins* over the prefix up to and including t* (they must hold at every sample until Goal is
+//! reached). Lemma 4.4 and Corollary 4.6 turn each part into a guarantee for the perturbed trajectory.
+//!
+//! **Signed values.** Instead of the unsigned depth and dist of (4.12)–(4.15) we use the signed distance
+//! (2.8): `Dist(x̃, Goal)` for Goal and `−Dist(x̃, Unsafe)`, `Dist(x̃, A_κ)` for Unsafe and Input, where
+//! A_κ = {x : k(κ, x) ∈ Input} is the set of states whose feedback input is admissible (so
+//! dist(x̃, ℝⁿ∖A_κ) is the distance to the "unsafe input" set of (4.15)). Whenever a part is positive it
+//! equals the theorem's value, and δ₀ > 0 exactly when the theorem certifies a neighbourhood; when the
+//! nominal trajectory itself fails (never reaches Goal, touches Unsafe, saturates the input), the
+//! negative value says by how much, and the critical time and point still give the optimiser a
+//! direction (§5.3). The certified radius is `max(δ₀, 0)`.
+//!
+//! **Cost.** One pass over the samples up to T for Goal, then one pass over the samples up to t* for
+//! Unsafe and Input: O(N) signed-distance evaluations. Ties in the argmax pick the earliest sample, which
+//! gives the shortest prefix and hence the largest δ_Unsafe and δ_Input among the maximisers.
+//!
+//! [`safety_robustness_joint`] is a variant that chooses t* to maximise the combined radius instead of
+//! the Goal depth alone (the robustness of the until embedding of Remark 2.29, with a closed prefix); it
+//! is never smaller than the Theorem 4.7 value and is certified by the same proof, since the proof only
+//! uses that x̃(t*) is δ₀-deep in Goal and the prefix up to t* is δ₀-far from the bad sets.
+
+use crate::geometry::{Metric, Region, Witness};
+
+/// Errors of the safety robustness computation: bad trajectories, mismatched dimensions and sets whose
+/// distance routines return NaN.
+#[derive(Debug, Clone, PartialEq, thiserror::Error, miette::Diagnostic)]
+pub enum SafetyError {
+    #[error("trajectory has no samples")]
+    Empty,
+    #[error("state dimension n must be positive")]
+    ZeroDimension,
+    #[error(
+        "trajectory has {times} sample times but {states} state entries; expected {expected} (= {times} × n with n = {n})"
+    )]
+    LengthMismatch { times: usize, states: usize, n: usize, expected: usize },
+    #[error("sample time t[{index}] is not finite ({value})")]
+    NonFiniteTime { index: usize, value: f64 },
+    #[error("sample times must increase strictly: t[{index}] = {value} does not exceed t[{prev_index}] = {prev}", prev_index = .index - 1)]
+    NonMonotoneTime { index: usize, prev: f64, value: f64 },
+    #[error("component {component} of state sample {index} is not finite ({value})")]
+    NonFiniteState { index: usize, component: usize, value: f64 },
+    #[error("{what} has dimension {found}, but the trajectory has n = {n}")]
+    DimensionMismatch { what: &'static str, found: usize, n: usize },
+    #[error("metric weight R has {found} entries, expected n × n = {expected}")]
+    MetricShape { found: usize, expected: usize },
+    #[error("metric weight R has a non-finite entry at row {row}, column {col}")]
+    MetricNonFinite { row: usize, col: usize },
+    #[error("time bound T = {T} is not a number")]
+    HorizonNaN { T: f64 },
+    #[error("time bound T = {T} is before the first sample time t[0] = {t0}; no sample to reach Goal at")]
+    HorizonBeforeStart { T: f64, t0: f64 },
+    #[error("input constraints are given for {available} samples, but the horizon T covers {needed}")]
+    InputTooShort { needed: usize, available: usize },
+    #[error("the signed distance to {what} at sample {index} is NaN")]
+    NaNDistance { what: &'static str, index: usize },
+}
+
+/// A borrowed, validated sampled trajectory: times t_κ (finite, strictly increasing) and states x̃(κ)
+/// stored row-major, `states[κ·n .. (κ+1)·n]`.
+#[derive(Clone, Copy, Debug)]
+pub struct SampledTrajectory<'a> {
+    times: &'a [f64],
+    states: &'a [f64],
+    n: usize,
+}
+
+impl<'a> SampledTrajectory<'a> {
+    /// Validate and wrap. Every state must be finite and the times strictly increasing.
+    pub fn new(times: &'a [f64], states: &'a [f64], n: usize) -> Result<Self, SafetyError> {
+        if n == 0 {
+            return Err(SafetyError::ZeroDimension);
+        }
+        if times.is_empty() {
+            return Err(SafetyError::Empty);
+        }
+        let expected = times.len().checked_mul(n).unwrap_or(usize::MAX);
+        if states.len() != expected {
+            return Err(SafetyError::LengthMismatch { times: times.len(), states: states.len(), n, expected });
+        }
+        for (index, &value) in times.iter().enumerate() {
+            if !value.is_finite() {
+                return Err(SafetyError::NonFiniteTime { index, value });
+            }
+            if index > 0 && value <= times[index - 1] {
+                return Err(SafetyError::NonMonotoneTime { index, prev: times[index - 1], value });
+            }
+        }
+        if let Some(pos) = states.iter().position(|v| !v.is_finite()) {
+            return Err(SafetyError::NonFiniteState { index: pos / n, component: pos % n, value: states[pos] });
+        }
+        Ok(Self { times, states, n })
+    }
+    /// Number of samples.
+    pub fn len(&self) -> usize {
+        self.times.len()
+    }
+    /// Always false: construction rejects empty trajectories.
+    pub fn is_empty(&self) -> bool {
+        self.times.is_empty()
+    }
+    /// State dimension n.
+    pub fn n(&self) -> usize {
+        self.n
+    }
+    /// Sample times.
+    pub fn times(&self) -> &'a [f64] {
+        self.times
+    }
+    /// The state x̃(κ). Panics if κ ≥ len (an indexing bug, not bad input).
+    pub fn state(&self, kappa: usize) -> &'a [f64] {
+        &self.states[kappa * self.n..(kappa + 1) * self.n]
+    }
+}
+
+/// Per-sample input constraints mapped into state space.
+///
+/// For sample κ the feedback input is u = k(κ, x) (for the linear laws of ch. 3, `K x + v(κ)`); the
+/// *admissible-state set* is A_κ = {x : k(κ, x) ∈ Input}. An implementation returns the signed distance
+/// (2.8) of x to A_κ in the given metric: positive (the depth, = distance to the unsafe-input set of
+/// (4.15)) when the input at x is admissible, negative when it is not, with the witness point of the
+/// set that attains it.
+pub trait InputSets {
+    /// How many samples (κ = 0, 1, …) are covered, or `None` when every index is.
+    fn samples(&self) -> Option<usize>;
+    /// Ambient dimension of the sets, when known.
+    fn dim(&self) -> Option<usize> {
+        None
+    }
+    /// Signed distance of `x` (the nominal state at sample `kappa`) to A_κ.
+    fn signed_dist(&self, kappa: usize, x: &[f64], metric: &Metric) -> Witness;
+}
+
+/// One admissible-state set per sample, κ-th entry for sample κ.
+impl InputSets for Vec<&dyn Region> {
+    fn samples(&self) -> Option<usize> {
+        Some(self.len())
+    }
+    fn dim(&self) -> Option<usize> {
+        self.first().map(|r| r.dim())
+    }
+    fn signed_dist(&self, kappa: usize, x: &[f64], metric: &Metric) -> Witness {
+        self[kappa].signed_dist(x, metric)
+    }
+}
+
+/// One admissible-state set per sample, κ-th entry for sample κ.
+impl InputSets for Vec<Box<dyn Region>> {
+    fn samples(&self) -> Option<usize> {
+        Some(self.len())
+    }
+    fn dim(&self) -> Option<usize> {
+        self.first().map(|r| r.dim())
+    }
+    fn signed_dist(&self, kappa: usize, x: &[f64], metric: &Metric) -> Witness {
+        self[kappa].signed_dist(x, metric)
+    }
+}
+
+/// Input constraints given by a closure `(κ, x, metric) ↦ Dist(x, A_κ)` with its witness (see
+/// [`InputSets`]); covers every sample index.
+pub struct FnInput<F>(pub F);
+
+impl<F> InputSets for FnInput<F>
+where
+    F: Fn(usize, &[f64], &Metric) -> Witness,
+{
+    fn samples(&self) -> Option<usize> {
+        None
+    }
+    fn signed_dist(&self, kappa: usize, x: &[f64], metric: &Metric) -> Witness {
+        (self.0)(kappa, x, metric)
+    }
+}
+
+/// The sets, metric and time bound of one safety problem (Problem 2.26) in state coordinates.
+/// Output-space sets are passed already pulled back to states (the geometry module's `InOutput`).
+#[derive(Clone, Copy)]
+pub struct SafetySpec<'a> {
+    pub goal: &'a dyn Region,
+    pub unsafe_set: &'a dyn Region,
+    /// `None` when the problem has no input constraint (δ_Input = +∞).
+    pub input: Option<&'a dyn InputSets>,
+    /// The CAF metric ψ(x, x') = ‖x − x'‖_R.
+    pub metric: &'a Metric,
+    /// Time bound T: samples with t_κ ≤ T (compared exactly) may serve as t*.
+    pub T: f64,
+}
+
+/// Which part of δ₀ is smallest (ties resolved in the order Goal, Unsafe, Input).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Binding {
+    Goal,
+    Unsafe,
+    Input,
+}
+
+/// One part of δ₀ with where it is attained.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Critical {
+    /// The signed value of this part (see the module doc).
+    pub value: f64,
+    /// The critical sample index κ.
+    pub index: usize,
+    /// Its time t_κ.
+    pub time: f64,
+    /// The critical set point: the point of the set's boundary (or of the set, when the nominal state is
+    /// outside it) that attains the distance from x̃(κ).
+    pub point: Vec<f64>,
+}
+
+/// The result of Theorem 4.7 for one trajectory.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SafetyRobustness {
+    /// δ₀ = min(δ_Goal, δ_Unsafe, δ_Input), (4.11), signed.
+    pub delta: f64,
+    /// Which part attains δ₀.
+    pub binding: Binding,
+    /// δ_Goal, (4.13); its `index` is κ* (t*, (4.12)).
+    pub goal: Critical,
+    /// δ_Unsafe, (4.14), the minimum over samples 0..=κ*.
+    pub unsafe_set: Critical,
+    /// δ_Input, (4.15), the minimum over samples 0..=κ*; `None` without input constraints.
+    pub input: Option<Critical>,
+    /// Number of samples with t_κ ≤ T (the candidates for t*).
+    pub horizon_samples: usize,
+}
+
+impl SafetyRobustness {
+    /// The radius Theorem 4.7 certifies: max(δ₀, 0).
+    pub fn certified_radius(&self) -> f64 {
+        self.delta.max(0.0)
+    }
+    /// True when the theorem certifies a non-empty neighbourhood (δ₀ > 0).
+    pub fn is_certified(&self) -> bool {
+        self.delta > 0.0
+    }
+    /// The critical time t* (time of the Goal part).
+    pub fn t_star(&self) -> f64 {
+        self.goal.time
+    }
+}
+
+/// Validate the spec against the trajectory and return the number of samples with t ≤ T.
+fn check(traj: &SampledTrajectory, spec: &SafetySpec) -> Result<usize, SafetyError> {
+    let n = traj.n();
+    if spec.goal.dim() != n {
+        return Err(SafetyError::DimensionMismatch { what: "Goal", found: spec.goal.dim(), n });
+    }
+    if spec.unsafe_set.dim() != n {
+        return Err(SafetyError::DimensionMismatch { what: "Unsafe", found: spec.unsafe_set.dim(), n });
+    }
+    if spec.metric.n != n {
+        return Err(SafetyError::DimensionMismatch { what: "metric", found: spec.metric.n, n });
+    }
+    if spec.metric.R.len() != n * n {
+        return Err(SafetyError::MetricShape { found: spec.metric.R.len(), expected: n * n });
+    }
+    if let Some(pos) = spec.metric.R.iter().position(|v| !v.is_finite()) {
+        return Err(SafetyError::MetricNonFinite { row: pos / n, col: pos % n });
+    }
+    if spec.T.is_nan() {
+        return Err(SafetyError::HorizonNaN { T: spec.T });
+    }
+    let count = traj.times().partition_point(|&t| t <= spec.T);
+    if count == 0 {
+        return Err(SafetyError::HorizonBeforeStart { T: spec.T, t0: traj.times()[0] });
+    }
+    if let Some(input) = spec.input {
+        if let Some(d) = input.dim() {
+            if d != n {
+                return Err(SafetyError::DimensionMismatch { what: "input set", found: d, n });
+            }
+        }
+        if let Some(available) = input.samples() {
+            if available < count {
+                return Err(SafetyError::InputTooShort { needed: count, available });
+            }
+        }
+    }
+    Ok(count)
+}
+
+fn not_nan(w: Witness, what: &'static str, index: usize) -> Result<Witness, SafetyError> {
+    if w.value.is_nan() {
+        Err(SafetyError::NaNDistance { what, index })
+    } else {
+        Ok(w)
+    }
+}
+
+/// Signed Goal value at κ: Dist(x̃(κ), Goal).
+fn goal_at(traj: &SampledTrajectory, spec: &SafetySpec, k: usize) -> Result<Witness, SafetyError> {
+    not_nan(spec.goal.signed_dist(traj.state(k), spec.metric), "Goal", k)
+}
+
+/// Signed Unsafe value at κ: −Dist(x̃(κ), Unsafe) (= dist outside Unsafe, −depth inside).
+fn unsafe_at(traj: &SampledTrajectory, spec: &SafetySpec, k: usize) -> Result<Witness, SafetyError> {
+    let mut w = not_nan(spec.unsafe_set.signed_dist(traj.state(k), spec.metric), "Unsafe", k)?;
+    w.value = -w.value;
+    Ok(w)
+}
+
+/// Signed Input value at κ: Dist(x̃(κ), A_κ).
+fn input_at(
+    traj: &SampledTrajectory,
+    input: &dyn InputSets,
+    metric: &Metric,
+    k: usize,
+) -> Result<Witness, SafetyError> {
+    not_nan(input.signed_dist(k, traj.state(k), metric), "the admissible-input set", k)
+}
+
+fn critical(traj: &SampledTrajectory, w: Witness, index: usize) -> Critical {
+    Critical { value: w.value, index, time: traj.times()[index], point: w.point }
+}
+
+/// Running minimum over a prefix: the first index attaining it and its witness.
+fn prefix_min(
+    upto: usize,
+    mut f: impl FnMut(usize) -> Result<Witness, SafetyError>,
+) -> Result<(usize, Witness), SafetyError> {
+    let mut best = (0, f(0)?);
+    for k in 1..=upto {
+        let w = f(k)?;
+        if w.value < best.1.value {
+            best = (k, w);
+        }
+    }
+    Ok(best)
+}
+
+fn assemble(
+    goal: Critical,
+    unsafe_set: Critical,
+    input: Option<Critical>,
+    horizon_samples: usize,
+) -> SafetyRobustness {
+    let mut delta = goal.value;
+    let mut binding = Binding::Goal;
+    if unsafe_set.value < delta {
+        delta = unsafe_set.value;
+        binding = Binding::Unsafe;
+    }
+    if let Some(i) = &input {
+        if i.value < delta {
+            delta = i.value;
+            binding = Binding::Input;
+        }
+    }
+    SafetyRobustness { delta, binding, goal, unsafe_set, input, horizon_samples }
+}
+
+/// Theorem 4.7: δ₀ with t* = argmax of the Goal depth over samples with t_κ ≤ T, (4.11)–(4.15).
+///
+/// Runs in O(N) signed-distance evaluations: one pass for Goal up to T, one for Unsafe and Input up to
+/// κ*. See the module doc for the signed convention and the tie rule.
+pub fn safety_robustness(
+    traj: &SampledTrajectory,
+    spec: &SafetySpec,
+) -> Result<SafetyRobustness, SafetyError> {
+    let count = check(traj, spec)?;
+    // (4.12)–(4.13): first maximiser of the signed Goal distance.
+    let mut kstar = 0;
+    let mut gbest = goal_at(traj, spec, 0)?;
+    for k in 1..count {
+        let w = goal_at(traj, spec, k)?;
+        if w.value > gbest.value {
+            gbest = w;
+            kstar = k;
+        }
+    }
+    // (4.14): minimum over the closed prefix 0..=κ*.
+    let (ku, wu) = prefix_min(kstar, |k| unsafe_at(traj, spec, k))?;
+    // (4.15).
+    let input = match spec.input {
+        Some(inp) => {
+            let (ki, wi) = prefix_min(kstar, |k| input_at(traj, inp, spec.metric, k))?;
+            Some(critical(traj, wi, ki))
+        }
+        None => None,
+    };
+    Ok(assemble(critical(traj, gbest, kstar), critical(traj, wu, ku), input, count))
+}
+
+/// Variant of Theorem 4.7 that picks t* to maximise min(Dist(x̃(t*), Goal), the Unsafe and Input minima
+/// over 0..=κ*) rather than the Goal depth alone: the robustness of the until embedding of Remark 2.29
+/// (with the prefix closed at t*). Never smaller than [`safety_robustness`], equally sound (module doc).
+///
+/// One pass, O(N); it stops early once the prefix minimum cannot be beaten any more.
+pub fn safety_robustness_joint(
+    traj: &SampledTrajectory,
+    spec: &SafetySpec,
+) -> Result<SafetyRobustness, SafetyError> {
+    let count = check(traj, spec)?;
+    let mut mu = f64::INFINITY; // running min of the Unsafe part
+    let mut ku = 0;
+    let mut mi = f64::INFINITY; // running min of the Input part
+    let mut ki = 0;
+    let mut best = f64::NEG_INFINITY;
+    let mut kstar = 0;
+    let mut ku_star = 0;
+    let mut ki_star = 0;
+    for k in 0..count {
+        let u = unsafe_at(traj, spec, k)?.value;
+        if u < mu || k == 0 {
+            mu = u;
+            ku = k;
+        }
+        if let Some(inp) = spec.input {
+            let v = input_at(traj, inp, spec.metric, k)?.value;
+            if v < mi || k == 0 {
+                mi = v;
+                ki = k;
+            }
+        }
+        let prefix = mu.min(mi);
+        if k > 0 && prefix <= best {
+            // The prefix minimum never increases, so no later sample can beat `best`.
+            break;
+        }
+        let score = goal_at(traj, spec, k)?.value.min(prefix);
+        if score > best || k == 0 {
+            best = score;
+            kstar = k;
+            ku_star = ku;
+            ki_star = ki;
+        }
+    }
+    // Recompute the witnesses at the three critical samples (three extra evaluations).
+    let goal = critical(traj, goal_at(traj, spec, kstar)?, kstar);
+    let unsafe_set = critical(traj, unsafe_at(traj, spec, ku_star)?, ku_star);
+    let input = match spec.input {
+        Some(inp) => Some(critical(traj, input_at(traj, inp, spec.metric, ki_star)?, ki_star)),
+        None => None,
+    };
+    Ok(assemble(goal, unsafe_set, input, count))
+}

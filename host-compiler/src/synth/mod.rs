@@ -1,0 +1,427 @@
+//! The synthesis pipeline for linear affine plants (Algorithm 1 with Algorithm 2's controller):
+//! spec → sampled plant → CAF and feedback → trajectories grown until Init is covered → certified,
+//! f32-exact image → independent Monte Carlo verification → report.
+//!
+//! Everything random is drawn from ChaCha streams seeded by the spec's seed, and parallel work is
+//! collected in a fixed order, so the same spec and seed give a byte-identical image.
+
+mod present;
+mod sets;
+
+use crate::certify::{self, Certificate, ContinuousPart, Loop, LoopConstants};
+use crate::coverage::{CoverageEstimate, SampleBox};
+use crate::emit::{FallbackLaw, ImageBuilder, TrajectoryEntry};
+use crate::linalg::{from_row_major, p_norm};
+use crate::spec::Problem;
+use crate::trajectory::generate::{generate, GenProblem, GenSettings, InputBound};
+use crate::trajectory::{simulate, Nominal};
+use crate::verify::{monte_carlo, Judge, VerifyReport};
+use faer::Mat;
+use indicatif::{ProgressBar, ProgressStyle};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rayon::prelude::*;
+use std::time::Instant;
+
+pub use present::report_data;
+pub use sets::input_bound;
+
+/// Options of one run that are not part of the task (defaults documented per field).
+#[derive(Clone, Debug)]
+pub struct SynthOptions {
+    /// Monte Carlo runs from the certified cover in the verification (default 10 000).
+    pub verify_interior: usize,
+    /// Runs from the boundary of each ball (default 32).
+    pub verify_per_ball: usize,
+    /// Uniform samples of Init used to choose seeds (default 4 000).
+    pub working_samples: usize,
+    /// Show progress bars (default true).
+    pub progress: bool,
+}
+
+impl Default for SynthOptions {
+    fn default() -> Self {
+        Self { verify_interior: 10_000, verify_per_ball: 32, working_samples: 4_000, progress: true }
+    }
+}
+
+/// Why the growth loop stopped.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub enum StopReason {
+    /// The coverage lower bound met the target at the requested confidence.
+    Covered,
+    /// The trajectory budget ran out first.
+    Budget { trajectories: usize },
+    /// No uncovered sample admits a certifiable trajectory.
+    Stuck { failed_seeds: usize },
+}
+
+impl std::fmt::Display for StopReason {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            StopReason::Covered => write!(f, "Init covered at the requested confidence"),
+            StopReason::Budget { trajectories } => {
+                write!(f, "trajectory budget ({trajectories}) ran out before Init was covered")
+            }
+            StopReason::Stuck { failed_seeds } => write!(
+                f,
+                "stopped: {failed_seeds} uncovered seed states admit no certifiable trajectory (needs a new seed trajectory)"
+            ),
+        }
+    }
+}
+
+/// One certified trajectory of the cover.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct CoverTrajectory {
+    pub source: String,
+    pub nominal: Nominal,
+    pub certificate: Certificate,
+}
+
+/// The sampled plant and its continuous origin.
+#[derive(Clone, Debug)]
+pub struct SampledPlant {
+    pub A: Mat<f64>,
+    pub B: Mat<f64>,
+    pub g: Vec<f64>,
+    pub continuous: Option<ContinuousPart>,
+    /// Exact ZOH over a sub-period h/substeps (continuous plants), for the verifier's inter-sample check.
+    pub sub: Option<(Mat<f64>, Mat<f64>, Vec<f64>, usize)>,
+}
+
+/// Everything a run produced.
+pub struct Synthesis {
+    pub plant: SampledPlant,
+    pub K: Mat<f64>,
+    pub P: Mat<f64>,
+    pub constants: LoopConstants,
+    pub trajectories: Vec<CoverTrajectory>,
+    pub image: Vec<u8>,
+    pub coverage: CoverageEstimate,
+    /// Final coverage samples not covered (full state vectors).
+    pub uncovered: Vec<Vec<f64>>,
+    pub stop: StopReason,
+    pub verify: VerifyReport,
+    pub timings: Vec<(String, f64)>,
+    pub warnings: Vec<String>,
+}
+
+/// Errors that end a run.
+#[derive(Debug, thiserror::Error)]
+pub enum SynthError {
+    #[error("discretisation failed: {0}")]
+    Model(String),
+    #[error("no CAF and feedback: {0}")]
+    Caf(String),
+    #[error(transparent)]
+    Certify(#[from] certify::CertifyError),
+    #[error("set conversion: {0}")]
+    Sets(String),
+    #[error("image: {0}")]
+    Emit(#[from] crate::emit::EmitError),
+    #[error("no certified trajectory at all: {0}")]
+    Nothing(String),
+}
+
+/// f32 rounding (the values the image stores), widened back exactly.
+pub fn round32(x: f64) -> f64 {
+    x as f32 as f64
+}
+
+/// The sampled plant of a spec (exact zero-order hold for continuous-time plants).
+pub fn sampled_plant(problem: &Problem) -> Result<SampledPlant, SynthError> {
+    let pl = &problem.plant;
+    let (n, m) = (pl.n(), pl.m());
+    let A = from_row_major(n, n, &pl.A.data);
+    let B = from_row_major(n, m, &pl.B.data);
+    match pl.time {
+        crate::spec::TimeDomain::Discrete => {
+            Ok(SampledPlant { A, B, g: pl.offset.clone(), continuous: None, sub: None })
+        }
+        crate::spec::TimeDomain::Continuous => {
+            let (Ad, Bd, gd) = crate::model::zoh(A.as_ref(), B.as_ref(), &pl.offset, pl.period)
+                .map_err(|e| SynthError::Model(e.to_string()))?;
+            const SUBSTEPS: usize = 8;
+            let (As, Bs, gs) = crate::model::zoh(A.as_ref(), B.as_ref(), &pl.offset, pl.period / SUBSTEPS as f64)
+                .map_err(|e| SynthError::Model(e.to_string()))?;
+            Ok(SampledPlant {
+                A: Ad,
+                B: Bd,
+                g: gd,
+                continuous: Some(ContinuousPart { Ac: A, Bc: B, c: pl.offset.clone(), h: pl.period }),
+                sub: Some((As, Bs, gs, SUBSTEPS)),
+            })
+        }
+    }
+}
+
+fn bar(progress: bool, len: u64, msg: &str) -> ProgressBar {
+    if !progress {
+        return ProgressBar::hidden();
+    }
+    let b = ProgressBar::new(len);
+    b.set_style(
+        ProgressStyle::with_template("{msg:>28} [{bar:30}] {pos}/{len} {elapsed}").unwrap_or(ProgressStyle::default_bar()),
+    );
+    b.set_message(msg.to_string());
+    b
+}
+
+/// Run the whole pipeline.
+pub fn synthesize(problem: &Problem, opts: &SynthOptions) -> Result<Synthesis, SynthError> {
+    let mut timings = Vec::new();
+    let mut warnings = Vec::new();
+    let t0 = Instant::now();
+    let n = problem.plant.n();
+    let m = problem.plant.m();
+    let plant = sampled_plant(problem)?;
+
+    // CAF and feedback for the sampled loop (LMIs (3.66)–(3.67) with the σ-margin of Remark 3.22).
+    let (K, P) = crate::caf::design_discrete(plant.A.as_ref(), plant.B.as_ref(), problem.synthesis.sigma_margin)
+        .map_err(|e| SynthError::Caf(e.to_string()))?;
+    // What ships is the f32 gain; everything below is certified for it.
+    let Khat = Mat::from_fn(m, n, |i, j| round32(K[(i, j)]));
+    timings.push(("CAF (SDP)".to_string(), t0.elapsed().as_secs_f64()));
+
+    let goal = problem.goal_region().map_err(|e| SynthError::Sets(e.to_string()))?;
+    let unsafe_set = problem.unsafe_region().map_err(|e| SynthError::Sets(e.to_string()))?;
+    let input = sets::input_bound(&problem.input);
+    let goal_piece = sets::convex_piece(&problem.goal, n).map_err(SynthError::Sets)?;
+    let unsafe_pieces: Vec<_> =
+        problem.unsafe_sets.iter().map(|s| sets::convex_piece(s, n)).collect::<Result<_, _>>().map_err(SynthError::Sets)?;
+    let lp = Loop {
+        A: plant.A.as_ref(),
+        B: plant.B.as_ref(),
+        g: &plant.g,
+        K: Khat.as_ref(),
+        P: P.as_ref(),
+        continuous: plant.continuous.as_ref(),
+        goal: goal.as_ref(),
+        unsafe_set: unsafe_set.as_deref(),
+        input: &input,
+    };
+    let lc = LoopConstants::new(&lp)?;
+    let steps = problem.horizon_steps();
+
+    // Trajectory generator: the tube conditions of Theorem 4.7 with the inter-sample and rounding margins.
+    let eps_guess = 1e-5 * sets::input_scale(&input);
+    let excursion = |x: &[f64], u: &[f64]| -> f64 {
+        match &plant.continuous {
+            None => 0.0,
+            Some(cp) => {
+                let ax = crate::linalg::mat_vec(cp.Ac.as_ref(), x);
+                let bu = crate::linalg::mat_vec(cp.Bc.as_ref(), u);
+                let f: Vec<f64> = (0..x.len()).map(|i| ax[i] + bu[i] + cp.c[i]).collect();
+                lc.phi * (p_norm(P.as_ref(), &f) + lc.beta * eps_guess)
+            }
+        }
+    };
+    let gp = GenProblem {
+        A: plant.A.as_ref(),
+        B: plant.B.as_ref(),
+        g: &plant.g,
+        K: Khat.as_ref(),
+        P: P.as_ref(),
+        goal: &goal_piece,
+        unsafe_sets: &unsafe_pieces,
+        input: &input,
+        steps,
+        gamma: lc.gamma,
+        input_margin: eps_guess,
+        excursion: &excursion,
+    };
+    let gs = GenSettings::default();
+    let make = |x0: &[f64]| -> Option<CoverTrajectory> {
+        let g = generate(&gp, x0, &gs).ok()?;
+        let v32: Vec<Vec<f64>> = g.nominal.v.iter().map(|r| r.iter().map(|&a| round32(a)).collect()).collect();
+        let nom = simulate(plant.A.as_ref(), plant.B.as_ref(), &plant.g, Khat.as_ref(), x0, &v32);
+        let cert = certify::certify(&lp, &lc, &nom);
+        (cert.is_certified() && cert.delta >= problem.synthesis.min_robustness).then(|| CoverTrajectory {
+            source: "generated".into(),
+            nominal: nom,
+            certificate: cert,
+        })
+    };
+
+    // Algorithm 1: grow the cover from uncovered samples, in parallel batches.
+    let t1 = Instant::now();
+    let init = SampleBox { lo: problem.init.lo.clone(), hi: problem.init.hi.clone() };
+    let mut work_rng = ChaCha8Rng::seed_from_u64(problem.seed);
+    let mut work = init.samples(opts.working_samples, &mut work_rng);
+    let mut trajs: Vec<CoverTrajectory> = Vec::new();
+    let mut failed = 0usize;
+    let budget = problem.synthesis.max_trajectories;
+    let batch = rayon::current_num_threads().max(1) * 2;
+    let pb = bar(opts.progress, budget as u64, "trajectories");
+    let n_final = problem.synthesis.coverage_samples();
+    let mut final_round = 0u64;
+    let (stop, coverage, uncovered, image) = loop {
+        // Seeds: uncovered working samples, farthest first (greedy, spread by the typical radius).
+        let typical = median(trajs.iter().map(|t| t.certificate.delta)).unwrap_or(0.05);
+        let outside = |x: &[f64], extra: &[Vec<f64>]| -> f64 {
+            let mut d = f64::INFINITY;
+            for t in &trajs {
+                let e: Vec<f64> = x.iter().zip(&t.nominal.x[0]).map(|(a, b)| a - b).collect();
+                d = d.min(p_norm(P.as_ref(), &e) - t.certificate.delta_stored as f64);
+            }
+            for c in extra {
+                let e: Vec<f64> = x.iter().zip(c).map(|(a, b)| a - b).collect();
+                d = d.min(p_norm(P.as_ref(), &e) - typical);
+            }
+            d
+        };
+        work.retain(|x| outside(x, &[]) > 0.0);
+        if work.is_empty() || trajs.len() >= budget {
+            // Final, independent estimate on fresh samples through the f32 selection of the image.
+            let image = build_image(problem, &plant, &Khat, &P, &trajs)?;
+            let img = shared_types::image::decode(&image).map_err(|e| SynthError::Nothing(format!("{e:?}")))?;
+            let ctl = shared_types::eval::Controller::new(img);
+            let mut frng = ChaCha8Rng::seed_from_u64(problem.seed ^ 0x5eed_c0fe_u64.wrapping_add(final_round));
+            final_round += 1;
+            let pts = init.samples(n_final, &mut frng);
+            let unc: Vec<Vec<f64>> = pts
+                .par_iter()
+                .filter(|x| {
+                    let xf: Vec<f32> = x.iter().map(|&v| v as f32).collect();
+                    ctl.select(&xf).is_none()
+                })
+                .cloned()
+                .collect();
+            let est = CoverageEstimate::from_counts(n_final, n_final - unc.len(), problem.synthesis.confidence);
+            let target = problem.synthesis.coverage_target;
+            if est.mean - problem.synthesis.coverage_tolerance >= target {
+                break (StopReason::Covered, est, unc, image);
+            }
+            if trajs.len() >= budget {
+                break (StopReason::Budget { trajectories: budget }, est, unc, image);
+            }
+            if unc.is_empty() || final_round > 8 {
+                break (StopReason::Stuck { failed_seeds: failed }, est, unc, image);
+            }
+            // Not yet: the fresh sample found holes; use them as seeds and estimate again afterwards.
+            work = unc;
+            continue;
+        }
+        let mut seeds: Vec<Vec<f64>> = Vec::new();
+        let mut cand = work.clone();
+        while seeds.len() < batch.min(budget - trajs.len()) && !cand.is_empty() {
+            let (best, _) = cand
+                .iter()
+                .enumerate()
+                .map(|(i, x)| (i, outside(x, &seeds)))
+                .fold((0, f64::NEG_INFINITY), |a, b| if b.1 > a.1 { b } else { a });
+            let s: Vec<f64> = cand.swap_remove(best).iter().map(|&v| round32(v)).collect();
+            cand.retain(|x| {
+                let e: Vec<f64> = x.iter().zip(&s).map(|(a, b)| a - b).collect();
+                p_norm(P.as_ref(), &e) > typical
+            });
+            seeds.push(s);
+        }
+        let made: Vec<Option<CoverTrajectory>> = seeds.par_iter().map(|s| make(s)).collect();
+        let mut progress = false;
+        for (s, t) in seeds.iter().zip(made) {
+            match t {
+                Some(t) => {
+                    trajs.push(t);
+                    progress = true;
+                    pb.inc(1);
+                }
+                None => {
+                    failed += 1;
+                    // Drop the seed and its close neighbours from the working set so the loop moves on; the
+                    // final fresh sample will find any hole this leaves.
+                    work.retain(|x| {
+                        let e: Vec<f64> = x.iter().zip(s).map(|(a, b)| a - b).collect();
+                        p_norm(P.as_ref(), &e) > 0.25 * typical
+                    });
+                }
+            }
+        }
+        if !progress && work.is_empty() && trajs.is_empty() {
+            pb.finish_and_clear();
+            return Err(SynthError::Nothing(format!("{failed} seeds from Init gave no certifiable trajectory")));
+        }
+    };
+    pb.finish_and_clear();
+    if trajs.is_empty() {
+        return Err(SynthError::Nothing("no trajectory could be certified".into()));
+    }
+    timings.push(("cover (Algorithm 1)".to_string(), t1.elapsed().as_secs_f64()));
+    if stop != StopReason::Covered {
+        warnings.push(stop.to_string());
+    }
+
+    // Independent verification through the shared evaluator.
+    let t2 = Instant::now();
+    let img = shared_types::image::decode(&image).map_err(|e| SynthError::Nothing(format!("{e:?}")))?;
+    let judge = Judge {
+        A: plant.A.as_ref(),
+        B: plant.B.as_ref(),
+        g: &plant.g,
+        sub: plant.sub.as_ref().map(|(a, b, g, s)| (a.as_ref(), b.as_ref(), g.as_slice(), *s)),
+        goal: goal.as_ref(),
+        unsafe_set: unsafe_set.as_deref(),
+        input: &input,
+        steps,
+        init_lo: &problem.init.lo,
+        init_hi: &problem.init.hi,
+    };
+    let verify = monte_carlo(&judge, &img, opts.verify_interior, opts.verify_per_ball, problem.seed ^ 0x7e51f1);
+    timings.push(("verification".to_string(), t2.elapsed().as_secs_f64()));
+    if verify.violations > 0 {
+        warnings.push(format!("verification found {} violations: the image is NOT certified", verify.violations));
+    }
+    timings.push(("total".to_string(), t0.elapsed().as_secs_f64()));
+    Ok(Synthesis {
+        plant,
+        K: Khat,
+        P,
+        constants: lc,
+        trajectories: trajs,
+        image,
+        coverage,
+        uncovered,
+        stop,
+        verify,
+        timings,
+        warnings,
+    })
+}
+
+fn median(it: impl Iterator<Item = f64>) -> Option<f64> {
+    let mut v: Vec<f64> = it.collect();
+    if v.is_empty() {
+        return None;
+    }
+    v.sort_by(|a, b| a.total_cmp(b));
+    Some(v[v.len() / 2])
+}
+
+/// The feedforward image of a cover (Algorithm 2): the f32 gain and metric, each ball with its stored
+/// radius, and each reference table; terminal behaviour keeps the last law; fallback per the input set.
+pub fn build_image(
+    problem: &Problem,
+    plant: &SampledPlant,
+    Khat: &Mat<f64>,
+    P: &Mat<f64>,
+    trajs: &[CoverTrajectory],
+) -> Result<Vec<u8>, SynthError> {
+    let (n, m) = (problem.plant.n(), problem.plant.m());
+    let _ = plant;
+    let mut b = ImageBuilder::new(n, m, problem.plant.period);
+    b.add_location(crate::linalg::to_row_major(Khat.as_ref()), crate::linalg::to_row_major(P.as_ref()));
+    for t in trajs {
+        b.add_trajectory(TrajectoryEntry {
+            x0: t.nominal.x[0].clone(),
+            delta: t.certificate.delta_stored as f64,
+            v: t.nominal.v.concat(),
+            location: vec![0; t.nominal.v.len()],
+        });
+    }
+    if let crate::spec::InputSet::Box { lo, hi } = &problem.input {
+        b.input_box = Some((lo.clone(), hi.clone()));
+    }
+    b.fallback = FallbackLaw::Zero;
+    Ok(b.to_bytes()?)
+}

@@ -1,0 +1,179 @@
+//! From a synthesis run to the plot-ready [`ReportData`]: projections of sets, tubes and balls onto the
+//! plotting planes.
+
+use super::Synthesis;
+use crate::linalg::{spectral_norm, sym_fn, PdRoots};
+use crate::report::data::{Ellipse2, ReportData, Shape2, TrajectoryReport, VerifySummary};
+use crate::spec::sets::{Coords, SetDesc, Shape};
+use crate::spec::{InputSet, Problem};
+use faer::Mat;
+
+/// The 2×2 matrix M with M Mᵀ = S (symmetric PSD), as an ellipse generator.
+fn root2(S: &Mat<f64>) -> [[f64; 2]; 2] {
+    let R = sym_fn(S.as_ref(), |l| l.max(0.0).sqrt()).unwrap_or_else(|| Mat::zeros(2, 2));
+    [[R[(0, 0)], R[(0, 1)]], [R[(1, 0)], R[(1, 1)]]]
+}
+
+/// Which two state coordinates a set constrains, if it is a set on exactly two state coordinates.
+fn plane_of(s: &SetDesc, n: usize) -> Option<[usize; 2]> {
+    match &s.coords {
+        Coords::StateIndices(idx) if idx.len() == 2 => Some([idx[0], idx[1]]),
+        Coords::State if n == 2 => Some([0, 1]),
+        _ => None,
+    }
+}
+
+/// A spec set drawn in the plane `pl` (only when it lives on exactly those coordinates).
+fn shape2(s: &SetDesc, n: usize, pl: [usize; 2]) -> Option<Shape2> {
+    if plane_of(s, n)? != pl {
+        return None;
+    }
+    Some(match &s.shape {
+        Shape::Ball { center, radius } => {
+            Shape2::Ellipse(Ellipse2 { center: [center[0], center[1]], M: [[*radius, 0.0], [0.0, *radius]] })
+        }
+        Shape::Ellipsoid { center, Q } => {
+            let Qm = Mat::from_fn(2, 2, |i, j| Q.data[i * 2 + j]);
+            let Qi = sym_fn(Qm.as_ref(), |l| if l > 0.0 { 1.0 / l } else { 0.0 })?;
+            Shape2::Ellipse(Ellipse2 { center: [center[0], center[1]], M: root2(&Qi) })
+        }
+        Shape::Polytope { A, b } => Shape2::HalfPlanes {
+            a: (0..A.rows).map(|r| [A.data[r * 2], A.data[r * 2 + 1]]).collect(),
+            b: b.clone(),
+        },
+        Shape::Box { lo, hi } => Shape2::Box { lo: [lo[0], lo[1]], hi: [hi[0], hi[1]] },
+    })
+}
+
+/// Build the report's data.
+pub fn report_data(problem: &Problem, spec_path: &str, s: &Synthesis, image_path: &str) -> ReportData {
+    let n = problem.plant.n();
+    let period = problem.plant.period;
+    let mut warnings = s.warnings.clone();
+    // Workspace plane: the goal's coordinates when it lives on two state coordinates, else x1, x2.
+    let pl = plane_of(&problem.goal, n).unwrap_or([0, 1.min(n - 1)]);
+    let label = |i: usize| format!("x{}", i + 1);
+    let roots = PdRoots::new(s.P.as_ref());
+    let Pinv = roots.as_ref().map(|r| r.inv.clone()).unwrap_or_else(|| Mat::identity(n, n));
+    let Sigma = Mat::from_fn(2, 2, |i, j| Pinv[(pl[i], pl[j])]);
+    let Mtube = root2(&Sigma);
+    let goal_plane: Vec<Shape2> = shape2(&problem.goal, n, pl).into_iter().collect();
+    let unsafe_plane: Vec<Shape2> = problem.unsafe_sets.iter().filter_map(|u| shape2(u, n, pl)).collect();
+    if unsafe_plane.len() < problem.unsafe_sets.len() {
+        warnings.push("some Unsafe sets do not live on the plotted coordinates and are not drawn".into());
+    }
+    // Init plane: the first two free coordinates of Init.
+    let free = problem.init.free_coords();
+    let ipl = match free.as_slice() {
+        [a, b, ..] => [*a, *b],
+        [a] => [*a, if *a == 0 { 1.min(n - 1) } else { 0 }],
+        [] => [0, 1.min(n - 1)],
+    };
+    let Pff = Mat::from_fn(2, 2, |i, j| s.P[(ipl[i], ipl[j])]);
+    let Pff_inv = sym_fn(Pff.as_ref(), |l| if l > 0.0 { 1.0 / l } else { 0.0 }).unwrap_or_else(|| Mat::zeros(2, 2));
+    let Mball = root2(&Pff_inv);
+    let scale = |M: [[f64; 2]; 2], r: f64| [[M[0][0] * r, M[0][1] * r], [M[1][0] * r, M[1][1] * r]];
+    let (input_bound_label, input_bound) = match &problem.input {
+        InputSet::Ball { radius, .. } => (format!("‖u − u_c‖₂ ≤ {radius}"), *radius),
+        InputSet::Box { lo, hi } => {
+            ("max_i |u_i| (box bound)".to_string(), lo.iter().chain(hi).fold(0.0f64, |a, b| a.max(b.abs())))
+        }
+    };
+    let sK = roots.as_ref().map(|r| spectral_norm((&s.K * &r.inv_sqrt).as_ref())).unwrap_or(0.0);
+    let trajectories = s
+        .trajectories
+        .iter()
+        .enumerate()
+        .map(|(id, t)| {
+            let c = &t.certificate;
+            let r = c.delta;
+            let u_worst = t
+                .nominal
+                .u
+                .iter()
+                .map(|u| match &problem.input {
+                    InputSet::Ball { center, .. } => {
+                        u.iter().zip(center).map(|(a, b)| (a - b) * (a - b)).sum::<f64>().sqrt() + r * sK
+                    }
+                    InputSet::Box { .. } => (0..u.len())
+                        .map(|i| {
+                            let Ki: Vec<f64> = (0..n).map(|j| s.K[(i, j)]).collect();
+                            u[i].abs() + r * roots.as_ref().map(|q| q.dual_norm(&Ki)).unwrap_or(0.0)
+                        })
+                        .fold(0.0, f64::max),
+                })
+                .collect();
+            TrajectoryReport {
+                id,
+                source: t.source.clone(),
+                x0: t.nominal.x[0].clone(),
+                delta: c.delta_stored as f64,
+                delta_goal: c.delta_goal,
+                delta_unsafe: c.delta_unsafe_intersample,
+                delta_input: c.delta_input,
+                t_star: c.k_star as f64 * period,
+                times: (0..t.nominal.x.len()).map(|k| k as f64 * period).collect(),
+                path: t.nominal.x.iter().map(|x| [x[pl[0]], x[pl[1]]]).collect(),
+                tube: t
+                    .nominal
+                    .x
+                    .iter()
+                    .map(|x| Ellipse2 { center: [x[pl[0]], x[pl[1]]], M: scale(Mtube, r) })
+                    .collect(),
+                u: t.nominal.u.clone(),
+                u_worst,
+            }
+        })
+        .collect();
+    let balls = s
+        .trajectories
+        .iter()
+        .map(|t| Ellipse2 {
+            center: [t.nominal.x[0][ipl[0]], t.nominal.x[0][ipl[1]]],
+            M: scale(Mball, t.certificate.delta_stored as f64),
+        })
+        .collect();
+    let lo = &problem.init.lo;
+    let hi = &problem.init.hi;
+    let init_box = Shape2::Box { lo: [lo[ipl[0]], lo[ipl[1]]], hi: [hi[ipl[0]], hi[ipl[1]]] };
+    let init_plane = Some(Shape2::Box { lo: [lo[pl[0]], lo[pl[1]]], hi: [hi[pl[0]], hi[pl[1]]] });
+    let rows = |M: &Mat<f64>| crate::linalg::to_rows(M.as_ref());
+    let eps = s.trajectories.iter().map(|t| t.certificate.eps_f32).fold(0.0, f64::max);
+    ReportData {
+        title: problem.name.clone().unwrap_or_else(|| spec_path.to_string()),
+        spec_path: spec_path.to_string(),
+        n,
+        m: problem.plant.m(),
+        period,
+        horizon: problem.horizon,
+        plane_labels: [label(pl[0]), label(pl[1])],
+        init_plane,
+        goal_plane,
+        unsafe_plane,
+        trajectories,
+        init_labels: [label(ipl[0]), label(ipl[1])],
+        init_box,
+        balls,
+        uncovered: s.uncovered.iter().take(2000).map(|x| [x[ipl[0]], x[ipl[1]]]).collect(),
+        coverage: s.coverage.clone(),
+        stop_reason: s.stop.to_string(),
+        input_bound_label,
+        input_bound,
+        K: rows(&s.K),
+        P: rows(&s.P),
+        sigma_min: s.constants.sigma_min,
+        eps_f32: eps,
+        r_crit: s.constants.r_crit(eps),
+        image_bytes: s.image.len(),
+        image_path: image_path.to_string(),
+        verify: Some(VerifySummary {
+            runs: s.verify.interior_runs + s.verify.boundary_runs - s.verify.boundary_rejected,
+            violations: s.verify.violations,
+            worst_goal_margin: s.verify.worst_goal_margin,
+            worst_unsafe_margin: s.verify.worst_unsafe_margin,
+            worst_input_margin: s.verify.worst_input_margin,
+        }),
+        timings: s.timings.clone(),
+        warnings,
+    }
+}

@@ -1,0 +1,54 @@
+//! Conversion of the spec's set descriptions into the forms the trajectory generator takes.
+
+use crate::linalg::from_row_major;
+use crate::spec::sets::{SetDesc, Shape};
+use crate::spec::InputSet;
+use crate::trajectory::generate::{ConvexPiece, InputBound};
+use faer::Mat;
+
+/// A spec set as a convex piece in state coordinates: y = M x with M from the set's coordinates.
+pub fn convex_piece(s: &SetDesc, n: usize) -> Result<ConvexPiece, String> {
+    let d = s.dim();
+    let M = match s.map_matrix(n).map_err(|e| e.to_string())? {
+        None => Mat::<f64>::identity(n, n),
+        Some(M) => from_row_major(M.rows, M.cols, &M.data),
+    };
+    Ok(match &s.shape {
+        Shape::Ball { center, radius } if *radius > 0.0 => ConvexPiece::Ellipsoid {
+            C: M,
+            c: center.clone(),
+            Q: Mat::from_fn(d, d, |i, j| if i == j { 1.0 / (radius * radius) } else { 0.0 }),
+        },
+        Shape::Ellipsoid { center, Q } => ConvexPiece::Ellipsoid { C: M, c: center.clone(), Q: from_row_major(d, d, &Q.data) },
+        Shape::Polytope { A, b } => {
+            let Ay = from_row_major(A.rows, A.cols, &A.data);
+            ConvexPiece::Polytope { H: &Ay * &M, b: b.clone() }
+        }
+        Shape::Box { lo, hi } => box_piece(&M, lo, hi),
+        Shape::Ball { center, .. } => box_piece(&M, center, center),
+    })
+}
+
+fn box_piece(M: &Mat<f64>, lo: &[f64], hi: &[f64]) -> ConvexPiece {
+    let d = lo.len();
+    let n = M.ncols();
+    let H = Mat::from_fn(2 * d, n, |r, j| if r < d { M[(r, j)] } else { -M[(r - d, j)] });
+    let b = hi.iter().copied().chain(lo.iter().map(|l| -l)).collect();
+    ConvexPiece::Polytope { H, b }
+}
+
+/// The spec's input set in the generator's form.
+pub fn input_bound(i: &InputSet) -> InputBound {
+    match i {
+        InputSet::Box { lo, hi } => InputBound::Box { lo: lo.clone(), hi: hi.clone() },
+        InputSet::Ball { center, radius } => InputBound::Norm2 { center: center.clone(), max: *radius },
+    }
+}
+
+/// A magnitude of admissible inputs (for relative margins).
+pub fn input_scale(i: &InputBound) -> f64 {
+    match i {
+        InputBound::Box { lo, hi } => lo.iter().chain(hi).fold(0.0f64, |a, b| a.max(b.abs())).max(1e-12),
+        InputBound::Norm2 { center, max } => center.iter().fold(*max, |a, b| a.max(b.abs())),
+    }
+}

@@ -1,0 +1,439 @@
+//! Automatic trajectory generation: from one initial state, find reference inputs v(0..N) that drive the
+//! closed loop u = K x + v into Goal at step N while a tube of CAF radius δ around the trajectory keeps
+//! clear of Unsafe and inside the input bounds — and make δ as large as possible.
+//!
+//! The conditions are those of Theorem 4.7 written for a ball ‖x − x̃(κ)‖_P ≤ δ around each sample:
+//!
+//! * Goal (4.13): the δ-ball around x̃(N) lies in Goal. For an ellipsoid {(Cx−c)ᵀQ(Cx−c) ≤ 1} this is implied
+//!   by ‖Q^{1/2}(Cx̃(N)−c)‖ + δ‖Q^{1/2}CP^{-1/2}‖ ≤ 1 (a second-order cone); for a polytope by
+//!   hᵢᵀx̃(N) + δ‖hᵢ‖_{P⁻¹} ≤ bᵢ.
+//! * Unsafe (4.14): each convex piece is replaced by a supporting half-space {nᵀ(x − p) ≤ 0} ⊇ piece, taken at
+//!   a boundary point p chosen from the previous iterate; staying δγ + ρ away from the half-space in the
+//!   P-metric keeps the tube (and the inter-sample excursion ρ, grown by γ) out of the piece.
+//! * Input (4.15): u = K(x̃ + e) + ṽ for ‖e‖_P ≤ δ stays in the input set shrunk by the rounding margin.
+//!
+//! Because every half-space contains its piece, each iterate is feasible for the true problem; iterating
+//! (sequential convex programming) moves the linearisation points with the trajectory. Each subproblem is a
+//! second-order cone program solved with clarabel. The certified δ is computed afterwards, independently,
+//! by the robustness library; this module only proposes trajectories.
+
+use super::{simulate, Nominal};
+use crate::linalg::{mat_vec, spectral_norm, sym_fn, PdRoots};
+use clarabel::algebra::CscMatrix;
+use clarabel::solver::{
+    DefaultSettingsBuilder, DefaultSolver, IPSolver, SolverStatus, SupportedConeT,
+    SupportedConeT::{NonnegativeConeT, SecondOrderConeT, ZeroConeT},
+};
+use faer::{Mat, MatRef};
+
+/// A convex set in state coordinates (Goal, or one piece of Unsafe).
+#[derive(Clone, Debug)]
+pub enum ConvexPiece {
+    /// {x : (C x − c)ᵀ Q (C x − c) ≤ 1} with C p×n and Q p×p positive definite.
+    Ellipsoid { C: Mat<f64>, c: Vec<f64>, Q: Mat<f64> },
+    /// {x : H x ≤ b}.
+    Polytope { H: Mat<f64>, b: Vec<f64> },
+}
+
+/// The input set.
+#[derive(Clone, Debug)]
+pub enum InputBound {
+    /// lo ≤ u ≤ hi componentwise.
+    Box { lo: Vec<f64>, hi: Vec<f64> },
+    /// ‖u − center‖₂ ≤ max.
+    Norm2 { center: Vec<f64>, max: f64 },
+}
+
+/// Settings of the generator, with documented defaults.
+#[derive(Clone, Debug)]
+pub struct GenSettings {
+    /// Sequential-convex iterations at most (default 12).
+    pub max_iter: usize,
+    /// Stop when δ improves by less than this, relative (default 1e-4).
+    pub tol: f64,
+    /// Weight of Σ‖v(κ+1) − v(κ)‖² against δ, for smooth inputs (default 1e-4).
+    pub smooth_weight: f64,
+    /// Upper bound on δ in the subproblems, keeping them bounded (default 10).
+    pub delta_max: f64,
+}
+
+impl Default for GenSettings {
+    fn default() -> Self {
+        Self { max_iter: 12, tol: 1e-4, smooth_weight: 1e-4, delta_max: 10.0 }
+    }
+}
+
+/// What the generator needs of the task.
+pub struct GenProblem<'a> {
+    /// Discrete plant x⁺ = A x + B u + g.
+    pub A: MatRef<'a, f64>,
+    pub B: MatRef<'a, f64>,
+    pub g: &'a [f64],
+    /// Feedback and CAF metric.
+    pub K: MatRef<'a, f64>,
+    pub P: MatRef<'a, f64>,
+    pub goal: &'a ConvexPiece,
+    pub unsafe_sets: &'a [ConvexPiece],
+    pub input: &'a InputBound,
+    /// Number of steps N; Goal is required at step N.
+    pub steps: usize,
+    /// Inter-sample growth of the tube radius (1 for discrete-time plants).
+    pub gamma: f64,
+    /// Margin subtracted from the input bounds (f32 rounding of the evaluator).
+    pub input_margin: f64,
+    /// Inter-sample excursion ρ(x̃(κ), ũ(κ)) of the nominal in the P-metric (0 for discrete-time plants).
+    pub excursion: &'a (dyn Fn(&[f64], &[f64]) -> f64 + Sync),
+}
+
+/// A generated trajectory.
+#[derive(Clone, Debug)]
+pub struct Generated {
+    pub nominal: Nominal,
+    /// The tube radius the last convex subproblem certified (a lower bound on Theorem 4.7's δ).
+    pub delta_lin: f64,
+    pub iterations: usize,
+}
+
+/// Why no trajectory was found.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum GenError {
+    #[error("no trajectory from x0 = {x0:?} reaches Goal in {steps} steps within the input bounds (solver: {status})")]
+    Infeasible { x0: Vec<f64>, steps: usize, status: String },
+    #[error("the CAF matrix P is not positive definite")]
+    BadMetric,
+    #[error("dimension mismatch: {0}")]
+    Dimension(String),
+}
+
+/// Generate a trajectory from `x0` that maximises the tube radius δ (see the module doc).
+pub fn generate(prob: &GenProblem<'_>, x0: &[f64], settings: &GenSettings) -> Result<Generated, GenError> {
+    let n = prob.A.nrows();
+    let m = prob.B.ncols();
+    if x0.len() != n || prob.g.len() != n || prob.K.nrows() != m || prob.K.ncols() != n {
+        return Err(GenError::Dimension(format!("n = {n}, m = {m}, x0 has {}", x0.len())));
+    }
+    let roots = PdRoots::new(prob.P).ok_or(GenError::BadMetric)?;
+    let mut best: Option<Generated> = None;
+    let mut lin: Option<Nominal> = None;
+    for it in 0..settings.max_iter.max(1) {
+        let sol = solve_subproblem(prob, &roots, x0, lin.as_ref(), settings);
+        match sol {
+            Ok((v, delta)) => {
+                let nominal = simulate(prob.A, prob.B, prob.g, prob.K, x0, &v);
+                let improved = best.as_ref().map(|b| delta - b.delta_lin).unwrap_or(f64::INFINITY);
+                // The first iterate ignores Unsafe (no linearisation point yet); it only seeds the next one.
+                if lin.is_some() && best.as_ref().is_none_or(|b| delta >= b.delta_lin) {
+                    best = Some(Generated { nominal: nominal.clone(), delta_lin: delta, iterations: it + 1 });
+                }
+                let done = lin.is_some() && improved.abs() <= settings.tol * delta.abs().max(1e-9);
+                lin = Some(nominal);
+                if done {
+                    break;
+                }
+            }
+            Err(status) => {
+                if let Some(b) = best {
+                    return Ok(b);
+                }
+                return Err(GenError::Infeasible { x0: x0.to_vec(), steps: prob.steps, status });
+            }
+        }
+    }
+    best.ok_or_else(|| GenError::Infeasible {
+        x0: x0.to_vec(),
+        steps: prob.steps,
+        status: "no iterate with Unsafe constraints".into(),
+    })
+}
+
+/// Row builder for clarabel's `A z + s = b, s ∈ K` form.
+struct Rows {
+    I: Vec<usize>,
+    J: Vec<usize>,
+    V: Vec<f64>,
+    b: Vec<f64>,
+    cones: Vec<SupportedConeT<f64>>,
+}
+
+impl Rows {
+    fn row(&mut self, entries: &[(usize, f64)], rhs: f64) {
+        let r = self.b.len();
+        for &(j, v) in entries {
+            if v != 0.0 {
+                self.I.push(r);
+                self.J.push(j);
+                self.V.push(v);
+            }
+        }
+        self.b.push(rhs);
+    }
+}
+
+/// One SOCP: returns v(0..N) and δ, or the solver status.
+fn solve_subproblem(
+    prob: &GenProblem<'_>,
+    roots: &PdRoots,
+    x0: &[f64],
+    lin: Option<&Nominal>,
+    settings: &GenSettings,
+) -> Result<(Vec<Vec<f64>>, f64), String> {
+    let (A, B, K) = (prob.A, prob.B, prob.K);
+    let n = A.nrows();
+    let m = B.ncols();
+    let N = prob.steps;
+    let xi = |k: usize, i: usize| k * n + i;
+    let vi = |k: usize, i: usize| n * (N + 1) + k * m + i;
+    let d = n * (N + 1) + m * N;
+    let nvar = d + 1;
+    let mut rows = Rows { I: vec![], J: vec![], V: vec![], b: vec![], cones: vec![] };
+
+    // Equalities: x(0) = x0; x(κ+1) − A x(κ) − B v(κ) − B K x(κ) = g.
+    let Acl = A + B * K;
+    for i in 0..n {
+        rows.row(&[(xi(0, i), 1.0)], x0[i]);
+    }
+    for k in 0..N {
+        for i in 0..n {
+            let mut e = vec![(xi(k + 1, i), 1.0)];
+            for j in 0..n {
+                e.push((xi(k, j), -Acl[(i, j)]));
+            }
+            for j in 0..m {
+                e.push((vi(k, j), -B[(i, j)]));
+            }
+            rows.row(&e, prob.g[i]);
+        }
+    }
+    let n_eq = rows.b.len();
+    rows.cones.push(ZeroConeT(n_eq));
+
+    // Nonnegative rows.
+    let start = rows.b.len();
+    rows.row(&[(d, -1.0)], 0.0); // δ ≥ 0
+    rows.row(&[(d, 1.0)], settings.delta_max); // δ ≤ δmax
+    // Unsafe: supporting half-spaces at the previous iterate.
+    if let Some(nom) = lin {
+        for k in 0..=N {
+            let xk = &nom.x[k];
+            let uk = if k < N { nom.u[k].clone() } else { nom.u[N - 1].clone() };
+            let rho = (prob.excursion)(xk, &uk);
+            for piece in prob.unsafe_sets {
+                let (nrm, off) = supporting_halfspace(piece, xk);
+                // Keep nᵀx ≥ off + ‖n‖_{P⁻¹}(γδ + ρ):  −nᵀx + γ‖n‖δ + s = −off − ‖n‖ρ.
+                let dn = roots.dual_norm(&nrm);
+                let mut e: Vec<(usize, f64)> = (0..n).map(|i| (xi(k, i), -nrm[i])).collect();
+                e.push((d, prob.gamma * dn));
+                rows.row(&e, -off - dn * rho);
+            }
+        }
+    }
+    // Input box.
+    if let InputBound::Box { lo, hi } = prob.input {
+        for k in 0..N {
+            for i in 0..m {
+                let Ki: Vec<f64> = (0..n).map(|j| K[(i, j)]).collect();
+                let s = roots.dual_norm(&Ki);
+                let mut e: Vec<(usize, f64)> = (0..n).map(|j| (xi(k, j), Ki[j])).collect();
+                e.push((vi(k, i), 1.0));
+                e.push((d, s));
+                rows.row(&e, hi[i] - prob.input_margin);
+                let mut e: Vec<(usize, f64)> = (0..n).map(|j| (xi(k, j), -Ki[j])).collect();
+                e.push((vi(k, i), -1.0));
+                e.push((d, s));
+                rows.row(&e, -lo[i] - prob.input_margin);
+            }
+        }
+    }
+    // Polytope goal.
+    if let ConvexPiece::Polytope { H, b } = prob.goal {
+        for r in 0..H.nrows() {
+            let h: Vec<f64> = (0..n).map(|j| H[(r, j)]).collect();
+            let mut e: Vec<(usize, f64)> = (0..n).map(|j| (xi(N, j), h[j])).collect();
+            e.push((d, roots.dual_norm(&h)));
+            rows.row(&e, b[r]);
+        }
+    }
+    let n_nn = rows.b.len() - start;
+    rows.cones.push(NonnegativeConeT(n_nn));
+
+    // Second-order cones.
+    if let InputBound::Norm2 { center, max } = prob.input {
+        let sK = spectral_norm((K * &roots.inv_sqrt).as_ref());
+        for k in 0..N {
+            rows.row(&[(d, sK)], max - prob.input_margin);
+            for i in 0..m {
+                let mut e: Vec<(usize, f64)> = (0..n).map(|j| (xi(k, j), -K[(i, j)])).collect();
+                e.push((vi(k, i), -1.0));
+                rows.row(&e, -center[i]);
+            }
+            rows.cones.push(SecondOrderConeT(m + 1));
+        }
+    }
+    if let ConvexPiece::Ellipsoid { C, c, Q } = prob.goal {
+        let Qh = sym_fn(Q.as_ref(), |l| l.max(0.0).sqrt()).ok_or("goal shape has no square root")?;
+        let QhC = &Qh * C;
+        let sg = spectral_norm((&QhC * &roots.inv_sqrt).as_ref());
+        let Qhc = mat_vec(Qh.as_ref(), c);
+        let p = C.nrows();
+        rows.row(&[(d, sg)], 1.0);
+        for i in 0..p {
+            let e: Vec<(usize, f64)> = (0..n).map(|j| (xi(N, j), -QhC[(i, j)])).collect();
+            rows.row(&e, -Qhc[i]);
+        }
+        rows.cones.push(SecondOrderConeT(p + 1));
+    }
+
+    // Objective: −δ + w Σ‖v(κ+1) − v(κ)‖² (+ a tiny ‖v‖² for strict convexity); clarabel takes ½zᵀPz, upper part.
+    let w = settings.smooth_weight;
+    let mut PI = vec![];
+    let mut PJ = vec![];
+    let mut PV = vec![];
+    for k in 0..N {
+        for i in 0..m {
+            let deg = (k > 0) as usize + (k + 1 < N) as usize;
+            PI.push(vi(k, i));
+            PJ.push(vi(k, i));
+            PV.push(2.0 * w * deg as f64 + 2e-8);
+            if k + 1 < N {
+                PI.push(vi(k, i));
+                PJ.push(vi(k + 1, i));
+                PV.push(-2.0 * w);
+            }
+        }
+    }
+    let Pm = CscMatrix::new_from_triplets(nvar, nvar, PI, PJ, PV);
+    let mut q = vec![0.0; nvar];
+    q[d] = -1.0;
+    let Am = CscMatrix::new_from_triplets(rows.b.len(), nvar, rows.I, rows.J, rows.V);
+    let st = DefaultSettingsBuilder::default().verbose(false).max_iter(200).build().map_err(|e| format!("{e:?}"))?;
+    let mut solver = DefaultSolver::new(&Pm, &q, &Am, &rows.b, &rows.cones, st).map_err(|e| format!("{e:?}"))?;
+    solver.solve();
+    match solver.solution.status {
+        SolverStatus::Solved | SolverStatus::AlmostSolved => {}
+        s => return Err(format!("{s:?}")),
+    }
+    let z = &solver.solution.x;
+    let v: Vec<Vec<f64>> = (0..N).map(|k| (0..m).map(|i| z[vi(k, i)]).collect()).collect();
+    Ok((v, z[d].max(0.0)))
+}
+
+/// A half-space {x : nᵀx ≤ off} containing `piece`, supporting it at a boundary point chosen from `x`:
+/// for an ellipsoid the radial projection of C x onto its boundary (the tangent plane there); for a polytope
+/// the facet that `x` is farthest outside of (or least inside of).
+pub fn supporting_halfspace(piece: &ConvexPiece, x: &[f64]) -> (Vec<f64>, f64) {
+    match piece {
+        ConvexPiece::Ellipsoid { C, c, Q } => {
+            let p = C.nrows();
+            let y = mat_vec(C.as_ref(), x);
+            let mut dy: Vec<f64> = (0..p).map(|i| y[i] - c[i]).collect();
+            let mut q: f64 = (0..p).map(|i| (0..p).map(|j| dy[i] * Q[(i, j)] * dy[j]).sum::<f64>()).sum();
+            if q <= 1e-300 {
+                dy = vec![0.0; p];
+                dy[0] = 1.0;
+                q = Q[(0, 0)];
+            }
+            let s = 1.0 / q.sqrt();
+            let py: Vec<f64> = (0..p).map(|i| c[i] + s * dy[i]).collect();
+            // Outward normal in y: Q (py − c); in x: Cᵀ Q (py − c).
+            let ny: Vec<f64> = (0..p).map(|i| (0..p).map(|j| Q[(i, j)] * s * dy[j]).sum()).collect();
+            let nx: Vec<f64> = (0..x.len()).map(|j| (0..p).map(|i| C[(i, j)] * ny[i]).sum()).collect();
+            let off: f64 = (0..p).map(|i| ny[i] * py[i]).sum();
+            (nx, off)
+        }
+        ConvexPiece::Polytope { H, b } => {
+            let mut best = 0;
+            let mut best_val = f64::NEG_INFINITY;
+            for r in 0..H.nrows() {
+                let h: Vec<f64> = (0..x.len()).map(|j| H[(r, j)]).collect();
+                let nn = h.iter().map(|a| a * a).sum::<f64>().sqrt().max(1e-300);
+                let val = (h.iter().zip(x).map(|(a, b)| a * b).sum::<f64>() - b[r]) / nn;
+                if val > best_val {
+                    best_val = val;
+                    best = r;
+                }
+            }
+            ((0..x.len()).map(|j| H[(best, j)]).collect(), b[best])
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::linalg::from_row_major;
+
+    fn disc(cx: f64, cy: f64, r: f64) -> ConvexPiece {
+        ConvexPiece::Ellipsoid {
+            C: Mat::<f64>::identity(2, 2),
+            c: vec![cx, cy],
+            Q: from_row_major(2, 2, &[1.0 / (r * r), 0.0, 0.0, 1.0 / (r * r)]),
+        }
+    }
+
+    /// A contracting 2-D plant with P = I: the tube conditions can be checked by hand.
+    #[test]
+    fn avoids_the_obstacle_reaches_goal_and_respects_the_bound() {
+        let A = from_row_major(2, 2, &[0.9, 0.0, 0.0, 0.9]);
+        let B = Mat::<f64>::identity(2, 2);
+        let K = Mat::<f64>::zeros(2, 2);
+        let P = Mat::<f64>::identity(2, 2);
+        let goal = disc(2.0, 0.0, 0.3);
+        let unsafe_sets = [disc(1.0, 0.05, 0.3)];
+        let input = InputBound::Norm2 { center: vec![0.0, 0.0], max: 0.5 };
+        let zero = |_: &[f64], _: &[f64]| 0.0;
+        let prob = GenProblem {
+            A: A.as_ref(),
+            B: B.as_ref(),
+            g: &[0.0, 0.0],
+            K: K.as_ref(),
+            P: P.as_ref(),
+            goal: &goal,
+            unsafe_sets: &unsafe_sets,
+            input: &input,
+            steps: 30,
+            gamma: 1.0,
+            input_margin: 0.0,
+            excursion: &zero,
+        };
+        let out = generate(&prob, &[0.0, 0.0], &GenSettings::default()).unwrap();
+        let d = out.delta_lin;
+        assert!(d > 0.02, "delta {d}");
+        let x = &out.nominal.x;
+        let end = &x[30];
+        let to_goal = ((end[0] - 2.0).powi(2) + end[1].powi(2)).sqrt();
+        assert!(to_goal + d <= 0.3 + 1e-6, "goal: {to_goal} + {d}");
+        for xk in x {
+            let to_obs = ((xk[0] - 1.0).powi(2) + (xk[1] - 0.05).powi(2)).sqrt();
+            assert!(to_obs >= 0.3 + d - 1e-6, "obstacle: {to_obs} vs {d}");
+        }
+        for uk in &out.nominal.u {
+            assert!((uk[0] * uk[0] + uk[1] * uk[1]).sqrt() <= 0.5 + 1e-6);
+        }
+    }
+
+    #[test]
+    fn an_unreachable_goal_is_reported() {
+        let A = from_row_major(2, 2, &[0.9, 0.0, 0.0, 0.9]);
+        let B = Mat::<f64>::identity(2, 2);
+        let K = Mat::<f64>::zeros(2, 2);
+        let P = Mat::<f64>::identity(2, 2);
+        let goal = disc(20.0, 0.0, 0.3);
+        let input = InputBound::Box { lo: vec![-0.1, -0.1], hi: vec![0.1, 0.1] };
+        let zero = |_: &[f64], _: &[f64]| 0.0;
+        let prob = GenProblem {
+            A: A.as_ref(),
+            B: B.as_ref(),
+            g: &[0.0, 0.0],
+            K: K.as_ref(),
+            P: P.as_ref(),
+            goal: &goal,
+            unsafe_sets: &[],
+            input: &input,
+            steps: 10,
+            gamma: 1.0,
+            input_margin: 0.0,
+            excursion: &zero,
+        };
+        assert!(matches!(generate(&prob, &[0.0, 0.0], &GenSettings::default()), Err(GenError::Infeasible { .. })));
+    }
+}

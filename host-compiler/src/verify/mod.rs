@@ -1,0 +1,210 @@
+//! Independent re-check of a controller image: closed-loop Monte Carlo through the shared-types evaluator
+//! in f32, on the exact discretised plant, from initial states drawn in the certified cover and on the
+//! boundary of every ball. Every run must reach Goal within the horizon, never enter Unsafe (also checked
+//! at sub-sample instants for continuous-time plants) and apply only inputs inside the input set.
+
+use crate::geometry::Region;
+use crate::linalg::mat_vec;
+use crate::trajectory::generate::InputBound;
+use faer::MatRef;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rayon::prelude::*;
+use shared_types::eval::Controller;
+use shared_types::image::Image;
+
+/// The plant and spec a run is judged against.
+pub struct Judge<'a> {
+    /// Discrete plant x⁺ = A x + B u + g.
+    pub A: MatRef<'a, f64>,
+    pub B: MatRef<'a, f64>,
+    pub g: &'a [f64],
+    /// Sub-sample plant over h/`substeps` (exact ZOH of the continuous plant), for the inter-sample check.
+    pub sub: Option<(MatRef<'a, f64>, MatRef<'a, f64>, &'a [f64], usize)>,
+    pub goal: &'a dyn Region,
+    pub unsafe_set: Option<&'a dyn Region>,
+    pub input: &'a InputBound,
+    /// Steps in the horizon.
+    pub steps: usize,
+    /// Init box (lo, hi), to draw initial states from.
+    pub init_lo: &'a [f64],
+    pub init_hi: &'a [f64],
+}
+
+/// How one run ended.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct RunOutcome {
+    pub x0: Vec<f64>,
+    pub reached_goal: bool,
+    pub entered_unsafe: bool,
+    pub input_violation: bool,
+    /// The evaluator refused the state (out of envelope) at κ = 0.
+    pub rejected: bool,
+    /// The evaluator refused a later state of an accepted run.
+    pub evaluator_error: bool,
+    /// Largest Goal depth reached (Euclidean), smallest Unsafe distance, smallest input slack.
+    pub goal_margin: f64,
+    pub unsafe_margin: f64,
+    pub input_margin: f64,
+}
+
+impl RunOutcome {
+    pub fn violated(&self) -> bool {
+        !self.rejected && (!self.reached_goal || self.entered_unsafe || self.input_violation || self.evaluator_error)
+    }
+}
+
+/// Result of a verification campaign.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct VerifyReport {
+    pub interior_runs: usize,
+    pub boundary_runs: usize,
+    /// Boundary points the f32 selection did not accept (not violations: the controller reports them).
+    pub boundary_rejected: usize,
+    pub violations: usize,
+    pub first_violations: Vec<RunOutcome>,
+    pub worst_goal_margin: f64,
+    pub worst_unsafe_margin: f64,
+    pub worst_input_margin: f64,
+}
+
+fn input_slack(input: &InputBound, u: &[f64]) -> f64 {
+    match input {
+        InputBound::Box { lo, hi } => {
+            u.iter().zip(lo.iter().zip(hi)).map(|(&x, (&l, &h))| (h - x).min(x - l)).fold(f64::INFINITY, f64::min)
+        }
+        InputBound::Norm2 { center, max } => max - u.iter().zip(center).map(|(a, c)| (a - c) * (a - c)).sum::<f64>().sqrt(),
+    }
+}
+
+/// Run the closed loop from `x0` with the image's evaluator.
+pub fn run(judge: &Judge<'_>, image: &Image<'_>, x0: &[f64]) -> RunOutcome {
+    let metric = crate::geometry::Metric::euclidean(x0.len());
+    let mut ctl = Controller::new(*image);
+    let mut x = x0.to_vec();
+    let mut out = RunOutcome {
+        x0: x0.to_vec(),
+        reached_goal: false,
+        entered_unsafe: false,
+        input_violation: false,
+        rejected: false,
+        evaluator_error: false,
+        goal_margin: f64::NEG_INFINITY,
+        unsafe_margin: f64::INFINITY,
+        input_margin: f64::INFINITY,
+    };
+    let check = |x: &[f64], out: &mut RunOutcome| {
+        if let Some(us) = judge.unsafe_set {
+            if us.contains(x) {
+                out.entered_unsafe = true;
+            }
+            out.unsafe_margin = out.unsafe_margin.min(-us.signed_dist(x, &metric).value);
+        }
+    };
+    check(&x, &mut out);
+    for k in 0..=judge.steps {
+        if judge.goal.contains(&x) {
+            out.reached_goal = true;
+        }
+        out.goal_margin = out.goal_margin.max(judge.goal.signed_dist(&x, &metric).value);
+        if k == judge.steps {
+            break;
+        }
+        let xf: Vec<f32> = x.iter().map(|&v| v as f32).collect();
+        let u: Vec<f64> = match ctl.step(&xf) {
+            Ok(u) => u.as_slice().iter().map(|&v| v as f64).collect(),
+            Err(_) => {
+                if k == 0 {
+                    out.rejected = true;
+                } else {
+                    out.evaluator_error = true;
+                }
+                return out;
+            }
+        };
+        let s = input_slack(judge.input, &u);
+        out.input_margin = out.input_margin.min(s);
+        if s < 0.0 {
+            out.input_violation = true;
+        }
+        if let Some((As, Bs, gs, subs)) = judge.sub {
+            let mut xs = x.clone();
+            for _ in 0..subs.saturating_sub(1) {
+                xs = step(As, Bs, gs, &xs, &u);
+                check(&xs, &mut out);
+            }
+        }
+        x = step(judge.A, judge.B, judge.g, &x, &u);
+        check(&x, &mut out);
+    }
+    out
+}
+
+fn step(A: MatRef<'_, f64>, B: MatRef<'_, f64>, g: &[f64], x: &[f64], u: &[f64]) -> Vec<f64> {
+    let ax = mat_vec(A, x);
+    let bu = mat_vec(B, u);
+    (0..x.len()).map(|i| ax[i] + bu[i] + g[i]).collect()
+}
+
+/// Monte Carlo over the certified cover: `interior` initial states drawn uniformly in Init and accepted by
+/// the evaluator's ball selection (rejection sampling, at most 50× as many draws), plus `per_ball` points on
+/// the boundary of every ball (in all state directions, scaled to the stored radius). Deterministic for a
+/// seed; runs in parallel.
+pub fn monte_carlo(judge: &Judge<'_>, image: &Image<'_>, interior: usize, per_ball: usize, seed: u64) -> VerifyReport {
+    let n = image.n();
+    let ctl = Controller::new(*image);
+    // Interior: rejection sampling against the evaluator's own selection.
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let mut starts: Vec<Vec<f64>> = Vec::with_capacity(interior);
+    let mut draws = 0usize;
+    while starts.len() < interior && draws < interior.saturating_mul(50) {
+        draws += 1;
+        let x: Vec<f64> = judge
+            .init_lo
+            .iter()
+            .zip(judge.init_hi)
+            .map(|(&l, &h)| if h > l { rng.random_range(l..=h) } else { l })
+            .collect();
+        let xf: Vec<f32> = x.iter().map(|&v| v as f32).collect();
+        if ctl.select(&xf).is_some() {
+            starts.push(x);
+        }
+    }
+    let interior_runs = starts.len();
+    // Boundary: x = c + δ·P^{-1/2}w/‖w‖ for random directions w.
+    let mut boundary: Vec<Vec<f64>> = Vec::new();
+    for t in 0..image.n_trajectories() {
+        let P = faer::Mat::from_fn(n, n, |i, j| image.P(0, i, j) as f64);
+        let Pis = crate::linalg::sym_fn(P.as_ref(), |l| 1.0 / l.max(1e-300).sqrt()).expect("P decodes as symmetric");
+        let c: Vec<f64> = (0..n).map(|i| image.centre(t, i) as f64).collect();
+        let d = image.delta(t) as f64;
+        for _ in 0..per_ball {
+            let w: Vec<f64> = (0..n).map(|_| rng.sample::<f64, _>(rand_distr::StandardNormal)).collect();
+            let wn = w.iter().map(|a| a * a).sum::<f64>().sqrt().max(1e-300);
+            let e = mat_vec(Pis.as_ref(), &w);
+            boundary.push((0..n).map(|i| c[i] + d * e[i] / wn).collect());
+        }
+    }
+    let boundary_runs = boundary.len();
+    let all: Vec<Vec<f64>> = starts.into_iter().chain(boundary).collect();
+    let outcomes: Vec<RunOutcome> = all.par_iter().map(|x0| run(judge, image, x0)).collect();
+    let boundary_rejected = outcomes[interior_runs..].iter().filter(|o| o.rejected).count();
+    let bad: Vec<&RunOutcome> = outcomes.iter().filter(|o| o.violated()).collect();
+    let ok = outcomes.iter().filter(|o| !o.rejected);
+    let (mut wg, mut wu, mut wi) = (f64::INFINITY, f64::INFINITY, f64::INFINITY);
+    for o in ok {
+        wg = wg.min(o.goal_margin);
+        wu = wu.min(o.unsafe_margin);
+        wi = wi.min(o.input_margin);
+    }
+    VerifyReport {
+        interior_runs,
+        boundary_runs,
+        boundary_rejected,
+        violations: bad.len(),
+        first_violations: bad.into_iter().take(10).cloned().collect(),
+        worst_goal_margin: wg,
+        worst_unsafe_margin: wu,
+        worst_input_margin: wi,
+    }
+}

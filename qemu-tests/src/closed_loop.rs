@@ -1,0 +1,143 @@
+//! The closed loop: the plant on the host, the controller on the (emulated) target, and the host's own
+//! evaluation of the same image alongside, compared bit for bit every step.
+
+use crate::plant::DiscretePlant;
+use crate::qemu::Qemu;
+use crate::HilError;
+use shared_types::eval::{Controller, Input, Status};
+use shared_types::image::Image;
+use shared_types::protocol::{InputVec, Reply};
+
+/// What the firmware should answer, computed on the host with `shared_types::eval` in f32: the same rules
+/// as the firmware's `app` module (the fallback replaces the input whenever the step is not `Ok`).
+pub struct HostEvaluator<'a> {
+    controller: Controller<'a>,
+    last_u: Input,
+    last_x: Option<Vec<f32>>,
+}
+
+impl<'a> HostEvaluator<'a> {
+    /// A fresh evaluator, as the firmware is after boot.
+    pub fn new(image: Image<'a>) -> Self {
+        let m = image.m();
+        Self {
+            controller: Controller::new(image),
+            last_u: Input::zero(m),
+            last_x: None,
+        }
+    }
+
+    /// One accepted step: the status and the input the firmware must reply.
+    pub fn step(&mut self, x: &[f32]) -> (Status, Input) {
+        let (status, u) = match self.controller.step(x) {
+            Ok(u) => (Status::Ok, u),
+            Err(s) => (s, self.controller.fallback(x, &self.last_u)),
+        };
+        if status != Status::BadFrame {
+            self.last_u = u;
+            self.last_x = Some(x.to_vec());
+        }
+        (status, u)
+    }
+
+    /// The input the firmware replies to a bad frame: the fallback at the last accepted state.
+    pub fn bad_frame_input(&self) -> Input {
+        let x = self.last_x.as_deref().unwrap_or(&[]);
+        self.controller.fallback(x, &self.last_u)
+    }
+}
+
+/// `u` as it travels on the wire.
+pub fn wire(u: &Input) -> InputVec {
+    InputVec::from_slice(u.as_slice()).unwrap_or_default()
+}
+
+/// The record of a closed-loop run.
+#[derive(Clone, Debug, Default)]
+pub struct Trace {
+    /// Plant states, `x(0)` … `x(steps)`.
+    pub states: Vec<Vec<f64>>,
+    /// The firmware's replies, one per step.
+    pub replies: Vec<Reply>,
+}
+
+impl Trace {
+    /// The last state.
+    pub fn last_state(&self) -> &[f64] {
+        self.states.last().map_or(&[], |v| v.as_slice())
+    }
+
+    /// Largest reported cost among replies with `status`.
+    pub fn max_cost(&self, status: Status) -> Option<u32> {
+        self.replies
+            .iter()
+            .filter(|r| r.status == status)
+            .map(|r| r.cost)
+            .max()
+    }
+}
+
+/// A check that failed, as an error.
+pub fn check(ok: bool, what: impl FnOnce() -> String) -> Result<(), HilError> {
+    if ok {
+        Ok(())
+    } else {
+        Err(HilError::Check(what()))
+    }
+}
+
+/// One period: sample `x` (rounded to f32), send it with `seq`, check the reply against `expect`
+/// (status and input bit for bit, echoed `seq`), and return the reply.
+pub fn exchange(
+    q: &mut Qemu,
+    seq: u32,
+    x: &[f64],
+    expect: impl FnOnce(&[f32]) -> (Status, Input),
+) -> Result<Reply, HilError> {
+    let xf: Vec<f32> = x.iter().map(|&v| v as f32).collect();
+    let reply = q.step(seq, &xf)?;
+    let (status, u) = expect(&xf);
+    check(reply.seq == seq, || {
+        format!("seq {seq}: reply carries seq {}", reply.seq)
+    })?;
+    check(reply.status == status, || {
+        format!("seq {seq}: status {:?}, host says {status:?}", reply.status)
+    })?;
+    check(reply.u == wire(&u), || {
+        format!(
+            "seq {seq} at x = {xf:?}: firmware u = {:?}, host u = {:?} (bitwise)",
+            reply.u,
+            u.as_slice()
+        )
+    })?;
+    check(status != Status::Ok || reply.cost > 0, || {
+        format!("seq {seq}: Ok step with cost 0")
+    })?;
+    Ok(reply)
+}
+
+/// Runs `steps` periods from `x0`, sequence numbers from `first_seq`: each reply is checked against the
+/// host evaluator and its input applied to the plant (zero-order hold over one period).
+pub fn run(
+    q: &mut Qemu,
+    plant: &DiscretePlant,
+    host: &mut HostEvaluator<'_>,
+    x0: &[f64],
+    first_seq: u32,
+    steps: usize,
+) -> Result<Trace, HilError> {
+    let mut trace = Trace {
+        states: vec![x0.to_vec()],
+        replies: Vec::with_capacity(steps),
+    };
+    let mut x = x0.to_vec();
+    for k in 0..steps {
+        let seq = first_seq.wrapping_add(k as u32);
+        let reply = exchange(q, seq, &x, |xf| host.step(xf))?;
+        let u: Vec<f64> = reply.u.as_slice().iter().map(|&v| v as f64).collect();
+        x = plant.step(&x, &u);
+        trace.states.push(x.clone());
+        trace.replies.push(reply);
+    }
+    Ok(trace)
+}

@@ -1,0 +1,312 @@
+//! The evaluator: the one piece of code that computes the control input from a validated [`Image`], run in
+//! f32 both by host verification and by the firmware (DESIGN §4, §5). Also the per-period answer type
+//! [`Status`] and the fixed-size [`Input`].
+//!
+//! Feedforward mode implements Algorithm 2 with the law (3.5)–(3.6):
+//! 1. at κ = 0, among the trajectories whose ball `‖x − x̃_i(0)‖_P ≤ δ_i` (P of the trajectory's first
+//!    location) contains x, select the nearest in that metric (ties: the lowest index); none → the answer
+//!    is [`Status::OutOfEnvelope`], latched until [`Controller::reset`];
+//! 2. at every step, `u = K_ℓ x + v_i(κ)` where ℓ = ℓ_i(κ) is the row's nominal location (hybrid segments,
+//!    (4.41)–(4.42); a single-location image always uses K_0);
+//! 3. past the last row, the image's [`Terminal`] behaviour.
+//!
+//! Distances are compared squared (`(x − c)ᵀP(x − c) ≤ δ²`), so no square root is needed. Arithmetic is
+//! plain f32 multiply and add in a fixed order, without fused multiply-add, so host and Cortex-M4F give the
+//! same bits. Every loop is bounded by the capacities in [`crate::capacity`]; nothing allocates or panics.
+//!
+//! Errors never advance the step counter κ.
+#![allow(non_snake_case)]
+
+use crate::capacity::{MAX_M, MAX_N};
+use crate::image::{f32_span, floats, Fallback, Image, Mode, Terminal};
+
+/// The firmware's answer every period besides `Ok(u)`. Shared by firmware and host (wire value = `u8`).
+#[repr(u8)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Status {
+    /// An input was computed.
+    Ok = 0,
+    /// The state is outside the certified envelope (in no ball at κ = 0, or the input overflowed).
+    OutOfEnvelope = 1,
+    /// The request was malformed (used by the protocol layer; the evaluator also returns it for a state of
+    /// the wrong length or with non-finite components).
+    BadFrame = 2,
+    /// The stored image failed validation; the firmware applies [`rejected_image_input`].
+    ImageRejected = 3,
+}
+
+impl Status {
+    /// The status with this wire value, if any.
+    pub const fn from_u8(b: u8) -> Option<Status> {
+        match b {
+            0 => Some(Status::Ok),
+            1 => Some(Status::OutOfEnvelope),
+            2 => Some(Status::BadFrame),
+            3 => Some(Status::ImageRejected),
+            _ => None,
+        }
+    }
+}
+
+impl core::fmt::Display for Status {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(match self {
+            Status::Ok => "ok",
+            Status::OutOfEnvelope => "out of envelope",
+            Status::BadFrame => "bad frame",
+            Status::ImageRejected => "image rejected",
+        })
+    }
+}
+
+/// A control input: up to [`MAX_M`] values, of which the first `len()` are meaningful (the rest are 0).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Input {
+    u: [f32; MAX_M],
+    m: u8,
+}
+
+impl Input {
+    /// Zero input of dimension `min(m, MAX_M)`.
+    pub const fn zero(m: usize) -> Input {
+        let m = if m > MAX_M { MAX_M } else { m };
+        Input {
+            u: [0.0; MAX_M],
+            m: m as u8,
+        }
+    }
+
+    /// Input with these values; `None` if longer than [`MAX_M`].
+    pub fn from_slice(u: &[f32]) -> Option<Input> {
+        let mut out = Input::zero(u.len());
+        out.u.get_mut(..u.len())?.copy_from_slice(u);
+        Some(out)
+    }
+
+    /// The meaningful values.
+    pub fn as_slice(&self) -> &[f32] {
+        self.u.get(..self.m as usize).unwrap_or(&self.u)
+    }
+
+    /// Input dimension.
+    pub fn len(&self) -> usize {
+        self.m as usize
+    }
+
+    /// Whether the input has dimension 0.
+    pub fn is_empty(&self) -> bool {
+        self.m == 0
+    }
+
+    /// All [`MAX_M`] slots (those past `len()` are 0).
+    pub fn values(&self) -> [f32; MAX_M] {
+        self.u
+    }
+}
+
+/// The build-time fallback: the input the firmware applies when its image is rejected (zero, of dimension
+/// `min(m, MAX_M)`; the firmware passes the `m` it was built for, or 0 if it knows none).
+pub const fn rejected_image_input(m: usize) -> Input {
+    Input::zero(m)
+}
+
+/// Feedforward controller state over a validated image.
+#[derive(Clone, Copy, Debug)]
+pub struct Controller<'a> {
+    image: Image<'a>,
+    kappa: u32,
+    active: Option<u16>,
+    out_of_envelope: bool,
+    last_u: Input,
+}
+
+impl<'a> Controller<'a> {
+    /// A controller at κ = 0 with no trajectory selected.
+    pub fn new(image: Image<'a>) -> Controller<'a> {
+        let m = image.m();
+        Controller {
+            image,
+            kappa: 0,
+            active: None,
+            out_of_envelope: false,
+            last_u: Input::zero(m),
+        }
+    }
+
+    /// The image.
+    pub fn image(&self) -> &Image<'a> {
+        &self.image
+    }
+
+    /// Back to κ = 0: forget the selected trajectory, the out-of-envelope latch and the last input.
+    pub fn reset(&mut self) {
+        *self = Controller::new(self.image);
+    }
+
+    /// κ: the number of successful steps since reset (the index of the next step); saturates.
+    pub fn step_index(&self) -> u32 {
+        self.kappa
+    }
+
+    /// The trajectory selected at κ = 0, if any.
+    pub fn active_trajectory(&self) -> Option<u16> {
+        self.active
+    }
+
+    /// The last input returned by [`Controller::step`] (zero after reset).
+    pub fn last_input(&self) -> Input {
+        self.last_u
+    }
+
+    /// Algorithm 2, step 2: the trajectory whose ball contains `x` and is nearest in its metric,
+    /// `argmin_i (x − x̃_i(0))ᵀ P_{ℓ_i(0)} (x − x̃_i(0))` subject to that being ≤ δ_i²; ties go to the lowest
+    /// index. `None` if no ball contains `x` or `x` has the wrong length. Pure; does not change state.
+    pub fn select(&self, x: &[f32]) -> Option<u16> {
+        let img = &self.image;
+        // Validated images have 1 ≤ n ≤ MAX_N; the clamp lets the compiler drop the zero-chunk panic path.
+        let n = img.n().clamp(1, MAX_N);
+        if x.len() != n {
+            return None;
+        }
+        let p = img.payload();
+        let mut best: Option<u16> = None;
+        let mut best_d2 = f32::INFINITY;
+        let mut e = [0.0f32; MAX_N];
+        for t in 0..img.n_trajectories() {
+            let centre = f32_span(p.centre, t * n, n);
+            for ((ei, &xi), ci) in e.iter_mut().zip(x).zip(floats(centre)) {
+                *ei = xi - ci;
+            }
+            let (start, _) = img.trajectory_rows(t);
+            let l = p.location.get(start).copied().unwrap_or(0) as usize;
+            let P = f32_span(p.P, l * n * n, n * n);
+            let mut d2 = 0.0f32;
+            for (row, &ei) in P.chunks_exact(4 * n).zip(&e) {
+                let mut s = 0.0f32;
+                for (pij, &ej) in floats(row).zip(&e) {
+                    s += pij * ej;
+                }
+                d2 += ei * s;
+            }
+            let delta = img.delta(t);
+            if d2 <= delta * delta && d2 < best_d2 {
+                best_d2 = d2;
+                best = Some(t as u16);
+            }
+        }
+        best
+    }
+
+    /// `u = K_ℓ x + v` for table row `row` ((3.5)–(3.6), location per (4.41)).
+    fn law(&self, row: usize, x: &[f32]) -> Input {
+        let img = &self.image;
+        let p = img.payload();
+        let (n, m) = (img.n().clamp(1, MAX_N), img.m().clamp(1, MAX_M));
+        let l = p.location.get(row).copied().unwrap_or(0) as usize;
+        let K = f32_span(p.K, l * m * n, m * n);
+        let v = f32_span(p.v, row * m, m);
+        let mut out = Input::zero(m);
+        for ((uj, krow), vj) in out.u.iter_mut().zip(K.chunks_exact(4 * n)).zip(floats(v)) {
+            let mut s = 0.0f32;
+            for (kji, &xi) in floats(krow).zip(x) {
+                s += kji * xi;
+            }
+            *uj = s + vj;
+        }
+        out
+    }
+
+    /// One control period. `x` must have length n and be finite, else `Err(BadFrame)`. Returns
+    /// `Err(OutOfEnvelope)` if no ball contained the state at κ = 0 (latched until reset) or if the input is
+    /// not finite. On success κ advances and the input is remembered for [`Fallback::Hold`].
+    pub fn step(&mut self, x: &[f32]) -> Result<Input, Status> {
+        if self.image.mode() != Mode::Feedforward {
+            return Err(Status::ImageRejected);
+        }
+        if x.len() != self.image.n() || !x.iter().all(|v| v.is_finite()) {
+            return Err(Status::BadFrame);
+        }
+        if self.out_of_envelope {
+            return Err(Status::OutOfEnvelope);
+        }
+        let t = match self.active {
+            Some(t) => t,
+            None => match self.select(x) {
+                Some(t) => {
+                    self.active = Some(t);
+                    t
+                }
+                None => {
+                    self.out_of_envelope = true;
+                    return Err(Status::OutOfEnvelope);
+                }
+            },
+        };
+        let (start, len) = self.image.trajectory_rows(t as usize);
+        let k = self.kappa as usize;
+        let u = if k < len {
+            self.law(start + k, x)
+        } else {
+            match self.image.terminal() {
+                Terminal::HoldLast => self.law(start + len.saturating_sub(1), x),
+                Terminal::Fallback => self.fallback(x, &self.last_u),
+            }
+        };
+        if !u.as_slice().iter().all(|v| v.is_finite()) {
+            return Err(Status::OutOfEnvelope);
+        }
+        self.kappa = self.kappa.saturating_add(1);
+        self.last_u = u;
+        Ok(u)
+    }
+
+    /// The image's fallback input for state `x`, given the last applied input:
+    /// * `Hold`: `last_u` (its first m values; missing or non-finite components become 0);
+    /// * `Zero`: zero;
+    /// * `Linear`: `K_fb (x − x_ref) + u_ref`, saturated to the input box if stored. If `x` has the wrong
+    ///   length or a non-finite component, or the result is not finite, zero instead.
+    pub fn fallback(&self, x: &[f32], last_u: &Input) -> Input {
+        let img = &self.image;
+        let (n, m) = (img.n().clamp(1, MAX_N), img.m().clamp(1, MAX_M));
+        let mut out = Input::zero(m);
+        match img.fallback() {
+            Fallback::Zero => {}
+            Fallback::Hold => {
+                for (o, &l) in out.u.iter_mut().zip(last_u.as_slice()).take(m) {
+                    *o = if l.is_finite() { l } else { 0.0 };
+                }
+            }
+            Fallback::Linear { K, x_ref, u_ref } => {
+                if x.len() != n || !x.iter().all(|v| v.is_finite()) {
+                    return out;
+                }
+                let mut e = [0.0f32; MAX_N];
+                for ((ei, &xi), ri) in e.iter_mut().zip(x).zip(floats(x_ref)) {
+                    *ei = xi - ri;
+                }
+                for ((uj, krow), urj) in out
+                    .u
+                    .iter_mut()
+                    .zip(K.chunks_exact(4 * n))
+                    .zip(floats(u_ref))
+                {
+                    let mut s = 0.0f32;
+                    for (kji, &ei) in floats(krow).zip(&e) {
+                        s += kji * ei;
+                    }
+                    *uj = s + urj;
+                }
+                if let Some(b) = img.payload().input_box {
+                    for ((uj, lo), hi) in out.u.iter_mut().zip(floats(b.lo)).zip(floats(b.hi)) {
+                        // max/min, not clamp: clamp panics on NaN bounds (validated away, but be total).
+                        *uj = uj.max(lo).min(hi);
+                    }
+                }
+                if !out.as_slice().iter().all(|v| v.is_finite()) {
+                    return Input::zero(m);
+                }
+            }
+        }
+        out
+    }
+}
