@@ -50,7 +50,10 @@ fn bench(c: &mut Criterion) {
     let naive = robustness_window_scan(&mg, &tr).unwrap();
     assert_eq!(fast.len(), naive.len());
     for (k, (a, b)) in fast.iter().zip(&naive).enumerate() {
-        assert!((a - b).abs() <= 1e-12 || a == b, "sample {k}: streaming {a} vs naive {b}");
+        assert!(
+            (a - b).abs() <= 1e-12 || a == b,
+            "sample {k}: streaming {a} vs naive {b}"
+        );
     }
     let u = Formula::parse("x2 >= -2.9 U[0,1000] x1 >= 20").unwrap();
     let mu = u.bind(tr.names(), &[]).unwrap();
@@ -58,28 +61,60 @@ fn bench(c: &mut Criterion) {
     let mf = f.bind(tr.names(), &[]).unwrap();
 
     let mut grp = c.benchmark_group("mtl");
-    grp.sample_size(10).measurement_time(Duration::from_secs(3)).warm_up_time(Duration::from_secs(1));
+    grp.sample_size(10)
+        .measurement_time(Duration::from_secs(3))
+        .warm_up_time(Duration::from_secs(1));
     grp.throughput(criterion::Throughput::Elements(N as u64));
-    grp.bench_function("always1000_streaming", |b| b.iter(|| mg.robustness(black_box(&tr)).unwrap()));
-    grp.bench_function("until1000_streaming", |b| b.iter(|| mu.robustness(black_box(&tr)).unwrap()));
+    grp.bench_function("always1000_streaming", |b| {
+        b.iter(|| mg.robustness(black_box(&tr)).unwrap())
+    });
+    grp.bench_function("until1000_streaming", |b| {
+        b.iter(|| mu.robustness(black_box(&tr)).unwrap())
+    });
     grp.finish();
 
-    let ours = N as f64 / median_time(|| {
-        black_box(mg.robustness(black_box(&tr)).unwrap());
-    }, Duration::from_secs(2), 5);
-    let base = N as f64 / median_time(|| {
-        black_box(robustness_window_scan(&mg, black_box(&tr)).unwrap());
-    }, Duration::from_secs(3), 3);
-    let until = N as f64 / median_time(|| {
-        black_box(mu.robustness(black_box(&tr)).unwrap());
-    }, Duration::from_secs(2), 5);
-    let ev = N as f64 / median_time(|| {
-        black_box(mf.robustness(black_box(&tr)).unwrap());
-    }, Duration::from_secs(2), 5);
+    let ours = N as f64
+        / median_time(
+            || {
+                black_box(mg.robustness(black_box(&tr)).unwrap());
+            },
+            Duration::from_secs(2),
+            5,
+        );
+    let base = N as f64
+        / median_time(
+            || {
+                black_box(robustness_window_scan(&mg, black_box(&tr)).unwrap());
+            },
+            Duration::from_secs(3),
+            3,
+        );
+    let until = N as f64
+        / median_time(
+            || {
+                black_box(mu.robustness(black_box(&tr)).unwrap());
+            },
+            Duration::from_secs(2),
+            5,
+        );
+    let ev = N as f64
+        / median_time(
+            || {
+                black_box(mf.robustness(black_box(&tr)).unwrap());
+            },
+            Duration::from_secs(2),
+            5,
+        );
     write_rows(
         "mtl",
         &[
-            Row::with_baseline("mtl_always1000_samples_per_s", ours, "samples/s", base, ours / base),
+            Row::with_baseline(
+                "mtl_always1000_samples_per_s",
+                ours,
+                "samples/s",
+                base,
+                ours / base,
+            ),
             Row::new("mtl_until1000_samples_per_s", until, "samples/s"),
             Row::new("mtl_eventually1000_samples_per_s", ev, "samples/s"),
         ],

@@ -15,8 +15,9 @@ pub mod emit;
 pub mod geometry;
 pub mod linalg;
 pub mod model;
+pub mod report;
 pub mod robustness;
 pub mod spec;
-// pub mod synth; (enabled once model::zoh, caf and report land)
+pub mod synth;
 pub mod trajectory;
 pub mod verify;

@@ -56,10 +56,18 @@ fn example_7_8_multiple_optima() {
     // Directly in the standard form (7.5) (R = I and Q diagonal: the transformation is the identity).
     let sf = StandardForm::new(vec![9.0, 4.0, 1.0]).unwrap();
     let mut z = [0.0; 3];
-    let s = sf.solve(&[0.0, 0.25, 0.1], &mut z, &BoundaryDistanceSettings::default());
+    let s = sf.solve(
+        &[0.0, 0.25, 0.1],
+        &mut z,
+        &BoundaryDistanceSettings::default(),
+    );
     assert_eq!(s.kind, OptimumKind::Multiple);
     assert!((s.mu + 1.0 / 9.0).abs() < 1e-15);
-    assert!((z[0].abs() - x1).abs() < 1e-14 && (z[1] - 0.45).abs() < 1e-14 && (z[2] - 0.1125).abs() < 1e-14);
+    assert!(
+        (z[0].abs() - x1).abs() < 1e-14
+            && (z[1] - 0.45).abs() < 1e-14
+            && (z[2] - 0.1125).abs() < 1e-14
+    );
     assert!((s.value_sq.sqrt() - want_value).abs() < 1e-14);
 
     // Through the full pipeline.
@@ -84,7 +92,12 @@ fn example_7_8_multiple_optima() {
         let s = sf.solve(&zb, &mut z, &BoundaryDistanceSettings::default());
         assert_eq!(s.kind == OptimumKind::Multiple, multiple, "z̄ = {zb:?}");
         let b = brute_force(&[0.0; 3], &Q, &Metric::euclidean(3).R, &zb);
-        assert!((s.value_sq.sqrt() - b.value).abs() < 1e-9, "z̄ = {zb:?}: {} vs {}", s.value_sq.sqrt(), b.value);
+        assert!(
+            (s.value_sq.sqrt() - b.value).abs() < 1e-9,
+            "z̄ = {zb:?}: {} vs {}",
+            s.value_sq.sqrt(),
+            b.value
+        );
     }
 }
 
@@ -94,9 +107,13 @@ fn start_point_is_below_the_root() {
     let mut rng = ChaCha8Rng::seed_from_u64(7);
     for _ in 0..2000 {
         let q = rng.random_range(1..=12);
-        let lam: Vec<f64> = (0..q).map(|_| 10f64.powf(rng.random_range(-3.0..3.0))).collect();
+        let lam: Vec<f64> = (0..q)
+            .map(|_| 10f64.powf(rng.random_range(-3.0..3.0)))
+            .collect();
         let sf = StandardForm::new(lam).unwrap();
-        let zbar: Vec<f64> = (0..q).map(|_| rng.sample::<f64, _>(StandardNormal) * 10f64.powf(rng.random_range(-3.0..2.0))).collect();
+        let zbar: Vec<f64> = (0..q)
+            .map(|_| rng.sample::<f64, _>(StandardNormal) * 10f64.powf(rng.random_range(-3.0..2.0)))
+            .collect();
         let d0 = sf.start(&zbar);
         let (G, _) = sf.secular(&zbar, d0);
         assert!(G >= -1e-12, "G(µ₀) = {G}");
@@ -155,10 +172,14 @@ fn make_problem(n: usize, qk: QKind, rk: RKind, pk: PointKind, seed: u64) -> Pro
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let c: Vec<f64> = (0..n).map(|_| rng.random_range(-3.0..3.0)).collect();
     // Q's spectrum.
-    let mut sig: Vec<f64> = (0..n).map(|_| 10f64.powf(rng.random_range(-1.0..1.0))).collect();
+    let mut sig: Vec<f64> = (0..n)
+        .map(|_| 10f64.powf(rng.random_range(-1.0..1.0)))
+        .collect();
     let repeated = |rng: &mut ChaCha8Rng| -> Vec<f64> {
         let m = rng.random_range(1..=3usize);
-        let vals: Vec<f64> = (0..m).map(|_| 10f64.powf(rng.random_range(-1.0..1.0))).collect();
+        let vals: Vec<f64> = (0..m)
+            .map(|_| 10f64.powf(rng.random_range(-1.0..1.0)))
+            .collect();
         let top = vals.iter().cloned().fold(f64::MIN, f64::max);
         let mut s: Vec<f64> = (0..n).map(|_| pick(rng, &vals)).collect();
         // Make the largest eigenvalue repeated (M ≥ 2) most of the time.
@@ -209,7 +230,11 @@ fn make_problem(n: usize, qk: QKind, rk: RKind, pk: PointKind, seed: u64) -> Pro
     };
     let Q = compose(n, &V, &sig);
     // R.
-    let rho_pd = |rng: &mut ChaCha8Rng| -> Vec<f64> { (0..n).map(|_| 10f64.powf(rng.random_range(-0.7..0.7))).collect() };
+    let rho_pd = |rng: &mut ChaCha8Rng| -> Vec<f64> {
+        (0..n)
+            .map(|_| 10f64.powf(rng.random_range(-0.7..0.7)))
+            .collect()
+    };
     let R = match rk {
         RKind::Identity => Metric::euclidean(n).R,
         RKind::RandomPd => compose(n, &random_orthogonal(n, &mut rng), &rho_pd(&mut rng)),
@@ -242,7 +267,9 @@ fn make_problem(n: usize, qk: QKind, rk: RKind, pk: PointKind, seed: u64) -> Pro
     // The point, built in Q's eigenbasis: u = V w.
     let smax = sig.iter().cloned().fold(0.0, f64::max);
     let level_scaled = |rng: &mut ChaCha8Rng, rho: f64| -> Vec<f64> {
-        let w: Vec<f64> = (0..n).map(|_| rng.sample::<f64, _>(StandardNormal)).collect();
+        let w: Vec<f64> = (0..n)
+            .map(|_| rng.sample::<f64, _>(StandardNormal))
+            .collect();
         let h: f64 = (0..n).map(|i| sig[i] * w[i] * w[i]).sum();
         let s = rho / h.sqrt();
         w.iter().map(|x| x * s).collect()
@@ -299,10 +326,13 @@ static OUTSIDE: AtomicUsize = AtomicUsize::new(0);
 /// problems that floor is added to the 1e-9 tolerances.
 fn check_problem(p: &Problem, singular_metric: bool) -> Result<(), TestCaseError> {
     let n = p.c.len();
-    let f = EllipsoidBoundaryDistance::new(&p.c, &p.Q, &p.R).map_err(|e| TestCaseError::fail(format!("factor: {e}")))?;
+    let f = EllipsoidBoundaryDistance::new(&p.c, &p.Q, &p.R)
+        .map_err(|e| TestCaseError::fail(format!("factor: {e}")))?;
     let mut ws = f.workspace();
     let mut x = vec![0.0; n];
-    let s = f.solve(&p.xbar, &mut ws, &mut x).map_err(|e| TestCaseError::fail(format!("solve: {e}")))?;
+    let s = f
+        .solve(&p.xbar, &mut ws, &mut x)
+        .map_err(|e| TestCaseError::fail(format!("solve: {e}")))?;
     match s.kind {
         OptimumKind::Unique => UNIQUE.fetch_add(1, Ordering::Relaxed),
         OptimumKind::Multiple => MULTIPLE.fetch_add(1, Ordering::Relaxed),
@@ -312,11 +342,20 @@ fn check_problem(p: &Problem, singular_metric: bool) -> Result<(), TestCaseError
     let u: Vec<f64> = x.iter().zip(&p.c).map(|(a, b)| a - b).collect();
     let h = quad(&p.Q, &u);
     let hscale = abs_quad(&p.Q, &u).max(1.0);
-    prop_assert!((h - 1.0).abs() <= 1e-9 * hscale, "infeasible: h(x*) = {h} (scale {hscale}), kind {:?}", s.kind);
+    prop_assert!(
+        (h - 1.0).abs() <= 1e-9 * hscale,
+        "infeasible: h(x*) = {h} (scale {hscale}), kind {:?}",
+        s.kind
+    );
     // The value is the distance to the returned point.
     let floor_for = |d: &[f64]| -> f64 {
         if singular_metric {
-            let disp = d.iter().zip(&p.xbar).map(|(a, b)| (a - b).powi(2)).sum::<f64>().sqrt();
+            let disp = d
+                .iter()
+                .zip(&p.xbar)
+                .map(|(a, b)| (a - b).powi(2))
+                .sum::<f64>()
+                .sqrt();
             (n as f64 * f64::EPSILON * max_abs(&p.R)).sqrt() * disp
         } else {
             0.0
@@ -396,23 +435,37 @@ fn matches_global_brute_force() {
     let config = Config {
         cases: 1500,
         failure_persistence: None,
-        rng_seed: RngSeed::Fixed(0x7_2_4),
+        rng_seed: RngSeed::Fixed(0x724),
         ..Config::default()
     };
     let mut runner = TestRunner::new(config);
     let result = runner.run(&strategy(), |(n, qk, rk, pk, seed)| {
         let p = make_problem(n, qk, rk, pk, seed);
         let singular = matches!(rk, RKind::Singular | RKind::NullInsideQNull);
-        check_problem(&p, singular).map_err(|e| TestCaseError::fail(format!("{e}\nproblem: n={n} {qk:?} {rk:?} {pk:?} seed={seed}")))
+        check_problem(&p, singular).map_err(|e| {
+            TestCaseError::fail(format!(
+                "{e}\nproblem: n={n} {qk:?} {rk:?} {pk:?} seed={seed}"
+            ))
+        })
     });
     if let Err(e) = result {
         panic!("{e}");
     }
-    let (u, m, z) = (UNIQUE.load(Ordering::Relaxed), MULTIPLE.load(Ordering::Relaxed), ZERO_COST.load(Ordering::Relaxed));
-    let (i, o) = (INSIDE.load(Ordering::Relaxed), OUTSIDE.load(Ordering::Relaxed));
+    let (u, m, z) = (
+        UNIQUE.load(Ordering::Relaxed),
+        MULTIPLE.load(Ordering::Relaxed),
+        ZERO_COST.load(Ordering::Relaxed),
+    );
+    let (i, o) = (
+        INSIDE.load(Ordering::Relaxed),
+        OUTSIDE.load(Ordering::Relaxed),
+    );
     println!("kinds: unique {u}, multiple {m}, zero-cost {z}; inside {i}, outside {o}");
     // Every branch of the algorithm was exercised.
-    assert!(u > 100 && m > 5 && z > 20 && i > 100 && o > 100, "coverage: {u} {m} {z} {i} {o}");
+    assert!(
+        u > 100 && m > 5 && z > 20 && i > 100 && o > 100,
+        "coverage: {u} {m} {z} {i} {o}"
+    );
 }
 
 /// Points placed exactly in W⊥ of axis-aligned ellipsoids with repeated largest eigenvalue, R = I: the
@@ -423,7 +476,13 @@ fn multiple_optima_branch_against_brute_force() {
     let mut multiple = 0;
     for _ in 0..300 {
         let n = rng.random_range(2..=8);
-        let p = make_problem(n, QKind::AxisAlignedRepeated, RKind::Identity, PointKind::OffTopEigenspace, rng.random());
+        let p = make_problem(
+            n,
+            QKind::AxisAlignedRepeated,
+            RKind::Identity,
+            PointKind::OffTopEigenspace,
+            rng.random(),
+        );
         let f = EllipsoidBoundaryDistance::new(&p.c, &p.Q, &p.R).unwrap();
         let mut ws = f.workspace();
         let mut x = vec![0.0; n];
@@ -432,7 +491,12 @@ fn multiple_optima_branch_against_brute_force() {
             multiple += 1;
         }
         let b = brute_force(&p.c, &p.Q, &p.R, &p.xbar);
-        assert!((s.value - b.value).abs() <= 1e-9 * b.value.max(1.0), "{} vs {}: {p:?}", s.value, b.value);
+        assert!(
+            (s.value - b.value).abs() <= 1e-9 * b.value.max(1.0),
+            "{} vs {}: {p:?}",
+            s.value,
+            b.value
+        );
         let u: Vec<f64> = x.iter().zip(&p.c).map(|(a, b)| a - b).collect();
         assert!((quad(&p.Q, &u) - 1.0).abs() < 1e-12);
     }
@@ -446,7 +510,9 @@ fn batch_matches_single_points() {
     let f = EllipsoidBoundaryDistance::new(&p.c, &p.Q, &p.R).unwrap();
     let mut rng = ChaCha8Rng::seed_from_u64(12);
     let N = 50;
-    let pts: Vec<f64> = (0..N * 5).map(|k| p.c[k % 5] + rng.random_range(-2.0..2.0)).collect();
+    let pts: Vec<f64> = (0..N * 5)
+        .map(|k| p.c[k % 5] + rng.random_range(-2.0..2.0))
+        .collect();
     let mut vals = vec![0.0; N];
     let mut wit = vec![0.0; N * 5];
     f.solve_batch(&pts, &mut vals, Some(&mut wit)).unwrap();
@@ -464,23 +530,39 @@ fn batch_matches_single_points() {
     assert!(f.solve_batch(&pts, &mut vals[..3], None).is_err());
 }
 
+/// Regression: a near-degenerate Q (λ ratio ~1e-5) in a near-singular metric (ρ ratio 1e-6) gives a standard
+/// form with λmax/λmin ≈ 3e10, whose small eigenvalue is only known to ~1e-6 relative. Before the Newton
+/// refinement in the original coordinates, the returned point violated the constraint by 3.7e-6.
 #[test]
-fn zz_debug() {
-    let p = make_problem(2, QKind::NearDegenerate, RKind::NearSingular, PointKind::Far, 4702353144985464639);
-    println!("{p:?}");
+fn ill_conditioned_standard_form_is_refined() {
+    let p = make_problem(
+        2,
+        QKind::NearDegenerate,
+        RKind::NearSingular,
+        PointKind::Far,
+        4702353144985464639,
+    );
     let f = EllipsoidBoundaryDistance::new(&p.c, &p.Q, &p.R).unwrap();
+    let sf = f.standard_form().unwrap();
+    assert!(
+        sf.lambda()[0] / sf.lambda()[1] > 1e9,
+        "the case is no longer ill-conditioned"
+    );
     let mut ws = f.workspace();
     let mut x = vec![0.0; 2];
     let s = f.solve(&p.xbar, &mut ws, &mut x).unwrap();
-    println!("{s:?} {x:?}");
-    let sf = f.standard_form().unwrap();
-    println!("lambda {:?} gaps {:?} M {}", sf.lambda(), sf.gaps(), sf.multiplicity());
-    let mut zb = vec![0.0; 2];
-    f.standardize(&p.xbar, &mut zb);
-    println!("zbar {zb:?}");
-    let mut z = vec![0.0;2];
-    let c = sf.solve(&zb, &mut z, &BoundaryDistanceSettings::default());
-    println!("{c:?} z {z:?} h_std {}", sf.lambda()[0]*z[0]*z[0] + sf.lambda()[1]*z[1]*z[1]);
+    let u: Vec<f64> = x.iter().zip(&p.c).map(|(a, b)| a - b).collect();
+    assert!(
+        (quad(&p.Q, &u) - 1.0).abs() < 1e-12,
+        "h(x*) = {}",
+        quad(&p.Q, &u)
+    );
     let b = brute_force(&p.c, &p.Q, &p.R, &p.xbar);
-    println!("brute {b:?}");
+    assert!(
+        (s.value - b.value).abs() <= 1e-9 * b.value,
+        "{} vs {}",
+        s.value,
+        b.value
+    );
+    assert!((rdist(&p.R, &x, &p.xbar) - s.value).abs() <= 1e-12 * s.value);
 }

@@ -22,12 +22,20 @@ fn max_diff(a: &Mat<f64>, b: &Mat<f64>) -> f64 {
 }
 
 fn vdiff(a: &[f64], b: &[f64]) -> f64 {
-    a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max)
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f64::max)
 }
 
 #[test]
 fn double_integrator_closed_form() {
-    let p = ContinuousPlant::new(Mat::from_fn(2, 2, |i, j| if i == 0 && j == 1 { 1.0 } else { 0.0 }), Mat::from_fn(2, 1, |i, _| if i == 1 { 1.0 } else { 0.0 }), vec![0.0, -9.81]).unwrap();
+    let p = ContinuousPlant::new(
+        Mat::from_fn(2, 2, |i, j| if i == 0 && j == 1 { 1.0 } else { 0.0 }),
+        Mat::from_fn(2, 1, |i, _| if i == 1 { 1.0 } else { 0.0 }),
+        vec![0.0, -9.81],
+    )
+    .unwrap();
     for &h in &[1e-3, 0.01, 0.1, 1.0, 10.0] {
         let d = p.zoh(h).unwrap();
         let tol = 1e-14 * (1.0 + h * h);
@@ -35,7 +43,10 @@ fn double_integrator_closed_form() {
         assert!(d.A[(1, 0)].abs() < tol && (d.A[(1, 1)] - 1.0).abs() < tol);
         assert!((d.B[(0, 0)] - h * h / 2.0).abs() < tol && (d.B[(1, 0)] - h).abs() < tol);
         // Constant gravity: g_d = (−9.81 h²/2, −9.81 h).
-        assert!((d.g[0] + 9.81 * h * h / 2.0).abs() < 10.0 * tol && (d.g[1] + 9.81 * h).abs() < 10.0 * tol);
+        assert!(
+            (d.g[0] + 9.81 * h * h / 2.0).abs() < 10.0 * tol
+                && (d.g[1] + 9.81 * h).abs() < 10.0 * tol
+        );
         assert_eq!(d.period, h);
     }
 }
@@ -43,14 +54,31 @@ fn double_integrator_closed_form() {
 #[test]
 fn scalar_exponential_closed_form_on_every_pade_branch() {
     // |a h| spans every degree (3, 5, 7, 9) and the scaled degree-13 branch.
-    for &(a, h) in &[(0.5, 0.01), (-2.0, 0.1), (3.0, 0.3), (-1.5, 1.3), (0.7, 40.0), (-4.0, 10.0)] {
+    for &(a, h) in &[
+        (0.5, 0.01),
+        (-2.0, 0.1),
+        (3.0, 0.3),
+        (-1.5, 1.3),
+        (0.7, 40.0),
+        (-4.0, 10.0),
+    ] {
         let (b, c) = (2.0, 0.25);
-        let p = ContinuousPlant::new(Mat::from_fn(1, 1, |_, _| a), Mat::from_fn(1, 1, |_, _| b), vec![c]).unwrap();
+        let p = ContinuousPlant::new(
+            Mat::from_fn(1, 1, |_, _| a),
+            Mat::from_fn(1, 1, |_, _| b),
+            vec![c],
+        )
+        .unwrap();
         let d = p.zoh(h).unwrap();
         let e = (a * h).exp();
         let phi = (a * h).exp_m1() / a;
         let rel = |x: f64, y: f64| ((x - y) / y).abs();
-        assert!(rel(d.A[(0, 0)], e) < 1e-13, "a h = {}: {} vs {e}", a * h, d.A[(0, 0)]);
+        assert!(
+            rel(d.A[(0, 0)], e) < 1e-13,
+            "a h = {}: {} vs {e}",
+            a * h,
+            d.A[(0, 0)]
+        );
         assert!(rel(d.B[(0, 0)], b * phi) < 1e-13);
         assert!(rel(d.g[0], c * phi) < 1e-13);
     }
@@ -72,7 +100,11 @@ fn rotation_and_inverse_identities() {
             (0, 1) => s,
             _ => -s,
         });
-        assert!(max_diff(&e, &want) < 1e-12 * (1.0 + w * t), "w t = {}", w * t);
+        assert!(
+            max_diff(&e, &want) < 1e-12 * (1.0 + w * t),
+            "w t = {}",
+            w * t
+        );
     }
     // e^M e^{−M} = I for random matrices of several norms.
     let mut r = ChaCha8Rng::seed_from_u64(5);
@@ -84,7 +116,11 @@ fn rotation_and_inverse_identities() {
         let id = Mat::from_fn(6, 6, |i, j| if i == j { 1.0 } else { 0.0 });
         // Rounding in the product alone is of order eps·‖e^M‖·‖e^{−M}‖.
         let cond = e.norm_l2() * einv.norm_l2();
-        assert!(max_diff(&prod, &id) < 1e-13 * cond, "scale {scale}: {} (cond {cond})", max_diff(&prod, &id));
+        assert!(
+            max_diff(&prod, &id) < 1e-13 * cond,
+            "scale {scale}: {} (cond {cond})",
+            max_diff(&prod, &id)
+        );
     }
 }
 
@@ -101,7 +137,10 @@ fn expm_matches_a_long_taylor_series() {
             term = &term * &m * (1.0 / k as f64);
             sum = &sum + &term;
         }
-        assert!(max_diff(&expm(m.as_ref()).unwrap(), &sum) < 1e-14, "scale {scale}");
+        assert!(
+            max_diff(&expm(m.as_ref()).unwrap(), &sum) < 1e-14,
+            "scale {scale}"
+        );
     }
 }
 
@@ -110,7 +149,12 @@ fn zoh_matches_fine_rk4_integration() {
     let mut r = ChaCha8Rng::seed_from_u64(7);
     for trial in 0..6 {
         let (n, m) = (4, 2);
-        let p = ContinuousPlant::new(rand_mat(&mut r, n, n, 1.5), rand_mat(&mut r, n, m, 1.0), (0..n).map(|_| r.random_range(-1.0..1.0)).collect()).unwrap();
+        let p = ContinuousPlant::new(
+            rand_mat(&mut r, n, n, 1.5),
+            rand_mat(&mut r, n, m, 1.0),
+            (0..n).map(|_| r.random_range(-1.0..1.0)).collect(),
+        )
+        .unwrap();
         let h = [0.01, 0.1, 0.5][trial % 3];
         let d = p.zoh(h).unwrap();
         let x0: Vec<f64> = (0..n).map(|_| r.random_range(-2.0..2.0)).collect();
@@ -121,7 +165,10 @@ fn zoh_matches_fine_rk4_integration() {
             x = p.rk4_step(&x, &u, h / steps as f64);
         }
         let exact = d.step(&x0, &u);
-        assert!(vdiff(&x, &exact) < 1e-11 * (1.0 + x.iter().map(|v| v.abs()).fold(0.0, f64::max)), "trial {trial}");
+        assert!(
+            vdiff(&x, &exact) < 1e-11 * (1.0 + x.iter().map(|v| v.abs()).fold(0.0, f64::max)),
+            "trial {trial}"
+        );
     }
 }
 
@@ -129,10 +176,18 @@ fn zoh_matches_fine_rk4_integration() {
 fn closed_loop_reproduces_the_nominal_and_superposes() {
     let mut r = ChaCha8Rng::seed_from_u64(8);
     let (n, m) = (3, 2);
-    let plant = DiscretePlant::new(rand_mat(&mut r, n, n, 0.6), rand_mat(&mut r, n, m, 1.0), vec![0.1, -0.2, 0.3], 0.05).unwrap();
+    let plant = DiscretePlant::new(
+        rand_mat(&mut r, n, n, 0.6),
+        rand_mat(&mut r, n, m, 1.0),
+        vec![0.1, -0.2, 0.3],
+        0.05,
+    )
+    .unwrap();
     let K = rand_mat(&mut r, m, n, 0.5);
     // A nominal trajectory from arbitrary inputs.
-    let u_nom: Vec<Vec<f64>> = (0..20).map(|_| (0..m).map(|_| r.random_range(-1.0..1.0)).collect()).collect();
+    let u_nom: Vec<Vec<f64>> = (0..20)
+        .map(|_| (0..m).map(|_| r.random_range(-1.0..1.0)).collect())
+        .collect();
     let mut x_nom = vec![vec![0.5, -0.5, 1.0]];
     for u in &u_nom {
         let next = plant.step(x_nom.last().unwrap(), u);
@@ -152,8 +207,12 @@ fn closed_loop_reproduces_the_nominal_and_superposes() {
     let Acl = &plant.A + &plant.B * &K;
     let mut e = vec![0.0; n];
     for k in 0..20 {
-        let be: Vec<f64> = (0..n).map(|i| (0..m).map(|j| plant.B[(i, j)] * eps[k][j]).sum()).collect();
-        e = (0..n).map(|i| (0..n).map(|j| Acl[(i, j)] * e[j]).sum::<f64>() + be[i]).collect();
+        let be: Vec<f64> = (0..n)
+            .map(|i| (0..m).map(|j| plant.B[(i, j)] * eps[k][j]).sum())
+            .collect();
+        e = (0..n)
+            .map(|i| (0..n).map(|j| Acl[(i, j)] * e[j]).sum::<f64>() + be[i])
+            .collect();
         let got: Vec<f64> = (0..n).map(|i| dist.x[k + 1][i] - run.x[k + 1][i]).collect();
         assert!(vdiff(&got, &e) < 1e-12);
     }
@@ -165,7 +224,12 @@ fn inter_sample_bound_holds_and_is_tight_for_small_periods() {
     let mut worst_ratio: f64 = 0.0;
     for trial in 0..40 {
         let (n, m) = (3, 1);
-        let plant = ContinuousPlant::new(rand_mat(&mut r, n, n, 2.0), rand_mat(&mut r, n, m, 1.0), (0..n).map(|_| r.random_range(-1.0..1.0)).collect()).unwrap();
+        let plant = ContinuousPlant::new(
+            rand_mat(&mut r, n, n, 2.0),
+            rand_mat(&mut r, n, m, 1.0),
+            (0..n).map(|_| r.random_range(-1.0..1.0)).collect(),
+        )
+        .unwrap();
         let h = [0.01, 0.05, 0.2, 0.5][trial % 4];
         let bound = plant.inter_sample_bound(h).unwrap();
         let x: Vec<f64> = (0..n).map(|_| r.random_range(-1.0..1.0)).collect();
@@ -177,12 +241,24 @@ fn inter_sample_bound_holds_and_is_tight_for_small_periods() {
         let mut observed: f64 = 0.0;
         for _ in 0..steps {
             y = plant.rk4_step(&y, &u, h / steps as f64);
-            observed = observed.max(y.iter().zip(&x).map(|(a, c)| (a - c) * (a - c)).sum::<f64>().sqrt());
+            observed = observed.max(
+                y.iter()
+                    .zip(&x)
+                    .map(|(a, c)| (a - c) * (a - c))
+                    .sum::<f64>()
+                    .sqrt(),
+            );
         }
-        assert!(observed <= b * (1.0 + 1e-9), "trial {trial}: observed {observed} > bound {b}");
+        assert!(
+            observed <= b * (1.0 + 1e-9),
+            "trial {trial}: observed {observed} > bound {b}"
+        );
         if h <= 0.01 {
             // For small h, x(t) − x_κ ≈ τ f_κ, so the bound is nearly attained.
-            assert!(observed >= 0.9 * b, "trial {trial}: bound too loose ({observed} vs {b})");
+            assert!(
+                observed >= 0.9 * b,
+                "trial {trial}: bound too loose ({observed} vs {b})"
+            );
         }
         worst_ratio = worst_ratio.max(observed / b);
     }
@@ -193,7 +269,12 @@ fn inter_sample_bound_holds_and_is_tight_for_small_periods() {
 fn deviation_factor_bounds_two_runs_between_samples() {
     let mut r = ChaCha8Rng::seed_from_u64(10);
     let (n, m) = (4, 2);
-    let plant = ContinuousPlant::new(rand_mat(&mut r, n, n, 1.0), rand_mat(&mut r, n, m, 1.0), vec![0.0; n]).unwrap();
+    let plant = ContinuousPlant::new(
+        rand_mat(&mut r, n, n, 1.0),
+        rand_mat(&mut r, n, m, 1.0),
+        vec![0.0; n],
+    )
+    .unwrap();
     let K = rand_mat(&mut r, m, n, 1.0);
     let h = 0.1;
     let bound = plant.inter_sample_bound(h).unwrap();
@@ -202,14 +283,28 @@ fn deviation_factor_bounds_two_runs_between_samples() {
         let x: Vec<f64> = (0..n).map(|_| r.random_range(-1.0..1.0)).collect();
         let xt: Vec<f64> = x.iter().map(|v| v + r.random_range(-0.1..0.1)).collect();
         let v: Vec<f64> = (0..m).map(|_| r.random_range(-1.0..1.0)).collect();
-        let u = |s: &[f64]| -> Vec<f64> { (0..m).map(|i| (0..n).map(|j| K[(i, j)] * s[j]).sum::<f64>() + v[i]).collect() };
+        let u = |s: &[f64]| -> Vec<f64> {
+            (0..m)
+                .map(|i| (0..n).map(|j| K[(i, j)] * s[j]).sum::<f64>() + v[i])
+                .collect()
+        };
         let (ua, ub) = (u(&x), u(&xt));
-        let e0 = x.iter().zip(&xt).map(|(a, b)| (a - b) * (a - b)).sum::<f64>().sqrt();
+        let e0 = x
+            .iter()
+            .zip(&xt)
+            .map(|(a, b)| (a - b) * (a - b))
+            .sum::<f64>()
+            .sqrt();
         let (mut ya, mut yb) = (x.clone(), xt.clone());
         for _ in 0..200 {
             ya = plant.rk4_step(&ya, &ua, h / 200.0);
             yb = plant.rk4_step(&yb, &ub, h / 200.0);
-            let e = ya.iter().zip(&yb).map(|(a, b)| (a - b) * (a - b)).sum::<f64>().sqrt();
+            let e = ya
+                .iter()
+                .zip(&yb)
+                .map(|(a, b)| (a - b) * (a - b))
+                .sum::<f64>()
+                .sqrt();
             assert!(e <= factor * e0 * (1.0 + 1e-9));
         }
     }
@@ -218,22 +313,46 @@ fn deviation_factor_bounds_two_runs_between_samples() {
 #[test]
 fn bad_input_is_an_error_not_a_panic() {
     let a = Mat::from_fn(2, 2, |_, _| 1.0);
-    assert!(matches!(ContinuousPlant::new(a.clone(), Mat::zeros(3, 1), vec![0.0; 2]), Err(ModelError::Dimension { .. })));
-    assert!(matches!(ContinuousPlant::new(Mat::zeros(2, 3), Mat::zeros(2, 1), vec![0.0; 2]), Err(ModelError::Dimension { .. })));
-    assert!(matches!(ContinuousPlant::new(a.clone(), Mat::zeros(2, 1), vec![0.0; 3]), Err(ModelError::Dimension { .. })));
+    assert!(matches!(
+        ContinuousPlant::new(a.clone(), Mat::zeros(3, 1), vec![0.0; 2]),
+        Err(ModelError::Dimension { .. })
+    ));
+    assert!(matches!(
+        ContinuousPlant::new(Mat::zeros(2, 3), Mat::zeros(2, 1), vec![0.0; 2]),
+        Err(ModelError::Dimension { .. })
+    ));
+    assert!(matches!(
+        ContinuousPlant::new(a.clone(), Mat::zeros(2, 1), vec![0.0; 3]),
+        Err(ModelError::Dimension { .. })
+    ));
     let mut nan = a.clone();
     nan[(0, 1)] = f64::NAN;
-    assert!(matches!(ContinuousPlant::new(nan, Mat::zeros(2, 1), vec![0.0; 2]), Err(ModelError::NonFinite { .. })));
+    assert!(matches!(
+        ContinuousPlant::new(nan, Mat::zeros(2, 1), vec![0.0; 2]),
+        Err(ModelError::NonFinite { .. })
+    ));
     let p = ContinuousPlant::new(a.clone(), Mat::zeros(2, 1), vec![0.0; 2]).unwrap();
     assert!(matches!(p.zoh(0.0), Err(ModelError::Period(_))));
     assert!(matches!(p.zoh(f64::NAN), Err(ModelError::Period(_))));
-    assert!(matches!(DiscretePlant::new(a.clone(), Mat::zeros(2, 1), vec![0.0; 2], -1.0), Err(ModelError::Period(_))));
+    assert!(matches!(
+        DiscretePlant::new(a.clone(), Mat::zeros(2, 1), vec![0.0; 2], -1.0),
+        Err(ModelError::Period(_))
+    ));
     assert!(expm(Mat::<f64>::zeros(2, 3).as_ref()).is_err());
     let bound = p.inter_sample_bound(0.1).unwrap();
     assert!(bound.excursion(&[0.0], &[0.0]).is_err());
-    assert!(bound.deviation_factor(Mat::<f64>::zeros(2, 2).as_ref()).is_err());
+    assert!(bound
+        .deviation_factor(Mat::<f64>::zeros(2, 2).as_ref())
+        .is_err());
     let d = p.zoh(0.1).unwrap();
-    assert!(simulate_closed_loop(&d, Mat::<f64>::zeros(1, 2).as_ref(), &[0.0, 0.0], &[vec![0.0, 0.0]], None).is_err());
+    assert!(simulate_closed_loop(
+        &d,
+        Mat::<f64>::zeros(1, 2).as_ref(),
+        &[0.0, 0.0],
+        &[vec![0.0, 0.0]],
+        None
+    )
+    .is_err());
 }
 
 #[test]
@@ -241,16 +360,30 @@ fn sampled_plant_from_spec() {
     use host_compiler::spec::{Matrix, Plant, TimeDomain};
     let spec = Plant {
         time: TimeDomain::Continuous,
-        A: Matrix { rows: 2, cols: 2, data: vec![0.0, 1.0, 0.0, 0.0] },
-        B: Matrix { rows: 2, cols: 1, data: vec![0.0, 1.0] },
+        A: Matrix {
+            rows: 2,
+            cols: 2,
+            data: vec![0.0, 1.0, 0.0, 0.0],
+        },
+        B: Matrix {
+            rows: 2,
+            cols: 1,
+            data: vec![0.0, 1.0],
+        },
         offset: vec![0.0, 0.0],
         period: 0.5,
         C: Matrix::identity(2),
     };
     let s = SampledPlant::from_spec(&spec).unwrap();
     assert!(s.continuous.is_some());
-    assert!((s.discrete.A[(0, 1)] - 0.5).abs() < 1e-15 && (s.discrete.B[(0, 0)] - 0.125).abs() < 1e-15);
-    let d = SampledPlant::from_spec(&Plant { time: TimeDomain::Discrete, ..spec }).unwrap();
+    assert!(
+        (s.discrete.A[(0, 1)] - 0.5).abs() < 1e-15 && (s.discrete.B[(0, 0)] - 0.125).abs() < 1e-15
+    );
+    let d = SampledPlant::from_spec(&Plant {
+        time: TimeDomain::Discrete,
+        ..spec
+    })
+    .unwrap();
     assert!(d.continuous.is_none());
     assert_eq!(d.discrete.A[(0, 1)], 1.0);
 }

@@ -12,16 +12,32 @@ fn tmp(name: &str, text: &str) -> PathBuf {
 }
 
 fn run(args: &[&str]) -> (bool, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_host-compiler")).arg("mtl").args(args).output().unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_host-compiler"))
+        .arg("mtl")
+        .args(args)
+        .output()
+        .unwrap();
     let flat = |b: &[u8]| {
         // miette wraps long messages and draws a gutter; undo both for matching.
-        String::from_utf8_lossy(b).replace('│', " ").split_whitespace().collect::<Vec<_>>().join(" ")
+        String::from_utf8_lossy(b)
+            .replace('│', " ")
+            .split_whitespace()
+            .collect::<Vec<_>>()
+            .join(" ")
     };
-    (out.status.success(), String::from_utf8_lossy(&out.stdout).into_owned(), flat(&out.stderr))
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        flat(&out.stderr),
+    )
 }
 
 fn last_token(s: &str) -> f64 {
-    s.split_whitespace().last().expect("no output").parse().expect("last token is not a number")
+    s.split_whitespace()
+        .last()
+        .expect("no output")
+        .parse()
+        .expect("last token is not a number")
 }
 
 const TRACE: &str = "t,x1,x2\n0,1,-5\n1,-1,4\n2,2,-2\n3,0.5,1\n4,3,0\n";
@@ -44,7 +60,13 @@ fn prints_the_robustness_at_time_zero_last() {
 #[test]
 fn all_prints_the_whole_signal() {
     let p = tmp("all.csv", TRACE);
-    let (ok, out, err) = run(&["--trace", p.to_str().unwrap(), "--formula", "F[1,2] x1 >= 0.5", "--all"]);
+    let (ok, out, err) = run(&[
+        "--trace",
+        p.to_str().unwrap(),
+        "--formula",
+        "F[1,2] x1 >= 0.5",
+        "--all",
+    ]);
     assert!(ok, "{err}");
     let lines: Vec<&str> = out.lines().collect();
     assert_eq!(lines[0], "t,rho");
@@ -55,7 +77,16 @@ fn all_prints_the_whole_signal() {
             (t.parse().unwrap(), r.parse().unwrap())
         })
         .collect();
-    assert_eq!(rows, vec![(0.0, 1.5), (1.0, 1.5), (2.0, 2.5), (3.0, 2.5), (4.0, f64::NEG_INFINITY)]);
+    assert_eq!(
+        rows,
+        vec![
+            (0.0, 1.5),
+            (1.0, 1.5),
+            (2.0, 2.5),
+            (3.0, 2.5),
+            (4.0, f64::NEG_INFINITY)
+        ]
+    );
     assert_eq!(last_token(&out), 1.5);
 }
 
@@ -73,13 +104,23 @@ fn named_sets_from_toml() {
     assert!(ok, "{err}");
     assert!((last_token(&out) - 0.5).abs() < 1e-9, "{out}");
     // F Right: px = 3 at t=1 is 1 inside [2, 10].
-    let (ok, out, err) = run(&["--trace", p, "--sets", s, "--formula", "F Right & G[0,0] !Right"]);
+    let (ok, out, err) = run(&[
+        "--trace",
+        p,
+        "--sets",
+        s,
+        "--formula",
+        "F Right & G[0,0] !Right",
+    ]);
     assert!(ok, "{err}");
     assert!((last_token(&out) - 1.0).abs() < 1e-9, "{out}");
     // Unknown set: error names it and lists the known ones.
     let (ok, _, err) = run(&["--trace", p, "--sets", s, "--formula", "F Goal"]);
     assert!(!ok);
-    assert!(err.contains("unknown set `Goal`") && err.contains("Disc"), "{err}");
+    assert!(
+        err.contains("unknown set `Goal`") && err.contains("Disc"),
+        "{err}"
+    );
 }
 
 #[test]
@@ -93,12 +134,18 @@ fn errors_are_reported_with_location() {
     let bad = tmp("bad.csv", "t,x1\n0,1\n1,oops\n");
     let (ok, _, err) = run(&["--trace", bad.to_str().unwrap(), "--formula", "x1 >= 0"]);
     assert!(!ok);
-    assert!(err.contains("bad.csv:3:3") && err.contains("`oops` is not a number"), "{err}");
+    assert!(
+        err.contains("bad.csv:3:3") && err.contains("`oops` is not a number"),
+        "{err}"
+    );
 
     let back = tmp("back.csv", "t,x1\n0,1\n2,1\n1,1\n");
     let (ok, _, err) = run(&["--trace", back.to_str().unwrap(), "--formula", "x1 >= 0"]);
     assert!(!ok);
-    assert!(err.contains("back.csv:4") && err.contains("increase strictly"), "{err}");
+    assert!(
+        err.contains("back.csv:4") && err.contains("increase strictly"),
+        "{err}"
+    );
 
     let empty = tmp("empty.csv", "");
     let (ok, _, err) = run(&["--trace", empty.to_str().unwrap(), "--formula", "x1 >= 0"]);

@@ -8,11 +8,19 @@ use host_compiler::robustness::mtl::{Formula, FormulaErrorKind, NamedSet, Trace,
 fn syntax(src: &str, column: usize, expected_contains: &str) {
     let e = Formula::parse(src).expect_err(src);
     assert_eq!(e.column, column, "{src}: {e}");
-    let exp = e.expected().unwrap_or_else(|| panic!("{src}: not a syntax error: {e}"));
-    assert!(exp.contains(expected_contains), "{src}: expected {exp:?} to mention {expected_contains:?}");
+    let exp = e
+        .expected()
+        .unwrap_or_else(|| panic!("{src}: not a syntax error: {e}"));
+    assert!(
+        exp.contains(expected_contains),
+        "{src}: expected {exp:?} to mention {expected_contains:?}"
+    );
     // The message repeats both the expectation and the column.
     let msg = e.to_string();
-    assert!(msg.contains(&format!("column {column}")) && msg.contains(exp), "{msg}");
+    assert!(
+        msg.contains(&format!("column {column}")) && msg.contains(exp),
+        "{msg}"
+    );
 }
 
 #[test]
@@ -64,41 +72,96 @@ impl Region for Everything {
         true
     }
     fn dist(&self, x: &[f64], _: &Metric) -> Witness {
-        Witness { value: 0.0, point: x.to_vec() }
+        Witness {
+            value: 0.0,
+            point: x.to_vec(),
+        }
     }
     fn depth(&self, x: &[f64], _: &Metric) -> Witness {
-        Witness { value: f64::INFINITY, point: x.to_vec() }
+        Witness {
+            value: f64::INFINITY,
+            point: x.to_vec(),
+        }
     }
 }
 
 #[test]
 fn binding_errors_name_the_unknown_thing() {
     let names = vec!["x1".to_string(), "x2".to_string()];
-    let sets = vec![NamedSet::euclidean("Safe", vec!["x1".into()], Box::new(Everything))];
-    let bind = |s: &str| Formula::parse(s).unwrap().bind(&names, &sets).err().expect(s);
+    let sets = vec![NamedSet::euclidean(
+        "Safe",
+        vec!["x1".into()],
+        Box::new(Everything),
+    )];
+    let bind = |s: &str| {
+        Formula::parse(s)
+            .unwrap()
+            .bind(&names, &sets)
+            .err()
+            .expect(s)
+    };
 
     let e = bind("G (x1 >= 0 & x9 <= 1)");
     assert_eq!(e.kind, FormulaErrorKind::UnknownName { name: "x9".into() });
     assert_eq!(e.column, 14);
-    assert!(e.help.as_deref().unwrap().contains("x1, x2"), "help lists the signals");
+    assert!(
+        e.help.as_deref().unwrap().contains("x1, x2"),
+        "help lists the signals"
+    );
 
     let e = bind("F Obstacle");
-    assert_eq!(e.kind, FormulaErrorKind::UnknownName { name: "Obstacle".into() });
+    assert_eq!(
+        e.kind,
+        FormulaErrorKind::UnknownName {
+            name: "Obstacle".into()
+        }
+    );
     assert_eq!(e.column, 3);
-    assert!(e.help.as_deref().unwrap().contains("Safe"), "help lists the sets");
+    assert!(
+        e.help.as_deref().unwrap().contains("Safe"),
+        "help lists the sets"
+    );
 
     let e = bind("x1 & Safe");
-    assert!(e.message.contains("is a signal, not a set"), "{}", e.message);
+    assert!(
+        e.message.contains("is a signal, not a set"),
+        "{}",
+        e.message
+    );
 
-    let sets2 = vec![NamedSet::euclidean("Bad", vec!["x7".into()], Box::new(Everything))];
-    let e = Formula::parse("Bad").unwrap().bind(&names, &sets2).err().unwrap();
+    let sets2 = vec![NamedSet::euclidean(
+        "Bad",
+        vec!["x7".into()],
+        Box::new(Everything),
+    )];
+    let e = Formula::parse("Bad")
+        .unwrap()
+        .bind(&names, &sets2)
+        .err()
+        .unwrap();
     assert!(matches!(e.kind, FormulaErrorKind::SetMismatch { .. }));
-    let sets3 = vec![NamedSet::euclidean("Bad", vec!["x1".into(), "x2".into()], Box::new(Everything))];
-    let e = Formula::parse("Bad").unwrap().bind(&names, &sets3).err().unwrap();
+    let sets3 = vec![NamedSet::euclidean(
+        "Bad",
+        vec!["x1".into(), "x2".into()],
+        Box::new(Everything),
+    )];
+    let e = Formula::parse("Bad")
+        .unwrap()
+        .bind(&names, &sets3)
+        .err()
+        .unwrap();
     assert!(e.message.contains("dimension 1"), "{}", e.message);
     // Bound to one layout, refuses another.
-    let m = Formula::parse("x1 >= 0").unwrap().bind(&names, &[]).unwrap();
-    let other = Trace::new(vec![0.0], vec!["x2".into(), "x1".into()], vec![vec![0.0], vec![0.0]]).unwrap();
+    let m = Formula::parse("x1 >= 0")
+        .unwrap()
+        .bind(&names, &[])
+        .unwrap();
+    let other = Trace::new(
+        vec![0.0],
+        vec!["x2".into(), "x1".into()],
+        vec![vec![0.0], vec![0.0]],
+    )
+    .unwrap();
     assert!(m.robustness(&other).is_err());
 }
 
@@ -124,7 +187,10 @@ fn csv_errors_have_line_and_column() {
     let e = csv("t,x1,x2\n0,1,2\n1,2\n");
     assert_eq!(e.line(), Some(3));
     let msg = e.to_string();
-    assert!(msg.contains("trace.csv:3") && msg.contains("missing `x2`"), "{msg}");
+    assert!(
+        msg.contains("trace.csv:3") && msg.contains("missing `x2`"),
+        "{msg}"
+    );
     let e = csv("t,x1\n0,1,2\n");
     assert!(e.to_string().contains("1 extra"), "{e}");
 
@@ -132,18 +198,47 @@ fn csv_errors_have_line_and_column() {
     let e = csv("t,x1\n0,1\n1,  abc\n");
     assert_eq!((e.line(), e.column()), (Some(3), Some(2)));
     let msg = e.to_string();
-    assert!(msg.contains("trace.csv:3:5") && msg.contains("`x1`") && msg.contains("`abc` is not a number"), "{msg}");
+    assert!(
+        msg.contains("trace.csv:3:5")
+            && msg.contains("`x1`")
+            && msg.contains("`abc` is not a number"),
+        "{msg}"
+    );
     let e = csv("t,x1\n0,NaN\n");
-    assert!(matches!(e, TraceError::NonFinite { line: 2, column: 2, .. }), "{e}");
+    assert!(
+        matches!(
+            e,
+            TraceError::NonFinite {
+                line: 2,
+                column: 2,
+                ..
+            }
+        ),
+        "{e}"
+    );
     let e = csv("t,x1\n,1\n");
-    assert!(matches!(e, TraceError::NotNumeric { line: 2, column: 1, .. }), "{e}");
+    assert!(
+        matches!(
+            e,
+            TraceError::NotNumeric {
+                line: 2,
+                column: 1,
+                ..
+            }
+        ),
+        "{e}"
+    );
 
     // Time must increase strictly.
     let e = csv("t,x1\n0,1\n1,1\n1,2\n");
     assert_eq!((e.line(), e.column()), (Some(4), Some(1)));
     assert!(e.to_string().contains("t = 1 follows t = 1"), "{e}");
     let e = csv("t,x1\n0,1\n\n-1,1\n");
-    assert_eq!(e.line(), Some(4), "blank lines still count for line numbers");
+    assert_eq!(
+        e.line(),
+        Some(4),
+        "blank lines still count for line numbers"
+    );
 }
 
 #[test]
@@ -163,6 +258,11 @@ fn trace_constructor_validates() {
     assert!(Trace::new(vec![0.0, 0.0], vec![], vec![]).is_err());
     assert!(Trace::new(vec![0.0], vec!["a".into()], vec![vec![]]).is_err());
     assert!(Trace::new(vec![0.0], vec!["t".into()], vec![vec![1.0]]).is_err());
-    assert!(Trace::new(vec![0.0], vec!["a".into(), "a".into()], vec![vec![1.0], vec![1.0]]).is_err());
+    assert!(Trace::new(
+        vec![0.0],
+        vec!["a".into(), "a".into()],
+        vec![vec![1.0], vec![1.0]]
+    )
+    .is_err());
     assert!(Trace::new(vec![0.0], vec!["a".into()], vec![vec![f64::NAN]]).is_err());
 }

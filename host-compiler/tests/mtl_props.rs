@@ -3,7 +3,9 @@
 //! and random formulas over every operator; printing and re-parsing a formula preserves it.
 
 use host_compiler::geometry::{Metric, Region, Witness};
-use host_compiler::robustness::mtl::{robustness_naive, robustness_window_scan, Formula, NamedSet, Trace};
+use host_compiler::robustness::mtl::{
+    robustness_naive, robustness_window_scan, Formula, NamedSet, Trace,
+};
 use proptest::prelude::*;
 
 /// Euclidean ball of radius 1.5 around (0.5, −0.5) in (x1, x2).
@@ -16,16 +18,36 @@ impl Region for B {
         (x[0] - 0.5).hypot(x[1] + 0.5) <= 1.5
     }
     fn dist(&self, x: &[f64], _: &Metric) -> Witness {
-        Witness { value: ((x[0] - 0.5).hypot(x[1] + 0.5) - 1.5).max(0.0), point: x.to_vec() }
+        Witness {
+            value: ((x[0] - 0.5).hypot(x[1] + 0.5) - 1.5).max(0.0),
+            point: x.to_vec(),
+        }
     }
     fn depth(&self, x: &[f64], _: &Metric) -> Witness {
-        Witness { value: (1.5 - (x[0] - 0.5).hypot(x[1] + 0.5)).max(0.0), point: x.to_vec() }
+        Witness {
+            value: (1.5 - (x[0] - 0.5).hypot(x[1] + 0.5)).max(0.0),
+            point: x.to_vec(),
+        }
     }
 }
 
 fn interval() -> impl Strategy<Value = String> {
-    let a = prop_oneof![Just(0.0), Just(0.5), Just(1.0), Just(2.0), Just(3.3), 0.0..4.0f64];
-    let w = prop_oneof![Just(Some(0.0)), Just(Some(0.5)), Just(Some(1.0)), Just(Some(2.5)), Just(None), (0.0..6.0f64).prop_map(Some)];
+    let a = prop_oneof![
+        Just(0.0),
+        Just(0.5),
+        Just(1.0),
+        Just(2.0),
+        Just(3.3),
+        0.0..4.0f64
+    ];
+    let w = prop_oneof![
+        Just(Some(0.0)),
+        Just(Some(0.5)),
+        Just(Some(1.0)),
+        Just(Some(2.5)),
+        Just(None),
+        (0.0..6.0f64).prop_map(Some)
+    ];
     let explicit = (a, w).prop_map(|(a, w)| match w {
         Some(w) => format!("[{a},{}]", a + w),
         None => format!("[{a},inf]"),
@@ -35,7 +57,8 @@ fn interval() -> impl Strategy<Value = String> {
 
 fn atom() -> impl Strategy<Value = String> {
     let sig = prop_oneof![Just("x1"), Just("x2"), Just("x3")];
-    let c = prop_oneof![Just(1.0), Just(-1.0), Just(2.0), -3.0..3.0f64].prop_filter("nonzero", |c: &f64| *c != 0.0);
+    let c = prop_oneof![Just(1.0), Just(-1.0), Just(2.0), -3.0..3.0f64]
+        .prop_filter("nonzero", |c: &f64| *c != 0.0);
     let b = prop_oneof![Just(0.0), Just(1.0), -2.0..2.0f64];
     let op = prop_oneof![Just("<="), Just(">="), Just("<"), Just(">")];
     prop_oneof![
@@ -63,32 +86,47 @@ fn formula() -> impl Strategy<Value = String> {
             (inner.clone(), inner.clone()).prop_map(|(a, b)| format!("({a}) -> ({b})")),
             (interval(), inner.clone()).prop_map(|(i, f)| format!("F{i} ({f})")),
             (interval(), inner.clone()).prop_map(|(i, f)| format!("G{i} ({f})")),
-            (inner.clone(), interval(), inner.clone()).prop_map(|(a, i, b)| format!("({a}) U{i} ({b})")),
+            (inner.clone(), interval(), inner.clone())
+                .prop_map(|(a, i, b)| format!("({a}) U{i} ({b})")),
             (inner.clone(), interval(), inner).prop_map(|(a, i, b)| format!("({a}) R{i} ({b})")),
         ]
     })
 }
 
 fn trace() -> impl Strategy<Value = Trace> {
-    (1usize..28).prop_flat_map(|n| {
-        let step = prop_oneof![
-            Just(vec![1.0; n]),
-            proptest::collection::vec(prop_oneof![Just(0.25), Just(0.5), Just(1.0), Just(1.5)], n),
-            proptest::collection::vec(0.01..2.0f64, n),
-        ];
-        // Small integers give many ties, which exercise the deques' tie handling.
-        let val = || proptest::collection::vec(prop_oneof![(-3i32..4).prop_map(f64::from), -5.0..5.0f64], n);
-        (step, val(), val(), val(), -3.0..3.0f64)
-    })
-    .prop_map(|(steps, x1, x2, x3, t0)| {
-        let mut t = Vec::with_capacity(steps.len());
-        let mut acc = t0;
-        for s in steps {
-            t.push(acc);
-            acc += s;
-        }
-        Trace::new(t, vec!["x1".into(), "x2".into(), "x3".into()], vec![x1, x2, x3]).unwrap()
-    })
+    (1usize..28)
+        .prop_flat_map(|n| {
+            let step = prop_oneof![
+                Just(vec![1.0; n]),
+                proptest::collection::vec(
+                    prop_oneof![Just(0.25), Just(0.5), Just(1.0), Just(1.5)],
+                    n
+                ),
+                proptest::collection::vec(0.01..2.0f64, n),
+            ];
+            // Small integers give many ties, which exercise the deques' tie handling.
+            let val = || {
+                proptest::collection::vec(
+                    prop_oneof![(-3i32..4).prop_map(f64::from), -5.0..5.0f64],
+                    n,
+                )
+            };
+            (step, val(), val(), val(), -3.0..3.0f64)
+        })
+        .prop_map(|(steps, x1, x2, x3, t0)| {
+            let mut t = Vec::with_capacity(steps.len());
+            let mut acc = t0;
+            for s in steps {
+                t.push(acc);
+                acc += s;
+            }
+            Trace::new(
+                t,
+                vec!["x1".into(), "x2".into(), "x3".into()],
+                vec![x1, x2, x3],
+            )
+            .unwrap()
+        })
 }
 
 proptest! {

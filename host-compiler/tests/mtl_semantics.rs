@@ -11,7 +11,10 @@ fn trace() -> Trace {
     Trace::new(
         vec![0.0, 1.0, 2.0, 3.0, 4.0],
         vec!["x1".into(), "x2".into()],
-        vec![vec![1.0, -1.0, 2.0, 0.5, 3.0], vec![-5.0, 4.0, -2.0, 1.0, 0.0]],
+        vec![
+            vec![1.0, -1.0, 2.0, 0.5, 3.0],
+            vec![-5.0, 4.0, -2.0, 1.0, 0.0],
+        ],
     )
     .unwrap()
 }
@@ -20,18 +23,28 @@ fn trace() -> Trace {
 fn rho(f: &str, tr: &Trace, sets: &[NamedSet]) -> Vec<f64> {
     let fast = mtl::robustness(f, tr, sets).unwrap_or_else(|e| panic!("{f}: {e}"));
     let m = Formula::parse(f).unwrap().bind(tr.names(), sets).unwrap();
-    assert_eq!(fast, robustness_naive(&m, tr).unwrap(), "{f}: naive disagrees");
+    assert_eq!(
+        fast,
+        robustness_naive(&m, tr).unwrap(),
+        "{f}: naive disagrees"
+    );
     fast
 }
 
 fn close(a: &[f64], b: &[f64]) -> bool {
-    a.len() == b.len() && a.iter().zip(b).all(|(x, y)| x == y || (x - y).abs() <= 1e-12)
+    a.len() == b.len()
+        && a.iter()
+            .zip(b)
+            .all(|(x, y)| x == y || (x - y).abs() <= 1e-12)
 }
 
 #[track_caller]
 fn check(f: &str, expected: &[f64]) {
     let got = rho(f, &trace(), &[]);
-    assert!(close(&got, expected), "{f}: got {got:?}, expected {expected:?}");
+    assert!(
+        close(&got, expected),
+        "{f}: got {got:?}, expected {expected:?}"
+    );
 }
 
 #[test]
@@ -41,10 +54,19 @@ fn atoms() {
     check("0.5 <= x1", &[0.5, -1.5, 1.5, 0.0, 2.5]);
     // (1 − 2 x1 + x2)/√5.
     let s5 = 5f64.sqrt();
-    check("2*x1 - x2 <= 1", &[-6.0 / s5, 7.0 / s5, -5.0 / s5, 1.0 / s5, -5.0 / s5]);
-    check("x1*2 + -1*x2 < 1", &[-6.0 / s5, 7.0 / s5, -5.0 / s5, 1.0 / s5, -5.0 / s5]);
+    check(
+        "2*x1 - x2 <= 1",
+        &[-6.0 / s5, 7.0 / s5, -5.0 / s5, 1.0 / s5, -5.0 / s5],
+    );
+    check(
+        "x1*2 + -1*x2 < 1",
+        &[-6.0 / s5, 7.0 / s5, -5.0 / s5, 1.0 / s5, -5.0 / s5],
+    );
     // Terms on both sides and repeated names combine: 3 x1 − x1 ≥ x2 + 1 ⇔ 2 x1 − x2 ≥ 1.
-    check("3*x1 - x1 >= x2 + 1", &[6.0 / s5, -7.0 / s5, 5.0 / s5, -1.0 / s5, 5.0 / s5]);
+    check(
+        "3*x1 - x1 >= x2 + 1",
+        &[6.0 / s5, -7.0 / s5, 5.0 / s5, -1.0 / s5, 5.0 / s5],
+    );
     // The time column is a signal too.
     check("t >= 2", &[-2.0, -1.0, 0.0, 1.0, 2.0]);
     check("true", &[INF; 5]);
@@ -134,11 +156,17 @@ impl Region for Disc {
     }
     fn dist(&self, x: &[f64], _: &Metric) -> Witness {
         let r = x[0].hypot(x[1]);
-        Witness { value: (r - 1.0).max(0.0), point: vec![x[0] / r, x[1] / r] }
+        Witness {
+            value: (r - 1.0).max(0.0),
+            point: vec![x[0] / r, x[1] / r],
+        }
     }
     fn depth(&self, x: &[f64], _: &Metric) -> Witness {
         let r = x[0].hypot(x[1]);
-        Witness { value: (1.0 - r).max(0.0), point: vec![x[0] / r, x[1] / r] }
+        Witness {
+            value: (1.0 - r).max(0.0),
+            point: vec![x[0] / r, x[1] / r],
+        }
     }
 }
 
@@ -147,15 +175,26 @@ fn set_atoms_use_signed_distance() {
     let tr = Trace::new(
         vec![0.0, 1.0, 2.0],
         vec!["a".into(), "p".into(), "q".into()],
-        vec![vec![9.0, 9.0, 9.0], vec![0.0, 3.0, 0.6], vec![0.5, 4.0, 0.8]],
+        vec![
+            vec![9.0, 9.0, 9.0],
+            vec![0.0, 3.0, 0.6],
+            vec![0.5, 4.0, 0.8],
+        ],
     )
     .unwrap();
-    let sets = vec![NamedSet::euclidean("Disc", vec!["p".into(), "q".into()], Box::new(Disc))];
+    let sets = vec![NamedSet::euclidean(
+        "Disc",
+        vec!["p".into(), "q".into()],
+        Box::new(Disc),
+    )];
     // |(0, .5)| = .5 → depth .5; |(3,4)| = 5 → −4; |(.6,.8)| = 1 → 0.
     assert!(close(&rho("Disc", &tr, &sets), &[0.5, -4.0, 0.0]));
     assert!(close(&rho("!Disc", &tr, &sets), &[-0.5, 4.0, -0.0]));
     assert!(close(&rho("G !Disc", &tr, &sets), &[-0.5, 0.0, 0.0]));
-    assert!(close(&rho("F[1,1] Disc & a >= 0", &tr, &sets), &[-4.0, 0.0, -INF]));
+    assert!(close(
+        &rho("F[1,1] Disc & a >= 0", &tr, &sets),
+        &[-4.0, 0.0, -INF]
+    ));
 }
 
 #[test]
@@ -171,7 +210,10 @@ fn precedence_and_associativity() {
     // `!` binds tighter than nothing but the atom: G (¬(x1 ≥ 0)); x1 ≥ 0 is stored as −x1 ≤ 0.
     assert_eq!(show("G[1,2] !x1 >= 0"), "G[1.0,2.0] !(-1.0*x1 <= 0.0)");
     // Printing and re-parsing gives the same tree (up to spans).
-    for s in ["x1 - 2*x2 >= -1.5e-3 U[0.5,2] !(S | x3 < 4)", "G[0,10] (x1 >= 0.5 & !Unsafe) -> F Goal"] {
+    for s in [
+        "x1 - 2*x2 >= -1.5e-3 U[0.5,2] !(S | x3 < 4)",
+        "G[0,10] (x1 >= 0.5 & !Unsafe) -> F Goal",
+    ] {
         let once = show(s);
         assert_eq!(show(&once), once);
     }

@@ -143,6 +143,7 @@ fn missing_top_level_field() {
     assert!(e.message().contains("horizon"));
     // A missing top-level key has no better place than the start of the file.
     assert_eq!(e.line_col(), Some((1, 1)));
+    assert!(render(&e).contains("spec.toml:1:1"));
 }
 
 #[test]

@@ -54,10 +54,10 @@ fn planar_vehicle_is_example_4_8() {
         [-1.0, 0.0, 0.0, 0.0],
         [0.0, -1.0, 0.0, 0.0],
     ];
-    for i in 0..4 {
-        for j in 0..4 {
+    for (i, row) in cl.iter().enumerate() {
+        for (j, &want) in row.iter().enumerate() {
             let bk: f64 = (0..2).map(|k| pl.B.get(i, k) * K[k][j]).sum();
-            assert!((pl.A.get(i, j) + bk - cl[i][j]).abs() < 1e-15, "({i},{j})");
+            assert!((pl.A.get(i, j) + bk - want).abs() < 1e-15, "({i},{j})");
         }
     }
     assert_eq!(pl.period, 0.01);

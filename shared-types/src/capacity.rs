@@ -1,7 +1,15 @@
 //! Compile-time capacities of the controller image: the largest dimensions an image may declare and the
-//! evaluator's fixed scratch sizes. Every runtime loop in `image` and `eval` is bounded by these (DESIGN §4).
+//! evaluator's fixed scratch sizes. Every runtime loop in `image`, `pwa` and `eval` is bounded by these
+//! (DESIGN §4).
 //!
 //! The host refuses to emit an image that exceeds them, and the decoder rejects one that does.
+//!
+//! # Worst-case work per control step
+//! * Feedforward (Algorithm 2): at κ = 0 one quadratic form per trajectory (`MAX_TRAJECTORIES` of them),
+//!   then `m·n` multiply-adds per step.
+//! * PWA feedback: at most [`MAX_TREE_DEPTH`] hyperplane tests (`n` multiply-adds each), then at most
+//!   [`MAX_LEAF_BALLS`] ball tests (`n² + n` multiply-adds and `n` subtractions each), then `m·n`
+//!   multiply-adds for the law; [`PWA_STEP_MAX_MULADDS`] is the total at capacity.
 
 /// Largest state dimension `n`.
 pub const MAX_N: usize = 12;
@@ -12,27 +20,70 @@ pub const MAX_LOCATIONS: usize = 8;
 /// Largest number of nominal trajectories (robust balls) in a feedforward image.
 pub const MAX_TRAJECTORIES: usize = 256;
 /// Largest total number of rows of the feedforward table, summed over all trajectories.
-pub const MAX_STEPS: usize = 4096;
-/// Largest number of partitions of a PWA-feedback image (mode reserved, not yet supported).
-pub const MAX_PARTITIONS: usize = 1024;
+pub const MAX_STEPS: usize = 32768;
+
+/// Largest number of partitions (affine laws `u = K_j x + θ0_j`) of a PWA-feedback image.
+pub const MAX_PARTITIONS: usize = 256;
+/// Largest number of hyperplane tests on any root-to-leaf path of a PWA point-location tree.
+pub const MAX_TREE_DEPTH: usize = 24;
+/// Largest number of internal (hyperplane) nodes of a PWA point-location tree.
+pub const MAX_TREE_NODES: usize = 1024;
+/// Largest number of leaves of a PWA point-location tree (each names one partition and its balls).
+pub const MAX_LEAVES: usize = 1024;
+/// Largest number of certified balls `B_P(x̃_i(κ), δ_i)` (the pieces of the envelope F of (6.2)) in a PWA
+/// image.
+pub const MAX_BALLS: usize = 2048;
+/// Largest total number of ball references, summed over all leaves (a ball cut by a hyperplane is listed by
+/// the leaves on both sides).
+pub const MAX_BALL_REFS: usize = 4096;
+/// Largest number of balls one leaf may list: bounds the envelope test of one control step.
+pub const MAX_LEAF_BALLS: usize = 32;
+
+/// Worst-case multiply-adds of one PWA control step at capacity (see the module docs).
+pub const PWA_STEP_MAX_MULADDS: usize =
+    MAX_TREE_DEPTH * MAX_N + MAX_LEAF_BALLS * (MAX_N * MAX_N + MAX_N) + MAX_M * MAX_N;
 
 /// Size in bytes of the fixed image header that precedes the postcard payload.
 pub const HEADER_LEN: usize = 32;
 
-/// Largest payload an image within the capacities can have, in bytes. Used by the host to size buffers and
-/// by the firmware to size its image region. Computed from the field sizes (each float is 4 bytes) plus a
-/// generous allowance for postcard's length prefixes and enum tags.
-pub const MAX_PAYLOAD_LEN: usize = 4
+/// Bytes of the parts both modes share: `K` and `P` per location, the fallback law and the input box.
+const COMMON_PAYLOAD_LEN: usize = 4
     * (MAX_LOCATIONS * MAX_M * MAX_N      // K per location
         + MAX_LOCATIONS * MAX_N * MAX_N   // P per location
-        + MAX_TRAJECTORIES                // trajectory ends (u32)
+        + MAX_M * MAX_N + MAX_N + MAX_M   // fallback linear law
+        + 2 * MAX_M); // input box
+
+/// Largest feedforward payload.
+const FEEDFORWARD_PAYLOAD_LEN: usize = COMMON_PAYLOAD_LEN
+    + 4 * (MAX_TRAJECTORIES               // trajectory ends (u32)
         + MAX_TRAJECTORIES * MAX_N        // ball centres
         + MAX_TRAJECTORIES                // ball radii
-        + MAX_STEPS * MAX_M               // v table
-        + MAX_M * MAX_N + MAX_N + MAX_M   // fallback linear law
-        + 2 * MAX_M)                      // input box
-    + MAX_STEPS                           // location per step (u8)
-    + 64; // length prefixes (≤ 5 bytes each), enum tags and option tag
+        + MAX_STEPS * MAX_M)              // v table
+    + MAX_STEPS; // location per step (u8)
+
+/// Largest PWA-feedback payload.
+const PWA_PAYLOAD_LEN: usize = COMMON_PAYLOAD_LEN
+    + 4 * (MAX_PARTITIONS * (MAX_M * MAX_N + MAX_M)  // gains K_j and offsets θ0_j
+        + MAX_TREE_NODES * (MAX_N + 1)              // hyperplanes a, b
+        + MAX_BALLS * (MAX_N + 1))                  // ball centres and radii
+    + 2 * (2 * MAX_TREE_NODES                       // children (u16)
+        + 2 * MAX_LEAVES                            // leaf partition and ball end (u16)
+        + MAX_BALL_REFS                             // ball references (u16)
+        + MAX_BALLS)                                // ball partition (u16)
+    + MAX_BALLS; // ball location (u8)
+
+const fn max(a: usize, b: usize) -> usize {
+    if a > b {
+        a
+    } else {
+        b
+    }
+}
+
+/// Largest payload an image within the capacities can have, in bytes (the larger of the two modes). Used by
+/// the host to size buffers and by the firmware to size its image region. Computed from the field sizes
+/// plus a generous allowance for postcard's length prefixes, counts and enum tags.
+pub const MAX_PAYLOAD_LEN: usize = max(FEEDFORWARD_PAYLOAD_LEN, PWA_PAYLOAD_LEN) + 128;
 
 /// Largest whole image (header and payload), in bytes.
 pub const MAX_IMAGE_LEN: usize = HEADER_LEN + MAX_PAYLOAD_LEN;

@@ -10,6 +10,11 @@
 //!    (4.41)–(4.42); a single-location image always uses K_0);
 //! 3. past the last row, the image's [`Terminal`] behaviour.
 //!
+//! PWA-feedback mode (Ch. 6, law (6.1)) is pure feedback: at every step, locate x (a bounded-depth tree
+//! walk, then the envelope test against the leaf's certified balls, see [`crate::pwa`]); inside a ball,
+//! `u = K_j x + θ0_j` with `K_j = K + θ_j` of the leaf's partition j; otherwise [`Status::OutOfEnvelope`]
+//! for this step only (nothing is latched, and there is no default region).
+//!
 //! Distances are compared squared (`(x − c)ᵀP(x − c) ≤ δ²`), so no square root is needed. Arithmetic is
 //! plain f32 multiply and add in a fixed order, without fused multiply-add, so host and Cortex-M4F give the
 //! same bits. Every loop is bounded by the capacities in [`crate::capacity`]; nothing allocates or panics.
@@ -19,6 +24,7 @@
 
 use crate::capacity::{MAX_M, MAX_N};
 use crate::image::{f32_span, floats, Fallback, Image, Mode, Terminal};
+use crate::pwa::Region;
 
 /// The firmware's answer every period besides `Ok(u)`. Shared by firmware and host (wire value = `u8`).
 #[repr(u8)]
@@ -26,7 +32,8 @@ use crate::image::{f32_span, floats, Fallback, Image, Mode, Terminal};
 pub enum Status {
     /// An input was computed.
     Ok = 0,
-    /// The state is outside the certified envelope (in no ball at κ = 0, or the input overflowed).
+    /// The state is outside the certified envelope (feedforward: in no ball at κ = 0; PWA: in no certified
+    /// ball of its leaf, or sent outside by the tree), or the input overflowed.
     OutOfEnvelope = 1,
     /// The request was malformed (used by the protocol layer; the evaluator also returns it for a state of
     /// the wrong length or with non-finite components).
@@ -110,7 +117,7 @@ pub const fn rejected_image_input(m: usize) -> Input {
     Input::zero(m)
 }
 
-/// Feedforward controller state over a validated image.
+/// Controller state over a validated image (either mode).
 #[derive(Clone, Copy, Debug)]
 pub struct Controller<'a> {
     image: Image<'a>,
@@ -197,6 +204,12 @@ impl<'a> Controller<'a> {
         best
     }
 
+    /// PWA point location of `x` (see [`Image::locate`]): `None` for a feedforward image or an unusable
+    /// `x`. Pure; does not change state.
+    pub fn locate(&self, x: &[f32]) -> Option<Region> {
+        self.image.locate(x)
+    }
+
     /// `u = K_ℓ x + v` for table row `row` ((3.5)–(3.6), location per (4.41)).
     fn law(&self, row: usize, x: &[f32]) -> Input {
         let img = &self.image;
@@ -216,12 +229,14 @@ impl<'a> Controller<'a> {
         out
     }
 
-    /// One control period. `x` must have length n and be finite, else `Err(BadFrame)`. Returns
-    /// `Err(OutOfEnvelope)` if no ball contained the state at κ = 0 (latched until reset) or if the input is
-    /// not finite. On success κ advances and the input is remembered for [`Fallback::Hold`].
+    /// One control period. `x` must have length n and be finite, else `Err(BadFrame)`. Feedforward:
+    /// returns `Err(OutOfEnvelope)` if no ball contained the state at κ = 0 (latched until reset). PWA:
+    /// returns `Err(OutOfEnvelope)` for this step if the state is outside the certified envelope. Both:
+    /// `Err(OutOfEnvelope)` if the input is not finite. On success κ advances and the input is remembered
+    /// for [`Fallback::Hold`].
     pub fn step(&mut self, x: &[f32]) -> Result<Input, Status> {
         if self.image.mode() != Mode::Feedforward {
-            return Err(Status::ImageRejected);
+            return self.step_pwa(x);
         }
         if x.len() != self.image.n() || !x.iter().all(|v| v.is_finite()) {
             return Err(Status::BadFrame);
@@ -252,6 +267,38 @@ impl<'a> Controller<'a> {
                 Terminal::Fallback => self.fallback(x, &self.last_u),
             }
         };
+        if !u.as_slice().iter().all(|v| v.is_finite()) {
+            return Err(Status::OutOfEnvelope);
+        }
+        self.kappa = self.kappa.saturating_add(1);
+        self.last_u = u;
+        Ok(u)
+    }
+
+    /// PWA-feedback step: locate, then `u = K_j x + θ0_j` (6.1). Kept out of line so that the feedforward
+    /// path of [`Controller::step`] stays as it was.
+    #[inline(never)]
+    fn step_pwa(&mut self, x: &[f32]) -> Result<Input, Status> {
+        let img = &self.image;
+        let (n, m) = (img.n().clamp(1, MAX_N), img.m().clamp(1, MAX_M));
+        if x.len() != n || !x.iter().all(|v| v.is_finite()) {
+            return Err(Status::BadFrame);
+        }
+        let Region::Inside { partition, .. } = img.locate_in(x, n) else {
+            return Err(Status::OutOfEnvelope);
+        };
+        let t = img.pwa();
+        let j = partition as usize;
+        let K = f32_span(t.gain, j * m * n, m * n);
+        let theta0 = f32_span(t.offset, j * m, m);
+        let mut u = Input::zero(m);
+        for ((uj, krow), oj) in u.u.iter_mut().zip(K.chunks_exact(4 * n)).zip(floats(theta0)) {
+            let mut s = 0.0f32;
+            for (kji, &xi) in floats(krow).zip(x) {
+                s += kji * xi;
+            }
+            *uj = s + oj;
+        }
         if !u.as_slice().iter().all(|v| v.is_finite()) {
             return Err(Status::OutOfEnvelope);
         }

@@ -18,7 +18,8 @@
 //! The CRC is seeded with the header's first 28 bytes so that a corrupted period or dimension is caught as
 //! surely as a corrupted payload byte.
 //!
-//! The payload is a postcard-serialised [`Payload`]: every float array is a byte string of little-endian
+//! The payload is a postcard-serialised [`Payload`] (feedforward, mode 1) or [`PwaPayload`] (PWA feedback,
+//! mode 2); the header's mode byte says which. Every float array is a byte string of little-endian
 //! `f32` values (row-major matrices), borrowed in place by [`decode`], so decoding neither copies nor
 //! allocates. Postcard encodings are canonical here: `decode` rejects a payload whose re-encoding would not
 //! have exactly its length (overlong varints), so one content has exactly one byte string.
@@ -30,19 +31,32 @@
 //!   nominal location index `ℓ_i(κ)` (one byte), so hybrid plants fit ((4.41)–(4.42));
 //! * the fallback law, an optional input box, and the terminal behaviour past the end of a trajectory.
 //!
+//! # PWA-feedback content (Ch. 6, the law (6.1) on the envelope F of (6.2))
+//! * per location ℓ: `K_ℓ` and `P_ℓ` as above (`P_ℓ` is the metric of the certified balls; `K_ℓ` is the CAF
+//!   gain the laws were learned around, kept so that `θ_j = K_j − K` can be reported);
+//! * the [`crate::pwa::PwaTables`]: per partition the full gain `K_j = K + θ_j` and offset `θ0_j`, the
+//!   point-location tree, its leaves and the certified balls (layout and rationale in [`crate::pwa`]);
+//! * the fallback law and an optional input box. There are no trajectories (`trajectories = 0` in the
+//!   header) and no terminal behaviour.
+//!
 //! # Validation
 //! [`decode`] and [`Image::new`] check, before anything can read the data: magic, version, reserved bytes,
 //! lengths, CRC, mode, dimensions against [`crate::capacity`], every field's byte length, every float finite,
 //! `P` symmetric and positive definite, `δ ≥ 0`, trajectory ends strictly increasing (every trajectory has
 //! at least one step) with the total within capacity, location indices in range, and the input box
-//! non-empty. An [`Image`] can only be obtained through them, so its accessors never meet bad data.
+//! non-empty; for PWA images also everything listed in [`crate::pwa`] (tree well-formed and within depth,
+//! indices in range, stored depth exact). An [`Image`] can only be obtained through them, so its accessors
+//! never meet bad data.
 #![allow(non_snake_case)]
 
 use core::fmt;
 
 use serde::{Deserialize, Serialize};
 
-use crate::capacity::{HEADER_LEN, MAX_LOCATIONS, MAX_M, MAX_N, MAX_STEPS, MAX_TRAJECTORIES};
+use crate::capacity::{
+    HEADER_LEN, MAX_LOCATIONS, MAX_M, MAX_N, MAX_PARTITIONS, MAX_STEPS, MAX_TRAJECTORIES,
+};
+use crate::pwa::PwaTables;
 
 /// First four bytes of every image ("safe controller image").
 pub const MAGIC: [u8; 4] = *b"SFCI";
@@ -60,8 +74,8 @@ const CRC32: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
 pub enum Mode {
     /// Algorithm 2: select a robust ball at κ = 0, then `u = K x + v_i(κ)`.
     Feedforward = 1,
-    /// PWA feedback (Ch. 6): `u = (K + θ_j) x + θ0_j` after point location. Reserved; decoding rejects it
-    /// with [`ImageError::UnsupportedMode`] until it is implemented.
+    /// PWA feedback (Ch. 6): locate the partition j of x with a bounded-depth tree, check that x lies in
+    /// a certified ball of that leaf (the envelope F), then `u = K_j x + θ0_j` with `K_j = K + θ_j`.
     PwaFeedback = 2,
 }
 
@@ -142,6 +156,25 @@ pub struct Payload<'a> {
     pub terminal: Terminal,
 }
 
+/// The postcard payload of a PWA-feedback image (mode 2), as raw borrowed byte strings. Build one and pass
+/// it to [`Image::new_pwa`], which validates it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct PwaPayload<'a> {
+    /// `K_ℓ` for each location ℓ (the CAF gain; not used by the evaluator in this mode).
+    pub K: &'a [u8],
+    /// `P_ℓ` for each location ℓ: the metric of the certified balls.
+    pub P: &'a [u8],
+    /// Laws, tree, leaves and balls.
+    #[serde(borrow)]
+    pub tables: PwaTables<'a>,
+    /// Fallback law.
+    #[serde(borrow)]
+    pub fallback: Fallback<'a>,
+    /// Optional input box, used to saturate the linear fallback.
+    #[serde(borrow)]
+    pub input_box: Option<InputBox<'a>>,
+}
+
 /// Dimensions of an image.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Dims {
@@ -151,9 +184,9 @@ pub struct Dims {
     pub m: usize,
     /// Number of locations (≥ 1).
     pub n_locations: usize,
-    /// Number of trajectories.
+    /// Number of trajectories (0 in PWA mode).
     pub n_trajectories: usize,
-    /// Number of partitions (0 in feedforward mode).
+    /// Number of partitions (0 in feedforward mode, ≥ 1 in PWA mode).
     pub n_partitions: usize,
 }
 
@@ -190,6 +223,16 @@ pub enum Dim {
     Partitions,
     /// Total rows of the step table.
     Steps,
+    /// Internal nodes of the PWA tree.
+    TreeNodes,
+    /// Leaves of the PWA tree.
+    Leaves,
+    /// Certified balls of a PWA image.
+    Balls,
+    /// Ball references summed over all leaves.
+    BallRefs,
+    /// Stored worst-case depth of the PWA tree.
+    TreeDepth,
 }
 
 /// Which payload field an error is about.
@@ -219,11 +262,37 @@ pub enum Field {
     BoxLo,
     /// Input box upper bounds.
     BoxHi,
+    /// PWA gains `K_j = K + θ_j`.
+    LawGain,
+    /// PWA offsets `θ0_j`.
+    LawOffset,
+    /// Hyperplane normals `a` of the tree nodes.
+    NodeNormal,
+    /// Hyperplane offsets `b` of the tree nodes.
+    NodeOffset,
+    /// Child codes of the tree nodes.
+    NodeChildren,
+    /// Partition of each leaf.
+    LeafPartition,
+    /// Exclusive end of each leaf's run of ball references.
+    LeafEnd,
+    /// Ball references of the leaves.
+    BallRef,
+    /// Certified ball centres.
+    BallCentre,
+    /// Certified ball radii.
+    BallDelta,
+    /// Location (metric) of each certified ball.
+    BallLocation,
+    /// Partition (law) each certified ball is certified for.
+    BallPartition,
 }
 
 /// Position of a bad value. Its meaning depends on the field: `K`, `P`: (location, row, col); `Centre`:
 /// (trajectory, component, 0); `Delta`: (trajectory, 0, 0); `V`: (trajectory, step, component);
-/// `FallbackK`: (row, col, 0); vectors: (component, 0, 0).
+/// `FallbackK`: (row, col, 0); `LawGain`: (partition, row, col); `LawOffset`: (partition, component, 0);
+/// `NodeNormal`: (node, component, 0); `NodeOffset`: (node, 0, 0); `BallCentre`: (ball, component, 0);
+/// `BallDelta`: (ball, 0, 0); vectors: (component, 0, 0).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Pos(pub u16, pub u16, pub u16);
 
@@ -252,7 +321,8 @@ pub enum ImageError {
         /// What was found.
         found: u8,
     },
-    /// A known mode this build does not evaluate yet.
+    /// A known mode this build does not evaluate, or [`Image::new`] given a mode whose payload it does not
+    /// take (PWA images are built with [`Image::new_pwa`]).
     UnsupportedMode {
         /// The mode.
         mode: Mode,
@@ -344,6 +414,107 @@ pub enum ImageError {
         /// The component.
         input: u16,
     },
+    /// A tree node's child names a node index at or past the node count.
+    ChildOutOfRange {
+        /// The parent node.
+        node: u16,
+        /// The child's node index.
+        child: u16,
+    },
+    /// A tree node's child is a node whose index is not greater than its own: a back edge (the rule
+    /// "children after parents" is what excludes cycles and bounds every path).
+    BackEdge {
+        /// The parent node.
+        node: u16,
+        /// The child's node index.
+        child: u16,
+    },
+    /// A tree node's child names a leaf index at or past the leaf count.
+    LeafOutOfRange {
+        /// The parent node.
+        node: u16,
+        /// The leaf index.
+        leaf: u16,
+    },
+    /// No path from the root reaches this node.
+    UnreachableNode {
+        /// The node.
+        node: u16,
+    },
+    /// No node refers to this leaf (with no nodes, the tree is leaf 0 alone).
+    UnreferencedLeaf {
+        /// The leaf.
+        leaf: u16,
+    },
+    /// A path from the root reaches this node after [`crate::capacity::MAX_TREE_DEPTH`] tests already.
+    TreeTooDeep {
+        /// The first node found too deep.
+        node: u16,
+    },
+    /// The stored worst-case depth is not the tree's.
+    TreeDepthMismatch {
+        /// Depth stored in the image.
+        stored: u8,
+        /// Depth of the tree.
+        actual: u8,
+    },
+    /// A hyperplane normal is zero (the test would be constant).
+    DegenerateHyperplane {
+        /// The node.
+        node: u16,
+    },
+    /// A leaf's partition index is not below the number of partitions.
+    PartitionOutOfRange {
+        /// The leaf.
+        leaf: u16,
+        /// The index found.
+        value: u16,
+    },
+    /// Leaf ball ends are not strictly increasing (a leaf without balls, or out of order).
+    LeafBallEnds {
+        /// The offending leaf.
+        leaf: u16,
+    },
+    /// A leaf lists more than [`crate::capacity::MAX_LEAF_BALLS`] balls.
+    LeafTooManyBalls {
+        /// The leaf.
+        leaf: u16,
+        /// How many it lists.
+        count: u16,
+    },
+    /// A leaf refers to a ball index not below the number of balls.
+    BallRefOutOfRange {
+        /// The leaf.
+        leaf: u16,
+        /// The index found.
+        value: u16,
+    },
+    /// A leaf lists a ball certified for another partition's law.
+    BallPartitionMismatch {
+        /// The leaf.
+        leaf: u16,
+        /// The ball.
+        ball: u16,
+    },
+    /// A ball's location index is not below the number of locations.
+    BallLocationOutOfRange {
+        /// The ball.
+        ball: u16,
+        /// The index found.
+        value: u8,
+    },
+    /// A ball's partition index is not below the number of partitions.
+    BallPartitionOutOfRange {
+        /// The ball.
+        ball: u16,
+        /// The index found.
+        value: u16,
+    },
+    /// A certified ball has a negative radius.
+    NegativeBallRadius {
+        /// The ball.
+        ball: u16,
+    },
     /// The output buffer of [`encode`] is too small.
     BufferTooSmall {
         /// Bytes needed.
@@ -362,6 +533,11 @@ impl fmt::Display for Dim {
             Dim::Trajectories => "number of trajectories",
             Dim::Partitions => "number of partitions",
             Dim::Steps => "total table rows",
+            Dim::TreeNodes => "number of tree nodes",
+            Dim::Leaves => "number of leaves",
+            Dim::Balls => "number of certified balls",
+            Dim::BallRefs => "total ball references",
+            Dim::TreeDepth => "tree depth",
         })
     }
 }
@@ -381,6 +557,18 @@ impl fmt::Display for Field {
             Field::FallbackURef => "fallback u_ref",
             Field::BoxLo => "input box lower bounds",
             Field::BoxHi => "input box upper bounds",
+            Field::LawGain => "law gain K_j",
+            Field::LawOffset => "law offset theta0_j",
+            Field::NodeNormal => "node normal a",
+            Field::NodeOffset => "node offset b",
+            Field::NodeChildren => "node children",
+            Field::LeafPartition => "leaf partitions",
+            Field::LeafEnd => "leaf ball ends",
+            Field::BallRef => "ball references",
+            Field::BallCentre => "ball centres",
+            Field::BallDelta => "ball radii",
+            Field::BallLocation => "ball locations",
+            Field::BallPartition => "ball partitions",
         })
     }
 }
@@ -409,7 +597,7 @@ impl fmt::Display for ImageError {
             ReservedNotZero => f.write_str("a reserved header byte is not zero"),
             UnknownMode { found } => write!(f, "unknown mode {found}"),
             UnsupportedMode { mode } => {
-                write!(f, "mode {} ({mode}) is reserved but not supported yet", mode as u8)
+                write!(f, "mode {} ({mode}) is not supported here", mode as u8)
             }
             PayloadLength { header, actual } => write!(
                 f,
@@ -437,6 +625,12 @@ impl fmt::Display for ImageError {
                 Field::Delta => write!(f, "trajectory {a}: delta is not finite"),
                 Field::V => write!(f, "trajectory {a} step {b}: v[{c}] is not finite"),
                 Field::FallbackK => write!(f, "fallback K[{a},{b}] is not finite"),
+                Field::LawGain => write!(f, "partition {a}: K_j[{b},{c}] is not finite"),
+                Field::LawOffset => write!(f, "partition {a}: theta0_j[{b}] is not finite"),
+                Field::NodeNormal => write!(f, "node {a}: a[{b}] is not finite"),
+                Field::NodeOffset => write!(f, "node {a}: b is not finite"),
+                Field::BallCentre => write!(f, "ball {a}: centre[{b}] is not finite"),
+                Field::BallDelta => write!(f, "ball {a}: delta is not finite"),
                 _ => write!(f, "{field}[{a}] is not finite"),
             },
             NotSymmetric { location, row, col } => write!(
@@ -456,6 +650,57 @@ impl fmt::Display for ImageError {
                 "trajectory {trajectory} step {step}: location {value} is out of range"
             ),
             EmptyInputBox { input } => write!(f, "input box component {input}: lower bound above upper"),
+            ChildOutOfRange { node, child } => write!(
+                f,
+                "tree node {node}: child node {child} is out of range"
+            ),
+            BackEdge { node, child } => write!(
+                f,
+                "tree node {node}: child node {child} does not come after its parent (back edge)"
+            ),
+            LeafOutOfRange { node, leaf } => {
+                write!(f, "tree node {node}: leaf {leaf} is out of range")
+            }
+            UnreachableNode { node } => write!(f, "tree node {node} is unreachable from the root"),
+            UnreferencedLeaf { leaf } => write!(f, "leaf {leaf} is not referenced by the tree"),
+            TreeTooDeep { node } => write!(
+                f,
+                "tree node {node} lies deeper than {} hyperplane tests",
+                crate::capacity::MAX_TREE_DEPTH
+            ),
+            TreeDepthMismatch { stored, actual } => write!(
+                f,
+                "stored tree depth {stored} differs from the tree's depth {actual}"
+            ),
+            DegenerateHyperplane { node } => {
+                write!(f, "tree node {node}: hyperplane normal is zero")
+            }
+            PartitionOutOfRange { leaf, value } => {
+                write!(f, "leaf {leaf}: partition {value} is out of range")
+            }
+            LeafBallEnds { leaf } => write!(
+                f,
+                "leaf {leaf}: ball end is not after the previous one (no balls, or out of order)"
+            ),
+            LeafTooManyBalls { leaf, count } => write!(
+                f,
+                "leaf {leaf} lists {count} balls, more than {}",
+                crate::capacity::MAX_LEAF_BALLS
+            ),
+            BallRefOutOfRange { leaf, value } => {
+                write!(f, "leaf {leaf}: ball {value} is out of range")
+            }
+            BallPartitionMismatch { leaf, ball } => write!(
+                f,
+                "leaf {leaf}: ball {ball} is certified for another partition"
+            ),
+            BallLocationOutOfRange { ball, value } => {
+                write!(f, "ball {ball}: location {value} is out of range")
+            }
+            BallPartitionOutOfRange { ball, value } => {
+                write!(f, "ball {ball}: partition {value} is out of range")
+            }
+            NegativeBallRadius { ball } => write!(f, "ball {ball}: delta is negative"),
             BufferTooSmall { needed } => write!(f, "output buffer too small: {needed} bytes needed"),
             Encode => f.write_str("payload could not be serialised"),
         }
@@ -469,7 +714,7 @@ impl core::error::Error for ImageError {}
 // take that path).
 
 #[inline(always)]
-fn f32_at(bytes: &[u8], i: usize) -> f32 {
+pub(crate) fn f32_at(bytes: &[u8], i: usize) -> f32 {
     let Some(s) = i.checked_mul(4) else {
         return 0.0;
     };
@@ -490,7 +735,7 @@ fn u32_at(bytes: &[u8], i: usize) -> u32 {
 
 #[inline(always)]
 fn u16_at(bytes: &[u8], off: usize) -> u16 {
-    match bytes.get(off..off + 2) {
+    match bytes.get(off..off.saturating_add(2)) {
         Some(&[a, b]) => u16::from_le_bytes([a, b]),
         _ => 0,
     }
@@ -512,21 +757,27 @@ pub(crate) fn floats(bytes: &[u8]) -> impl Iterator<Item = f32> + '_ {
         .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
 }
 
+/// Little-endian `u16` number `i` of a byte string; 0 out of range.
+#[inline(always)]
+pub(crate) fn u16_le(bytes: &[u8], i: usize) -> u16 {
+    u16_at(bytes, i.saturating_mul(2))
+}
+
 /// `a / b`, 0 if `b` is 0 (total, so position reporting has no panic path).
-fn div(a: usize, b: usize) -> usize {
+pub(crate) fn div(a: usize, b: usize) -> usize {
     a.checked_div(b).unwrap_or(0)
 }
 
 /// `a % b`, 0 if `b` is 0.
-fn rem(a: usize, b: usize) -> usize {
+pub(crate) fn rem(a: usize, b: usize) -> usize {
     a.checked_rem(b).unwrap_or(0)
 }
 
-fn sat16(v: usize) -> u16 {
+pub(crate) fn sat16(v: usize) -> u16 {
     u16::try_from(v).unwrap_or(u16::MAX)
 }
 
-fn sat32(v: usize) -> u32 {
+pub(crate) fn sat32(v: usize) -> u32 {
     u32::try_from(v).unwrap_or(u32::MAX)
 }
 
@@ -590,17 +841,23 @@ impl Header {
 // ---------------------------------------------------------------------------------------------------------
 // The validated image.
 
-/// A validated image: obtainable only from [`decode`] or [`Image::new`], so every accessor reads data
-/// that passed all checks. Borrows the bytes it was decoded from; `Copy` (a handful of slices).
+/// A validated image: obtainable only from [`decode`], [`Image::new`] or [`Image::new_pwa`], so every
+/// accessor reads data that passed all checks. Borrows the bytes it was decoded from; `Copy` (a handful of
+/// slices).
+///
+/// Both modes keep the shared fields (`K`, `P`, fallback, input box) in a [`Payload`]; for a PWA image its
+/// trajectory fields are empty and its terminal is [`Terminal::HoldLast`] (unused), and the PWA tables are
+/// in [`Image::pwa`] (empty for a feedforward image).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Image<'a> {
-    mode: Mode,
-    dims: Dims,
-    period: f32,
-    payload: Payload<'a>,
+    pub(crate) mode: Mode,
+    pub(crate) dims: Dims,
+    pub(crate) period: f32,
+    pub(crate) payload: Payload<'a>,
+    pub(crate) pwa: PwaTables<'a>,
 }
 
-fn check_dim(dim: Dim, value: usize, min: usize, max: usize) -> Result<(), ImageError> {
+pub(crate) fn check_dim(dim: Dim, value: usize, min: usize, max: usize) -> Result<(), ImageError> {
     if value < min || value > max {
         Err(ImageError::DimOutOfRange {
             dim,
@@ -613,7 +870,7 @@ fn check_dim(dim: Dim, value: usize, min: usize, max: usize) -> Result<(), Image
     }
 }
 
-fn check_len(field: Field, bytes: &[u8], expected: usize) -> Result<(), ImageError> {
+pub(crate) fn check_len(field: Field, bytes: &[u8], expected: usize) -> Result<(), ImageError> {
     if bytes.len() != expected {
         Err(ImageError::FieldLength {
             field,
@@ -626,7 +883,7 @@ fn check_len(field: Field, bytes: &[u8], expected: usize) -> Result<(), ImageErr
 }
 
 /// Checks that every `f32` in `bytes` is finite; `pos(i)` maps the flat index to a position.
-fn check_finite(field: Field, bytes: &[u8], pos: impl Fn(usize) -> Pos) -> Result<(), ImageError> {
+pub(crate) fn check_finite(field: Field, bytes: &[u8], pos: impl Fn(usize) -> Pos) -> Result<(), ImageError> {
     for (i, x) in floats(bytes).enumerate() {
         if !x.is_finite() {
             return Err(ImageError::NonFinite { field, pos: pos(i) });
@@ -664,66 +921,43 @@ fn positive_definite(p: &[u8], n: usize) -> bool {
     true
 }
 
+/// The header dimensions each mode allows: feedforward images have trajectories and no partitions, PWA
+/// images partitions and no trajectories.
+fn check_dims(mode: Mode, d: Dims) -> Result<(), ImageError> {
+    check_dim(Dim::N, d.n, 1, MAX_N)?;
+    check_dim(Dim::M, d.m, 1, MAX_M)?;
+    check_dim(Dim::Locations, d.n_locations, 1, MAX_LOCATIONS)?;
+    match mode {
+        Mode::Feedforward => {
+            check_dim(Dim::Trajectories, d.n_trajectories, 1, MAX_TRAJECTORIES)?;
+            check_dim(Dim::Partitions, d.n_partitions, 0, 0)
+        }
+        Mode::PwaFeedback => {
+            check_dim(Dim::Trajectories, d.n_trajectories, 0, 0)?;
+            check_dim(Dim::Partitions, d.n_partitions, 1, MAX_PARTITIONS)
+        }
+    }
+}
+
 fn validate(mode: Mode, dims: Dims, period: f32, p: &Payload<'_>) -> Result<(), ImageError> {
     if mode != Mode::Feedforward {
         return Err(ImageError::UnsupportedMode { mode });
+    }
+    check_dims(mode, dims)?;
+    if !(period.is_finite() && period > 0.0) {
+        return Err(ImageError::BadPeriod);
     }
     let Dims {
         n,
         m,
         n_locations: nl,
         n_trajectories: nt,
-        n_partitions,
+        ..
     } = dims;
-    check_dim(Dim::N, n, 1, MAX_N)?;
-    check_dim(Dim::M, m, 1, MAX_M)?;
-    check_dim(Dim::Locations, nl, 1, MAX_LOCATIONS)?;
-    check_dim(Dim::Trajectories, nt, 1, MAX_TRAJECTORIES)?;
-    // Feedforward images carry no partitions (PWA images will allow up to MAX_PARTITIONS).
-    check_dim(Dim::Partitions, n_partitions, 0, 0)?;
-    if !(period.is_finite() && period > 0.0) {
-        return Err(ImageError::BadPeriod);
-    }
     // From here on all products are bounded by the capacities and cannot overflow. The clamps change
     // nothing (checked just above) but let the compiler see that no division below is by zero.
     let (n, m) = (n.clamp(1, MAX_N), m.clamp(1, MAX_M));
-
-    // K_ℓ, m×n per location (the gain of (3.5)).
-    check_len(Field::K, p.K, 4 * nl * m * n)?;
-    check_finite(Field::K, p.K, |i| {
-        Pos(
-            sat16(div(i, m * n)),
-            sat16(div(rem(i, m * n), n)),
-            sat16(rem(i, n)),
-        )
-    })?;
-
-    // P_ℓ, the CAF metric ψ(x, x') = ‖x − x'‖_P of (3.8): symmetric positive definite.
-    check_len(Field::P, p.P, 4 * nl * n * n)?;
-    check_finite(Field::P, p.P, |i| {
-        Pos(
-            sat16(div(i, n * n)),
-            sat16(div(rem(i, n * n), n)),
-            sat16(rem(i, n)),
-        )
-    })?;
-    for l in 0..nl {
-        let pl = f32_span(p.P, l * n * n, n * n);
-        for r in 0..n {
-            for c in (r + 1)..n {
-                if f32_at(pl, r * n + c).to_bits() != f32_at(pl, c * n + r).to_bits() {
-                    return Err(ImageError::NotSymmetric {
-                        location: sat16(l),
-                        row: sat16(r),
-                        col: sat16(c),
-                    });
-                }
-            }
-        }
-        if !positive_definite(pl, n) {
-            return Err(ImageError::NotPositiveDefinite { location: sat16(l) });
-        }
-    }
+    validate_K_P(n, m, nl, p.K, p.P)?;
 
     // Trajectory ends: strictly increasing (no empty trajectory), total within capacity.
     check_len(Field::TrajEnd, p.traj_end, 4 * nt)?;
@@ -784,9 +1018,75 @@ fn validate(mode: Mode, dims: Dims, period: f32, p: &Payload<'_>) -> Result<(), 
         }
         start = end;
     }
+    validate_fallback_box(n, m, p.fallback, p.input_box)
+}
 
+/// The PWA counterpart of [`validate`]: dimensions, period, `K`, `P`, the tables (see [`crate::pwa`]), the
+/// fallback law and the input box.
+fn validate_pwa(dims: Dims, period: f32, p: &PwaPayload<'_>) -> Result<(), ImageError> {
+    check_dims(Mode::PwaFeedback, dims)?;
+    if !(period.is_finite() && period > 0.0) {
+        return Err(ImageError::BadPeriod);
+    }
+    let (n, m) = (dims.n.clamp(1, MAX_N), dims.m.clamp(1, MAX_M));
+    validate_K_P(n, m, dims.n_locations, p.K, p.P)?;
+    crate::pwa::validate_tables(dims, &p.tables)?;
+    validate_fallback_box(n, m, p.fallback, p.input_box)
+}
+
+/// `K_ℓ` (m×n) and `P_ℓ` (n×n, symmetric positive definite) for `nl` locations; `1 ≤ n ≤ MAX_N`,
+/// `1 ≤ m ≤ MAX_M`, `nl ≤ MAX_LOCATIONS` already checked.
+fn validate_K_P(n: usize, m: usize, nl: usize, K: &[u8], P: &[u8]) -> Result<(), ImageError> {
+    let (n, m, nl) = (n.clamp(1, MAX_N), m.clamp(1, MAX_M), nl.min(MAX_LOCATIONS));
+    // K_ℓ, m×n per location (the gain of (3.5)).
+    check_len(Field::K, K, 4 * nl * m * n)?;
+    check_finite(Field::K, K, |i| {
+        Pos(
+            sat16(div(i, m * n)),
+            sat16(div(rem(i, m * n), n)),
+            sat16(rem(i, n)),
+        )
+    })?;
+
+    // P_ℓ, the CAF metric ψ(x, x') = ‖x − x'‖_P of (3.8): symmetric positive definite.
+    check_len(Field::P, P, 4 * nl * n * n)?;
+    check_finite(Field::P, P, |i| {
+        Pos(
+            sat16(div(i, n * n)),
+            sat16(div(rem(i, n * n), n)),
+            sat16(rem(i, n)),
+        )
+    })?;
+    for l in 0..nl {
+        let pl = f32_span(P, l * n * n, n * n);
+        for r in 0..n {
+            for c in (r + 1)..n {
+                if f32_at(pl, r * n + c).to_bits() != f32_at(pl, c * n + r).to_bits() {
+                    return Err(ImageError::NotSymmetric {
+                        location: sat16(l),
+                        row: sat16(r),
+                        col: sat16(c),
+                    });
+                }
+            }
+        }
+        if !positive_definite(pl, n) {
+            return Err(ImageError::NotPositiveDefinite { location: sat16(l) });
+        }
+    }
+    Ok(())
+}
+
+/// The fallback law and the input box (both modes).
+fn validate_fallback_box(
+    n: usize,
+    m: usize,
+    fallback: Fallback<'_>,
+    input_box: Option<InputBox<'_>>,
+) -> Result<(), ImageError> {
+    let (n, m) = (n.clamp(1, MAX_N), m.clamp(1, MAX_M));
     // Fallback law.
-    if let Fallback::Linear { K, x_ref, u_ref } = p.fallback {
+    if let Fallback::Linear { K, x_ref, u_ref } = fallback {
         check_len(Field::FallbackK, K, 4 * m * n)?;
         check_finite(Field::FallbackK, K, |i| {
             Pos(sat16(div(i, n)), sat16(rem(i, n)), 0)
@@ -798,7 +1098,7 @@ fn validate(mode: Mode, dims: Dims, period: f32, p: &Payload<'_>) -> Result<(), 
     }
 
     // Input box.
-    if let Some(b) = p.input_box {
+    if let Some(b) = input_box {
         check_len(Field::BoxLo, b.lo, 4 * m)?;
         check_finite(Field::BoxLo, b.lo, |i| Pos(sat16(i), 0, 0))?;
         check_len(Field::BoxHi, b.hi, 4 * m)?;
@@ -827,7 +1127,44 @@ impl<'a> Image<'a> {
             dims,
             period,
             payload,
+            pwa: PwaTables::EMPTY,
         })
+    }
+
+    /// Validates a PWA-feedback payload against `dims` and `period` and wraps it (mode
+    /// [`Mode::PwaFeedback`]); it runs exactly the checks [`decode`] runs on such a payload.
+    pub fn new_pwa(dims: Dims, period: f32, payload: PwaPayload<'a>) -> Result<Self, ImageError> {
+        validate_pwa(dims, period, &payload)?;
+        Ok(Image {
+            mode: Mode::PwaFeedback,
+            dims,
+            period,
+            payload: Payload {
+                K: payload.K,
+                P: payload.P,
+                traj_end: &[],
+                centre: &[],
+                delta: &[],
+                v: &[],
+                location: &[],
+                fallback: payload.fallback,
+                input_box: payload.input_box,
+                terminal: Terminal::HoldLast,
+            },
+            pwa: payload.tables,
+        })
+    }
+
+    /// The PWA payload this image encodes to (meaningful for PWA images; for a feedforward image its
+    /// tables are empty).
+    pub fn pwa_payload(&self) -> PwaPayload<'a> {
+        PwaPayload {
+            K: self.payload.K,
+            P: self.payload.P,
+            tables: self.pwa,
+            fallback: self.payload.fallback,
+            input_box: self.payload.input_box,
+        }
     }
 
     /// Controller mode.
@@ -858,7 +1195,8 @@ impl<'a> Image<'a> {
     pub fn period(&self) -> f32 {
         self.period
     }
-    /// The raw payload (validated).
+    /// The raw payload (validated). For a PWA image only `K`, `P`, `fallback` and `input_box` are
+    /// meaningful (the trajectory fields are empty); its tables are [`Image::pwa`].
     pub fn payload(&self) -> &Payload<'a> {
         &self.payload
     }
@@ -992,9 +1330,17 @@ impl<'a> Image<'a> {
 
     /// Size of the encoded image (header and payload), in bytes.
     pub fn encoded_len(&self) -> Result<usize, ImageError> {
-        let size =
-            postcard::serialize_with_flavor(&self.payload, postcard::ser_flavors::Size::default())
-                .map_err(|_| ImageError::Encode)?;
+        let size = match self.mode {
+            Mode::Feedforward => postcard::serialize_with_flavor(
+                &self.payload,
+                postcard::ser_flavors::Size::default(),
+            ),
+            Mode::PwaFeedback => postcard::serialize_with_flavor(
+                &self.pwa_payload(),
+                postcard::ser_flavors::Size::default(),
+            ),
+        }
+        .map_err(|_| ImageError::Encode)?;
         Ok(HEADER_LEN + size)
     }
 }
@@ -1020,28 +1366,35 @@ pub fn decode(bytes: &[u8]) -> Result<Image<'_>, ImageError> {
         });
     }
     let mode = Mode::from_u8(h.mode).ok_or(ImageError::UnknownMode { found: h.mode })?;
-    if mode != Mode::Feedforward {
-        return Err(ImageError::UnsupportedMode { mode });
-    }
     // Dimensions are checked again in `validate`; checking them before parsing gives the clearer error.
     let d = h.dims;
-    check_dim(Dim::N, d.n, 1, MAX_N)?;
-    check_dim(Dim::M, d.m, 1, MAX_M)?;
-    check_dim(Dim::Locations, d.n_locations, 1, MAX_LOCATIONS)?;
-    check_dim(Dim::Trajectories, d.n_trajectories, 1, MAX_TRAJECTORIES)?;
-    check_dim(Dim::Partitions, d.n_partitions, 0, 0)?;
-    let (payload, rest): (Payload<'_>, &[u8]) =
-        postcard::take_from_bytes(payload_bytes).map_err(|_| ImageError::Malformed)?;
+    check_dims(mode, d)?;
+    match mode {
+        Mode::Feedforward => {
+            let payload: Payload<'_> = parse_canonical(payload_bytes)?;
+            Image::new(mode, d, h.period, payload)
+        }
+        Mode::PwaFeedback => {
+            let payload: PwaPayload<'_> = parse_canonical(payload_bytes)?;
+            Image::new_pwa(d, h.period, payload)
+        }
+    }
+}
+
+/// Parses a postcard payload that must fill `bytes` exactly and be in canonical form.
+fn parse_canonical<'a, T: Serialize + Deserialize<'a>>(bytes: &'a [u8]) -> Result<T, ImageError> {
+    let (payload, rest): (T, &[u8]) =
+        postcard::take_from_bytes(bytes).map_err(|_| ImageError::Malformed)?;
     if !rest.is_empty() {
         return Err(ImageError::TrailingBytes);
     }
     let canonical =
         postcard::serialize_with_flavor(&payload, postcard::ser_flavors::Size::default())
             .map_err(|_| ImageError::Malformed)?;
-    if canonical != payload_bytes.len() {
+    if canonical != bytes.len() {
         return Err(ImageError::NotCanonical);
     }
-    Image::new(mode, d, h.period, payload)
+    Ok(payload)
 }
 
 /// Writes the image (header and payload) into `out` and returns the number of bytes written. No
@@ -1057,8 +1410,13 @@ pub fn encode(image: &Image<'_>, out: &mut [u8]) -> Result<usize, ImageError> {
     let Some((header, payload)) = buf.split_at_mut_checked(HEADER_LEN) else {
         return Err(ImageError::Encode);
     };
-    let written = postcard::to_slice(&image.payload, payload).map_err(|_| ImageError::Encode)?;
-    if written.len() != payload_len {
+    let written = match image.mode {
+        Mode::Feedforward => postcard::to_slice(&image.payload, payload),
+        Mode::PwaFeedback => postcard::to_slice(&image.pwa_payload(), payload),
+    }
+    .map_err(|_| ImageError::Encode)?
+    .len();
+    if written != payload_len {
         return Err(ImageError::Encode);
     }
     let d = image.dims;

@@ -1,18 +1,20 @@
 //! 100 000 random and mutated byte strings through the decoder: each gives an error or a valid image,
-//! never a panic. Mutations of valid images get their payload length and CRC recomputed most of the time,
-//! so validation past the CRC is exercised; images that still decode are run through the evaluator and must
-//! re-encode to exactly the same bytes (the format is canonical).
+//! never a panic. The valid seeds are feedforward and PWA-feedback images in equal numbers. Mutations of
+//! valid images get their payload length and CRC recomputed most of the time, so validation past the CRC is
+//! exercised; images that still decode are run through the evaluator and must re-encode to exactly the same
+//! bytes (the format is canonical).
 
 mod common;
 
 use std::collections::BTreeMap;
 
-use common::{fix_header, random_content};
+use common::{fix_header, random_content, random_pwa, PwaShape};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use shared_types::capacity::HEADER_LEN;
 use shared_types::eval::{Controller, Input, Status};
-use shared_types::image::{decode, encode, ImageError, FORMAT_VERSION, MAGIC};
+use shared_types::image::{decode, encode, ImageError, Mode, FORMAT_VERSION, MAGIC};
+use shared_types::pwa::Region;
 
 /// Name of an error variant, to count which checks the fuzzing reached.
 fn kind(e: &ImageError) -> &'static str {
@@ -39,6 +41,22 @@ fn kind(e: &ImageError) -> &'static str {
         NegativeDelta { .. } => "NegativeDelta",
         LocationOutOfRange { .. } => "LocationOutOfRange",
         EmptyInputBox { .. } => "EmptyInputBox",
+        ChildOutOfRange { .. } => "ChildOutOfRange",
+        BackEdge { .. } => "BackEdge",
+        LeafOutOfRange { .. } => "LeafOutOfRange",
+        UnreachableNode { .. } => "UnreachableNode",
+        UnreferencedLeaf { .. } => "UnreferencedLeaf",
+        TreeTooDeep { .. } => "TreeTooDeep",
+        TreeDepthMismatch { .. } => "TreeDepthMismatch",
+        DegenerateHyperplane { .. } => "DegenerateHyperplane",
+        PartitionOutOfRange { .. } => "PartitionOutOfRange",
+        LeafBallEnds { .. } => "LeafBallEnds",
+        LeafTooManyBalls { .. } => "LeafTooManyBalls",
+        BallRefOutOfRange { .. } => "BallRefOutOfRange",
+        BallPartitionMismatch { .. } => "BallPartitionMismatch",
+        BallLocationOutOfRange { .. } => "BallLocationOutOfRange",
+        BallPartitionOutOfRange { .. } => "BallPartitionOutOfRange",
+        NegativeBallRadius { .. } => "NegativeBallRadius",
         BufferTooSmall { .. } => "BufferTooSmall",
         Encode => "Encode",
     }
@@ -54,6 +72,9 @@ fn exercise(bytes: &[u8], rng: &mut ChaCha8Rng, stats: &mut BTreeMap<&'static st
         }
         Ok(img) => {
             *stats.entry("Ok").or_default() += 1;
+            if img.mode() == Mode::PwaFeedback {
+                *stats.entry("OkPwa").or_default() += 1;
+            }
             let mut again = vec![0u8; bytes.len()];
             assert_eq!(encode(&img, &mut again), Ok(bytes.len()));
             assert_eq!(
@@ -65,10 +86,14 @@ fn exercise(bytes: &[u8], rng: &mut ChaCha8Rng, stats: &mut BTreeMap<&'static st
             for k in 0..8 {
                 let len = if k == 3 { n + 1 } else { n };
                 let x: Vec<f32> = (0..len).map(|_| rng.random_range(-3.0f32..3.0)).collect();
+                let located = ctl.locate(&x);
                 match ctl.step(&x) {
                     Ok(u) => {
                         assert_eq!(u.len(), img.m());
                         assert!(u.as_slice().iter().all(|v| v.is_finite()));
+                        if img.mode() == Mode::PwaFeedback {
+                            assert!(matches!(located, Some(Region::Inside { .. })));
+                        }
                     }
                     Err(s) => assert!(matches!(s, Status::OutOfEnvelope | Status::BadFrame)),
                 }
@@ -83,8 +108,19 @@ fn exercise(bytes: &[u8], rng: &mut ChaCha8Rng, stats: &mut BTreeMap<&'static st
 fn decoder_never_panics_on_100k_random_and_mutated_inputs() {
     let mut rng = ChaCha8Rng::seed_from_u64(0xDEC0DE);
     let mut stats: BTreeMap<&'static str, usize> = BTreeMap::new();
-    let valid: Vec<Vec<u8>> = (0..64)
-        .map(|_| random_content(&mut rng, 6, 3, 6, 8).to_bytes().unwrap())
+    let shape = PwaShape {
+        max_nodes: 12,
+        max_leaf_balls: 3,
+        ..PwaShape::default()
+    };
+    let valid: Vec<Vec<u8>> = (0..128)
+        .map(|i| {
+            if i % 2 == 0 {
+                random_content(&mut rng, 6, 3, 6, 8).to_bytes().unwrap()
+            } else {
+                random_pwa(&mut rng, shape).to_bytes().unwrap()
+            }
+        })
         .collect();
     let mut total = 0usize;
 
@@ -95,7 +131,7 @@ fn decoder_never_panics_on_100k_random_and_mutated_inputs() {
         if i % 2 == 0 && b.len() >= 8 {
             b[..4].copy_from_slice(&MAGIC);
             b[4..6].copy_from_slice(&FORMAT_VERSION.to_le_bytes());
-            b[6] = 1;
+            b[6] = 1 + (i % 3 == 0) as u8;
             b[7] = 0;
             if i % 4 == 0 {
                 fix_header(&mut b);
@@ -183,6 +219,20 @@ fn decoder_never_panics_on_100k_random_and_mutated_inputs() {
         "TrajectoryEnds",
         "LocationOutOfRange",
         "Ok",
+        "OkPwa",
+        "ChildOutOfRange",
+        "BackEdge",
+        "LeafOutOfRange",
+        "PartitionOutOfRange",
+        "LeafBallEnds",
+        "BallRefOutOfRange",
+        "BallPartitionMismatch",
+        "BallPartitionOutOfRange",
+        "BallLocationOutOfRange",
+        "LeafTooManyBalls",
+        "UnreachableNode",
+        "UnreferencedLeaf",
+        "TreeDepthMismatch",
     ] {
         assert!(
             stats.get(k).copied().unwrap_or(0) > 0,

@@ -296,13 +296,40 @@ fn rejects_payload_length_mismatch_and_trailing_bytes() {
 }
 
 #[test]
-fn rejects_unknown_and_reserved_modes() {
+fn rejects_unknown_modes_and_feedforward_content_under_the_pwa_mode() {
     let b = simple().to_bytes().unwrap();
+    // Mode 2 is PWA feedback: a feedforward header (trajectories, no partitions) does not fit it.
     let mut pwa = b.clone();
     pwa[6] = 2;
     set_crc(&mut pwa);
     assert_eq!(
         decode(&pwa),
+        Err(ImageError::DimOutOfRange {
+            dim: Dim::Trajectories,
+            value: 2,
+            min: 0,
+            max: 0
+        })
+    );
+    // With the header dimensions made PWA-like, the feedforward payload does not parse as a PWA payload.
+    let mut pwa = b.clone();
+    pwa[6] = 2;
+    pwa[14..16].copy_from_slice(&0u16.to_le_bytes());
+    pwa[16..18].copy_from_slice(&1u16.to_le_bytes());
+    set_crc(&mut pwa);
+    assert!(
+        matches!(
+            decode(&pwa),
+            Err(ImageError::Malformed | ImageError::TrailingBytes | ImageError::FieldLength { .. })
+        ),
+        "{:?}",
+        decode(&pwa)
+    );
+    // Image::new builds feedforward images only.
+    let c = simple();
+    let owned = c.owned();
+    assert_eq!(
+        shared_types::image::Image::new(Mode::PwaFeedback, c.dims(), c.period, owned.payload()),
         Err(ImageError::UnsupportedMode {
             mode: Mode::PwaFeedback
         })

@@ -35,7 +35,8 @@ fn main() -> ExitCode {
 
 /// The workspace root (xtask lives one level below it).
 fn root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    root.canonicalize().unwrap_or(root)
 }
 
 fn target_dir() -> PathBuf {
@@ -135,10 +136,10 @@ impl Steps {
         let mut failed = 0;
         for (i, (name, r, secs)) in self.results.iter().enumerate() {
             match r {
-                Ok(()) => println!("xtask:   {}. {name:<48} passed  {secs:>7.1} s", i + 1),
+                Ok(()) => println!("xtask:   {}. {name:<72} passed  {secs:>7.1} s", i + 1),
                 Err(e) => {
                     failed += 1;
-                    println!("xtask:   {}. {name:<48} FAILED  {secs:>7.1} s  {e}", i + 1)
+                    println!("xtask:   {}. {name:<72} FAILED  {secs:>7.1} s  {e}", i + 1)
                 }
             }
         }
@@ -225,10 +226,16 @@ fn test() -> ExitCode {
     let target_ok = steps.run("rustup target thumbv7em-none-eabihf", ensure_target);
     let qemu_ok = steps.run("qemu-system-arm", ensure_qemu);
     steps.run(
-        "host tests: cargo test --workspace --exclude qemu-tests",
+        "host tests: cargo test --workspace --exclude qemu-tests --no-fail-fast",
         || {
             let mut c = cargo();
-            c.args(["test", "--workspace", "--exclude", "qemu-tests"]);
+            c.args([
+                "test",
+                "--workspace",
+                "--exclude",
+                "qemu-tests",
+                "--no-fail-fast",
+            ]);
             run(c)
         },
     );
@@ -245,12 +252,19 @@ fn test() -> ExitCode {
     } else {
         steps.skip(no_std, "the target is missing");
     }
-    let hil = "HIL: cargo test -p qemu-tests -- --include-ignored";
+    let hil = "HIL: cargo test -p qemu-tests --no-fail-fast -- --include-ignored";
     match (target_ok, qemu_ok) {
         (true, true) => {
             steps.run(hil, || {
                 let mut c = cargo();
-                c.args(["test", "-p", "qemu-tests", "--", "--include-ignored"]);
+                c.args([
+                    "test",
+                    "-p",
+                    "qemu-tests",
+                    "--no-fail-fast",
+                    "--",
+                    "--include-ignored",
+                ]);
                 run(c)
             });
         }

@@ -8,9 +8,11 @@
 //!    (4.15), with Input' the input set shrunk by the f32 rounding bound (so the input the firmware applies,
 //!    not only the ideal one, is in Input). Unsafe and Input are checked over the whole table (κ = 0..N),
 //!    which is stronger than the [0, t*] of the theorem.
-//! 2. **Between samples** (continuous-time plants under zero-order hold). With a = ‖A_c‖_P and
-//!    φ(h) = (e^{ah} − 1)/a, Grönwall's inequality on ẋ = A_c x + B_c u + c over one period gives
-//!    ‖x(κh+s) − x(κh)‖_P ≤ φ(h)‖A_c x(κh) + B_c u(κ) + c‖_P. With x(κh) = x̃(κ) + e, ‖e‖_P ≤ r, and
+//! 2. **Between samples** (continuous-time plants under zero-order hold). With u held, d(s) = x(κh+s) − x(κh)
+//!    solves ḋ = A_c d + f with f = A_c x(κh) + B_c u(κ) + c, so d(s) = ∫₀ˢ e^{A_c τ}dτ f. The logarithmic
+//!    norm μ = λ_max(sym(P^{1/2}A_cP^{-1/2})) bounds ‖e^{A_c τ}‖_P ≤ e^{μτ}, hence with
+//!    φ(h) = (e^{μh} − 1)/μ (h when μ = 0): ‖x(κh+s) − x(κh)‖_P ≤ φ(h)‖f‖_P for all s ∈ [0, h] (the
+//!    Euclidean version of this bound is `model::InterSampleBound`; here it is taken in the CAF metric). With x(κh) = x̃(κ) + e, ‖e‖_P ≤ r, and
 //!    u = ũ + K̂e + ε this is at most γr + ρ_κ + φ(h)β ε̄ after the sample, where γ = 1 + φ(h)‖A_c + B_cK̂‖_P,
 //!    ρ_κ = φ(h)‖A_c x̃(κ) + B_c ũ(κ) + c‖_P and β = ‖P^{1/2}B_c‖₂. So the tube clears Unsafe between
 //!    samples when r < (dist_P(x̃(κ), Unsafe) − ρ_κ − φβε̄)/γ.
@@ -107,8 +109,9 @@ impl LoopConstants {
         let (phi, gamma, beta) = match lp.continuous {
             None => (0.0, 1.0, 0.0),
             Some(cp) => {
-                let a = roots.induced_norm(cp.Ac.as_ref());
-                let phi = if a * cp.h < 1e-12 { cp.h } else { (a * cp.h).exp_m1() / a };
+                let At = &roots.sqrt * &cp.Ac * &roots.inv_sqrt;
+                let mu = sym_eigenvalues(At.as_ref()).and_then(|e| e.last().copied()).unwrap_or(f64::INFINITY);
+                let phi = if (mu * cp.h).abs() < 1e-12 { cp.h } else { (mu * cp.h).exp_m1() / mu };
                 let Acl = &cp.Ac + &cp.Bc * lp.K;
                 (phi, 1.0 + phi * roots.induced_norm(Acl.as_ref()), roots.norm_into(cp.Bc.as_ref()))
             }

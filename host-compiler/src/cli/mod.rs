@@ -4,9 +4,9 @@ use clap::{Parser, Subcommand};
 
 pub mod inspect;
 pub mod mtl;
-// pub mod simulate;
-// pub mod synth;
-// pub mod verify;
+pub mod simulate;
+pub mod synth;
+pub mod verify;
 
 /// Synthesise controllers that are provably safe for one task, and the fixed-size image a
 /// microcontroller runs.
@@ -20,11 +20,11 @@ pub struct Cli {
 #[derive(Subcommand, Debug)]
 pub enum Command {
     /// Synthesise a certified controller image and report from a task spec (TOML).
-    Synth(crate::cli::PendingArgs),
+    Synth(synth::SynthArgs),
     /// Re-check an image against its spec by closed-loop Monte Carlo through the shared f32 evaluator.
-    Verify(crate::cli::PendingArgs),
+    Verify(verify::VerifyArgs),
     /// Simulate the closed loop of a spec's plant with an image from one initial state; writes CSV.
-    Simulate(crate::cli::PendingArgs),
+    Simulate(simulate::SimulateArgs),
     /// Decode and validate a controller image; print its whole content.
     Inspect(inspect::InspectArgs),
     /// Robustness of a recorded trace against a metric temporal logic formula (Def 2.17).
@@ -37,12 +37,9 @@ pub fn main() -> miette::Result<()> {
     match cli.command {
         Command::Inspect(a) => inspect::run(&a),
         Command::Mtl(a) => mtl::run(&a),
-        Command::Synth(_) | Command::Verify(_) | Command::Simulate(_) => Err(miette::miette!("pending")),
+        Command::Synth(a) => synth::run(&a),
+        Command::Verify(a) => verify::run(&a),
+        Command::Simulate(a) => simulate::run(&a),
     }
 }
 
-/// Placeholder arguments while the pipeline lands.
-#[derive(clap::Args, Debug)]
-pub struct PendingArgs {
-    pub args: Vec<String>,
-}

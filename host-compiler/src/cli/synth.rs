@@ -16,6 +16,11 @@ pub struct SynthArgs {
     /// Monte Carlo runs from the certified cover in the final verification.
     #[arg(long, default_value_t = 10_000)]
     pub verify_runs: usize,
+    /// A recorded trajectory to certify and use before any is generated (repeatable): CSV with a comment
+    /// line `# x0 = …` giving the initial state, a header `t,v1,…,vm` and one row of reference inputs per
+    /// sample period.
+    #[arg(long = "import", value_name = "FILE.csv")]
+    pub imports: Vec<PathBuf>,
     /// Hide progress bars.
     #[arg(long)]
     pub quiet: bool,
@@ -23,7 +28,14 @@ pub struct SynthArgs {
 
 pub fn run(a: &SynthArgs) -> miette::Result<()> {
     let problem = crate::spec::load(&a.spec)?;
-    let opts = SynthOptions { verify_interior: a.verify_runs, progress: !a.quiet, ..SynthOptions::default() };
+    let (n, m, h) = (problem.plant.n(), problem.plant.m(), problem.plant.period);
+    let mut imports = Vec::new();
+    for p in &a.imports {
+        let rec = crate::trajectory::csv::load_recording(p, n, m, h).map_err(|e| miette::miette!("{e}"))?;
+        imports.push((p.display().to_string(), rec));
+    }
+    let opts =
+        SynthOptions { verify_interior: a.verify_runs, progress: !a.quiet, imports, ..SynthOptions::default() };
     let s = synthesize(&problem, &opts).map_err(|e| miette::miette!("{e}"))?;
     std::fs::create_dir_all(&a.out).into_diagnostic().wrap_err_with(|| format!("creating {}", a.out.display()))?;
     let img_path = a.out.join("controller.img");

@@ -14,7 +14,9 @@ pub(crate) struct MetricCache<T> {
 
 impl<T> Default for MetricCache<T> {
     fn default() -> Self {
-        Self { entries: RwLock::new(Vec::new()) }
+        Self {
+            entries: RwLock::new(Vec::new()),
+        }
     }
 }
 
@@ -27,7 +29,10 @@ impl<T> MetricCache<T> {
     ) -> Result<Arc<T>, GeometryError> {
         {
             let entries = self.entries.read().unwrap_or_else(|e| e.into_inner());
-            if let Some((_, _, v)) = entries.iter().find(|(n, R, _)| *n == metric.n && *R == metric.R) {
+            if let Some((_, _, v)) = entries
+                .iter()
+                .find(|(n, R, _)| *n == metric.n && *R == metric.R)
+            {
                 return Ok(Arc::clone(v));
             }
         }
@@ -61,15 +66,23 @@ mod tests {
         }
         assert_eq!(calls, 1);
         for k in 0..CAPACITY {
-            let mk = Metric { n: 1, R: vec![k as f64 + 2.0] };
+            let mk = Metric {
+                n: 1,
+                R: vec![k as f64 + 2.0],
+            };
             cache.get_or_try_insert(&mk, || Ok(k)).unwrap();
         }
         // The first entry was evicted: asking again calls `make`.
         let v = cache.get_or_try_insert(&m, || Ok(9)).unwrap();
         assert_eq!(*v, 9);
         // Errors are not stored.
-        let bad = Metric { n: 1, R: vec![-1.0] };
-        assert!(cache.get_or_try_insert(&bad, || Err(GeometryError::EmptyUnion)).is_err());
+        let bad = Metric {
+            n: 1,
+            R: vec![-1.0],
+        };
+        assert!(cache
+            .get_or_try_insert(&bad, || Err(GeometryError::EmptyUnion))
+            .is_err());
         assert_eq!(*cache.get_or_try_insert(&bad, || Ok(3)).unwrap(), 3);
     }
 }

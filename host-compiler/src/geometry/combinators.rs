@@ -26,7 +26,12 @@ impl Union {
         let n = first.dim();
         for (index, m) in members.iter().enumerate() {
             if m.dim() != n {
-                return Err(GeometryError::MemberDimension { what: "union", index, expected: n, got: m.dim() });
+                return Err(GeometryError::MemberDimension {
+                    what: "union",
+                    index,
+                    expected: n,
+                    got: m.dim(),
+                });
             }
         }
         Ok(Self { n, members })
@@ -40,7 +45,11 @@ impl Union {
     /// For x in the union: (the reported depth with its witness, an upper bound on the true depth). The upper
     /// bound is the smallest member depth whose witness lies in no other member (+∞ if there is none); when it
     /// equals the reported value, the depth is exact. For x outside: (zero witness, 0).
-    pub fn depth_bounds(&self, x: &[f64], metric: &Metric) -> Result<(Witness, f64), GeometryError> {
+    pub fn depth_bounds(
+        &self,
+        x: &[f64],
+        metric: &Metric,
+    ) -> Result<(Witness, f64), GeometryError> {
         check_query(self.n, x, metric)?;
         let mut best: Option<Witness> = None;
         let mut upper = f64::INFINITY;
@@ -49,7 +58,11 @@ impl Union {
                 continue;
             }
             let w = m.try_depth(x, metric)?;
-            let covered = self.members.iter().enumerate().any(|(k, o)| k != j && o.contains(&w.point));
+            let covered = self
+                .members
+                .iter()
+                .enumerate()
+                .any(|(k, o)| k != j && o.contains(&w.point));
             if !covered {
                 upper = upper.min(w.value);
             }
@@ -59,7 +72,13 @@ impl Union {
         }
         match best {
             Some(w) => Ok((w, upper)),
-            None => Ok((Witness { value: 0.0, point: x.to_vec() }, 0.0)),
+            None => Ok((
+                Witness {
+                    value: 0.0,
+                    point: x.to_vec(),
+                },
+                0.0,
+            )),
         }
     }
 }
@@ -163,7 +182,9 @@ impl InOutput {
     /// dimension p.
     pub fn new(C: Vec<f64>, p: usize, inner: Box<dyn Region>) -> Result<Self, GeometryError> {
         if p == 0 {
-            return Err(GeometryError::ZeroDimension { what: "output map C (rows)" });
+            return Err(GeometryError::ZeroDimension {
+                what: "output map C (rows)",
+            });
         }
         if C.is_empty() || C.len() % p != 0 {
             return Err(GeometryError::Dimension {
@@ -175,7 +196,12 @@ impl InOutput {
         let n = C.len() / p;
         linalg::check_finite("output map C", &C)?;
         if inner.dim() != p {
-            return Err(GeometryError::MemberDimension { what: "output set", index: 0, expected: p, got: inner.dim() });
+            return Err(GeometryError::MemberDimension {
+                what: "output set",
+                index: 0,
+                expected: p,
+                got: inner.dim(),
+            });
         }
         // Full row rank: CCᵀ positive definite (relative threshold).
         let Ct = linalg::transpose(&C, p, n);
@@ -183,9 +209,19 @@ impl InOutput {
         let e = SymEig::new("C Cᵀ", p, &CCt)?;
         let rank = e.values.iter().filter(|&&v| v > 1e-12 * e.max()).count();
         if rank < p || e.max() <= 0.0 {
-            return Err(GeometryError::RankDeficient { what: "output map C", rank, expected: p });
+            return Err(GeometryError::RankDeficient {
+                what: "output map C",
+                rank,
+                expected: p,
+            });
         }
-        Ok(Self { n, p, C, inner, cache: MetricCache::default() })
+        Ok(Self {
+            n,
+            p,
+            C,
+            inner,
+            cache: MetricCache::default(),
+        })
     }
 
     /// Output dimension p.
@@ -223,7 +259,7 @@ impl InOutput {
             let Ct = linalg::transpose(C, p, n);
             let RpCt = linalg::matmul(&Rp, &Ct, n, n, p); // R⁺Cᵀ (n×p)
             let M = linalg::matmul(C, &RpCt, p, n, p); // C R⁺ Cᵀ
-            // K = range(CN); Π = I − Π_K.
+                                                       // K = range(CN); Π = I − Π_K.
             let CN = linalg::matmul(C, &N, p, n, k); // p×k
             let CNt = linalg::transpose(&CN, p, k);
             let G = linalg::matmul(&CN, &CNt, p, k, p);
@@ -270,18 +306,27 @@ impl InOutput {
                     *l += v;
                 }
             }
-            Ok(OutputMetric { Ry: Metric { n: p, R: Rys }, L })
+            Ok(OutputMetric {
+                Ry: Metric { n: p, R: Rys },
+                L,
+            })
         })
     }
 
     fn lift(&self, x: &[f64], y: &[f64], w: Witness, om: &OutputMetric) -> Witness {
         if w.point.len() != self.p {
-            return Witness { value: w.value, point: Vec::new() };
+            return Witness {
+                value: w.value,
+                point: Vec::new(),
+            };
         }
         let dy: Vec<f64> = w.point.iter().zip(y).map(|(a, b)| a - b).collect();
         let mut dx = vec![0.0; self.n];
         linalg::matvec(&om.L, self.n, self.p, &dy, &mut dx);
-        Witness { value: w.value, point: x.iter().zip(&dx).map(|(a, b)| a + b).collect() }
+        Witness {
+            value: w.value,
+            point: x.iter().zip(&dx).map(|(a, b)| a + b).collect(),
+        }
     }
 }
 
@@ -337,8 +382,14 @@ mod tests {
         assert!((w.value - 0.8).abs() < 1e-15, "{}", w.value); // depth in [0, 2]; the true depth is 1.2
         assert!(upper >= 1.2 - 1e-15);
         assert!(matches!(Union::new(vec![]), Err(GeometryError::EmptyUnion)));
-        let bad = Union::new(vec![interval(0.0, 1.0), Box::new(Ellipsoid::new(vec![0.0, 0.0], vec![1.0, 0.0, 0.0, 1.0]).unwrap())]);
-        assert!(matches!(bad, Err(GeometryError::MemberDimension { index: 1, .. })));
+        let bad = Union::new(vec![
+            interval(0.0, 1.0),
+            Box::new(Ellipsoid::new(vec![0.0, 0.0], vec![1.0, 0.0, 0.0, 1.0]).unwrap()),
+        ]);
+        assert!(matches!(
+            bad,
+            Err(GeometryError::MemberDimension { index: 1, .. })
+        ));
     }
 
     #[test]
@@ -354,10 +405,22 @@ mod tests {
     #[test]
     fn output_set_rejects_bad_C() {
         let inner = || -> Box<dyn Region> { interval(0.0, 1.0) };
-        assert!(matches!(InOutput::new(vec![0.0, 0.0], 1, inner()), Err(GeometryError::RankDeficient { .. })));
-        assert!(matches!(InOutput::new(vec![], 1, inner()), Err(GeometryError::Dimension { .. })));
-        assert!(matches!(InOutput::new(vec![1.0, 0.0], 2, inner()), Err(GeometryError::MemberDimension { .. })));
-        assert!(matches!(InOutput::new(vec![1.0, f64::NAN], 1, inner()), Err(GeometryError::NotFinite { .. })));
+        assert!(matches!(
+            InOutput::new(vec![0.0, 0.0], 1, inner()),
+            Err(GeometryError::RankDeficient { .. })
+        ));
+        assert!(matches!(
+            InOutput::new(vec![], 1, inner()),
+            Err(GeometryError::Dimension { .. })
+        ));
+        assert!(matches!(
+            InOutput::new(vec![1.0, 0.0], 2, inner()),
+            Err(GeometryError::MemberDimension { .. })
+        ));
+        assert!(matches!(
+            InOutput::new(vec![1.0, f64::NAN], 1, inner()),
+            Err(GeometryError::NotFinite { .. })
+        ));
     }
 
     #[test]
@@ -376,6 +439,10 @@ mod tests {
         let w = s.dist(&x, &m0);
         assert!(w.value.abs() < 1e-9);
         let y = w.point[0] + w.point[1];
-        assert!((-1e-9..=1.0 + 1e-9).contains(&y) && (w.point[0] - 2.0).abs() < 1e-9, "{:?}", w.point);
+        assert!(
+            (-1e-9..=1.0 + 1e-9).contains(&y) && (w.point[0] - 2.0).abs() < 1e-9,
+            "{:?}",
+            w.point
+        );
     }
 }

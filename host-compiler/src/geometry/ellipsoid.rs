@@ -22,13 +22,20 @@ pub struct Ellipsoid {
 
 impl Clone for Ellipsoid {
     fn clone(&self) -> Self {
-        Self { c: self.c.clone(), Q: self.Q.clone(), cache: MetricCache::default() }
+        Self {
+            c: self.c.clone(),
+            Q: self.Q.clone(),
+            cache: MetricCache::default(),
+        }
     }
 }
 
 impl std::fmt::Debug for Ellipsoid {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Ellipsoid").field("c", &self.c).field("Q", &self.Q).finish()
+        f.debug_struct("Ellipsoid")
+            .field("c", &self.c)
+            .field("Q", &self.Q)
+            .finish()
     }
 }
 
@@ -38,16 +45,24 @@ impl Ellipsoid {
     pub fn new(c: Vec<f64>, Q: Vec<f64>) -> Result<Self, GeometryError> {
         let n = c.len();
         if n == 0 {
-            return Err(GeometryError::ZeroDimension { what: "ellipsoid centre" });
+            return Err(GeometryError::ZeroDimension {
+                what: "ellipsoid centre",
+            });
         }
         linalg::check_finite("ellipsoid centre", &c)?;
         let Q = linalg::symmetrize_checked("ellipsoid Q", n, &Q)?;
         let e = SymEig::new("ellipsoid Q", n, &Q)?;
         e.check_psd("ellipsoid Q")?;
         if e.values.iter().all(|v| *v == 0.0) {
-            return Err(GeometryError::ZeroMatrix { what: "ellipsoid Q" });
+            return Err(GeometryError::ZeroMatrix {
+                what: "ellipsoid Q",
+            });
         }
-        Ok(Self { c, Q, cache: MetricCache::default() })
+        Ok(Self {
+            c,
+            Q,
+            cache: MetricCache::default(),
+        })
     }
 
     /// The centre.
@@ -67,13 +82,20 @@ impl Ellipsoid {
     /// the allocation-free [`EllipsoidBoundaryDistance::solve`].
     pub fn factor(&self, metric: &Metric) -> Result<EllipsoidBoundaryDistance, GeometryError> {
         if metric.n != self.c.len() {
-            return Err(GeometryError::Dimension { what: "metric dimension", expected: self.c.len(), got: metric.n });
+            return Err(GeometryError::Dimension {
+                what: "metric dimension",
+                expected: self.c.len(),
+                got: metric.n,
+            });
         }
         EllipsoidBoundaryDistance::new(&self.c, &self.Q, &metric.R)
     }
 
     /// The cached factorisation for `metric`.
-    pub fn factored(&self, metric: &Metric) -> Result<Arc<EllipsoidBoundaryDistance>, GeometryError> {
+    pub fn factored(
+        &self,
+        metric: &Metric,
+    ) -> Result<Arc<EllipsoidBoundaryDistance>, GeometryError> {
         self.cache.get_or_try_insert(metric, || self.factor(metric))
     }
 
@@ -82,7 +104,10 @@ impl Ellipsoid {
         let mut ws = f.workspace();
         let mut point = vec![0.0; x.len()];
         let s = f.solve(x, &mut ws, &mut point)?;
-        Ok(Witness { value: s.value, point })
+        Ok(Witness {
+            value: s.value,
+            point,
+        })
     }
 }
 
@@ -103,7 +128,10 @@ impl Region for Ellipsoid {
         check_query(self.dim(), x, metric)?;
         if self.contains(x) {
             self.factored(metric)?; // validate the metric even when the answer is trivial
-            return Ok(Witness { value: 0.0, point: x.to_vec() });
+            return Ok(Witness {
+                value: 0.0,
+                point: x.to_vec(),
+            });
         }
         self.boundary(x, metric)
     }
@@ -111,7 +139,10 @@ impl Region for Ellipsoid {
         check_query(self.dim(), x, metric)?;
         if !self.contains(x) {
             self.factored(metric)?;
-            return Ok(Witness { value: 0.0, point: x.to_vec() });
+            return Ok(Witness {
+                value: 0.0,
+                point: x.to_vec(),
+            });
         }
         self.boundary(x, metric)
     }
@@ -131,19 +162,30 @@ impl Ball {
     /// radius r > 0, all finite.
     pub fn new(center: Vec<f64>, P: Vec<f64>, r: f64) -> Result<Self, GeometryError> {
         if !(r.is_finite() && r > 0.0) {
-            return Err(GeometryError::NotPositive { what: "ball radius", value: r });
+            return Err(GeometryError::NotPositive {
+                what: "ball radius",
+                value: r,
+            });
         }
         let n = center.len();
         let Ps = linalg::symmetrize_checked("ball metric P", n, &P)?;
         let Q: Vec<f64> = Ps.iter().map(|p| p / (r * r)).collect();
         let inner = Ellipsoid::new(center.clone(), Q).map_err(|e| match e {
-            GeometryError::NotPsd { min_eigenvalue, .. } => {
-                GeometryError::NotPsd { what: "ball metric P", min_eigenvalue: min_eigenvalue * r * r }
-            }
-            GeometryError::ZeroMatrix { .. } => GeometryError::ZeroMatrix { what: "ball metric P" },
+            GeometryError::NotPsd { min_eigenvalue, .. } => GeometryError::NotPsd {
+                what: "ball metric P",
+                min_eigenvalue: min_eigenvalue * r * r,
+            },
+            GeometryError::ZeroMatrix { .. } => GeometryError::ZeroMatrix {
+                what: "ball metric P",
+            },
             other => other,
         })?;
-        Ok(Self { center, P: Ps, r, inner })
+        Ok(Self {
+            center,
+            P: Ps,
+            r,
+            inner,
+        })
     }
     /// The centre.
     pub fn center(&self) -> &[f64] {
@@ -199,10 +241,21 @@ mod tests {
         let x = [2.0, -1.0];
         let d = m.distance(&x, &[1.0, -2.0]);
         let w = b.dist(&x, &m);
-        assert!((w.value - (d - 0.5)).abs() < 1e-13, "{} vs {}", w.value, d - 0.5);
+        assert!(
+            (w.value - (d - 0.5)).abs() < 1e-13,
+            "{} vs {}",
+            w.value,
+            d - 0.5
+        );
         assert!((b.as_ellipsoid().level(&w.point) - 1.0).abs() < 1e-12);
-        assert!(matches!(Ball::new(vec![0.0], vec![1.0], 0.0), Err(GeometryError::NotPositive { .. })));
-        assert!(matches!(Ball::new(vec![0.0], vec![-1.0], 1.0), Err(GeometryError::NotPsd { .. })));
+        assert!(matches!(
+            Ball::new(vec![0.0], vec![1.0], 0.0),
+            Err(GeometryError::NotPositive { .. })
+        ));
+        assert!(matches!(
+            Ball::new(vec![0.0], vec![-1.0], 1.0),
+            Err(GeometryError::NotPsd { .. })
+        ));
     }
 
     #[test]
@@ -216,6 +269,14 @@ mod tests {
         // Wrong dimension: NaN witness from the infallible form, an error from try_*.
         assert!(e.dist(&[0.0], &m).value.is_nan());
         assert!(e.try_dist(&[0.0], &m).is_err());
-        assert!(e.try_dist(&[0.0, 5.0], &Metric { n: 2, R: vec![1.0, 3.0, 3.0, 1.0] }).is_err());
+        assert!(e
+            .try_dist(
+                &[0.0, 5.0],
+                &Metric {
+                    n: 2,
+                    R: vec![1.0, 3.0, 3.0, 1.0]
+                }
+            )
+            .is_err());
     }
 }

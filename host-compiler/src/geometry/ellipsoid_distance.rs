@@ -40,7 +40,10 @@ pub struct BoundaryDistanceSettings {
 
 impl Default for BoundaryDistanceSettings {
     fn default() -> Self {
-        Self { tol: 1e-14, max_iter: 100 }
+        Self {
+            tol: 1e-14,
+            max_iter: 100,
+        }
     }
 }
 
@@ -57,7 +60,10 @@ impl BoundaryDistanceSettings {
     }
     fn validate(&self) -> Result<(), GeometryError> {
         if !(self.tol.is_finite() && self.tol > 0.0) {
-            return Err(GeometryError::NotPositive { what: "boundary-distance tolerance", value: self.tol });
+            return Err(GeometryError::NotPositive {
+                what: "boundary-distance tolerance",
+                value: self.tol,
+            });
         }
         Ok(())
     }
@@ -106,15 +112,23 @@ impl StandardForm {
     /// largest are set equal to it.
     pub fn new(mut lambda: Vec<f64>) -> Result<Self, GeometryError> {
         if lambda.is_empty() {
-            return Err(GeometryError::ZeroDimension { what: "standard form Λ" });
+            return Err(GeometryError::ZeroDimension {
+                what: "standard form Λ",
+            });
         }
         linalg::check_finite("standard form Λ", &lambda)?;
         if let Some(&v) = lambda.iter().find(|&&v| v <= 0.0) {
-            return Err(GeometryError::NotPositive { what: "standard form eigenvalue", value: v });
+            return Err(GeometryError::NotPositive {
+                what: "standard form eigenvalue",
+                value: v,
+            });
         }
         lambda.sort_by(|a, b| b.total_cmp(a));
         let lmax = lambda[0];
-        let M = lambda.iter().take_while(|&&l| l >= lmax * (1.0 - EQUAL_EIG_TOL)).count();
+        let M = lambda
+            .iter()
+            .take_while(|&&l| l >= lmax * (1.0 - EQUAL_EIG_TOL))
+            .count();
         let mut gap = vec![0.0; lambda.len()];
         for i in 0..lambda.len() {
             if i < M {
@@ -181,7 +195,12 @@ impl StandardForm {
     ///
     /// Panics never; `zbar`/`zstar` shorter than q would be a caller bug (debug-asserted, then only the
     /// common prefix is used).
-    pub fn solve(&self, zbar: &[f64], zstar: &mut [f64], settings: &BoundaryDistanceSettings) -> CoreSolution {
+    pub fn solve(
+        &self,
+        zbar: &[f64],
+        zstar: &mut [f64],
+        settings: &BoundaryDistanceSettings,
+    ) -> CoreSolution {
         let q = self.lambda.len();
         debug_assert!(zbar.len() >= q && zstar.len() >= q);
         let q = q.min(zbar.len()).min(zstar.len());
@@ -211,17 +230,44 @@ impl StandardForm {
                     zstar[i] = zbar[i] / gap[i];
                 }
                 let value_sq = zstar.iter().zip(zbar).map(|(a, b)| (a - b) * (a - b)).sum();
-                let kind = if radius > 0.0 { OptimumKind::Multiple } else { OptimumKind::Unique };
-                return CoreSolution { value_sq, mu: mu_bar, kind, iterations: 0 };
+                let kind = if radius > 0.0 {
+                    OptimumKind::Multiple
+                } else {
+                    OptimumKind::Unique
+                };
+                return CoreSolution {
+                    value_sq,
+                    mu: mu_bar,
+                    kind,
+                    iterations: 0,
+                };
             }
         }
 
-        // Unique root µ* ∈ (µ̄, ∞): Lemma 7.9 from µ₀ of (7.45), monotone from below.
+        // Unique root µ* ∈ (µ̄, ∞): Lemma 7.9 from µ₀ of (7.45), monotone from below. The bracket's upper end
+        // is only computed if a step ever leaves (lo, ∞).
+        let first = if sW > 0.0 { 0 } else { M };
         let mut lo = delta;
-        let mut hi = self.upper_bound(zbar).max(lo);
+        let mut hi = f64::INFINITY;
         let mut iterations = 0;
         loop {
-            let (G, dG) = self.secular(zbar, delta);
+            // G, G' of (7.21)–(7.22) and, on the fly, z = (µΛ + I)⁻¹z̄ of (7.24) at the current µ. Every
+            // factor gap + δλ is positive here (δ > 0, or i ≥ M where gap > 0).
+            let mut G = -1.0;
+            let mut dG = 0.0;
+            for (((z, &zb), &l), &g) in zstar[first..]
+                .iter_mut()
+                .zip(&zbar[first..])
+                .zip(&lam[first..])
+                .zip(&gap[first..])
+            {
+                let inv = 1.0 / (g + delta * l);
+                let t = zb * inv;
+                *z = t;
+                let w = l * t * t;
+                G += w;
+                dG -= 2.0 * w * l * inv;
+            }
             if G.abs() <= settings.tol || iterations >= settings.max_iter {
                 break;
             }
@@ -231,9 +277,14 @@ impl StandardForm {
                 hi = hi.min(delta);
             }
             let a = 1.0 + G; // = ‖a(µ)‖² ≥ 0 in the notation of the proof of Lemma 7.9
-            let mut next = delta - (2.0 * a / (1.0 + a.sqrt())) * (G / dG); // (7.37)
+            let mut next = delta - (2.0 * a * G) / ((1.0 + a.sqrt()) * dG); // (7.37), one division
             if !(next > lo && next < hi) {
-                next = 0.5 * (lo + hi);
+                if hi == f64::INFINITY {
+                    hi = self.upper_bound(zbar).max(lo);
+                }
+                if !(next > lo && next < hi) {
+                    next = 0.5 * (lo + hi);
+                }
             }
             iterations += 1;
             if next == delta {
@@ -241,14 +292,19 @@ impl StandardForm {
             }
             delta = next;
         }
-        // (7.24): z* = (µ*Λ + I)⁻¹ z̄.
-        let mut value_sq = 0.0;
-        for i in 0..q {
-            let z = if zbar[i] == 0.0 { 0.0 } else { zbar[i] / (gap[i] + delta * lam[i]) };
-            zstar[i] = z;
-            value_sq += (z - zbar[i]) * (z - zbar[i]);
+        // (7.24): z* = (µ*Λ + I)⁻¹ z̄, already in `zstar` for i ≥ first; z̄ vanishes below.
+        zstar[..first].fill(0.0);
+        let value_sq = zstar
+            .iter()
+            .zip(zbar)
+            .map(|(z, zb)| (z - zb) * (z - zb))
+            .sum();
+        CoreSolution {
+            value_sq,
+            mu: delta + mu_bar,
+            kind: OptimumKind::Unique,
+            iterations,
         }
-        CoreSolution { value_sq, mu: delta + mu_bar, kind: OptimumKind::Unique, iterations }
     }
 }
 
@@ -323,6 +379,9 @@ pub struct EllipsoidBoundaryDistance {
     R: Vec<f64>,
     /// λmax/λmin of the standard form exceeds `ILL_CONDITIONED`: always refine.
     ill_conditioned: bool,
+    /// The standard form or R is moderately conditioned (`CHECK_CONDITIONED`): check each returned point's
+    /// constraint and refine if it is off. Below that, rounding cannot reach `REFINE_TRIGGER`.
+    check_constraint: bool,
 }
 
 impl EllipsoidBoundaryDistance {
@@ -342,7 +401,9 @@ impl EllipsoidBoundaryDistance {
         settings.validate()?;
         let n = c.len();
         if n == 0 {
-            return Err(GeometryError::ZeroDimension { what: "ellipsoid centre" });
+            return Err(GeometryError::ZeroDimension {
+                what: "ellipsoid centre",
+            });
         }
         linalg::check_finite("ellipsoid centre", c)?;
         let Qs = linalg::symmetrize_checked("ellipsoid Q", n, Q)?;
@@ -350,7 +411,9 @@ impl EllipsoidBoundaryDistance {
         eq.check_psd("ellipsoid Q")?;
         let qscale = eq.values.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
         if qscale == 0.0 {
-            return Err(GeometryError::ZeroMatrix { what: "ellipsoid Q" });
+            return Err(GeometryError::ZeroMatrix {
+                what: "ellipsoid Q",
+            });
         }
         let (Rs, er) = Metric { n, R: R.to_vec() }.validated()?;
         Self::from_parts(c.to_vec(), Qs, Rs, qscale, &er, settings)
@@ -367,7 +430,9 @@ impl EllipsoidBoundaryDistance {
         let n = c.len();
         // (7.3)/(7.6): split R's eigenvectors into range (ρ > threshold) and null space.
         let thr = er.zero_threshold();
-        let range: Vec<usize> = (0..n).filter(|&k| er.values[k] > thr && er.values[k] > 0.0).collect();
+        let range: Vec<usize> = (0..n)
+            .filter(|&k| er.values[k] > thr && er.values[k] > 0.0)
+            .collect();
         let null: Vec<usize> = (0..n).filter(|k| !range.contains(k)).collect();
         let r = range.len();
         let nr = n - r;
@@ -423,7 +488,16 @@ impl EllipsoidBoundaryDistance {
             let top = e22.vector(nr - 1);
             let mut dir = vec![0.0; n];
             linalg::matvec(&V2, n, nr, &top, &mut dir);
-            (S, K, D, Some(Escape { Q: Q.clone(), E, dir }))
+            (
+                S,
+                K,
+                D,
+                Some(Escape {
+                    Q: Q.clone(),
+                    E,
+                    dir,
+                }),
+            )
         } else {
             let D = (nr > 0).then(|| linalg::matmul(&V2, &V2t, n, nr, n));
             (P11, V1.clone(), D, None)
@@ -440,7 +514,14 @@ impl EllipsoidBoundaryDistance {
         // Descending order (Notation 7.1); λ under the rank threshold are free directions (7.18).
         let order: Vec<usize> = (0..r).rev().collect();
         let lmax = ep.max();
-        let q = if lmax > 0.0 { order.iter().filter(|&&k| ep.values[k] > RANK_TOL_REL * lmax).count() } else { 0 };
+        let q = if lmax > 0.0 {
+            order
+                .iter()
+                .filter(|&&k| ep.values[k] > RANK_TOL_REL * lmax)
+                .count()
+        } else {
+            0
+        };
         let mut U = vec![0.0; r * r];
         for (j, &k) in order.iter().enumerate() {
             for i in 0..r {
@@ -480,8 +561,30 @@ impl EllipsoidBoundaryDistance {
             });
         }
         let ill_conditioned = q > 0 && lambda[0] > ILL_CONDITIONED * lambda[q - 1];
-        let core = if q > 0 { Some(StandardForm::new(lambda)?) } else { None };
-        Ok(Self { n, c, r, T, B, D, core, escape, settings, Q, R, ill_conditioned })
+        let rho_max = rho.iter().cloned().fold(0.0, f64::max);
+        let rho_min = rho.iter().cloned().fold(f64::INFINITY, f64::min);
+        let check_constraint = (q > 0 && lambda[0] > CHECK_CONDITIONED * lambda[q - 1])
+            || (r > 0 && rho_max > CHECK_CONDITIONED * CHECK_CONDITIONED * rho_min);
+        let core = if q > 0 {
+            Some(StandardForm::new(lambda)?)
+        } else {
+            None
+        };
+        Ok(Self {
+            n,
+            c,
+            r,
+            T,
+            B,
+            D,
+            core,
+            escape,
+            settings,
+            Q,
+            R,
+            ill_conditioned,
+            check_constraint,
+        })
     }
 
     /// Ambient dimension n.
@@ -519,8 +622,15 @@ impl EllipsoidBoundaryDistance {
 
     fn check_point(&self, xbar: &[f64], ws: &BoundaryWorkspace) -> Result<(), GeometryError> {
         linalg::check_vector("query point", xbar, self.n)?;
-        if ws.u.len() != self.n || ws.zbar.len() != self.r || ws.kkt.len() != (self.n + 1) * (self.n + 1) {
-            return Err(GeometryError::Dimension { what: "boundary workspace", expected: self.n, got: ws.u.len() });
+        if ws.u.len() != self.n
+            || ws.zbar.len() != self.r
+            || ws.kkt.len() != (self.n + 1) * (self.n + 1)
+        {
+            return Err(GeometryError::Dimension {
+                what: "boundary workspace",
+                expected: self.n,
+                got: ws.u.len(),
+            });
         }
         Ok(())
     }
@@ -574,35 +684,58 @@ impl EllipsoidBoundaryDistance {
     ) -> Result<BoundarySolution, GeometryError> {
         self.check_point(xbar, ws)?;
         if x_star.len() != self.n {
-            return Err(GeometryError::Dimension { what: "witness buffer", expected: self.n, got: x_star.len() });
+            return Err(GeometryError::Dimension {
+                what: "witness buffer",
+                expected: self.n,
+                got: x_star.len(),
+            });
         }
         let q = self.core.as_ref().map_or(0, |c| c.dim());
         self.standardize(xbar, &mut ws.zbar);
         if let Some(esc) = &self.escape {
             // §7.2.2: if ȳ₁ᵀSȳ₁ ≤ 1 the point (ȳ₁, some y₂) is on the boundary: zero cost.
             let level: f64 = match &self.core {
-                Some(core) => core.lambda().iter().zip(&ws.zbar).map(|(l, z)| l * z * z).sum(),
+                Some(core) => core
+                    .lambda()
+                    .iter()
+                    .zip(&ws.zbar)
+                    .map(|(l, z)| l * z * z)
+                    .sum(),
                 None => 0.0,
             };
             if level <= 1.0 {
                 self.zero_cost_point(esc, xbar, ws, x_star);
-                return Ok(BoundarySolution { value: 0.0, kind: OptimumKind::ZeroCost, mu: f64::NAN, iterations: 0 });
+                return Ok(BoundarySolution {
+                    value: 0.0,
+                    kind: OptimumKind::ZeroCost,
+                    mu: f64::NAN,
+                    iterations: 0,
+                });
             }
         }
         let Some(core) = &self.core else {
             // Unreachable by construction (q = 0 implies an escape, whose level is 0 ≤ 1).
-            return Err(GeometryError::Degenerate { what: "ellipsoid boundary distance", reason: "empty standard form".into() });
+            return Err(GeometryError::Degenerate {
+                what: "ellipsoid boundary distance",
+                reason: "empty standard form".into(),
+            });
         };
         let sol = core.solve(&ws.zbar[..q], &mut ws.zstar[..q], &self.settings);
         ws.zstar[q..].copy_from_slice(&ws.zbar[q..]);
         self.destandardize(xbar, &ws.zstar, x_star);
         let mut value = sol.value_sq.sqrt();
-        if self.ill_conditioned || self.constraint_error(x_star, ws) > REFINE_TRIGGER {
+        let check = self.check_constraint || sol.iterations >= self.settings.max_iter;
+        if self.ill_conditioned || (check && self.constraint_error(x_star, ws) > REFINE_TRIGGER) {
             if let Some(v) = self.refine(xbar, sol.mu, ws, x_star) {
                 value = v;
             }
         }
-        Ok(BoundarySolution { value, kind: sol.kind, mu: sol.mu, iterations: sol.iterations })
+        Ok(BoundarySolution {
+            value,
+            kind: sol.kind,
+            mu: sol.mu,
+            iterations: sol.iterations,
+        })
     }
 
     /// The optimal value of (7.2) as a distance, without keeping the witness point. Allocation-free.
@@ -637,7 +770,13 @@ impl EllipsoidBoundaryDistance {
     /// constraint violation that these steps remove (quadratic convergence from the nearby KKT point).
     /// Returns the refined distance, or `None` (and leaves `x` unchanged) if refinement did not help.
     /// Allocation-free: works in the workspace.
-    fn refine(&self, xbar: &[f64], mu0: f64, ws: &mut BoundaryWorkspace, x: &mut [f64]) -> Option<f64> {
+    fn refine(
+        &self,
+        xbar: &[f64],
+        mu0: f64,
+        ws: &mut BoundaryWorkspace,
+        x: &mut [f64],
+    ) -> Option<f64> {
         let n = self.n;
         let m = n + 1;
         let err0 = self.constraint_error(x, ws);
@@ -683,7 +822,9 @@ impl EllipsoidBoundaryDistance {
         let mut size = 1.0_f64;
         for i in 0..n {
             moved = moved.max((x[i] - ws.saved[i]).abs());
-            size = size.max((ws.saved[i] - self.c[i]).abs()).max((ws.saved[i] - xbar[i]).abs());
+            size = size
+                .max((ws.saved[i] - self.c[i]).abs())
+                .max((ws.saved[i] - xbar[i]).abs());
         }
         if err1.is_finite() && err1 <= err0 && moved <= 1e-4 * size {
             let mut v = 0.0;
@@ -714,15 +855,27 @@ impl EllipsoidBoundaryDistance {
     ) -> Result<(), GeometryError> {
         let n = self.n;
         if points.len() % n != 0 {
-            return Err(GeometryError::Dimension { what: "batch points (multiple of n)", expected: n, got: points.len() % n });
+            return Err(GeometryError::Dimension {
+                what: "batch points (multiple of n)",
+                expected: n,
+                got: points.len() % n,
+            });
         }
         let N = points.len() / n;
         if values.len() != N {
-            return Err(GeometryError::Dimension { what: "batch values", expected: N, got: values.len() });
+            return Err(GeometryError::Dimension {
+                what: "batch values",
+                expected: N,
+                got: values.len(),
+            });
         }
         if let Some(w) = witnesses.as_deref() {
             if w.len() != N * n {
-                return Err(GeometryError::Dimension { what: "batch witnesses", expected: N * n, got: w.len() });
+                return Err(GeometryError::Dimension {
+                    what: "batch witnesses",
+                    expected: N * n,
+                    got: w.len(),
+                });
             }
         }
         let mut ws = self.workspace();
@@ -737,7 +890,13 @@ impl EllipsoidBoundaryDistance {
     }
 
     /// A boundary point reached from x̄ along the null space of R (zero cost), §7.2.2.
-    fn zero_cost_point(&self, esc: &Escape, xbar: &[f64], ws: &mut BoundaryWorkspace, x_star: &mut [f64]) {
+    fn zero_cost_point(
+        &self,
+        esc: &Escape,
+        xbar: &[f64],
+        ws: &mut BoundaryWorkspace,
+        x_star: &mut [f64],
+    ) {
         let n = self.n;
         for i in 0..n {
             ws.u[i] = xbar[i] - self.c[i];
@@ -758,8 +917,13 @@ impl EllipsoidBoundaryDistance {
         // h(x̄ + t d) − 1 = a t² + 2 b t + (h − 1).
         let b = linalg::dot(&ws.t2, &ws.t1);
         let a = linalg::quad_form(&esc.Q, &ws.t2);
-        let t = linalg::smallest_nonneg_root(a, b, h - 1.0)
-            .unwrap_or_else(|| if a > 0.0 { (-b / a).max(0.0) } else { 0.0 });
+        let t = linalg::smallest_nonneg_root(a, b, h - 1.0).unwrap_or_else(|| {
+            if a > 0.0 {
+                (-b / a).max(0.0)
+            } else {
+                0.0
+            }
+        });
         for i in 0..n {
             x_star[i] = xbar[i] + t * ws.t2[i];
         }
@@ -769,7 +933,13 @@ impl EllipsoidBoundaryDistance {
 /// Solve J s = b for a square m×m row-major J by Gaussian elimination with complete pivoting; pivots under
 /// 1e-14 of the largest entry end the elimination and the corresponding unknowns are set to 0 (a basic
 /// solution of a consistent singular system). Destroys `J` and `b`. Allocation-free.
-fn solve_complete_pivoting(m: usize, J: &mut [f64], b: &mut [f64], perm: &mut [usize], out: &mut [f64]) {
+fn solve_complete_pivoting(
+    m: usize,
+    J: &mut [f64],
+    b: &mut [f64],
+    perm: &mut [usize],
+    out: &mut [f64],
+) {
     for (k, p) in perm.iter_mut().enumerate().take(m) {
         *p = k;
     }
@@ -835,6 +1005,9 @@ fn solve_complete_pivoting(m: usize, J: &mut [f64], b: &mut [f64], perm: &mut [u
 /// Condition λmax/λmin of the standard form above which every answer is refined in the original coordinates
 /// (the smallest eigenvalues then carry a relative error of about ε·λmax/λmin).
 const ILL_CONDITIONED: f64 = 1e6;
+/// Condition above which each returned point's constraint is checked (λmax/λmin of the standard form, or its
+/// square for the eigenvalues of R, which enter through their square roots).
+const CHECK_CONDITIONED: f64 = 1e3;
 /// Relative constraint violation of a returned point above which it is refined.
 const REFINE_TRIGGER: f64 = 1e-12;
 

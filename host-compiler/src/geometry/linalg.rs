@@ -4,9 +4,9 @@
 //! touches faer types.
 
 use super::GeometryError;
+use faer::diag::Diag;
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::evd::{self_adjoint_evd, self_adjoint_evd_scratch, ComputeEigenvectors};
-use faer::diag::Diag;
 use faer::{Mat, Par};
 
 /// Relative tolerance for symmetry checks of user-supplied matrices: |Aᵢⱼ − Aⱼᵢ| ≤ tol · max(1, maxₖₗ |Aₖₗ|).
@@ -18,9 +18,17 @@ pub(crate) const PSD_TOL: f64 = 1e-10;
 pub(crate) const RANK_TOL: f64 = 1e-13;
 
 /// Check that `v` has `expected` entries, all finite.
-pub(crate) fn check_vector(what: &'static str, v: &[f64], expected: usize) -> Result<(), GeometryError> {
+pub(crate) fn check_vector(
+    what: &'static str,
+    v: &[f64],
+    expected: usize,
+) -> Result<(), GeometryError> {
     if v.len() != expected {
-        return Err(GeometryError::Dimension { what, expected, got: v.len() });
+        return Err(GeometryError::Dimension {
+            what,
+            expected,
+            got: v.len(),
+        });
     }
     check_finite(what, v)
 }
@@ -28,7 +36,11 @@ pub(crate) fn check_vector(what: &'static str, v: &[f64], expected: usize) -> Re
 /// Check that every entry of `v` is finite.
 pub(crate) fn check_finite(what: &'static str, v: &[f64]) -> Result<(), GeometryError> {
     match v.iter().position(|x| !x.is_finite()) {
-        Some(index) => Err(GeometryError::NotFinite { what, index, value: v[index] }),
+        Some(index) => Err(GeometryError::NotFinite {
+            what,
+            index,
+            value: v[index],
+        }),
         None => Ok(()),
     }
 }
@@ -39,7 +51,11 @@ pub(crate) fn max_abs(v: &[f64]) -> f64 {
 }
 
 /// Validate a row-major n×n matrix as symmetric and finite; return its symmetrised copy ½(A + Aᵀ).
-pub(crate) fn symmetrize_checked(what: &'static str, n: usize, A: &[f64]) -> Result<Vec<f64>, GeometryError> {
+pub(crate) fn symmetrize_checked(
+    what: &'static str,
+    n: usize,
+    A: &[f64],
+) -> Result<Vec<f64>, GeometryError> {
     check_vector(what, A, n * n)?;
     let scale = max_abs(A).max(1.0);
     let mut S = vec![0.0; n * n];
@@ -70,7 +86,11 @@ impl SymEig {
     pub fn new(what: &'static str, n: usize, A: &[f64]) -> Result<Self, GeometryError> {
         debug_assert_eq!(A.len(), n * n);
         if n == 0 {
-            return Ok(Self { n, values: vec![], vectors: vec![] });
+            return Ok(Self {
+                n,
+                values: vec![],
+                vectors: vec![],
+            });
         }
         let M = Mat::<f64>::from_fn(n, n, |i, j| 0.5 * (A[i * n + j] + A[j * n + i]));
         let mut U = Mat::<f64>::zeros(n, n);
@@ -131,7 +151,10 @@ impl SymEig {
     pub fn check_psd(&self, what: &'static str) -> Result<(), GeometryError> {
         let big = self.values.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
         if self.min() < -PSD_TOL * big {
-            return Err(GeometryError::NotPsd { what, min_eigenvalue: self.min() });
+            return Err(GeometryError::NotPsd {
+                what,
+                min_eigenvalue: self.min(),
+            });
         }
         Ok(())
     }
@@ -292,8 +315,14 @@ mod tests {
         assert!(e.values.windows(2).all(|w| w[0] <= w[1]));
         for i in 0..3 {
             for j in 0..3 {
-                let r: f64 = (0..3).map(|k| e.vectors[i * 3 + k] * e.values[k] * e.vectors[j * 3 + k]).sum();
-                assert!((r - A[i * 3 + j]).abs() < 1e-13, "({i},{j}): {r} vs {}", A[i * 3 + j]);
+                let r: f64 = (0..3)
+                    .map(|k| e.vectors[i * 3 + k] * e.values[k] * e.vectors[j * 3 + k])
+                    .sum();
+                assert!(
+                    (r - A[i * 3 + j]).abs() < 1e-13,
+                    "({i},{j}): {r} vs {}",
+                    A[i * 3 + j]
+                );
             }
         }
     }
@@ -337,6 +366,9 @@ mod tests {
             symmetrize_checked("Q", 2, &[1.0, f64::NAN, f64::NAN, 1.0]),
             Err(GeometryError::NotFinite { .. })
         ));
-        assert!(matches!(symmetrize_checked("Q", 2, &[1.0]), Err(GeometryError::Dimension { .. })));
+        assert!(matches!(
+            symmetrize_checked("Q", 2, &[1.0]),
+            Err(GeometryError::Dimension { .. })
+        ));
     }
 }

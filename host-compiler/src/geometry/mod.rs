@@ -26,8 +26,8 @@ pub(crate) mod linalg;
 pub use combinators::{Complement, InOutput, Union};
 pub use ellipsoid::{Ball, Ellipsoid};
 pub use ellipsoid_distance::{
-    BoundaryDistanceSettings, BoundarySolution, BoundaryWorkspace, EllipsoidBoundaryDistance, OptimumKind,
-    StandardForm,
+    BoundaryDistanceSettings, BoundarySolution, BoundaryWorkspace, EllipsoidBoundaryDistance,
+    OptimumKind, StandardForm,
 };
 pub use polytope::Polytope;
 
@@ -35,19 +35,40 @@ pub use polytope::Polytope;
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum GeometryError {
     #[error("{what}: expected {expected} entries, got {got}")]
-    Dimension { what: &'static str, expected: usize, got: usize },
+    Dimension {
+        what: &'static str,
+        expected: usize,
+        got: usize,
+    },
     #[error("{what}: entry {index} is not finite ({value})")]
-    NotFinite { what: &'static str, index: usize, value: f64 },
+    NotFinite {
+        what: &'static str,
+        index: usize,
+        value: f64,
+    },
     #[error("{what}: not symmetric, entry ({i},{j}) = {a} but ({j},{i}) = {b}")]
-    NotSymmetric { what: &'static str, i: usize, j: usize, a: f64, b: f64 },
+    NotSymmetric {
+        what: &'static str,
+        i: usize,
+        j: usize,
+        a: f64,
+        b: f64,
+    },
     #[error("{what}: not positive semidefinite (smallest eigenvalue {min_eigenvalue:e})")]
-    NotPsd { what: &'static str, min_eigenvalue: f64 },
+    NotPsd {
+        what: &'static str,
+        min_eigenvalue: f64,
+    },
     #[error("{what}: must not be the zero matrix")]
     ZeroMatrix { what: &'static str },
     #[error("{what}: must be positive and finite, got {value}")]
     NotPositive { what: &'static str, value: f64 },
     #[error("{what}: has rank {rank}, needs full row rank {expected}")]
-    RankDeficient { what: &'static str, rank: usize, expected: usize },
+    RankDeficient {
+        what: &'static str,
+        rank: usize,
+        expected: usize,
+    },
     #[error("{what}: the dimension must be at least 1")]
     ZeroDimension { what: &'static str },
     #[error("eigendecomposition of {what} did not converge")]
@@ -59,7 +80,12 @@ pub enum GeometryError {
     #[error("union: needs at least one member")]
     EmptyUnion,
     #[error("{what}: member {index} lives in ℝ^{got}, expected ℝ^{expected}")]
-    MemberDimension { what: &'static str, index: usize, expected: usize, got: usize },
+    MemberDimension {
+        what: &'static str,
+        index: usize,
+        expected: usize,
+        got: usize,
+    },
     #[error("{what}: quadratic-programming solver ended with status {status}")]
     Solver { what: &'static str, status: String },
     #[error("{what}: {reason}")]
@@ -129,7 +155,10 @@ impl Witness {
     /// The witness reported by the infallible [`Region`] methods when the query itself is invalid (wrong
     /// dimension, bad metric): value NaN and no point. Use the `try_*` methods to get the error instead.
     pub fn invalid() -> Self {
-        Self { value: f64::NAN, point: Vec::new() }
+        Self {
+            value: f64::NAN,
+            point: Vec::new(),
+        }
     }
 
     /// Convert a `try_*` result to the infallible form, logging the error.
@@ -191,7 +220,11 @@ pub trait Region: Send + Sync {
 pub(crate) fn check_query(n: usize, x: &[f64], metric: &Metric) -> Result<(), GeometryError> {
     linalg::check_vector("query point", x, n)?;
     if metric.n != n {
-        return Err(GeometryError::Dimension { what: "metric dimension", expected: n, got: metric.n });
+        return Err(GeometryError::Dimension {
+            what: "metric dimension",
+            expected: n,
+            got: metric.n,
+        });
     }
     linalg::check_vector("metric R", &metric.R, n * n)
 }
@@ -203,9 +236,18 @@ mod tests {
     #[test]
     fn metric_new_validates() {
         assert!(Metric::new(2, vec![1.0, 0.0, 0.0, 1.0]).is_ok());
-        assert!(matches!(Metric::new(2, vec![1.0, 2.0, 2.0, 1.0]), Err(GeometryError::NotPsd { .. })));
-        assert!(matches!(Metric::new(2, vec![1.0, 0.0, 0.0]), Err(GeometryError::Dimension { .. })));
-        assert!(matches!(Metric::new(0, vec![]), Err(GeometryError::ZeroDimension { .. })));
+        assert!(matches!(
+            Metric::new(2, vec![1.0, 2.0, 2.0, 1.0]),
+            Err(GeometryError::NotPsd { .. })
+        ));
+        assert!(matches!(
+            Metric::new(2, vec![1.0, 0.0, 0.0]),
+            Err(GeometryError::Dimension { .. })
+        ));
+        assert!(matches!(
+            Metric::new(0, vec![]),
+            Err(GeometryError::ZeroDimension { .. })
+        ));
         // PSD but singular is allowed: a seminorm.
         let m = Metric::new(2, vec![1.0, 0.0, 0.0, 0.0]).unwrap();
         assert_eq!(m.distance(&[0.0, 0.0], &[0.0, 5.0]), 0.0);

@@ -38,13 +38,23 @@ pub struct Polytope {
 
 impl Clone for Polytope {
     fn clone(&self) -> Self {
-        Self { n: self.n, k: self.k, A: self.A.clone(), b: self.b.clone(), cache: MetricCache::default() }
+        Self {
+            n: self.n,
+            k: self.k,
+            A: self.A.clone(),
+            b: self.b.clone(),
+            cache: MetricCache::default(),
+        }
     }
 }
 
 impl std::fmt::Debug for Polytope {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Polytope").field("n", &self.n).field("A", &self.A).field("b", &self.b).finish()
+        f.debug_struct("Polytope")
+            .field("n", &self.n)
+            .field("A", &self.A)
+            .field("b", &self.b)
+            .finish()
     }
 }
 
@@ -92,7 +102,13 @@ impl Polytope {
         if !any {
             return Err(GeometryError::NoConstraints);
         }
-        let p = Self { n, k, A, b, cache: MetricCache::default() };
+        let p = Self {
+            n,
+            k,
+            A,
+            b,
+            cache: MetricCache::default(),
+        };
         p.check_nonempty()?;
         Ok(p)
     }
@@ -115,7 +131,9 @@ impl Polytope {
     }
     /// The largest violation maxᵢ (aᵢᵀx − bᵢ) (≤ 0 inside). No length check beyond a debug assertion.
     pub fn max_violation(&self, x: &[f64]) -> f64 {
-        (0..self.k).map(|i| linalg::dot(&self.A[i * self.n..(i + 1) * self.n], x) - self.b[i]).fold(f64::NEG_INFINITY, f64::max)
+        (0..self.k)
+            .map(|i| linalg::dot(&self.A[i * self.n..(i + 1) * self.n], x) - self.b[i])
+            .fold(f64::NEG_INFINITY, f64::max)
     }
 
     fn check_nonempty(&self) -> Result<(), GeometryError> {
@@ -124,13 +142,28 @@ impl Polytope {
         let Ac = csc_from_dense(self.k, n, |i, j| self.A[i * n + j], false);
         let q = vec![0.0; n];
         let settings = qp_settings();
-        let mut solver = DefaultSolver::new(&P, &q, &Ac, &self.b, &[SupportedConeT::NonnegativeConeT(self.k)], settings)
-            .map_err(|e| GeometryError::Solver { what: "polytope feasibility LP", status: e.to_string() })?;
+        let mut solver = DefaultSolver::new(
+            &P,
+            &q,
+            &Ac,
+            &self.b,
+            &[SupportedConeT::NonnegativeConeT(self.k)],
+            settings,
+        )
+        .map_err(|e| GeometryError::Solver {
+            what: "polytope feasibility LP",
+            status: e.to_string(),
+        })?;
         solver.solve();
         match solver.solution.status {
             SolverStatus::Solved | SolverStatus::AlmostSolved => Ok(()),
-            SolverStatus::PrimalInfeasible | SolverStatus::AlmostPrimalInfeasible => Err(GeometryError::EmptyPolytope),
-            s => Err(GeometryError::Solver { what: "polytope feasibility LP", status: s.to_string() }),
+            SolverStatus::PrimalInfeasible | SolverStatus::AlmostPrimalInfeasible => {
+                Err(GeometryError::EmptyPolytope)
+            }
+            s => Err(GeometryError::Solver {
+                what: "polytope feasibility LP",
+                status: s.to_string(),
+            }),
         }
     }
 
@@ -166,7 +199,10 @@ impl Polytope {
                 linalg::matvec(&Rp, n, n, a, &mut g);
                 let aRa = linalg::dot(a, &g);
                 if aRa > 0.0 && aRa.is_finite() {
-                    rows.push(FacetStep::Norm { dual: aRa.sqrt(), step: g.iter().map(|v| v / aRa).collect() });
+                    rows.push(FacetStep::Norm {
+                        dual: aRa.sqrt(),
+                        step: g.iter().map(|v| v / aRa).collect(),
+                    });
                 } else {
                     // R⁺a vanished numerically: a is (numerically) in the null space after all.
                     let s = linalg::dot(a, a);
@@ -181,23 +217,41 @@ impl Polytope {
     fn project(&self, x: &[f64], R: &[f64]) -> Result<Witness, GeometryError> {
         let (n, k) = (self.n, self.k);
         // rhs = b − A x; constraint A d ≤ rhs.
-        let rhs: Vec<f64> = (0..k).map(|i| self.b[i] - linalg::dot(&self.A[i * n..(i + 1) * n], x)).collect();
+        let rhs: Vec<f64> = (0..k)
+            .map(|i| self.b[i] - linalg::dot(&self.A[i * n..(i + 1) * n], x))
+            .collect();
         let P = csc_from_dense(n, n, |i, j| R[i * n + j], true);
         let Ac = csc_from_dense(k, n, |i, j| self.A[i * n + j], false);
         let q = vec![0.0; n];
-        let mut solver =
-            DefaultSolver::new(&P, &q, &Ac, &rhs, &[SupportedConeT::NonnegativeConeT(k)], qp_settings())
-                .map_err(|e| GeometryError::Solver { what: "polytope distance QP (7.1)", status: e.to_string() })?;
+        let mut solver = DefaultSolver::new(
+            &P,
+            &q,
+            &Ac,
+            &rhs,
+            &[SupportedConeT::NonnegativeConeT(k)],
+            qp_settings(),
+        )
+        .map_err(|e| GeometryError::Solver {
+            what: "polytope distance QP (7.1)",
+            status: e.to_string(),
+        })?;
         solver.solve();
         let sol = &solver.solution;
         match sol.status {
             SolverStatus::Solved | SolverStatus::AlmostSolved => {}
-            s => return Err(GeometryError::Solver { what: "polytope distance QP (7.1)", status: s.to_string() }),
+            s => {
+                return Err(GeometryError::Solver {
+                    what: "polytope distance QP (7.1)",
+                    status: s.to_string(),
+                })
+            }
         }
         let d_ipm = sol.x.clone();
         let obj_ipm = linalg::quad_form(R, &d_ipm);
         let viol = |d: &[f64]| -> f64 {
-            (0..k).map(|i| linalg::dot(&self.A[i * n..(i + 1) * n], d) - rhs[i]).fold(f64::NEG_INFINITY, f64::max)
+            (0..k)
+                .map(|i| linalg::dot(&self.A[i * n..(i + 1) * n], d) - rhs[i])
+                .fold(f64::NEG_INFINITY, f64::max)
         };
         let scale = 1.0 + linalg::max_abs(&rhs);
         let mut d = d_ipm.clone();
@@ -216,7 +270,9 @@ impl Polytope {
 
     fn depth_inside(&self, x: &[f64], steps: &FacetSteps) -> Witness {
         let n = self.n;
-        let slack: Vec<f64> = (0..self.k).map(|i| self.b[i] - linalg::dot(&self.A[i * n..(i + 1) * n], x)).collect();
+        let slack: Vec<f64> = (0..self.k)
+            .map(|i| self.b[i] - linalg::dot(&self.A[i * n..(i + 1) * n], x))
+            .collect();
         let mut best: Option<(f64, usize)> = None;
         for (i, st) in steps.rows.iter().enumerate() {
             let s = slack[i].max(0.0);
@@ -231,11 +287,16 @@ impl Polytope {
         }
         let Some((value, i)) = best else {
             // Unreachable: construction guarantees a nonzero row.
-            return Witness { value: f64::INFINITY, point: Vec::new() };
+            return Witness {
+                value: f64::INFINITY,
+                point: Vec::new(),
+            };
         };
         let s = slack[i].max(0.0);
         let step: Vec<f64> = match &steps.rows[i] {
-            FacetStep::Free(g) | FacetStep::Norm { step: g, .. } => g.iter().map(|v| v * s).collect(),
+            FacetStep::Free(g) | FacetStep::Norm { step: g, .. } => {
+                g.iter().map(|v| v * s).collect()
+            }
             FacetStep::Never => vec![0.0; n],
         };
         // First crossing of the boundary on the segment x → x + step.
@@ -264,7 +325,12 @@ fn qp_settings() -> DefaultSettings<f64> {
 }
 
 /// Row/column-major dense → CSC (optionally the upper triangle only, as clarabel wants for P).
-fn csc_from_dense(m: usize, n: usize, get: impl Fn(usize, usize) -> f64, upper: bool) -> CscMatrix<f64> {
+fn csc_from_dense(
+    m: usize,
+    n: usize,
+    get: impl Fn(usize, usize) -> f64,
+    upper: bool,
+) -> CscMatrix<f64> {
     let mut colptr = Vec::with_capacity(n + 1);
     let mut rowval = Vec::new();
     let mut nzval = Vec::new();
@@ -313,7 +379,11 @@ fn polish(n: usize, R: &[f64], A: &[f64], rhs: &[f64], active: &[usize]) -> Opti
     // Consistency: K sol = f.
     let mut res = vec![0.0; N];
     linalg::matvec(&K, N, N, &sol, &mut res);
-    let err = res.iter().zip(&f).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+    let err = res
+        .iter()
+        .zip(&f)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0, f64::max);
     if !(err <= 1e-10 * (1.0 + linalg::max_abs(&f))) {
         return None;
     }
@@ -326,7 +396,9 @@ impl Region for Polytope {
         self.n
     }
     fn contains(&self, x: &[f64]) -> bool {
-        x.len() == self.n && (0..self.k).all(|i| linalg::dot(&self.A[i * self.n..(i + 1) * self.n], x) <= self.b[i])
+        x.len() == self.n
+            && (0..self.k)
+                .all(|i| linalg::dot(&self.A[i * self.n..(i + 1) * self.n], x) <= self.b[i])
     }
     fn dist(&self, x: &[f64], metric: &Metric) -> Witness {
         Witness::or_invalid(self.try_dist(x, metric))
@@ -338,7 +410,10 @@ impl Region for Polytope {
         check_query(self.n, x, metric)?;
         let steps = self.steps(metric)?;
         if self.contains(x) {
-            return Ok(Witness { value: 0.0, point: x.to_vec() });
+            return Ok(Witness {
+                value: 0.0,
+                point: x.to_vec(),
+            });
         }
         self.project(x, &steps.R)
     }
@@ -346,7 +421,10 @@ impl Region for Polytope {
         check_query(self.n, x, metric)?;
         let steps = self.steps(metric)?;
         if !self.contains(x) {
-            return Ok(Witness { value: 0.0, point: x.to_vec() });
+            return Ok(Witness {
+                value: 0.0,
+                point: x.to_vec(),
+            });
         }
         Ok(self.depth_inside(x, &steps))
     }
@@ -396,7 +474,12 @@ mod tests {
     #[test]
     fn weighted_depth_matches_formula() {
         // Half-plane x₀ + x₁ ≤ 1 intersected with a far box; R = diag(4, 1).
-        let p = Polytope::new(2, vec![1.0, 1.0, -1.0, 0.0, 0.0, -1.0], vec![1.0, 10.0, 10.0]).unwrap();
+        let p = Polytope::new(
+            2,
+            vec![1.0, 1.0, -1.0, 0.0, 0.0, -1.0],
+            vec![1.0, 10.0, 10.0],
+        )
+        .unwrap();
         let m = Metric::new(2, vec![4.0, 0.0, 0.0, 1.0]).unwrap();
         let x = [0.0, 0.0];
         let expect = 1.0 / (0.25_f64 + 1.0).sqrt();
@@ -408,11 +491,26 @@ mod tests {
 
     #[test]
     fn constructor_errors() {
-        assert!(matches!(Polytope::new(2, vec![1.0, 0.0], vec![1.0, 2.0]), Err(GeometryError::Dimension { .. })));
-        assert!(matches!(Polytope::new(1, vec![0.0], vec![1.0]), Err(GeometryError::NoConstraints)));
-        assert!(matches!(Polytope::new(1, vec![0.0], vec![-1.0]), Err(GeometryError::EmptyPolytope)));
-        assert!(matches!(Polytope::new(1, vec![1.0, -1.0], vec![0.0, -1.0]), Err(GeometryError::EmptyPolytope)));
-        assert!(matches!(Polytope::new(1, vec![f64::INFINITY], vec![1.0]), Err(GeometryError::NotFinite { .. })));
+        assert!(matches!(
+            Polytope::new(2, vec![1.0, 0.0], vec![1.0, 2.0]),
+            Err(GeometryError::Dimension { .. })
+        ));
+        assert!(matches!(
+            Polytope::new(1, vec![0.0], vec![1.0]),
+            Err(GeometryError::NoConstraints)
+        ));
+        assert!(matches!(
+            Polytope::new(1, vec![0.0], vec![-1.0]),
+            Err(GeometryError::EmptyPolytope)
+        ));
+        assert!(matches!(
+            Polytope::new(1, vec![1.0, -1.0], vec![0.0, -1.0]),
+            Err(GeometryError::EmptyPolytope)
+        ));
+        assert!(matches!(
+            Polytope::new(1, vec![f64::INFINITY], vec![1.0]),
+            Err(GeometryError::NotFinite { .. })
+        ));
         assert!(Polytope::new(1, vec![1.0, -1.0], vec![0.0, 0.0]).is_ok()); // a single point is fine
     }
 }

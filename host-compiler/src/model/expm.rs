@@ -10,7 +10,12 @@ use faer::linalg::solvers::Solve;
 use faer::{Mat, MatRef};
 
 /// θ_m: the largest ‖A‖₁ for which the degree-m Padé approximant is accurate to unit roundoff.
-const THETA: [(usize, f64); 4] = [(3, 1.495585217958292e-2), (5, 2.539398330063230e-1), (7, 9.504178996162932e-1), (9, 2.097847961257068e0)];
+const THETA: [(usize, f64); 4] = [
+    (3, 1.495585217958292e-2),
+    (5, 2.539398330063230e-1),
+    (7, 9.504178996162932e-1),
+    (9, 2.097847961257068e0),
+];
 const THETA_13: f64 = 5.371920351148152e0;
 
 /// Numerator coefficients b_0..b_m of the diagonal Padé approximant of degree m (the denominator has the same
@@ -19,8 +24,21 @@ fn pade_coefficients(m: usize) -> &'static [f64] {
     match m {
         3 => &[120.0, 60.0, 12.0, 1.0],
         5 => &[30240.0, 15120.0, 3360.0, 420.0, 30.0, 1.0],
-        7 => &[17297280.0, 8648640.0, 1995840.0, 277200.0, 25200.0, 1512.0, 56.0, 1.0],
-        9 => &[17643225600.0, 8821612800.0, 2075673600.0, 302702400.0, 30270240.0, 2162160.0, 110880.0, 3960.0, 90.0, 1.0],
+        7 => &[
+            17297280.0, 8648640.0, 1995840.0, 277200.0, 25200.0, 1512.0, 56.0, 1.0,
+        ],
+        9 => &[
+            17643225600.0,
+            8821612800.0,
+            2075673600.0,
+            302702400.0,
+            30270240.0,
+            2162160.0,
+            110880.0,
+            3960.0,
+            90.0,
+            1.0,
+        ],
         _ => &[
             64764752532480000.0,
             32382376266240000.0,
@@ -41,7 +59,9 @@ fn pade_coefficients(m: usize) -> &'static [f64] {
 }
 
 fn norm1(a: MatRef<'_, f64>) -> f64 {
-    (0..a.ncols()).map(|j| (0..a.nrows()).map(|i| a[(i, j)].abs()).sum::<f64>()).fold(0.0, f64::max)
+    (0..a.ncols())
+        .map(|j| (0..a.nrows()).map(|i| a[(i, j)].abs()).sum::<f64>())
+        .fold(0.0, f64::max)
 }
 
 fn identity(n: usize) -> Mat<f64> {
@@ -64,10 +84,22 @@ fn pade(a: &Mat<f64>, m: usize) -> Mat<f64> {
         let a4 = &a2 * &a2;
         let a6 = &a4 * &a2;
         let u_inner = &a6 * lin(&[(b[13], &a6), (b[11], &a4), (b[9], &a2)]);
-        let u_inner = lin(&[(1.0, &u_inner), (b[7], &a6), (b[5], &a4), (b[3], &a2), (b[1], &id)]);
+        let u_inner = lin(&[
+            (1.0, &u_inner),
+            (b[7], &a6),
+            (b[5], &a4),
+            (b[3], &a2),
+            (b[1], &id),
+        ]);
         let u = a * u_inner;
         let v = &a6 * lin(&[(b[12], &a6), (b[10], &a4), (b[8], &a2)]);
-        let v = lin(&[(1.0, &v), (b[6], &a6), (b[4], &a4), (b[2], &a2), (b[0], &id)]);
+        let v = lin(&[
+            (1.0, &v),
+            (b[6], &a6),
+            (b[4], &a4),
+            (b[2], &a2),
+            (b[0], &id),
+        ]);
         (u, v)
     } else {
         // Powers A^0, A^2, ..., A^(m-1).
@@ -76,8 +108,16 @@ fn pade(a: &Mat<f64>, m: usize) -> Mat<f64> {
             let next = &pows[pows.len() - 1] * &a2;
             pows.push(next);
         }
-        let odd: Vec<(f64, &Mat<f64>)> = pows.iter().enumerate().map(|(k, p)| (b[2 * k + 1], p)).collect();
-        let even: Vec<(f64, &Mat<f64>)> = pows.iter().enumerate().map(|(k, p)| (b[2 * k], p)).collect();
+        let odd: Vec<(f64, &Mat<f64>)> = pows
+            .iter()
+            .enumerate()
+            .map(|(k, p)| (b[2 * k + 1], p))
+            .collect();
+        let even: Vec<(f64, &Mat<f64>)> = pows
+            .iter()
+            .enumerate()
+            .map(|(k, p)| (b[2 * k], p))
+            .collect();
         (a * lin(&odd), lin(&even))
     };
     let p = lin(&[(1.0, &v), (1.0, &u)]);
@@ -88,7 +128,11 @@ fn pade(a: &Mat<f64>, m: usize) -> Mat<f64> {
 /// e^M for a square, finite M.
 pub fn expm(M: MatRef<'_, f64>) -> Result<Mat<f64>, ModelError> {
     if M.nrows() != M.ncols() {
-        return Err(ModelError::Dimension { what: "expm argument", expected: "a square matrix".into(), got: format!("{}×{}", M.nrows(), M.ncols()) });
+        return Err(ModelError::Dimension {
+            what: "expm argument",
+            expected: "a square matrix".into(),
+            got: format!("{}×{}", M.nrows(), M.ncols()),
+        });
     }
     check_finite("expm argument", M)?;
     let a = M.to_owned();
@@ -98,7 +142,11 @@ pub fn expm(M: MatRef<'_, f64>) -> Result<Mat<f64>, ModelError> {
             return Ok(pade(&a, m));
         }
     }
-    let s = if norm > THETA_13 { (norm / THETA_13).log2().ceil() as i32 } else { 0 };
+    let s = if norm > THETA_13 {
+        (norm / THETA_13).log2().ceil() as i32
+    } else {
+        0
+    };
     let scale = 0.5f64.powi(s);
     let scaled = Mat::from_fn(a.nrows(), a.ncols(), |i, j| a[(i, j)] * scale);
     let mut r = pade(&scaled, 13);

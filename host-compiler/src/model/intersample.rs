@@ -44,12 +44,19 @@ impl InterSampleBound {
         let mu = if n == 0 {
             0.0
         } else {
-            let ev = sym.self_adjoint_eigenvalues(Side::Lower).map_err(|_| ModelError::NonFinite { what: "A" })?;
+            let ev = sym
+                .self_adjoint_eigenvalues(Side::Lower)
+                .map_err(|_| ModelError::NonFinite { what: "A" })?;
             ev.iter().copied().fold(f64::NEG_INFINITY, f64::max)
         };
         // expm1 keeps γ accurate when μh is tiny; at μ = 0 the limit is h.
         let gain = if mu == 0.0 { h } else { (mu * h).exp_m1() / mu };
-        Ok(Self { plant: plant.clone(), h, log_norm: mu, gain })
+        Ok(Self {
+            plant: plant.clone(),
+            h,
+            log_norm: mu,
+            gain,
+        })
     }
 
     /// An upper bound on sup_{τ∈[0,h]} ‖x(κh+τ) − x_κ‖₂ given the sample state x_κ and the held input u_κ.
@@ -65,11 +72,20 @@ impl InterSampleBound {
     pub fn deviation_factor(&self, K: MatRef<'_, f64>) -> Result<f64, ModelError> {
         let (n, m) = (self.plant.n(), self.plant.m());
         if K.nrows() != m || K.ncols() != n {
-            return Err(ModelError::Dimension { what: "K", expected: format!("{m}×{n}"), got: format!("{}×{}", K.nrows(), K.ncols()) });
+            return Err(ModelError::Dimension {
+                what: "K",
+                expected: format!("{m}×{n}"),
+                got: format!("{}×{}", K.nrows(), K.ncols()),
+            });
         }
         check_finite("K", K)?;
         let Acl = &self.plant.A + &self.plant.B * K;
-        let norm = Acl.singular_values().map_err(|_| ModelError::NonFinite { what: "A + BK" })?.first().copied().unwrap_or(0.0);
+        let norm = Acl
+            .singular_values()
+            .map_err(|_| ModelError::NonFinite { what: "A + BK" })?
+            .first()
+            .copied()
+            .unwrap_or(0.0);
         Ok(1.0 + self.gain * norm)
     }
 }

@@ -38,17 +38,27 @@ pub struct SampledPlant {
 fn check_AB(A: MatRef<'_, f64>, B: MatRef<'_, f64>) -> Result<(), ModelError> {
     let n = A.nrows();
     if A.ncols() != n {
-        return Err(ModelError::Dimension { what: "A", expected: "a square matrix".into(), got: format!("{}×{}", n, A.ncols()) });
+        return Err(ModelError::Dimension {
+            what: "A",
+            expected: "a square matrix".into(),
+            got: format!("{}×{}", n, A.ncols()),
+        });
     }
     if B.nrows() != n {
-        return Err(ModelError::Dimension { what: "B", expected: format!("{n} rows"), got: format!("{} rows", B.nrows()) });
+        return Err(ModelError::Dimension {
+            what: "B",
+            expected: format!("{n} rows"),
+            got: format!("{} rows", B.nrows()),
+        });
     }
     check_finite("A", A)?;
     check_finite("B", B)
 }
 
 fn mat_vec(M: MatRef<'_, f64>, x: &[f64]) -> Vec<f64> {
-    (0..M.nrows()).map(|i| (0..M.ncols()).map(|j| M[(i, j)] * x[j]).sum()).collect()
+    (0..M.nrows())
+        .map(|i| (0..M.ncols()).map(|j| M[(i, j)] * x[j]).sum())
+        .collect()
 }
 
 impl ContinuousPlant {
@@ -79,12 +89,16 @@ impl ContinuousPlant {
     /// One classical Runge–Kutta step of length `dt` with u held constant (a reference integrator for tests and
     /// fine simulation; the exact sampled map is [`ContinuousPlant::zoh`]).
     pub fn rk4_step(&self, x: &[f64], u: &[f64], dt: f64) -> Vec<f64> {
-        let add = |x: &[f64], k: &[f64], s: f64| -> Vec<f64> { x.iter().zip(k).map(|(a, b)| a + s * b).collect() };
+        let add = |x: &[f64], k: &[f64], s: f64| -> Vec<f64> {
+            x.iter().zip(k).map(|(a, b)| a + s * b).collect()
+        };
         let k1 = self.f(x, u);
         let k2 = self.f(&add(x, &k1, dt / 2.0), u);
         let k3 = self.f(&add(x, &k2, dt / 2.0), u);
         let k4 = self.f(&add(x, &k3, dt), u);
-        (0..x.len()).map(|i| x[i] + dt / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])).collect()
+        (0..x.len())
+            .map(|i| x[i] + dt / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]))
+            .collect()
     }
 
     /// Exact zero-order-hold discretisation with period `h`; see [`zoh`].
@@ -166,11 +180,15 @@ impl SampledPlant {
             crate::spec::TimeDomain::Continuous => {
                 let c = ContinuousPlant::new(A, B, p.offset.clone())?;
                 let discrete = c.zoh(p.period)?;
-                Ok(Self { discrete, continuous: Some(c) })
+                Ok(Self {
+                    discrete,
+                    continuous: Some(c),
+                })
             }
-            crate::spec::TimeDomain::Discrete => {
-                Ok(Self { discrete: DiscretePlant::new(A, B, p.offset.clone(), p.period)?, continuous: None })
-            }
+            crate::spec::TimeDomain::Discrete => Ok(Self {
+                discrete: DiscretePlant::new(A, B, p.offset.clone(), p.period)?,
+                continuous: None,
+            }),
         }
     }
 }

@@ -21,7 +21,11 @@ pub use sim::{reference_inputs, simulate_closed_loop, ClosedLoopRun};
 pub enum ModelError {
     /// A matrix or vector has the wrong shape.
     #[error("{what}: expected {expected}, got {got}")]
-    Dimension { what: &'static str, expected: String, got: String },
+    Dimension {
+        what: &'static str,
+        expected: String,
+        got: String,
+    },
     /// A NaN or infinity where a finite number is required.
     #[error("{what} contains a non-finite entry")]
     NonFinite { what: &'static str },
@@ -43,7 +47,11 @@ pub(crate) fn check_finite(what: &'static str, m: faer::MatRef<'_, f64>) -> Resu
 
 pub(crate) fn check_len(what: &'static str, v: &[f64], n: usize) -> Result<(), ModelError> {
     if v.len() != n {
-        return Err(ModelError::Dimension { what, expected: format!("length {n}"), got: format!("length {}", v.len()) });
+        return Err(ModelError::Dimension {
+            what,
+            expected: format!("length {n}"),
+            got: format!("length {}", v.len()),
+        });
     }
     if v.iter().any(|x| !x.is_finite()) {
         return Err(ModelError::NonFinite { what });

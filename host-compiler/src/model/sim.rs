@@ -13,20 +13,34 @@ pub struct ClosedLoopRun {
 
 fn check_K(K: MatRef<'_, f64>, n: usize, m: usize) -> Result<(), ModelError> {
     if K.nrows() != m || K.ncols() != n {
-        return Err(ModelError::Dimension { what: "K", expected: format!("{m}×{n}"), got: format!("{}×{}", K.nrows(), K.ncols()) });
+        return Err(ModelError::Dimension {
+            what: "K",
+            expected: format!("{m}×{n}"),
+            got: format!("{}×{}", K.nrows(), K.ncols()),
+        });
     }
     check_finite("K", K)
 }
 
 /// Run x(κ+1) = A x(κ) + B u(κ) + g with u(κ) = K x(κ) + v(κ) + ε(κ) for κ = 0..v.len(); `eps` (the bounded
 /// disturbance of Notation 3.20) is optional and, when given, must have the same length as `v`.
-pub fn simulate_closed_loop(plant: &DiscretePlant, K: MatRef<'_, f64>, x0: &[f64], v: &[Vec<f64>], eps: Option<&[Vec<f64>]>) -> Result<ClosedLoopRun, ModelError> {
+pub fn simulate_closed_loop(
+    plant: &DiscretePlant,
+    K: MatRef<'_, f64>,
+    x0: &[f64],
+    v: &[Vec<f64>],
+    eps: Option<&[Vec<f64>]>,
+) -> Result<ClosedLoopRun, ModelError> {
     let (n, m) = (plant.n(), plant.m());
     check_K(K, n, m)?;
     check_len("x0", x0, n)?;
     if let Some(e) = eps {
         if e.len() != v.len() {
-            return Err(ModelError::Dimension { what: "eps", expected: format!("{} steps", v.len()), got: format!("{} steps", e.len()) });
+            return Err(ModelError::Dimension {
+                what: "eps",
+                expected: format!("{} steps", v.len()),
+                got: format!("{} steps", e.len()),
+            });
         }
     }
     let mut x = vec![x0.to_vec()];
@@ -34,7 +48,9 @@ pub fn simulate_closed_loop(plant: &DiscretePlant, K: MatRef<'_, f64>, x0: &[f64
     for (k, vk) in v.iter().enumerate() {
         check_len("v(κ)", vk, m)?;
         let xk = &x[k];
-        let mut uk: Vec<f64> = (0..m).map(|i| (0..n).map(|j| K[(i, j)] * xk[j]).sum::<f64>() + vk[i]).collect();
+        let mut uk: Vec<f64> = (0..m)
+            .map(|i| (0..n).map(|j| K[(i, j)] * xk[j]).sum::<f64>() + vk[i])
+            .collect();
         if let Some(e) = eps {
             check_len("eps(κ)", &e[k], m)?;
             uk.iter_mut().zip(&e[k]).for_each(|(a, b)| *a += b);
@@ -48,11 +64,19 @@ pub fn simulate_closed_loop(plant: &DiscretePlant, K: MatRef<'_, f64>, x0: &[f64
 
 /// v(κ) = ũ(κ) − K x̃(κ), the discrete counterpart of (3.6): with it the closed loop started at x̃(0)
 /// reproduces the nominal trajectory (x̃, ũ) exactly, whatever K is.
-pub fn reference_inputs(K: MatRef<'_, f64>, x_nom: &[Vec<f64>], u_nom: &[Vec<f64>]) -> Result<Vec<Vec<f64>>, ModelError> {
+pub fn reference_inputs(
+    K: MatRef<'_, f64>,
+    x_nom: &[Vec<f64>],
+    u_nom: &[Vec<f64>],
+) -> Result<Vec<Vec<f64>>, ModelError> {
     let (m, n) = (K.nrows(), K.ncols());
     check_finite("K", K)?;
     if x_nom.len() < u_nom.len() {
-        return Err(ModelError::Dimension { what: "x_nom", expected: format!("at least {} states", u_nom.len()), got: format!("{}", x_nom.len()) });
+        return Err(ModelError::Dimension {
+            what: "x_nom",
+            expected: format!("at least {} states", u_nom.len()),
+            got: format!("{}", x_nom.len()),
+        });
     }
     u_nom
         .iter()
@@ -60,7 +84,9 @@ pub fn reference_inputs(K: MatRef<'_, f64>, x_nom: &[Vec<f64>], u_nom: &[Vec<f64
         .map(|(u, x)| {
             check_len("u_nom(κ)", u, m)?;
             check_len("x_nom(κ)", x, n)?;
-            Ok((0..m).map(|i| u[i] - (0..n).map(|j| K[(i, j)] * x[j]).sum::<f64>()).collect())
+            Ok((0..m)
+                .map(|i| u[i] - (0..n).map(|j| K[(i, j)] * x[j]).sum::<f64>())
+                .collect())
         })
         .collect()
 }

@@ -43,7 +43,9 @@ pub struct TrajectoryReport {
     pub tube: Vec<Ellipse2>,
     /// Applied nominal inputs ũ(κ) (one row per sample period).
     pub u: Vec<Vec<f64>>,
-    /// The largest input any state in the tube can apply at each step (same norm as the bound).
+    /// The nominal input measured as the bound measures it (‖ũ − u_c‖₂, or max_i |ũ_i|), per step.
+    pub u_nominal: Vec<f64>,
+    /// The largest input any state in the tube can apply at each step (same measure as `u_nominal`).
     pub u_worst: Vec<f64>,
 }
 
@@ -81,6 +83,8 @@ pub struct ReportData {
     /// Coverage samples that no ball covers, in the Init plane.
     pub uncovered: Vec<[f64; 2]>,
     pub coverage: crate::coverage::CoverageEstimate,
+    /// The coverage the spec asks for (its `coverage_target`).
+    pub coverage_target: f64,
     /// "covered at the requested confidence" or why the loop stopped.
     pub stop_reason: String,
     /// Input bound description (e.g. "‖u‖₂ ≤ 1") and its value for plotting.

@@ -17,6 +17,6 @@ pub mod mtl;
 pub mod safety;
 
 pub use safety::{
-    safety_robustness, safety_robustness_joint, Binding, Critical, FnInput, InputSets,
-    SafetyError, SafetyRobustness, SafetySpec, SampledTrajectory,
+    safety_robustness, safety_robustness_joint, Binding, Critical, FnInput, InputSets, SafetyError,
+    SafetyRobustness, SafetySet, SafetySpec, SampledTrajectory,
 };

@@ -24,15 +24,23 @@
 //! direction (§5.3). The certified radius is `max(δ₀, 0)`.
 //!
 //! **Cost.** One pass over the samples up to T for Goal, then one pass over the samples up to t* for
-//! Unsafe and Input: O(N) signed-distance evaluations. Ties in the argmax pick the earliest sample, which
-//! gives the shortest prefix and hence the largest δ_Unsafe and δ_Input among the maximisers.
+//! Unsafe and Input: O(N) signed-distance evaluations. The passes ask for values only; the witness
+//! points are computed once, at the critical samples. Goal and Unsafe given as [`SafetySet::Ellipsoid`]
+//! (ellipsoids and CAF balls) are factored once per call and queried without allocation through the
+//! §7.2 boundary-distance solver; any other [`Region`] goes through [`Region::signed_dist`]. Ties in the
+//! argmax pick the earliest sample, which gives the shortest prefix and hence the largest δ_Unsafe and
+//! δ_Input among the maximisers.
 //!
 //! [`safety_robustness_joint`] is a variant that chooses t* to maximise the combined radius instead of
 //! the Goal depth alone (the robustness of the until embedding of Remark 2.29, with a closed prefix); it
 //! is never smaller than the Theorem 4.7 value and is certified by the same proof, since the proof only
 //! uses that x̃(t*) is δ₀-deep in Goal and the prefix up to t* is δ₀-far from the bad sets.
 
-use crate::geometry::{Metric, Region, Witness};
+use crate::geometry::{
+    Ball, BoundaryWorkspace, Ellipsoid, EllipsoidBoundaryDistance, GeometryError, Metric, Region,
+    Witness,
+};
+use std::sync::Arc;
 
 /// Errors of the safety robustness computation: bad trajectories, mismatched dimensions and sets whose
 /// distance routines return NaN.
@@ -45,15 +53,28 @@ pub enum SafetyError {
     #[error(
         "trajectory has {times} sample times but {states} state entries; expected {expected} (= {times} × n with n = {n})"
     )]
-    LengthMismatch { times: usize, states: usize, n: usize, expected: usize },
+    LengthMismatch {
+        times: usize,
+        states: usize,
+        n: usize,
+        expected: usize,
+    },
     #[error("sample time t[{index}] is not finite ({value})")]
     NonFiniteTime { index: usize, value: f64 },
     #[error("sample times must increase strictly: t[{index}] = {value} does not exceed t[{prev_index}] = {prev}", prev_index = .index - 1)]
     NonMonotoneTime { index: usize, prev: f64, value: f64 },
     #[error("component {component} of state sample {index} is not finite ({value})")]
-    NonFiniteState { index: usize, component: usize, value: f64 },
+    NonFiniteState {
+        index: usize,
+        component: usize,
+        value: f64,
+    },
     #[error("{what} has dimension {found}, but the trajectory has n = {n}")]
-    DimensionMismatch { what: &'static str, found: usize, n: usize },
+    DimensionMismatch {
+        what: &'static str,
+        found: usize,
+        n: usize,
+    },
     #[error("metric weight R has {found} entries, expected n × n = {expected}")]
     MetricShape { found: usize, expected: usize },
     #[error("metric weight R has a non-finite entry at row {row}, column {col}")]
@@ -62,10 +83,18 @@ pub enum SafetyError {
     HorizonNaN { T: f64 },
     #[error("time bound T = {T} is before the first sample time t[0] = {t0}; no sample to reach Goal at")]
     HorizonBeforeStart { T: f64, t0: f64 },
-    #[error("input constraints are given for {available} samples, but the horizon T covers {needed}")]
+    #[error(
+        "input constraints are given for {available} samples, but the horizon T covers {needed}"
+    )]
     InputTooShort { needed: usize, available: usize },
     #[error("the signed distance to {what} at sample {index} is NaN")]
     NaNDistance { what: &'static str, index: usize },
+    #[error("{what}: {source}")]
+    Geometry {
+        what: &'static str,
+        #[source]
+        source: GeometryError,
+    },
 }
 
 /// A borrowed, validated sampled trajectory: times t_κ (finite, strictly increasing) and states x̃(κ)
@@ -88,18 +117,31 @@ impl<'a> SampledTrajectory<'a> {
         }
         let expected = times.len().checked_mul(n).unwrap_or(usize::MAX);
         if states.len() != expected {
-            return Err(SafetyError::LengthMismatch { times: times.len(), states: states.len(), n, expected });
+            return Err(SafetyError::LengthMismatch {
+                times: times.len(),
+                states: states.len(),
+                n,
+                expected,
+            });
         }
         for (index, &value) in times.iter().enumerate() {
             if !value.is_finite() {
                 return Err(SafetyError::NonFiniteTime { index, value });
             }
             if index > 0 && value <= times[index - 1] {
-                return Err(SafetyError::NonMonotoneTime { index, prev: times[index - 1], value });
+                return Err(SafetyError::NonMonotoneTime {
+                    index,
+                    prev: times[index - 1],
+                    value,
+                });
             }
         }
         if let Some(pos) = states.iter().position(|v| !v.is_finite()) {
-            return Err(SafetyError::NonFiniteState { index: pos / n, component: pos % n, value: states[pos] });
+            return Err(SafetyError::NonFiniteState {
+                index: pos / n,
+                component: pos % n,
+                value: states[pos],
+            });
         }
         Ok(Self { times, states, n })
     }
@@ -141,6 +183,10 @@ pub trait InputSets {
     }
     /// Signed distance of `x` (the nominal state at sample `kappa`) to A_κ.
     fn signed_dist(&self, kappa: usize, x: &[f64], metric: &Metric) -> Witness;
+    /// The value of [`InputSets::signed_dist`] alone; override when it is cheaper without the witness.
+    fn signed_value(&self, kappa: usize, x: &[f64], metric: &Metric) -> f64 {
+        self.signed_dist(kappa, x, metric).value
+    }
 }
 
 /// One admissible-state set per sample, κ-th entry for sample κ.
@@ -185,18 +231,104 @@ where
     }
 }
 
+/// Goal or Unsafe as the safety passes query it.
+#[derive(Clone, Copy)]
+pub enum SafetySet<'a> {
+    /// Any region, through [`Region::signed_dist`].
+    Region(&'a dyn Region),
+    /// An ellipsoid (a CAF ball via [`Ball::as_ellipsoid`]): factored once for the metric, then queried
+    /// without allocation by the §7.2 boundary-distance solver.
+    Ellipsoid(&'a Ellipsoid),
+}
+
+impl<'a> SafetySet<'a> {
+    /// Ambient dimension.
+    pub fn dim(&self) -> usize {
+        match self {
+            SafetySet::Region(r) => r.dim(),
+            SafetySet::Ellipsoid(e) => e.dim(),
+        }
+    }
+}
+
+impl<'a> From<&'a dyn Region> for SafetySet<'a> {
+    fn from(r: &'a dyn Region) -> Self {
+        SafetySet::Region(r)
+    }
+}
+
+impl<'a> From<&'a Ellipsoid> for SafetySet<'a> {
+    fn from(e: &'a Ellipsoid) -> Self {
+        SafetySet::Ellipsoid(e)
+    }
+}
+
+impl<'a> From<&'a Ball> for SafetySet<'a> {
+    fn from(b: &'a Ball) -> Self {
+        SafetySet::Ellipsoid(b.as_ellipsoid())
+    }
+}
+
 /// The sets, metric and time bound of one safety problem (Problem 2.26) in state coordinates.
 /// Output-space sets are passed already pulled back to states (the geometry module's `InOutput`).
 #[derive(Clone, Copy)]
 pub struct SafetySpec<'a> {
-    pub goal: &'a dyn Region,
-    pub unsafe_set: &'a dyn Region,
+    pub goal: SafetySet<'a>,
+    pub unsafe_set: SafetySet<'a>,
     /// `None` when the problem has no input constraint (δ_Input = +∞).
     pub input: Option<&'a dyn InputSets>,
     /// The CAF metric ψ(x, x') = ‖x − x'‖_R.
     pub metric: &'a Metric,
     /// Time bound T: samples with t_κ ≤ T (compared exactly) may serve as t*.
     pub T: f64,
+}
+
+/// A [`SafetySet`] made ready for many queries in one metric.
+enum Prepared<'a> {
+    Region(&'a dyn Region),
+    Ellipsoid {
+        e: &'a Ellipsoid,
+        f: Arc<EllipsoidBoundaryDistance>,
+        ws: BoundaryWorkspace,
+    },
+}
+
+impl<'a> Prepared<'a> {
+    fn new(set: SafetySet<'a>, metric: &Metric, what: &'static str) -> Result<Self, SafetyError> {
+        Ok(match set {
+            SafetySet::Region(r) => Prepared::Region(r),
+            SafetySet::Ellipsoid(e) => {
+                let f = e
+                    .factored(metric)
+                    .map_err(|source| SafetyError::Geometry { what, source })?;
+                let ws = f.workspace();
+                Prepared::Ellipsoid { e, f, ws }
+            }
+        })
+    }
+    /// Dist(x, S) (2.8), value only; NaN if the geometry reports an error.
+    #[inline]
+    fn value(&mut self, x: &[f64], metric: &Metric) -> f64 {
+        match self {
+            Prepared::Region(r) => r.signed_dist(x, metric).value,
+            Prepared::Ellipsoid { e, f, ws } => {
+                // The boundary distance (7.2) is the depth inside and the distance outside.
+                let d = f.distance(x, ws).unwrap_or(f64::NAN);
+                if e.contains(x) {
+                    d
+                } else {
+                    -d
+                }
+            }
+        }
+    }
+    /// Dist(x, S) with its witness point.
+    fn witness(&self, x: &[f64], metric: &Metric) -> Witness {
+        match self {
+            Prepared::Region(r) => r.signed_dist(x, metric),
+            Prepared::Ellipsoid { e, .. } => e.signed_dist(x, metric),
+        }
+    }
 }
 
 /// Which part of δ₀ is smallest (ties resolved in the order Goal, Unsafe, Input).
@@ -257,86 +389,159 @@ impl SafetyRobustness {
 fn check(traj: &SampledTrajectory, spec: &SafetySpec) -> Result<usize, SafetyError> {
     let n = traj.n();
     if spec.goal.dim() != n {
-        return Err(SafetyError::DimensionMismatch { what: "Goal", found: spec.goal.dim(), n });
+        return Err(SafetyError::DimensionMismatch {
+            what: "Goal",
+            found: spec.goal.dim(),
+            n,
+        });
     }
     if spec.unsafe_set.dim() != n {
-        return Err(SafetyError::DimensionMismatch { what: "Unsafe", found: spec.unsafe_set.dim(), n });
+        return Err(SafetyError::DimensionMismatch {
+            what: "Unsafe",
+            found: spec.unsafe_set.dim(),
+            n,
+        });
     }
     if spec.metric.n != n {
-        return Err(SafetyError::DimensionMismatch { what: "metric", found: spec.metric.n, n });
+        return Err(SafetyError::DimensionMismatch {
+            what: "metric",
+            found: spec.metric.n,
+            n,
+        });
     }
     if spec.metric.R.len() != n * n {
-        return Err(SafetyError::MetricShape { found: spec.metric.R.len(), expected: n * n });
+        return Err(SafetyError::MetricShape {
+            found: spec.metric.R.len(),
+            expected: n * n,
+        });
     }
     if let Some(pos) = spec.metric.R.iter().position(|v| !v.is_finite()) {
-        return Err(SafetyError::MetricNonFinite { row: pos / n, col: pos % n });
+        return Err(SafetyError::MetricNonFinite {
+            row: pos / n,
+            col: pos % n,
+        });
     }
     if spec.T.is_nan() {
         return Err(SafetyError::HorizonNaN { T: spec.T });
     }
     let count = traj.times().partition_point(|&t| t <= spec.T);
     if count == 0 {
-        return Err(SafetyError::HorizonBeforeStart { T: spec.T, t0: traj.times()[0] });
+        return Err(SafetyError::HorizonBeforeStart {
+            T: spec.T,
+            t0: traj.times()[0],
+        });
     }
     if let Some(input) = spec.input {
         if let Some(d) = input.dim() {
             if d != n {
-                return Err(SafetyError::DimensionMismatch { what: "input set", found: d, n });
+                return Err(SafetyError::DimensionMismatch {
+                    what: "input set",
+                    found: d,
+                    n,
+                });
             }
         }
         if let Some(available) = input.samples() {
             if available < count {
-                return Err(SafetyError::InputTooShort { needed: count, available });
+                return Err(SafetyError::InputTooShort {
+                    needed: count,
+                    available,
+                });
             }
         }
     }
     Ok(count)
 }
 
-fn not_nan(w: Witness, what: &'static str, index: usize) -> Result<Witness, SafetyError> {
-    if w.value.is_nan() {
+fn not_nan(v: f64, what: &'static str, index: usize) -> Result<f64, SafetyError> {
+    if v.is_nan() {
         Err(SafetyError::NaNDistance { what, index })
     } else {
-        Ok(w)
+        Ok(v)
     }
 }
 
-/// Signed Goal value at κ: Dist(x̃(κ), Goal).
-fn goal_at(traj: &SampledTrajectory, spec: &SafetySpec, k: usize) -> Result<Witness, SafetyError> {
-    not_nan(spec.goal.signed_dist(traj.state(k), spec.metric), "Goal", k)
+const GOAL: &str = "Goal";
+const UNSAFE: &str = "Unsafe";
+const INPUT: &str = "the admissible-input set";
+
+/// The per-call state: prepared sets and the signed values of (4.13)–(4.15) at one sample.
+struct Passes<'a, 't> {
+    traj: &'t SampledTrajectory<'t>,
+    metric: &'a Metric,
+    goal: Prepared<'a>,
+    unsafe_set: Prepared<'a>,
 }
 
-/// Signed Unsafe value at κ: −Dist(x̃(κ), Unsafe) (= dist outside Unsafe, −depth inside).
-fn unsafe_at(traj: &SampledTrajectory, spec: &SafetySpec, k: usize) -> Result<Witness, SafetyError> {
-    let mut w = not_nan(spec.unsafe_set.signed_dist(traj.state(k), spec.metric), "Unsafe", k)?;
-    w.value = -w.value;
-    Ok(w)
+impl<'a, 't> Passes<'a, 't> {
+    fn new(traj: &'t SampledTrajectory<'t>, spec: &SafetySpec<'a>) -> Result<Self, SafetyError> {
+        Ok(Self {
+            traj,
+            metric: spec.metric,
+            goal: Prepared::new(spec.goal, spec.metric, GOAL)?,
+            unsafe_set: Prepared::new(spec.unsafe_set, spec.metric, UNSAFE)?,
+        })
+    }
+    /// Dist(x̃(κ), Goal).
+    #[inline]
+    fn goal(&mut self, k: usize) -> Result<f64, SafetyError> {
+        not_nan(self.goal.value(self.traj.state(k), self.metric), GOAL, k)
+    }
+    /// −Dist(x̃(κ), Unsafe): the distance outside Unsafe, −depth inside.
+    #[inline]
+    fn unsafe_(&mut self, k: usize) -> Result<f64, SafetyError> {
+        not_nan(
+            -self.unsafe_set.value(self.traj.state(k), self.metric),
+            UNSAFE,
+            k,
+        )
+    }
+    /// Dist(x̃(κ), A_κ).
+    #[inline]
+    fn input(&self, inp: &dyn InputSets, k: usize) -> Result<f64, SafetyError> {
+        not_nan(
+            inp.signed_value(k, self.traj.state(k), self.metric),
+            INPUT,
+            k,
+        )
+    }
+    fn critical(&self, value: f64, index: usize, w: Witness) -> Critical {
+        Critical {
+            value,
+            index,
+            time: self.traj.times()[index],
+            point: w.point,
+        }
+    }
+    fn goal_critical(&self, value: f64, k: usize) -> Critical {
+        self.critical(value, k, self.goal.witness(self.traj.state(k), self.metric))
+    }
+    fn unsafe_critical(&self, value: f64, k: usize) -> Critical {
+        self.critical(
+            value,
+            k,
+            self.unsafe_set.witness(self.traj.state(k), self.metric),
+        )
+    }
+    fn input_critical(&self, inp: &dyn InputSets, value: f64, k: usize) -> Critical {
+        self.critical(
+            value,
+            k,
+            inp.signed_dist(k, self.traj.state(k), self.metric),
+        )
+    }
 }
 
-/// Signed Input value at κ: Dist(x̃(κ), A_κ).
-fn input_at(
-    traj: &SampledTrajectory,
-    input: &dyn InputSets,
-    metric: &Metric,
-    k: usize,
-) -> Result<Witness, SafetyError> {
-    not_nan(input.signed_dist(k, traj.state(k), metric), "the admissible-input set", k)
-}
-
-fn critical(traj: &SampledTrajectory, w: Witness, index: usize) -> Critical {
-    Critical { value: w.value, index, time: traj.times()[index], point: w.point }
-}
-
-/// Running minimum over a prefix: the first index attaining it and its witness.
+/// First index of the minimum over 0..=upto, and the minimum.
 fn prefix_min(
     upto: usize,
-    mut f: impl FnMut(usize) -> Result<Witness, SafetyError>,
-) -> Result<(usize, Witness), SafetyError> {
+    mut f: impl FnMut(usize) -> Result<f64, SafetyError>,
+) -> Result<(usize, f64), SafetyError> {
     let mut best = (0, f(0)?);
     for k in 1..=upto {
-        let w = f(k)?;
-        if w.value < best.1.value {
-            best = (k, w);
+        let v = f(k)?;
+        if v < best.1 {
+            best = (k, v);
         }
     }
     Ok(best)
@@ -360,39 +565,52 @@ fn assemble(
             binding = Binding::Input;
         }
     }
-    SafetyRobustness { delta, binding, goal, unsafe_set, input, horizon_samples }
+    SafetyRobustness {
+        delta,
+        binding,
+        goal,
+        unsafe_set,
+        input,
+        horizon_samples,
+    }
 }
 
 /// Theorem 4.7: δ₀ with t* = argmax of the Goal depth over samples with t_κ ≤ T, (4.11)–(4.15).
 ///
 /// Runs in O(N) signed-distance evaluations: one pass for Goal up to T, one for Unsafe and Input up to
-/// κ*. See the module doc for the signed convention and the tie rule.
+/// κ*, plus one witness query per part. See the module doc for the signed convention and the tie rule.
 pub fn safety_robustness(
     traj: &SampledTrajectory,
     spec: &SafetySpec,
 ) -> Result<SafetyRobustness, SafetyError> {
     let count = check(traj, spec)?;
+    let mut p = Passes::new(traj, spec)?;
     // (4.12)–(4.13): first maximiser of the signed Goal distance.
     let mut kstar = 0;
-    let mut gbest = goal_at(traj, spec, 0)?;
+    let mut gbest = p.goal(0)?;
     for k in 1..count {
-        let w = goal_at(traj, spec, k)?;
-        if w.value > gbest.value {
-            gbest = w;
+        let v = p.goal(k)?;
+        if v > gbest {
+            gbest = v;
             kstar = k;
         }
     }
     // (4.14): minimum over the closed prefix 0..=κ*.
-    let (ku, wu) = prefix_min(kstar, |k| unsafe_at(traj, spec, k))?;
+    let (ku, u) = prefix_min(kstar, |k| p.unsafe_(k))?;
     // (4.15).
     let input = match spec.input {
         Some(inp) => {
-            let (ki, wi) = prefix_min(kstar, |k| input_at(traj, inp, spec.metric, k))?;
-            Some(critical(traj, wi, ki))
+            let (ki, v) = prefix_min(kstar, |k| p.input(inp, k))?;
+            Some(p.input_critical(inp, v, ki))
         }
         None => None,
     };
-    Ok(assemble(critical(traj, gbest, kstar), critical(traj, wu, ku), input, count))
+    Ok(assemble(
+        p.goal_critical(gbest, kstar),
+        p.unsafe_critical(u, ku),
+        input,
+        count,
+    ))
 }
 
 /// Variant of Theorem 4.7 that picks t* to maximise min(Dist(x̃(t*), Goal), the Unsafe and Input minima
@@ -405,46 +623,41 @@ pub fn safety_robustness_joint(
     spec: &SafetySpec,
 ) -> Result<SafetyRobustness, SafetyError> {
     let count = check(traj, spec)?;
-    let mut mu = f64::INFINITY; // running min of the Unsafe part
-    let mut ku = 0;
-    let mut mi = f64::INFINITY; // running min of the Input part
-    let mut ki = 0;
-    let mut best = f64::NEG_INFINITY;
-    let mut kstar = 0;
-    let mut ku_star = 0;
-    let mut ki_star = 0;
+    let mut p = Passes::new(traj, spec)?;
+    let (mut mu, mut ku) = (f64::INFINITY, 0); // running min of the Unsafe part
+    let (mut mi, mut ki) = (f64::INFINITY, 0); // running min of the Input part
+    let mut best = (f64::NEG_INFINITY, 0, 0, 0, f64::NEG_INFINITY); // (score, κ*, κ_U, κ_I, Goal value)
+    let mut best_parts = (f64::INFINITY, f64::INFINITY);
     for k in 0..count {
-        let u = unsafe_at(traj, spec, k)?.value;
+        let u = p.unsafe_(k)?;
         if u < mu || k == 0 {
             mu = u;
             ku = k;
         }
         if let Some(inp) = spec.input {
-            let v = input_at(traj, inp, spec.metric, k)?.value;
+            let v = p.input(inp, k)?;
             if v < mi || k == 0 {
                 mi = v;
                 ki = k;
             }
         }
         let prefix = mu.min(mi);
-        if k > 0 && prefix <= best {
+        if k > 0 && prefix <= best.0 {
             // The prefix minimum never increases, so no later sample can beat `best`.
             break;
         }
-        let score = goal_at(traj, spec, k)?.value.min(prefix);
-        if score > best || k == 0 {
-            best = score;
-            kstar = k;
-            ku_star = ku;
-            ki_star = ki;
+        let g = p.goal(k)?;
+        let score = g.min(prefix);
+        if score > best.0 || k == 0 {
+            best = (score, k, ku, ki, g);
+            best_parts = (mu, mi);
         }
     }
-    // Recompute the witnesses at the three critical samples (three extra evaluations).
-    let goal = critical(traj, goal_at(traj, spec, kstar)?, kstar);
-    let unsafe_set = critical(traj, unsafe_at(traj, spec, ku_star)?, ku_star);
-    let input = match spec.input {
-        Some(inp) => Some(critical(traj, input_at(traj, inp, spec.metric, ki_star)?, ki_star)),
-        None => None,
-    };
+    let (_, kstar, ku, ki, g) = best;
+    let goal = p.goal_critical(g, kstar);
+    let unsafe_set = p.unsafe_critical(best_parts.0, ku);
+    let input = spec
+        .input
+        .map(|inp| p.input_critical(inp, best_parts.1, ki));
     Ok(assemble(goal, unsafe_set, input, count))
 }

@@ -27,8 +27,9 @@
 //!   in different coordinates, a polytope Goal inside an ellipsoid Unsafe.
 
 use clarabel::algebra::CscMatrix;
-// clarabel's BLAS/LAPACK symbols come from this crate at link time.
 use clarabel::solver::{DefaultSettings, DefaultSolver, IPSolver, SolverStatus, SupportedConeT};
+// clarabel's BLAS/LAPACK symbols come from this crate at link time.
+#[allow(unused_imports)]
 use lapack_faer as _;
 
 use super::sets::{SetDesc, Shape};
@@ -181,8 +182,8 @@ fn ellipsoid_meets_box(lo: &[f64], hi: &[f64], M: &Matrix, c: &[f64], Q: &Matrix
             let delta = new - x[j];
             if delta != 0.0 {
                 x[j] = new;
-                for i in 0..n {
-                    w[i] += delta * H.get(i, j);
+                for (i, wi) in w.iter_mut().enumerate() {
+                    *wi += delta * H.get(i, j);
                 }
             }
         }
@@ -195,17 +196,17 @@ fn ellipsoid_meets_box(lo: &[f64], hi: &[f64], M: &Matrix, c: &[f64], Q: &Matrix
 fn normalise_rows(A: &Matrix, b: &[f64]) -> Option<(Vec<Vec<f64>>, Vec<f64>)> {
     let mut rows = Vec::new();
     let mut rhs = Vec::new();
-    for i in 0..A.rows {
+    for (i, &bi) in b.iter().enumerate().take(A.rows) {
         let a = A.row(i);
         let nrm = dot(a, a).sqrt();
         if nrm == 0.0 {
-            if b[i] < 0.0 {
+            if bi < 0.0 {
                 return None;
             }
             continue;
         }
         rows.push(a.iter().map(|v| v / nrm).collect());
-        rhs.push(b[i] / nrm);
+        rhs.push(bi / nrm);
     }
     Some((rows, rhs))
 }

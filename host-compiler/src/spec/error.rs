@@ -78,7 +78,10 @@ impl ErrorKind {
 /// and the labelled TOML snippet. The first label is the primary one; [`SpecError::line_col`] is its
 /// start.
 #[derive(Debug)]
-pub struct SpecError {
+pub struct SpecError(Box<Inner>);
+
+#[derive(Debug)]
+struct Inner {
     kind: ErrorKind,
     message: String,
     help: Option<String>,
@@ -91,14 +94,14 @@ pub struct SpecError {
 impl SpecError {
     /// A new error without location; attach one with [`SpecError::at`].
     pub(crate) fn new(kind: ErrorKind, message: impl Into<String>) -> Self {
-        Self {
+        Self(Box::new(Inner {
             kind,
             message: message.into(),
             help: None,
             labels: Vec::new(),
             src: None,
             io: None,
-        }
+        }))
     }
 
     /// The file could not be read.
@@ -107,19 +110,19 @@ impl SpecError {
             ErrorKind::Io,
             format!("cannot read `{}`: {e}", path.display()),
         );
-        s.io = Some(e);
+        s.0.io = Some(e);
         s
     }
 
     /// Add a labelled span (the first one added is primary).
     pub(crate) fn at(mut self, span: Range<usize>, label: impl Into<String>) -> Self {
-        self.labels.push((span, label.into()));
+        self.0.labels.push((span, label.into()));
         self
     }
 
     /// Add a help line.
     pub(crate) fn help(mut self, help: impl Into<String>) -> Self {
-        self.help = Some(help.into());
+        self.0.help = Some(help.into());
         self
     }
 
@@ -127,11 +130,11 @@ impl SpecError {
     pub(crate) fn with_source(mut self, name: &str, text: &str) -> Self {
         // Clamp spans into the text so rendering never fails on an end-of-file position.
         let len = text.len();
-        for (r, _) in &mut self.labels {
+        for (r, _) in &mut self.0.labels {
             r.start = r.start.min(len);
             r.end = r.end.clamp(r.start, len);
         }
-        self.src = Some(NamedSource::new(name, text.to_string()));
+        self.0.src = Some(NamedSource::new(name, text.to_string()));
         self
     }
 
@@ -158,47 +161,47 @@ impl SpecError {
         };
         let mut s = Self::new(kind, msg);
         let span = e.span().unwrap_or(0..0);
-        s.labels.push((span, label.to_string()));
+        s.0.labels.push((span, label.to_string()));
         s
     }
 
     /// What is wrong.
     pub fn kind(&self) -> ErrorKind {
-        self.kind
+        self.0.kind
     }
 
     /// The reason, without location.
     pub fn message(&self) -> &str {
-        &self.message
+        &self.0.message
     }
 
     /// The file name given to [`crate::spec::parse`] / [`crate::spec::load`], if the error has a source.
     pub fn file_name(&self) -> Option<&str> {
-        self.src.as_ref().map(|s| s.name())
+        self.0.src.as_ref().map(|s| s.name())
     }
 
     /// Byte range of the primary label.
     pub fn span(&self) -> Option<Range<usize>> {
-        self.labels.first().map(|(r, _)| r.clone())
+        self.0.labels.first().map(|(r, _)| r.clone())
     }
 
     /// All labels, primary first: (byte range, text).
     pub fn label_spans(&self) -> &[(Range<usize>, String)] {
-        &self.labels
+        &self.0.labels
     }
 
     /// 1-based line and 1-based column (in characters) of the primary label's start.
     pub fn line_col(&self) -> Option<(usize, usize)> {
-        let src = self.src.as_ref()?;
-        let (r, _) = self.labels.first()?;
+        let src = self.0.src.as_ref()?;
+        let (r, _) = self.0.labels.first()?;
         Some(line_col(src.inner(), r.start))
     }
 
     /// `file:line:col: message` (or just the message when there is no location), for logs.
     pub fn headline(&self) -> String {
         match (self.file_name(), self.line_col()) {
-            (Some(f), Some((l, c))) => format!("{f}:{l}:{c}: {}", self.message),
-            _ => self.message.clone(),
+            (Some(f), Some((l, c))) => format!("{f}:{l}:{c}: {}", self.0.message),
+            _ => self.0.message.clone(),
         }
     }
 }
@@ -219,13 +222,14 @@ pub fn line_col(text: &str, offset: usize) -> (usize, usize) {
 
 impl fmt::Display for SpecError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(&self.message)
+        f.write_str(&self.0.message)
     }
 }
 
 impl std::error::Error for SpecError {
     fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
-        self.io
+        self.0
+            .io
             .as_ref()
             .map(|e| e as &(dyn std::error::Error + 'static))
     }
@@ -233,24 +237,25 @@ impl std::error::Error for SpecError {
 
 impl Diagnostic for SpecError {
     fn code<'a>(&'a self) -> Option<Box<dyn fmt::Display + 'a>> {
-        Some(Box::new(self.kind.code()))
+        Some(Box::new(self.0.kind.code()))
     }
 
     fn help<'a>(&'a self) -> Option<Box<dyn fmt::Display + 'a>> {
-        self.help
+        self.0
+            .help
             .as_ref()
             .map(|h| Box::new(h) as Box<dyn fmt::Display + 'a>)
     }
 
     fn source_code(&self) -> Option<&dyn SourceCode> {
-        self.src.as_ref().map(|s| s as &dyn SourceCode)
+        self.0.src.as_ref().map(|s| s as &dyn SourceCode)
     }
 
     fn labels(&self) -> Option<Box<dyn Iterator<Item = LabeledSpan> + '_>> {
-        if self.src.is_none() || self.labels.is_empty() {
+        if self.0.src.is_none() || self.0.labels.is_empty() {
             return None;
         }
-        Some(Box::new(self.labels.iter().enumerate().map(
+        Some(Box::new(self.0.labels.iter().enumerate().map(
             |(i, (r, text))| {
                 let span = (r.start, r.end - r.start);
                 let label = if text.is_empty() {

@@ -11,9 +11,9 @@ mod sets;
 use crate::certify::{self, Certificate, ContinuousPart, Loop, LoopConstants};
 use crate::coverage::{CoverageEstimate, SampleBox};
 use crate::emit::{FallbackLaw, ImageBuilder, TrajectoryEntry};
-use crate::linalg::{from_row_major, p_norm};
+use crate::linalg::p_norm;
 use crate::spec::Problem;
-use crate::trajectory::generate::{generate, GenProblem, GenSettings, InputBound};
+use crate::trajectory::generate::{generate, GenProblem, GenSettings};
 use crate::trajectory::{simulate, Nominal};
 use crate::verify::{monte_carlo, Judge, VerifyReport};
 use faer::Mat;
@@ -37,11 +37,13 @@ pub struct SynthOptions {
     pub working_samples: usize,
     /// Show progress bars (default true).
     pub progress: bool,
+    /// Recorded trajectories (e.g. from a person) to certify and use before generating any.
+    pub imports: Vec<(String, crate::trajectory::csv::Recording)>,
 }
 
 impl Default for SynthOptions {
     fn default() -> Self {
-        Self { verify_interior: 10_000, verify_per_ball: 32, working_samples: 4_000, progress: true }
+        Self { verify_interior: 10_000, verify_per_ball: 32, working_samples: 4_000, progress: true, imports: vec![] }
     }
 }
 
@@ -129,28 +131,21 @@ pub fn round32(x: f64) -> f64 {
     x as f32 as f64
 }
 
-/// The sampled plant of a spec (exact zero-order hold for continuous-time plants).
+/// The sampled plant of a spec (exact zero-order hold for continuous-time plants, [`crate::model::zoh`]).
 pub fn sampled_plant(problem: &Problem) -> Result<SampledPlant, SynthError> {
-    let pl = &problem.plant;
-    let (n, m) = (pl.n(), pl.m());
-    let A = from_row_major(n, n, &pl.A.data);
-    let B = from_row_major(n, m, &pl.B.data);
-    match pl.time {
-        crate::spec::TimeDomain::Discrete => {
-            Ok(SampledPlant { A, B, g: pl.offset.clone(), continuous: None, sub: None })
-        }
-        crate::spec::TimeDomain::Continuous => {
-            let (Ad, Bd, gd) = crate::model::zoh(A.as_ref(), B.as_ref(), &pl.offset, pl.period)
-                .map_err(|e| SynthError::Model(e.to_string()))?;
+    let model = crate::model::SampledPlant::from_spec(&problem.plant).map_err(|e| SynthError::Model(e.to_string()))?;
+    let d = model.discrete;
+    match model.continuous {
+        None => Ok(SampledPlant { A: d.A, B: d.B, g: d.g, continuous: None, sub: None }),
+        Some(cp) => {
             const SUBSTEPS: usize = 8;
-            let (As, Bs, gs) = crate::model::zoh(A.as_ref(), B.as_ref(), &pl.offset, pl.period / SUBSTEPS as f64)
-                .map_err(|e| SynthError::Model(e.to_string()))?;
+            let sub = crate::model::zoh(&cp, d.period / SUBSTEPS as f64).map_err(|e| SynthError::Model(e.to_string()))?;
             Ok(SampledPlant {
-                A: Ad,
-                B: Bd,
-                g: gd,
-                continuous: Some(ContinuousPart { Ac: A, Bc: B, c: pl.offset.clone(), h: pl.period }),
-                sub: Some((As, Bs, gs, SUBSTEPS)),
+                A: d.A,
+                B: d.B,
+                g: d.g,
+                continuous: Some(ContinuousPart { Ac: cp.A, Bc: cp.B, c: cp.c, h: d.period }),
+                sub: Some((sub.A, sub.B, sub.g, SUBSTEPS)),
             })
         }
     }
@@ -178,8 +173,16 @@ pub fn synthesize(problem: &Problem, opts: &SynthOptions) -> Result<Synthesis, S
     let plant = sampled_plant(problem)?;
 
     // CAF and feedback for the sampled loop (LMIs (3.66)–(3.67) with the σ-margin of Remark 3.22).
-    let (K, P) = crate::caf::design_discrete(plant.A.as_ref(), plant.B.as_ref(), problem.synthesis.sigma_margin)
-        .map_err(|e| SynthError::Caf(e.to_string()))?;
+    let dp = crate::model::DiscretePlant::new(plant.A.clone(), plant.B.clone(), plant.g.clone(), problem.plant.period)
+        .map_err(|e| SynthError::Model(e.to_string()))?;
+    let caf_settings = crate::caf::CafSettings { sigma: problem.synthesis.sigma_margin, ..Default::default() };
+    let caf = match crate::caf::synthesize_discrete(&dp, &caf_settings).map_err(|e| SynthError::Caf(e.to_string()))? {
+        crate::caf::CafOutcome::Solved(c) => c,
+        other => return Err(SynthError::Caf(caf_outcome_message(&other))),
+    };
+    // Exactly symmetric, so that its f32 image is too (the image format checks it).
+    let P = crate::linalg::sym(caf.P.as_ref());
+    let K = caf.K;
     // What ships is the f32 gain; everything below is certified for it.
     let Khat = Mat::from_fn(m, n, |i, j| round32(K[(i, j)]));
     timings.push(("CAF (SDP)".to_string(), t0.elapsed().as_secs_f64()));
@@ -250,11 +253,37 @@ pub fn synthesize(problem: &Problem, opts: &SynthOptions) -> Result<Synthesis, S
     let mut work_rng = ChaCha8Rng::seed_from_u64(problem.seed);
     let mut work = init.samples(opts.working_samples, &mut work_rng);
     let mut trajs: Vec<CoverTrajectory> = Vec::new();
+    // Recorded trajectories first: the nominal of the shipped loop from the recorded x0 and v, certified as is.
+    for (name, rec) in &opts.imports {
+        if rec.x0.len() != n || rec.v.iter().any(|r| r.len() != m) {
+            return Err(SynthError::Sets(format!("{name}: the recording does not fit n = {n}, m = {m}")));
+        }
+        let x0: Vec<f64> = rec.x0.iter().map(|&v| round32(v)).collect();
+        let v32: Vec<Vec<f64>> = rec.v.iter().map(|r| r.iter().map(|&a| round32(a)).collect()).collect();
+        let nom = simulate(plant.A.as_ref(), plant.B.as_ref(), &plant.g, Khat.as_ref(), &x0, &v32);
+        let cert = certify::certify(&lp, &lc, &nom);
+        if cert.is_certified() {
+            trajs.push(CoverTrajectory { source: format!("csv:{name}"), nominal: nom, certificate: cert });
+        } else {
+            warnings.push(format!(
+                "{name}: not used, its certified robustness is not positive (δ_Goal {:.3e}, δ_Unsafe {:.3e}, δ_Input {:.3e}, r_crit {:.3e})",
+                cert.delta_goal, cert.delta_unsafe_intersample, cert.delta_input, cert.r_crit
+            ));
+        }
+    }
     let mut failed = 0usize;
     let budget = problem.synthesis.max_trajectories;
     let batch = rayon::current_num_threads().max(1) * 2;
     let pb = bar(opts.progress, budget as u64, "trajectories");
-    let n_final = problem.synthesis.coverage_samples();
+    // Enough fresh samples that a fully covered sample proves the target (and the spec's tolerance).
+    let n_final = problem
+        .synthesis
+        .coverage_samples()
+        .max(if problem.synthesis.coverage_target < 1.0 {
+            crate::coverage::samples_needed(problem.synthesis.coverage_target, problem.synthesis.confidence)
+        } else {
+            0 // a finite sample never proves 100 %: the loop stops on its budget and says so
+        });
     let mut final_round = 0u64;
     let (stop, coverage, uncovered, image) = loop {
         // Seeds: uncovered working samples, farthest first (greedy, spread by the typical radius).
@@ -290,7 +319,7 @@ pub fn synthesize(problem: &Problem, opts: &SynthOptions) -> Result<Synthesis, S
                 .collect();
             let est = CoverageEstimate::from_counts(n_final, n_final - unc.len(), problem.synthesis.confidence);
             let target = problem.synthesis.coverage_target;
-            if est.mean - problem.synthesis.coverage_tolerance >= target {
+            if est.lower >= target {
                 break (StopReason::Covered, est, unc, image);
             }
             if trajs.len() >= budget {
@@ -387,6 +416,22 @@ pub fn synthesize(problem: &Problem, opts: &SynthOptions) -> Result<Synthesis, S
         timings,
         warnings,
     })
+}
+
+/// A control engineer's reading of a CAF synthesis that did not produce a certificate.
+fn caf_outcome_message(o: &crate::caf::CafOutcome) -> String {
+    use crate::caf::CafOutcome::*;
+    match o {
+        Solved(_) => "solved".into(),
+        NotStabilizable { mode } => format!("the sampled plant is not stabilizable: uncontrollable mode {mode:?}"),
+        MarginUnachievable { mode, max_sigma } => format!(
+            "the σ-margin cannot be met: uncontrollable mode {mode:?} allows at most σ = {max_sigma:.4} \
+             (lower [synthesis] sigma_margin)"
+        ),
+        Infeasible { stage, status } => format!("the LMIs are infeasible at stage {stage} ({status})"),
+        SolverFailed { stage, status } => format!("clarabel failed at stage {stage} ({status})"),
+        ValidationFailed { reason } => format!("the solver's answer failed the independent check: {reason}"),
+    }
 }
 
 fn median(it: impl Iterator<Item = f64>) -> Option<f64> {

@@ -87,22 +87,28 @@ pub fn report_data(problem: &Problem, spec_path: &str, s: &Synthesis, image_path
         .map(|(id, t)| {
             let c = &t.certificate;
             let r = c.delta;
-            let u_worst = t
+            // The nominal input and the worst case over the tube, both measured as the bound measures them.
+            let (u_nominal, u_worst): (Vec<f64>, Vec<f64>) = t
                 .nominal
                 .u
                 .iter()
                 .map(|u| match &problem.input {
                     InputSet::Ball { center, .. } => {
-                        u.iter().zip(center).map(|(a, b)| (a - b) * (a - b)).sum::<f64>().sqrt() + r * sK
+                        let nom = u.iter().zip(center).map(|(a, b)| (a - b) * (a - b)).sum::<f64>().sqrt();
+                        (nom, nom + r * sK)
                     }
-                    InputSet::Box { .. } => (0..u.len())
-                        .map(|i| {
-                            let Ki: Vec<f64> = (0..n).map(|j| s.K[(i, j)]).collect();
-                            u[i].abs() + r * roots.as_ref().map(|q| q.dual_norm(&Ki)).unwrap_or(0.0)
-                        })
-                        .fold(0.0, f64::max),
+                    InputSet::Box { .. } => {
+                        let nom = u.iter().fold(0.0f64, |a, b| a.max(b.abs()));
+                        let worst = (0..u.len())
+                            .map(|i| {
+                                let Ki: Vec<f64> = (0..n).map(|j| s.K[(i, j)]).collect();
+                                u[i].abs() + r * roots.as_ref().map(|q| q.dual_norm(&Ki)).unwrap_or(0.0)
+                            })
+                            .fold(0.0, f64::max);
+                        (nom, worst)
+                    }
                 })
-                .collect();
+                .unzip();
             TrajectoryReport {
                 id,
                 source: t.source.clone(),
@@ -121,6 +127,7 @@ pub fn report_data(problem: &Problem, spec_path: &str, s: &Synthesis, image_path
                     .map(|x| Ellipse2 { center: [x[pl[0]], x[pl[1]]], M: scale(Mtube, r) })
                     .collect(),
                 u: t.nominal.u.clone(),
+                u_nominal,
                 u_worst,
             }
         })
@@ -156,6 +163,7 @@ pub fn report_data(problem: &Problem, spec_path: &str, s: &Synthesis, image_path
         balls,
         uncovered: s.uncovered.iter().take(2000).map(|x| [x[ipl[0]], x[ipl[1]]]).collect(),
         coverage: s.coverage.clone(),
+        coverage_target: problem.synthesis.coverage_target,
         stop_reason: s.stop.to_string(),
         input_bound_label,
         input_bound,

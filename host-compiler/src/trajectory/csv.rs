@@ -1,7 +1,8 @@
 //! CSV import of a recorded reference-input sequence (how a person's trajectories come in).
 //!
 //! Format: a header `t,v1,…,vm` (or `k,…`), then one row per sample period with the reference input v(κ)
-//! of the closed loop u = K x + v. Times must increase by the plant's sample period.
+//! of the closed loop u = K x + v. Times must increase by the plant's sample period. A recording also names
+//! its initial state in a comment line `# x0 = a, b, …` before the header.
 
 use std::path::Path;
 
@@ -22,6 +23,8 @@ pub enum CsvError {
     Time { path: String, line: usize, t: f64, prev: f64, period: f64 },
     #[error("{path}: no samples after the header")]
     NoRows { path: String },
+    #[error("{path}:{line}: the initial state line `# x0 = …` {reason}")]
+    X0 { path: String, line: usize, reason: String },
 }
 
 /// Parse a recorded input sequence from CSV text. `period` is the plant's sample period; `m` its input count.
@@ -68,6 +71,44 @@ pub fn parse_inputs(text: &str, path: &str, m: usize, period: f64) -> Result<Vec
     Ok(out)
 }
 
+/// A recording: the initial state and the reference inputs.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Recording {
+    pub x0: Vec<f64>,
+    pub v: Vec<Vec<f64>>,
+}
+
+/// Parse a recording: the `# x0 = …` comment (n values) and the input rows.
+pub fn parse_recording(text: &str, path: &str, n: usize, m: usize, period: f64) -> Result<Recording, CsvError> {
+    let mut x0 = None;
+    for (i, line) in text.lines().enumerate() {
+        let t = line.trim();
+        if let Some(rest) = t.strip_prefix('#').map(str::trim).and_then(|r| r.strip_prefix("x0")) {
+            let err = |reason: String| CsvError::X0 { path: path.into(), line: i + 1, reason };
+            let rest = rest.trim_start().strip_prefix('=').ok_or_else(|| err("has no `=`".into()))?;
+            let vals: Result<Vec<f64>, _> = rest.split(',').map(|f| f.trim().parse::<f64>()).collect();
+            let vals = vals.map_err(|e| err(format!("has a field that is not a number ({e})")))?;
+            if vals.len() != n || vals.iter().any(|v| !v.is_finite()) {
+                return Err(err(format!("must give {n} finite values, found {}", vals.len())));
+            }
+            x0 = Some(vals);
+            break;
+        }
+        if !t.is_empty() && !t.starts_with('#') {
+            break;
+        }
+    }
+    let x0 = x0.ok_or_else(|| CsvError::X0 { path: path.into(), line: 1, reason: "is missing".into() })?;
+    Ok(Recording { x0, v: parse_inputs(text, path, m, period)? })
+}
+
+/// Read and parse a recording.
+pub fn load_recording(path: &Path, n: usize, m: usize, period: f64) -> Result<Recording, CsvError> {
+    let p = path.display().to_string();
+    let text = std::fs::read_to_string(path).map_err(|e| CsvError::Io { path: p.clone(), reason: e.to_string() })?;
+    parse_recording(&text, &p, n, m, period)
+}
+
 /// Read and parse a recorded input sequence.
 pub fn load_inputs(path: &Path, m: usize, period: f64) -> Result<Vec<Vec<f64>>, CsvError> {
     let p = path.display().to_string();
@@ -83,6 +124,17 @@ mod tests {
     fn reads_a_sequence() {
         let v = parse_inputs("t,v1,v2\n0,1,2\n0.1,3,4\n", "a.csv", 2, 0.1).unwrap();
         assert_eq!(v, vec![vec![1.0, 2.0], vec![3.0, 4.0]]);
+    }
+
+    #[test]
+    fn reads_a_recording_with_its_initial_state() {
+        let r = parse_recording("# x0 = 0.1, -0.2\nt,v1\n0,1\n0.5,2\n", "r.csv", 2, 1, 0.5).unwrap();
+        assert_eq!(r.x0, vec![0.1, -0.2]);
+        assert_eq!(r.v, vec![vec![1.0], vec![2.0]]);
+        let e = parse_recording("t,v1\n0,1\n", "r.csv", 2, 1, 0.5).unwrap_err();
+        assert!(matches!(e, CsvError::X0 { .. }));
+        let e = parse_recording("# x0 = 1\nt,v1\n0,1\n", "r.csv", 2, 1, 0.5).unwrap_err();
+        assert!(e.to_string().contains("must give 2 finite values, found 1"), "{e}");
     }
 
     #[test]

@@ -30,7 +30,9 @@ pub fn transpose(A: &[f64], m: usize, n: usize) -> Vec<f64> {
 }
 
 pub fn matvec(A: &[f64], m: usize, n: usize, x: &[f64]) -> Vec<f64> {
-    (0..m).map(|i| (0..n).map(|j| A[i * n + j] * x[j]).sum()).collect()
+    (0..m)
+        .map(|i| (0..n).map(|j| A[i * n + j] * x[j]).sum())
+        .collect()
 }
 
 pub fn quad(A: &[f64], v: &[f64]) -> f64 {
@@ -76,7 +78,10 @@ pub fn jacobi(n: usize, A: &[f64]) -> (Vec<f64>, Vec<f64>) {
         v[i * n + i] = 1.0;
     }
     for _sweep in 0..100 {
-        let off: f64 = (0..n).flat_map(|i| (0..n).filter(move |&j| j != i).map(move |j| (i, j))).map(|(i, j)| a[i * n + j].powi(2)).sum();
+        let off: f64 = (0..n)
+            .flat_map(|i| (0..n).filter(move |&j| j != i).map(move |j| (i, j)))
+            .map(|(i, j)| a[i * n + j].powi(2))
+            .sum();
         let diag: f64 = (0..n).map(|i| a[i * n + i].powi(2)).sum();
         if off == 0.0 || off <= 1e-34 * diag {
             break;
@@ -89,7 +94,11 @@ pub fn jacobi(n: usize, A: &[f64]) -> (Vec<f64>, Vec<f64>) {
                 }
                 let theta = (a[q * n + q] - a[p * n + p]) / (2.0 * apq);
                 let sign = if theta >= 0.0 { 1.0 } else { -1.0 };
-                let t = if theta.abs() > 1e150 { 0.5 / theta } else { sign / (theta.abs() + (theta * theta + 1.0).sqrt()) };
+                let t = if theta.abs() > 1e150 {
+                    0.5 / theta
+                } else {
+                    sign / (theta.abs() + (theta * theta + 1.0).sqrt())
+                };
                 let c = 1.0 / (t * t + 1.0).sqrt();
                 let s = t * c;
                 for k in 0..n {
@@ -141,7 +150,9 @@ pub fn random_orthogonal(n: usize, rng: &mut ChaCha8Rng) -> Vec<f64> {
         let mut cols: Vec<Vec<f64>> = Vec::with_capacity(n);
         let mut ok = true;
         for _ in 0..n {
-            let mut v: Vec<f64> = (0..n).map(|_| rng.sample::<f64, _>(StandardNormal)).collect();
+            let mut v: Vec<f64> = (0..n)
+                .map(|_| rng.sample::<f64, _>(StandardNormal))
+                .collect();
             for _ in 0..2 {
                 for u in &cols {
                     let d: f64 = v.iter().zip(u).map(|(a, b)| a * b).sum();
@@ -242,16 +253,30 @@ pub fn brute_force(c: &[f64], Q: &[f64], R: &[f64], xbar: &[f64]) -> Brute {
     let A = matmul(&matmul(&Ft, &Rt, q, n, n), &F, q, n, q);
     let b = matvec(&matmul(&Ft, &Rt, q, n, n), q, n, &g);
     let (d, W) = jacobi(q, &A);
-    let beta: Vec<f64> = (0..q).map(|i| (0..q).map(|r| W[r * q + i] * b[r]).sum()).collect();
+    let beta: Vec<f64> = (0..q)
+        .map(|i| (0..q).map(|r| W[r * q + i] * b[r]).sum())
+        .collect();
 
     let mut sigmas: Vec<Vec<f64>> = Vec::new();
     let from_theta = |theta: f64| -> Option<Vec<f64>> {
-        let s: Vec<f64> = (0..q).map(|i| if beta[i] == 0.0 { 0.0 } else { beta[i] / (d[i] - theta) }).collect();
+        let s: Vec<f64> = (0..q)
+            .map(|i| {
+                if beta[i] == 0.0 {
+                    0.0
+                } else {
+                    beta[i] / (d[i] - theta)
+                }
+            })
+            .collect();
         let ns = s.iter().map(|x| x * x).sum::<f64>().sqrt();
         (ns > 0.0 && ns.is_finite()).then(|| s.iter().map(|x| x / ns).collect())
     };
     let psi = |theta: f64| -> f64 {
-        (0..q).filter(|&i| beta[i] != 0.0).map(|i| (beta[i] / (d[i] - theta)).powi(2)).sum::<f64>() - 1.0
+        (0..q)
+            .filter(|&i| beta[i] != 0.0)
+            .map(|i| (beta[i] / (d[i] - theta)).powi(2))
+            .sum::<f64>()
+            - 1.0
     };
     let mut poles: Vec<f64> = (0..q).filter(|&i| beta[i] != 0.0).map(|i| d[i]).collect();
     poles.sort_by(|a, b| a.total_cmp(b));
@@ -263,7 +288,12 @@ pub fn brute_force(c: &[f64], Q: &[f64], R: &[f64], xbar: &[f64]) -> Brute {
         for w in poles.windows(2) {
             intervals.push((w[0], w[1], true, true));
         }
-        intervals.push((poles[poles.len() - 1], poles[poles.len() - 1] + L, true, false));
+        intervals.push((
+            poles[poles.len() - 1],
+            poles[poles.len() - 1] + L,
+            true,
+            false,
+        ));
         const K: usize = 400;
         for &(a, bnd, a_pole, b_pole) in &intervals {
             if !(bnd > a) {
@@ -272,7 +302,8 @@ pub fn brute_force(c: &[f64], Q: &[f64], R: &[f64], xbar: &[f64]) -> Brute {
             let mut pts: Vec<(f64, f64)> = Vec::with_capacity(K + 1);
             pts.push((a, if a_pole { f64::INFINITY } else { psi(a) }));
             for kk in 1..K {
-                let th = a + (bnd - a) * 0.5 * (1.0 - (std::f64::consts::PI * kk as f64 / K as f64).cos());
+                let th = a
+                    + (bnd - a) * 0.5 * (1.0 - (std::f64::consts::PI * kk as f64 / K as f64).cos());
                 if th > a && th < bnd {
                     pts.push((th, psi(th)));
                 }
@@ -306,7 +337,10 @@ pub fn brute_force(c: &[f64], Q: &[f64], R: &[f64], xbar: &[f64]) -> Brute {
             }
             // Interval minimum (tangential roots): golden section around the grid minimum.
             let interior: Vec<usize> = (1..pts.len() - 1).collect();
-            if let Some(&im) = interior.iter().min_by(|&&i, &&j| pts[i].1.total_cmp(&pts[j].1)) {
+            if let Some(&im) = interior
+                .iter()
+                .min_by(|&&i, &&j| pts[i].1.total_cmp(&pts[j].1))
+            {
                 let (mut lo, mut hi) = (pts[im - 1].0, pts[im + 1].0);
                 let gr = 0.5 * (5.0_f64.sqrt() - 1.0);
                 for _ in 0..200 {
@@ -333,7 +367,9 @@ pub fn brute_force(c: &[f64], Q: &[f64], R: &[f64], xbar: &[f64]) -> Brute {
     // Degenerate candidates θ = d_j.
     let dscale = d.iter().fold(0.0_f64, |m, x| m.max(x.abs())).max(1e-300);
     for j in 0..q {
-        let J: Vec<usize> = (0..q).filter(|&i| (d[i] - d[j]).abs() <= 1e-12 * dscale).collect();
+        let J: Vec<usize> = (0..q)
+            .filter(|&i| (d[i] - d[j]).abs() <= 1e-12 * dscale)
+            .collect();
         let mut s = vec![0.0; q];
         let mut used = 0.0;
         for i in 0..q {
@@ -351,7 +387,15 @@ pub fn brute_force(c: &[f64], Q: &[f64], R: &[f64], xbar: &[f64]) -> Brute {
         for sign in [1.0, -1.0] {
             let mut t = s.clone();
             for &i in &J {
-                t[i] = sign * r * if nbJ > 0.0 { beta[i] / nbJ } else if i == J[0] { 1.0 } else { 0.0 };
+                t[i] = sign
+                    * r
+                    * if nbJ > 0.0 {
+                        beta[i] / nbJ
+                    } else if i == J[0] {
+                        1.0
+                    } else {
+                        0.0
+                    };
             }
             let nt = t.iter().map(|x| x * x).sum::<f64>().sqrt();
             if nt > 0.0 {
@@ -360,7 +404,11 @@ pub fn brute_force(c: &[f64], Q: &[f64], R: &[f64], xbar: &[f64]) -> Brute {
         }
     }
 
-    let mut best = Brute { value: f64::INFINITY, point: vec![], candidates: sigmas.len() };
+    let mut best = Brute {
+        value: f64::INFINITY,
+        point: vec![],
+        candidates: sigmas.len(),
+    };
     for sg in &sigmas {
         let s = matvec(&W, q, q, sg);
         let Fs = matvec(&F, n, q, &s);

@@ -1,12 +1,12 @@
-//! Test helpers: an owned, std-side description of image content, its conversion to bytes, and a seeded
-//! generator of random valid contents.
+//! Test helpers: an owned, std-side description of image content (feedforward and PWA feedback), its
+//! conversion to bytes, and seeded generators of random valid contents.
 #![allow(dead_code, non_snake_case)]
 
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 use shared_types::capacity::MAX_IMAGE_LEN;
 use shared_types::image::{
-    encode, Dims, Fallback, Image, ImageError, InputBox, Mode, Payload, Terminal,
+    encode, Dims, Fallback, Image, ImageError, InputBox, Mode, Payload, PwaPayload, Terminal,
 };
 
 #[derive(Clone, Debug, PartialEq)]
@@ -288,3 +288,580 @@ pub fn fix_header(bytes: &mut [u8]) {
     let crc = shared_types::image::compute_crc(bytes).unwrap();
     bytes[28..32].copy_from_slice(&crc.to_le_bytes());
 }
+
+// ---- PWA-feedback content -------------------------------------------------------------------------------
+
+use shared_types::capacity::{MAX_TREE_DEPTH, MAX_TREE_NODES};
+use shared_types::pwa::{Child, PwaTables, LEAF_BASE, OUTSIDE};
+
+/// PWA image content with owned arrays, as a test would write it down. Counts are the array lengths
+/// (nodes = `node_b.len()`, leaves = `leaf_partition.len()`, balls = `ball_delta.len()`) unless overridden.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PwaContent {
+    pub n: usize,
+    pub m: usize,
+    pub nl: usize,
+    pub np: usize,
+    pub period: f32,
+    pub K: Vec<f32>,
+    pub P: Vec<f32>,
+    pub gain: Vec<f32>,
+    pub offset: Vec<f32>,
+    pub depth: u8,
+    pub node_a: Vec<f32>,
+    pub node_b: Vec<f32>,
+    /// Two child codes per node (left, right).
+    pub node_child: Vec<u16>,
+    pub leaf_partition: Vec<u16>,
+    pub leaf_balls: Vec<Vec<u16>>,
+    pub ball_centre: Vec<f32>,
+    pub ball_delta: Vec<f32>,
+    pub ball_location: Vec<u8>,
+    pub ball_partition: Vec<u16>,
+    pub fallback: FallbackC,
+    pub input_box: Option<(Vec<f32>, Vec<f32>)>,
+    /// Header trajectory count (0 for a valid PWA image).
+    pub n_trajectories: usize,
+    /// Overrides of the stored (nodes, leaves, balls) counts.
+    pub counts: Option<(u16, u16, u16)>,
+}
+
+pub fn le16(v: &[u16]) -> Vec<u8> {
+    v.iter().flat_map(|x| x.to_le_bytes()).collect()
+}
+
+/// Owned byte strings of every PWA payload field.
+pub struct OwnedPwa {
+    pub K: Vec<u8>,
+    pub P: Vec<u8>,
+    pub gain: Vec<u8>,
+    pub offset: Vec<u8>,
+    pub node_a: Vec<u8>,
+    pub node_b: Vec<u8>,
+    pub node_child: Vec<u8>,
+    pub leaf_partition: Vec<u8>,
+    pub leaf_end: Vec<u8>,
+    pub ball_ref: Vec<u8>,
+    pub ball_centre: Vec<u8>,
+    pub ball_delta: Vec<u8>,
+    pub ball_location: Vec<u8>,
+    pub ball_partition: Vec<u8>,
+    pub fb: Option<(Vec<u8>, Vec<u8>, Vec<u8>)>,
+    pub fb_kind: u8,
+    pub bx: Option<(Vec<u8>, Vec<u8>)>,
+    pub depth: u8,
+    pub counts: (u16, u16, u16),
+}
+
+impl OwnedPwa {
+    pub fn payload(&self) -> PwaPayload<'_> {
+        PwaPayload {
+            K: &self.K,
+            P: &self.P,
+            tables: PwaTables {
+                depth: self.depth,
+                n_nodes: self.counts.0,
+                n_leaves: self.counts.1,
+                n_balls: self.counts.2,
+                gain: &self.gain,
+                offset: &self.offset,
+                node_a: &self.node_a,
+                node_b: &self.node_b,
+                node_child: &self.node_child,
+                leaf_partition: &self.leaf_partition,
+                leaf_end: &self.leaf_end,
+                ball_ref: &self.ball_ref,
+                ball_centre: &self.ball_centre,
+                ball_delta: &self.ball_delta,
+                ball_location: &self.ball_location,
+                ball_partition: &self.ball_partition,
+            },
+            fallback: match (&self.fb, self.fb_kind) {
+                (Some((K, x, u)), _) => Fallback::Linear {
+                    K,
+                    x_ref: x,
+                    u_ref: u,
+                },
+                (None, 0) => Fallback::Hold,
+                _ => Fallback::Zero,
+            },
+            input_box: self.bx.as_ref().map(|(lo, hi)| InputBox { lo, hi }),
+        }
+    }
+}
+
+/// Worst-case number of tests from node 0 over a child-code array (children after parents assumed; back
+/// edges are ignored). 0 for an empty tree.
+pub fn tree_depth(node_child: &[u16]) -> u8 {
+    let nn = node_child.len() / 2;
+    if nn == 0 {
+        return 0;
+    }
+    let mut d = vec![0usize; nn];
+    d[0] = 1;
+    for i in 0..nn {
+        for side in 0..2 {
+            if let Child::Node(c) = Child::from_code(node_child[2 * i + side]) {
+                let c = c as usize;
+                if c > i && c < nn && d[i] > 0 {
+                    d[c] = d[c].max(d[i] + 1);
+                }
+            }
+        }
+    }
+    d.into_iter().max().unwrap_or(0).min(255) as u8
+}
+
+impl PwaContent {
+    pub fn dims(&self) -> Dims {
+        Dims {
+            n: self.n,
+            m: self.m,
+            n_locations: self.nl,
+            n_trajectories: self.n_trajectories,
+            n_partitions: self.np,
+        }
+    }
+
+    pub fn owned(&self) -> OwnedPwa {
+        let mut ends = Vec::new();
+        let mut refs = Vec::new();
+        for balls in &self.leaf_balls {
+            refs.extend_from_slice(balls);
+            ends.push(refs.len() as u16);
+        }
+        OwnedPwa {
+            K: le(&self.K),
+            P: le(&self.P),
+            gain: le(&self.gain),
+            offset: le(&self.offset),
+            node_a: le(&self.node_a),
+            node_b: le(&self.node_b),
+            node_child: le16(&self.node_child),
+            leaf_partition: le16(&self.leaf_partition),
+            leaf_end: le16(&ends),
+            ball_ref: le16(&refs),
+            ball_centre: le(&self.ball_centre),
+            ball_delta: le(&self.ball_delta),
+            ball_location: self.ball_location.clone(),
+            ball_partition: le16(&self.ball_partition),
+            fb: match &self.fallback {
+                FallbackC::Linear { K, x_ref, u_ref } => Some((le(K), le(x_ref), le(u_ref))),
+                _ => None,
+            },
+            fb_kind: match self.fallback {
+                FallbackC::Hold => 0,
+                FallbackC::Zero => 1,
+                FallbackC::Linear { .. } => 2,
+            },
+            bx: self.input_box.as_ref().map(|(lo, hi)| (le(lo), le(hi))),
+            depth: self.depth,
+            counts: self.counts.unwrap_or((
+                self.node_b.len() as u16,
+                self.leaf_partition.len() as u16,
+                self.ball_delta.len() as u16,
+            )),
+        }
+    }
+
+    /// Validates (through `Image::new_pwa`) and encodes.
+    pub fn to_bytes(&self) -> Result<Vec<u8>, ImageError> {
+        let owned = self.owned();
+        let img = Image::new_pwa(self.dims(), self.period, owned.payload())?;
+        let mut buf = vec![0u8; MAX_IMAGE_LEN];
+        let len = encode(&img, &mut buf)?;
+        buf.truncate(len);
+        Ok(buf)
+    }
+
+    /// Header and postcard payload written directly, without validation (to feed invalid content to
+    /// `decode`), with correct length and CRC.
+    pub fn raw_bytes(&self) -> Vec<u8> {
+        let owned = self.owned();
+        let mut buf = vec![0u8; MAX_IMAGE_LEN + 4096];
+        let plen = postcard::to_slice(&owned.payload(), &mut buf[32..])
+            .unwrap()
+            .len();
+        buf.truncate(32 + plen);
+        let d = self.dims();
+        buf[0..4].copy_from_slice(&shared_types::image::MAGIC);
+        buf[4..6].copy_from_slice(&shared_types::image::FORMAT_VERSION.to_le_bytes());
+        buf[6] = Mode::PwaFeedback as u8;
+        buf[7] = 0;
+        for (k, v) in [d.n, d.m, d.n_locations, d.n_trajectories, d.n_partitions]
+            .into_iter()
+            .enumerate()
+        {
+            buf[8 + 2 * k..10 + 2 * k].copy_from_slice(&(v as u16).to_le_bytes());
+        }
+        buf[18..20].copy_from_slice(&[0, 0]);
+        buf[20..24].copy_from_slice(&self.period.to_le_bytes());
+        fix_header(&mut buf);
+        buf
+    }
+
+    /// The error `decode` reports for the raw bytes; also checks that `Image::new_pwa` agrees.
+    pub fn decode_err(&self) -> ImageError {
+        let bytes = self.raw_bytes();
+        let e = shared_types::image::decode(&bytes).expect_err("content should be rejected");
+        let owned = self.owned();
+        assert_eq!(
+            Image::new_pwa(self.dims(), self.period, owned.payload()).map(|_| ()),
+            Err(e),
+            "Image::new_pwa and decode disagree"
+        );
+        e
+    }
+
+    /// Reads the content back out of a decoded image through its accessors.
+    pub fn from_image(img: &Image<'_>) -> PwaContent {
+        let (n, m, nl, np) = (img.n(), img.m(), img.n_locations(), img.n_partitions());
+        let nn = img.n_nodes();
+        let mut c = PwaContent {
+            n,
+            m,
+            nl,
+            np,
+            period: img.period(),
+            K: vec![],
+            P: vec![],
+            gain: vec![],
+            offset: vec![],
+            depth: img.tree_depth() as u8,
+            node_a: (0..nn)
+                .flat_map(|i| (0..n).map(move |k| (i, k)))
+                .map(|(i, k)| img.node_normal(i, k))
+                .collect(),
+            node_b: (0..nn).map(|i| img.node_offset(i)).collect(),
+            node_child: (0..nn)
+                .flat_map(|i| {
+                    let (l, r) = img.node_children(i).unwrap();
+                    [l.code().unwrap(), r.code().unwrap()]
+                })
+                .collect(),
+            leaf_partition: (0..img.n_leaves())
+                .map(|l| img.leaf_partition(l) as u16)
+                .collect(),
+            leaf_balls: (0..img.n_leaves())
+                .map(|l| {
+                    let (_, len) = img.leaf_refs(l);
+                    (0..len)
+                        .map(|k| img.leaf_ball(l, k).unwrap() as u16)
+                        .collect()
+                })
+                .collect(),
+            ball_centre: (0..img.n_balls())
+                .flat_map(|b| (0..n).map(move |i| (b, i)))
+                .map(|(b, i)| img.ball_centre(b, i))
+                .collect(),
+            ball_delta: (0..img.n_balls()).map(|b| img.ball_delta(b)).collect(),
+            ball_location: (0..img.n_balls())
+                .map(|b| img.ball_location(b) as u8)
+                .collect(),
+            ball_partition: (0..img.n_balls())
+                .map(|b| img.ball_partition(b) as u16)
+                .collect(),
+            fallback: match img.fallback() {
+                Fallback::Hold => FallbackC::Hold,
+                Fallback::Zero => FallbackC::Zero,
+                Fallback::Linear { .. } => FallbackC::Linear {
+                    K: (0..m)
+                        .flat_map(|r| (0..n).map(move |c| (r, c)))
+                        .map(|(r, c)| img.fallback_K(r, c))
+                        .collect(),
+                    x_ref: (0..n).map(|i| img.fallback_x_ref(i)).collect(),
+                    u_ref: (0..m).map(|j| img.fallback_u_ref(j)).collect(),
+                },
+            },
+            input_box: img.has_input_box().then(|| {
+                let b: Vec<(f32, f32)> = (0..m).map(|j| img.input_bounds(j).unwrap()).collect();
+                (
+                    b.iter().map(|p| p.0).collect(),
+                    b.iter().map(|p| p.1).collect(),
+                )
+            }),
+            n_trajectories: img.n_trajectories(),
+            counts: None,
+        };
+        for l in 0..nl {
+            for r in 0..m {
+                for col in 0..n {
+                    c.K.push(img.K(l, r, col));
+                }
+            }
+            for r in 0..n {
+                for col in 0..n {
+                    c.P.push(img.P(l, r, col));
+                }
+            }
+        }
+        for j in 0..np {
+            for r in 0..m {
+                for col in 0..n {
+                    c.gain.push(img.law_gain(j, r, col));
+                }
+                c.offset.push(img.law_offset(j, r));
+            }
+        }
+        c
+    }
+
+    /// Every root-to-terminal path of the tree: (the (node, went left) decisions, the terminal child).
+    pub fn paths(&self) -> Vec<(Vec<(usize, bool)>, Child)> {
+        let mut out = Vec::new();
+        if self.node_b.is_empty() {
+            out.push((vec![], Child::Leaf(0)));
+            return out;
+        }
+        fn walk(
+            c: &PwaContent,
+            node: usize,
+            path: &mut Vec<(usize, bool)>,
+            out: &mut Vec<(Vec<(usize, bool)>, Child)>,
+        ) {
+            for (side, left) in [(0, true), (1, false)] {
+                path.push((node, left));
+                match Child::from_code(c.node_child[2 * node + side]) {
+                    Child::Node(k) => walk(c, k as usize, path, out),
+                    t => out.push((path.clone(), t)),
+                }
+                path.pop();
+            }
+        }
+        walk(self, 0, &mut Vec::new(), &mut out);
+        out
+    }
+}
+
+/// Random parameters of a PWA content generator.
+#[derive(Clone, Copy, Debug)]
+pub struct PwaShape {
+    pub max_n: usize,
+    pub max_m: usize,
+    pub max_partitions: usize,
+    pub max_depth: usize,
+    pub max_nodes: usize,
+    /// Probability that a terminal child is OUTSIDE rather than a leaf.
+    pub p_outside: f64,
+    pub max_leaf_balls: usize,
+    /// Centres, hyperplane offsets and states are drawn in [-box, box]^n.
+    pub box_half: f32,
+}
+
+impl Default for PwaShape {
+    fn default() -> Self {
+        PwaShape {
+            max_n: 4,
+            max_m: 3,
+            max_partitions: 6,
+            max_depth: 6,
+            max_nodes: 40,
+            p_outside: 0.15,
+            max_leaf_balls: 6,
+            box_half: 3.0,
+        }
+    }
+}
+
+/// A random valid PWA content: a random tree (nodes in preorder, so children come after parents), leaves
+/// with random partitions, each listing balls of its own partition.
+pub fn random_pwa(rng: &mut ChaCha8Rng, s: PwaShape) -> PwaContent {
+    let n = rng.random_range(1..=s.max_n);
+    let m = rng.random_range(1..=s.max_m);
+    let nl = rng.random_range(1..=2);
+    let np = rng.random_range(1..=s.max_partitions);
+    let mut u =
+        |k: usize, a: f32| -> Vec<f32> { (0..k).map(|_| rng.random_range(-a..a)).collect() };
+    let K = u(nl * m * n, 3.0);
+    let gain = u(np * m * n, 3.0);
+    let offset = u(np * m, 5.0);
+    let fb_K = u(m * n, 2.0);
+    let x_ref = u(n, 1.0);
+    let u_ref = u(m, 1.0);
+    let P: Vec<f32> = (0..nl)
+        .flat_map(|_| {
+            let p = random_spd(rng, n);
+            // Scale to unit-ish size so that balls of radius ~1 are ~unit-sized.
+            let s = 1.0 / n as f32;
+            p.into_iter().map(move |v| v * s).collect::<Vec<_>>()
+        })
+        .collect();
+
+    // Tree, in preorder.
+    let mut node_a = Vec::new();
+    let mut node_b = Vec::new();
+    let mut node_child: Vec<u16> = Vec::new();
+    let mut n_leaves = 0u16;
+    fn gen(
+        rng: &mut ChaCha8Rng,
+        s: &PwaShape,
+        n: usize,
+        level: usize,
+        node_a: &mut Vec<f32>,
+        node_b: &mut Vec<f32>,
+        node_child: &mut Vec<u16>,
+        n_leaves: &mut u16,
+        root: bool,
+    ) -> u16 {
+        let room = node_b.len() < s.max_nodes && level < s.max_depth;
+        let split = room && (root || rng.random_bool(0.6));
+        if !split {
+            if !root && rng.random_bool(s.p_outside) {
+                return OUTSIDE;
+            }
+            *n_leaves += 1;
+            return LEAF_BASE + (*n_leaves - 1);
+        }
+        let me = node_b.len();
+        let a: Vec<f32> = loop {
+            let a: Vec<f32> = (0..n).map(|_| rng.random_range(-1.0f32..1.0)).collect();
+            if a.iter().any(|&v| v != 0.0) {
+                break a;
+            }
+        };
+        node_a.extend_from_slice(&a);
+        node_b.push(rng.random_range(-s.box_half * 0.7..s.box_half * 0.7));
+        node_child.extend_from_slice(&[0, 0]);
+        for side in 0..2 {
+            let c = gen(
+                rng, s, n, level + 1, node_a, node_b, node_child, n_leaves, false,
+            );
+            node_child[2 * me + side] = c;
+        }
+        me as u16
+    }
+    let root_leaf_only = rng.random_bool(0.05);
+    if !root_leaf_only {
+        gen(
+            rng,
+            &s,
+            n,
+            0,
+            &mut node_a,
+            &mut node_b,
+            &mut node_child,
+            &mut n_leaves,
+            true,
+        );
+    }
+    if n_leaves == 0 {
+        // Every terminal came out OUTSIDE (or there is no tree): make the last OUTSIDE a leaf.
+        if let Some(c) = node_child.iter_mut().rev().find(|c| **c == OUTSIDE) {
+            *c = LEAF_BASE;
+        }
+        n_leaves = 1;
+    }
+    let leaf_partition: Vec<u16> = (0..n_leaves)
+        .map(|_| rng.random_range(0..np as u16))
+        .collect();
+
+    // Balls: per partition a pool; each leaf lists a random subset of its partition's pool.
+    let mut ball_centre = Vec::new();
+    let mut ball_delta = Vec::new();
+    let mut ball_location = Vec::new();
+    let mut ball_partition = Vec::new();
+    let mut pools: Vec<Vec<u16>> = vec![Vec::new(); np];
+    let mut leaf_balls = Vec::new();
+    for &j in &leaf_partition {
+        let k = rng.random_range(1..=s.max_leaf_balls);
+        let mut listed = Vec::new();
+        for _ in 0..k {
+            let pool = &mut pools[j as usize];
+            if !pool.is_empty() && rng.random_bool(0.3) {
+                listed.push(pool[rng.random_range(0..pool.len())]);
+            } else {
+                let b = ball_delta.len() as u16;
+                ball_centre.extend((0..n).map(|_| rng.random_range(-s.box_half..s.box_half)));
+                ball_delta.push(rng.random_range(0.3f32..2.0));
+                ball_location.push(rng.random_range(0..nl as u8));
+                ball_partition.push(j);
+                pool.push(b);
+                listed.push(b);
+            }
+        }
+        leaf_balls.push(listed);
+    }
+    let depth = tree_depth(&node_child);
+    let fallback = match rng.random_range(0..3) {
+        0 => FallbackC::Hold,
+        1 => FallbackC::Zero,
+        _ => FallbackC::Linear {
+            K: fb_K,
+            x_ref,
+            u_ref,
+        },
+    };
+    let input_box = rng.random_bool(0.5).then(|| {
+        let lo: Vec<f32> = (0..m).map(|_| rng.random_range(-5.0..0.0)).collect();
+        let hi: Vec<f32> = (0..m).map(|_| rng.random_range(0.0..5.0)).collect();
+        (lo, hi)
+    });
+    assert!(node_b.len() <= MAX_TREE_NODES && (depth as usize) <= MAX_TREE_DEPTH);
+    PwaContent {
+        n,
+        m,
+        nl,
+        np,
+        period: rng.random_range(0.001..1.0),
+        K,
+        P,
+        gain,
+        offset,
+        depth,
+        node_a,
+        node_b,
+        node_child,
+        leaf_partition,
+        leaf_balls,
+        ball_centre,
+        ball_delta,
+        ball_location,
+        ball_partition,
+        fallback,
+        input_box,
+        n_trajectories: 0,
+        counts: None,
+    }
+}
+
+pub const L0: u16 = LEAF_BASE;
+pub const L1: u16 = LEAF_BASE + 1;
+
+/// n = 2, m = 1, one location (P = I), two partitions:
+/// * law 0: `u = −x₀ − 2x₁ + 0.5`; law 1: `u = −3x₀ − 1`;
+/// * node 0: `x₀ ≤ 0` → node 1, else leaf 1 (partition 1);
+/// * node 1: `x₁ ≤ 2` → leaf 0 (partition 0), else OUTSIDE;
+/// * balls: 0 at (−1, 0) δ 1 and 1 at (−0.5, 1) δ 0.75 for partition 0; 2 at (1, 0) δ 1.5 for partition 1;
+///   leaf 0 lists 0 and 1, leaf 1 lists 2.
+pub fn two_partitions() -> PwaContent {
+    PwaContent {
+        n: 2,
+        m: 1,
+        nl: 1,
+        np: 2,
+        period: 0.05,
+        K: vec![-1.0, -1.0],
+        P: vec![1.0, 0.0, 0.0, 1.0],
+        gain: vec![-1.0, -2.0, -3.0, 0.0],
+        offset: vec![0.5, -1.0],
+        depth: 2,
+        node_a: vec![1.0, 0.0, 0.0, 1.0],
+        node_b: vec![0.0, 2.0],
+        node_child: vec![1, L1, L0, OUTSIDE],
+        leaf_partition: vec![0, 1],
+        leaf_balls: vec![vec![0, 1], vec![2]],
+        ball_centre: vec![-1.0, 0.0, -0.5, 1.0, 1.0, 0.0],
+        ball_delta: vec![1.0, 0.75, 1.5],
+        ball_location: vec![0, 0, 0],
+        ball_partition: vec![0, 0, 1],
+        fallback: FallbackC::Linear {
+            K: vec![-0.5, -0.5],
+            x_ref: vec![0.0, 0.0],
+            u_ref: vec![0.0],
+        },
+        input_box: Some((vec![-2.0], vec![2.0])),
+        n_trajectories: 0,
+        counts: None,
+    }
+}
+

@@ -16,7 +16,10 @@ impl Span {
     }
     /// The smallest span covering both.
     pub fn join(self, other: Span) -> Span {
-        Span { start: self.start.min(other.start), end: self.end.max(other.end) }
+        Span {
+            start: self.start.min(other.start),
+            end: self.end.max(other.end),
+        }
     }
 }
 
@@ -29,7 +32,10 @@ pub struct Interval {
 
 impl Interval {
     /// [0, +∞), the interval of an operator written without one.
-    pub const UNBOUNDED: Interval = Interval { a: 0.0, b: f64::INFINITY };
+    pub const UNBOUNDED: Interval = Interval {
+        a: 0.0,
+        b: f64::INFINITY,
+    };
     /// Checked constructor: both finite-or-+∞ for b, 0 ≤ a ≤ b, a finite.
     pub fn new(a: f64, b: f64) -> Option<Self> {
         (a.is_finite() && a >= 0.0 && !b.is_nan() && a <= b).then_some(Self { a, b })
@@ -72,7 +78,10 @@ pub enum Expr {
     /// ⊥ = ¬⊤, robustness −∞.
     False,
     /// Atomic proposition naming a set: robustness Dist(x(t), S) (2.10).
-    Set { name: String, span: Span },
+    Set {
+        name: String,
+        span: Span,
+    },
     /// Atomic proposition aᵀx ≤ b on named signals.
     Linear(LinearPredicate),
     Not(Box<Expr>),

@@ -29,8 +29,15 @@ use super::MtlError;
 #[derive(Clone, Debug)]
 pub(crate) enum Node {
     Const(f64),
-    Linear { cols: Vec<(usize, f64)>, b: f64, norm: f64 },
-    Set { set: usize, cols: Vec<usize> },
+    Linear {
+        cols: Vec<(usize, f64)>,
+        b: f64,
+        norm: f64,
+    },
+    Set {
+        set: usize,
+        cols: Vec<usize>,
+    },
     Not(Box<Node>),
     And(Box<Node>, Box<Node>),
     Or(Box<Node>, Box<Node>),
@@ -51,8 +58,17 @@ pub struct Monitor<'s> {
 impl<'s> Monitor<'s> {
     /// Resolve the names in `expr` (parsed from `src`). `signals` are the trace's signal names in column
     /// order (without `t`); predicates may use them and `t` itself. Bare names must be sets.
-    pub fn bind(expr: &Expr, src: &str, signals: &[String], sets: &'s [NamedSet]) -> Result<Self, FormulaError> {
-        let mut m = Monitor { root: Node::Const(0.0), signals: signals.to_vec(), sets: Vec::new() };
+    pub fn bind(
+        expr: &Expr,
+        src: &str,
+        signals: &[String],
+        sets: &'s [NamedSet],
+    ) -> Result<Self, FormulaError> {
+        let mut m = Monitor {
+            root: Node::Const(0.0),
+            signals: signals.to_vec(),
+            sets: Vec::new(),
+        };
         m.root = m.node(expr, src, sets)?;
         Ok(m)
     }
@@ -70,12 +86,18 @@ impl<'s> Monitor<'s> {
     }
 
     fn known(&self, sets: &[NamedSet]) -> String {
-        let sig: Vec<String> = std::iter::once("t".to_string()).chain(self.signals.iter().cloned()).collect();
+        let sig: Vec<String> = std::iter::once("t".to_string())
+            .chain(self.signals.iter().cloned())
+            .collect();
         let set: Vec<&str> = sets.iter().map(|s| s.name.as_str()).collect();
         format!(
             "signals: {}; sets: {}",
             sig.join(", "),
-            if set.is_empty() { "(none; pass --sets)".to_string() } else { set.join(", ") }
+            if set.is_empty() {
+                "(none; pass --sets)".to_string()
+            } else {
+                set.join(", ")
+            }
         )
     }
 
@@ -99,7 +121,11 @@ impl<'s> Monitor<'s> {
                     })?;
                     cols.push((col, *c));
                 }
-                Node::Linear { cols, b: p.b, norm: p.norm() }
+                Node::Linear {
+                    cols,
+                    b: p.b,
+                    norm: p.norm(),
+                }
             }
             Expr::Set { name, span } => {
                 let Some(set) = sets.iter().find(|s| &s.name == name) else {
@@ -129,8 +155,10 @@ impl<'s> Monitor<'s> {
                 let mut cols = Vec::with_capacity(set.signals.len());
                 for s in &set.signals {
                     cols.push(self.column(s).ok_or_else(|| {
-                        mismatch(format!("set `{name}` is over signal `{s}`, which the trace does not have"))
-                            .with_help(self.known(sets))
+                        mismatch(format!(
+                            "set `{name}` is over signal `{s}`, which the trace does not have"
+                        ))
+                        .with_help(self.known(sets))
                     })?);
                 }
                 if set.region.dim() != cols.len() || set.metric.n != cols.len() {
@@ -153,17 +181,27 @@ impl<'s> Monitor<'s> {
             Expr::Not(x) => Node::Not(b(self.node(x, src, sets)?)),
             Expr::And(l, r) => Node::And(b(self.node(l, src, sets)?), b(self.node(r, src, sets)?)),
             Expr::Or(l, r) => Node::Or(b(self.node(l, src, sets)?), b(self.node(r, src, sets)?)),
-            Expr::Implies(l, r) => Node::Or(b(Node::Not(b(self.node(l, src, sets)?))), b(self.node(r, src, sets)?)),
+            Expr::Implies(l, r) => Node::Or(
+                b(Node::Not(b(self.node(l, src, sets)?))),
+                b(self.node(r, src, sets)?),
+            ),
             Expr::Eventually(i, x) => Node::Eventually(*i, b(self.node(x, src, sets)?)),
             Expr::Always(i, x) => Node::Always(*i, b(self.node(x, src, sets)?)),
-            Expr::Until(i, l, r) => Node::Until(*i, b(self.node(l, src, sets)?), b(self.node(r, src, sets)?)),
-            Expr::Release(i, l, r) => Node::Release(*i, b(self.node(l, src, sets)?), b(self.node(r, src, sets)?)),
+            Expr::Until(i, l, r) => {
+                Node::Until(*i, b(self.node(l, src, sets)?), b(self.node(r, src, sets)?))
+            }
+            Expr::Release(i, l, r) => {
+                Node::Release(*i, b(self.node(l, src, sets)?), b(self.node(r, src, sets)?))
+            }
         })
     }
 
     pub(crate) fn check_trace(&self, trace: &Trace) -> Result<(), MtlError> {
         if trace.names() != self.signals.as_slice() {
-            return Err(MtlError::Layout { bound: self.signals.join(","), trace: trace.names().join(",") });
+            return Err(MtlError::Layout {
+                bound: self.signals.join(","),
+                trace: trace.names().join(","),
+            });
         }
         Ok(())
     }
@@ -177,7 +215,9 @@ impl<'s> Monitor<'s> {
 
     fn eval(&self, node: &Node, t: &[f64], cols: &[&[f64]]) -> Result<Vec<f64>, MtlError> {
         Ok(match node {
-            Node::Const(_) | Node::Linear { .. } | Node::Set { .. } => self.atom(node, t.len(), cols)?,
+            Node::Const(_) | Node::Linear { .. } | Node::Set { .. } => {
+                self.atom(node, t.len(), cols)?
+            }
             Node::Not(x) => {
                 let mut v = self.eval(x, t, cols)?;
                 v.iter_mut().for_each(|r| *r = -*r);
@@ -195,7 +235,9 @@ impl<'s> Monitor<'s> {
                 v.iter_mut().zip(&w).for_each(|(a, b)| *a = a.max(*b));
                 v
             }
-            Node::Eventually(i, x) => sliding_max(&self.eval(x, t, cols)?, &Windows::new(t, i.a, i.b)),
+            Node::Eventually(i, x) => {
+                sliding_max(&self.eval(x, t, cols)?, &Windows::new(t, i.a, i.b))
+            }
             Node::Always(i, x) => sliding_min(&self.eval(x, t, cols)?, &Windows::new(t, i.a, i.b)),
             Node::Until(i, l, r) => until(t, &self.eval(l, t, cols)?, &self.eval(r, t, cols)?, *i),
             Node::Release(i, l, r) => {
@@ -211,10 +253,19 @@ impl<'s> Monitor<'s> {
     }
 
     /// The atomic propositions: constants (2.9), linear predicates and sets (2.10).
-    pub(crate) fn atom(&self, node: &Node, n: usize, cols: &[&[f64]]) -> Result<Vec<f64>, MtlError> {
+    pub(crate) fn atom(
+        &self,
+        node: &Node,
+        n: usize,
+        cols: &[&[f64]],
+    ) -> Result<Vec<f64>, MtlError> {
         Ok(match node {
             Node::Const(c) => vec![*c; n],
-            Node::Linear { cols: terms, b, norm } => {
+            Node::Linear {
+                cols: terms,
+                b,
+                norm,
+            } => {
                 let mut v = vec![*b; n];
                 for &(c, a) in terms {
                     v.iter_mut().zip(cols[c]).for_each(|(r, x)| *r -= a * x);
@@ -232,7 +283,10 @@ impl<'s> Monitor<'s> {
                     }
                     let r = s.region.signed_dist(&x, &s.metric).value;
                     if r.is_nan() {
-                        return Err(MtlError::NaN { set: s.name.clone(), index: k });
+                        return Err(MtlError::NaN {
+                            set: s.name.clone(),
+                            index: k,
+                        });
                     }
                     v.push(r);
                 }
@@ -245,7 +299,9 @@ impl<'s> Monitor<'s> {
 
 /// `[t, signal 0, signal 1, …]`, the column layout [`Node`] indices refer to.
 pub(crate) fn columns(trace: &Trace) -> Vec<&[f64]> {
-    std::iter::once(trace.times()).chain(trace.columns().iter().map(|c| c.as_slice())).collect()
+    std::iter::once(trace.times())
+        .chain(trace.columns().iter().map(|c| c.as_slice()))
+        .collect()
 }
 
 /// Bounded or unbounded until (2.13) in O(n).
@@ -271,8 +327,12 @@ pub(crate) fn until(t: &[f64], phi: &[f64], psi: &[f64], i: Interval) -> Vec<f64
     let mut pushed_b = 0usize;
     for k in 0..n {
         let (lo, end) = (w.lo[k], w.hi_end[k]);
-        let first = if lo == k && lo < end { psi[k] } else { f64::NEG_INFINITY };
-        let lo2 = lo.max(k);
+        let first = if lo == k && lo < end {
+            psi[k]
+        } else {
+            f64::NEG_INFINITY
+        };
+        let lo2 = lo.max(k + 1);
         let rest = if lo2 < end {
             while pushed_a < lo2 {
                 let x = phi[pushed_a];
@@ -285,9 +345,19 @@ pub(crate) fn until(t: &[f64], phi: &[f64], psi: &[f64], i: Interval) -> Vec<f64
             while head < dq.len() && dq[head] < k + 1 {
                 head += 1;
             }
-            let before = if k + 1 < lo2 { phi[dq[head]] } else { f64::INFINITY };
+            let before = if k + 1 < lo2 {
+                phi[dq[head]]
+            } else {
+                f64::INFINITY
+            };
             while pushed_b < end {
-                q.push(pushed_b, Clamp { alpha: psi[pushed_b], beta: phi[pushed_b] });
+                q.push(
+                    pushed_b,
+                    Clamp {
+                        alpha: psi[pushed_b],
+                        beta: phi[pushed_b],
+                    },
+                );
                 pushed_b += 1;
             }
             q.expire(lo2);

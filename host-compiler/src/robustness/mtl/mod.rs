@@ -55,7 +55,10 @@ pub struct Formula {
 impl Formula {
     /// Parse formula text.
     pub fn parse(src: &str) -> Result<Self, FormulaError> {
-        Ok(Self { expr: parse::parse(src)?, src: src.to_string() })
+        Ok(Self {
+            expr: parse::parse(src)?,
+            src: src.to_string(),
+        })
     }
     /// The syntax tree.
     pub fn expr(&self) -> &Expr {
@@ -67,7 +70,11 @@ impl Formula {
     }
     /// Resolve names against the signal names of a trace (in column order, without `t`) and the
     /// named sets.
-    pub fn bind<'s>(&self, signals: &[String], sets: &'s [NamedSet]) -> Result<Monitor<'s>, FormulaError> {
+    pub fn bind<'s>(
+        &self,
+        signals: &[String],
+        sets: &'s [NamedSet],
+    ) -> Result<Monitor<'s>, FormulaError> {
         Monitor::bind(&self.expr, &self.src, signals, sets)
     }
 }

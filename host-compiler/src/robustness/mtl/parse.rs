@@ -63,14 +63,29 @@ pub struct FormulaError {
 }
 
 impl FormulaError {
-    pub(crate) fn new(src: &str, span: Span, kind: FormulaErrorKind, message: String, label: String) -> Self {
+    pub(crate) fn new(
+        src: &str,
+        span: Span,
+        kind: FormulaErrorKind,
+        message: String,
+        label: String,
+    ) -> Self {
         let start = span.start.min(src.len());
         let before = &src[..start];
         let line = before.matches('\n').count() + 1;
         let line_start = before.rfind('\n').map(|i| i + 1).unwrap_or(0);
         let column = src[line_start..start].chars().count() + 1;
         let len = span.end.saturating_sub(span.start).min(src.len() - start);
-        Self { kind, message, line, column, src: src.to_string(), span: (start, len).into(), label, help: None }
+        Self {
+            kind,
+            message,
+            line,
+            column,
+            src: src.to_string(),
+            span: (start, len).into(),
+            label,
+            help: None,
+        }
     }
     pub(crate) fn with_help(mut self, help: impl Into<String>) -> Self {
         self.help = Some(help.into());
@@ -152,7 +167,9 @@ fn lex(src: &str) -> Result<Vec<Token>, FormulaError> {
                 j += 1;
             }
             (Tok::Ident(src[i..j].to_string()), j - i)
-        } else if c.is_ascii_digit() || (c == b'.' && b.get(i + 1).is_some_and(|d| d.is_ascii_digit())) {
+        } else if c.is_ascii_digit()
+            || (c == b'.' && b.get(i + 1).is_some_and(|d| d.is_ascii_digit()))
+        {
             let mut j = i;
             while j < b.len() && (b[j].is_ascii_digit() || b[j] == b'.') {
                 j += 1;
@@ -174,7 +191,10 @@ fn lex(src: &str) -> Result<Vec<Token>, FormulaError> {
                 FormulaError::new(
                     src,
                     Span::new(i, j),
-                    FormulaErrorKind::Syntax { expected: "a number".into(), found: format!("`{text}`") },
+                    FormulaErrorKind::Syntax {
+                        expected: "a number".into(),
+                        found: format!("`{text}`"),
+                    },
                     format!("expected a number, found `{text}`"),
                     "not a number".into(),
                 )
@@ -213,17 +233,25 @@ fn lex(src: &str) -> Result<Vec<Token>, FormulaError> {
                             expected: "an operator, a name, a number or a bracket".into(),
                             found: format!("`{ch}`"),
                         },
-                        format!("expected an operator, a name, a number or a bracket, found `{ch}`"),
+                        format!(
+                            "expected an operator, a name, a number or a bracket, found `{ch}`"
+                        ),
                         "not part of the formula language".into(),
                     ));
                 }
             };
             (tok, 1)
         };
-        out.push(Token { tok, span: Span::new(start, start + len) });
+        out.push(Token {
+            tok,
+            span: Span::new(start, start + len),
+        });
         i += len;
     }
-    out.push(Token { tok: Tok::Eof, span: Span::new(b.len(), b.len()) });
+    out.push(Token {
+        tok: Tok::Eof,
+        span: Span::new(b.len(), b.len()),
+    });
     Ok(out)
 }
 
@@ -266,7 +294,10 @@ impl<'s> Parser<'s> {
         FormulaError::new(
             self.src,
             span,
-            FormulaErrorKind::Syntax { expected: what.to_string(), found: found.clone() },
+            FormulaErrorKind::Syntax {
+                expected: what.to_string(),
+                found: found.clone(),
+            },
             format!("expected {what}, found {found}"),
             format!("expected {what}"),
         )
@@ -334,7 +365,11 @@ impl<'s> Parser<'s> {
                 self.bump();
                 let i = self.opt_interval()?;
                 let e = Box::new(self.unary()?);
-                return Ok(if always { Expr::Always(i, e) } else { Expr::Eventually(i, e) });
+                return Ok(if always {
+                    Expr::Always(i, e)
+                } else {
+                    Expr::Eventually(i, e)
+                });
             }
         }
         self.primary()
@@ -357,8 +392,10 @@ impl<'s> Parser<'s> {
             }
             Tok::Ident(s) if RESERVED.contains(&s.as_str()) => Err(self.expected(FORMULA_START)),
             Tok::Ident(name) => {
-                if matches!(self.peek2(), Tok::Star | Tok::Plus | Tok::Minus | Tok::Le | Tok::Ge | Tok::Lt | Tok::Gt)
-                {
+                if matches!(
+                    self.peek2(),
+                    Tok::Star | Tok::Plus | Tok::Minus | Tok::Le | Tok::Ge | Tok::Lt | Tok::Gt
+                ) {
                     self.predicate()
                 } else {
                     let span = self.bump();
@@ -395,7 +432,11 @@ impl<'s> Parser<'s> {
                 self.bump();
                 f64::INFINITY
             }
-            _ => return Err(self.expected("a non-negative number or `inf` (the interval's upper bound)")),
+            _ => {
+                return Err(
+                    self.expected("a non-negative number or `inf` (the interval's upper bound)")
+                )
+            }
         };
         let close = self.eat(&Tok::RBrack, "`]`")?;
         Interval::new(a, b).ok_or_else(|| {
@@ -429,7 +470,11 @@ impl<'s> Parser<'s> {
         for t in terms.iter_mut() {
             t.1 = t.1 * flip + 0.0;
         }
-        let p = LinearPredicate { terms, b: -flip * c0 + 0.0, span };
+        let p = LinearPredicate {
+            terms,
+            b: -flip * c0 + 0.0,
+            span,
+        };
         let norm = p.norm();
         if norm == 0.0 || !norm.is_finite() || !p.b.is_finite() {
             return Err(FormulaError::new(
@@ -449,7 +494,12 @@ impl<'s> Parser<'s> {
     }
 
     /// Adds `sign ·` the expression into (terms, c0).
-    fn linexpr(&mut self, sign: f64, terms: &mut Vec<(String, f64, Span)>, c0: &mut f64) -> Result<(), FormulaError> {
+    fn linexpr(
+        &mut self,
+        sign: f64,
+        terms: &mut Vec<(String, f64, Span)>,
+        c0: &mut f64,
+    ) -> Result<(), FormulaError> {
         self.sterm(sign, terms, c0)?;
         loop {
             let s = match self.peek() {
@@ -462,7 +512,12 @@ impl<'s> Parser<'s> {
         }
     }
 
-    fn sterm(&mut self, mut sign: f64, terms: &mut Vec<(String, f64, Span)>, c0: &mut f64) -> Result<(), FormulaError> {
+    fn sterm(
+        &mut self,
+        mut sign: f64,
+        terms: &mut Vec<(String, f64, Span)>,
+        c0: &mut f64,
+    ) -> Result<(), FormulaError> {
         match self.peek() {
             Tok::Minus => {
                 sign = -sign;

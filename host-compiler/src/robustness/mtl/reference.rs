@@ -37,7 +37,13 @@ fn candidates(t: &[f64], k: usize, b: f64, scan: Scan) -> impl Iterator<Item = u
     (start..t.len()).take_while(move |&j| scan == Scan::Full || t[j] - t[k] <= b)
 }
 
-fn eval(m: &Monitor, node: &Node, t: &[f64], cols: &[&[f64]], scan: Scan) -> Result<Vec<f64>, MtlError> {
+fn eval(
+    m: &Monitor,
+    node: &Node,
+    t: &[f64],
+    cols: &[&[f64]],
+    scan: Scan,
+) -> Result<Vec<f64>, MtlError> {
     let n = t.len();
     Ok(match node {
         Node::Const(_) | Node::Linear { .. } | Node::Set { .. } => m.atom(node, n, cols)?,

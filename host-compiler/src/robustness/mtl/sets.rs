@@ -19,9 +19,18 @@ pub struct NamedSet {
 
 impl NamedSet {
     /// A set with the Euclidean metric on its coordinates.
-    pub fn euclidean(name: impl Into<String>, signals: Vec<String>, region: Box<dyn Region>) -> Self {
+    pub fn euclidean(
+        name: impl Into<String>,
+        signals: Vec<String>,
+        region: Box<dyn Region>,
+    ) -> Self {
         let metric = Metric::euclidean(signals.len());
-        Self { name: name.into(), signals, region, metric }
+        Self {
+            name: name.into(),
+            signals,
+            region,
+            metric,
+        }
     }
 }
 
@@ -58,7 +67,10 @@ pub fn from_spec_sets(
     use crate::spec::{Coords, Shape};
     let mut out = Vec::with_capacity(descs.len());
     for (name, desc) in descs {
-        let err = |message: String| SetsError { name: name.clone(), message };
+        let err = |message: String| SetsError {
+            name: name.clone(),
+            message,
+        };
         let chosen: Vec<String> = match &desc.coords {
             Coords::State => signals.to_vec(),
             Coords::StateIndices(idx) => idx
@@ -75,9 +87,11 @@ pub fn from_spec_sets(
                 })
                 .collect::<Result<_, _>>()?,
             Coords::Output { .. } => {
-                return Err(err("output coordinates need a plant; for a trace, list signal columns as \
+                return Err(err(
+                    "output coordinates need a plant; for a trace, list signal columns as \
                                 coords = [\"x1\", …]"
-                    .into()))
+                        .into(),
+                ))
             }
         };
         let d = desc.dim();
@@ -93,7 +107,9 @@ pub fn from_spec_sets(
             Shape::Ball { center, radius } => {
                 Box::new(Ball::new(center, Metric::euclidean(d).R, radius).map_err(geo)?)
             }
-            Shape::Ellipsoid { center, Q } => Box::new(Ellipsoid::new(center, Q.data).map_err(geo)?),
+            Shape::Ellipsoid { center, Q } => {
+                Box::new(Ellipsoid::new(center, Q.data).map_err(geo)?)
+            }
             Shape::Polytope { A, b } => Box::new(Polytope::new(d, A.data, b).map_err(geo)?),
             Shape::Box { lo, hi } => {
                 // lo ≤ y ≤ hi as [I; −I] y ≤ [hi; −lo].

@@ -20,19 +20,52 @@ pub enum TraceError {
     #[error("{origin}: the file is empty; expected a header `t,<signal names>`")]
     Empty { origin: String },
     #[error("{origin}:{line}:{char_column}: header field {column}: {message}")]
-    Header { origin: String, line: usize, column: usize, char_column: usize, message: String },
+    Header {
+        origin: String,
+        line: usize,
+        column: usize,
+        char_column: usize,
+        message: String,
+    },
     #[error("{origin}: the header has no data rows after it; a trace needs at least one sample")]
     NoRows { origin: String },
     #[error("{origin}:{line}: row has {found} fields, expected {expected} ({names}){missing}")]
-    FieldCount { origin: String, line: usize, found: usize, expected: usize, names: String, missing: String },
+    FieldCount {
+        origin: String,
+        line: usize,
+        found: usize,
+        expected: usize,
+        names: String,
+        missing: String,
+    },
     #[error("{origin}:{line}:{char_column}: field {column} (`{name}`): `{field}` is not a number")]
-    NotNumeric { origin: String, line: usize, column: usize, char_column: usize, name: String, field: String },
+    NotNumeric {
+        origin: String,
+        line: usize,
+        column: usize,
+        char_column: usize,
+        name: String,
+        field: String,
+    },
     #[error("{origin}:{line}:{char_column}: field {column} (`{name}`): `{field}` is not finite")]
-    NonFinite { origin: String, line: usize, column: usize, char_column: usize, name: String, field: String },
+    NonFinite {
+        origin: String,
+        line: usize,
+        column: usize,
+        char_column: usize,
+        name: String,
+        field: String,
+    },
     #[error(
         "{origin}:{line}:{char_column}: time must increase strictly, but t = {value} follows t = {prev} (field 1, `t`)"
     )]
-    NonMonotoneTime { origin: String, line: usize, char_column: usize, value: f64, prev: f64 },
+    NonMonotoneTime {
+        origin: String,
+        line: usize,
+        char_column: usize,
+        value: f64,
+        prev: f64,
+    },
     #[error("trace: {0}")]
     Invalid(String),
 }
@@ -71,20 +104,32 @@ pub struct Trace {
 
 impl Trace {
     /// Build from columns. `names` and `columns` pair up; every column has one value per time.
-    pub fn new(times: Vec<f64>, names: Vec<String>, columns: Vec<Vec<f64>>) -> Result<Self, TraceError> {
+    pub fn new(
+        times: Vec<f64>,
+        names: Vec<String>,
+        columns: Vec<Vec<f64>>,
+    ) -> Result<Self, TraceError> {
         let bad = |m: String| Err(TraceError::Invalid(m));
         if times.is_empty() {
             return bad("no samples".into());
         }
         if names.len() != columns.len() {
-            return bad(format!("{} names for {} columns", names.len(), columns.len()));
+            return bad(format!(
+                "{} names for {} columns",
+                names.len(),
+                columns.len()
+            ));
         }
         for (k, &t) in times.iter().enumerate() {
             if !t.is_finite() {
                 return bad(format!("time t[{k}] = {t} is not finite"));
             }
             if k > 0 && t <= times[k - 1] {
-                return bad(format!("time must increase strictly: t[{k}] = {t} follows t[{}] = {}", k - 1, times[k - 1]));
+                return bad(format!(
+                    "time must increase strictly: t[{k}] = {t} follows t[{}] = {}",
+                    k - 1,
+                    times[k - 1]
+                ));
             }
         }
         for (i, (name, col)) in names.iter().zip(&columns).enumerate() {
@@ -92,20 +137,37 @@ impl Trace {
                 return bad(format!("signal name `{name}` is empty, `t`, or repeated"));
             }
             if col.len() != times.len() {
-                return bad(format!("signal `{name}` has {} values for {} times", col.len(), times.len()));
+                return bad(format!(
+                    "signal `{name}` has {} values for {} times",
+                    col.len(),
+                    times.len()
+                ));
             }
             if let Some(k) = col.iter().position(|v| !v.is_finite()) {
-                return bad(format!("signal `{name}` at sample {k} is not finite ({})", col[k]));
+                return bad(format!(
+                    "signal `{name}` at sample {k} is not finite ({})",
+                    col[k]
+                ));
             }
         }
-        Ok(Self { times, names, columns })
+        Ok(Self {
+            times,
+            names,
+            columns,
+        })
     }
 
     /// Parse CSV text (format in the module doc). `origin` names the source in error messages.
     pub fn from_csv_str(text: &str, origin: &str) -> Result<Self, TraceError> {
         let origin_s = origin.to_string();
-        let mut lines = text.lines().enumerate().map(|(i, l)| (i + 1, l)).filter(|(_, l)| !l.trim().is_empty());
-        let (hline, header) = lines.next().ok_or_else(|| TraceError::Empty { origin: origin_s.clone() })?;
+        let mut lines = text
+            .lines()
+            .enumerate()
+            .map(|(i, l)| (i + 1, l))
+            .filter(|(_, l)| !l.trim().is_empty());
+        let (hline, header) = lines.next().ok_or_else(|| TraceError::Empty {
+            origin: origin_s.clone(),
+        })?;
         let hfields = split(header);
         let herr = |column: usize, char_column: usize, message: String| TraceError::Header {
             origin: origin_s.clone(),
@@ -116,7 +178,11 @@ impl Trace {
         };
         let (c0, first) = hfields[0];
         if first != "t" {
-            return Err(herr(1, c0, format!("the first column must be named `t` (time), found `{first}`")));
+            return Err(herr(
+                1,
+                c0,
+                format!("the first column must be named `t` (time), found `{first}`"),
+            ));
         }
         let mut names: Vec<String> = Vec::new();
         for (i, &(cc, name)) in hfields.iter().enumerate().skip(1) {
@@ -124,11 +190,17 @@ impl Trace {
                 return Err(herr(i + 1, cc, "empty signal name".into()));
             }
             if name == "t" || names.iter().any(|n| n == name) {
-                return Err(herr(i + 1, cc, format!("signal name `{name}` appears twice")));
+                return Err(herr(
+                    i + 1,
+                    cc,
+                    format!("signal name `{name}` appears twice"),
+                ));
             }
             names.push(name.to_string());
         }
-        let all: Vec<&str> = std::iter::once("t").chain(names.iter().map(|s| s.as_str())).collect();
+        let all: Vec<&str> = std::iter::once("t")
+            .chain(names.iter().map(|s| s.as_str()))
+            .collect();
         let width = all.len();
         let mut times = Vec::new();
         let mut columns: Vec<Vec<f64>> = vec![Vec::new(); names.len()];
@@ -136,7 +208,14 @@ impl Trace {
             let fields = split(row);
             if fields.len() != width {
                 let missing = if fields.len() < width {
-                    format!("; missing {}", all[fields.len()..].iter().map(|n| format!("`{n}`")).collect::<Vec<_>>().join(", "))
+                    format!(
+                        "; missing {}",
+                        all[fields.len()..]
+                            .iter()
+                            .map(|n| format!("`{n}`"))
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    )
                 } else {
                     format!("; {} extra", fields.len() - width)
                 };
@@ -189,13 +268,20 @@ impl Trace {
         if times.is_empty() {
             return Err(TraceError::NoRows { origin: origin_s });
         }
-        Ok(Self { times, names, columns })
+        Ok(Self {
+            times,
+            names,
+            columns,
+        })
     }
 
     /// Read and parse a CSV file.
     pub fn from_csv_path(path: &Path) -> Result<Self, TraceError> {
         let origin = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|source| TraceError::Io { origin: origin.clone(), source })?;
+        let text = std::fs::read_to_string(path).map_err(|source| TraceError::Io {
+            origin: origin.clone(),
+            source,
+        })?;
         Self::from_csv_str(&text, &origin)
     }
 
@@ -221,7 +307,10 @@ impl Trace {
     }
     /// One signal by name.
     pub fn signal(&self, name: &str) -> Option<&[f64]> {
-        self.names.iter().position(|n| n == name).map(|i| self.columns[i].as_slice())
+        self.names
+            .iter()
+            .position(|n| n == name)
+            .map(|i| self.columns[i].as_slice())
     }
 }
 

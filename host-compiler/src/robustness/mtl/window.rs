@@ -51,7 +51,10 @@ struct Wedge {
 
 impl Wedge {
     fn with_capacity(n: usize) -> Self {
-        Self { buf: Vec::with_capacity(n), head: 0 }
+        Self {
+            buf: Vec::with_capacity(n),
+            head: 0,
+        }
     }
     #[inline(always)]
     fn push(&mut self, v: &[f64], j: usize, dominates: impl Fn(f64, f64) -> bool) {
@@ -73,7 +76,12 @@ impl Wedge {
     }
 }
 
-fn sliding(v: &[f64], w: &Windows, empty: f64, dominates: impl Fn(f64, f64) -> bool + Copy) -> Vec<f64> {
+fn sliding(
+    v: &[f64],
+    w: &Windows,
+    empty: f64,
+    dominates: impl Fn(f64, f64) -> bool + Copy,
+) -> Vec<f64> {
     let n = v.len();
     let mut out = Vec::with_capacity(n);
     let mut q = Wedge::with_capacity(n);
@@ -85,7 +93,11 @@ fn sliding(v: &[f64], w: &Windows, empty: f64, dominates: impl Fn(f64, f64) -> b
             pushed += 1;
         }
         q.expire(lo);
-        out.push(if lo < end { q.front().map_or(empty, |j| v[j]) } else { empty });
+        out.push(if lo < end {
+            q.front().map_or(empty, |j| v[j])
+        } else {
+            empty
+        });
     }
     out
 }
@@ -109,11 +121,17 @@ pub(crate) struct Clamp {
 }
 
 impl Clamp {
-    pub const ID: Clamp = Clamp { alpha: f64::NEG_INFINITY, beta: f64::INFINITY };
+    pub const ID: Clamp = Clamp {
+        alpha: f64::NEG_INFINITY,
+        beta: f64::INFINITY,
+    };
     /// self ∘ g.
     #[inline(always)]
     pub fn then(self, g: Clamp) -> Clamp {
-        Clamp { alpha: self.alpha.max(self.beta.min(g.alpha)), beta: self.beta.min(g.beta) }
+        Clamp {
+            alpha: self.alpha.max(self.beta.min(g.alpha)),
+            beta: self.beta.min(g.beta),
+        }
     }
 }
 
@@ -130,7 +148,11 @@ pub(crate) struct ClampQueue {
 
 impl ClampQueue {
     pub fn new() -> Self {
-        Self { front: Vec::new(), back: Vec::new(), back_agg: Clamp::ID }
+        Self {
+            front: Vec::new(),
+            back: Vec::new(),
+            back_agg: Clamp::ID,
+        }
     }
     #[inline(always)]
     pub fn push(&mut self, j: usize, f: Clamp) {

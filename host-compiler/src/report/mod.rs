@@ -1,0 +1,12 @@
+//! The HTML report of a synthesis run: `report.html`, one self-contained page (inline SVG and CSS)
+//! rendered from the plot-ready [`data::ReportData`]. `data` (owned by the lead) defines the input;
+//! `planar` the 2-D clipping, `plots` the SVG plots, `format` the number and text formatting, and `html`
+//! the page itself.
+
+pub mod data;
+pub mod format;
+pub mod html;
+pub mod planar;
+pub mod plots;
+
+pub use html::{render_html, verdict, write_report, Verdict};

@@ -1,0 +1,185 @@
+//! The certification's bounds hold for the code that runs: the f32 evaluator's error bound, the f32 ball
+//! selection's radius, and the inter-sample excursion bound — each checked against the real thing.
+
+use faer::Mat;
+use host_compiler::certify::{evaluator_error_bound, selection_radius, ContinuousPart, Loop, LoopConstants};
+use host_compiler::emit::{ImageBuilder, TrajectoryEntry};
+use host_compiler::geometry::{Metric, Region, Witness};
+use host_compiler::linalg::{mat_vec, p_norm};
+use host_compiler::trajectory::generate::InputBound;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use shared_types::eval::Controller;
+
+fn f32r(x: f64) -> f64 {
+    x as f32 as f64
+}
+
+/// A random symmetric positive definite matrix with condition number up to ~`cond`.
+fn random_pd(n: usize, cond: f64, rng: &mut ChaCha8Rng) -> Mat<f64> {
+    let M = Mat::from_fn(n, n, |_, _| rng.random_range(-1.0..1.0));
+    let qr = M.qr();
+    let Q = qr.compute_Q();
+    let d: Vec<f64> = (0..n).map(|i| 1.0 + (cond - 1.0) * i as f64 / (n.max(2) - 1) as f64).collect();
+    let P = Mat::from_fn(n, n, |i, j| (0..n).map(|k| Q[(i, k)] * d[k] * Q[(j, k)]).sum::<f64>());
+    // Exactly symmetric after rounding to f32 (the image requires it).
+    Mat::from_fn(n, n, |i, j| f32r(if i <= j { P[(i, j)] } else { P[(j, i)] }))
+}
+
+#[test]
+fn f32_evaluator_stays_within_the_rounding_bound() {
+    let mut rng = ChaCha8Rng::seed_from_u64(11);
+    let mut worst_ratio: f64 = 0.0;
+    for trial in 0..300 {
+        let n = 1 + trial % 8;
+        let m = 1 + trial % 3;
+        let K: Vec<f64> = (0..m * n).map(|_| f32r(rng.random_range(-50.0..50.0))).collect();
+        let v: Vec<f64> = (0..m).map(|_| f32r(rng.random_range(-10.0..10.0))).collect();
+        let mut b = ImageBuilder::new(n, m, 0.01);
+        let I: Vec<f64> = (0..n * n).map(|k| if k % (n + 1) == 0 { 1.0 } else { 0.0 }).collect();
+        b.add_location(K.clone(), I);
+        b.add_trajectory(TrajectoryEntry { x0: vec![0.0; n], delta: 1e6, v: v.clone(), location: vec![0] });
+        let bytes = b.to_bytes().unwrap();
+        let img = shared_types::image::decode(&bytes).unwrap();
+        let Km = Mat::from_fn(m, n, |i, j| K[i * n + j]);
+        for _ in 0..20 {
+            let scale = 10f64.powf(rng.random_range(-3.0..3.0));
+            let x: Vec<f64> = (0..n).map(|_| rng.random_range(-1.0..1.0) * scale).collect();
+            let xf: Vec<f32> = x.iter().map(|&a| a as f32).collect();
+            let mut ctl = Controller::new(img);
+            let u = ctl.step(&xf).unwrap();
+            let exact: Vec<f64> = (0..m).map(|i| (0..n).map(|j| K[i * n + j] * x[j]).sum::<f64>() + v[i]).collect();
+            let X: Vec<f64> = x.iter().map(|a| a.abs()).collect();
+            let bound = evaluator_error_bound(Km.as_ref(), &v, &X);
+            for i in 0..m {
+                let err = (u.as_slice()[i] as f64 - exact[i]).abs();
+                assert!(err <= bound[i], "trial {trial}: |error| {err:e} exceeds the bound {:e}", bound[i]);
+                if bound[i] > 0.0 {
+                    worst_ratio = worst_ratio.max(err / bound[i]);
+                }
+            }
+        }
+    }
+    // The bound is not vacuous: some errors come within a factor 100 of it.
+    assert!(worst_ratio > 0.01, "bound is loose by more than 100x everywhere: {worst_ratio}");
+}
+
+#[test]
+fn f32_selection_accepts_only_states_in_the_certified_ball() {
+    let mut rng = ChaCha8Rng::seed_from_u64(12);
+    let mut accepted_near = 0;
+    for trial in 0..200 {
+        let n = 2 + trial % 6;
+        let P = random_pd(n, 1.0 + 50.0 * rng.random::<f64>(), &mut rng);
+        let c: Vec<f64> = (0..n).map(|_| f32r(rng.random_range(-3.0..3.0))).collect();
+        let delta = rng.random_range(0.01..1.0);
+        let stored = selection_radius(P.as_ref(), &c, delta);
+        assert!(stored > 0.0 && (stored as f64) < delta);
+        let mut b = ImageBuilder::new(n, 1, 0.01);
+        b.add_location(vec![0.0; n], host_compiler::linalg::to_row_major(P.as_ref()));
+        b.add_trajectory(TrajectoryEntry { x0: c.clone(), delta: stored as f64, v: vec![0.0], location: vec![0] });
+        let bytes = b.to_bytes().unwrap();
+        let ctl = Controller::new(shared_types::image::decode(&bytes).unwrap());
+        let roots = host_compiler::linalg::PdRoots::new(P.as_ref()).unwrap();
+        for _ in 0..200 {
+            // Points on shells just inside and just outside the stored radius.
+            let w: Vec<f64> = (0..n).map(|_| rng.random_range(-1.0..1.0)).collect();
+            let wn = w.iter().map(|a| a * a).sum::<f64>().sqrt();
+            let e = mat_vec(roots.inv_sqrt.as_ref(), &w);
+            let r = stored as f64 * (1.0 + rng.random_range(-1e-6..1e-6));
+            let x: Vec<f64> = (0..n).map(|i| c[i] + r * e[i] / wn).collect();
+            let xf: Vec<f32> = x.iter().map(|&a| a as f32).collect();
+            if ctl.select(&xf).is_some() {
+                accepted_near += 1;
+                let d = p_norm(P.as_ref(), &(0..n).map(|i| x[i] - c[i]).collect::<Vec<_>>());
+                assert!(d <= delta, "trial {trial}: accepted a state at P-distance {d} > certified {delta}");
+            }
+        }
+    }
+    assert!(accepted_near > 1000, "the test must exercise acceptance near the boundary: {accepted_near}");
+}
+
+/// A region with nothing in it: the inter-sample test only needs the loop constants.
+struct Nowhere(usize);
+impl Region for Nowhere {
+    fn dim(&self) -> usize {
+        self.0
+    }
+    fn contains(&self, _: &[f64]) -> bool {
+        false
+    }
+    fn dist(&self, x: &[f64], _: &Metric) -> Witness {
+        Witness { value: f64::INFINITY, point: x.to_vec() }
+    }
+    fn depth(&self, x: &[f64], _: &Metric) -> Witness {
+        Witness { value: 0.0, point: x.to_vec() }
+    }
+}
+
+#[test]
+fn inter_sample_excursion_is_bounded() {
+    // The planar vehicle of Example 3.3 with a stabilising sampled gain.
+    let Ac = Mat::from_fn(4, 4, |i, j| {
+        [[0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0], [-1.0, 0.0, 0.1, 0.0], [0.0, -1.0, 0.0, 0.1]][i][j]
+    });
+    let Bc = Mat::from_fn(4, 2, |i, j| [[0.0, 0.0], [0.0, 0.0], [1.0, 0.0], [0.0, 1.0]][i][j]);
+    let c = vec![0.0, 0.0, 1.0, 1.0];
+    let h = 0.05;
+    let plant = host_compiler::model::ContinuousPlant::new(Ac.clone(), Bc.clone(), c.clone()).unwrap();
+    let d = host_compiler::model::zoh(&plant, h).unwrap();
+    const SUB: usize = 50;
+    let fine = host_compiler::model::zoh(&plant, h / SUB as f64).unwrap();
+    let K = Mat::from_fn(2, 4, |i, j| [[-2.0, 0.0, -2.5, 0.0], [0.0, -2.0, 0.0, -2.5]][i][j]);
+    let P = random_pd(4, 5.0, &mut ChaCha8Rng::seed_from_u64(3));
+    let cp = ContinuousPart { Ac: Ac.clone(), Bc: Bc.clone(), c: c.clone(), h };
+    let nowhere = Nowhere(4);
+    let input = InputBound::Norm2 { center: vec![0.0, 0.0], max: 1e9 };
+    let At = &d.A + &d.B * &K;
+    let sigma = host_compiler::linalg::sym_eigenvalues((&P - At.transpose() * &P * &At).as_ref()).unwrap()[0];
+    let lp = Loop {
+        A: d.A.as_ref(),
+        B: d.B.as_ref(),
+        g: &d.g,
+        K: K.as_ref(),
+        P: P.as_ref(),
+        continuous: Some(&cp),
+        goal: &nowhere,
+        unsafe_set: None,
+        input: &input,
+    };
+    if sigma <= 0.0 {
+        // Not contracting in this random metric: then the constants must refuse the loop.
+        assert!(LoopConstants::new(&lp).is_err());
+        return;
+    }
+    let lc = LoopConstants::new(&lp).unwrap();
+    let mut rng = ChaCha8Rng::seed_from_u64(4);
+    let mut tight: f64 = 0.0;
+    for _ in 0..500 {
+        let xn: Vec<f64> = (0..4).map(|_| rng.random_range(-2.0..2.0)).collect();
+        let un: Vec<f64> = (0..2).map(|_| rng.random_range(-1.0..1.0)).collect();
+        let e: Vec<f64> = (0..4).map(|_| rng.random_range(-0.1..0.1)).collect();
+        let eps: Vec<f64> = (0..2).map(|_| rng.random_range(-1e-3..1e-3)).collect();
+        let r = p_norm(P.as_ref(), &e);
+        let epsn = eps.iter().map(|a| a * a).sum::<f64>().sqrt();
+        // The actual run: x = x̃ + e, u = ũ + K e + ε, held for one period.
+        let ke = mat_vec(K.as_ref(), &e);
+        let u: Vec<f64> = (0..2).map(|i| un[i] + ke[i] + eps[i]).collect();
+        let mut x: Vec<f64> = (0..4).map(|i| xn[i] + e[i]).collect();
+        let f = {
+            let ax = mat_vec(Ac.as_ref(), &xn);
+            let bu = mat_vec(Bc.as_ref(), &un);
+            (0..4).map(|i| ax[i] + bu[i] + c[i]).collect::<Vec<_>>()
+        };
+        let bound = lc.gamma * r + lc.phi * p_norm(P.as_ref(), &f) + lc.phi * lc.beta * epsn;
+        for _ in 0..SUB {
+            let ax = mat_vec(fine.A.as_ref(), &x);
+            let bu = mat_vec(fine.B.as_ref(), &u);
+            x = (0..4).map(|i| ax[i] + bu[i] + fine.g[i]).collect();
+            let dev = p_norm(P.as_ref(), &(0..4).map(|i| x[i] - xn[i]).collect::<Vec<_>>());
+            assert!(dev <= bound * (1.0 + 1e-12), "excursion {dev} exceeds the bound {bound}");
+            tight = tight.max(dev / bound);
+        }
+    }
+    assert!(tight > 0.3, "bound far from tight: {tight}");
+}

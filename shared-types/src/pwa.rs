@@ -1,0 +1,652 @@
+//! PWA-feedback images (mode 2, Ch. 6): the tables, their validation and bounded-time point location.
+//!
+//! # The law
+//! On the envelope F of (6.2) (the union of the certified balls `B_P(x̃_i(κ), δ_i)`), the input is the
+//! piecewise-affine law (6.1) around the CAF gain K: `u = (K + θ_j) x + θ0_j` on partition `X_j`. The image
+//! stores the *full gain* `K_j = K + θ_j` of every partition, summed in f64 on the host and rounded once to
+//! f32, so one step costs m·n multiply-adds and a single rounding per stored entry (storing `K` and `θ_j`
+//! apart would double both). `K` itself stays in the payload's per-location `K` for reports; the evaluator
+//! does not read it in this mode.
+//!
+//! # Point location
+//! A binary tree over hyperplanes. Internal node i holds `a_i` (n values) and `b_i`; at node i the state
+//! goes to the left child if `a_iᵀx ≤ b_i` and to the right child otherwise (a non-finite `a_iᵀx`, which
+//! only huge states can produce, goes right). A child is a 16-bit code:
+//!
+//! | code              | meaning                                                    |
+//! |-------------------|------------------------------------------------------------|
+//! | `0x0000..=0x7FFF` | internal node of that index                                |
+//! | `0x8000..=0xFFFE` | leaf `code − 0x8000` ([`LEAF_BASE`])                        |
+//! | `0xFFFF`          | outside the certified envelope ([`OUTSIDE`])               |
+//!
+//! The root is node 0; a tree without internal nodes is leaf 0 alone. Decoding requires every child node
+//! to have a larger index than its parent, so indices strictly increase along every path: there are no
+//! cycles, and a single pass in index order computes every node's depth. Subtrees may be shared (the tree
+//! may be a DAG); that changes neither the bound nor the meaning.
+//!
+//! # The envelope: balls at the leaves
+//! F is a union of ellipsoids, not a polytope, so a leaf does not describe `cell ∩ F` by half-spaces (that
+//! could only be an inner approximation, found by an LP at build time). Each leaf instead names its
+//! partition j and lists the certified balls whose law is j: the balls `B_P(x̃_i(κ), δ_i)` with `x̃_i(κ)`
+//! in `X_j`, for which (6.5) (through (6.6)–(6.7)) was shown. A state gets `Ok(u)` only if it lies in one of
+//! the listed balls, which is exactly the hypothesis of Theorem 6.6 for that ball: the law of j maps the
+//! ball into `B_P(x̃_i(κ+1), δ_i) ⊂ F`. A state in no listed ball gets [`Region::OutsideBalls`], a state the
+//! tree sends to [`OUTSIDE`] gets [`Region::OutsideTree`]; both are "out of envelope". So the tree only has
+//! to route; a hyperplane cutting a ball near a partition boundary (the situation Algorithm 5 repairs by
+//! moving the boundary to `b⁻_m`) is handled by listing the ball in the leaves on both sides of the cut
+//! that use its law, and listing it in no other leaf. The same holds for f32 rounding of the hyperplane
+//! tests: a misrouted state is either in a ball certified for the law it gets, or out of envelope.
+//!
+//! Balls live in one table (centre, δ, location whose `P_ℓ` is the metric, partition it is certified for);
+//! leaves refer to them through a list of `u16` references (a leaf owns references `end[l−1]..end[l]`), so
+//! a ball cut by a hyperplane is stored once. Each ball records its partition and decoding checks that every
+//! leaf lists only balls of its own partition.
+//!
+//! # Cost of one step
+//! At most [`MAX_TREE_DEPTH`] hyperplane tests (n multiply-adds each; the stored depth is the exact worst
+//! case of this image), at most [`MAX_LEAF_BALLS`] ball tests (`(x − c)ᵀP(x − c) ≤ δ²`, n subtractions and
+//! n² + n multiply-adds each; the scan stops at the first ball containing x) and m·n multiply-adds for the
+//! law: see [`crate::capacity::PWA_STEP_MAX_MULADDS`]. Arithmetic is plain f32 in a fixed order, without
+//! fused multiply-add, as in the feedforward mode.
+//!
+//! # Rounding of the ball test
+//! With `ẽ = fl(x − c)` (each component within a relative `u = 2⁻²⁴` of `x − c`), the computed d̂² satisfies
+//! `|d̂² − ẽᵀPẽ| ≤ γ_{2n} |ẽ|ᵀ|P||ẽ|` (γ_k = k·u/(1 − k·u)), and fl(δ·δ) ≤ δ²(1 + u). A state accepted by the
+//! evaluator therefore satisfies `ẽᵀPẽ ≤ δ²(1 + u) + γ_{2n}|ẽ|ᵀ|P||ẽ|`; certification accounts for this
+//! margin as it does for the feedforward balls (DESIGN §5).
+//!
+//! # Validation (run by [`crate::image::decode`] and [`crate::image::Image::new_pwa`])
+//! * counts within capacity: nodes ≤ [`MAX_TREE_NODES`], 1 ≤ leaves ≤ [`MAX_LEAVES`],
+//!   1 ≤ balls ≤ [`MAX_BALLS`], stored depth ≤ [`MAX_TREE_DEPTH`], references ≤ [`MAX_BALL_REFS`];
+//! * every field's byte length matches the counts and dimensions; every float finite; no zero normal;
+//! * each leaf's partition in range; leaf ends strictly increasing (every leaf lists ≥ 1 ball) and at most
+//!   [`MAX_LEAF_BALLS`] per leaf; every reference in range and to a ball of the leaf's partition;
+//! * balls: `δ ≥ 0`, location and partition in range;
+//! * tree: every child node in range and after its parent, every child leaf in range, every node reachable
+//!   from the root, every leaf referenced, no node deeper than [`MAX_TREE_DEPTH`] tests, and the stored
+//!   depth equal to the tree's worst case.
+#![allow(non_snake_case)]
+
+use serde::{Deserialize, Serialize};
+
+use crate::capacity::{
+    MAX_BALLS, MAX_BALL_REFS, MAX_LEAF_BALLS, MAX_LEAVES, MAX_LOCATIONS, MAX_M, MAX_N,
+    MAX_PARTITIONS, MAX_TREE_DEPTH, MAX_TREE_NODES,
+};
+use crate::image::{
+    check_dim, check_finite, check_len, div, f32_at, f32_span, floats, rem, sat16, sat32, u16_le,
+    Dim, Dims, Field, Image, ImageError, Mode, Pos,
+};
+
+/// Child codes from here up to `OUTSIDE − 1` name leaves: leaf `code − LEAF_BASE`.
+pub const LEAF_BASE: u16 = 0x8000;
+/// Child code meaning "outside the certified envelope".
+pub const OUTSIDE: u16 = 0xFFFF;
+
+/// A decoded child code of a tree node.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Child {
+    /// Internal node of this index.
+    Node(u16),
+    /// Leaf of this index.
+    Leaf(u16),
+    /// Outside the certified envelope.
+    Outside,
+}
+
+impl Child {
+    /// The child a code stands for (every code means something; ranges are checked by validation).
+    pub const fn from_code(code: u16) -> Child {
+        if code == OUTSIDE {
+            Child::Outside
+        } else if code >= LEAF_BASE {
+            Child::Leaf(code - LEAF_BASE)
+        } else {
+            Child::Node(code)
+        }
+    }
+
+    /// The code of this child; `None` for an index the code space cannot hold (node ≥ 0x8000, leaf ≥
+    /// 0x7FFF).
+    pub const fn code(self) -> Option<u16> {
+        match self {
+            Child::Node(i) if i < LEAF_BASE => Some(i),
+            Child::Leaf(l) if l < OUTSIDE - LEAF_BASE => Some(LEAF_BASE + l),
+            Child::Outside => Some(OUTSIDE),
+            _ => None,
+        }
+    }
+}
+
+/// The PWA tables of an image, as raw borrowed byte strings (`f32` and `u16` little-endian, matrices
+/// row-major). Counts are stored explicitly; field lengths are checked against them.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct PwaTables<'a> {
+    /// Worst-case number of hyperplane tests from the root to a leaf (must equal the tree's).
+    pub depth: u8,
+    /// Number of internal nodes (0: the tree is leaf 0 alone).
+    pub n_nodes: u16,
+    /// Number of leaves.
+    pub n_leaves: u16,
+    /// Number of certified balls.
+    pub n_balls: u16,
+    /// `K_j = K + θ_j` per partition: partitions × m × n values.
+    pub gain: &'a [u8],
+    /// `θ0_j` per partition: partitions × m values.
+    pub offset: &'a [u8],
+    /// Hyperplane normals `a_i`: nodes × n values.
+    pub node_a: &'a [u8],
+    /// Hyperplane offsets `b_i`: one value per node.
+    pub node_b: &'a [u8],
+    /// Child codes (left, right) per node: nodes × 2 `u16`.
+    pub node_child: &'a [u8],
+    /// Partition of each leaf (`u16`).
+    pub leaf_partition: &'a [u8],
+    /// Exclusive end of each leaf's run in `ball_ref` (`u16`, strictly increasing).
+    pub leaf_end: &'a [u8],
+    /// Ball references (`u16` indices into the ball table).
+    pub ball_ref: &'a [u8],
+    /// Ball centres `x̃_i(κ)`: balls × n values.
+    pub ball_centre: &'a [u8],
+    /// Ball radii `δ_i`, in the metric of the ball's location: one value per ball.
+    pub ball_delta: &'a [u8],
+    /// Location of each ball (one byte): its metric is that location's `P`.
+    pub ball_location: &'a [u8],
+    /// Partition each ball is certified for (`u16`).
+    pub ball_partition: &'a [u8],
+}
+
+impl PwaTables<'static> {
+    /// No tables (what a feedforward image carries).
+    pub const EMPTY: PwaTables<'static> = PwaTables {
+        depth: 0,
+        n_nodes: 0,
+        n_leaves: 0,
+        n_balls: 0,
+        gain: &[],
+        offset: &[],
+        node_a: &[],
+        node_b: &[],
+        node_child: &[],
+        leaf_partition: &[],
+        leaf_end: &[],
+        ball_ref: &[],
+        ball_centre: &[],
+        ball_delta: &[],
+        ball_location: &[],
+        ball_partition: &[],
+    };
+}
+
+/// Where point location put a state.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Region {
+    /// The tree sent the state to an [`OUTSIDE`] child.
+    OutsideTree,
+    /// The state reached `leaf` (of `partition`) but lies in none of its certified balls.
+    OutsideBalls {
+        /// The leaf.
+        leaf: u16,
+        /// Its partition.
+        partition: u16,
+    },
+    /// The state lies in certified ball `ball` of `leaf`: the law of `partition` applies.
+    Inside {
+        /// The leaf.
+        leaf: u16,
+        /// Its partition.
+        partition: u16,
+        /// The first listed ball containing the state.
+        ball: u16,
+    },
+}
+
+impl Region {
+    /// The partition whose law applies, if the state is in the envelope.
+    pub fn partition(&self) -> Option<u16> {
+        match *self {
+            Region::Inside { partition, .. } => Some(partition),
+            _ => None,
+        }
+    }
+
+    /// The leaf the tree reached, if any.
+    pub fn leaf(&self) -> Option<u16> {
+        match *self {
+            Region::OutsideTree => None,
+            Region::OutsideBalls { leaf, .. } | Region::Inside { leaf, .. } => Some(leaf),
+        }
+    }
+}
+
+/// Validates the tables of a PWA image whose header dimensions (`n`, `m`, locations, partitions) are
+/// already within capacity. See the module docs for the list of rules.
+pub(crate) fn validate_tables(dims: Dims, t: &PwaTables<'_>) -> Result<(), ImageError> {
+    let n = dims.n.clamp(1, MAX_N);
+    let m = dims.m.clamp(1, MAX_M);
+    let n_loc = dims.n_locations.min(MAX_LOCATIONS);
+    let np = dims.n_partitions.min(MAX_PARTITIONS);
+    let (nn, nl, nb) = (
+        t.n_nodes as usize,
+        t.n_leaves as usize,
+        t.n_balls as usize,
+    );
+    check_dim(Dim::TreeNodes, nn, 0, MAX_TREE_NODES)?;
+    check_dim(Dim::Leaves, nl, 1, MAX_LEAVES)?;
+    check_dim(Dim::Balls, nb, 1, MAX_BALLS)?;
+    check_dim(Dim::TreeDepth, t.depth as usize, 0, MAX_TREE_DEPTH)?;
+
+    // Laws: K_j (m×n) and θ0_j (m) per partition.
+    check_len(Field::LawGain, t.gain, 4 * np * m * n)?;
+    check_finite(Field::LawGain, t.gain, |i| {
+        Pos(
+            sat16(div(i, m * n)),
+            sat16(div(rem(i, m * n), n)),
+            sat16(rem(i, n)),
+        )
+    })?;
+    check_len(Field::LawOffset, t.offset, 4 * np * m)?;
+    check_finite(Field::LawOffset, t.offset, |i| {
+        Pos(sat16(div(i, m)), sat16(rem(i, m)), 0)
+    })?;
+
+    // Hyperplanes.
+    check_len(Field::NodeNormal, t.node_a, 4 * nn * n)?;
+    check_finite(Field::NodeNormal, t.node_a, |i| {
+        Pos(sat16(div(i, n)), sat16(rem(i, n)), 0)
+    })?;
+    for i in 0..nn {
+        if floats(f32_span(t.node_a, i * n, n)).all(|a| a == 0.0) {
+            return Err(ImageError::DegenerateHyperplane { node: sat16(i) });
+        }
+    }
+    check_len(Field::NodeOffset, t.node_b, 4 * nn)?;
+    check_finite(Field::NodeOffset, t.node_b, |i| Pos(sat16(i), 0, 0))?;
+    check_len(Field::NodeChildren, t.node_child, 4 * nn)?;
+
+    // Leaves: partition and run of ball references.
+    check_len(Field::LeafPartition, t.leaf_partition, 2 * nl)?;
+    for l in 0..nl {
+        let j = u16_le(t.leaf_partition, l);
+        if j as usize >= np {
+            return Err(ImageError::PartitionOutOfRange {
+                leaf: sat16(l),
+                value: j,
+            });
+        }
+    }
+    check_len(Field::LeafEnd, t.leaf_end, 2 * nl)?;
+    let mut prev = 0u16;
+    for l in 0..nl {
+        let e = u16_le(t.leaf_end, l);
+        if e <= prev {
+            return Err(ImageError::LeafBallEnds { leaf: sat16(l) });
+        }
+        if (e - prev) as usize > MAX_LEAF_BALLS {
+            return Err(ImageError::LeafTooManyBalls {
+                leaf: sat16(l),
+                count: e - prev,
+            });
+        }
+        if e as usize > MAX_BALL_REFS {
+            return Err(ImageError::DimOutOfRange {
+                dim: Dim::BallRefs,
+                value: e as u32,
+                min: 1,
+                max: sat32(MAX_BALL_REFS),
+            });
+        }
+        prev = e;
+    }
+    let n_refs = prev as usize;
+
+    // Balls.
+    check_len(Field::BallCentre, t.ball_centre, 4 * nb * n)?;
+    check_finite(Field::BallCentre, t.ball_centre, |i| {
+        Pos(sat16(div(i, n)), sat16(rem(i, n)), 0)
+    })?;
+    check_len(Field::BallDelta, t.ball_delta, 4 * nb)?;
+    check_finite(Field::BallDelta, t.ball_delta, |i| Pos(sat16(i), 0, 0))?;
+    for (b, d) in floats(t.ball_delta).enumerate() {
+        if d < 0.0 {
+            return Err(ImageError::NegativeBallRadius { ball: sat16(b) });
+        }
+    }
+    check_len(Field::BallLocation, t.ball_location, nb)?;
+    for (b, &l) in t.ball_location.iter().enumerate() {
+        if l as usize >= n_loc {
+            return Err(ImageError::BallLocationOutOfRange {
+                ball: sat16(b),
+                value: l,
+            });
+        }
+    }
+    check_len(Field::BallPartition, t.ball_partition, 2 * nb)?;
+    for b in 0..nb {
+        let j = u16_le(t.ball_partition, b);
+        if j as usize >= np {
+            return Err(ImageError::BallPartitionOutOfRange {
+                ball: sat16(b),
+                value: j,
+            });
+        }
+    }
+
+    // References: in range, and only to balls certified for the leaf's law.
+    check_len(Field::BallRef, t.ball_ref, 2 * n_refs)?;
+    let mut start = 0usize;
+    for l in 0..nl {
+        let end = u16_le(t.leaf_end, l) as usize;
+        let j = u16_le(t.leaf_partition, l);
+        for k in start..end {
+            let b = u16_le(t.ball_ref, k);
+            if b as usize >= nb {
+                return Err(ImageError::BallRefOutOfRange {
+                    leaf: sat16(l),
+                    value: b,
+                });
+            }
+            if u16_le(t.ball_partition, b as usize) != j {
+                return Err(ImageError::BallPartitionMismatch {
+                    leaf: sat16(l),
+                    ball: b,
+                });
+            }
+        }
+        start = end;
+    }
+
+    validate_tree(t, nn, nl)
+}
+
+/// The tree rules: children after parents and in range, everything reachable, depth within capacity and
+/// equal to the stored one. One pass in index order: since every parent precedes its children, a node's
+/// depth (tests up to and including it) is final when the pass reaches it.
+fn validate_tree(t: &PwaTables<'_>, nn: usize, nl: usize) -> Result<(), ImageError> {
+    let nn = nn.min(MAX_TREE_NODES);
+    let nl = nl.min(MAX_LEAVES);
+    if nn == 0 {
+        // The tree is leaf 0 alone.
+        if nl > 1 {
+            return Err(ImageError::UnreferencedLeaf { leaf: 1 });
+        }
+        if t.depth != 0 {
+            return Err(ImageError::TreeDepthMismatch {
+                stored: t.depth,
+                actual: 0,
+            });
+        }
+        return Ok(());
+    }
+    // depth[i] = 0: not reached (yet); else the largest number of tests on a path ending at node i.
+    let mut depth = [0u8; MAX_TREE_NODES];
+    let mut leaf_seen = [0u32; MAX_LEAVES.div_ceil(32)];
+    depth[0] = 1;
+    let mut worst = 0u8;
+    for i in 0..nn {
+        let d = depth.get(i).copied().unwrap_or(0);
+        if d == 0 {
+            return Err(ImageError::UnreachableNode { node: sat16(i) });
+        }
+        worst = worst.max(d);
+        for side in 0..2 {
+            match Child::from_code(u16_le(t.node_child, 2 * i + side)) {
+                Child::Outside => {}
+                Child::Leaf(l) => {
+                    if l as usize >= nl {
+                        return Err(ImageError::LeafOutOfRange {
+                            node: sat16(i),
+                            leaf: l,
+                        });
+                    }
+                    if let Some(w) = leaf_seen.get_mut(l as usize / 32) {
+                        *w |= 1 << (l % 32);
+                    }
+                }
+                Child::Node(c) => {
+                    let cu = c as usize;
+                    if cu >= nn {
+                        return Err(ImageError::ChildOutOfRange {
+                            node: sat16(i),
+                            child: c,
+                        });
+                    }
+                    if cu <= i {
+                        return Err(ImageError::BackEdge {
+                            node: sat16(i),
+                            child: c,
+                        });
+                    }
+                    if d as usize >= MAX_TREE_DEPTH {
+                        return Err(ImageError::TreeTooDeep { node: c });
+                    }
+                    if let Some(dc) = depth.get_mut(cu) {
+                        *dc = (*dc).max(d + 1);
+                    }
+                }
+            }
+        }
+    }
+    for l in 0..nl {
+        let seen = leaf_seen.get(l / 32).is_some_and(|w| w & (1 << (l % 32)) != 0);
+        if !seen {
+            return Err(ImageError::UnreferencedLeaf { leaf: sat16(l) });
+        }
+    }
+    if worst != t.depth {
+        return Err(ImageError::TreeDepthMismatch {
+            stored: t.depth,
+            actual: worst,
+        });
+    }
+    Ok(())
+}
+
+impl<'a> Image<'a> {
+    /// The PWA tables (empty for a feedforward image).
+    pub fn pwa(&self) -> &PwaTables<'a> {
+        &self.pwa
+    }
+    /// Number of partitions (0 for a feedforward image).
+    pub fn n_partitions(&self) -> usize {
+        self.dims.n_partitions
+    }
+    /// Worst-case number of hyperplane tests of one point location.
+    pub fn tree_depth(&self) -> usize {
+        self.pwa.depth as usize
+    }
+    /// Number of internal tree nodes.
+    pub fn n_nodes(&self) -> usize {
+        self.pwa.n_nodes as usize
+    }
+    /// Number of leaves.
+    pub fn n_leaves(&self) -> usize {
+        self.pwa.n_leaves as usize
+    }
+    /// Number of certified balls.
+    pub fn n_balls(&self) -> usize {
+        self.pwa.n_balls as usize
+    }
+    /// Number of ball references, summed over all leaves.
+    pub fn n_ball_refs(&self) -> usize {
+        self.pwa.ball_ref.len() / 2
+    }
+
+    /// `K_j[row, col]` (`K_j = K + θ_j`); 0.0 out of range.
+    pub fn law_gain(&self, partition: usize, row: usize, col: usize) -> f32 {
+        let (n, m) = (self.dims.n, self.dims.m);
+        if partition >= self.n_partitions() || row >= m || col >= n {
+            return 0.0;
+        }
+        f32_at(self.pwa.gain, (partition * m + row) * n + col)
+    }
+
+    /// `θ0_j[row]`; 0.0 out of range.
+    pub fn law_offset(&self, partition: usize, row: usize) -> f32 {
+        if partition >= self.n_partitions() || row >= self.dims.m {
+            return 0.0;
+        }
+        f32_at(self.pwa.offset, partition * self.dims.m + row)
+    }
+
+    /// Component `i` of the normal `a` of node `node`; 0.0 out of range.
+    pub fn node_normal(&self, node: usize, i: usize) -> f32 {
+        if node >= self.n_nodes() || i >= self.dims.n {
+            return 0.0;
+        }
+        f32_at(self.pwa.node_a, node * self.dims.n + i)
+    }
+
+    /// Offset `b` of node `node`; 0.0 out of range.
+    pub fn node_offset(&self, node: usize) -> f32 {
+        if node >= self.n_nodes() {
+            return 0.0;
+        }
+        f32_at(self.pwa.node_b, node)
+    }
+
+    /// Children (left: `aᵀx ≤ b`, right: otherwise) of node `node`; `None` out of range.
+    pub fn node_children(&self, node: usize) -> Option<(Child, Child)> {
+        if node >= self.n_nodes() {
+            return None;
+        }
+        Some((
+            Child::from_code(u16_le(self.pwa.node_child, 2 * node)),
+            Child::from_code(u16_le(self.pwa.node_child, 2 * node + 1)),
+        ))
+    }
+
+    /// Partition of leaf `leaf`; 0 out of range.
+    pub fn leaf_partition(&self, leaf: usize) -> usize {
+        if leaf >= self.n_leaves() {
+            return 0;
+        }
+        u16_le(self.pwa.leaf_partition, leaf) as usize
+    }
+
+    /// First reference and number of references of leaf `leaf`; `(0, 0)` out of range.
+    pub fn leaf_refs(&self, leaf: usize) -> (usize, usize) {
+        if leaf >= self.n_leaves() {
+            return (0, 0);
+        }
+        let start = match leaf {
+            0 => 0,
+            _ => u16_le(self.pwa.leaf_end, leaf - 1) as usize,
+        };
+        let end = u16_le(self.pwa.leaf_end, leaf) as usize;
+        (start, end.saturating_sub(start))
+    }
+
+    /// Ball `k` of leaf `leaf` (its index in the ball table); `None` out of range.
+    pub fn leaf_ball(&self, leaf: usize, k: usize) -> Option<usize> {
+        let (start, len) = self.leaf_refs(leaf);
+        (k < len).then(|| u16_le(self.pwa.ball_ref, start + k) as usize)
+    }
+
+    /// Component `i` of the centre of ball `ball`; 0.0 out of range.
+    pub fn ball_centre(&self, ball: usize, i: usize) -> f32 {
+        if ball >= self.n_balls() || i >= self.dims.n {
+            return 0.0;
+        }
+        f32_at(self.pwa.ball_centre, ball * self.dims.n + i)
+    }
+
+    /// Radius of ball `ball`; 0.0 out of range.
+    pub fn ball_delta(&self, ball: usize) -> f32 {
+        if ball >= self.n_balls() {
+            return 0.0;
+        }
+        f32_at(self.pwa.ball_delta, ball)
+    }
+
+    /// Location (metric) of ball `ball`; 0 out of range.
+    pub fn ball_location(&self, ball: usize) -> usize {
+        self.pwa.ball_location.get(ball).copied().unwrap_or(0) as usize
+    }
+
+    /// Partition ball `ball` is certified for; 0 out of range.
+    pub fn ball_partition(&self, ball: usize) -> usize {
+        if ball >= self.n_balls() {
+            return 0;
+        }
+        u16_le(self.pwa.ball_partition, ball) as usize
+    }
+
+    /// Point location of `x` (length n, finite): the tree walk, then the envelope test against the
+    /// leaf's balls. `None` for a feedforward image or an unusable `x`. Pure.
+    pub fn locate(&self, x: &[f32]) -> Option<Region> {
+        if self.mode != Mode::PwaFeedback {
+            return None;
+        }
+        let n = self.dims.n.clamp(1, MAX_N);
+        if x.len() != n || !x.iter().all(|v| v.is_finite()) {
+            return None;
+        }
+        Some(self.locate_in(x, n))
+    }
+
+    /// [`Image::locate`] without the argument checks (`x.len() == n`, `1 ≤ n ≤ MAX_N`). Every loop is
+    /// bounded by a capacity; on a validated image the walk ends within `depth` tests.
+    pub(crate) fn locate_in(&self, x: &[f32], n: usize) -> Region {
+        let t = &self.pwa;
+        let mut code = if t.n_nodes == 0 { LEAF_BASE } else { 0 };
+        let mut tests = 0usize;
+        let leaf = loop {
+            match Child::from_code(code) {
+                Child::Outside => return Region::OutsideTree,
+                Child::Leaf(l) => break l,
+                Child::Node(i) => {
+                    if tests >= MAX_TREE_DEPTH {
+                        // Unreachable for a validated image (depth ≤ MAX_TREE_DEPTH); total anyway.
+                        return Region::OutsideTree;
+                    }
+                    tests += 1;
+                    let i = i as usize;
+                    let mut s = 0.0f32;
+                    for (ai, &xi) in floats(f32_span(t.node_a, i * n, n)).zip(x) {
+                        s += ai * xi;
+                    }
+                    let side = if s <= f32_at(t.node_b, i) { 0 } else { 1 };
+                    code = u16_le(t.node_child, 2 * i + side);
+                }
+            }
+        };
+        let l = leaf as usize;
+        let partition = u16_le(t.leaf_partition, l);
+        let start = match l {
+            0 => 0,
+            _ => u16_le(t.leaf_end, l - 1) as usize,
+        };
+        let end = u16_le(t.leaf_end, l) as usize;
+        // Validated: end − start ≤ MAX_LEAF_BALLS; the `take` makes the bound explicit.
+        let refs = t.ball_ref.get(2 * start..2 * end).unwrap_or(&[]);
+        let mut e = [0.0f32; MAX_N];
+        for r in refs.chunks_exact(2).take(MAX_LEAF_BALLS) {
+            let b = u16::from_le_bytes([r[0], r[1]]);
+            let bu = b as usize;
+            let centre = f32_span(t.ball_centre, bu * n, n);
+            for ((ei, &xi), ci) in e.iter_mut().zip(x).zip(floats(centre)) {
+                *ei = xi - ci;
+            }
+            let loc = t.ball_location.get(bu).copied().unwrap_or(0) as usize;
+            let P = f32_span(self.payload.P, loc * n * n, n * n);
+            let mut d2 = 0.0f32;
+            for (row, &ei) in P.chunks_exact(4 * n).zip(&e) {
+                let mut s = 0.0f32;
+                for (pij, &ej) in floats(row).zip(&e) {
+                    s += pij * ej;
+                }
+                d2 += ei * s;
+            }
+            let delta = f32_at(t.ball_delta, bu);
+            if d2 <= delta * delta {
+                return Region::Inside {
+                    leaf,
+                    partition,
+                    ball: b,
+                };
+            }
+        }
+        Region::OutsideBalls { leaf, partition }
+    }
+}
