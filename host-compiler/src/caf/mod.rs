@@ -43,6 +43,9 @@
 //! mode decays slower than σ requires), infeasible, solver failure, or an answer that failed validation.
 //! Bad input (shapes, non-finite numbers, settings out of range) is a [`CafError`].
 
+// Negated comparisons (`!(x > 0.0)`) are deliberate throughout: they reject NaN as well.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 mod pbh;
 mod rcrit;
 mod sdp;

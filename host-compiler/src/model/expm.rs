@@ -5,6 +5,9 @@
 //! Written here because faer has no matrix exponential and no maintained crate provides one on faer
 //! matrices; the matrices exponentiated here are small (n + m + 1 ≤ a few dozen).
 
+// The θ_m are quoted to the digits the paper gives.
+#![allow(clippy::excessive_precision)]
+
 use super::{check_finite, ModelError};
 use faer::linalg::solvers::Solve;
 use faer::{Mat, MatRef};

@@ -687,63 +687,67 @@ pub fn random_pwa(rng: &mut ChaCha8Rng, s: PwaShape) -> PwaContent {
         })
         .collect();
 
-    // Tree, in preorder.
-    let mut node_a = Vec::new();
-    let mut node_b = Vec::new();
-    let mut node_child: Vec<u16> = Vec::new();
-    let mut n_leaves = 0u16;
-    fn gen(
-        rng: &mut ChaCha8Rng,
-        s: &PwaShape,
+    // Tree, in preorder (so children come after parents).
+    struct TreeGen<'r> {
+        rng: &'r mut ChaCha8Rng,
+        s: PwaShape,
         n: usize,
-        level: usize,
-        node_a: &mut Vec<f32>,
-        node_b: &mut Vec<f32>,
-        node_child: &mut Vec<u16>,
-        n_leaves: &mut u16,
-        root: bool,
-    ) -> u16 {
-        let room = node_b.len() < s.max_nodes && level < s.max_depth;
-        let split = room && (root || rng.random_bool(0.6));
-        if !split {
-            if !root && rng.random_bool(s.p_outside) {
-                return OUTSIDE;
+        node_a: Vec<f32>,
+        node_b: Vec<f32>,
+        node_child: Vec<u16>,
+        n_leaves: u16,
+    }
+    impl TreeGen<'_> {
+        fn child(&mut self, level: usize, root: bool) -> u16 {
+            let room = self.node_b.len() < self.s.max_nodes && level < self.s.max_depth;
+            let split = room && (root || self.rng.random_bool(0.6));
+            if !split {
+                if !root && self.rng.random_bool(self.s.p_outside) {
+                    return OUTSIDE;
+                }
+                self.n_leaves += 1;
+                return LEAF_BASE + (self.n_leaves - 1);
             }
-            *n_leaves += 1;
-            return LEAF_BASE + (*n_leaves - 1);
-        }
-        let me = node_b.len();
-        let a: Vec<f32> = loop {
-            let a: Vec<f32> = (0..n).map(|_| rng.random_range(-1.0f32..1.0)).collect();
-            if a.iter().any(|&v| v != 0.0) {
-                break a;
+            let me = self.node_b.len();
+            let a: Vec<f32> = loop {
+                let a: Vec<f32> = (0..self.n)
+                    .map(|_| self.rng.random_range(-1.0f32..1.0))
+                    .collect();
+                if a.iter().any(|&v| v != 0.0) {
+                    break a;
+                }
+            };
+            self.node_a.extend_from_slice(&a);
+            let h = self.s.box_half * 0.7;
+            self.node_b.push(self.rng.random_range(-h..h));
+            self.node_child.extend_from_slice(&[0, 0]);
+            for side in 0..2 {
+                let c = self.child(level + 1, false);
+                self.node_child[2 * me + side] = c;
             }
-        };
-        node_a.extend_from_slice(&a);
-        node_b.push(rng.random_range(-s.box_half * 0.7..s.box_half * 0.7));
-        node_child.extend_from_slice(&[0, 0]);
-        for side in 0..2 {
-            let c = gen(
-                rng, s, n, level + 1, node_a, node_b, node_child, n_leaves, false,
-            );
-            node_child[2 * me + side] = c;
+            me as u16
         }
-        me as u16
     }
     let root_leaf_only = rng.random_bool(0.05);
+    let mut g = TreeGen {
+        rng: &mut *rng,
+        s,
+        n,
+        node_a: Vec::new(),
+        node_b: Vec::new(),
+        node_child: Vec::new(),
+        n_leaves: 0,
+    };
     if !root_leaf_only {
-        gen(
-            rng,
-            &s,
-            n,
-            0,
-            &mut node_a,
-            &mut node_b,
-            &mut node_child,
-            &mut n_leaves,
-            true,
-        );
+        g.child(0, true);
     }
+    let TreeGen {
+        node_a,
+        node_b,
+        mut node_child,
+        mut n_leaves,
+        ..
+    } = g;
     if n_leaves == 0 {
         // Every terminal came out OUTSIDE (or there is no tree): make the last OUTSIDE a leaf.
         if let Some(c) = node_child.iter_mut().rev().find(|c| **c == OUTSIDE) {
