@@ -5,6 +5,19 @@
 //! COBS-framed request from UART0, evaluate the controller ([`app`]), reply with the input, a status and
 //! the step's cost in instructions ([`cost`]). Logs go out as defmt over semihosting, apart from the UART.
 //! No heap; every buffer is a fixed array sized by `shared_types::capacity`.
+//!
+//! # Building and running
+//! Build from this directory, so that cargo reads `firmware/.cargo/config.toml` (target, linker scripts,
+//! QEMU runner):
+//!
+//! ```text
+//! cd firmware
+//! CONTROLLER_IMAGE=/path/to/controller.img cargo build --release   # without it: the default test image
+//! cargo run --release                                                # boots it in qemu-system-arm
+//! ```
+//!
+//! `cargo run` puts UART0 on the terminal; the HIL harness (`qemu-tests`) connects it to a socket instead
+//! and decodes the defmt log. See `build.rs` for the build-time settings.
 #![no_std]
 
 pub mod app;

@@ -10,14 +10,30 @@
 //! values beyond the f32 range, and rounding every `δ_i` *down* so that the stored ball never exceeds the
 //! certified one), then runs the same validation the firmware runs at decode. The effect of rounding `K`,
 //! `P`, `v` and the centres to f32 is for certification to bound (DESIGN §5), not for this module.
+//!
+//! [`PwaImageBuilder`] is its sibling for the PWA-feedback image of Ch. 6 (layout and rationale in
+//! `shared_types::pwa`): per partition j the law `u = K_j x + θ0_j` with the full gain `K_j = K + θ_j`
+//! (summed in f64 here, see [`PwaLaw::from_theta`], and rounded once), the point-location tree over
+//! hyperplanes, its leaves (a partition and the certified balls that may use its law) and the ball table
+//! (the pieces `B_P(x̃_i(κ), δ_i)` of the envelope F of (6.2), each with the partition it is certified for).
+//! It checks shapes, capacities and indices with errors that name the offending item, computes the tree's
+//! worst-case depth, rounds every ball radius down as above, and then runs the decoder's validation (which
+//! also refuses unreachable nodes, unreferenced leaves and zero normals).
 #![allow(non_snake_case)]
 
 use std::path::Path;
 
-use shared_types::capacity::{MAX_LOCATIONS, MAX_M, MAX_N, MAX_STEPS, MAX_TRAJECTORIES};
-use shared_types::image::{self, Dims, Fallback, Image, ImageError, InputBox, Mode, Payload};
+use shared_types::capacity::{
+    MAX_BALLS, MAX_BALL_REFS, MAX_LEAF_BALLS, MAX_LEAVES, MAX_LOCATIONS, MAX_M, MAX_N,
+    MAX_PARTITIONS, MAX_STEPS, MAX_TRAJECTORIES, MAX_TREE_DEPTH, MAX_TREE_NODES,
+};
+use shared_types::image::{
+    self, Dims, Fallback, Image, ImageError, InputBox, Mode, Payload, PwaPayload,
+};
+use shared_types::pwa::PwaTables;
 
 pub use shared_types::image::Terminal;
+pub use shared_types::pwa::Child;
 
 /// Why an image could not be emitted.
 #[derive(Debug, thiserror::Error)]
@@ -383,32 +399,7 @@ impl ImageBuilder {
             traj_end.extend_from_slice(&end.to_le_bytes());
         }
 
-        let fb = match &self.fallback {
-            FallbackLaw::Linear { K, x_ref, u_ref } => Some((
-                le_bytes("fallback K", K, m * n)?,
-                le_bytes("fallback x_ref", x_ref, n)?,
-                le_bytes("fallback u_ref", u_ref, m)?,
-            )),
-            _ => None,
-        };
-        let bx = match &self.input_box {
-            Some((lo, hi)) => {
-                for j in 0..m.min(lo.len()).min(hi.len()) {
-                    if lo[j] > hi[j] {
-                        return Err(EmitError::Invalid {
-                            what: format!("input box component {j}"),
-                            reason: "has its lower bound above its upper bound",
-                        });
-                    }
-                }
-                Some((
-                    le_bytes("input box lo", lo, m)?,
-                    le_bytes("input box hi", hi, m)?,
-                ))
-            }
-            None => None,
-        };
-
+        let (fb, bx) = fallback_box_bytes(n, m, &self.fallback, &self.input_box)?;
         let payload = Payload {
             K: &K,
             P: &P,
@@ -417,11 +408,7 @@ impl ImageBuilder {
             delta: &delta,
             v: &v,
             location: &location,
-            fallback: match (&self.fallback, &fb) {
-                (_, Some((K, x_ref, u_ref))) => Fallback::Linear { K, x_ref, u_ref },
-                (FallbackLaw::Hold, _) => Fallback::Hold,
-                _ => Fallback::Zero,
-            },
+            fallback: fallback_of(&self.fallback, &fb),
             input_box: bx.as_ref().map(|(lo, hi)| InputBox { lo, hi }),
             terminal: self.terminal,
         };
@@ -449,8 +436,8 @@ impl ImageBuilder {
         Ok(bytes)
     }
 
-    /// Reads a decoded image back into owned data (each f32 widened exactly to f64). Building it again
-    /// reproduces the same bytes.
+    /// Reads a decoded feedforward image back into owned data (each f32 widened exactly to f64). Building
+    /// it again reproduces the same bytes. (A PWA image reads back through [`PwaImageBuilder::from_image`].)
     pub fn from_image(img: &Image<'_>) -> Self {
         let (n, m) = (img.n(), img.m());
         let locations = (0..img.n_locations())
@@ -472,33 +459,509 @@ impl ImageBuilder {
                 }
             })
             .collect();
-        let fallback = match img.fallback() {
-            Fallback::Hold => FallbackLaw::Hold,
-            Fallback::Zero => FallbackLaw::Zero,
-            Fallback::Linear { .. } => FallbackLaw::Linear {
-                K: (0..m * n)
-                    .map(|i| img.fallback_K(i / n, i % n) as f64)
-                    .collect(),
-                x_ref: (0..n).map(|i| img.fallback_x_ref(i) as f64).collect(),
-                u_ref: (0..m).map(|j| img.fallback_u_ref(j) as f64).collect(),
-            },
-        };
-        let input_box = img.has_input_box().then(|| {
-            let b: Vec<(f32, f32)> = (0..m).filter_map(|j| img.input_bounds(j)).collect();
-            (
-                b.iter().map(|p| p.0 as f64).collect(),
-                b.iter().map(|p| p.1 as f64).collect(),
-            )
-        });
         ImageBuilder {
             n,
             m,
             period: img.period() as f64,
             locations,
             trajectories,
-            fallback,
-            input_box,
+            fallback: fallback_from_image(img),
+            input_box: input_box_from_image(img),
             terminal: img.terminal(),
         }
+    }
+}
+
+// ---------------------------------------------------------------------------------------------------------
+// PWA feedback (Ch. 6).
+
+/// The affine law of one partition: `u = K_j x + θ0_j`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PwaLaw {
+    /// Full gain `K_j = K + θ_j`, m×n row-major.
+    pub gain: Vec<f64>,
+    /// Offset `θ0_j`, m values.
+    pub offset: Vec<f64>,
+}
+
+impl PwaLaw {
+    /// The law (6.1) of a partition given around the CAF gain: `K_j = K + θ_j` summed in f64 (so the image
+    /// rounds each entry once). `K` and `theta` are m×n row-major and must have the same length.
+    pub fn from_theta(K: &[f64], theta: &[f64], theta0: Vec<f64>) -> Result<PwaLaw, EmitError> {
+        if K.len() != theta.len() {
+            return Err(EmitError::Shape {
+                what: "theta".into(),
+                expected: K.len(),
+                found: theta.len(),
+            });
+        }
+        Ok(PwaLaw {
+            gain: K.iter().zip(theta).map(|(k, t)| k + t).collect(),
+            offset: theta0,
+        })
+    }
+}
+
+/// An internal node of the point-location tree: `aᵀx ≤ b` goes to `left`, otherwise to `right`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TreeNode {
+    /// Normal `a`, n values (not all zero).
+    pub a: Vec<f64>,
+    /// Offset `b`.
+    pub b: f64,
+    /// Child when `aᵀx ≤ b`. A child node must have a larger index than its parent.
+    pub left: Child,
+    /// Child otherwise.
+    pub right: Child,
+}
+
+/// A leaf of the tree: the partition whose law applies and the certified balls (indices into
+/// [`PwaImageBuilder::balls`], all certified for that partition) that make up the leaf's part of F.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PwaLeaf {
+    /// Partition index.
+    pub partition: usize,
+    /// Ball indices, 1..=`MAX_LEAF_BALLS` of them; the evaluator tests them in this order.
+    pub balls: Vec<usize>,
+}
+
+/// A certified ball `B_P(x̃_i(κ), δ_i)`: the law of `partition` maps it into the next ball of its
+/// trajectory ((6.5) via (6.6)–(6.7)).
+#[derive(Clone, Debug, PartialEq)]
+pub struct CertifiedBall {
+    /// Centre `x̃_i(κ)`, n values.
+    pub centre: Vec<f64>,
+    /// Radius `δ_i` in the metric `P` of `location` (rounded down to f32 when emitted).
+    pub delta: f64,
+    /// Location whose `P` is the ball's metric.
+    pub location: u8,
+    /// Partition whose law the ball is certified for.
+    pub partition: usize,
+}
+
+/// Owned content of a PWA-feedback image. Defaults from [`PwaImageBuilder::new`]: nothing stored,
+/// fallback [`FallbackLaw::Zero`], no input box.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PwaImageBuilder {
+    /// State dimension.
+    pub n: usize,
+    /// Input dimension.
+    pub m: usize,
+    /// Sample period, seconds.
+    pub period: f64,
+    /// Per-location CAF gain `K` (kept for reports) and ball metric `P`.
+    pub locations: Vec<LocationLaw>,
+    /// Per-partition laws (index = partition).
+    pub laws: Vec<PwaLaw>,
+    /// Internal tree nodes; node 0 is the root. Empty: the tree is leaf 0 alone.
+    pub nodes: Vec<TreeNode>,
+    /// Leaves (index = leaf).
+    pub leaves: Vec<PwaLeaf>,
+    /// Certified balls (index = ball).
+    pub balls: Vec<CertifiedBall>,
+    /// Fallback law.
+    pub fallback: FallbackLaw,
+    /// Optional input box `(lo, hi)`, m values each.
+    pub input_box: Option<(Vec<f64>, Vec<f64>)>,
+}
+
+fn invalid(what: String, reason: &'static str) -> EmitError {
+    EmitError::Invalid { what, reason }
+}
+
+/// Fallback and input box as f32 bytes (shared by both builders).
+type FallbackBytes = Option<(Vec<u8>, Vec<u8>, Vec<u8>)>;
+type BoxBytes = Option<(Vec<u8>, Vec<u8>)>;
+
+fn fallback_box_bytes(
+    n: usize,
+    m: usize,
+    fallback: &FallbackLaw,
+    input_box: &Option<(Vec<f64>, Vec<f64>)>,
+) -> Result<(FallbackBytes, BoxBytes), EmitError> {
+    let fb = match fallback {
+        FallbackLaw::Linear { K, x_ref, u_ref } => Some((
+            le_bytes("fallback K", K, m * n)?,
+            le_bytes("fallback x_ref", x_ref, n)?,
+            le_bytes("fallback u_ref", u_ref, m)?,
+        )),
+        _ => None,
+    };
+    let bx = match input_box {
+        Some((lo, hi)) => {
+            for j in 0..m.min(lo.len()).min(hi.len()) {
+                if lo[j] > hi[j] {
+                    return Err(invalid(
+                        format!("input box component {j}"),
+                        "has its lower bound above its upper bound",
+                    ));
+                }
+            }
+            Some((
+                le_bytes("input box lo", lo, m)?,
+                le_bytes("input box hi", hi, m)?,
+            ))
+        }
+        None => None,
+    };
+    Ok((fb, bx))
+}
+
+fn fallback_of<'a>(law: &FallbackLaw, fb: &'a FallbackBytes) -> Fallback<'a> {
+    match (law, fb) {
+        (_, Some((K, x_ref, u_ref))) => Fallback::Linear { K, x_ref, u_ref },
+        (FallbackLaw::Hold, _) => Fallback::Hold,
+        _ => Fallback::Zero,
+    }
+}
+
+fn fallback_from_image(img: &Image<'_>) -> FallbackLaw {
+    let (n, m) = (img.n(), img.m());
+    match img.fallback() {
+        Fallback::Hold => FallbackLaw::Hold,
+        Fallback::Zero => FallbackLaw::Zero,
+        Fallback::Linear { .. } => FallbackLaw::Linear {
+            K: (0..m * n)
+                .map(|i| img.fallback_K(i / n, i % n) as f64)
+                .collect(),
+            x_ref: (0..n).map(|i| img.fallback_x_ref(i) as f64).collect(),
+            u_ref: (0..m).map(|j| img.fallback_u_ref(j) as f64).collect(),
+        },
+    }
+}
+
+fn input_box_from_image(img: &Image<'_>) -> Option<(Vec<f64>, Vec<f64>)> {
+    img.has_input_box().then(|| {
+        let b: Vec<(f32, f32)> = (0..img.m()).filter_map(|j| img.input_bounds(j)).collect();
+        (
+            b.iter().map(|p| p.0 as f64).collect(),
+            b.iter().map(|p| p.1 as f64).collect(),
+        )
+    })
+}
+
+fn le_u16(v: impl IntoIterator<Item = u16>) -> Vec<u8> {
+    v.into_iter().flat_map(|x| x.to_le_bytes()).collect()
+}
+
+impl PwaImageBuilder {
+    /// An empty builder with the defaults listed on the type.
+    pub fn new(n: usize, m: usize, period: f64) -> Self {
+        PwaImageBuilder {
+            n,
+            m,
+            period,
+            locations: Vec::new(),
+            laws: Vec::new(),
+            nodes: Vec::new(),
+            leaves: Vec::new(),
+            balls: Vec::new(),
+            fallback: FallbackLaw::Zero,
+            input_box: None,
+        }
+    }
+
+    /// Adds a location with CAF gain `K` (m×n) and metric `P` (n×n); returns its index.
+    pub fn add_location(&mut self, K: Vec<f64>, P: Vec<f64>) -> usize {
+        self.locations.push(LocationLaw { K, P });
+        self.locations.len() - 1
+    }
+
+    /// Adds a partition's law; returns the partition index.
+    pub fn add_law(&mut self, law: PwaLaw) -> usize {
+        self.laws.push(law);
+        self.laws.len() - 1
+    }
+
+    /// Adds a tree node; returns its index (the first node added is the root).
+    pub fn add_node(&mut self, node: TreeNode) -> usize {
+        self.nodes.push(node);
+        self.nodes.len() - 1
+    }
+
+    /// Adds a leaf; returns its index.
+    pub fn add_leaf(&mut self, leaf: PwaLeaf) -> usize {
+        self.leaves.push(leaf);
+        self.leaves.len() - 1
+    }
+
+    /// Adds a certified ball; returns its index.
+    pub fn add_ball(&mut self, ball: CertifiedBall) -> usize {
+        self.balls.push(ball);
+        self.balls.len() - 1
+    }
+
+    /// Checks that every child is in range and every child node comes after its parent, and returns the
+    /// worst-case number of hyperplane tests from the root to a leaf (0 without nodes).
+    pub fn tree_depth(&self) -> Result<usize, EmitError> {
+        let nn = self.nodes.len();
+        let mut depth = vec![0usize; nn];
+        if let Some(d) = depth.first_mut() {
+            *d = 1;
+        }
+        for (i, node) in self.nodes.iter().enumerate() {
+            for (side, c) in [("left", node.left), ("right", node.right)] {
+                match c {
+                    Child::Outside => {}
+                    Child::Leaf(l) => {
+                        if l as usize >= self.leaves.len() {
+                            return Err(invalid(
+                                format!("tree node {i}: {side} child leaf {l}"),
+                                "does not exist",
+                            ));
+                        }
+                    }
+                    Child::Node(k) => {
+                        let k = k as usize;
+                        if k >= nn {
+                            return Err(invalid(
+                                format!("tree node {i}: {side} child node {k}"),
+                                "does not exist",
+                            ));
+                        }
+                        if k <= i {
+                            return Err(invalid(
+                                format!("tree node {i}: {side} child node {k}"),
+                                "does not come after its parent (children must have larger indices)",
+                            ));
+                        }
+                        depth[k] = depth[k].max(depth[i] + 1);
+                    }
+                }
+            }
+        }
+        Ok(depth.into_iter().max().unwrap_or(0))
+    }
+
+    /// Total number of ball references over all leaves.
+    pub fn total_ball_refs(&self) -> usize {
+        self.leaves.iter().map(|l| l.balls.len()).sum()
+    }
+
+    /// Checks everything, converts to f32 and encodes the image.
+    pub fn to_bytes(&self) -> Result<Vec<u8>, EmitError> {
+        let (n, m) = (self.n, self.m);
+        capacity("state dimension n", n, 1, MAX_N)?;
+        capacity("input dimension m", m, 1, MAX_M)?;
+        capacity(
+            "number of locations",
+            self.locations.len(),
+            1,
+            MAX_LOCATIONS,
+        )?;
+        capacity("number of partitions", self.laws.len(), 1, MAX_PARTITIONS)?;
+        capacity("number of tree nodes", self.nodes.len(), 0, MAX_TREE_NODES)?;
+        capacity("number of leaves", self.leaves.len(), 1, MAX_LEAVES)?;
+        capacity("number of certified balls", self.balls.len(), 1, MAX_BALLS)?;
+        capacity(
+            "total ball references",
+            self.total_ball_refs(),
+            1,
+            MAX_BALL_REFS,
+        )?;
+        let depth = self.tree_depth()?;
+        capacity("tree depth", depth, 0, MAX_TREE_DEPTH)?;
+        let period = to_f32(|| "sample period".into(), self.period)?;
+        if period <= 0.0 {
+            return Err(invalid("sample period".into(), "is not positive"));
+        }
+
+        let mut K = Vec::new();
+        let mut P = Vec::new();
+        for (l, law) in self.locations.iter().enumerate() {
+            K.extend(le_bytes(&format!("location {l}: K"), &law.K, m * n)?);
+            P.extend(le_bytes(&format!("location {l}: P"), &law.P, n * n)?);
+        }
+
+        let mut gain = Vec::new();
+        let mut offset = Vec::new();
+        for (j, law) in self.laws.iter().enumerate() {
+            gain.extend(le_bytes(&format!("partition {j}: K_j"), &law.gain, m * n)?);
+            offset.extend(le_bytes(
+                &format!("partition {j}: theta0_j"),
+                &law.offset,
+                m,
+            )?);
+        }
+
+        let mut node_a = Vec::new();
+        let mut node_b = Vec::new();
+        let mut node_child = Vec::new();
+        for (i, node) in self.nodes.iter().enumerate() {
+            node_a.extend(le_bytes(&format!("tree node {i}: a"), &node.a, n)?);
+            let b = to_f32(|| format!("tree node {i}: b"), node.b)?;
+            node_b.extend_from_slice(&b.to_le_bytes());
+            for c in [node.left, node.right] {
+                // In range (checked by tree_depth), so the code exists.
+                let code = c.code().ok_or_else(|| {
+                    invalid(format!("tree node {i}: child {c:?}"), "has no code")
+                })?;
+                node_child.extend_from_slice(&code.to_le_bytes());
+            }
+        }
+
+        let mut leaf_end = Vec::new();
+        let mut ball_ref = Vec::new();
+        let mut refs = 0u16;
+        for (l, leaf) in self.leaves.iter().enumerate() {
+            if leaf.partition >= self.laws.len() {
+                return Err(invalid(
+                    format!("leaf {l}: partition {}", leaf.partition),
+                    "does not exist",
+                ));
+            }
+            capacity("balls of one leaf", leaf.balls.len(), 1, MAX_LEAF_BALLS)?;
+            for &b in &leaf.balls {
+                let Some(ball) = self.balls.get(b) else {
+                    return Err(invalid(format!("leaf {l}: ball {b}"), "does not exist"));
+                };
+                if ball.partition != leaf.partition {
+                    return Err(invalid(
+                        format!(
+                            "leaf {l} (partition {}): ball {b} (partition {})",
+                            leaf.partition, ball.partition
+                        ),
+                        "is certified for another partition",
+                    ));
+                }
+                ball_ref.extend_from_slice(&(b as u16).to_le_bytes());
+            }
+            refs += leaf.balls.len() as u16; // ≤ MAX_BALL_REFS, checked above
+            leaf_end.extend_from_slice(&refs.to_le_bytes());
+        }
+        let leaf_partition = le_u16(self.leaves.iter().map(|l| l.partition as u16));
+
+        let mut ball_centre = Vec::new();
+        let mut ball_delta = Vec::new();
+        let mut ball_location = Vec::new();
+        for (b, ball) in self.balls.iter().enumerate() {
+            ball_centre.extend(le_bytes(&format!("ball {b}: centre"), &ball.centre, n)?);
+            let d32 = to_f32(|| format!("ball {b}: delta"), ball.delta)?;
+            if ball.delta < 0.0 {
+                return Err(invalid(format!("ball {b}: delta"), "is negative"));
+            }
+            ball_delta.extend_from_slice(&f32_round_down(d32, ball.delta).to_le_bytes());
+            if ball.location as usize >= self.locations.len() {
+                return Err(invalid(
+                    format!("ball {b}: location {}", ball.location),
+                    "does not exist",
+                ));
+            }
+            ball_location.push(ball.location);
+            if ball.partition >= self.laws.len() {
+                return Err(invalid(
+                    format!("ball {b}: partition {}", ball.partition),
+                    "does not exist",
+                ));
+            }
+        }
+        let ball_partition = le_u16(self.balls.iter().map(|b| b.partition as u16));
+
+        let (fb, bx) = fallback_box_bytes(n, m, &self.fallback, &self.input_box)?;
+        let payload = PwaPayload {
+            K: &K,
+            P: &P,
+            tables: PwaTables {
+                depth: depth as u8, // ≤ MAX_TREE_DEPTH, checked above
+                n_nodes: self.nodes.len() as u16,
+                n_leaves: self.leaves.len() as u16,
+                n_balls: self.balls.len() as u16,
+                gain: &gain,
+                offset: &offset,
+                node_a: &node_a,
+                node_b: &node_b,
+                node_child: &node_child,
+                leaf_partition: &leaf_partition,
+                leaf_end: &leaf_end,
+                ball_ref: &ball_ref,
+                ball_centre: &ball_centre,
+                ball_delta: &ball_delta,
+                ball_location: &ball_location,
+                ball_partition: &ball_partition,
+            },
+            fallback: fallback_of(&self.fallback, &fb),
+            input_box: bx.as_ref().map(|(lo, hi)| InputBox { lo, hi }),
+        };
+        let dims = Dims {
+            n,
+            m,
+            n_locations: self.locations.len(),
+            n_trajectories: 0,
+            n_partitions: self.laws.len(),
+        };
+        let img = Image::new_pwa(dims, period, payload)?;
+        let mut out = vec![0u8; img.encoded_len()?];
+        let len = image::encode(&img, &mut out)?;
+        out.truncate(len);
+        Ok(out)
+    }
+
+    /// [`PwaImageBuilder::to_bytes`], then writes the file.
+    pub fn write(&self, path: &Path) -> Result<Vec<u8>, EmitError> {
+        let bytes = self.to_bytes()?;
+        std::fs::write(path, &bytes).map_err(|source| EmitError::Io {
+            path: path.display().to_string(),
+            source,
+        })?;
+        Ok(bytes)
+    }
+
+    /// Reads a decoded PWA image back into owned data (each f32 widened exactly to f64); `None` for a
+    /// feedforward image. Building it again reproduces the same bytes.
+    pub fn from_image(img: &Image<'_>) -> Option<Self> {
+        if img.mode() != Mode::PwaFeedback {
+            return None;
+        }
+        let (n, m) = (img.n(), img.m());
+        Some(PwaImageBuilder {
+            n,
+            m,
+            period: img.period() as f64,
+            locations: (0..img.n_locations())
+                .map(|l| LocationLaw {
+                    K: (0..m * n).map(|i| img.K(l, i / n, i % n) as f64).collect(),
+                    P: (0..n * n).map(|i| img.P(l, i / n, i % n) as f64).collect(),
+                })
+                .collect(),
+            laws: (0..img.n_partitions())
+                .map(|j| PwaLaw {
+                    gain: (0..m * n)
+                        .map(|i| img.law_gain(j, i / n, i % n) as f64)
+                        .collect(),
+                    offset: (0..m).map(|r| img.law_offset(j, r) as f64).collect(),
+                })
+                .collect(),
+            nodes: (0..img.n_nodes())
+                .map(|i| {
+                    let (left, right) = img
+                        .node_children(i)
+                        .unwrap_or((Child::Outside, Child::Outside));
+                    TreeNode {
+                        a: (0..n).map(|k| img.node_normal(i, k) as f64).collect(),
+                        b: img.node_offset(i) as f64,
+                        left,
+                        right,
+                    }
+                })
+                .collect(),
+            leaves: (0..img.n_leaves())
+                .map(|l| PwaLeaf {
+                    partition: img.leaf_partition(l),
+                    balls: (0..img.leaf_refs(l).1)
+                        .filter_map(|k| img.leaf_ball(l, k))
+                        .collect(),
+                })
+                .collect(),
+            balls: (0..img.n_balls())
+                .map(|b| CertifiedBall {
+                    centre: (0..n).map(|i| img.ball_centre(b, i) as f64).collect(),
+                    delta: img.ball_delta(b) as f64,
+                    location: img.ball_location(b) as u8,
+                    partition: img.ball_partition(b),
+                })
+                .collect(),
+            fallback: fallback_from_image(img),
+            input_box: input_box_from_image(img),
+        })
     }
 }

@@ -566,3 +566,22 @@ fn ill_conditioned_standard_form_is_refined() {
     );
     assert!((rdist(&p.R, &x, &p.xbar) - s.value).abs() <= 1e-12 * s.value);
 }
+
+#[test]
+fn zz_debug() {
+    let p = make_problem(5, QKind::NearDegenerate, RKind::Singular, PointKind::Far, 4789014612021199497);
+    let f = EllipsoidBoundaryDistance::new(&p.c, &p.Q, &p.R).unwrap();
+    let mut ws = f.workspace();
+    let mut x = vec![0.0; 5];
+    let s = f.solve(&p.xbar, &mut ws, &mut x).unwrap();
+    println!("{s:?} {x:?} esc {}", f.has_zero_cost_directions());
+    let sf = f.standard_form().unwrap();
+    println!("lambda {:?} M {} rank R {}", sf.lambda(), sf.multiplicity(), f.metric_rank());
+    let u: Vec<f64> = x.iter().zip(&p.c).map(|(a, b)| a - b).collect();
+    println!("h {} scale {} rdist {}", quad(&p.Q, &u), abs_quad(&p.Q, &u), rdist(&p.R, &x, &p.xbar));
+    let b = brute_force(&p.c, &p.Q, &p.R, &p.xbar);
+    let ub: Vec<f64> = b.point.iter().zip(&p.c).map(|(a, b)| a - b).collect();
+    println!("brute {} {:?} h {}", b.value, b.point, quad(&p.Q, &ub));
+    let (sig, _) = jacobi(5, &p.Q); println!("Q eig {sig:?}");
+    let (rho, _) = jacobi(5, &p.R); println!("R eig {rho:?}");
+}

@@ -9,8 +9,10 @@
 //! (40 rows) the last row is held; the fallback is the linear law `u = K x` saturated to |u| ≤ 20.
 #![allow(non_snake_case)]
 
-use crate::plant::{ContinuousPlant, DiscretePlant, Mat};
+use crate::plant::{double_integrator as double_integrator_plant, ContinuousPlant, DiscretePlant};
+use faer::Mat;
 use host_compiler::emit::{EmitError, FallbackLaw, ImageBuilder, Terminal};
+use host_compiler::model::ModelError;
 use shared_types::image;
 
 /// A test image with what the tests need to know about it.
@@ -20,6 +22,8 @@ pub struct TestImage {
     pub bytes: Vec<u8>,
     /// The continuous plant it was designed for.
     pub plant: ContinuousPlant,
+    /// Its exact zero-order-hold sampling with the image's period.
+    pub sampled: DiscretePlant,
     /// Sample period, seconds.
     pub h: f64,
     /// Ball centres (f32 values as stored).
@@ -33,7 +37,7 @@ pub struct TestImage {
 impl TestImage {
     /// The plant sampled with the image's period.
     pub fn discrete_plant(&self) -> DiscretePlant {
-        self.plant.zoh(self.h)
+        self.sampled.clone()
     }
 
     /// `(x − c)ᵀ P (x − c)` in f64, for choosing test states inside or outside balls.
@@ -59,6 +63,17 @@ impl TestImage {
     }
 }
 
+/// Why a test image could not be made.
+#[derive(Debug, thiserror::Error)]
+pub enum ImageBuildError {
+    #[error(transparent)]
+    Model(#[from] ModelError),
+    #[error(transparent)]
+    Emit(#[from] EmitError),
+    #[error(transparent)]
+    Image(#[from] image::ImageError),
+}
+
 /// Tracking gain `K` (closed-loop poles of the sampled double integrator at 0.8, 0.8, h = 0.1).
 pub const K_TRACK: [f64; 2] = [-4.0, -3.8];
 /// Nominal gain `K₂` (poles at 0.5, 0.5).
@@ -67,66 +82,44 @@ pub const K_NOMINAL: [f64; 2] = [-25.0, -8.75];
 pub const TABLE_LEN: usize = 40;
 
 /// `Acl = Ad + Bd K` for a single-input plant.
-pub fn closed_loop(d: &DiscretePlant, K: &[f64]) -> Mat {
-    let n = d.Ad.rows;
-    let mut data = d.Ad.data.clone();
-    for i in 0..n {
-        for j in 0..n {
-            data[i * n + j] += d.Bd.at(i, 0) * K[j];
-        }
-    }
-    Mat {
-        rows: n,
-        cols: n,
-        data,
-    }
+pub fn closed_loop(d: &DiscretePlant, K: &[f64]) -> Mat<f64> {
+    let n = d.A.nrows();
+    Mat::from_fn(n, n, |i, j| d.A[(i, j)] + d.B[(i, 0)] * K[j])
 }
 
 /// `P = Σ_k (Aclᵀ)^k Acl^k`, the solution of `Aclᵀ P Acl − P = −I` for a Schur-stable `Acl`, summed until
 /// the terms vanish in f64 (at most 10 000 terms).
-pub fn lyapunov(Acl: &Mat) -> Mat {
-    let n = Acl.rows;
-    let mut P = Mat::zeros(n, n);
-    let mut Ak = Mat::zeros(n, n);
-    for i in 0..n {
-        Ak.data[i * n + i] = 1.0;
-    }
+pub fn lyapunov(Acl: &Mat<f64>) -> Mat<f64> {
+    let n = Acl.nrows();
+    let mut P = Mat::<f64>::zeros(n, n);
+    let mut Ak = Mat::<f64>::identity(n, n);
     for _ in 0..10_000 {
-        // P += Akᵀ Ak
-        let mut largest = 0.0f64;
-        for i in 0..n {
-            for j in 0..n {
-                let t: f64 = (0..n).map(|k| Ak.at(k, i) * Ak.at(k, j)).sum();
-                P.data[i * n + j] += t;
-                largest = largest.max(t.abs());
-            }
-        }
+        let term = Ak.transpose() * &Ak;
+        P += &term;
+        let largest = (0..n)
+            .flat_map(|i| (0..n).map(move |j| (i, j)))
+            .map(|(i, j)| term[(i, j)].abs())
+            .fold(0.0, f64::max);
         if largest < 1e-18 {
             break;
         }
-        let mut next = Mat::zeros(n, n);
-        for i in 0..n {
-            for j in 0..n {
-                next.data[i * n + j] = (0..n).map(|k| Ak.at(i, k) * Acl.at(k, j)).sum();
-            }
-        }
-        Ak = next;
+        Ak = &Ak * Acl;
     }
     P
 }
 
 /// The double-integrator feedforward image described in the module doc, emitted by the host compiler's
 /// [`ImageBuilder`] (so the HIL suite also exercises the real emitter).
-pub fn double_integrator() -> Result<TestImage, EmitError> {
-    let plant = ContinuousPlant::double_integrator();
+pub fn double_integrator() -> Result<TestImage, ImageBuildError> {
+    let plant = double_integrator_plant();
     let h = 0.1;
-    let d = plant.zoh(h);
+    let d = plant.zoh(h)?;
     let n = 2;
     let Acl = closed_loop(&d, &K_TRACK);
     let Pm = lyapunov(&Acl);
     // Exactly symmetric (the decoder checks symmetry bit for bit).
     let P: Vec<f64> = (0..n * n)
-        .map(|k| 0.5 * (Pm.at(k / n, k % n) + Pm.at(k % n, k / n)))
+        .map(|k| 0.5 * (Pm[(k / n, k % n)] + Pm[(k % n, k / n)]))
         .collect();
     let starts: [[f64; 2]; 4] = [[2.0, 0.0], [-2.0, 0.0], [0.0, 2.0], [0.0, -2.0]];
     let pdist = |a: &[f64; 2], b: &[f64; 2]| {
@@ -196,8 +189,8 @@ mod tests {
 
     fn spectral_radius_2x2(m: &Mat) -> f64 {
         let (tr, det) = (
-            m.at(0, 0) + m.at(1, 1),
-            m.at(0, 0) * m.at(1, 1) - m.at(0, 1) * m.at(1, 0),
+            m[(0, 0)] + m[(1, 1)],
+            m[(0, 0)] * m[(1, 1)] - m[(0, 1)] * m[(1, 0)],
         );
         let disc = tr * tr / 4.0 - det;
         if disc >= 0.0 {
@@ -209,11 +202,11 @@ mod tests {
 
     #[test]
     fn gains_place_the_documented_poles() {
-        let d = ContinuousPlant::double_integrator().zoh(0.1);
+        let d = double_integrator_plant().zoh(0.1).unwrap();
         for (K, pole) in [(K_TRACK, 0.8), (K_NOMINAL, 0.5)] {
             let a = closed_loop(&d, &K);
-            let tr = a.at(0, 0) + a.at(1, 1);
-            let det = a.at(0, 0) * a.at(1, 1) - a.at(0, 1) * a.at(1, 0);
+            let tr = a[(0, 0)] + a[(1, 1)];
+            let det = a[(0, 0)] * a[(1, 1)] - a[(0, 1)] * a[(1, 0)];
             assert!(
                 (tr - 2.0 * pole).abs() < 1e-12 && (det - pole * pole).abs() < 1e-12,
                 "{K:?}"
@@ -224,7 +217,7 @@ mod tests {
 
     #[test]
     fn lyapunov_solution_satisfies_the_equation() {
-        let d = ContinuousPlant::double_integrator().zoh(0.1);
+        let d = double_integrator_plant().zoh(0.1).unwrap();
         let a = closed_loop(&d, &K_TRACK);
         let p = lyapunov(&a);
         for i in 0..2 {
@@ -233,12 +226,12 @@ mod tests {
                 let apa: f64 = (0..2)
                     .map(|k| {
                         (0..2)
-                            .map(|l| a.at(k, i) * p.at(k, l) * a.at(l, j))
+                            .map(|l| a[(k, i)] * p[(k, l)] * a[(l, j)])
                             .sum::<f64>()
                     })
                     .sum();
                 let want = if i == j { -1.0 } else { 0.0 };
-                assert!((apa - p.at(i, j) - want).abs() < 1e-9, "({i},{j})");
+                assert!((apa - p[(i, j)] - want).abs() < 1e-9, "({i},{j})");
             }
         }
     }

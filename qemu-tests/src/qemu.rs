@@ -202,7 +202,10 @@ impl Qemu {
 
     /// Sends raw bytes on UART0 (for malformed-frame tests).
     pub fn send_raw(&mut self, bytes: &[u8]) -> Result<(), HilError> {
-        self.remaining("sending on UART0")?;
+        let left = self.remaining("sending on UART0")?;
+        self.uart
+            .set_write_timeout(Some(left))
+            .map_err(HilError::io("setting the UART timeout"))?;
         if let Err(e) = self.uart.write_all(bytes) {
             return Err(match e.kind() {
                 ErrorKind::BrokenPipe | ErrorKind::ConnectionReset => {

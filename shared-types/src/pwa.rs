@@ -256,7 +256,7 @@ pub(crate) fn validate_tables(dims: Dims, t: &PwaTables<'_>) -> Result<(), Image
         Pos(sat16(div(i, n)), sat16(rem(i, n)), 0)
     })?;
     for i in 0..nn {
-        if floats(f32_span(t.node_a, i * n, n)).all(|a| a == 0.0) {
+        if (0..n).all(|k| f32_at(t.node_a, i * n + k) == 0.0) {
             return Err(ImageError::DegenerateHyperplane { node: sat16(i) });
         }
     }

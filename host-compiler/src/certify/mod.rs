@@ -73,10 +73,10 @@ pub struct LoopConstants {
     pub roots: PdRoots,
     /// σ_min(P − ÃᵀPÃ) for Ã = A + B K̂ (Theorem 3.21 needs it > 0).
     pub sigma_min: f64,
-    /// ‖ÃᵀPB‖₂ and ‖BᵀPB‖₂ of (3.83), λ_max(P) of (3.85).
-    pub atpb: f64,
-    pub btpb: f64,
-    pub lambda_max: f64,
+    /// Ã = A + B K̂ and B, for r_crit.
+    pub At: Mat<f64>,
+    pub B: Mat<f64>,
+    pub P: Mat<f64>,
     /// Inter-sample constants: φ(h), γ, β (1, 0, 0 for discrete-time plants).
     pub phi: f64,
     pub gamma: f64,
@@ -103,9 +103,6 @@ impl LoopConstants {
         if !(sigma_min > 0.0) {
             return Err(CertifyError::NotContracting(sigma_min));
         }
-        let atpb = crate::linalg::spectral_norm((At.transpose() * lp.P * lp.B).as_ref());
-        let btpb = crate::linalg::spectral_norm((lp.B.transpose() * lp.P * lp.B).as_ref());
-        let lambda_max = sym_eigenvalues(lp.P).and_then(|e| e.last().copied()).unwrap_or(f64::INFINITY);
         let (phi, gamma, beta) = match lp.continuous {
             None => (0.0, 1.0, 0.0),
             Some(cp) => {
@@ -118,15 +115,13 @@ impl LoopConstants {
         };
         let n = lp.P.nrows();
         let axis = (0..n).map(|j| roots.inv[(j, j)].max(0.0).sqrt()).collect();
-        Ok(Self { roots, sigma_min, atpb, btpb, lambda_max, phi, gamma, beta, axis })
+        Ok(Self { roots, sigma_min, At, B: lp.B.to_owned(), P: lp.P.to_owned(), phi, gamma, beta, axis })
     }
 
-    /// r_crit of Theorem 3.21, (3.83)–(3.87), for a disturbance bound ε̄ (2-norm per step).
+    /// r_crit of Theorem 3.21, (3.83)–(3.87), for a disturbance bound ε̄ (2-norm per step) entering through B
+    /// ([`crate::caf::r_crit`], with its validated, rounding-guarded norms); ∞ when it does not exist.
     pub fn r_crit(&self, eps: f64) -> f64 {
-        let s = self.sigma_min;
-        let rho = (self.atpb + (self.atpb * self.atpb + s * self.btpb).sqrt()) / s * eps;
-        let r_tilde = rho * self.lambda_max.sqrt();
-        (r_tilde * r_tilde + (self.atpb * self.atpb / s + self.btpb) * eps * eps).sqrt()
+        crate::caf::r_crit(self.At.as_ref(), self.P.as_ref(), self.B.as_ref(), eps).map(|r| r.r_crit).unwrap_or(f64::INFINITY)
     }
 }
 

@@ -1,6 +1,11 @@
 //! `host-compiler inspect IMAGE [--json]`: decode and validate a controller image with the same decoder the
 //! firmware runs, then print its whole content (header, K, P, balls, tables, fallback, terminal, CRC,
 //! size) as JSON, or as a readable summary. A rejected image is reported with what is wrong with it.
+//!
+//! For a PWA-feedback image (Ch. 6) the content is the laws `u = K_j x + θ0_j` (with `θ_j = K_j − K` when
+//! the image has one location), the point-location tree (depth, nodes with their hyperplanes and
+//! children), the leaves (partition and certified balls), the ball table, and the worst-case work of one
+//! control step for this image.
 #![allow(non_snake_case)]
 
 use std::fmt::Write as _;
@@ -8,6 +13,7 @@ use std::io::Write as _;
 
 use serde::Serialize;
 use shared_types::image::{decode, Fallback, Header, Image, ImageError, Mode, Terminal, MAGIC};
+use shared_types::pwa::Child;
 
 /// Arguments of `inspect`.
 #[derive(clap::Args, Debug)]
@@ -157,14 +163,166 @@ struct BoxJson {
 }
 
 #[derive(Serialize)]
+#[serde(rename_all = "snake_case")]
+enum ChildJson {
+    Node(u16),
+    Leaf(u16),
+    Outside,
+}
+
+impl From<Child> for ChildJson {
+    fn from(c: Child) -> Self {
+        match c {
+            Child::Node(i) => ChildJson::Node(i),
+            Child::Leaf(l) => ChildJson::Leaf(l),
+            Child::Outside => ChildJson::Outside,
+        }
+    }
+}
+
+impl std::fmt::Display for ChildJson {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            ChildJson::Node(i) => write!(f, "node {i}"),
+            ChildJson::Leaf(l) => write!(f, "leaf {l}"),
+            ChildJson::Outside => f.write_str("OUTSIDE"),
+        }
+    }
+}
+
+#[derive(Serialize)]
+struct LawJson {
+    partition: usize,
+    /// Full gain `K_j = K + θ_j`.
+    K: Vec<Vec<f32>>,
+    theta0: Vec<f32>,
+    /// `θ_j = K_j − K_0` (f64 difference of the stored values), only for single-location images.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    theta: Option<Vec<Vec<f64>>>,
+}
+
+#[derive(Serialize)]
+struct NodeJson {
+    node: usize,
+    a: Vec<f32>,
+    b: f32,
+    left: ChildJson,
+    right: ChildJson,
+}
+
+#[derive(Serialize)]
+struct LeafJson {
+    leaf: usize,
+    partition: usize,
+    balls: Vec<usize>,
+}
+
+#[derive(Serialize)]
+struct BallJson {
+    ball: usize,
+    centre: Vec<f32>,
+    delta: f32,
+    location: usize,
+    partition: usize,
+}
+
+#[derive(Serialize)]
+struct PwaJson {
+    tree_depth: usize,
+    nodes: usize,
+    leaves: usize,
+    balls: usize,
+    ball_refs: usize,
+    max_leaf_balls: usize,
+    /// Worst-case multiply-adds of one step for this image: depth·n + max_leaf_balls·(n² + n) + m·n.
+    worst_case_muladds: usize,
+    laws: Vec<LawJson>,
+    tree: Vec<NodeJson>,
+    leaf_table: Vec<LeafJson>,
+    ball_table: Vec<BallJson>,
+}
+
+impl PwaJson {
+    fn new(img: &Image<'_>) -> PwaJson {
+        let (n, m) = (img.n(), img.m());
+        let max_leaf_balls = (0..img.n_leaves())
+            .map(|l| img.leaf_refs(l).1)
+            .max()
+            .unwrap_or(0);
+        PwaJson {
+            tree_depth: img.tree_depth(),
+            nodes: img.n_nodes(),
+            leaves: img.n_leaves(),
+            balls: img.n_balls(),
+            ball_refs: img.n_ball_refs(),
+            max_leaf_balls,
+            worst_case_muladds: img.tree_depth() * n + max_leaf_balls * (n * n + n) + m * n,
+            laws: (0..img.n_partitions())
+                .map(|j| LawJson {
+                    partition: j,
+                    K: matrix(m, n, |r, c| img.law_gain(j, r, c)),
+                    theta0: (0..m).map(|r| img.law_offset(j, r)).collect(),
+                    theta: (img.n_locations() == 1).then(|| {
+                        (0..m)
+                            .map(|r| {
+                                (0..n)
+                                    .map(|c| img.law_gain(j, r, c) as f64 - img.K(0, r, c) as f64)
+                                    .collect()
+                            })
+                            .collect()
+                    }),
+                })
+                .collect(),
+            tree: (0..img.n_nodes())
+                .map(|i| {
+                    let (l, r) = img
+                        .node_children(i)
+                        .unwrap_or((Child::Outside, Child::Outside));
+                    NodeJson {
+                        node: i,
+                        a: (0..n).map(|k| img.node_normal(i, k)).collect(),
+                        b: img.node_offset(i),
+                        left: l.into(),
+                        right: r.into(),
+                    }
+                })
+                .collect(),
+            leaf_table: (0..img.n_leaves())
+                .map(|l| LeafJson {
+                    leaf: l,
+                    partition: img.leaf_partition(l),
+                    balls: (0..img.leaf_refs(l).1)
+                        .filter_map(|k| img.leaf_ball(l, k))
+                        .collect(),
+                })
+                .collect(),
+            ball_table: (0..img.n_balls())
+                .map(|b| BallJson {
+                    ball: b,
+                    centre: (0..n).map(|i| img.ball_centre(b, i)).collect(),
+                    delta: img.ball_delta(b),
+                    location: img.ball_location(b),
+                    partition: img.ball_partition(b),
+                })
+                .collect(),
+        }
+    }
+}
+
+#[derive(Serialize)]
 struct Report {
     header: HeaderJson,
     total_steps: usize,
-    terminal: &'static str,
+    /// Feedforward only.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    terminal: Option<&'static str>,
     fallback: FallbackJson,
     input_box: Option<BoxJson>,
     locations: Vec<LocationJson>,
     trajectories: Vec<TrajectoryJson>,
+    /// PWA feedback only.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pwa: Option<PwaJson>,
 }
 
 fn matrix(rows: usize, cols: usize, at: impl Fn(usize, usize) -> f32) -> Vec<Vec<f32>> {
@@ -196,10 +354,10 @@ impl Report {
                 size,
             },
             total_steps: img.total_steps(),
-            terminal: match img.terminal() {
+            terminal: (img.mode() == Mode::Feedforward).then_some(match img.terminal() {
                 Terminal::HoldLast => "hold_last",
                 Terminal::Fallback => "fallback",
-            },
+            }),
             fallback: match img.fallback() {
                 Fallback::Hold => FallbackJson::Hold,
                 Fallback::Zero => FallbackJson::Zero,
@@ -237,6 +395,7 @@ impl Report {
                     }
                 })
                 .collect(),
+            pwa: (img.mode() == Mode::PwaFeedback).then(|| PwaJson::new(img)),
         }
     }
 }
@@ -248,6 +407,8 @@ fn vec_str(v: &[f32]) -> String {
 
 /// Rows of the v table printed per trajectory in the summary (the JSON has all of them).
 const SUMMARY_ROWS: usize = 6;
+/// Laws, tree nodes, leaves and balls printed in the summary of a PWA image (the JSON has all of them).
+const SUMMARY_ITEMS: usize = 8;
 
 fn summary(r: &Report, path: &str) -> String {
     let h = &r.header;
@@ -262,19 +423,39 @@ fn summary(r: &Report, path: &str) -> String {
         "mode: {} ({}), sample period {} s",
         h.mode, h.mode_value, h.period
     );
-    let _ = writeln!(
-        s,
-        "n = {}, m = {}, locations = {}, trajectories = {}, table rows = {}, partitions = {}",
-        h.n, h.m, h.locations, h.trajectories, r.total_steps, h.partitions
-    );
-    let _ = writeln!(
-        s,
-        "terminal: {}",
-        match r.terminal {
-            "hold_last" => "hold the last row (u = K x + v_last)",
-            _ => "apply the fallback",
-        }
-    );
+    if let Some(p) = &r.pwa {
+        let _ = writeln!(
+            s,
+            "n = {}, m = {}, locations = {}, partitions = {}",
+            h.n, h.m, h.locations, h.partitions
+        );
+        let _ = writeln!(
+            s,
+            "tree: {} nodes, depth {} (worst case), {} leaves; {} certified balls ({} references, at most {} per leaf)",
+            p.nodes, p.tree_depth, p.leaves, p.balls, p.ball_refs, p.max_leaf_balls
+        );
+        let _ = writeln!(
+            s,
+            "worst case per step: {} hyperplane tests, {} ball tests, {} multiply-adds",
+            p.tree_depth, p.max_leaf_balls, p.worst_case_muladds
+        );
+    } else {
+        let _ = writeln!(
+            s,
+            "n = {}, m = {}, locations = {}, trajectories = {}, table rows = {}, partitions = {}",
+            h.n, h.m, h.locations, h.trajectories, r.total_steps, h.partitions
+        );
+    }
+    if let Some(t) = r.terminal {
+        let _ = writeln!(
+            s,
+            "terminal: {}",
+            match t {
+                "hold_last" => "hold the last row (u = K x + v_last)",
+                _ => "apply the fallback",
+            }
+        );
+    }
     match &r.fallback {
         FallbackJson::Hold => {
             let _ = writeln!(s, "fallback: hold the last applied input");
@@ -321,6 +502,9 @@ fn summary(r: &Report, path: &str) -> String {
             let _ = writeln!(s, "  P[{i}] = {}", vec_str(row));
         }
     }
+    if let Some(p) = &r.pwa {
+        pwa_summary(&mut s, p);
+    }
     for t in &r.trajectories {
         let _ = writeln!(
             s,
@@ -348,4 +532,75 @@ fn summary(r: &Report, path: &str) -> String {
     }
     s.truncate(s.trim_end().len());
     s
+}
+
+/// The PWA part of the summary: laws, tree, leaves and balls (the first [`SUMMARY_ITEMS`] of each).
+fn pwa_summary(s: &mut String, p: &PwaJson) {
+    let more = |s: &mut String, total: usize, what: &str| {
+        if total > SUMMARY_ITEMS {
+            let _ = writeln!(
+                s,
+                "  ... {} more {what} (all with --json)",
+                total - SUMMARY_ITEMS
+            );
+        }
+    };
+    for law in p.laws.iter().take(SUMMARY_ITEMS) {
+        let _ = writeln!(
+            s,
+            "partition {}: u = K_j x + theta0_j, theta0_j = {}",
+            law.partition,
+            vec_str(&law.theta0)
+        );
+        for (i, row) in law.K.iter().enumerate() {
+            let _ = writeln!(s, "  K_j[{i}] = {}", vec_str(row));
+        }
+        if let Some(theta) = &law.theta {
+            for (i, row) in theta.iter().enumerate() {
+                let row: Vec<String> = row.iter().map(|x| x.to_string()).collect();
+                let _ = writeln!(s, "  theta_j[{i}] = [{}]", row.join(", "));
+            }
+        }
+    }
+    more(s, p.laws.len(), "partitions");
+    if p.tree.is_empty() {
+        let _ = writeln!(s, "tree: leaf 0 alone (no hyperplanes)");
+    } else {
+        let _ = writeln!(s, "tree (a^T x <= b goes left):");
+    }
+    for n in p.tree.iter().take(SUMMARY_ITEMS) {
+        let _ = writeln!(
+            s,
+            "  node {}: a = {}, b = {} -> left {}, right {}",
+            n.node,
+            vec_str(&n.a),
+            n.b,
+            n.left,
+            n.right
+        );
+    }
+    more(s, p.tree.len(), "nodes");
+    for l in p.leaf_table.iter().take(SUMMARY_ITEMS) {
+        let balls: Vec<String> = l.balls.iter().map(|b| b.to_string()).collect();
+        let _ = writeln!(
+            s,
+            "leaf {}: partition {}, balls [{}]",
+            l.leaf,
+            l.partition,
+            balls.join(", ")
+        );
+    }
+    more(s, p.leaf_table.len(), "leaves");
+    for b in p.ball_table.iter().take(SUMMARY_ITEMS) {
+        let _ = writeln!(
+            s,
+            "ball {}: centre {}, delta {}, location {}, partition {}",
+            b.ball,
+            vec_str(&b.centre),
+            b.delta,
+            b.location,
+            b.partition
+        );
+    }
+    more(s, p.ball_table.len(), "balls");
 }

@@ -277,7 +277,11 @@ impl StandardForm {
                 hi = hi.min(delta);
             }
             let a = 1.0 + G; // = ‖a(µ)‖² ≥ 0 in the notation of the proof of Lemma 7.9
-            let mut next = delta - (2.0 * a * G) / ((1.0 + a.sqrt()) * dG); // (7.37), one division
+                             // (7.36) rather than (7.37): with p₁ + µ = −2(1 + G)/G' of (7.34), µ⁺ = µ + (p₁ + µ)(√(1 + G) − 1). The
+                             // square root and the division are independent (shorter latency chain than (7.37)); the
+                             // cancellation in √(1 + G) − 1 costs an absolute error of about ε·|p₁ + µ| in µ⁺, the same order as
+                             // the error with which G itself determines µ*.
+            let mut next = delta + (-2.0 * a / dG) * (a.sqrt() - 1.0);
             if !(next > lo && next < hi) {
                 if hi == f64::INFINITY {
                     hi = self.upper_bound(zbar).max(lo);

@@ -290,6 +290,7 @@ enum Prepared<'a> {
         e: &'a Ellipsoid,
         f: Arc<EllipsoidBoundaryDistance>,
         ws: BoundaryWorkspace,
+        bounds: EllipsoidBounds,
     },
 }
 
@@ -302,7 +303,8 @@ impl<'a> Prepared<'a> {
                     .factored(metric)
                     .map_err(|source| SafetyError::Geometry { what, source })?;
                 let ws = f.workspace();
-                Prepared::Ellipsoid { e, f, ws }
+                let bounds = EllipsoidBounds::new(e.center(), e.shape(), metric);
+                Prepared::Ellipsoid { e, f, ws, bounds }
             }
         })
     }
@@ -311,7 +313,7 @@ impl<'a> Prepared<'a> {
     fn value(&mut self, x: &[f64], metric: &Metric) -> f64 {
         match self {
             Prepared::Region(r) => r.signed_dist(x, metric).value,
-            Prepared::Ellipsoid { e, f, ws } => {
+            Prepared::Ellipsoid { e, f, ws, .. } => {
                 // The boundary distance (7.2) is the depth inside and the distance outside.
                 let d = f.distance(x, ws).unwrap_or(f64::NAN);
                 if e.contains(x) {
@@ -322,6 +324,14 @@ impl<'a> Prepared<'a> {
             }
         }
     }
+    /// Cheap bounds lo ≤ Dist(x, S) ≤ hi, when the set has them.
+    #[inline]
+    fn bounds(&self, x: &[f64]) -> Option<(f64, f64)> {
+        match self {
+            Prepared::Region(_) => None,
+            Prepared::Ellipsoid { bounds, .. } => Some(bounds.signed(x)),
+        }
+    }
     /// Dist(x, S) with its witness point.
     fn witness(&self, x: &[f64], metric: &Metric) -> Witness {
         match self {
@@ -329,6 +339,137 @@ impl<'a> Prepared<'a> {
             Prepared::Ellipsoid { e, .. } => e.signed_dist(x, metric),
         }
     }
+}
+
+/// Two-sided bounds on the signed distance Dist_R(x, E) to an ellipsoid E = {x : (x − c)ᵀQ(x − c) ≤ 1},
+/// at the cost of two quadratic forms, so that samples that cannot be critical skip the (7.2) solve.
+///
+/// With g(x) = ((x − c)ᵀQ(x − c))^½ and ρ(x) = ‖x − c‖_R:
+/// * the ray point c + (x − c)/g lies on ∂E at R-distance ρ·|g − 1|/g from x, so |Dist| ≤ ρ|g − 1|/g;
+/// * g is a seminorm of x − c with |g(y) − g(x)| ≤ √λ̄ ‖y − x‖_R for any λ̄ ≥ sup vᵀQv / vᵀRv, and g = 1
+///   on ∂E, so |Dist| ≥ |g − 1|/√λ̄.
+///
+/// Inside (g ≤ 1) Dist ∈ [(1 − g)/√λ̄, ρ(1 − g)/g]; outside Dist ∈ [−ρ(g − 1)/g, −(g − 1)/√λ̄]. λ̄ is
+/// bounded through a Cholesky factor R = LLᵀ: λmax(L⁻¹QL⁻ᵀ) ≤ min(Frobenius norm, largest absolute row
+/// sum); without one (R singular) the lower bound on |Dist| is dropped. Both bounds are widened by
+/// 1e-9·(1 + ρ) to cover rounding here and in the exact solver.
+struct EllipsoidBounds {
+    c: Vec<f64>,
+    Q: Vec<f64>,
+    R: Vec<f64>,
+    /// 1/√λ̄, or 0 when no bound on λmax is available.
+    inv_sqrt_lambda: f64,
+}
+
+impl EllipsoidBounds {
+    fn new(c: &[f64], Q: &[f64], metric: &Metric) -> Self {
+        let n = c.len();
+        let R = metric.R.clone();
+        let inv_sqrt_lambda = match cholesky(&R, n) {
+            Some(L) => {
+                // M = L⁻¹ Q L⁻ᵀ: X = L⁻¹Q, then M = L⁻¹Xᵀ (M is symmetric).
+                let X = lower_solve_columns(&L, Q, n);
+                let mut Xt = vec![0.0; n * n];
+                for i in 0..n {
+                    for j in 0..n {
+                        Xt[i * n + j] = X[j * n + i];
+                    }
+                }
+                let M = lower_solve_columns(&L, &Xt, n);
+                let frob = M.iter().map(|v| v * v).sum::<f64>().sqrt();
+                let rows = (0..n)
+                    .map(|i| M[i * n..(i + 1) * n].iter().map(|v| v.abs()).sum::<f64>())
+                    .fold(0.0, f64::max);
+                let lambda = frob.min(rows) * (1.0 + 1e-6);
+                if lambda.is_finite() && lambda > 0.0 {
+                    1.0 / lambda.sqrt()
+                } else {
+                    0.0
+                }
+            }
+            None => 0.0,
+        };
+        Self {
+            c: c.to_vec(),
+            Q: Q.to_vec(),
+            R,
+            inv_sqrt_lambda,
+        }
+    }
+
+    /// (lo, hi) with lo ≤ Dist_R(x, E) ≤ hi.
+    #[inline]
+    fn signed(&self, x: &[f64]) -> (f64, f64) {
+        let n = self.c.len();
+        let (mut h, mut r2) = (0.0, 0.0);
+        for i in 0..n {
+            let di = x[i] - self.c[i];
+            let (mut qi, mut ri) = (0.0, 0.0);
+            for j in 0..n {
+                let dj = x[j] - self.c[j];
+                qi += self.Q[i * n + j] * dj;
+                ri += self.R[i * n + j] * dj;
+            }
+            h += di * qi;
+            r2 += di * ri;
+        }
+        let g = h.max(0.0).sqrt();
+        let rho = r2.max(0.0).sqrt();
+        let m = 1e-9 * (1.0 + rho);
+        let (lo, hi) = if g <= 1.0 {
+            let hi = if g > 0.0 {
+                rho * (1.0 - g) / g
+            } else {
+                f64::INFINITY
+            };
+            ((1.0 - g) * self.inv_sqrt_lambda, hi)
+        } else {
+            (-rho * (g - 1.0) / g, -(g - 1.0) * self.inv_sqrt_lambda)
+        };
+        if lo.is_nan() || hi.is_nan() {
+            (f64::NEG_INFINITY, f64::INFINITY)
+        } else {
+            (lo - m, hi + m)
+        }
+    }
+}
+
+/// Lower Cholesky factor of a symmetric positive definite n×n matrix (row-major), or `None`.
+fn cholesky(A: &[f64], n: usize) -> Option<Vec<f64>> {
+    let mut L = vec![0.0; n * n];
+    let scale = (0..n).map(|i| A[i * n + i].abs()).fold(0.0, f64::max);
+    for i in 0..n {
+        for j in 0..=i {
+            let mut s = A[i * n + j];
+            for k in 0..j {
+                s -= L[i * n + k] * L[j * n + k];
+            }
+            if i == j {
+                if !(s > 1e-12 * scale) {
+                    return None;
+                }
+                L[i * n + i] = s.sqrt();
+            } else {
+                L[i * n + j] = s / L[j * n + j];
+            }
+        }
+    }
+    Some(L)
+}
+
+/// L⁻¹B for lower-triangular L and B (both n×n, row-major), by forward substitution per column.
+fn lower_solve_columns(L: &[f64], B: &[f64], n: usize) -> Vec<f64> {
+    let mut X = vec![0.0; n * n];
+    for col in 0..n {
+        for i in 0..n {
+            let mut s = B[i * n + col];
+            for k in 0..i {
+                s -= L[i * n + k] * X[k * n + col];
+            }
+            X[i * n + col] = s / L[i * n + i];
+        }
+    }
+    X
 }
 
 /// Which part of δ₀ is smallest (ties resolved in the order Goal, Unsafe, Input).
@@ -496,6 +637,16 @@ impl<'a, 't> Passes<'a, 't> {
             k,
         )
     }
+    /// Bounds on Dist(x̃(κ), Goal), when available.
+    #[inline]
+    fn goal_bounds(&self, k: usize) -> Option<(f64, f64)> {
+        self.goal.bounds(self.traj.state(k))
+    }
+    /// Bounds on Dist(x̃(κ), Unsafe), when available.
+    #[inline]
+    fn unsafe_bounds(&self, k: usize) -> Option<(f64, f64)> {
+        self.unsafe_set.bounds(self.traj.state(k))
+    }
     /// Dist(x̃(κ), A_κ).
     #[inline]
     fn input(&self, inp: &dyn InputSets, k: usize) -> Result<f64, SafetyError> {
@@ -547,6 +698,68 @@ fn prefix_min(
     Ok(best)
 }
 
+/// Goal or Unsafe, for the passes that only need Dist(·, S).
+#[derive(Clone, Copy)]
+enum Which {
+    Goal,
+    Unsafe,
+}
+
+impl Passes<'_, '_> {
+    /// Dist(x̃(κ), S) for S = Goal or Unsafe.
+    #[inline]
+    fn dist(&mut self, which: Which, k: usize) -> Result<f64, SafetyError> {
+        match which {
+            Which::Goal => self.goal(k),
+            Which::Unsafe => self.unsafe_(k).map(|u| -u),
+        }
+    }
+    #[inline]
+    fn dist_bounds(&self, which: Which, k: usize) -> Option<(f64, f64)> {
+        match which {
+            Which::Goal => self.goal_bounds(k),
+            Which::Unsafe => self.unsafe_bounds(k),
+        }
+    }
+
+    /// First index of the maximum of Dist(x̃(κ), S) over κ ∈ 0..end, and the maximum. When the set has
+    /// bounds (lo, hi) bracketing the value, a first pass takes the sample with the largest lo as the
+    /// incumbent, and the scan then solves only samples whose hi reaches the incumbent's value; every
+    /// skipped sample is provably below the maximum, so the result equals the full scan's.
+    fn first_argmax(&mut self, which: Which, end: usize) -> Result<(usize, f64), SafetyError> {
+        let pruning = end > 1 && self.dist_bounds(which, 0).is_some();
+        let incumbent = if pruning {
+            let mut k0 = 0;
+            let mut lo0 = f64::NEG_INFINITY;
+            for k in 0..end {
+                let lo = self
+                    .dist_bounds(which, k)
+                    .map_or(f64::NEG_INFINITY, |b| b.0);
+                if lo > lo0 {
+                    lo0 = lo;
+                    k0 = k;
+                }
+            }
+            Some((k0, self.dist(which, k0)?))
+        } else {
+            None
+        };
+        let mut best: Option<(usize, f64)> = None;
+        for k in 0..end {
+            let v = match incumbent {
+                Some((k0, v0)) if k == k0 => v0,
+                Some((_, v0)) if self.dist_bounds(which, k).is_some_and(|b| b.1 < v0) => continue,
+                _ => self.dist(which, k)?,
+            };
+            if best.is_none_or(|(_, b)| v > b) {
+                best = Some((k, v));
+            }
+        }
+        // end ≥ 1 (checked by the caller), so the scan saw at least one sample.
+        best.ok_or(SafetyError::Empty)
+    }
+}
+
 fn assemble(
     goal: Critical,
     unsafe_set: Critical,
@@ -586,17 +799,11 @@ pub fn safety_robustness(
     let count = check(traj, spec)?;
     let mut p = Passes::new(traj, spec)?;
     // (4.12)–(4.13): first maximiser of the signed Goal distance.
-    let mut kstar = 0;
-    let mut gbest = p.goal(0)?;
-    for k in 1..count {
-        let v = p.goal(k)?;
-        if v > gbest {
-            gbest = v;
-            kstar = k;
-        }
-    }
-    // (4.14): minimum over the closed prefix 0..=κ*.
-    let (ku, u) = prefix_min(kstar, |k| p.unsafe_(k))?;
+    let (kstar, gbest) = p.first_argmax(Which::Goal, count)?;
+    // (4.14): minimum over the closed prefix 0..=κ* of −Dist(·, Unsafe), i.e. the first maximiser of
+    // Dist(·, Unsafe).
+    let (ku, du) = p.first_argmax(Which::Unsafe, kstar + 1)?;
+    let u = -du;
     // (4.15).
     let input = match spec.input {
         Some(inp) => {
@@ -629,10 +836,14 @@ pub fn safety_robustness_joint(
     let mut best = (f64::NEG_INFINITY, 0, 0, 0, f64::NEG_INFINITY); // (score, κ*, κ_U, κ_I, Goal value)
     let mut best_parts = (f64::INFINITY, f64::INFINITY);
     for k in 0..count {
-        let u = p.unsafe_(k)?;
-        if u < mu || k == 0 {
-            mu = u;
-            ku = k;
+        // u = −Dist(·, Unsafe) ≥ −hi: skip the solve when it cannot lower the running minimum.
+        let skip_u = k > 0 && p.unsafe_bounds(k).is_some_and(|b| -b.1 >= mu);
+        if !skip_u {
+            let u = p.unsafe_(k)?;
+            if u < mu || k == 0 {
+                mu = u;
+                ku = k;
+            }
         }
         if let Some(inp) = spec.input {
             let v = p.input(inp, k)?;
@@ -645,6 +856,9 @@ pub fn safety_robustness_joint(
         if k > 0 && prefix <= best.0 {
             // The prefix minimum never increases, so no later sample can beat `best`.
             break;
+        }
+        if k > 0 && p.goal_bounds(k).is_some_and(|b| b.1.min(prefix) <= best.0) {
+            continue; // the score min(Goal, prefix) cannot exceed `best`
         }
         let g = p.goal(k)?;
         let score = g.min(prefix);
@@ -660,4 +874,89 @@ pub fn safety_robustness_joint(
         .input
         .map(|inp| p.input_critical(inp, best_parts.1, ki));
     Ok(assemble(goal, unsafe_set, input, count))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    /// A random symmetric PSD n×n matrix B Bᵀ + shift·I with B n×rank.
+    fn psd(rng: &mut ChaCha8Rng, n: usize, rank: usize, shift: f64) -> Vec<f64> {
+        let B: Vec<f64> = (0..n * rank).map(|_| rng.random_range(-1.0..1.0)).collect();
+        let mut A = vec![0.0; n * n];
+        for i in 0..n {
+            for j in 0..n {
+                A[i * n + j] = (0..rank)
+                    .map(|k| B[i * rank + k] * B[j * rank + k])
+                    .sum::<f64>()
+                    + if i == j { shift } else { 0.0 };
+            }
+        }
+        A
+    }
+
+    /// lo ≤ Dist_R(x, E) ≤ hi against the exact §7.2 solver, for full and degenerate ellipsoids and
+    /// for positive definite and singular metrics, with points inside, outside and near the boundary.
+    #[test]
+    fn ellipsoid_bounds_bracket_the_exact_signed_distance() {
+        let mut rng = ChaCha8Rng::seed_from_u64(99);
+        let (mut checked, mut informative) = (0, 0);
+        for case in 0..300 {
+            let n = rng.random_range(1..=4);
+            let q_rank = if case % 3 == 0 {
+                rng.random_range(1..=n)
+            } else {
+                n
+            };
+            let Q = psd(&mut rng, n, q_rank, if q_rank < n { 0.0 } else { 0.2 });
+            let R = if case % 5 == 0 && n > 1 {
+                psd(&mut rng, n, n - 1, 0.0)
+            } else {
+                psd(&mut rng, n, n, 0.1)
+            };
+            let c: Vec<f64> = (0..n).map(|_| rng.random_range(-1.0..1.0)).collect();
+            let Ok(e) = Ellipsoid::new(c.clone(), Q.clone()) else {
+                continue;
+            };
+            let metric = Metric { n, R: R.clone() };
+            let b = EllipsoidBounds::new(&c, e.shape(), &metric);
+            for _ in 0..20 {
+                let scale = [0.05, 0.5, 1.0, 3.0][rng.random_range(0..4)];
+                let x: Vec<f64> = c
+                    .iter()
+                    .map(|ci| ci + scale * rng.random_range(-1.0..1.0))
+                    .collect();
+                let exact = e.signed_dist(&x, &metric).value;
+                if exact.is_nan() {
+                    continue;
+                }
+                let (lo, hi) = b.signed(&x);
+                assert!(
+                    lo <= exact && exact <= hi,
+                    "case {case}: {lo} ≤ {exact} ≤ {hi} fails"
+                );
+                checked += 1;
+                if hi - lo < 0.5 * exact.abs() {
+                    informative += 1;
+                }
+            }
+        }
+        assert!(checked > 3000, "{checked}");
+        assert!(
+            informative > checked / 10,
+            "bounds are too loose to prune anything ({informative}/{checked})"
+        );
+    }
+
+    #[test]
+    fn cholesky_rejects_singular_and_solves() {
+        assert!(cholesky(&[1.0, 1.0, 1.0, 1.0], 2).is_none());
+        let L = cholesky(&[4.0, 2.0, 2.0, 5.0], 2).unwrap();
+        assert_eq!(L, vec![2.0, 0.0, 1.0, 2.0]);
+        // L⁻¹ L = I.
+        let X = lower_solve_columns(&L, &L, 2);
+        assert_eq!(X, vec![1.0, 0.0, 0.0, 1.0]);
+    }
 }
