@@ -7,9 +7,6 @@
 //! the trace inner product of the matrices (clarabel's `mat_to_svec`/`svec_to_mat`). Hence
 //! `b = svec(F₀)` and column v of A is `−svec(Fᵥ)`.
 
-// clarabel's SDP code calls the Fortran-ABI BLAS/LAPACK symbols that lapack-faer defines; naming the crate
-// here makes rustc hand it to the linker.
-extern crate lapack_faer;
 
 use clarabel::algebra::CscMatrix;
 use clarabel::solver::{DefaultSettings, DefaultSolver, IPSolver, SolverStatus, SupportedConeT};

@@ -2,7 +2,7 @@
 //! shared f32 evaluator.
 
 use crate::synth::sampled_plant;
-use crate::verify::{monte_carlo, Judge};
+use crate::verify::monte_carlo;
 use miette::IntoDiagnostic;
 use std::path::PathBuf;
 
@@ -45,18 +45,7 @@ pub fn run(a: &VerifyArgs) -> miette::Result<()> {
     let goal = problem.goal_region()?;
     let unsafe_set = problem.unsafe_region()?;
     let input = crate::synth::input_bound(&problem.input);
-    let judge = Judge {
-        A: plant.A.as_ref(),
-        B: plant.B.as_ref(),
-        g: &plant.g,
-        sub: plant.sub.as_ref().map(|(a, b, g, s)| (a.as_ref(), b.as_ref(), g.as_slice(), *s)),
-        goal: goal.as_ref(),
-        unsafe_set: unsafe_set.as_deref(),
-        input: &input,
-        steps: problem.horizon_steps(),
-        init_lo: &problem.init.lo,
-        init_hi: &problem.init.hi,
-    };
+    let judge = crate::synth::judge(&problem, &plant, goal.as_ref(), unsafe_set.as_deref(), &input);
     let r = monte_carlo(&judge, &img, a.runs, a.per_ball, a.seed.unwrap_or(problem.seed ^ 0x7e51f1));
     if a.json {
         println!("{}", serde_json::to_string_pretty(&r).into_diagnostic()?);

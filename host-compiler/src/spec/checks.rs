@@ -28,9 +28,6 @@
 
 use clarabel::algebra::CscMatrix;
 use clarabel::solver::{DefaultSettings, DefaultSolver, IPSolver, SolverStatus, SupportedConeT};
-// clarabel's BLAS/LAPACK symbols come from this crate at link time.
-#[allow(unused_imports)]
-use lapack_faer as _;
 
 use super::sets::{SetDesc, Shape};
 use super::Matrix;

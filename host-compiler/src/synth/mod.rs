@@ -151,6 +151,28 @@ pub fn sampled_plant(problem: &Problem) -> Result<SampledPlant, SynthError> {
     }
 }
 
+/// The verifier's view of a spec: its sampled plant (with the sub-sample plant), sets, input set and horizon.
+pub fn judge<'a>(
+    problem: &'a Problem,
+    plant: &'a SampledPlant,
+    goal: &'a dyn crate::geometry::Region,
+    unsafe_set: Option<&'a dyn crate::geometry::Region>,
+    input: &'a crate::trajectory::generate::InputBound,
+) -> Judge<'a> {
+    Judge {
+        A: plant.A.as_ref(),
+        B: plant.B.as_ref(),
+        g: &plant.g,
+        sub: plant.sub.as_ref().map(|(a, b, g, s)| (a.as_ref(), b.as_ref(), g.as_slice(), *s)),
+        goal,
+        unsafe_set,
+        input,
+        steps: problem.horizon_steps(),
+        init_lo: &problem.init.lo,
+        init_hi: &problem.init.hi,
+    }
+}
+
 fn bar(progress: bool, len: u64, msg: &str) -> ProgressBar {
     if !progress {
         return ProgressBar::hidden();
@@ -384,18 +406,7 @@ pub fn synthesize(problem: &Problem, opts: &SynthOptions) -> Result<Synthesis, S
     // Independent verification through the shared evaluator.
     let t2 = Instant::now();
     let img = shared_types::image::decode(&image).map_err(|e| SynthError::Nothing(format!("{e:?}")))?;
-    let judge = Judge {
-        A: plant.A.as_ref(),
-        B: plant.B.as_ref(),
-        g: &plant.g,
-        sub: plant.sub.as_ref().map(|(a, b, g, s)| (a.as_ref(), b.as_ref(), g.as_slice(), *s)),
-        goal: goal.as_ref(),
-        unsafe_set: unsafe_set.as_deref(),
-        input: &input,
-        steps,
-        init_lo: &problem.init.lo,
-        init_hi: &problem.init.hi,
-    };
+    let judge = judge(problem, &plant, goal.as_ref(), unsafe_set.as_deref(), &input);
     let verify = monte_carlo(&judge, &img, opts.verify_interior, opts.verify_per_ball, problem.seed ^ 0x7e51f1);
     timings.push(("verification".to_string(), t2.elapsed().as_secs_f64()));
     if verify.violations > 0 {
