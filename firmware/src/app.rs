@@ -44,6 +44,8 @@ pub struct Stats {
     pub max_cost: u32,
 }
 
+// One instance for the whole program, and no heap to box into: the size difference does not matter.
+#[allow(clippy::large_enum_variant)]
 enum Engine<'a> {
     Running(Controller<'a>),
     Rejected(Input),

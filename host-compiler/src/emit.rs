@@ -793,9 +793,9 @@ impl PwaImageBuilder {
             node_b.extend_from_slice(&b.to_le_bytes());
             for c in [node.left, node.right] {
                 // In range (checked by tree_depth), so the code exists.
-                let code = c.code().ok_or_else(|| {
-                    invalid(format!("tree node {i}: child {c:?}"), "has no code")
-                })?;
+                let code = c
+                    .code()
+                    .ok_or_else(|| invalid(format!("tree node {i}: child {c:?}"), "has no code"))?;
                 node_child.extend_from_slice(&code.to_le_bytes());
             }
         }

@@ -6,6 +6,7 @@ use host_compiler::cli::inspect::{render, InspectError};
 use host_compiler::emit::{EmitError, FallbackLaw, ImageBuilder, Terminal, TrajectoryEntry};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
+use shared_types::capacity::MAX_STEPS;
 use shared_types::eval::Controller;
 use shared_types::image::{decode, ImageError};
 
@@ -222,11 +223,14 @@ fn refusals_say_what_is_wrong() {
     );
 
     let mut b = builder();
-    b.trajectories[0].v = vec![0.0; 4096];
-    b.trajectories[0].location = vec![0; 4096];
+    b.trajectories[0].v = vec![0.0; MAX_STEPS];
+    b.trajectories[0].location = vec![0; MAX_STEPS];
     assert_eq!(
         err(&b),
-        "total table rows is 4097, allowed 1..=4096 (image capacity)"
+        format!(
+            "total table rows is {}, allowed 1..={MAX_STEPS} (image capacity)",
+            MAX_STEPS + 1
+        )
     );
 
     let mut b = builder();

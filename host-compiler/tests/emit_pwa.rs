@@ -1,7 +1,7 @@
 //! Host emission of PWA-feedback images (Ch. 6): PwaImageBuilder → bytes → decode → PwaImageBuilder round
 //! trips, the law `K_j = K + θ_j` through the shared evaluator, every refusal with its message, and
 //! `inspect` on PWA images.
-#![allow(non_snake_case)]
+#![allow(non_snake_case, clippy::needless_range_loop)]
 
 use host_compiler::cli::inspect::render;
 use host_compiler::emit::{
@@ -91,7 +91,10 @@ fn round_trip_through_bytes_is_exact_and_canonical() {
         location: vec![0],
     });
     let ff_bytes = ff.to_bytes().unwrap();
-    assert_eq!(PwaImageBuilder::from_image(&decode(&ff_bytes).unwrap()), None);
+    assert_eq!(
+        PwaImageBuilder::from_image(&decode(&ff_bytes).unwrap()),
+        None
+    );
 }
 
 #[test]
@@ -201,7 +204,12 @@ fn random_builders_round_trip_and_evaluate_like_f64() {
         assert_eq!(img.tree_depth(), b.tree_depth().unwrap());
         let back = PwaImageBuilder::from_image(&img).unwrap();
         for (l0, l1) in b.laws.iter().zip(&back.laws) {
-            for (x, y) in l0.gain.iter().zip(&l1.gain).chain(l0.offset.iter().zip(&l1.offset)) {
+            for (x, y) in l0
+                .gain
+                .iter()
+                .zip(&l1.gain)
+                .chain(l0.offset.iter().zip(&l1.offset))
+            {
                 assert_eq!(*y, *x as f32 as f64);
             }
         }
@@ -344,10 +352,7 @@ fn refusals_say_what_is_wrong() {
             right: Child::Leaf(0),
         });
     }
-    assert_eq!(
-        err(&b),
-        "tree depth is 25, allowed 0..=24 (image capacity)"
-    );
+    assert_eq!(err(&b), "tree depth is 25, allowed 0..=24 (image capacity)");
     b.nodes.pop();
     b.nodes.last_mut().unwrap().left = Child::Leaf(1);
     assert_eq!(

@@ -338,12 +338,13 @@ fn check_problem(p: &Problem, singular_metric: bool) -> Result<(), TestCaseError
         OptimumKind::Multiple => MULTIPLE.fetch_add(1, Ordering::Relaxed),
         OptimumKind::ZeroCost => ZERO_COST.fetch_add(1, Ordering::Relaxed),
     };
-    // Feasible: on the boundary, to 1e-9 relative to the rounding scale of evaluating the constraint.
+    // Feasible: on the boundary to 1e-9, plus 1e-12 of the rounding scale |u|ᵀ|Q||u| of evaluating the
+    // constraint (which exceeds 1 when far-apart terms cancel, e.g. long thin ellipsoids in rotated coordinates).
     let u: Vec<f64> = x.iter().zip(&p.c).map(|(a, b)| a - b).collect();
     let h = quad(&p.Q, &u);
-    let hscale = abs_quad(&p.Q, &u).max(1.0);
+    let hscale = abs_quad(&p.Q, &u);
     prop_assert!(
-        (h - 1.0).abs() <= 1e-9 * hscale,
+        (h - 1.0).abs() <= 1e-9 + 1e-12 * hscale,
         "infeasible: h(x*) = {h} (scale {hscale}), kind {:?}",
         s.kind
     );
@@ -433,9 +434,9 @@ fn strategy() -> impl Strategy<Value = (usize, QKind, RKind, PointKind, u64)> {
 #[test]
 fn matches_global_brute_force() {
     let config = Config {
-        cases: 1500,
+        cases: 20000,
         failure_persistence: None,
-        rng_seed: RngSeed::Fixed(0x724),
+        rng_seed: RngSeed::Fixed(4242),
         ..Config::default()
     };
     let mut runner = TestRunner::new(config);
@@ -530,6 +531,38 @@ fn batch_matches_single_points() {
     assert!(f.solve_batch(&pts, &mut vals[..3], None).is_err());
 }
 
+/// Regression: rank-one metric with a near-degenerate Q; the reconstruction through P₂₂⁺ (condition ~6e5) left
+/// the point off the constraint by 2.7e-7, and with the multiplier µ* ≈ 1.3e4 the value was 1e-6 too small.
+/// The per-point constraint check now triggers the refinement.
+#[test]
+fn singular_metric_reconstruction_is_refined() {
+    let p = make_problem(
+        5,
+        QKind::NearDegenerate,
+        RKind::Singular,
+        PointKind::Far,
+        4789014612021199497,
+    );
+    let f = EllipsoidBoundaryDistance::new(&p.c, &p.Q, &p.R).unwrap();
+    assert_eq!(f.metric_rank(), 1);
+    let mut ws = f.workspace();
+    let mut x = vec![0.0; 5];
+    let s = f.solve(&p.xbar, &mut ws, &mut x).unwrap();
+    let u: Vec<f64> = x.iter().zip(&p.c).map(|(a, b)| a - b).collect();
+    assert!(
+        (quad(&p.Q, &u) - 1.0).abs() < 1e-10,
+        "h(x*) = {}",
+        quad(&p.Q, &u)
+    );
+    let b = brute_force(&p.c, &p.Q, &p.R, &p.xbar);
+    assert!(
+        (s.value - b.value).abs() <= 1e-9 * b.value,
+        "{} vs {}",
+        s.value,
+        b.value
+    );
+}
+
 /// Regression: a near-degenerate Q (λ ratio ~1e-5) in a near-singular metric (ρ ratio 1e-6) gives a standard
 /// form with λmax/λmin ≈ 3e10, whose small eigenvalue is only known to ~1e-6 relative. Before the Newton
 /// refinement in the original coordinates, the returned point violated the constraint by 3.7e-6.
@@ -565,23 +598,4 @@ fn ill_conditioned_standard_form_is_refined() {
         b.value
     );
     assert!((rdist(&p.R, &x, &p.xbar) - s.value).abs() <= 1e-12 * s.value);
-}
-
-#[test]
-fn zz_debug() {
-    let p = make_problem(5, QKind::NearDegenerate, RKind::Singular, PointKind::Far, 4789014612021199497);
-    let f = EllipsoidBoundaryDistance::new(&p.c, &p.Q, &p.R).unwrap();
-    let mut ws = f.workspace();
-    let mut x = vec![0.0; 5];
-    let s = f.solve(&p.xbar, &mut ws, &mut x).unwrap();
-    println!("{s:?} {x:?} esc {}", f.has_zero_cost_directions());
-    let sf = f.standard_form().unwrap();
-    println!("lambda {:?} M {} rank R {}", sf.lambda(), sf.multiplicity(), f.metric_rank());
-    let u: Vec<f64> = x.iter().zip(&p.c).map(|(a, b)| a - b).collect();
-    println!("h {} scale {} rdist {}", quad(&p.Q, &u), abs_quad(&p.Q, &u), rdist(&p.R, &x, &p.xbar));
-    let b = brute_force(&p.c, &p.Q, &p.R, &p.xbar);
-    let ub: Vec<f64> = b.point.iter().zip(&p.c).map(|(a, b)| a - b).collect();
-    println!("brute {} {:?} h {}", b.value, b.point, quad(&p.Q, &ub));
-    let (sig, _) = jacobi(5, &p.Q); println!("Q eig {sig:?}");
-    let (rho, _) = jacobi(5, &p.R); println!("R eig {rho:?}");
 }

@@ -166,6 +166,7 @@ pub fn double_integrator() -> Result<TestImage, ImageBuildError> {
     Ok(TestImage {
         bytes,
         plant,
+        sampled: d,
         h,
         centres,
         deltas,
@@ -187,7 +188,7 @@ pub fn corrupted(bytes: &[u8]) -> Vec<u8> {
 mod tests {
     use super::*;
 
-    fn spectral_radius_2x2(m: &Mat) -> f64 {
+    fn spectral_radius_2x2(m: &Mat<f64>) -> f64 {
         let (tr, det) = (
             m[(0, 0)] + m[(1, 1)],
             m[(0, 0)] * m[(1, 1)] - m[(0, 1)] * m[(1, 0)],

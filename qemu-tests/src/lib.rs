@@ -5,7 +5,7 @@
 //! * [`qemu`]: one QEMU `mps2-an386` session: UART0 on a loopback TCP socket, semihosting (defmt) on
 //!   QEMU's stdout, kept apart; an overall deadline on every wait, and QEMU killed on drop;
 //! * [`logs`]: decodes the defmt stream with the ELF's table (`defmt-decoder`);
-//! * [`plant`]: the plant on the host, exact zero-order-hold discretisation;
+//! * [`plant`]: the plant on the host, sampled with `host_compiler::model`'s exact zero-order hold;
 //! * [`closed_loop`]: runs N steps against the plant and the host evaluator, comparing bit for bit;
 //! * [`images`]: the test controller images.
 //!

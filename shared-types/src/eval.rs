@@ -292,7 +292,11 @@ impl<'a> Controller<'a> {
         let K = f32_span(t.gain, j * m * n, m * n);
         let theta0 = f32_span(t.offset, j * m, m);
         let mut u = Input::zero(m);
-        for ((uj, krow), oj) in u.u.iter_mut().zip(K.chunks_exact(4 * n)).zip(floats(theta0)) {
+        for ((uj, krow), oj) in
+            u.u.iter_mut()
+                .zip(K.chunks_exact(4 * n))
+                .zip(floats(theta0))
+        {
             let mut s = 0.0f32;
             for (kji, &xi) in floats(krow).zip(x) {
                 s += kji * xi;

@@ -883,7 +883,11 @@ pub(crate) fn check_len(field: Field, bytes: &[u8], expected: usize) -> Result<(
 }
 
 /// Checks that every `f32` in `bytes` is finite; `pos(i)` maps the flat index to a position.
-pub(crate) fn check_finite(field: Field, bytes: &[u8], pos: impl Fn(usize) -> Pos) -> Result<(), ImageError> {
+pub(crate) fn check_finite(
+    field: Field,
+    bytes: &[u8],
+    pos: impl Fn(usize) -> Pos,
+) -> Result<(), ImageError> {
     for (i, x) in floats(bytes).enumerate() {
         if !x.is_finite() {
             return Err(ImageError::NonFinite { field, pos: pos(i) });

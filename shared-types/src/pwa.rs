@@ -226,11 +226,7 @@ pub(crate) fn validate_tables(dims: Dims, t: &PwaTables<'_>) -> Result<(), Image
     let m = dims.m.clamp(1, MAX_M);
     let n_loc = dims.n_locations.min(MAX_LOCATIONS);
     let np = dims.n_partitions.min(MAX_PARTITIONS);
-    let (nn, nl, nb) = (
-        t.n_nodes as usize,
-        t.n_leaves as usize,
-        t.n_balls as usize,
-    );
+    let (nn, nl, nb) = (t.n_nodes as usize, t.n_leaves as usize, t.n_balls as usize);
     check_dim(Dim::TreeNodes, nn, 0, MAX_TREE_NODES)?;
     check_dim(Dim::Leaves, nl, 1, MAX_LEAVES)?;
     check_dim(Dim::Balls, nb, 1, MAX_BALLS)?;
@@ -428,7 +424,9 @@ fn validate_tree(t: &PwaTables<'_>, nn: usize, nl: usize) -> Result<(), ImageErr
         }
     }
     for l in 0..nl {
-        let seen = leaf_seen.get(l / 32).is_some_and(|w| w & (1 << (l % 32)) != 0);
+        let seen = leaf_seen
+            .get(l / 32)
+            .is_some_and(|w| w & (1 << (l % 32)) != 0);
         if !seen {
             return Err(ImageError::UnreferencedLeaf { leaf: sat16(l) });
         }

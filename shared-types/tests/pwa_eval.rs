@@ -223,7 +223,11 @@ fn shared_subtree_routes_both_ways() {
         assert_eq!(ctl.locate(&[-1.0, 3.0]), Some(Region::OutsideTree)); // 0 → 1 → OUTSIDE
         assert!(matches!(
             ctl.locate(&[-1.0, 0.5]),
-            Some(Region::Inside { leaf: 0, ball: 0, .. })
+            Some(Region::Inside {
+                leaf: 0,
+                ball: 0,
+                ..
+            })
         ));
     });
 }

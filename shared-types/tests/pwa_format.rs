@@ -38,14 +38,8 @@ fn round_trip_fixed_content() {
     assert_eq!(img.total_steps(), 0);
     assert_eq!(img.law_gain(0, 0, 1), -2.0);
     assert_eq!(img.law_offset(1, 0), -1.0);
-    assert_eq!(
-        img.node_children(0),
-        Some((Child::Node(1), Child::Leaf(1)))
-    );
-    assert_eq!(
-        img.node_children(1),
-        Some((Child::Leaf(0), Child::Outside))
-    );
+    assert_eq!(img.node_children(0), Some((Child::Node(1), Child::Leaf(1))));
+    assert_eq!(img.node_children(1), Some((Child::Leaf(0), Child::Outside)));
     assert_eq!(img.node_children(2), None);
     assert_eq!(img.leaf_refs(0), (0, 2));
     assert_eq!(img.leaf_refs(1), (2, 1));
@@ -350,10 +344,7 @@ fn rejects_degenerate_and_non_finite_hyperplanes() {
     let mut c = two_partitions();
     c.node_a[2] = 0.0;
     c.node_a[3] = -0.0;
-    assert_eq!(
-        c.decode_err(),
-        ImageError::DegenerateHyperplane { node: 1 }
-    );
+    assert_eq!(c.decode_err(), ImageError::DegenerateHyperplane { node: 1 });
     let mut c = two_partitions();
     c.node_a[3] = f32::NAN;
     assert_eq!(
@@ -601,4 +592,50 @@ fn shared_subtrees_are_allowed_and_counted_once_for_depth() {
     c.node_child = vec![1, 1, L0, L1];
     let img_bytes = c.to_bytes().unwrap();
     assert_eq!(decode(&img_bytes).unwrap().tree_depth(), 2);
+}
+
+#[test]
+fn rejects_overlong_varints_and_trailing_bytes_in_pwa_payloads() {
+    // The first payload field is K's byte string: length prefix 8 (0x08). Re-encode it as the overlong
+    // varint 0x88 0x00: same content, non-canonical bytes.
+    let b = two_partitions().to_bytes().unwrap();
+    assert_eq!(b[32], 8);
+    let mut x = b[..32].to_vec();
+    x.extend_from_slice(&[0x88, 0x00]);
+    x.extend_from_slice(&b[33..]);
+    common::fix_header(&mut x);
+    assert_eq!(decode(&x), Err(ImageError::NotCanonical));
+    let mut x = b.clone();
+    x.push(0);
+    common::fix_header(&mut x);
+    assert_eq!(decode(&x), Err(ImageError::TrailingBytes));
+    let mut x = b[..b.len() - 1].to_vec();
+    common::fix_header(&mut x);
+    assert_eq!(decode(&x), Err(ImageError::Malformed));
+}
+
+#[test]
+fn a_header_dimension_that_disagrees_with_the_payload_is_a_field_length_error() {
+    let mut b = two_partitions().to_bytes().unwrap();
+    b[8..10].copy_from_slice(&3u16.to_le_bytes()); // n = 3
+    common::fix_header(&mut b);
+    assert_eq!(
+        decode(&b),
+        Err(ImageError::FieldLength {
+            field: Field::K,
+            expected: 12,
+            found: 8
+        })
+    );
+    let mut b = two_partitions().to_bytes().unwrap();
+    b[16..18].copy_from_slice(&3u16.to_le_bytes()); // 3 partitions
+    common::fix_header(&mut b);
+    assert_eq!(
+        decode(&b),
+        Err(ImageError::FieldLength {
+            field: Field::LawGain,
+            expected: 24,
+            found: 16
+        })
+    );
 }

@@ -51,6 +51,9 @@ pub fn run(a: &SynthArgs) -> miette::Result<()> {
         "sigma_min": s.constants.sigma_min,
         "K": crate::linalg::to_rows(s.K.as_ref()),
         "P": crate::linalg::to_rows(s.P.as_ref()),
+        "continuous_caf_3_8": s.continuous_caf.as_ref().map(|(K, P)| serde_json::json!({
+            "K": crate::linalg::to_rows(K.as_ref()), "P": crate::linalg::to_rows(P.as_ref()),
+        })),
         "trajectories": s.trajectories.iter().map(|t| serde_json::json!({
             "source": t.source, "x0": t.nominal.x[0], "certificate": t.certificate,
         })).collect::<Vec<_>>(),

@@ -722,41 +722,64 @@ impl Passes<'_, '_> {
         }
     }
 
+    /// Dist(x̃(j)) + ‖x̃(κ) − x̃(j)‖_R (widened for rounding) ≥ Dist(x̃(κ)) for the anchor (j, Dist(x̃(j))).
+    #[inline]
+    fn lipschitz_bound(&self, (j, vj): (usize, f64), k: usize) -> f64 {
+        let d = self.metric.distance(self.traj.state(k), self.traj.state(j));
+        vj + d * (1.0 + 1e-9) + 1e-9 * (1.0 + vj.abs())
+    }
+
     /// First index of the maximum of Dist(x̃(κ), S) over κ ∈ 0..end, and the maximum. When the set has
     /// bounds (lo, hi) bracketing the value, a first pass takes the sample with the largest lo as the
     /// incumbent, and the scan then solves only samples whose hi reaches the incumbent's value; every
     /// skipped sample is provably below the maximum, so the result equals the full scan's.
     fn first_argmax(&mut self, which: Which, end: usize) -> Result<(usize, f64), SafetyError> {
-        let pruning = end > 1 && self.dist_bounds(which, 0).is_some();
-        let incumbent = if pruning {
-            let mut k0 = 0;
-            let mut lo0 = f64::NEG_INFINITY;
-            for k in 0..end {
-                let lo = self
-                    .dist_bounds(which, k)
-                    .map_or(f64::NEG_INFINITY, |b| b.0);
-                if lo > lo0 {
-                    lo0 = lo;
-                    k0 = k;
+        if end <= 1 || self.dist_bounds(which, 0).is_none() {
+            let mut best = (0, self.dist(which, 0)?);
+            for k in 1..end {
+                let v = self.dist(which, k)?;
+                if v > best.1 {
+                    best = (k, v);
                 }
             }
-            Some((k0, self.dist(which, k0)?))
-        } else {
-            None
-        };
-        let mut best: Option<(usize, f64)> = None;
+            return Ok(best);
+        }
+        // Pass 1: bounds of every sample; the incumbent is the first sample with the largest lo.
+        let mut hi = Vec::with_capacity(end);
+        let (mut k0, mut lo0) = (0, f64::NEG_INFINITY);
         for k in 0..end {
-            let v = match incumbent {
-                Some((k0, v0)) if k == k0 => v0,
-                Some((_, v0)) if self.dist_bounds(which, k).is_some_and(|b| b.1 < v0) => continue,
-                _ => self.dist(which, k)?,
+            let (lo, h) = self
+                .dist_bounds(which, k)
+                .unwrap_or((f64::NEG_INFINITY, f64::INFINITY));
+            if lo > lo0 {
+                lo0 = lo;
+                k0 = k;
+            }
+            hi.push(h);
+        }
+        let v0 = self.dist(which, k0)?;
+        // Pass 2: solve only where the value may reach the threshold max(v0, best so far). Besides the
+        // set's bound, the signed distance is 1-Lipschitz in ‖·‖_R (the segment between a point inside
+        // and one outside crosses the boundary), so the last solved sample j gives
+        // Dist(x̃(κ)) ≤ Dist(x̃(j)) + ‖x̃(κ) − x̃(j)‖_R.
+        let mut best: Option<(usize, f64)> = None;
+        let mut anchor = (k0, v0);
+        for (k, &h) in hi.iter().enumerate() {
+            let threshold = best.map_or(v0, |(_, b)| b.max(v0));
+            let v = if k == k0 {
+                v0
+            } else if h < threshold || self.lipschitz_bound(anchor, k) < threshold {
+                continue;
+            } else {
+                let v = self.dist(which, k)?;
+                anchor = (k, v);
+                v
             };
             if best.is_none_or(|(_, b)| v > b) {
                 best = Some((k, v));
             }
         }
-        // end ≥ 1 (checked by the caller), so the scan saw at least one sample.
-        best.ok_or(SafetyError::Empty)
+        Ok(best.unwrap_or((k0, v0)))
     }
 }
 

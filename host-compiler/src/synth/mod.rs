@@ -97,6 +97,8 @@ pub struct Synthesis {
     pub plant: SampledPlant,
     pub K: Mat<f64>,
     pub P: Mat<f64>,
+    /// The continuous-time (K, P) of LMI (3.8) for continuous plants (reported, not used by the image).
+    pub continuous_caf: Option<(Mat<f64>, Mat<f64>)>,
     pub constants: LoopConstants,
     pub trajectories: Vec<CoverTrajectory>,
     pub image: Vec<u8>,
@@ -201,6 +203,27 @@ pub fn synthesize(problem: &Problem, opts: &SynthOptions) -> Result<Synthesis, S
     let caf = match crate::caf::synthesize_discrete(&dp, &caf_settings).map_err(|e| SynthError::Caf(e.to_string()))? {
         crate::caf::CafOutcome::Solved(c) => c,
         other => return Err(SynthError::Caf(caf_outcome_message(&other))),
+    };
+    // The continuous-time CAF of (3.8), for reporting only: what the loop would certify with continuous
+    // feedback (Example 3.3 gives K = −0.1·[0 I] and P = I for the planar vehicle).
+    let continuous_caf = match &plant.continuous {
+        None => None,
+        Some(cp) => {
+            let c = crate::model::ContinuousPlant::new(cp.Ac.clone(), cp.Bc.clone(), cp.c.clone())
+                .map_err(|e| SynthError::Model(e.to_string()))?;
+            let st = crate::caf::CafSettings { sigma: 0.0, ..Default::default() };
+            match crate::caf::synthesize_continuous(&c, &st) {
+                Ok(crate::caf::CafOutcome::Solved(caf)) => Some((caf.K, caf.P)),
+                Ok(other) => {
+                    warnings.push(format!("continuous-time CAF (3.8), reported only: {}", caf_outcome_message(&other)));
+                    None
+                }
+                Err(e) => {
+                    warnings.push(format!("continuous-time CAF (3.8), reported only: {e}"));
+                    None
+                }
+            }
+        }
     };
     // Exactly symmetric, so that its f32 image is too (the image format checks it).
     let P = crate::linalg::sym(caf.P.as_ref());
@@ -417,6 +440,7 @@ pub fn synthesize(problem: &Problem, opts: &SynthOptions) -> Result<Synthesis, S
         plant,
         K: Khat,
         P,
+        continuous_caf,
         constants: lc,
         trajectories: trajs,
         image,

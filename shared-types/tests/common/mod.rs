@@ -868,4 +868,3 @@ pub fn two_partitions() -> PwaContent {
         counts: None,
     }
 }
-

@@ -21,7 +21,7 @@ use super::ast::{Expr, Interval};
 use super::parse::{FormulaError, FormulaErrorKind};
 use super::sets::NamedSet;
 use super::trace::Trace;
-use super::window::{sliding_max, sliding_min, Clamp, ClampQueue, Windows};
+use super::window::{sliding_max, sliding_min, Clamp, ClampQueue, Wedge, WindowCursor};
 use super::MtlError;
 
 /// A formula with names resolved: signal references are column indices into
@@ -235,10 +235,8 @@ impl<'s> Monitor<'s> {
                 v.iter_mut().zip(&w).for_each(|(a, b)| *a = a.max(*b));
                 v
             }
-            Node::Eventually(i, x) => {
-                sliding_max(&self.eval(x, t, cols)?, &Windows::new(t, i.a, i.b))
-            }
-            Node::Always(i, x) => sliding_min(&self.eval(x, t, cols)?, &Windows::new(t, i.a, i.b)),
+            Node::Eventually(i, x) => sliding_max(&self.eval(x, t, cols)?, t, i.a, i.b),
+            Node::Always(i, x) => sliding_min(&self.eval(x, t, cols)?, t, i.a, i.b),
             Node::Until(i, l, r) => until(t, &self.eval(l, t, cols)?, &self.eval(r, t, cols)?, *i),
             Node::Release(i, l, r) => {
                 let mut phi = self.eval(l, t, cols)?;
@@ -317,16 +315,15 @@ pub(crate) fn columns(trace: &Trace) -> Vec<&[f64]> {
 /// form, so a two-stack queue gives the composition over the sliding window lo'..=hi in amortised O(1).
 pub(crate) fn until(t: &[f64], phi: &[f64], psi: &[f64], i: Interval) -> Vec<f64> {
     let n = t.len();
-    let w = Windows::new(t, i.a, i.b);
+    let mut w = WindowCursor::new(t, i.a, i.b);
     let mut out = Vec::with_capacity(n);
-    // Sliding min of φ over k+1..=lo'−1: a monotone deque of indices with increasing values.
-    let mut dq: Vec<usize> = Vec::with_capacity(n);
-    let mut head = 0usize;
+    // Sliding min of φ over k+1..=lo'−1.
+    let mut dq = Wedge::new();
     let mut pushed_a = 0usize;
     let mut q = ClampQueue::new();
     let mut pushed_b = 0usize;
     for k in 0..n {
-        let (lo, end) = (w.lo[k], w.hi_end[k]);
+        let (lo, end) = w.at(k);
         let first = if lo == k && lo < end {
             psi[k]
         } else {
@@ -335,20 +332,13 @@ pub(crate) fn until(t: &[f64], phi: &[f64], psi: &[f64], i: Interval) -> Vec<f64
         let lo2 = lo.max(k + 1);
         let rest = if lo2 < end {
             while pushed_a < lo2 {
-                let x = phi[pushed_a];
-                while dq.len() > head && phi[dq[dq.len() - 1]] >= x {
-                    dq.pop();
-                }
-                dq.push(pushed_a);
+                dq.push(phi, pushed_a, |x, y| x <= y);
                 pushed_a += 1;
             }
-            while head < dq.len() && dq[head] < k + 1 {
-                head += 1;
-            }
-            let before = if k + 1 < lo2 {
-                phi[dq[head]]
-            } else {
-                f64::INFINITY
+            dq.expire(k + 1);
+            let before = match dq.front() {
+                Some(j) if k + 1 < lo2 => phi[j],
+                _ => f64::INFINITY,
             };
             while pushed_b < end {
                 q.push(

@@ -7,87 +7,104 @@
 //! * [`ClampQueue`]: a two-stack FIFO aggregating the composition of the monotone maps
 //!   f_j(x) = max(ψ_j, min(φ_j, x)), which is how bounded until is evaluated in linear time.
 
-/// Time windows: for each sample k the index range `lo[k]..=hi[k]` of samples j with
-/// `t[j] − t[k] ∈ [a, b]` (computed in f64 exactly as written). Empty when `lo[k] > hi[k]`.
+/// Time windows, streamed: for sample k the index range `lo..end` (end exclusive) of samples j with
+/// `t[j] − t[k] ∈ [a, b]` (computed in f64 exactly as written). Empty when `lo ≥ end`.
 ///
 /// Both ends are non-decreasing in k: rounded subtraction is monotone, so `fl(t[j] − t[k])` is
-/// non-decreasing in j and non-increasing in k for strictly increasing times.
-pub(crate) struct Windows {
-    pub lo: Vec<usize>,
-    /// `hi[k] + 1` (exclusive end), so that empty windows need no negative index.
-    pub hi_end: Vec<usize>,
+/// non-decreasing in j and non-increasing in k for strictly increasing times. Hence two pointers that
+/// only move forward, O(n) in total.
+pub(crate) struct WindowCursor<'t> {
+    t: &'t [f64],
+    a: f64,
+    b: f64,
+    lo: usize,
+    end: usize,
 }
 
-impl Windows {
-    pub fn new(t: &[f64], a: f64, b: f64) -> Self {
-        let n = t.len();
-        let mut lo = Vec::with_capacity(n);
-        let mut hi_end = Vec::with_capacity(n);
-        let (mut l, mut h) = (0usize, 0usize);
-        for k in 0..n {
-            // First j with t[j] − t[k] ≥ a (j ≥ k since a ≥ 0 and t strictly increases).
-            l = l.max(k);
-            while l < n && t[l] - t[k] < a {
-                l += 1;
-            }
-            // One past the last j with t[j] − t[k] ≤ b.
-            h = h.max(k);
-            while h < n && t[h] - t[k] <= b {
-                h += 1;
-            }
-            lo.push(l);
-            hi_end.push(h);
+impl<'t> WindowCursor<'t> {
+    pub fn new(t: &'t [f64], a: f64, b: f64) -> Self {
+        Self {
+            t,
+            a,
+            b,
+            lo: 0,
+            end: 0,
         }
-        Self { lo, hi_end }
+    }
+    /// The window of sample k; calls must come with k = 0, 1, 2, … in order.
+    #[inline(always)]
+    pub fn at(&mut self, k: usize) -> (usize, usize) {
+        let (t, n) = (self.t, self.t.len());
+        // First j with t[j] − t[k] ≥ a (j ≥ k since a ≥ 0 and t strictly increases).
+        self.lo = self.lo.max(k);
+        while self.lo < n && t[self.lo] - t[k] < self.a {
+            self.lo += 1;
+        }
+        // One past the last j with t[j] − t[k] ≤ b.
+        self.end = self.end.max(k);
+        while self.end < n && t[self.end] - t[k] <= self.b {
+            self.end += 1;
+        }
+        (self.lo, self.end)
     }
 }
 
-/// A monotone deque of indices into `v`: values strictly "better" towards the front. `better(x, y)`
-/// true means x dominates y (x ≥ y for max, x ≤ y for min), so y can be dropped when x arrives later.
-struct Wedge {
-    buf: Vec<usize>,
-    head: usize,
+/// A monotone deque (wedge) of indices into `v`, kept in a ring buffer that only grows to the largest
+/// number of live candidates. `dominates(x, y)` true means a later x makes an earlier y useless (x ≥ y
+/// for max, x ≤ y for min).
+pub(crate) struct Wedge {
+    buf: std::collections::VecDeque<usize>,
 }
 
 impl Wedge {
-    fn with_capacity(n: usize) -> Self {
+    pub fn new() -> Self {
         Self {
-            buf: Vec::with_capacity(n),
-            head: 0,
+            buf: std::collections::VecDeque::with_capacity(64),
         }
     }
     #[inline(always)]
-    fn push(&mut self, v: &[f64], j: usize, dominates: impl Fn(f64, f64) -> bool) {
+    pub fn push(&mut self, v: &[f64], j: usize, dominates: impl Fn(f64, f64) -> bool) {
         let x = v[j];
-        while self.buf.len() > self.head && dominates(x, v[*self.buf.last().unwrap_or(&0)]) {
-            self.buf.pop();
+        while let Some(&last) = self.buf.back() {
+            if dominates(x, v[last]) {
+                self.buf.pop_back();
+            } else {
+                break;
+            }
         }
-        self.buf.push(j);
+        self.buf.push_back(j);
     }
     #[inline(always)]
-    fn expire(&mut self, lo: usize) {
-        while self.head < self.buf.len() && self.buf[self.head] < lo {
-            self.head += 1;
+    pub fn expire(&mut self, lo: usize) {
+        while let Some(&first) = self.buf.front() {
+            if first < lo {
+                self.buf.pop_front();
+            } else {
+                break;
+            }
         }
     }
     #[inline(always)]
-    fn front(&self) -> Option<usize> {
-        self.buf.get(self.head).copied()
+    pub fn front(&self) -> Option<usize> {
+        self.buf.front().copied()
     }
 }
 
 fn sliding(
     v: &[f64],
-    w: &Windows,
+    t: &[f64],
+    a: f64,
+    b: f64,
     empty: f64,
     dominates: impl Fn(f64, f64) -> bool + Copy,
 ) -> Vec<f64> {
     let n = v.len();
     let mut out = Vec::with_capacity(n);
-    let mut q = Wedge::with_capacity(n);
+    let mut w = WindowCursor::new(t, a, b);
+    let mut q = Wedge::new();
     let mut pushed = 0usize;
     for k in 0..n {
-        let (lo, end) = (w.lo[k], w.hi_end[k]);
+        let (lo, end) = w.at(k);
         while pushed < end {
             q.push(v, pushed, dominates);
             pushed += 1;
@@ -102,14 +119,14 @@ fn sliding(
     out
 }
 
-/// out[k] = max of v over window k, −∞ for an empty window.
-pub(crate) fn sliding_max(v: &[f64], w: &Windows) -> Vec<f64> {
-    sliding(v, w, f64::NEG_INFINITY, |x, y| x >= y)
+/// out[k] = max of v over the window [a, b] of sample k, −∞ for an empty window.
+pub(crate) fn sliding_max(v: &[f64], t: &[f64], a: f64, b: f64) -> Vec<f64> {
+    sliding(v, t, a, b, f64::NEG_INFINITY, |x, y| x >= y)
 }
 
-/// out[k] = min of v over window k, +∞ for an empty window.
-pub(crate) fn sliding_min(v: &[f64], w: &Windows) -> Vec<f64> {
-    sliding(v, w, f64::INFINITY, |x, y| x <= y)
+/// out[k] = min of v over the window [a, b] of sample k, +∞ for an empty window.
+pub(crate) fn sliding_min(v: &[f64], t: &[f64], a: f64, b: f64) -> Vec<f64> {
+    sliding(v, t, a, b, f64::INFINITY, |x, y| x <= y)
 }
 
 /// The map x ↦ max(alpha, min(beta, x)). These maps are closed under composition:
