@@ -230,12 +230,11 @@ fn distance_satisfies_kkt_in_higher_dimension() {
         }
         let Some(nu) = gauss(m, G, f) else { continue };
         let scale = 1.0 + Rd.iter().fold(0.0_f64, |a, v| a.max(v.abs()));
-        for (r, &i) in J.iter().enumerate() {
-            let _ = i;
-            assert!(nu[r] >= -1e-7 * scale, "negative multiplier {}", nu[r]);
+        for &v in &nu {
+            assert!(v >= -1e-7 * scale, "negative multiplier {v}");
         }
-        for j in 0..n {
-            let s: f64 = Rd[j]
+        for (j, &rdj) in Rd.iter().enumerate() {
+            let s: f64 = rdj
                 + J.iter()
                     .enumerate()
                     .map(|(r, &i)| nu[r] * p.A[i * n + j])

@@ -3,7 +3,7 @@
 //! ```text
 //! qemu-system-arm -machine mps2-an386 -nographic -monitor none
 //!     -semihosting-config enable=on,target=native -icount shift=0
-//!     -serial tcp:127.0.0.1:<port> -kernel <elf>
+//!     -serial tcp:127.0.0.1:<port>,nodelay=on -kernel <elf>
 //! ```
 //!
 //! The harness listens on a loopback port of its own choosing (port 0) before starting QEMU, so there is
@@ -91,7 +91,8 @@ impl Qemu {
         let mut child = Command::new(&qemu)
             .args(["-machine", "mps2-an386", "-nographic", "-monitor", "none"])
             .args(["-semihosting-config", "enable=on,target=native", "-icount", "shift=0"])
-            .args(["-serial", &format!("tcp:127.0.0.1:{port}")])
+            // nodelay: without it Nagle + delayed ACKs cost ~40 ms per request/reply exchange.
+            .args(["-serial", &format!("tcp:127.0.0.1:{port},nodelay=on")])
             .arg("-kernel")
             .arg(elf)
             .stdin(Stdio::null())

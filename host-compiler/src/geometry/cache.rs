@@ -9,8 +9,11 @@ const CAPACITY: usize = 8;
 
 /// Factorisations of type `T` keyed by the metric (exact equality of n and R).
 pub(crate) struct MetricCache<T> {
-    entries: RwLock<Vec<(usize, Vec<f64>, Arc<T>)>>,
+    entries: RwLock<Vec<Entry<T>>>,
 }
+
+/// (n, R, value).
+type Entry<T> = (usize, Vec<f64>, Arc<T>);
 
 impl<T> Default for MetricCache<T> {
     fn default() -> Self {

@@ -186,7 +186,7 @@ impl InOutput {
                 what: "output map C (rows)",
             });
         }
-        if C.is_empty() || C.len() % p != 0 {
+        if C.is_empty() || !C.len().is_multiple_of(p) {
             return Err(GeometryError::Dimension {
                 what: "output map C (a positive multiple of p entries)",
                 expected: p * (C.len() / p).max(1),

@@ -17,6 +17,11 @@
 //! factors µλᵢ + 1 = (1 − λᵢ/λmax) + δλᵢ are formed without cancellation near the pole µ̄ (the case of points
 //! close to the multiple-optima set of Remark 7.7). The Lemma 7.9 iteration is kept inside a bracket
 //! [δ_lo, δ_hi] known to contain the root and falls back to bisection if rounding ever pushes it out.
+//! Every returned point is checked against the constraint in the original coordinates (n² flops); when the
+//! reduction lost accuracy — an ill-conditioned standard form, whose small eigenvalues are only known to
+//! ε·λmax, or a reconstruction through an ill-conditioned P₂₂⁺ — the point is refined by Newton's method on the
+//! KKT system of (7.2) in the original coordinates (the pencil R + µQ of Remark 7.11), still without
+//! allocating.
 
 use super::linalg::{self, SymEig};
 use super::{GeometryError, Metric};
@@ -634,14 +639,12 @@ impl EllipsoidBoundaryDistance {
     /// The standard-form coordinates z̄ = T(x̄ − x_c) (length r; the first q enter (7.5)). No validation.
     #[inline]
     pub fn standardize(&self, xbar: &[f64], zbar: &mut [f64]) {
-        let (n, r) = (self.n, self.r);
-        for a in 0..r {
-            let row = &self.T[a * n..(a + 1) * n];
-            let mut s = 0.0;
-            for j in 0..n {
-                s += row[j] * (xbar[j] - self.c[j]);
-            }
-            zbar[a] = s;
+        for (z, row) in zbar.iter_mut().zip(self.T.chunks_exact(self.n)) {
+            *z = row
+                .iter()
+                .zip(xbar)
+                .zip(&self.c)
+                .fold(0.0, |s, ((t, x), c)| s + t * (x - c));
         }
     }
 
@@ -649,22 +652,20 @@ impl EllipsoidBoundaryDistance {
     #[inline]
     pub fn destandardize(&self, xbar: &[f64], zstar: &[f64], x_star: &mut [f64]) {
         let (n, r) = (self.n, self.r);
-        for i in 0..n {
-            let row = &self.B[i * r..(i + 1) * r];
-            let mut s = self.c[i];
-            for a in 0..r {
-                s += row[a] * zstar[a];
+        if r > 0 {
+            for ((x, row), &c) in x_star.iter_mut().zip(self.B.chunks_exact(r)).zip(&self.c) {
+                *x = row.iter().zip(zstar).fold(c, |s, (b, z)| s + b * z);
             }
-            x_star[i] = s;
+        } else {
+            x_star[..n].copy_from_slice(&self.c);
         }
         if let Some(D) = &self.D {
-            for i in 0..n {
-                let row = &D[i * n..(i + 1) * n];
-                let mut s = 0.0;
-                for j in 0..n {
-                    s += row[j] * (xbar[j] - self.c[j]);
-                }
-                x_star[i] += s;
+            for (x, row) in x_star.iter_mut().zip(D.chunks_exact(n)) {
+                *x += row
+                    .iter()
+                    .zip(xbar)
+                    .zip(&self.c)
+                    .fold(0.0, |s, ((d, xb), c)| s + d * (xb - c));
             }
         }
     }
@@ -746,16 +747,16 @@ impl EllipsoidBoundaryDistance {
     /// |h(x) − 1| relative to the size of the terms of h(x) = (x − x_c)ᵀQ(x − x_c). Uses `u`, `t1`.
     #[inline]
     fn constraint_error(&self, x: &[f64], ws: &mut BoundaryWorkspace) -> f64 {
-        let n = self.n;
-        for i in 0..n {
-            ws.u[i] = x[i] - self.c[i];
+        for ((u, &xi), &ci) in ws.u.iter_mut().zip(x).zip(&self.c) {
+            *u = xi - ci;
         }
-        linalg::matvec(&self.Q, n, n, &ws.u, &mut ws.t1);
+        let u = &ws.u;
         let mut h = 0.0;
         let mut scale = 0.0;
-        for i in 0..n {
-            h += ws.u[i] * ws.t1[i];
-            scale += (ws.u[i] * ws.t1[i]).abs();
+        for (&ui, row) in u.iter().zip(self.Q.chunks_exact(self.n)) {
+            let qu = row.iter().zip(u).fold(0.0, |s, (q, v)| s + q * v);
+            h += ui * qu;
+            scale += (ui * qu).abs();
         }
         (h - 1.0).abs() / scale.max(1.0)
     }
@@ -780,8 +781,8 @@ impl EllipsoidBoundaryDistance {
         ws.saved.copy_from_slice(x);
         let mut mu = if mu0.is_finite() { mu0 } else { 0.0 };
         for _ in 0..6 {
-            for i in 0..n {
-                ws.u[i] = x[i] - self.c[i];
+            for ((u, &xi), &ci) in ws.u.iter_mut().zip(x.iter()).zip(&self.c) {
+                *u = xi - ci;
             }
             linalg::matvec(&self.Q, n, n, &ws.u, &mut ws.t1); // g = Q u
             let h = linalg::dot(&ws.u, &ws.t1);
@@ -800,10 +801,10 @@ impl EllipsoidBoundaryDistance {
             solve_complete_pivoting(m, &mut ws.kkt, &mut ws.rhs, &mut ws.perm, &mut ws.step);
             let mut size = 0.0_f64;
             let mut xs = 0.0_f64;
-            for i in 0..n {
-                x[i] += ws.step[i];
-                size = size.max(ws.step[i].abs());
-                xs = xs.max(x[i].abs());
+            for (xi, &d) in x.iter_mut().zip(&ws.step[..n]) {
+                *xi += d;
+                size = size.max(d.abs());
+                xs = xs.max(xi.abs());
             }
             mu += ws.step[n];
             if !(size.is_finite() && mu.is_finite()) {
@@ -851,7 +852,7 @@ impl EllipsoidBoundaryDistance {
         mut witnesses: Option<&mut [f64]>,
     ) -> Result<(), GeometryError> {
         let n = self.n;
-        if points.len() % n != 0 {
+        if !points.len().is_multiple_of(n) {
             return Err(GeometryError::Dimension {
                 what: "batch points (multiple of n)",
                 expected: n,
@@ -895,8 +896,8 @@ impl EllipsoidBoundaryDistance {
         x_star: &mut [f64],
     ) {
         let n = self.n;
-        for i in 0..n {
-            ws.u[i] = xbar[i] - self.c[i];
+        for ((u, &xi), &ci) in ws.u.iter_mut().zip(xbar).zip(&self.c) {
+            *u = xi - ci;
         }
         linalg::matvec(&esc.Q, n, n, &ws.u, &mut ws.t1); // t1 = Q u
         let h = linalg::dot(&ws.u, &ws.t1);
@@ -954,7 +955,7 @@ fn solve_complete_pivoting(
                 }
             }
         }
-        if !(best > 1e-14 * scale) {
+        if best.is_nan() || best <= 1e-14 * scale {
             rank = k;
             break;
         }

@@ -12,6 +12,7 @@
 //!   * Otherwise aᵢ ∈ range(R); by Cauchy–Schwarz in the R-inner product, sᵢ = aᵢᵀd = (R⁺aᵢ)ᵀR d ≤
 //!     ‖R⁺aᵢ‖_R ‖d‖_R = sqrt(aᵢᵀR⁺aᵢ) ‖d‖_R, with equality at d = sᵢ R⁺aᵢ/(aᵢᵀR⁺aᵢ). So the distance is
 //!     sᵢ / sqrt(aᵢᵀR⁺aᵢ); for R positive definite this is the familiar (bᵢ − aᵢᵀx)/sqrt(aᵢᵀR⁻¹aᵢ).
+//!
 //!   A component counts as "in the null space" when ‖a_N‖ > 1e-12‖aᵢ‖, the null space being the eigenvectors of
 //!   R with eigenvalue ≤ 1e-13·λmax(R). The witness is the first boundary crossing on the segment from x to the
 //!   minimising step (which is the step's end point whenever the depth is positive).
@@ -301,10 +302,10 @@ impl Polytope {
         };
         // First crossing of the boundary on the segment x → x + step.
         let mut t = 1.0_f64;
-        for j in 0..self.k {
-            let ad = linalg::dot(&self.A[j * n..(j + 1) * n], &step);
+        for (row, &s) in self.A.chunks_exact(n).zip(&slack) {
+            let ad = linalg::dot(row, &step);
             if ad > 0.0 {
-                t = t.min(slack[j].max(0.0) / ad);
+                t = t.min(s.max(0.0) / ad);
             }
         }
         let point = x.iter().zip(&step).map(|(a, d)| a + t * d).collect();
@@ -384,7 +385,7 @@ fn polish(n: usize, R: &[f64], A: &[f64], rhs: &[f64], active: &[usize]) -> Opti
         .zip(&f)
         .map(|(a, b)| (a - b).abs())
         .fold(0.0, f64::max);
-    if !(err <= 1e-10 * (1.0 + linalg::max_abs(&f))) {
+    if err.is_nan() || err > 1e-10 * (1.0 + linalg::max_abs(&f)) {
         return None;
     }
     sol.truncate(n);

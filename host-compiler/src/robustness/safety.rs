@@ -24,12 +24,14 @@
 //! direction (§5.3). The certified radius is `max(δ₀, 0)`.
 //!
 //! **Cost.** One pass over the samples up to T for Goal, then one pass over the samples up to t* for
-//! Unsafe and Input: O(N) signed-distance evaluations. The passes ask for values only; the witness
-//! points are computed once, at the critical samples. Goal and Unsafe given as [`SafetySet::Ellipsoid`]
-//! (ellipsoids and CAF balls) are factored once per call and queried without allocation through the
-//! §7.2 boundary-distance solver; any other [`Region`] goes through [`Region::signed_dist`]. Ties in the
-//! argmax pick the earliest sample, which gives the shortest prefix and hence the largest δ_Unsafe and
-//! δ_Input among the maximisers.
+//! Unsafe and Input: O(N) work. The passes ask for values only; witness points are computed once, at
+//! the critical samples. Goal and Unsafe given as [`SafetySet::Ellipsoid`] (ellipsoids and CAF balls)
+//! are factored once per call and solved without allocation by the §7.2 boundary-distance solver, and
+//! most samples do not need that solve at all: cheap two-sided bounds on the signed distance (see
+//! `EllipsoidBounds`) and its 1-Lipschitz continuity in ‖·‖_R prove that they cannot be the
+//! maximiser, so the result is the full scan's. Any other [`Region`] goes through
+//! [`Region::signed_dist`] at every sample. Ties in the argmax pick the earliest sample, which gives
+//! the shortest prefix and hence the largest δ_Unsafe and δ_Input among the maximisers.
 //!
 //! [`safety_robustness_joint`] is a variant that chooses t* to maximise the combined radius instead of
 //! the Goal depth alone (the robustness of the until embedding of Remark 2.29, with a closed prefix); it
@@ -115,7 +117,7 @@ impl<'a> SampledTrajectory<'a> {
         if times.is_empty() {
             return Err(SafetyError::Empty);
         }
-        let expected = times.len().checked_mul(n).unwrap_or(usize::MAX);
+        let expected = times.len().saturating_mul(n);
         if states.len() != expected {
             return Err(SafetyError::LengthMismatch {
                 times: times.len(),
@@ -283,7 +285,8 @@ pub struct SafetySpec<'a> {
     pub T: f64,
 }
 
-/// A [`SafetySet`] made ready for many queries in one metric.
+/// A [`SafetySet`] made ready for many queries in one metric (two per call, so size is no concern).
+#[allow(clippy::large_enum_variant)]
 enum Prepared<'a> {
     Region(&'a dyn Region),
     Ellipsoid {
@@ -399,6 +402,7 @@ impl EllipsoidBounds {
 
     /// (lo, hi) with lo ≤ Dist_R(x, E) ≤ hi.
     #[inline]
+    #[allow(clippy::needless_range_loop)]
     fn signed(&self, x: &[f64]) -> (f64, f64) {
         let n = self.c.len();
         let (mut h, mut r2) = (0.0, 0.0);
@@ -445,6 +449,7 @@ fn cholesky(A: &[f64], n: usize) -> Option<Vec<f64>> {
                 s -= L[i * n + k] * L[j * n + k];
             }
             if i == j {
+                #[allow(clippy::neg_cmp_op_on_partial_ord)] // also rejects NaN
                 if !(s > 1e-12 * scale) {
                     return None;
                 }

@@ -296,7 +296,7 @@ pub fn brute_force(c: &[f64], Q: &[f64], R: &[f64], xbar: &[f64]) -> Brute {
         ));
         const K: usize = 400;
         for &(a, bnd, a_pole, b_pole) in &intervals {
-            if !(bnd > a) {
+            if bnd.is_nan() || bnd <= a {
                 continue;
             }
             let mut pts: Vec<(f64, f64)> = Vec::with_capacity(K + 1);

@@ -17,6 +17,9 @@
 //! the window and a two-stack composition of clamp maps for the window itself (derivation at
 //! [`until`]). Everything is O(length) per operator, independent of the window width.
 
+// Formula errors carry their source text for miette; they are built once per failed parse.
+#![allow(clippy::result_large_err)]
+
 use super::ast::{Expr, Interval};
 use super::parse::{FormulaError, FormulaErrorKind};
 use super::sets::NamedSet;
@@ -251,6 +254,7 @@ impl<'s> Monitor<'s> {
     }
 
     /// The atomic propositions: constants (2.9), linear predicates and sets (2.10).
+    #[allow(clippy::needless_range_loop)]
     pub(crate) fn atom(
         &self,
         node: &Node,

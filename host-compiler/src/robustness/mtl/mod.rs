@@ -15,6 +15,9 @@
 //! predicate aᵀx ≤ b gives (b − aᵀx)/‖a‖₂, the signed Euclidean distance to the half-space. `true` is +∞
 //! (2.9), `false` −∞. Time bounds are in the trace's time units.
 
+// Formula errors carry their source text for miette; they are built once per failed parse.
+#![allow(clippy::result_large_err)]
+
 pub mod ast;
 pub mod eval;
 pub mod parse;

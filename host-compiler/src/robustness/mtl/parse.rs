@@ -22,6 +22,9 @@
 //! names a set. Strict and non-strict comparisons have the same robustness (the boundary is a null
 //! set for the signed distance). Parentheses group formulas, not arithmetic.
 
+// Formula errors carry their source text for miette; they are built once per failed parse.
+#![allow(clippy::result_large_err)]
+
 use super::ast::{Expr, Interval, LinearPredicate, Span};
 use miette::SourceSpan;
 

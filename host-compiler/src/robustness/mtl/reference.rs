@@ -3,6 +3,11 @@
 //! O(length × window) per operator. It shares nothing with the streaming evaluator except the atomic
 //! propositions, and serves as the test oracle and the bench baseline.
 
+// Index loops on purpose: a literal transcription of the definition.
+#![allow(clippy::needless_range_loop)]
+// Formula errors carry their source text for miette; they are built once per failed parse.
+#![allow(clippy::result_large_err)]
+
 use super::eval::{columns, Monitor, Node};
 use super::trace::Trace;
 use super::MtlError;
