@@ -7,13 +7,22 @@ use host_compiler::synth::{synthesize, SynthOptions};
 use std::time::Instant;
 
 fn main() {
-    let spec = concat!(env!("CARGO_MANIFEST_DIR"), "/../examples/planar-vehicle.toml");
+    let spec = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../examples/planar-vehicle.toml"
+    );
     let problem = host_compiler::spec::load(spec).expect("the shipped example parses");
-    let opts = SynthOptions { progress: false, ..SynthOptions::default() };
+    let opts = SynthOptions {
+        progress: false,
+        ..SynthOptions::default()
+    };
     let t = Instant::now();
     let s = synthesize(&problem, &opts).expect("synthesis succeeds on the shipped example");
     let secs = t.elapsed().as_secs_f64();
-    assert_eq!(s.verify.violations, 0, "verification must find no violation");
+    assert_eq!(
+        s.verify.violations, 0,
+        "verification must find no violation"
+    );
     println!(
         "planar vehicle: {} trajectories, coverage {:.5} (lower {:.5} at {:.0} %), {} verification runs, {} violations",
         s.trajectories.len(),
@@ -27,8 +36,16 @@ fn main() {
         "synth_planar_vehicle",
         &[
             Row::new("synth_planar_vehicle_s", secs, "s"),
-            Row::new("coverage_planar_vehicle", s.coverage.lower, "fraction (lower bound, 99 % conf.)"),
-            Row::new("trajectories_planar_vehicle", s.trajectories.len() as f64, "count"),
+            Row::new(
+                "coverage_planar_vehicle",
+                s.coverage.lower,
+                "fraction (lower bound, 99 % conf.)",
+            ),
+            Row::new(
+                "trajectories_planar_vehicle",
+                s.trajectories.len() as f64,
+                "count",
+            ),
         ],
     )
     .expect("bench rows written");

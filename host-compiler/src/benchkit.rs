@@ -21,11 +21,23 @@ pub struct Row {
 impl Row {
     /// A row without baseline.
     pub fn new(name: &str, value: f64, unit: &str) -> Self {
-        Self { name: name.into(), value, unit: unit.into(), baseline: None, ratio: None }
+        Self {
+            name: name.into(),
+            value,
+            unit: unit.into(),
+            baseline: None,
+            ratio: None,
+        }
     }
     /// A row with a baseline and its ratio.
     pub fn with_baseline(name: &str, value: f64, unit: &str, baseline: f64, ratio: f64) -> Self {
-        Self { name: name.into(), value, unit: unit.into(), baseline: Some(baseline), ratio: Some(ratio) }
+        Self {
+            name: name.into(),
+            value,
+            unit: unit.into(),
+            baseline: Some(baseline),
+            ratio: Some(ratio),
+        }
     }
 }
 
@@ -33,7 +45,11 @@ impl Row {
 pub fn rows_dir() -> PathBuf {
     let target = std::env::var_os("CARGO_TARGET_DIR")
         .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..").join("target"));
+        .unwrap_or_else(|| {
+            PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+                .join("..")
+                .join("target")
+        });
     target.join("bench").join("rows")
 }
 

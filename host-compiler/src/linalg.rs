@@ -10,7 +10,9 @@ pub fn from_row_major(r: usize, c: usize, data: &[f64]) -> Mat<f64> {
 
 /// Rows of a faer matrix (row-major `Vec<Vec<f64>>`).
 pub fn to_rows(m: MatRef<'_, f64>) -> Vec<Vec<f64>> {
-    (0..m.nrows()).map(|i| (0..m.ncols()).map(|j| m[(i, j)]).collect()).collect()
+    (0..m.nrows())
+        .map(|i| (0..m.ncols()).map(|j| m[(i, j)]).collect())
+        .collect()
 }
 
 /// Row-major flattening.
@@ -20,7 +22,9 @@ pub fn to_row_major(m: MatRef<'_, f64>) -> Vec<f64> {
 
 /// y = M x.
 pub fn mat_vec(m: MatRef<'_, f64>, x: &[f64]) -> Vec<f64> {
-    (0..m.nrows()).map(|i| (0..m.ncols()).map(|j| m[(i, j)] * x[j]).sum()).collect()
+    (0..m.nrows())
+        .map(|i| (0..m.ncols()).map(|j| m[(i, j)] * x[j]).sum())
+        .collect()
 }
 
 /// Symmetrise (M + Mᵀ)/2.
@@ -41,7 +45,9 @@ pub fn sym_fn(m: MatRef<'_, f64>, f: impl Fn(f64) -> f64) -> Option<Mat<f64>> {
     let S = evd.S();
     let n = s.nrows();
     let d: Vec<f64> = (0..n).map(|k| f(S[k])).collect();
-    Some(Mat::from_fn(n, n, |i, j| (0..n).map(|k| U[(i, k)] * d[k] * U[(j, k)]).sum()))
+    Some(Mat::from_fn(n, n, |i, j| {
+        (0..n).map(|k| U[(i, k)] * d[k] * U[(j, k)]).sum()
+    }))
 }
 
 /// Largest singular value ‖M‖₂.
@@ -49,7 +55,10 @@ pub fn spectral_norm(m: MatRef<'_, f64>) -> f64 {
     if m.nrows() == 0 || m.ncols() == 0 {
         return 0.0;
     }
-    m.singular_values().ok().and_then(|s| s.first().copied()).unwrap_or(f64::INFINITY)
+    m.singular_values()
+        .ok()
+        .and_then(|s| s.first().copied())
+        .unwrap_or(f64::INFINITY)
 }
 
 /// The square root and inverse square root of a positive definite P.

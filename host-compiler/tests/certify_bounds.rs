@@ -2,7 +2,9 @@
 //! selection's radius, and the inter-sample excursion bound — each checked against the real thing.
 
 use faer::Mat;
-use host_compiler::certify::{evaluator_error_bound, selection_radius, ContinuousPart, Loop, LoopConstants};
+use host_compiler::certify::{
+    evaluator_error_bound, selection_radius, ContinuousPart, Loop, LoopConstants,
+};
 use host_compiler::emit::{ImageBuilder, TrajectoryEntry};
 use host_compiler::geometry::{Metric, Region, Witness};
 use host_compiler::linalg::{mat_vec, p_norm};
@@ -20,10 +22,16 @@ fn random_pd(n: usize, cond: f64, rng: &mut ChaCha8Rng) -> Mat<f64> {
     let M = Mat::from_fn(n, n, |_, _| rng.random_range(-1.0..1.0));
     let qr = M.qr();
     let Q = qr.compute_Q();
-    let d: Vec<f64> = (0..n).map(|i| 1.0 + (cond - 1.0) * i as f64 / (n.max(2) - 1) as f64).collect();
-    let P = Mat::from_fn(n, n, |i, j| (0..n).map(|k| Q[(i, k)] * d[k] * Q[(j, k)]).sum::<f64>());
+    let d: Vec<f64> = (0..n)
+        .map(|i| 1.0 + (cond - 1.0) * i as f64 / (n.max(2) - 1) as f64)
+        .collect();
+    let P = Mat::from_fn(n, n, |i, j| {
+        (0..n).map(|k| Q[(i, k)] * d[k] * Q[(j, k)]).sum::<f64>()
+    });
     // Exactly symmetric after rounding to f32 (the image requires it).
-    Mat::from_fn(n, n, |i, j| f32r(if i <= j { P[(i, j)] } else { P[(j, i)] }))
+    Mat::from_fn(n, n, |i, j| {
+        f32r(if i <= j { P[(i, j)] } else { P[(j, i)] })
+    })
 }
 
 #[test]
@@ -33,27 +41,46 @@ fn f32_evaluator_stays_within_the_rounding_bound() {
     for trial in 0..300 {
         let n = 1 + trial % 8;
         let m = 1 + trial % 3;
-        let K: Vec<f64> = (0..m * n).map(|_| f32r(rng.random_range(-50.0..50.0))).collect();
-        let v: Vec<f64> = (0..m).map(|_| f32r(rng.random_range(-10.0..10.0))).collect();
+        let K: Vec<f64> = (0..m * n)
+            .map(|_| f32r(rng.random_range(-50.0..50.0)))
+            .collect();
+        let v: Vec<f64> = (0..m)
+            .map(|_| f32r(rng.random_range(-10.0..10.0)))
+            .collect();
         let mut b = ImageBuilder::new(n, m, 0.01);
-        let I: Vec<f64> = (0..n * n).map(|k| if k % (n + 1) == 0 { 1.0 } else { 0.0 }).collect();
+        let I: Vec<f64> = (0..n * n)
+            .map(|k| if k % (n + 1) == 0 { 1.0 } else { 0.0 })
+            .collect();
         b.add_location(K.clone(), I);
-        b.add_trajectory(TrajectoryEntry { x0: vec![0.0; n], delta: 1e6, v: v.clone(), location: vec![0] });
+        b.add_trajectory(TrajectoryEntry {
+            x0: vec![0.0; n],
+            delta: 1e6,
+            v: v.clone(),
+            location: vec![0],
+        });
         let bytes = b.to_bytes().unwrap();
         let img = shared_types::image::decode(&bytes).unwrap();
         let Km = Mat::from_fn(m, n, |i, j| K[i * n + j]);
         for _ in 0..20 {
             let scale = 10f64.powf(rng.random_range(-3.0..3.0));
-            let x: Vec<f64> = (0..n).map(|_| rng.random_range(-1.0..1.0) * scale).collect();
+            let x: Vec<f64> = (0..n)
+                .map(|_| rng.random_range(-1.0..1.0) * scale)
+                .collect();
             let xf: Vec<f32> = x.iter().map(|&a| a as f32).collect();
             let mut ctl = Controller::new(img);
             let u = ctl.step(&xf).unwrap();
-            let exact: Vec<f64> = (0..m).map(|i| (0..n).map(|j| K[i * n + j] * x[j]).sum::<f64>() + v[i]).collect();
+            let exact: Vec<f64> = (0..m)
+                .map(|i| (0..n).map(|j| K[i * n + j] * x[j]).sum::<f64>() + v[i])
+                .collect();
             let X: Vec<f64> = x.iter().map(|a| a.abs()).collect();
             let bound = evaluator_error_bound(Km.as_ref(), &v, &X);
             for i in 0..m {
                 let err = (u.as_slice()[i] as f64 - exact[i]).abs();
-                assert!(err <= bound[i], "trial {trial}: |error| {err:e} exceeds the bound {:e}", bound[i]);
+                assert!(
+                    err <= bound[i],
+                    "trial {trial}: |error| {err:e} exceeds the bound {:e}",
+                    bound[i]
+                );
                 if bound[i] > 0.0 {
                     worst_ratio = worst_ratio.max(err / bound[i]);
                 }
@@ -61,7 +88,10 @@ fn f32_evaluator_stays_within_the_rounding_bound() {
         }
     }
     // The bound is not vacuous: some errors come within a factor 100 of it.
-    assert!(worst_ratio > 0.01, "bound is loose by more than 100x everywhere: {worst_ratio}");
+    assert!(
+        worst_ratio > 0.01,
+        "bound is loose by more than 100x everywhere: {worst_ratio}"
+    );
 }
 
 #[test]
@@ -76,8 +106,16 @@ fn f32_selection_accepts_only_states_in_the_certified_ball() {
         let stored = selection_radius(P.as_ref(), &c, delta);
         assert!(stored > 0.0 && (stored as f64) < delta);
         let mut b = ImageBuilder::new(n, 1, 0.01);
-        b.add_location(vec![0.0; n], host_compiler::linalg::to_row_major(P.as_ref()));
-        b.add_trajectory(TrajectoryEntry { x0: c.clone(), delta: stored as f64, v: vec![0.0], location: vec![0] });
+        b.add_location(
+            vec![0.0; n],
+            host_compiler::linalg::to_row_major(P.as_ref()),
+        );
+        b.add_trajectory(TrajectoryEntry {
+            x0: c.clone(),
+            delta: stored as f64,
+            v: vec![0.0],
+            location: vec![0],
+        });
         let bytes = b.to_bytes().unwrap();
         let ctl = Controller::new(shared_types::image::decode(&bytes).unwrap());
         let roots = host_compiler::linalg::PdRoots::new(P.as_ref()).unwrap();
@@ -92,11 +130,17 @@ fn f32_selection_accepts_only_states_in_the_certified_ball() {
             if ctl.select(&xf).is_some() {
                 accepted_near += 1;
                 let d = p_norm(P.as_ref(), &(0..n).map(|i| x[i] - c[i]).collect::<Vec<_>>());
-                assert!(d <= delta, "trial {trial}: accepted a state at P-distance {d} > certified {delta}");
+                assert!(
+                    d <= delta,
+                    "trial {trial}: accepted a state at P-distance {d} > certified {delta}"
+                );
             }
         }
     }
-    assert!(accepted_near > 1000, "the test must exercise acceptance near the boundary: {accepted_near}");
+    assert!(
+        accepted_near > 1000,
+        "the test must exercise acceptance near the boundary: {accepted_near}"
+    );
 }
 
 /// A region with nothing in it: the inter-sample test only needs the loop constants.
@@ -109,10 +153,16 @@ impl Region for Nowhere {
         false
     }
     fn dist(&self, x: &[f64], _: &Metric) -> Witness {
-        Witness { value: f64::INFINITY, point: x.to_vec() }
+        Witness {
+            value: f64::INFINITY,
+            point: x.to_vec(),
+        }
     }
     fn depth(&self, x: &[f64], _: &Metric) -> Witness {
-        Witness { value: 0.0, point: x.to_vec() }
+        Witness {
+            value: 0.0,
+            point: x.to_vec(),
+        }
     }
 }
 
@@ -120,22 +170,41 @@ impl Region for Nowhere {
 fn inter_sample_excursion_is_bounded() {
     // The planar vehicle of Example 3.3 with a stabilising sampled gain.
     let Ac = Mat::from_fn(4, 4, |i, j| {
-        [[0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0], [-1.0, 0.0, 0.1, 0.0], [0.0, -1.0, 0.0, 0.1]][i][j]
+        [
+            [0.0, 0.0, 1.0, 0.0],
+            [0.0, 0.0, 0.0, 1.0],
+            [-1.0, 0.0, 0.1, 0.0],
+            [0.0, -1.0, 0.0, 0.1],
+        ][i][j]
     });
-    let Bc = Mat::from_fn(4, 2, |i, j| [[0.0, 0.0], [0.0, 0.0], [1.0, 0.0], [0.0, 1.0]][i][j]);
+    let Bc = Mat::from_fn(4, 2, |i, j| {
+        [[0.0, 0.0], [0.0, 0.0], [1.0, 0.0], [0.0, 1.0]][i][j]
+    });
     let c = vec![0.0, 0.0, 1.0, 1.0];
     let h = 0.05;
-    let plant = host_compiler::model::ContinuousPlant::new(Ac.clone(), Bc.clone(), c.clone()).unwrap();
+    let plant =
+        host_compiler::model::ContinuousPlant::new(Ac.clone(), Bc.clone(), c.clone()).unwrap();
     let d = host_compiler::model::zoh(&plant, h).unwrap();
     const SUB: usize = 50;
     let fine = host_compiler::model::zoh(&plant, h / SUB as f64).unwrap();
-    let K = Mat::from_fn(2, 4, |i, j| [[-2.0, 0.0, -2.5, 0.0], [0.0, -2.0, 0.0, -2.5]][i][j]);
+    let K = Mat::from_fn(2, 4, |i, j| {
+        [[-2.0, 0.0, -2.5, 0.0], [0.0, -2.0, 0.0, -2.5]][i][j]
+    });
     let P = random_pd(4, 5.0, &mut ChaCha8Rng::seed_from_u64(3));
-    let cp = ContinuousPart { Ac: Ac.clone(), Bc: Bc.clone(), c: c.clone(), h };
+    let cp = ContinuousPart {
+        Ac: Ac.clone(),
+        Bc: Bc.clone(),
+        c: c.clone(),
+        h,
+    };
     let nowhere = Nowhere(4);
-    let input = InputBound::Norm2 { center: vec![0.0, 0.0], max: 1e9 };
+    let input = InputBound::Norm2 {
+        center: vec![0.0, 0.0],
+        max: 1e9,
+    };
     let At = &d.A + &d.B * &K;
-    let sigma = host_compiler::linalg::sym_eigenvalues((&P - At.transpose() * &P * &At).as_ref()).unwrap()[0];
+    let sigma = host_compiler::linalg::sym_eigenvalues((&P - At.transpose() * &P * &At).as_ref())
+        .unwrap()[0];
     let lp = Loop {
         A: d.A.as_ref(),
         B: d.B.as_ref(),
@@ -176,8 +245,14 @@ fn inter_sample_excursion_is_bounded() {
             let ax = mat_vec(fine.A.as_ref(), &x);
             let bu = mat_vec(fine.B.as_ref(), &u);
             x = (0..4).map(|i| ax[i] + bu[i] + fine.g[i]).collect();
-            let dev = p_norm(P.as_ref(), &(0..4).map(|i| x[i] - xn[i]).collect::<Vec<_>>());
-            assert!(dev <= bound * (1.0 + 1e-12), "excursion {dev} exceeds the bound {bound}");
+            let dev = p_norm(
+                P.as_ref(),
+                &(0..4).map(|i| x[i] - xn[i]).collect::<Vec<_>>(),
+            );
+            assert!(
+                dev <= bound * (1.0 + 1e-12),
+                "excursion {dev} exceeds the bound {bound}"
+            );
             tight = tight.max(dev / bound);
         }
     }

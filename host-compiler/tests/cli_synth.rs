@@ -9,11 +9,23 @@ fn bin() -> Command {
 
 #[test]
 fn synth_then_verify_simulate_and_inspect() {
-    let spec = concat!(env!("CARGO_MANIFEST_DIR"), "/../examples/double-integrator.toml");
+    let spec = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../examples/double-integrator.toml"
+    );
     let out = std::env::temp_dir().join(format!("hc-cli-synth-{}", std::process::id()));
-    let o = bin().args(["synth", spec, "--out"]).arg(&out).args(["--quiet", "--verify-runs", "500"]).output().unwrap();
+    let o = bin()
+        .args(["synth", spec, "--out"])
+        .arg(&out)
+        .args(["--quiet", "--verify-runs", "500"])
+        .output()
+        .unwrap();
     let stdout = String::from_utf8_lossy(&o.stdout);
-    assert!(o.status.success(), "synth failed: {stdout}\n{}", String::from_utf8_lossy(&o.stderr));
+    assert!(
+        o.status.success(),
+        "synth failed: {stdout}\n{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
     assert!(stdout.contains("0 violations"), "{stdout}");
     for f in ["controller.img", "report.html", "certificate.json"] {
         assert!(out.join(f).is_file(), "{f} missing");
@@ -22,12 +34,25 @@ fn synth_then_verify_simulate_and_inspect() {
     assert!(html.contains("<svg"));
     let img = out.join("controller.img");
 
-    let o = bin().args(["verify", spec]).arg(&img).args(["--runs", "500"]).output().unwrap();
+    let o = bin()
+        .args(["verify", spec])
+        .arg(&img)
+        .args(["--runs", "500"])
+        .output()
+        .unwrap();
     let stdout = String::from_utf8_lossy(&o.stdout);
     assert!(o.status.success(), "verify failed: {stdout}");
-    assert!(stdout.lines().last().unwrap().trim() == "violations 0", "{stdout}");
+    assert!(
+        stdout.lines().last().unwrap().trim() == "violations 0",
+        "{stdout}"
+    );
 
-    let o = bin().args(["simulate", spec]).arg(&img).args(["--x0", "0.05,0"]).output().unwrap();
+    let o = bin()
+        .args(["simulate", spec])
+        .arg(&img)
+        .args(["--x0", "0.05,0"])
+        .output()
+        .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let csv = String::from_utf8_lossy(&o.stdout);
     let lines: Vec<&str> = csv.lines().collect();
@@ -35,23 +60,47 @@ fn synth_then_verify_simulate_and_inspect() {
     assert_eq!(lines.len(), 1 + 41, "header + horizon 4 s / 0.1 s + 1 rows");
     let last: Vec<&str> = lines.last().unwrap().split(',').collect();
     let x1: f64 = last[1].parse().unwrap();
-    assert!((0.95..=1.05).contains(&x1) || lines.iter().any(|l| {
-        l.split(',').nth(1).and_then(|v| v.parse::<f64>().ok()).is_some_and(|v| (0.95..=1.05).contains(&v))
-    }), "never reached the goal: {csv}");
+    assert!(
+        (0.95..=1.05).contains(&x1)
+            || lines.iter().any(|l| {
+                l.split(',')
+                    .nth(1)
+                    .and_then(|v| v.parse::<f64>().ok())
+                    .is_some_and(|v| (0.95..=1.05).contains(&v))
+            }),
+        "never reached the goal: {csv}"
+    );
     assert!(lines[1..].iter().all(|l| l.ends_with(",ok")), "{csv}");
 
     // An initial state outside every ball: the evaluator says so and the fallback is applied.
-    let o = bin().args(["simulate", spec]).arg(&img).args(["--x0", "5,0", "--steps", "2"]).output().unwrap();
+    let o = bin()
+        .args(["simulate", spec])
+        .arg(&img)
+        .args(["--x0", "5,0", "--steps", "2"])
+        .output()
+        .unwrap();
     let csv = String::from_utf8_lossy(&o.stdout);
-    assert!(csv.lines().nth(1).unwrap().ends_with("out-of-envelope") || csv.contains("envelope"), "{csv}");
+    assert!(
+        csv.lines().nth(1).unwrap().ends_with("out-of-envelope") || csv.contains("envelope"),
+        "{csv}"
+    );
 
-    let o = bin().args(["inspect", "--json"]).arg(&img).output().unwrap();
+    let o = bin()
+        .args(["inspect", "--json"])
+        .arg(&img)
+        .output()
+        .unwrap();
     assert!(o.status.success());
     let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert!(j.is_object());
 
     // Bad input: wrong x0 length gets a clear error, not a panic.
-    let o = bin().args(["simulate", spec]).arg(&img).args(["--x0", "1,2,3"]).output().unwrap();
+    let o = bin()
+        .args(["simulate", spec])
+        .arg(&img)
+        .args(["--x0", "1,2,3"])
+        .output()
+        .unwrap();
     assert!(!o.status.success());
     assert!(String::from_utf8_lossy(&o.stderr).contains("--x0 has 3 values"));
     let _ = std::fs::remove_dir_all(&out);

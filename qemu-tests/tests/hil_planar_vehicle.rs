@@ -14,7 +14,13 @@ use std::time::Duration;
 
 const RUNS: usize = 50;
 
-fn step(A: faer::MatRef<'_, f64>, B: faer::MatRef<'_, f64>, g: &[f64], x: &[f64], u: &[f64]) -> Vec<f64> {
+fn step(
+    A: faer::MatRef<'_, f64>,
+    B: faer::MatRef<'_, f64>,
+    g: &[f64],
+    x: &[f64],
+    u: &[f64],
+) -> Vec<f64> {
     let ax = host_compiler::linalg::mat_vec(A, x);
     let bu = host_compiler::linalg::mat_vec(B, u);
     (0..x.len()).map(|i| ax[i] + bu[i] + g[i]).collect()
@@ -23,19 +29,39 @@ fn step(A: faer::MatRef<'_, f64>, B: faer::MatRef<'_, f64>, g: &[f64], x: &[f64]
 #[test]
 #[ignore = "needs qemu-system-arm and the thumbv7em-none-eabihf target: run `cargo xtask test`"]
 fn planar_vehicle_meets_the_spec_on_the_target_from_50_initial_states() {
-    let spec = concat!(env!("CARGO_MANIFEST_DIR"), "/../examples/planar-vehicle.toml");
+    let spec = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../examples/planar-vehicle.toml"
+    );
     let problem = host_compiler::spec::load(spec).expect("the example parses");
-    let opts = SynthOptions { verify_interior: 1_000, verify_per_ball: 4, progress: false, ..SynthOptions::default() };
+    let opts = SynthOptions {
+        verify_interior: 1_000,
+        verify_per_ball: 4,
+        progress: false,
+        ..SynthOptions::default()
+    };
     let s = synthesize(&problem, &opts).expect("synthesis succeeds");
     assert_eq!(s.verify.violations, 0);
     let path = firmware::write_image("planar_vehicle", &s.image).expect("image written");
-    let elf = firmware::build("planar_vehicle", &FirmwareConfig { image: Some(path), ..Default::default() })
-        .unwrap_or_else(|e| panic!("{e}"));
+    let elf = firmware::build(
+        "planar_vehicle",
+        &FirmwareConfig {
+            image: Some(path),
+            ..Default::default()
+        },
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
     let image = shared_types::image::decode(&s.image).expect("the image decodes");
     let plant = sampled_plant(&problem).expect("plant");
-    let (As, Bs, gs, subs) = plant.sub.as_ref().expect("continuous plant has a sub-sample model");
+    let (As, Bs, gs, subs) = plant
+        .sub
+        .as_ref()
+        .expect("continuous plant has a sub-sample model");
     let goal = problem.goal_region().unwrap();
-    let unsafe_set = problem.unsafe_region().unwrap().expect("the example has an obstacle");
+    let unsafe_set = problem
+        .unsafe_region()
+        .unwrap()
+        .expect("the example has an obstacle");
     let steps = problem.horizon_steps();
     let mut rng = ChaCha8Rng::seed_from_u64(problem.seed ^ 0x4111);
     let mut worst_cost = 0u32;
@@ -52,15 +78,23 @@ fn planar_vehicle_meets_the_spec_on_the_target_from_50_initial_states() {
         let mut x = x0.clone();
         let mut reached = None;
         for k in 0..=steps {
-            assert!(!unsafe_set.contains(&x), "run {run} from {x0:?}: in Unsafe at step {k}: {x:?}");
+            assert!(
+                !unsafe_set.contains(&x),
+                "run {run} from {x0:?}: in Unsafe at step {k}: {x:?}"
+            );
             if reached.is_none() && goal.contains(&x) {
                 reached = Some(k);
             }
             if k == steps {
                 break;
             }
-            let reply = exchange(&mut q, k as u32, &x, |xf| host.step(xf)).unwrap_or_else(|e| panic!("run {run}: {e}"));
-            assert_eq!(reply.status, Status::Ok, "run {run} from {x0:?}: step {k} not Ok");
+            let reply = exchange(&mut q, k as u32, &x, |xf| host.step(xf))
+                .unwrap_or_else(|e| panic!("run {run}: {e}"));
+            assert_eq!(
+                reply.status,
+                Status::Ok,
+                "run {run} from {x0:?}: step {k} not Ok"
+            );
             worst_cost = worst_cost.max(reply.cost);
             let u: Vec<f64> = reply.u.as_slice().iter().map(|&v| v as f64).collect();
             let un = u.iter().map(|a| a * a).sum::<f64>().sqrt();
@@ -68,11 +102,15 @@ fn planar_vehicle_meets_the_spec_on_the_target_from_50_initial_states() {
             let mut xs = x.clone();
             for _ in 0..subs - 1 {
                 xs = step(As.as_ref(), Bs.as_ref(), gs, &xs, &u);
-                assert!(!unsafe_set.contains(&xs), "run {run}: in Unsafe between samples after step {k}");
+                assert!(
+                    !unsafe_set.contains(&xs),
+                    "run {run}: in Unsafe between samples after step {k}"
+                );
             }
             x = step(plant.A.as_ref(), plant.B.as_ref(), &plant.g, &x, &u);
         }
-        let k = reached.unwrap_or_else(|| panic!("run {run} from {x0:?} never reached Goal; ends at {x:?}"));
+        let k = reached
+            .unwrap_or_else(|| panic!("run {run} from {x0:?} never reached Goal; ends at {x:?}"));
         assert!(k as f64 * problem.plant.period <= problem.horizon + 1e-9);
         let exit = q.shutdown().unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(exit.code, Some(0), "run {run}: firmware exit");

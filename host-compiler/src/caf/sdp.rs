@@ -7,7 +7,6 @@
 //! the trace inner product of the matrices (clarabel's `mat_to_svec`/`svec_to_mat`). Hence
 //! `b = svec(F₀)` and column v of A is `−svec(Fᵥ)`.
 
-
 use clarabel::algebra::CscMatrix;
 use clarabel::solver::{DefaultSettings, DefaultSolver, IPSolver, SolverStatus, SupportedConeT};
 use faer::Mat;

@@ -99,7 +99,9 @@ impl LoopConstants {
         let roots = PdRoots::new(lp.P).ok_or(CertifyError::MetricNotPd)?;
         let At = lp.A + lp.B * lp.K;
         let M = lp.P - At.transpose() * lp.P * &At;
-        let sigma_min = sym_eigenvalues(M.as_ref()).and_then(|e| e.first().copied()).unwrap_or(f64::NAN);
+        let sigma_min = sym_eigenvalues(M.as_ref())
+            .and_then(|e| e.first().copied())
+            .unwrap_or(f64::NAN);
         if !(sigma_min > 0.0) {
             return Err(CertifyError::NotContracting(sigma_min));
         }
@@ -107,21 +109,43 @@ impl LoopConstants {
             None => (0.0, 1.0, 0.0),
             Some(cp) => {
                 let At = &roots.sqrt * &cp.Ac * &roots.inv_sqrt;
-                let mu = sym_eigenvalues(At.as_ref()).and_then(|e| e.last().copied()).unwrap_or(f64::INFINITY);
-                let phi = if (mu * cp.h).abs() < 1e-12 { cp.h } else { (mu * cp.h).exp_m1() / mu };
+                let mu = sym_eigenvalues(At.as_ref())
+                    .and_then(|e| e.last().copied())
+                    .unwrap_or(f64::INFINITY);
+                let phi = if (mu * cp.h).abs() < 1e-12 {
+                    cp.h
+                } else {
+                    (mu * cp.h).exp_m1() / mu
+                };
                 let Acl = &cp.Ac + &cp.Bc * lp.K;
-                (phi, 1.0 + phi * roots.induced_norm(Acl.as_ref()), roots.norm_into(cp.Bc.as_ref()))
+                (
+                    phi,
+                    1.0 + phi * roots.induced_norm(Acl.as_ref()),
+                    roots.norm_into(cp.Bc.as_ref()),
+                )
             }
         };
         let n = lp.P.nrows();
         let axis = (0..n).map(|j| roots.inv[(j, j)].max(0.0).sqrt()).collect();
-        Ok(Self { roots, sigma_min, At, B: lp.B.to_owned(), P: lp.P.to_owned(), phi, gamma, beta, axis })
+        Ok(Self {
+            roots,
+            sigma_min,
+            At,
+            B: lp.B.to_owned(),
+            P: lp.P.to_owned(),
+            phi,
+            gamma,
+            beta,
+            axis,
+        })
     }
 
     /// r_crit of Theorem 3.21, (3.83)–(3.87), for a disturbance bound ε̄ (2-norm per step) entering through B
     /// ([`crate::caf::r_crit`], with its validated, rounding-guarded norms); ∞ when it does not exist.
     pub fn r_crit(&self, eps: f64) -> f64 {
-        crate::caf::r_crit(self.At.as_ref(), self.P.as_ref(), self.B.as_ref(), eps).map(|r| r.r_crit).unwrap_or(f64::INFINITY)
+        crate::caf::r_crit(self.At.as_ref(), self.P.as_ref(), self.B.as_ref(), eps)
+            .map(|r| r.r_crit)
+            .unwrap_or(f64::INFINITY)
     }
 }
 
@@ -155,7 +179,10 @@ impl Certificate {
 
 /// Largest absolute state components over the tube of radius r around x̃(κ).
 fn tube_abs(x: &[f64], r: f64, axis: &[f64]) -> Vec<f64> {
-    x.iter().zip(axis).map(|(&xi, &a)| xi.abs() + r * a).collect()
+    x.iter()
+        .zip(axis)
+        .map(|(&xi, &a)| xi.abs() + r * a)
+        .collect()
 }
 
 /// Componentwise bound on the f32 evaluator's error for states with |x_j| ≤ X_j (module doc, item 3).
@@ -165,7 +192,9 @@ pub fn evaluator_error_bound(K: MatRef<'_, f64>, v: &[f64], X: &[f64]) -> Vec<f6
     (0..m)
         .map(|i| {
             let kx: f64 = (0..n).map(|j| K[(i, j)].abs() * X[j]).sum();
-            let quant: f64 = (0..n).map(|j| K[(i, j)].abs() * (U32 * X[j] + F32_ABS)).sum();
+            let quant: f64 = (0..n)
+                .map(|j| K[(i, j)].abs() * (U32 * X[j] + F32_ABS))
+                .sum();
             quant + g * (kx * (1.0 + U32) + v[i].abs()) + F32_ABS
         })
         .collect()
@@ -174,7 +203,13 @@ pub fn evaluator_error_bound(K: MatRef<'_, f64>, v: &[f64], X: &[f64]) -> Vec<f6
 /// Distance in the P-metric from x̃ to {x : K x + v ∉ Input'} — exact for a box (the nearest violated face),
 /// and the lower bound (ρ − ‖ũ‖)/‖K P^{-1/2}‖₂ for a 2-norm ball. `eps` is the componentwise rounding
 /// bound by which Input is shrunk. Negative when ũ itself violates Input'.
-pub fn input_distance(K: MatRef<'_, f64>, roots: &PdRoots, u: &[f64], input: &InputBound, eps: &[f64]) -> f64 {
+pub fn input_distance(
+    K: MatRef<'_, f64>,
+    roots: &PdRoots,
+    u: &[f64],
+    input: &InputBound,
+    eps: &[f64],
+) -> f64 {
     let (m, n) = (K.nrows(), K.ncols());
     match input {
         InputBound::Box { lo, hi } => {
@@ -183,14 +218,25 @@ pub fn input_distance(K: MatRef<'_, f64>, roots: &PdRoots, u: &[f64], input: &In
                 let Ki: Vec<f64> = (0..n).map(|j| K[(i, j)]).collect();
                 let s = roots.dual_norm(&Ki);
                 let slack = (hi[i] - eps[i] - u[i]).min(u[i] - lo[i] - eps[i]);
-                let di = if s > 0.0 { slack / s } else if slack >= 0.0 { f64::INFINITY } else { slack };
+                let di = if s > 0.0 {
+                    slack / s
+                } else if slack >= 0.0 {
+                    f64::INFINITY
+                } else {
+                    slack
+                };
                 d = d.min(di);
             }
             d
         }
         InputBound::Norm2 { center, max } => {
             let e2 = eps.iter().map(|e| e * e).sum::<f64>().sqrt();
-            let un = u.iter().zip(center).map(|(a, c)| (a - c) * (a - c)).sum::<f64>().sqrt();
+            let un = u
+                .iter()
+                .zip(center)
+                .map(|(a, c)| (a - c) * (a - c))
+                .sum::<f64>()
+                .sqrt();
             let s = roots.norm_from(K);
             let slack = max - e2 - un;
             if s > 0.0 {
@@ -215,7 +261,10 @@ pub fn selection_radius(P: MatRef<'_, f64>, center: &[f64], delta: f64) -> f32 {
     let n = P.nrows();
     let absP = Mat::from_fn(n, n, |i, j| P[(i, j)].abs());
     let ev = sym_eigenvalues(P).unwrap_or_default();
-    let (lmin, lmax) = (ev.first().copied().unwrap_or(0.0), ev.last().copied().unwrap_or(f64::INFINITY));
+    let (lmin, lmax) = (
+        ev.first().copied().unwrap_or(0.0),
+        ev.last().copied().unwrap_or(f64::INFINITY),
+    );
     if !(lmin > 0.0) || !(delta > 0.0) {
         return 0.0;
     }
@@ -243,7 +292,10 @@ pub fn round_down_f32(x: f64) -> f32 {
 
 /// Certify one nominal trajectory (simulated with the shipped K̂, v̂) for the loop.
 pub fn certify(lp: &Loop<'_>, lc: &LoopConstants, nom: &Nominal) -> Certificate {
-    let metric = Metric { n: lp.P.nrows(), R: crate::linalg::to_row_major(lp.P) };
+    let metric = Metric {
+        n: lp.P.nrows(),
+        R: crate::linalg::to_row_major(lp.P),
+    };
     let N = nom.steps();
     // 1. Goal (4.12)–(4.13): the sample of greatest depth.
     let mut delta_goal = f64::NEG_INFINITY;
@@ -261,7 +313,10 @@ pub fn certify(lp: &Loop<'_>, lc: &LoopConstants, nom: &Nominal) -> Certificate 
     let mut eps_components = vec![0.0f64; m];
     for k in 0..N {
         let X = tube_abs(&nom.x[k], r_max, &lc.axis);
-        for (e, b) in eps_components.iter_mut().zip(evaluator_error_bound(lp.K, &nom.v[k], &X)) {
+        for (e, b) in eps_components
+            .iter_mut()
+            .zip(evaluator_error_bound(lp.K, &nom.v[k], &X))
+        {
             *e = e.max(b);
         }
     }
@@ -302,7 +357,11 @@ pub fn certify(lp: &Loop<'_>, lc: &LoopConstants, nom: &Nominal) -> Certificate 
     let r_crit = lc.r_crit(eps_f32);
     let d47 = delta_goal.min(delta_unsafe_is).min(delta_input);
     // Theorem 3.21: any r in [r_crit, d47) works; the strict inequalities of Lemma 4.4 need r < d47.
-    let delta = if d47 > 0.0 && r_crit < d47 { d47 * (1.0 - 1e-9) } else { 0.0 };
+    let delta = if d47 > 0.0 && r_crit < d47 {
+        d47 * (1.0 - 1e-9)
+    } else {
+        0.0
+    };
     let delta_stored = selection_radius(lp.P, &nom.x[0], delta);
     Certificate {
         delta_goal,

@@ -42,4 +42,3 @@ pub fn main() -> miette::Result<()> {
         Command::Simulate(a) => simulate::run(&a),
     }
 }
-

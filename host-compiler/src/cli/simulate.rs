@@ -15,7 +15,12 @@ pub struct SimulateArgs {
     /// Controller image.
     pub image: PathBuf,
     /// Initial state, comma separated (n values).
-    #[arg(long, value_delimiter = ',', allow_hyphen_values = true, required = true)]
+    #[arg(
+        long,
+        value_delimiter = ',',
+        allow_hyphen_values = true,
+        required = true
+    )]
     pub x0: Vec<f64>,
     /// Number of steps (default: the spec's horizon).
     #[arg(long)]
@@ -32,7 +37,11 @@ pub fn run(a: &SimulateArgs) -> miette::Result<()> {
         .map_err(|e| miette::miette!("{}: the image is rejected: {e:?}", a.image.display()))?;
     let n = problem.plant.n();
     if a.x0.len() != n || img.n() != n {
-        return Err(miette::miette!("--x0 has {} values; the spec has n = {n} and the image n = {}", a.x0.len(), img.n()));
+        return Err(miette::miette!(
+            "--x0 has {} values; the spec has n = {n} and the image n = {}",
+            a.x0.len(),
+            img.n()
+        ));
     }
     let plant = sampled_plant(&problem).map_err(|e| miette::miette!("{e}"))?;
     let steps = a.steps.unwrap_or(problem.horizon_steps());

@@ -31,17 +31,33 @@ pub fn run(a: &SynthArgs) -> miette::Result<()> {
     let (n, m, h) = (problem.plant.n(), problem.plant.m(), problem.plant.period);
     let mut imports = Vec::new();
     for p in &a.imports {
-        let rec = crate::trajectory::csv::load_recording(p, n, m, h).map_err(|e| miette::miette!("{e}"))?;
+        let rec = crate::trajectory::csv::load_recording(p, n, m, h)
+            .map_err(|e| miette::miette!("{e}"))?;
         imports.push((p.display().to_string(), rec));
     }
-    let opts =
-        SynthOptions { verify_interior: a.verify_runs, progress: !a.quiet, imports, ..SynthOptions::default() };
+    let opts = SynthOptions {
+        verify_interior: a.verify_runs,
+        progress: !a.quiet,
+        imports,
+        ..SynthOptions::default()
+    };
     let s = synthesize(&problem, &opts).map_err(|e| miette::miette!("{e}"))?;
-    std::fs::create_dir_all(&a.out).into_diagnostic().wrap_err_with(|| format!("creating {}", a.out.display()))?;
+    std::fs::create_dir_all(&a.out)
+        .into_diagnostic()
+        .wrap_err_with(|| format!("creating {}", a.out.display()))?;
     let img_path = a.out.join("controller.img");
-    std::fs::write(&img_path, &s.image).into_diagnostic().wrap_err("writing the image")?;
-    let data = report_data(&problem, &a.spec.display().to_string(), &s, &img_path.display().to_string());
-    let report = crate::report::write_report(&data, &a.out).into_diagnostic().wrap_err("writing the report")?;
+    std::fs::write(&img_path, &s.image)
+        .into_diagnostic()
+        .wrap_err("writing the image")?;
+    let data = report_data(
+        &problem,
+        &a.spec.display().to_string(),
+        &s,
+        &img_path.display().to_string(),
+    );
+    let report = crate::report::write_report(&data, &a.out)
+        .into_diagnostic()
+        .wrap_err("writing the report")?;
     let cert = serde_json::json!({
         "spec": a.spec.display().to_string(),
         "seed": problem.seed,
@@ -59,10 +75,19 @@ pub fn run(a: &SynthArgs) -> miette::Result<()> {
         })).collect::<Vec<_>>(),
         "timings": s.timings,
     });
-    std::fs::write(a.out.join("certificate.json"), serde_json::to_string_pretty(&cert).into_diagnostic()?)
-        .into_diagnostic()?;
-    let deltas: Vec<f64> = s.trajectories.iter().map(|t| t.certificate.delta_stored as f64).collect();
-    let (dmin, dmax) = deltas.iter().fold((f64::INFINITY, 0.0f64), |(a, b), &d| (a.min(d), b.max(d)));
+    std::fs::write(
+        a.out.join("certificate.json"),
+        serde_json::to_string_pretty(&cert).into_diagnostic()?,
+    )
+    .into_diagnostic()?;
+    let deltas: Vec<f64> = s
+        .trajectories
+        .iter()
+        .map(|t| t.certificate.delta_stored as f64)
+        .collect();
+    let (dmin, dmax) = deltas
+        .iter()
+        .fold((f64::INFINITY, 0.0f64), |(a, b), &d| (a.min(d), b.max(d)));
     println!("trajectories      {}", s.trajectories.len());
     println!("delta range       {dmin:.4} .. {dmax:.4} (CAF metric)");
     println!(
@@ -81,7 +106,11 @@ pub fn run(a: &SynthArgs) -> miette::Result<()> {
         s.verify.boundary_runs - s.verify.boundary_rejected,
         s.verify.violations
     );
-    println!("image             {} ({} bytes)", img_path.display(), s.image.len());
+    println!(
+        "image             {} ({} bytes)",
+        img_path.display(),
+        s.image.len()
+    );
     println!("report            {}", report.display());
     for (k, v) in &s.timings {
         println!("time {k:<20} {v:.3} s");
@@ -90,7 +119,10 @@ pub fn run(a: &SynthArgs) -> miette::Result<()> {
         eprintln!("warning: {w}");
     }
     if s.verify.violations > 0 {
-        return Err(miette::miette!("verification found {} violations", s.verify.violations));
+        return Err(miette::miette!(
+            "verification found {} violations",
+            s.verify.violations
+        ));
     }
     Ok(())
 }

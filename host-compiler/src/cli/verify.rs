@@ -45,8 +45,20 @@ pub fn run(a: &VerifyArgs) -> miette::Result<()> {
     let goal = problem.goal_region()?;
     let unsafe_set = problem.unsafe_region()?;
     let input = crate::synth::input_bound(&problem.input);
-    let judge = crate::synth::judge(&problem, &plant, goal.as_ref(), unsafe_set.as_deref(), &input);
-    let r = monte_carlo(&judge, &img, a.runs, a.per_ball, a.seed.unwrap_or(problem.seed ^ 0x7e51f1));
+    let judge = crate::synth::judge(
+        &problem,
+        &plant,
+        goal.as_ref(),
+        unsafe_set.as_deref(),
+        &input,
+    );
+    let r = monte_carlo(
+        &judge,
+        &img,
+        a.runs,
+        a.per_ball,
+        a.seed.unwrap_or(problem.seed ^ 0x7e51f1),
+    );
     if a.json {
         println!("{}", serde_json::to_string_pretty(&r).into_diagnostic()?);
     } else {

@@ -64,7 +64,11 @@ pub struct CoverageEstimate {
 impl CoverageEstimate {
     /// Bounds from a count.
     pub fn from_counts(samples: usize, covered: usize, confidence: f64) -> Self {
-        let mean = if samples == 0 { 0.0 } else { covered as f64 / samples as f64 };
+        let mean = if samples == 0 {
+            0.0
+        } else {
+            covered as f64 / samples as f64
+        };
         let (lower, upper) = if samples == 0 {
             (0.0, 1.0)
         } else {
@@ -73,7 +77,14 @@ impl CoverageEstimate {
                 (mean + chernoff_upper_eps(samples, confidence)).min(1.0),
             )
         };
-        Self { samples, covered, mean, confidence, lower, upper }
+        Self {
+            samples,
+            covered,
+            mean,
+            confidence,
+            lower,
+            upper,
+        }
     }
 }
 
@@ -149,7 +160,10 @@ mod tests {
     #[test]
     fn lower_bound_holds_at_its_confidence() {
         let mut rng = ChaCha8Rng::seed_from_u64(7);
-        let bx = SampleBox { lo: vec![0.0, 0.0], hi: vec![1.0, 1.0] };
+        let bx = SampleBox {
+            lo: vec![0.0, 0.0],
+            hi: vec![1.0, 1.0],
+        };
         let p = 0.3; // covered: x0 < 0.3
         let trials = 400;
         let mut failures = 0;
@@ -167,7 +181,10 @@ mod tests {
     #[test]
     fn pinned_coordinates_are_kept() {
         let mut rng = ChaCha8Rng::seed_from_u64(1);
-        let bx = SampleBox { lo: vec![-0.2, 0.0, 1.0], hi: vec![0.2, 0.0, 1.0] };
+        let bx = SampleBox {
+            lo: vec![-0.2, 0.0, 1.0],
+            hi: vec![0.2, 0.0, 1.0],
+        };
         for _ in 0..100 {
             let x = bx.sample(&mut rng);
             assert!((-0.2..=0.2).contains(&x[0]));

@@ -16,9 +16,15 @@ pub struct Ellipse2 {
 pub enum Shape2 {
     Ellipse(Ellipse2),
     /// {y : a_i · y ≤ b_i for all i} — clip to the plot's bounding box before drawing (may be unbounded).
-    HalfPlanes { a: Vec<[f64; 2]>, b: Vec<f64> },
+    HalfPlanes {
+        a: Vec<[f64; 2]>,
+        b: Vec<f64>,
+    },
     /// An axis-aligned box [lo, hi].
-    Box { lo: [f64; 2], hi: [f64; 2] },
+    Box {
+        lo: [f64; 2],
+        hi: [f64; 2],
+    },
 }
 
 /// One certified trajectory.

@@ -43,7 +43,13 @@ pub struct SynthOptions {
 
 impl Default for SynthOptions {
     fn default() -> Self {
-        Self { verify_interior: 10_000, verify_per_ball: 32, working_samples: 4_000, progress: true, imports: vec![] }
+        Self {
+            verify_interior: 10_000,
+            verify_per_ball: 32,
+            working_samples: 4_000,
+            progress: true,
+            imports: vec![],
+        }
     }
 }
 
@@ -135,18 +141,31 @@ pub fn round32(x: f64) -> f64 {
 
 /// The sampled plant of a spec (exact zero-order hold for continuous-time plants, [`crate::model::zoh`]).
 pub fn sampled_plant(problem: &Problem) -> Result<SampledPlant, SynthError> {
-    let model = crate::model::SampledPlant::from_spec(&problem.plant).map_err(|e| SynthError::Model(e.to_string()))?;
+    let model = crate::model::SampledPlant::from_spec(&problem.plant)
+        .map_err(|e| SynthError::Model(e.to_string()))?;
     let d = model.discrete;
     match model.continuous {
-        None => Ok(SampledPlant { A: d.A, B: d.B, g: d.g, continuous: None, sub: None }),
+        None => Ok(SampledPlant {
+            A: d.A,
+            B: d.B,
+            g: d.g,
+            continuous: None,
+            sub: None,
+        }),
         Some(cp) => {
             const SUBSTEPS: usize = 8;
-            let sub = crate::model::zoh(&cp, d.period / SUBSTEPS as f64).map_err(|e| SynthError::Model(e.to_string()))?;
+            let sub = crate::model::zoh(&cp, d.period / SUBSTEPS as f64)
+                .map_err(|e| SynthError::Model(e.to_string()))?;
             Ok(SampledPlant {
                 A: d.A,
                 B: d.B,
                 g: d.g,
-                continuous: Some(ContinuousPart { Ac: cp.A, Bc: cp.B, c: cp.c, h: d.period }),
+                continuous: Some(ContinuousPart {
+                    Ac: cp.A,
+                    Bc: cp.B,
+                    c: cp.c,
+                    h: d.period,
+                }),
                 sub: Some((sub.A, sub.B, sub.g, SUBSTEPS)),
             })
         }
@@ -165,7 +184,10 @@ pub fn judge<'a>(
         A: plant.A.as_ref(),
         B: plant.B.as_ref(),
         g: &plant.g,
-        sub: plant.sub.as_ref().map(|(a, b, g, s)| (a.as_ref(), b.as_ref(), g.as_slice(), *s)),
+        sub: plant
+            .sub
+            .as_ref()
+            .map(|(a, b, g, s)| (a.as_ref(), b.as_ref(), g.as_slice(), *s)),
         goal,
         unsafe_set,
         input,
@@ -181,7 +203,8 @@ fn bar(progress: bool, len: u64, msg: &str) -> ProgressBar {
     }
     let b = ProgressBar::new(len);
     b.set_style(
-        ProgressStyle::with_template("{msg:>28} [{bar:30}] {pos}/{len} {elapsed}").unwrap_or(ProgressStyle::default_bar()),
+        ProgressStyle::with_template("{msg:>28} [{bar:30}] {pos}/{len} {elapsed}")
+            .unwrap_or(ProgressStyle::default_bar()),
     );
     b.set_message(msg.to_string());
     b
@@ -197,10 +220,20 @@ pub fn synthesize(problem: &Problem, opts: &SynthOptions) -> Result<Synthesis, S
     let plant = sampled_plant(problem)?;
 
     // CAF and feedback for the sampled loop (LMIs (3.66)–(3.67) with the σ-margin of Remark 3.22).
-    let dp = crate::model::DiscretePlant::new(plant.A.clone(), plant.B.clone(), plant.g.clone(), problem.plant.period)
-        .map_err(|e| SynthError::Model(e.to_string()))?;
-    let caf_settings = crate::caf::CafSettings { sigma: problem.synthesis.sigma_margin, ..Default::default() };
-    let caf = match crate::caf::synthesize_discrete(&dp, &caf_settings).map_err(|e| SynthError::Caf(e.to_string()))? {
+    let dp = crate::model::DiscretePlant::new(
+        plant.A.clone(),
+        plant.B.clone(),
+        plant.g.clone(),
+        problem.plant.period,
+    )
+    .map_err(|e| SynthError::Model(e.to_string()))?;
+    let caf_settings = crate::caf::CafSettings {
+        sigma: problem.synthesis.sigma_margin,
+        ..Default::default()
+    };
+    let caf = match crate::caf::synthesize_discrete(&dp, &caf_settings)
+        .map_err(|e| SynthError::Caf(e.to_string()))?
+    {
         crate::caf::CafOutcome::Solved(c) => c,
         other => return Err(SynthError::Caf(caf_outcome_message(&other))),
     };
@@ -211,11 +244,17 @@ pub fn synthesize(problem: &Problem, opts: &SynthOptions) -> Result<Synthesis, S
         Some(cp) => {
             let c = crate::model::ContinuousPlant::new(cp.Ac.clone(), cp.Bc.clone(), cp.c.clone())
                 .map_err(|e| SynthError::Model(e.to_string()))?;
-            let st = crate::caf::CafSettings { sigma: 0.0, ..Default::default() };
+            let st = crate::caf::CafSettings {
+                sigma: 0.0,
+                ..Default::default()
+            };
             match crate::caf::synthesize_continuous(&c, &st) {
                 Ok(crate::caf::CafOutcome::Solved(caf)) => Some((caf.K, caf.P)),
                 Ok(other) => {
-                    warnings.push(format!("continuous-time CAF (3.8), reported only: {}", caf_outcome_message(&other)));
+                    warnings.push(format!(
+                        "continuous-time CAF (3.8), reported only: {}",
+                        caf_outcome_message(&other)
+                    ));
                     None
                 }
                 Err(e) => {
@@ -232,12 +271,20 @@ pub fn synthesize(problem: &Problem, opts: &SynthOptions) -> Result<Synthesis, S
     let Khat = Mat::from_fn(m, n, |i, j| round32(K[(i, j)]));
     timings.push(("CAF (SDP)".to_string(), t0.elapsed().as_secs_f64()));
 
-    let goal = problem.goal_region().map_err(|e| SynthError::Sets(e.to_string()))?;
-    let unsafe_set = problem.unsafe_region().map_err(|e| SynthError::Sets(e.to_string()))?;
+    let goal = problem
+        .goal_region()
+        .map_err(|e| SynthError::Sets(e.to_string()))?;
+    let unsafe_set = problem
+        .unsafe_region()
+        .map_err(|e| SynthError::Sets(e.to_string()))?;
     let input = sets::input_bound(&problem.input);
     let goal_piece = sets::convex_piece(&problem.goal, n).map_err(SynthError::Sets)?;
-    let unsafe_pieces: Vec<_> =
-        problem.unsafe_sets.iter().map(|s| sets::convex_piece(s, n)).collect::<Result<_, _>>().map_err(SynthError::Sets)?;
+    let unsafe_pieces: Vec<_> = problem
+        .unsafe_sets
+        .iter()
+        .map(|s| sets::convex_piece(s, n))
+        .collect::<Result<_, _>>()
+        .map_err(SynthError::Sets)?;
     let lp = Loop {
         A: plant.A.as_ref(),
         B: plant.B.as_ref(),
@@ -282,33 +329,67 @@ pub fn synthesize(problem: &Problem, opts: &SynthOptions) -> Result<Synthesis, S
     let gs = GenSettings::default();
     let make = |x0: &[f64]| -> Option<CoverTrajectory> {
         let g = generate(&gp, x0, &gs).ok()?;
-        let v32: Vec<Vec<f64>> = g.nominal.v.iter().map(|r| r.iter().map(|&a| round32(a)).collect()).collect();
-        let nom = simulate(plant.A.as_ref(), plant.B.as_ref(), &plant.g, Khat.as_ref(), x0, &v32);
+        let v32: Vec<Vec<f64>> = g
+            .nominal
+            .v
+            .iter()
+            .map(|r| r.iter().map(|&a| round32(a)).collect())
+            .collect();
+        let nom = simulate(
+            plant.A.as_ref(),
+            plant.B.as_ref(),
+            &plant.g,
+            Khat.as_ref(),
+            x0,
+            &v32,
+        );
         let cert = certify::certify(&lp, &lc, &nom);
-        (cert.is_certified() && cert.delta >= problem.synthesis.min_robustness).then(|| CoverTrajectory {
-            source: "generated".into(),
-            nominal: nom,
-            certificate: cert,
+        (cert.is_certified() && cert.delta >= problem.synthesis.min_robustness).then(|| {
+            CoverTrajectory {
+                source: "generated".into(),
+                nominal: nom,
+                certificate: cert,
+            }
         })
     };
 
     // Algorithm 1: grow the cover from uncovered samples, in parallel batches.
     let t1 = Instant::now();
-    let init = SampleBox { lo: problem.init.lo.clone(), hi: problem.init.hi.clone() };
+    let init = SampleBox {
+        lo: problem.init.lo.clone(),
+        hi: problem.init.hi.clone(),
+    };
     let mut work_rng = ChaCha8Rng::seed_from_u64(problem.seed);
     let mut work = init.samples(opts.working_samples, &mut work_rng);
     let mut trajs: Vec<CoverTrajectory> = Vec::new();
     // Recorded trajectories first: the nominal of the shipped loop from the recorded x0 and v, certified as is.
     for (name, rec) in &opts.imports {
         if rec.x0.len() != n || rec.v.iter().any(|r| r.len() != m) {
-            return Err(SynthError::Sets(format!("{name}: the recording does not fit n = {n}, m = {m}")));
+            return Err(SynthError::Sets(format!(
+                "{name}: the recording does not fit n = {n}, m = {m}"
+            )));
         }
         let x0: Vec<f64> = rec.x0.iter().map(|&v| round32(v)).collect();
-        let v32: Vec<Vec<f64>> = rec.v.iter().map(|r| r.iter().map(|&a| round32(a)).collect()).collect();
-        let nom = simulate(plant.A.as_ref(), plant.B.as_ref(), &plant.g, Khat.as_ref(), &x0, &v32);
+        let v32: Vec<Vec<f64>> = rec
+            .v
+            .iter()
+            .map(|r| r.iter().map(|&a| round32(a)).collect())
+            .collect();
+        let nom = simulate(
+            plant.A.as_ref(),
+            plant.B.as_ref(),
+            &plant.g,
+            Khat.as_ref(),
+            &x0,
+            &v32,
+        );
         let cert = certify::certify(&lp, &lc, &nom);
         if cert.is_certified() {
-            trajs.push(CoverTrajectory { source: format!("csv:{name}"), nominal: nom, certificate: cert });
+            trajs.push(CoverTrajectory {
+                source: format!("csv:{name}"),
+                nominal: nom,
+                certificate: cert,
+            });
         } else {
             warnings.push(format!(
                 "{name}: not used, its certified robustness is not positive (δ_Goal {:.3e}, δ_Unsafe {:.3e}, δ_Input {:.3e}, r_crit {:.3e})",
@@ -321,14 +402,18 @@ pub fn synthesize(problem: &Problem, opts: &SynthOptions) -> Result<Synthesis, S
     let batch = rayon::current_num_threads().max(1) * 2;
     let pb = bar(opts.progress, budget as u64, "trajectories");
     // Enough fresh samples that a fully covered sample proves the target (and the spec's tolerance).
-    let n_final = problem
-        .synthesis
-        .coverage_samples()
-        .max(if problem.synthesis.coverage_target < 1.0 {
-            crate::coverage::samples_needed(problem.synthesis.coverage_target, problem.synthesis.confidence)
-        } else {
-            0 // a finite sample never proves 100 %: the loop stops on its budget and says so
-        });
+    let n_final =
+        problem
+            .synthesis
+            .coverage_samples()
+            .max(if problem.synthesis.coverage_target < 1.0 {
+                crate::coverage::samples_needed(
+                    problem.synthesis.coverage_target,
+                    problem.synthesis.confidence,
+                )
+            } else {
+                0 // a finite sample never proves 100 %: the loop stops on its budget and says so
+            });
     let mut final_round = 0u64;
     let (stop, coverage, uncovered, image) = loop {
         // Seeds: uncovered working samples, farthest first (greedy, spread by the typical radius).
@@ -349,9 +434,11 @@ pub fn synthesize(problem: &Problem, opts: &SynthOptions) -> Result<Synthesis, S
         if work.is_empty() || trajs.len() >= budget {
             // Final, independent estimate on fresh samples through the f32 selection of the image.
             let image = build_image(problem, &plant, &Khat, &P, &trajs)?;
-            let img = shared_types::image::decode(&image).map_err(|e| SynthError::Nothing(format!("{e:?}")))?;
+            let img = shared_types::image::decode(&image)
+                .map_err(|e| SynthError::Nothing(format!("{e:?}")))?;
             let ctl = shared_types::eval::Controller::new(img);
-            let mut frng = ChaCha8Rng::seed_from_u64(problem.seed ^ 0x5eed_c0fe_u64.wrapping_add(final_round));
+            let mut frng =
+                ChaCha8Rng::seed_from_u64(problem.seed ^ 0x5eed_c0fe_u64.wrapping_add(final_round));
             final_round += 1;
             let pts = init.samples(n_final, &mut frng);
             let unc: Vec<Vec<f64>> = pts
@@ -362,16 +449,34 @@ pub fn synthesize(problem: &Problem, opts: &SynthOptions) -> Result<Synthesis, S
                 })
                 .cloned()
                 .collect();
-            let est = CoverageEstimate::from_counts(n_final, n_final - unc.len(), problem.synthesis.confidence);
+            let est = CoverageEstimate::from_counts(
+                n_final,
+                n_final - unc.len(),
+                problem.synthesis.confidence,
+            );
             let target = problem.synthesis.coverage_target;
             if est.lower >= target {
                 break (StopReason::Covered, est, unc, image);
             }
             if trajs.len() >= budget {
-                break (StopReason::Budget { trajectories: budget }, est, unc, image);
+                break (
+                    StopReason::Budget {
+                        trajectories: budget,
+                    },
+                    est,
+                    unc,
+                    image,
+                );
             }
             if unc.is_empty() || final_round > 8 {
-                break (StopReason::Stuck { failed_seeds: failed }, est, unc, image);
+                break (
+                    StopReason::Stuck {
+                        failed_seeds: failed,
+                    },
+                    est,
+                    unc,
+                    image,
+                );
             }
             // Not yet: the fresh sample found holes; use them as seeds and estimate again afterwards.
             work = unc;
@@ -414,26 +519,49 @@ pub fn synthesize(problem: &Problem, opts: &SynthOptions) -> Result<Synthesis, S
         }
         if !progress && work.is_empty() && trajs.is_empty() {
             pb.finish_and_clear();
-            return Err(SynthError::Nothing(format!("{failed} seeds from Init gave no certifiable trajectory")));
+            return Err(SynthError::Nothing(format!(
+                "{failed} seeds from Init gave no certifiable trajectory"
+            )));
         }
     };
     pb.finish_and_clear();
     if trajs.is_empty() {
-        return Err(SynthError::Nothing("no trajectory could be certified".into()));
+        return Err(SynthError::Nothing(
+            "no trajectory could be certified".into(),
+        ));
     }
-    timings.push(("cover (Algorithm 1)".to_string(), t1.elapsed().as_secs_f64()));
+    timings.push((
+        "cover (Algorithm 1)".to_string(),
+        t1.elapsed().as_secs_f64(),
+    ));
     if stop != StopReason::Covered {
         warnings.push(stop.to_string());
     }
 
     // Independent verification through the shared evaluator.
     let t2 = Instant::now();
-    let img = shared_types::image::decode(&image).map_err(|e| SynthError::Nothing(format!("{e:?}")))?;
-    let judge = judge(problem, &plant, goal.as_ref(), unsafe_set.as_deref(), &input);
-    let verify = monte_carlo(&judge, &img, opts.verify_interior, opts.verify_per_ball, problem.seed ^ 0x7e51f1);
+    let img =
+        shared_types::image::decode(&image).map_err(|e| SynthError::Nothing(format!("{e:?}")))?;
+    let judge = judge(
+        problem,
+        &plant,
+        goal.as_ref(),
+        unsafe_set.as_deref(),
+        &input,
+    );
+    let verify = monte_carlo(
+        &judge,
+        &img,
+        opts.verify_interior,
+        opts.verify_per_ball,
+        problem.seed ^ 0x7e51f1,
+    );
     timings.push(("verification".to_string(), t2.elapsed().as_secs_f64()));
     if verify.violations > 0 {
-        warnings.push(format!("verification found {} violations: the image is NOT certified", verify.violations));
+        warnings.push(format!(
+            "verification found {} violations: the image is NOT certified",
+            verify.violations
+        ));
     }
     timings.push(("total".to_string(), t0.elapsed().as_secs_f64()));
     Ok(Synthesis {
@@ -490,7 +618,10 @@ pub fn build_image(
     let (n, m) = (problem.plant.n(), problem.plant.m());
     let _ = plant;
     let mut b = ImageBuilder::new(n, m, problem.plant.period);
-    b.add_location(crate::linalg::to_row_major(Khat.as_ref()), crate::linalg::to_row_major(P.as_ref()));
+    b.add_location(
+        crate::linalg::to_row_major(Khat.as_ref()),
+        crate::linalg::to_row_major(P.as_ref()),
+    );
     for t in trajs {
         b.add_trajectory(TrajectoryEntry {
             x0: t.nominal.x[0].clone(),

@@ -29,24 +29,38 @@ fn shape2(s: &SetDesc, n: usize, pl: [usize; 2]) -> Option<Shape2> {
         return None;
     }
     Some(match &s.shape {
-        Shape::Ball { center, radius } => {
-            Shape2::Ellipse(Ellipse2 { center: [center[0], center[1]], M: [[*radius, 0.0], [0.0, *radius]] })
-        }
+        Shape::Ball { center, radius } => Shape2::Ellipse(Ellipse2 {
+            center: [center[0], center[1]],
+            M: [[*radius, 0.0], [0.0, *radius]],
+        }),
         Shape::Ellipsoid { center, Q } => {
             let Qm = Mat::from_fn(2, 2, |i, j| Q.data[i * 2 + j]);
             let Qi = sym_fn(Qm.as_ref(), |l| if l > 0.0 { 1.0 / l } else { 0.0 })?;
-            Shape2::Ellipse(Ellipse2 { center: [center[0], center[1]], M: root2(&Qi) })
+            Shape2::Ellipse(Ellipse2 {
+                center: [center[0], center[1]],
+                M: root2(&Qi),
+            })
         }
         Shape::Polytope { A, b } => Shape2::HalfPlanes {
-            a: (0..A.rows).map(|r| [A.data[r * 2], A.data[r * 2 + 1]]).collect(),
+            a: (0..A.rows)
+                .map(|r| [A.data[r * 2], A.data[r * 2 + 1]])
+                .collect(),
             b: b.clone(),
         },
-        Shape::Box { lo, hi } => Shape2::Box { lo: [lo[0], lo[1]], hi: [hi[0], hi[1]] },
+        Shape::Box { lo, hi } => Shape2::Box {
+            lo: [lo[0], lo[1]],
+            hi: [hi[0], hi[1]],
+        },
     })
 }
 
 /// Build the report's data.
-pub fn report_data(problem: &Problem, spec_path: &str, s: &Synthesis, image_path: &str) -> ReportData {
+pub fn report_data(
+    problem: &Problem,
+    spec_path: &str,
+    s: &Synthesis,
+    image_path: &str,
+) -> ReportData {
     let n = problem.plant.n();
     let period = problem.plant.period;
     let mut warnings = s.warnings.clone();
@@ -54,13 +68,22 @@ pub fn report_data(problem: &Problem, spec_path: &str, s: &Synthesis, image_path
     let pl = plane_of(&problem.goal, n).unwrap_or([0, 1.min(n - 1)]);
     let label = |i: usize| format!("x{}", i + 1);
     let roots = PdRoots::new(s.P.as_ref());
-    let Pinv = roots.as_ref().map(|r| r.inv.clone()).unwrap_or_else(|| Mat::identity(n, n));
+    let Pinv = roots
+        .as_ref()
+        .map(|r| r.inv.clone())
+        .unwrap_or_else(|| Mat::identity(n, n));
     let Sigma = Mat::from_fn(2, 2, |i, j| Pinv[(pl[i], pl[j])]);
     let Mtube = root2(&Sigma);
     let goal_plane: Vec<Shape2> = shape2(&problem.goal, n, pl).into_iter().collect();
-    let unsafe_plane: Vec<Shape2> = problem.unsafe_sets.iter().filter_map(|u| shape2(u, n, pl)).collect();
+    let unsafe_plane: Vec<Shape2> = problem
+        .unsafe_sets
+        .iter()
+        .filter_map(|u| shape2(u, n, pl))
+        .collect();
     if unsafe_plane.len() < problem.unsafe_sets.len() {
-        warnings.push("some Unsafe sets do not live on the plotted coordinates and are not drawn".into());
+        warnings.push(
+            "some Unsafe sets do not live on the plotted coordinates and are not drawn".into(),
+        );
     }
     // Init plane: the first two free coordinates of Init.
     let free = problem.init.free_coords();
@@ -70,16 +93,21 @@ pub fn report_data(problem: &Problem, spec_path: &str, s: &Synthesis, image_path
         [] => [0, 1.min(n - 1)],
     };
     let Pff = Mat::from_fn(2, 2, |i, j| s.P[(ipl[i], ipl[j])]);
-    let Pff_inv = sym_fn(Pff.as_ref(), |l| if l > 0.0 { 1.0 / l } else { 0.0 }).unwrap_or_else(|| Mat::zeros(2, 2));
+    let Pff_inv = sym_fn(Pff.as_ref(), |l| if l > 0.0 { 1.0 / l } else { 0.0 })
+        .unwrap_or_else(|| Mat::zeros(2, 2));
     let Mball = root2(&Pff_inv);
     let scale = |M: [[f64; 2]; 2], r: f64| [[M[0][0] * r, M[0][1] * r], [M[1][0] * r, M[1][1] * r]];
     let (input_bound_label, input_bound) = match &problem.input {
         InputSet::Ball { radius, .. } => (format!("‖u − u_c‖₂ ≤ {radius}"), *radius),
-        InputSet::Box { lo, hi } => {
-            ("max_i |u_i| (box bound)".to_string(), lo.iter().chain(hi).fold(0.0f64, |a, b| a.max(b.abs())))
-        }
+        InputSet::Box { lo, hi } => (
+            "max_i |u_i| (box bound)".to_string(),
+            lo.iter().chain(hi).fold(0.0f64, |a, b| a.max(b.abs())),
+        ),
     };
-    let sK = roots.as_ref().map(|r| spectral_norm((&s.K * &r.inv_sqrt).as_ref())).unwrap_or(0.0);
+    let sK = roots
+        .as_ref()
+        .map(|r| spectral_norm((&s.K * &r.inv_sqrt).as_ref()))
+        .unwrap_or(0.0);
     let trajectories = s
         .trajectories
         .iter()
@@ -94,7 +122,12 @@ pub fn report_data(problem: &Problem, spec_path: &str, s: &Synthesis, image_path
                 .iter()
                 .map(|u| match &problem.input {
                     InputSet::Ball { center, .. } => {
-                        let nom = u.iter().zip(center).map(|(a, b)| (a - b) * (a - b)).sum::<f64>().sqrt();
+                        let nom = u
+                            .iter()
+                            .zip(center)
+                            .map(|(a, b)| (a - b) * (a - b))
+                            .sum::<f64>()
+                            .sqrt();
                         (nom, nom + r * sK)
                     }
                     InputSet::Box { .. } => {
@@ -102,7 +135,8 @@ pub fn report_data(problem: &Problem, spec_path: &str, s: &Synthesis, image_path
                         let worst = (0..u.len())
                             .map(|i| {
                                 let Ki: Vec<f64> = (0..n).map(|j| s.K[(i, j)]).collect();
-                                u[i].abs() + r * roots.as_ref().map(|q| q.dual_norm(&Ki)).unwrap_or(0.0)
+                                u[i].abs()
+                                    + r * roots.as_ref().map(|q| q.dual_norm(&Ki)).unwrap_or(0.0)
                             })
                             .fold(0.0, f64::max);
                         (nom, worst)
@@ -124,7 +158,10 @@ pub fn report_data(problem: &Problem, spec_path: &str, s: &Synthesis, image_path
                     .nominal
                     .x
                     .iter()
-                    .map(|x| Ellipse2 { center: [x[pl[0]], x[pl[1]]], M: scale(Mtube, r) })
+                    .map(|x| Ellipse2 {
+                        center: [x[pl[0]], x[pl[1]]],
+                        M: scale(Mtube, r),
+                    })
                     .collect(),
                 u: t.nominal.u.clone(),
                 u_nominal,
@@ -142,12 +179,25 @@ pub fn report_data(problem: &Problem, spec_path: &str, s: &Synthesis, image_path
         .collect();
     let lo = &problem.init.lo;
     let hi = &problem.init.hi;
-    let init_box = Shape2::Box { lo: [lo[ipl[0]], lo[ipl[1]]], hi: [hi[ipl[0]], hi[ipl[1]]] };
-    let init_plane = Some(Shape2::Box { lo: [lo[pl[0]], lo[pl[1]]], hi: [hi[pl[0]], hi[pl[1]]] });
+    let init_box = Shape2::Box {
+        lo: [lo[ipl[0]], lo[ipl[1]]],
+        hi: [hi[ipl[0]], hi[ipl[1]]],
+    };
+    let init_plane = Some(Shape2::Box {
+        lo: [lo[pl[0]], lo[pl[1]]],
+        hi: [hi[pl[0]], hi[pl[1]]],
+    });
     let rows = |M: &Mat<f64>| crate::linalg::to_rows(M.as_ref());
-    let eps = s.trajectories.iter().map(|t| t.certificate.eps_f32).fold(0.0, f64::max);
+    let eps = s
+        .trajectories
+        .iter()
+        .map(|t| t.certificate.eps_f32)
+        .fold(0.0, f64::max);
     ReportData {
-        title: problem.name.clone().unwrap_or_else(|| spec_path.to_string()),
+        title: problem
+            .name
+            .clone()
+            .unwrap_or_else(|| spec_path.to_string()),
         spec_path: spec_path.to_string(),
         n,
         m: problem.plant.m(),
@@ -161,7 +211,12 @@ pub fn report_data(problem: &Problem, spec_path: &str, s: &Synthesis, image_path
         init_labels: [label(ipl[0]), label(ipl[1])],
         init_box,
         balls,
-        uncovered: s.uncovered.iter().take(2000).map(|x| [x[ipl[0]], x[ipl[1]]]).collect(),
+        uncovered: s
+            .uncovered
+            .iter()
+            .take(2000)
+            .map(|x| [x[ipl[0]], x[ipl[1]]])
+            .collect(),
         coverage: s.coverage.clone(),
         coverage_target: problem.synthesis.coverage_target,
         stop_reason: s.stop.to_string(),

@@ -17,12 +17,23 @@ pub fn convex_piece(s: &SetDesc, n: usize) -> Result<ConvexPiece, String> {
         Shape::Ball { center, radius } if *radius > 0.0 => ConvexPiece::Ellipsoid {
             C: M,
             c: center.clone(),
-            Q: Mat::from_fn(d, d, |i, j| if i == j { 1.0 / (radius * radius) } else { 0.0 }),
+            Q: Mat::from_fn(
+                d,
+                d,
+                |i, j| if i == j { 1.0 / (radius * radius) } else { 0.0 },
+            ),
         },
-        Shape::Ellipsoid { center, Q } => ConvexPiece::Ellipsoid { C: M, c: center.clone(), Q: from_row_major(d, d, &Q.data) },
+        Shape::Ellipsoid { center, Q } => ConvexPiece::Ellipsoid {
+            C: M,
+            c: center.clone(),
+            Q: from_row_major(d, d, &Q.data),
+        },
         Shape::Polytope { A, b } => {
             let Ay = from_row_major(A.rows, A.cols, &A.data);
-            ConvexPiece::Polytope { H: &Ay * &M, b: b.clone() }
+            ConvexPiece::Polytope {
+                H: &Ay * &M,
+                b: b.clone(),
+            }
         }
         Shape::Box { lo, hi } => box_piece(&M, lo, hi),
         Shape::Ball { center, .. } => box_piece(&M, center, center),
@@ -32,7 +43,11 @@ pub fn convex_piece(s: &SetDesc, n: usize) -> Result<ConvexPiece, String> {
 fn box_piece(M: &Mat<f64>, lo: &[f64], hi: &[f64]) -> ConvexPiece {
     let d = lo.len();
     let n = M.ncols();
-    let H = Mat::from_fn(2 * d, n, |r, j| if r < d { M[(r, j)] } else { -M[(r - d, j)] });
+    let H = Mat::from_fn(
+        2 * d,
+        n,
+        |r, j| if r < d { M[(r, j)] } else { -M[(r - d, j)] },
+    );
     let b = hi.iter().copied().chain(lo.iter().map(|l| -l)).collect();
     ConvexPiece::Polytope { H, b }
 }
@@ -40,15 +55,25 @@ fn box_piece(M: &Mat<f64>, lo: &[f64], hi: &[f64]) -> ConvexPiece {
 /// The spec's input set in the generator's form.
 pub fn input_bound(i: &InputSet) -> InputBound {
     match i {
-        InputSet::Box { lo, hi } => InputBound::Box { lo: lo.clone(), hi: hi.clone() },
-        InputSet::Ball { center, radius } => InputBound::Norm2 { center: center.clone(), max: *radius },
+        InputSet::Box { lo, hi } => InputBound::Box {
+            lo: lo.clone(),
+            hi: hi.clone(),
+        },
+        InputSet::Ball { center, radius } => InputBound::Norm2 {
+            center: center.clone(),
+            max: *radius,
+        },
     }
 }
 
 /// A magnitude of admissible inputs (for relative margins).
 pub fn input_scale(i: &InputBound) -> f64 {
     match i {
-        InputBound::Box { lo, hi } => lo.iter().chain(hi).fold(0.0f64, |a, b| a.max(b.abs())).max(1e-12),
+        InputBound::Box { lo, hi } => lo
+            .iter()
+            .chain(hi)
+            .fold(0.0f64, |a, b| a.max(b.abs()))
+            .max(1e-12),
         InputBound::Norm2 { center, max } => center.iter().fold(*max, |a, b| a.max(b.abs())),
     }
 }

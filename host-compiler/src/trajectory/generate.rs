@@ -30,7 +30,11 @@ use faer::{Mat, MatRef};
 #[derive(Clone, Debug)]
 pub enum ConvexPiece {
     /// {x : (C x − c)ᵀ Q (C x − c) ≤ 1} with C p×n and Q p×p positive definite.
-    Ellipsoid { C: Mat<f64>, c: Vec<f64>, Q: Mat<f64> },
+    Ellipsoid {
+        C: Mat<f64>,
+        c: Vec<f64>,
+        Q: Mat<f64>,
+    },
     /// {x : H x ≤ b}.
     Polytope { H: Mat<f64>, b: Vec<f64> },
 }
@@ -59,7 +63,12 @@ pub struct GenSettings {
 
 impl Default for GenSettings {
     fn default() -> Self {
-        Self { max_iter: 12, tol: 1e-4, smooth_weight: 1e-4, delta_max: 10.0 }
+        Self {
+            max_iter: 12,
+            tol: 1e-4,
+            smooth_weight: 1e-4,
+            delta_max: 10.0,
+        }
     }
 }
 
@@ -98,7 +107,11 @@ pub struct Generated {
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum GenError {
     #[error("no trajectory from x0 = {x0:?} reaches Goal in {steps} steps within the input bounds (solver: {status})")]
-    Infeasible { x0: Vec<f64>, steps: usize, status: String },
+    Infeasible {
+        x0: Vec<f64>,
+        steps: usize,
+        status: String,
+    },
     #[error("the CAF matrix P is not positive definite")]
     BadMetric,
     #[error("dimension mismatch: {0}")]
@@ -106,11 +119,18 @@ pub enum GenError {
 }
 
 /// Generate a trajectory from `x0` that maximises the tube radius δ (see the module doc).
-pub fn generate(prob: &GenProblem<'_>, x0: &[f64], settings: &GenSettings) -> Result<Generated, GenError> {
+pub fn generate(
+    prob: &GenProblem<'_>,
+    x0: &[f64],
+    settings: &GenSettings,
+) -> Result<Generated, GenError> {
     let n = prob.A.nrows();
     let m = prob.B.ncols();
     if x0.len() != n || prob.g.len() != n || prob.K.nrows() != m || prob.K.ncols() != n {
-        return Err(GenError::Dimension(format!("n = {n}, m = {m}, x0 has {}", x0.len())));
+        return Err(GenError::Dimension(format!(
+            "n = {n}, m = {m}, x0 has {}",
+            x0.len()
+        )));
     }
     let roots = PdRoots::new(prob.P).ok_or(GenError::BadMetric)?;
     let mut best: Option<Generated> = None;
@@ -120,10 +140,17 @@ pub fn generate(prob: &GenProblem<'_>, x0: &[f64], settings: &GenSettings) -> Re
         match sol {
             Ok((v, delta)) => {
                 let nominal = simulate(prob.A, prob.B, prob.g, prob.K, x0, &v);
-                let improved = best.as_ref().map(|b| delta - b.delta_lin).unwrap_or(f64::INFINITY);
+                let improved = best
+                    .as_ref()
+                    .map(|b| delta - b.delta_lin)
+                    .unwrap_or(f64::INFINITY);
                 // The first iterate ignores Unsafe (no linearisation point yet); it only seeds the next one.
                 if lin.is_some() && best.as_ref().is_none_or(|b| delta >= b.delta_lin) {
-                    best = Some(Generated { nominal: nominal.clone(), delta_lin: delta, iterations: it + 1 });
+                    best = Some(Generated {
+                        nominal: nominal.clone(),
+                        delta_lin: delta,
+                        iterations: it + 1,
+                    });
                 }
                 let done = lin.is_some() && improved.abs() <= settings.tol * delta.abs().max(1e-9);
                 lin = Some(nominal);
@@ -135,7 +162,11 @@ pub fn generate(prob: &GenProblem<'_>, x0: &[f64], settings: &GenSettings) -> Re
                 if let Some(b) = best {
                     return Ok(b);
                 }
-                return Err(GenError::Infeasible { x0: x0.to_vec(), steps: prob.steps, status });
+                return Err(GenError::Infeasible {
+                    x0: x0.to_vec(),
+                    steps: prob.steps,
+                    status,
+                });
             }
         }
     }
@@ -185,7 +216,13 @@ fn solve_subproblem(
     let vi = |k: usize, i: usize| n * (N + 1) + k * m + i;
     let d = n * (N + 1) + m * N;
     let nvar = d + 1;
-    let mut rows = Rows { I: vec![], J: vec![], V: vec![], b: vec![], cones: vec![] };
+    let mut rows = Rows {
+        I: vec![],
+        J: vec![],
+        V: vec![],
+        b: vec![],
+        cones: vec![],
+    };
 
     // Equalities: x(0) = x0; x(κ+1) − A x(κ) − B v(κ) − B K x(κ) = g.
     let Acl = A + B * K;
@@ -211,11 +248,15 @@ fn solve_subproblem(
     let start = rows.b.len();
     rows.row(&[(d, -1.0)], 0.0); // δ ≥ 0
     rows.row(&[(d, 1.0)], settings.delta_max); // δ ≤ δmax
-    // Unsafe: supporting half-spaces at the previous iterate.
+                                               // Unsafe: supporting half-spaces at the previous iterate.
     if let Some(nom) = lin {
         for k in 0..=N {
             let xk = &nom.x[k];
-            let uk = if k < N { nom.u[k].clone() } else { nom.u[N - 1].clone() };
+            let uk = if k < N {
+                nom.u[k].clone()
+            } else {
+                nom.u[N - 1].clone()
+            };
             let rho = (prob.excursion)(xk, &uk);
             for piece in prob.unsafe_sets {
                 let (nrm, off) = supporting_halfspace(piece, xk);
@@ -270,7 +311,8 @@ fn solve_subproblem(
         }
     }
     if let ConvexPiece::Ellipsoid { C, c, Q } = prob.goal {
-        let Qh = sym_fn(Q.as_ref(), |l| l.max(0.0).sqrt()).ok_or("goal shape has no square root")?;
+        let Qh =
+            sym_fn(Q.as_ref(), |l| l.max(0.0).sqrt()).ok_or("goal shape has no square root")?;
         let QhC = &Qh * C;
         let sg = spectral_norm((&QhC * &roots.inv_sqrt).as_ref());
         let Qhc = mat_vec(Qh.as_ref(), c);
@@ -305,15 +347,22 @@ fn solve_subproblem(
     let mut q = vec![0.0; nvar];
     q[d] = -1.0;
     let Am = CscMatrix::new_from_triplets(rows.b.len(), nvar, rows.I, rows.J, rows.V);
-    let st = DefaultSettingsBuilder::default().verbose(false).max_iter(200).build().map_err(|e| format!("{e:?}"))?;
-    let mut solver = DefaultSolver::new(&Pm, &q, &Am, &rows.b, &rows.cones, st).map_err(|e| format!("{e:?}"))?;
+    let st = DefaultSettingsBuilder::default()
+        .verbose(false)
+        .max_iter(200)
+        .build()
+        .map_err(|e| format!("{e:?}"))?;
+    let mut solver =
+        DefaultSolver::new(&Pm, &q, &Am, &rows.b, &rows.cones, st).map_err(|e| format!("{e:?}"))?;
     solver.solve();
     match solver.solution.status {
         SolverStatus::Solved | SolverStatus::AlmostSolved => {}
         s => return Err(format!("{s:?}")),
     }
     let z = &solver.solution.x;
-    let v: Vec<Vec<f64>> = (0..N).map(|k| (0..m).map(|i| z[vi(k, i)]).collect()).collect();
+    let v: Vec<Vec<f64>> = (0..N)
+        .map(|k| (0..m).map(|i| z[vi(k, i)]).collect())
+        .collect();
     Ok((v, z[d].max(0.0)))
 }
 
@@ -326,7 +375,9 @@ pub fn supporting_halfspace(piece: &ConvexPiece, x: &[f64]) -> (Vec<f64>, f64) {
             let p = C.nrows();
             let y = mat_vec(C.as_ref(), x);
             let mut dy: Vec<f64> = (0..p).map(|i| y[i] - c[i]).collect();
-            let mut q: f64 = (0..p).map(|i| (0..p).map(|j| dy[i] * Q[(i, j)] * dy[j]).sum::<f64>()).sum();
+            let mut q: f64 = (0..p)
+                .map(|i| (0..p).map(|j| dy[i] * Q[(i, j)] * dy[j]).sum::<f64>())
+                .sum();
             if q <= 1e-300 {
                 dy = vec![0.0; p];
                 dy[0] = 1.0;
@@ -335,8 +386,12 @@ pub fn supporting_halfspace(piece: &ConvexPiece, x: &[f64]) -> (Vec<f64>, f64) {
             let s = 1.0 / q.sqrt();
             let py: Vec<f64> = (0..p).map(|i| c[i] + s * dy[i]).collect();
             // Outward normal in y: Q (py − c); in x: Cᵀ Q (py − c).
-            let ny: Vec<f64> = (0..p).map(|i| (0..p).map(|j| Q[(i, j)] * s * dy[j]).sum()).collect();
-            let nx: Vec<f64> = (0..x.len()).map(|j| (0..p).map(|i| C[(i, j)] * ny[i]).sum()).collect();
+            let ny: Vec<f64> = (0..p)
+                .map(|i| (0..p).map(|j| Q[(i, j)] * s * dy[j]).sum())
+                .collect();
+            let nx: Vec<f64> = (0..x.len())
+                .map(|j| (0..p).map(|i| C[(i, j)] * ny[i]).sum())
+                .collect();
             let off: f64 = (0..p).map(|i| ny[i] * py[i]).sum();
             (nx, off)
         }
@@ -379,7 +434,10 @@ mod tests {
         let P = Mat::<f64>::identity(2, 2);
         let goal = disc(2.0, 0.0, 0.3);
         let unsafe_sets = [disc(1.0, 0.05, 0.3)];
-        let input = InputBound::Norm2 { center: vec![0.0, 0.0], max: 0.5 };
+        let input = InputBound::Norm2 {
+            center: vec![0.0, 0.0],
+            max: 0.5,
+        };
         let zero = |_: &[f64], _: &[f64]| 0.0;
         let prob = GenProblem {
             A: A.as_ref(),
@@ -418,7 +476,10 @@ mod tests {
         let K = Mat::<f64>::zeros(2, 2);
         let P = Mat::<f64>::identity(2, 2);
         let goal = disc(20.0, 0.0, 0.3);
-        let input = InputBound::Box { lo: vec![-0.1, -0.1], hi: vec![0.1, 0.1] };
+        let input = InputBound::Box {
+            lo: vec![-0.1, -0.1],
+            hi: vec![0.1, 0.1],
+        };
         let zero = |_: &[f64], _: &[f64]| 0.0;
         let prob = GenProblem {
             A: A.as_ref(),
@@ -434,6 +495,9 @@ mod tests {
             input_margin: 0.0,
             excursion: &zero,
         };
-        assert!(matches!(generate(&prob, &[0.0, 0.0], &GenSettings::default()), Err(GenError::Infeasible { .. })));
+        assert!(matches!(
+            generate(&prob, &[0.0, 0.0], &GenSettings::default()),
+            Err(GenError::Infeasible { .. })
+        ));
     }
 }

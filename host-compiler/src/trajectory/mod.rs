@@ -40,14 +40,22 @@ pub fn simulate(
     x.push(x0.to_vec());
     for vk in v {
         let xk = x.last().expect("x holds x0");
-        let uk: Vec<f64> = (0..m).map(|i| (0..n).map(|j| K[(i, j)] * xk[j]).sum::<f64>() + vk[i]).collect();
+        let uk: Vec<f64> = (0..m)
+            .map(|i| (0..n).map(|j| K[(i, j)] * xk[j]).sum::<f64>() + vk[i])
+            .collect();
         let xn: Vec<f64> = (0..n)
             .map(|i| {
-                (0..n).map(|j| A[(i, j)] * xk[j]).sum::<f64>() + (0..m).map(|j| B[(i, j)] * uk[j]).sum::<f64>() + g[i]
+                (0..n).map(|j| A[(i, j)] * xk[j]).sum::<f64>()
+                    + (0..m).map(|j| B[(i, j)] * uk[j]).sum::<f64>()
+                    + g[i]
             })
             .collect();
         u.push(uk);
         x.push(xn);
     }
-    Nominal { x, v: v.to_vec(), u }
+    Nominal {
+        x,
+        v: v.to_vec(),
+        u,
+    }
 }

@@ -50,7 +50,11 @@ pub struct RunOutcome {
 
 impl RunOutcome {
     pub fn violated(&self) -> bool {
-        !self.rejected && (!self.reached_goal || self.entered_unsafe || self.input_violation || self.evaluator_error)
+        !self.rejected
+            && (!self.reached_goal
+                || self.entered_unsafe
+                || self.input_violation
+                || self.evaluator_error)
     }
 }
 
@@ -75,10 +79,19 @@ pub struct VerifyReport {
 
 fn input_slack(input: &InputBound, u: &[f64]) -> f64 {
     match input {
-        InputBound::Box { lo, hi } => {
-            u.iter().zip(lo.iter().zip(hi)).map(|(&x, (&l, &h))| (h - x).min(x - l)).fold(f64::INFINITY, f64::min)
+        InputBound::Box { lo, hi } => u
+            .iter()
+            .zip(lo.iter().zip(hi))
+            .map(|(&x, (&l, &h))| (h - x).min(x - l))
+            .fold(f64::INFINITY, f64::min),
+        InputBound::Norm2 { center, max } => {
+            max - u
+                .iter()
+                .zip(center)
+                .map(|(a, c)| (a - c) * (a - c))
+                .sum::<f64>()
+                .sqrt()
         }
-        InputBound::Norm2 { center, max } => max - u.iter().zip(center).map(|(a, c)| (a - c) * (a - c)).sum::<f64>().sqrt(),
     }
 }
 
@@ -115,7 +128,9 @@ pub fn run(judge: &Judge<'_>, image: &Image<'_>, x0: &[f64], margins: bool) -> R
             out.reached_goal = true;
         }
         if margins {
-            out.goal_margin = out.goal_margin.max(judge.goal.signed_dist(&x, &metric).value);
+            out.goal_margin = out
+                .goal_margin
+                .max(judge.goal.signed_dist(&x, &metric).value);
         }
         if k == judge.steps {
             break;
@@ -160,7 +175,13 @@ fn step(A: MatRef<'_, f64>, B: MatRef<'_, f64>, g: &[f64], x: &[f64], u: &[f64])
 /// the evaluator's ball selection (rejection sampling, at most 50× as many draws), plus `per_ball` points on
 /// the boundary of every ball (in all state directions, scaled to the stored radius). Deterministic for a
 /// seed; runs in parallel.
-pub fn monte_carlo(judge: &Judge<'_>, image: &Image<'_>, interior: usize, per_ball: usize, seed: u64) -> VerifyReport {
+pub fn monte_carlo(
+    judge: &Judge<'_>,
+    image: &Image<'_>,
+    interior: usize,
+    per_ball: usize,
+    seed: u64,
+) -> VerifyReport {
     let n = image.n();
     let ctl = Controller::new(*image);
     // Interior: rejection sampling against the evaluator's own selection.
@@ -185,11 +206,14 @@ pub fn monte_carlo(judge: &Judge<'_>, image: &Image<'_>, interior: usize, per_ba
     let mut boundary: Vec<Vec<f64>> = Vec::new();
     for t in 0..image.n_trajectories() {
         let P = faer::Mat::from_fn(n, n, |i, j| image.P(0, i, j) as f64);
-        let Pis = crate::linalg::sym_fn(P.as_ref(), |l| 1.0 / l.max(1e-300).sqrt()).expect("P decodes as symmetric");
+        let Pis = crate::linalg::sym_fn(P.as_ref(), |l| 1.0 / l.max(1e-300).sqrt())
+            .expect("P decodes as symmetric");
         let c: Vec<f64> = (0..n).map(|i| image.centre(t, i) as f64).collect();
         let d = image.delta(t) as f64;
         for _ in 0..per_ball {
-            let w: Vec<f64> = (0..n).map(|_| rng.sample::<f64, _>(rand_distr::StandardNormal)).collect();
+            let w: Vec<f64> = (0..n)
+                .map(|_| rng.sample::<f64, _>(rand_distr::StandardNormal))
+                .collect();
             let wn = w.iter().map(|a| a * a).sum::<f64>().sqrt().max(1e-300);
             let e = mat_vec(Pis.as_ref(), &w);
             boundary.push((0..n).map(|i| c[i] + d * e[i] / wn).collect());
@@ -198,11 +222,20 @@ pub fn monte_carlo(judge: &Judge<'_>, image: &Image<'_>, interior: usize, per_ba
     let boundary_runs = boundary.len();
     let all: Vec<Vec<f64>> = starts.into_iter().chain(boundary).collect();
     // Margins (signed distances, for the report) on every MARGIN_EVERY-th run; violations on all of them.
-    let outcomes: Vec<RunOutcome> =
-        all.par_iter().enumerate().map(|(i, x0)| run(judge, image, x0, i % MARGIN_EVERY == 0)).collect();
-    let boundary_rejected = outcomes[interior_runs..].iter().filter(|o| o.rejected).count();
+    let outcomes: Vec<RunOutcome> = all
+        .par_iter()
+        .enumerate()
+        .map(|(i, x0)| run(judge, image, x0, i % MARGIN_EVERY == 0))
+        .collect();
+    let boundary_rejected = outcomes[interior_runs..]
+        .iter()
+        .filter(|o| o.rejected)
+        .count();
     let bad: Vec<&RunOutcome> = outcomes.iter().filter(|o| o.violated()).collect();
-    let ok = outcomes.iter().step_by(MARGIN_EVERY).filter(|o| !o.rejected);
+    let ok = outcomes
+        .iter()
+        .step_by(MARGIN_EVERY)
+        .filter(|o| !o.rejected);
     let (mut wg, mut wu, mut wi) = (f64::INFINITY, f64::INFINITY, f64::INFINITY);
     for o in ok {
         wg = wg.min(o.goal_margin);
