@@ -420,20 +420,12 @@ impl ImageBuilder {
             n_partitions: 0,
         };
         let img = Image::new(Mode::Feedforward, dims, period, payload)?;
-        let mut out = vec![0u8; img.encoded_len()?];
-        let len = image::encode(&img, &mut out)?;
-        out.truncate(len);
-        Ok(out)
+        encode_to_vec(&img)
     }
 
     /// [`ImageBuilder::to_bytes`], then writes the file.
     pub fn write(&self, path: &Path) -> Result<Vec<u8>, EmitError> {
-        let bytes = self.to_bytes()?;
-        std::fs::write(path, &bytes).map_err(|source| EmitError::Io {
-            path: path.display().to_string(),
-            source,
-        })?;
-        Ok(bytes)
+        write_file(path, self.to_bytes()?)
     }
 
     /// Reads a decoded feedforward image back into owned data (each f32 widened exactly to f64). Building
@@ -890,20 +882,12 @@ impl PwaImageBuilder {
             n_partitions: self.laws.len(),
         };
         let img = Image::new_pwa(dims, period, payload)?;
-        let mut out = vec![0u8; img.encoded_len()?];
-        let len = image::encode(&img, &mut out)?;
-        out.truncate(len);
-        Ok(out)
+        encode_to_vec(&img)
     }
 
     /// [`PwaImageBuilder::to_bytes`], then writes the file.
     pub fn write(&self, path: &Path) -> Result<Vec<u8>, EmitError> {
-        let bytes = self.to_bytes()?;
-        std::fs::write(path, &bytes).map_err(|source| EmitError::Io {
-            path: path.display().to_string(),
-            source,
-        })?;
-        Ok(bytes)
+        write_file(path, self.to_bytes()?)
     }
 
     /// Reads a decoded PWA image back into owned data (each f32 widened exactly to f64); `None` for a
@@ -964,4 +948,21 @@ impl PwaImageBuilder {
             input_box: input_box_from_image(img),
         })
     }
+}
+
+/// Encodes a validated image into a vector of exactly its length.
+fn encode_to_vec(img: &Image<'_>) -> Result<Vec<u8>, EmitError> {
+    let mut out = vec![0u8; img.encoded_len()?];
+    let len = image::encode(img, &mut out)?;
+    out.truncate(len);
+    Ok(out)
+}
+
+/// Writes image bytes to `path` and hands them back.
+fn write_file(path: &Path, bytes: Vec<u8>) -> Result<Vec<u8>, EmitError> {
+    std::fs::write(path, &bytes).map_err(|source| EmitError::Io {
+        path: path.display().to_string(),
+        source,
+    })?;
+    Ok(bytes)
 }
