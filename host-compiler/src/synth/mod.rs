@@ -563,7 +563,6 @@ pub fn synthesize(problem: &Problem, opts: &SynthOptions) -> Result<Synthesis, S
             verify.violations
         ));
     }
-    timings.push(("total".to_string(), t0.elapsed().as_secs_f64()));
     Ok(Synthesis {
         plant,
         K: Khat,
