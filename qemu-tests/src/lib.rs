@@ -9,9 +9,9 @@
 //! * [`closed_loop`]: runs N steps against the plant and the host evaluator, comparing bit for bit;
 //! * [`images`]: the test controller images.
 //!
-//! The integration tests (`tests/hil.rs`) are `#[ignore]`d in a plain `cargo test` because they need
-//! `qemu-system-arm` and the `thumbv7em-none-eabihf` target; `cargo xtask test` installs both and runs them
-//! with `--include-ignored`.
+//! The integration tests (`tests/hil*.rs`) need `qemu-system-arm` and the `thumbv7em-none-eabihf` target;
+//! `cargo xtask test` installs both before it runs them, and without them each test fails saying what is
+//! missing.
 #![allow(non_snake_case)]
 
 pub mod closed_loop;

@@ -1,7 +1,7 @@
 //! Hardware-in-the-loop tests: the real firmware in QEMU (mps2-an386), the plant on the host.
 //!
-//! Ignored in a plain `cargo test` (they need qemu-system-arm and the thumbv7em-none-eabihf target);
-//! `cargo xtask test` installs both and runs them with `--include-ignored`.
+//! They need qemu-system-arm and the thumbv7em-none-eabihf target: `cargo xtask test` installs both before
+//! it runs them; without them each test fails and says so.
 #![allow(non_snake_case)]
 
 use qemu_tests::closed_loop::{self, check, exchange, wire, HostEvaluator};
@@ -19,8 +19,6 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 const TIMEOUT: Duration = Duration::from_secs(120);
-const NEEDS: &str =
-    "needs qemu-system-arm and the thumbv7em-none-eabihf target: run `cargo xtask test`";
 
 fn good_image() -> (TestImage, PathBuf) {
     let img = images::double_integrator().expect("test image builds");
@@ -74,9 +72,7 @@ fn firmware_instructions_per_tick() -> u64 {
 }
 
 #[test]
-#[ignore = "needs qemu-system-arm and the thumbv7em-none-eabihf target: run `cargo xtask test`"]
 fn a_table_inputs_match_the_host_evaluator_bit_for_bit_and_the_state_converges() {
-    let _ = NEEDS;
     let (img, elf) = good_image();
     let plant = img.discrete_plant();
     let image = decode(&img.bytes).unwrap();
@@ -134,7 +130,6 @@ fn a_table_inputs_match_the_host_evaluator_bit_for_bit_and_the_state_converges()
 }
 
 #[test]
-#[ignore = "needs qemu-system-arm and the thumbv7em-none-eabihf target: run `cargo xtask test`"]
 fn b_a_corrupted_image_is_refused_and_every_reply_says_image_rejected() {
     let img = images::double_integrator().unwrap();
     let bad = images::corrupted(&img.bytes);
@@ -188,7 +183,6 @@ fn frame(req: &Request) -> Vec<u8> {
 }
 
 #[test]
-#[ignore = "needs qemu-system-arm and the thumbv7em-none-eabihf target: run `cargo xtask test`"]
 fn c_malformed_frames_get_bad_frame_and_the_loop_goes_on_correctly() {
     let (img, elf) = good_image();
     let plant = img.discrete_plant();
@@ -291,7 +285,6 @@ fn c_malformed_frames_get_bad_frame_and_the_loop_goes_on_correctly() {
 }
 
 #[test]
-#[ignore = "needs qemu-system-arm and the thumbv7em-none-eabihf target: run `cargo xtask test`"]
 fn d_a_state_outside_every_ball_gets_out_of_envelope_and_the_fallback() {
     let (img, elf) = good_image();
     let plant = img.discrete_plant();
@@ -324,7 +317,6 @@ fn d_a_state_outside_every_ball_gets_out_of_envelope_and_the_fallback() {
 }
 
 #[test]
-#[ignore = "needs qemu-system-arm and the thumbv7em-none-eabihf target: run `cargo xtask test`"]
 fn e_panic_and_hardfault_exit_qemu_with_failure() {
     for (kind, code, needle) in [
         ("panic", 101, "panic:"),

@@ -5,7 +5,7 @@
 //!   2. installs `qemu-system-arm` with apt-get if missing (as root; otherwise prints the command);
 //!   3. `cargo test --workspace --exclude qemu-tests` (host crates);
 //!   4. builds shared-types and the firmware for `thumbv7em-none-eabihf` (proves `no_std`);
-//!   5. the QEMU hardware-in-the-loop suite: `cargo test -p qemu-tests -- --include-ignored`.
+//!   5. the QEMU hardware-in-the-loop suite: `cargo test -p qemu-tests`.
 //!
 //!   It keeps going after a failure where it can, lists every step, ends with the line
 //!   `xtask: N passed, M failed`, and exits non-zero if any step failed.
@@ -252,19 +252,12 @@ fn test() -> ExitCode {
     } else {
         steps.skip(no_std, "the target is missing");
     }
-    let hil = "HIL: cargo test -p qemu-tests --no-fail-fast -- --include-ignored";
+    let hil = "HIL: cargo test -p qemu-tests --no-fail-fast";
     match (target_ok, qemu_ok) {
         (true, true) => {
             steps.run(hil, || {
                 let mut c = cargo();
-                c.args([
-                    "test",
-                    "-p",
-                    "qemu-tests",
-                    "--no-fail-fast",
-                    "--",
-                    "--include-ignored",
-                ]);
+                c.args(["test", "-p", "qemu-tests", "--no-fail-fast"]);
                 run(c)
             });
         }
