@@ -14,6 +14,7 @@ pub mod coverage;
 pub mod emit;
 pub mod geometry;
 pub mod linalg;
+pub mod pwa;
 pub mod model;
 pub mod report;
 pub mod robustness;

@@ -115,7 +115,11 @@ pub fn run(a: &SynthArgs) -> miette::Result<()> {
     for (k, v) in &s.timings {
         println!("time {k:<20} {v:.3} s");
     }
-    println!("time {:<20} {:.3} s", "total", s.timings.iter().map(|(_, v)| v).sum::<f64>());
+    println!(
+        "time {:<20} {:.3} s",
+        "total",
+        s.timings.iter().map(|(_, v)| v).sum::<f64>()
+    );
     for w in &s.warnings {
         eprintln!("warning: {w}");
     }

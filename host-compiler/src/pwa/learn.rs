@@ -1,0 +1,213 @@
+//! The bounded-error PWA fit of §6.2: a greedy maximum-feasible-subsystem search in the spirit of
+//! Bemporad et al. [190], with the three modifications of §6.2.
+//!
+//! Each cluster is grown from a seed data point s among the points not yet mapped:
+//! 1. start from θ_j = 0, θ0_j = ṽ_s (modification 3): A + BK + Bθ_j = A + BK satisfies (6.6)–(6.7) by the
+//!    design of K, and the seed is fitted exactly, so every search maps at least one point and the whole
+//!    procedure terminates;
+//! 2. repeatedly take the unmapped point nearest (in the P-metric) to the cluster; if the current law
+//!    already fits it within ε_fit and passes [`super::check_point`], add it; otherwise solve the
+//!    bounded-error fit `min ‖θ‖²_F  s.t. |θ x̃ + θ0 − ṽ|_∞ ≤ ε_fit` over the cluster and the candidate
+//!    (a QP in clarabel; the small-θ objective keeps Ã_j near the contracting A + BK), and accept the new
+//!    law only if every member still passes [`super::check_point`] (modification 2: every candidate that
+//!    fits more points is verified with (6.6) and (6.7));
+//! 3. stop after `max_failures` consecutive rejected candidates.
+//!
+//! ε_fit is chosen by [`super::PwaContext::new`] so that the disturbance keeps r_crit below the balls'
+//! radii (modification 1). Several seeds are tried (multi-start) and the largest verified cluster is kept,
+//! which is the maximum-feasible-subsystem criterion of [190] applied to one cluster at a time; the
+//! thermal-relaxation search of [190] itself is not implemented.
+
+use super::{check_point, PwaContext, StoredLaw};
+use clarabel::algebra::CscMatrix;
+use clarabel::solver::{
+    DefaultSettingsBuilder, DefaultSolver, IPSolver, SolverStatus, SupportedConeT,
+};
+use faer::Mat;
+
+/// One learned affine law with its cluster of data points.
+#[derive(Clone, Debug)]
+pub struct LearnedLaw {
+    /// θ_j (m×n) and θ0_j as fitted (f64).
+    pub theta: Mat<f64>,
+    pub theta0: Vec<f64>,
+    /// The law as stored, with its (6.6) margin and critical radius.
+    pub stored: StoredLaw,
+    /// Indices of the data points of the cluster.
+    pub members: Vec<usize>,
+}
+
+/// Solves the bounded-error fit over `members` (module doc, step 2). `None` if infeasible or the solver
+/// fails.
+pub fn fit(ctx: &PwaContext, members: &[usize], eps: f64) -> Option<(Mat<f64>, Vec<f64>)> {
+    let (n, m) = (ctx.n, ctx.m);
+    let nv = m * (n + 1); // θ (row-major), then θ0
+    let th = |i: usize, j: usize| i * n + j;
+    let t0 = |i: usize| m * n + i;
+    // ½ zᵀ Pq z with Pq = 2 I on θ, a tiny weight on θ0 for strict convexity.
+    let (mut PI, mut PJ, mut PV) = (vec![], vec![], vec![]);
+    for v in 0..nv {
+        PI.push(v);
+        PJ.push(v);
+        PV.push(if v < m * n { 2.0 } else { 1e-9 });
+    }
+    let (mut I, mut J, mut V, mut b) = (vec![], vec![], vec![], vec![]);
+    let mut row = 0;
+    // Scale of the state so the QP is well conditioned.
+    for &k in members {
+        let p = &ctx.points[k];
+        for i in 0..m {
+            // θ_i x + θ0_i − v_i ≤ eps  and  −(θ_i x + θ0_i − v_i) ≤ eps
+            for sgn in [1.0, -1.0] {
+                for j in 0..n {
+                    if p.x[j] != 0.0 {
+                        I.push(row);
+                        J.push(th(i, j));
+                        V.push(sgn * p.x[j]);
+                    }
+                }
+                I.push(row);
+                J.push(t0(i));
+                V.push(sgn);
+                b.push(eps + sgn * p.v[i]);
+                row += 1;
+            }
+        }
+    }
+    let Pm = CscMatrix::new_from_triplets(nv, nv, PI, PJ, PV);
+    let Am = CscMatrix::new_from_triplets(row, nv, I, J, V);
+    let q = vec![0.0; nv];
+    let cones = [SupportedConeT::NonnegativeConeT(row)];
+    let st = DefaultSettingsBuilder::default()
+        .verbose(false)
+        .max_iter(100)
+        .build()
+        .ok()?;
+    let mut solver = DefaultSolver::new(&Pm, &q, &Am, &b, &cones, st).ok()?;
+    solver.solve();
+    match solver.solution.status {
+        SolverStatus::Solved | SolverStatus::AlmostSolved => {}
+        _ => return None,
+    }
+    let z = &solver.solution.x;
+    let theta = Mat::from_fn(m, n, |i, j| z[th(i, j)]);
+    let theta0 = (0..m).map(|i| z[t0(i)]).collect();
+    Some((theta, theta0))
+}
+
+/// Whether the stored law fits every member within ε_fit and passes [`check_point`] on it.
+fn verified(ctx: &PwaContext, law: &StoredLaw, members: &[usize]) -> bool {
+    law.sigma > 0.0
+        && members.iter().all(|&k| {
+            let c = check_point(ctx, law, k);
+            c.ok && c.fit_err <= ctx.eps_fit
+        })
+}
+
+/// Grows one cluster from `seed` over the points with `free[k]` (module doc).
+fn grow(ctx: &PwaContext, free: &[bool], seed: usize) -> LearnedLaw {
+    let (n, m) = (ctx.n, ctx.m);
+    let mut theta = Mat::<f64>::zeros(m, n);
+    let mut theta0 = ctx.points[seed].v.clone();
+    let mut stored = StoredLaw::new(ctx, &theta, &theta0);
+    let mut members = vec![seed];
+    let np = ctx.points.len();
+    let dist = |a: usize, b: usize| {
+        let d: Vec<f64> = (0..n)
+            .map(|j| ctx.points[a].x[j] - ctx.points[b].x[j])
+            .collect();
+        crate::linalg::p_norm(ctx.P.as_ref(), &d)
+    };
+    // Distance of every free point to the cluster; excluded once taken or rejected.
+    let mut d: Vec<f64> = (0..np)
+        .map(|k| {
+            if free[k] && k != seed {
+                dist(k, seed)
+            } else {
+                f64::INFINITY
+            }
+        })
+        .collect();
+    // Slightly tighter tolerance in the QP, so f32 rounding of the law keeps the fit within ε_fit.
+    let eps_qp = ctx.eps_fit * (1.0 - 1e-3);
+    let mut failures = 0;
+    while failures < ctx.settings.max_failures {
+        let Some((c, &dc)) = d.iter().enumerate().min_by(|a, b| a.1.total_cmp(b.1)) else {
+            break;
+        };
+        if !dc.is_finite() {
+            break;
+        }
+        d[c] = f64::INFINITY;
+        let mut trial = members.clone();
+        trial.push(c);
+        let accepted = if verified(ctx, &stored, &[c]) {
+            true
+        } else if let Some((t, t0)) = fit(ctx, &trial, eps_qp) {
+            let s = StoredLaw::new(ctx, &t, &t0);
+            if verified(ctx, &s, &trial) {
+                theta = t;
+                theta0 = t0;
+                stored = s;
+                true
+            } else {
+                false
+            }
+        } else {
+            false
+        };
+        if accepted {
+            members = trial;
+            failures = 0;
+            for k in 0..np {
+                if d[k].is_finite() {
+                    d[k] = d[k].min(dist(k, c));
+                }
+            }
+        } else {
+            failures += 1;
+        }
+    }
+    members.sort_unstable();
+    LearnedLaw {
+        theta,
+        theta0,
+        stored,
+        members,
+    }
+}
+
+/// Learns laws until every data point is mapped (§6.2). Returns the laws (index = partition) and the law of
+/// each data point. Deterministic.
+pub fn learn_laws(ctx: &PwaContext) -> (Vec<LearnedLaw>, Vec<usize>) {
+    let np = ctx.points.len();
+    let mut free = vec![true; np];
+    let mut assignment = vec![usize::MAX; np];
+    let mut laws = Vec::new();
+    loop {
+        let unmapped: Vec<usize> = (0..np).filter(|&k| free[k]).collect();
+        if unmapped.is_empty() {
+            break;
+        }
+        // Seeds spread evenly over the unmapped points (data order: trajectory, then time).
+        let s = ctx.settings.seeds.max(1).min(unmapped.len());
+        let mut best: Option<LearnedLaw> = None;
+        for q in 0..s {
+            let seed = unmapped[q * unmapped.len() / s];
+            let c = grow(ctx, &free, seed);
+            if best
+                .as_ref()
+                .is_none_or(|b| c.members.len() > b.members.len())
+            {
+                best = Some(c);
+            }
+        }
+        let Some(best) = best else { break };
+        for &k in &best.members {
+            free[k] = false;
+            assignment[k] = laws.len();
+        }
+        laws.push(best);
+    }
+    (laws, assignment)
+}

@@ -1,0 +1,243 @@
+//! PWA feedback learned from the double-integrator cover (Ch. 6): every data point fitted within ε_fit by
+//! its partition's law, every emitted ball's law verified against (6.6)/(6.7) and the one-step inclusion
+//! (6.5), the image decodes, and closed-loop Monte Carlo through the shared-types evaluator from the balls
+//! at κ = 0 stays in the envelope until Goal and meets the spec.
+
+#![allow(non_snake_case)]
+
+use host_compiler::linalg::{mat_vec, sym_eigenvalues};
+use host_compiler::pwa::{check_point, learn_pwa, PwaController, PwaSettings, StoredLaw};
+use host_compiler::synth::{synthesize, SynthOptions, Synthesis};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use shared_types::eval::Controller;
+use std::sync::OnceLock;
+
+struct Fixture {
+    problem: host_compiler::spec::Problem,
+    syn: Synthesis,
+    pwa: PwaController,
+}
+
+fn fixture() -> &'static Fixture {
+    static F: OnceLock<Fixture> = OnceLock::new();
+    F.get_or_init(|| {
+        let problem = host_compiler::spec::load(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../examples/double-integrator.toml"
+        ))
+        .unwrap();
+        let opts = SynthOptions {
+            verify_interior: 200,
+            verify_per_ball: 4,
+            progress: false,
+            ..SynthOptions::default()
+        };
+        let syn = synthesize(&problem, &opts).unwrap();
+        let pwa = learn_pwa(&problem, &syn, &PwaSettings::default()).unwrap();
+        eprintln!(
+            "pwa: {} data points from {} trajectories, eps_fit = {:.3e}, {:?}, learn {:.2}s, partition {:.2}s, image {} bytes",
+            pwa.ctx.points.len(),
+            syn.trajectories.len(),
+            pwa.ctx.eps_fit,
+            pwa.stats,
+            pwa.learn_seconds,
+            pwa.partition_seconds,
+            pwa.image.len()
+        );
+        Fixture { problem, syn, pwa }
+    })
+}
+
+#[test]
+fn every_data_point_is_fitted_by_its_law_within_the_bound() {
+    let f = fixture();
+    let pwa = &f.pwa;
+    assert!(pwa.ctx.eps_fit > 0.0);
+    assert!(
+        pwa.laws.len() < pwa.ctx.points.len(),
+        "no compression at all"
+    );
+    for (k, p) in pwa.ctx.points.iter().enumerate() {
+        let j = pwa.assignment[k];
+        assert!(j < pwa.laws.len());
+        assert!(pwa.laws[j].members.contains(&k));
+        // u = (K + θ_j) x + θ0_j against K x + ṽ, with the stored (f32) law.
+        let law = &pwa.laws[j].stored;
+        let u = law.input(&p.x);
+        let kx = mat_vec(f.syn.K.as_ref(), &p.x);
+        for c in 0..pwa.ctx.m {
+            let err = (u[c] - (kx[c] + p.v[c])).abs();
+            assert!(
+                err <= pwa.ctx.eps_fit,
+                "point {k} comp {c}: {err:e} > {:e}",
+                pwa.ctx.eps_fit
+            );
+        }
+    }
+}
+
+#[test]
+fn every_emitted_ball_satisfies_6_6_and_6_7() {
+    let f = fixture();
+    let pwa = &f.pwa;
+    let ctx = &pwa.ctx;
+    for ball in &pwa.builder.balls {
+        let k = ctx
+            .points
+            .iter()
+            .position(|p| p.x == ball.centre)
+            .expect("ball centre is a data point");
+        let law = &pwa.builder.laws[ball.partition];
+        // Rebuild the stored law from the image's gain and offset (f32), independently of the learner.
+        let gain = faer::Mat::from_fn(ctx.m, ctx.n, |i, j| law.gain[i * ctx.n + j] as f32 as f64);
+        let At = &ctx.A + &ctx.B * &gain;
+        // (6.6): the block matrix [Q, ÃQ; (ÃQ)ᵀ, Q] is positive definite, Q = P⁻¹ the LMI variable of
+        // (3.67) (the text's "P" in (3.65)–(3.67) and (6.6) is the inverse of the CAF metric).
+        let n = ctx.n;
+        let Q = ctx.roots.inv.clone();
+        let AQ = &At * &Q;
+        let big = faer::Mat::from_fn(2 * n, 2 * n, |i, j| match (i < n, j < n) {
+            (true, true) => Q[(i, j)],
+            (true, false) => AQ[(i, j - n)],
+            (false, true) => AQ[(j, i - n)],
+            (false, false) => Q[(i - n, j - n)],
+        });
+        let ev = sym_eigenvalues(big.as_ref()).unwrap();
+        assert!(
+            ev[0] > 0.0,
+            "(6.6) fails for ball at {:?}: {ev:?}",
+            ball.centre
+        );
+        // (6.7) and the one-step inclusion (6.5), with the check the learner uses.
+        let theta = faer::Mat::from_fn(ctx.m, ctx.n, |i, j| gain[(i, j)] - ctx.K[(i, j)]);
+        let stored = StoredLaw::new(ctx, &theta, &law.offset);
+        let c = check_point(ctx, &stored, k);
+        assert!(c.ok, "ball {k} law {}: {c:?}", ball.partition);
+        assert!(c.r_crit < ctx.points[k].rho);
+        assert!(ball.delta <= ctx.points[k].rho);
+    }
+    // Every leaf lists only balls of its own partition.
+    for leaf in &pwa.builder.leaves {
+        for &b in &leaf.balls {
+            assert_eq!(pwa.builder.balls[b].partition, leaf.partition);
+        }
+    }
+}
+
+#[test]
+fn the_image_decodes() {
+    let f = fixture();
+    let img = shared_types::image::decode(&f.pwa.image).expect("PWA image decodes");
+    assert_eq!(img.n(), 2);
+    assert_eq!(img.m(), 1);
+    assert!(f.pwa.stats.depth <= shared_types::capacity::MAX_TREE_DEPTH);
+}
+
+#[test]
+fn closed_loop_from_initial_balls_stays_in_envelope_and_meets_the_spec() {
+    let f = fixture();
+    closed_loop(&f.pwa, &f.syn, &f.problem);
+}
+
+/// A much tighter fitting tolerance (r_crit ≤ 2% of the radius) forces several partitions; the same
+/// guarantees must hold.
+#[test]
+fn tight_tolerance_gives_several_partitions_and_the_same_guarantees() {
+    let f = fixture();
+    let pwa = learn_pwa(
+        &f.problem,
+        &f.syn,
+        &PwaSettings::default().rcrit_fraction(0.02),
+    )
+    .unwrap();
+    eprintln!(
+        "tight: eps_fit = {:.3e}, {:?}, learn {:.2}s, partition {:.2}s",
+        pwa.ctx.eps_fit, pwa.stats, pwa.learn_seconds, pwa.partition_seconds
+    );
+    assert!(pwa.laws.len() > 1, "{:?}", pwa.stats);
+    for (k, p) in pwa.ctx.points.iter().enumerate() {
+        let c = check_point(&pwa.ctx, &pwa.laws[pwa.assignment[k]].stored, k);
+        assert!(c.ok && c.fit_err <= pwa.ctx.eps_fit, "{k}: {c:?} {p:?}");
+    }
+    shared_types::image::decode(&pwa.image).unwrap();
+    closed_loop(&pwa, &f.syn, &f.problem);
+}
+
+fn closed_loop(pwa: &PwaController, syn: &Synthesis, problem: &host_compiler::spec::Problem) {
+    let img = shared_types::image::decode(&pwa.image).unwrap();
+    let goal = problem.goal_region().unwrap();
+    let unsafe_set = problem.unsafe_region().unwrap();
+    let input = host_compiler::synth::input_bound(&problem.input);
+    let steps = problem.horizon_steps();
+    let ctx = &pwa.ctx;
+    let starts: Vec<usize> = (0..ctx.points.len())
+        .filter(|&k| ctx.points[k].kappa == 0)
+        .collect();
+    assert!(!starts.is_empty());
+    let mut rng = ChaCha8Rng::seed_from_u64(7);
+    let runs = 500;
+    let mut failures = vec![];
+    let mut rejected_start = 0;
+    for r in 0..runs {
+        let p = &ctx.points[starts[r % starts.len()]];
+        // Uniform in the ψ-ball of radius ρ: x = x̃ + P^{-1/2} z, ‖z‖ ≤ ρ.
+        let z: Vec<f64> = (0..ctx.n).map(|_| rng.random_range(-1.0..1.0)).collect();
+        let nz = z.iter().map(|v| v * v).sum::<f64>().sqrt().max(1e-12);
+        let rad = p.rho * (1.0 - 1e-6) * rng.random::<f64>().powf(1.0 / ctx.n as f64);
+        let zz: Vec<f64> = z.iter().map(|v| v / nz * rad).collect();
+        let e = mat_vec(ctx.roots.inv_sqrt.as_ref(), &zz);
+        let mut x: Vec<f64> = p.x.iter().zip(&e).map(|(a, b)| a + b).collect();
+        let mut ctl = Controller::new(img);
+        let mut outcome = Err("goal not reached within T".to_string());
+        for k in 0..=steps {
+            if unsafe_set.as_ref().is_some_and(|u| u.contains(&x)) {
+                outcome = Err(format!("unsafe at step {k}"));
+                break;
+            }
+            if goal.contains(&x) {
+                outcome = Ok(());
+                break;
+            }
+            if k == steps {
+                break;
+            }
+            let xf: Vec<f32> = x.iter().map(|&v| v as f32).collect();
+            let u: Vec<f64> = match ctl.step(&xf) {
+                Ok(u) => u.as_slice().iter().map(|&v| v as f64).collect(),
+                Err(s) => {
+                    if k == 0 {
+                        rejected_start += 1;
+                    }
+                    outcome = Err(format!("evaluator {s:?} at step {k}, x = {x:?}"));
+                    break;
+                }
+            };
+            if let host_compiler::trajectory::generate::InputBound::Box { lo, hi } = &input {
+                if u.iter()
+                    .zip(lo.iter().zip(hi))
+                    .any(|(u, (l, h))| u < l || u > h)
+                {
+                    outcome = Err(format!("input {u:?} outside the box at step {k}"));
+                    break;
+                }
+            }
+            let ax = mat_vec(syn.plant.A.as_ref(), &x);
+            let bu = mat_vec(syn.plant.B.as_ref(), &u);
+            x = (0..ctx.n).map(|i| ax[i] + bu[i] + syn.plant.g[i]).collect();
+        }
+        if let Err(e) = outcome {
+            failures.push((r, e));
+        }
+    }
+    eprintln!(
+        "monte carlo: {runs} runs, {} failures ({} rejected at κ = 0)",
+        failures.len(),
+        rejected_start
+    );
+    assert!(
+        failures.is_empty(),
+        "{:?}",
+        &failures[..failures.len().min(5)]
+    );
+}
