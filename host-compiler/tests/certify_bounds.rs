@@ -1,6 +1,8 @@
 //! The certification's bounds hold for the code that runs: the f32 evaluator's error bound, the f32 ball
 //! selection's radius, and the inter-sample excursion bound — each checked against the real thing.
 
+#![allow(non_snake_case)]
+
 use faer::Mat;
 use host_compiler::certify::{
     evaluator_error_bound, selection_radius, ContinuousPart, Loop, LoopConstants,
