@@ -327,11 +327,10 @@ pub fn synthesize(problem: &Problem, opts: &SynthOptions) -> Result<Synthesis, S
         excursion: &excursion,
     };
     let gs = GenSettings::default();
-    let make = |x0: &[f64]| -> Option<CoverTrajectory> {
-        let g = generate(&gp, x0, &gs).ok()?;
-        let v32: Vec<Vec<f64>> = g
-            .nominal
-            .v
+    // What ships for a reference sequence: v rounded to f32, the nominal of the loop with the f32 gain
+    // from the (f32-representable) x0, and its certificate.
+    let shipped = |x0: &[f64], v: &[Vec<f64>]| -> (Nominal, Certificate) {
+        let v32: Vec<Vec<f64>> = v
             .iter()
             .map(|r| r.iter().map(|&a| round32(a)).collect())
             .collect();
@@ -344,13 +343,18 @@ pub fn synthesize(problem: &Problem, opts: &SynthOptions) -> Result<Synthesis, S
             &v32,
         );
         let cert = certify::certify(&lp, &lc, &nom);
-        (cert.is_certified() && cert.delta >= problem.synthesis.min_robustness).then(|| {
-            CoverTrajectory {
+        (nom, cert)
+    };
+    let make = |x0: &[f64]| -> Option<CoverTrajectory> {
+        let g = generate(&gp, x0, &gs).ok()?;
+        let (nominal, certificate) = shipped(x0, &g.nominal.v);
+        (certificate.is_certified() && certificate.delta >= problem.synthesis.min_robustness).then(
+            || CoverTrajectory {
                 source: "generated".into(),
-                nominal: nom,
-                certificate: cert,
-            }
-        })
+                nominal,
+                certificate,
+            },
+        )
     };
 
     // Algorithm 1: grow the cover from uncovered samples, in parallel batches.
@@ -370,20 +374,7 @@ pub fn synthesize(problem: &Problem, opts: &SynthOptions) -> Result<Synthesis, S
             )));
         }
         let x0: Vec<f64> = rec.x0.iter().map(|&v| round32(v)).collect();
-        let v32: Vec<Vec<f64>> = rec
-            .v
-            .iter()
-            .map(|r| r.iter().map(|&a| round32(a)).collect())
-            .collect();
-        let nom = simulate(
-            plant.A.as_ref(),
-            plant.B.as_ref(),
-            &plant.g,
-            Khat.as_ref(),
-            &x0,
-            &v32,
-        );
-        let cert = certify::certify(&lp, &lc, &nom);
+        let (nom, cert) = shipped(&x0, &rec.v);
         if cert.is_certified() {
             trajs.push(CoverTrajectory {
                 source: format!("csv:{name}"),
