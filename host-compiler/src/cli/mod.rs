@@ -11,7 +11,19 @@ pub mod verify;
 /// Synthesise controllers that are provably safe for one task, and the fixed-size image a
 /// microcontroller runs.
 #[derive(Parser, Debug)]
-#[command(name = "host-compiler", version, about, long_about = None)]
+#[command(
+    name = "host-compiler",
+    version,
+    about,
+    after_help = "Typical use:\n  \
+    host-compiler synth examples/planar-vehicle.toml --out out/planar-vehicle\n  \
+    host-compiler verify examples/planar-vehicle.toml out/planar-vehicle/controller.img\n  \
+    host-compiler simulate examples/planar-vehicle.toml out/planar-vehicle/controller.img --x0 0.1,0,0,1\n  \
+    host-compiler inspect out/planar-vehicle/controller.img --json\n\n\
+    `synth` covers Init with certified balls around nominal trajectories, writes the image the firmware \
+    runs, a report (report.html) and the certificate data; everything it calls certified is re-checked by \
+    closed-loop simulation through the firmware's own f32 evaluator."
+)]
 pub struct Cli {
     #[command(subcommand)]
     pub command: Command,
