@@ -6,6 +6,7 @@
 #![allow(non_snake_case)]
 
 use host_compiler::synth::{sampled_plant, synthesize, SynthOptions};
+use host_compiler::verify::plant_step as step;
 use qemu_tests::closed_loop::{exchange, HostEvaluator};
 use qemu_tests::firmware::{self, FirmwareConfig};
 use qemu_tests::qemu::Qemu;
@@ -15,18 +16,6 @@ use shared_types::eval::Status;
 use std::time::Duration;
 
 const RUNS: usize = 50;
-
-fn step(
-    A: faer::MatRef<'_, f64>,
-    B: faer::MatRef<'_, f64>,
-    g: &[f64],
-    x: &[f64],
-    u: &[f64],
-) -> Vec<f64> {
-    let ax = host_compiler::linalg::mat_vec(A, x);
-    let bu = host_compiler::linalg::mat_vec(B, u);
-    (0..x.len()).map(|i| ax[i] + bu[i] + g[i]).collect()
-}
 
 #[test]
 fn planar_vehicle_meets_the_spec_on_the_target_from_50_initial_states() {

@@ -73,9 +73,7 @@ pub fn run(a: &SimulateArgs) -> miette::Result<()> {
             .chain(std::iter::once(status))
             .collect();
         writeln!(out, "{}", row.join(",")).into_diagnostic()?;
-        let ax = crate::linalg::mat_vec(plant.A.as_ref(), &x);
-        let bu = crate::linalg::mat_vec(plant.B.as_ref(), &uf);
-        x = (0..n).map(|i| ax[i] + bu[i] + plant.g[i]).collect();
+        x = crate::verify::plant_step(plant.A.as_ref(), plant.B.as_ref(), &plant.g, &x, &uf);
     }
     Ok(())
 }

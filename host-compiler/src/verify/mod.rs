@@ -155,17 +155,24 @@ pub fn run(judge: &Judge<'_>, image: &Image<'_>, x0: &[f64], margins: bool) -> R
         if let Some((As, Bs, gs, subs)) = judge.sub {
             let mut xs = x.clone();
             for _ in 0..subs.saturating_sub(1) {
-                xs = step(As, Bs, gs, &xs, &u);
+                xs = plant_step(As, Bs, gs, &xs, &u);
                 check(&xs, &mut out, false);
             }
         }
-        x = step(judge.A, judge.B, judge.g, &x, &u);
+        x = plant_step(judge.A, judge.B, judge.g, &x, &u);
         check(&x, &mut out, true);
     }
     out
 }
 
-fn step(A: MatRef<'_, f64>, B: MatRef<'_, f64>, g: &[f64], x: &[f64], u: &[f64]) -> Vec<f64> {
+/// One period of the sampled plant: x⁺ = A x + B u + g.
+pub fn plant_step(
+    A: MatRef<'_, f64>,
+    B: MatRef<'_, f64>,
+    g: &[f64],
+    x: &[f64],
+    u: &[f64],
+) -> Vec<f64> {
     let ax = mat_vec(A, x);
     let bu = mat_vec(B, u);
     (0..x.len()).map(|i| ax[i] + bu[i] + g[i]).collect()
