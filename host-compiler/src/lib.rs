@@ -15,6 +15,7 @@ pub mod emit;
 pub mod geometry;
 pub mod linalg;
 pub mod model;
+pub mod optimize;
 pub mod pwa;
 pub mod report;
 pub mod robustness;

@@ -378,3 +378,20 @@ pub fn certify(lp: &Loop<'_>, lc: &LoopConstants, nom: &Nominal) -> Certificate 
         delta_stored,
     }
 }
+
+/// The one path from a reference sequence to what ships: `v` rounded to f32, the nominal of the loop
+/// with the shipped gain `lp.K` from `x0` (which the caller keeps f32-representable), and its certificate.
+pub fn shipped(
+    lp: &Loop<'_>,
+    lc: &LoopConstants,
+    x0: &[f64],
+    v: &[Vec<f64>],
+) -> (Nominal, Certificate) {
+    let v32: Vec<Vec<f64>> = v
+        .iter()
+        .map(|r| r.iter().map(|&a| a as f32 as f64).collect())
+        .collect();
+    let nom = crate::trajectory::simulate(lp.A, lp.B, lp.g, lp.K, x0, &v32);
+    let cert = certify(lp, lc, &nom);
+    (nom, cert)
+}

@@ -1,0 +1,145 @@
+//! Trajectory optimisation for the certified loop (Ch. 5): potential-function descent with an adjoint
+//! gradient (§5.2, Algorithm 3, time-optimal bisection of §5.2.3) and direct maximisation of the
+//! certified robustness δ(0) by a proximal bundle method (§5.3, subgradients (5.26)–(5.31)).
+//!
+//! Everything this module returns as *certified* went through [`crate::certify::shipped`]: v rounded to
+//! f32, simulated with the f32 gain, certified with the inter-sample and rounding margins.
+//!
+//! API changes for callers (newest first): none yet.
+
+use crate::certify::{self, Certificate, Loop, LoopConstants};
+use crate::trajectory::Nominal;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+/// Settings of the bundle method for [`maximize_delta`], a builder with documented defaults.
+#[derive(Clone, Debug)]
+pub struct BundleSettings {
+    /// Outer iterations (serious + null steps) at most (default 200).
+    pub max_iterations: usize,
+    /// Stop when the predicted increase of δ is below this (absolute, default 1e-7).
+    pub tolerance: f64,
+    /// Smallest proximal step parameter t (default 1e-8); below it the method stops with `NoProgress`.
+    pub min_step: f64,
+    /// Largest proximal step parameter t (default 1e2).
+    pub max_step: f64,
+    /// Initial proximal step parameter t (default 1e-2).
+    pub initial_step: f64,
+    /// Serious-step test: accept when the certified gain is at least this fraction of the predicted
+    /// gain (default 0.1).
+    pub serious_fraction: f64,
+    /// Bundle size at most, before aggregation (default 30).
+    pub bundle_size: usize,
+    /// Try shortening/lengthening the terminal time around k* every this many iterations (default 5;
+    /// 0 disables the terminal-time search).
+    pub time_search_every: usize,
+}
+
+impl Default for BundleSettings {
+    fn default() -> Self {
+        Self {
+            max_iterations: 200,
+            tolerance: 1e-7,
+            min_step: 1e-8,
+            max_step: 1e2,
+            initial_step: 1e-2,
+            serious_fraction: 0.1,
+            bundle_size: 30,
+            time_search_every: 5,
+        }
+    }
+}
+
+impl BundleSettings {
+    pub fn max_iterations(mut self, v: usize) -> Self {
+        self.max_iterations = v;
+        self
+    }
+    pub fn tolerance(mut self, v: f64) -> Self {
+        self.tolerance = v;
+        self
+    }
+    pub fn min_step(mut self, v: f64) -> Self {
+        self.min_step = v;
+        self
+    }
+    pub fn max_step(mut self, v: f64) -> Self {
+        self.max_step = v;
+        self
+    }
+    pub fn initial_step(mut self, v: f64) -> Self {
+        self.initial_step = v;
+        self
+    }
+    pub fn serious_fraction(mut self, v: f64) -> Self {
+        self.serious_fraction = v;
+        self
+    }
+    pub fn bundle_size(mut self, v: usize) -> Self {
+        self.bundle_size = v;
+        self
+    }
+    pub fn time_search_every(mut self, v: usize) -> Self {
+        self.time_search_every = v;
+        self
+    }
+}
+
+/// Why [`maximize_delta`] stopped.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+pub enum OptStop {
+    /// The predicted gain fell below the tolerance.
+    Converged,
+    /// `max_iterations` reached.
+    IterationLimit,
+    /// The cancel flag was set.
+    Cancelled,
+    /// The step parameter collapsed without a certified improvement.
+    NoProgress,
+}
+
+/// The result of [`maximize_delta`].
+#[derive(Clone, Debug)]
+pub struct Optimized {
+    /// What ships (f32-rounded v), from the same x0.
+    pub nominal: Nominal,
+    /// [`certify::shipped`] of it; δ never below the start's.
+    pub certificate: Certificate,
+    /// Certified δ per iteration; `history[0]` is δ of the start.
+    pub history: Vec<f64>,
+    /// Terminal time in steps before and after.
+    pub steps_before: usize,
+    pub steps_after: usize,
+    pub iterations: usize,
+    pub stop: OptStop,
+}
+
+/// §5.3: maximise the certified robustness δ(0) of the nominal from x0 over v and the terminal time
+/// (len(v) ≤ steps_max). Returns the best certified iterate (never worse than the start).
+pub fn maximize_delta(
+    lp: &Loop<'_>,
+    lc: &LoopConstants,
+    x0: &[f64],
+    v0: &[Vec<f64>],
+    steps_max: usize,
+    settings: &BundleSettings,
+    cancel: &AtomicBool,
+) -> Optimized {
+    let _ = (steps_max, settings);
+    // Temporary: the start, re-certified (the bundle method replaces this).
+    let (nominal, certificate) = certify::shipped(lp, lc, x0, v0);
+    let d0 = certificate.delta;
+    let stop = if cancel.load(Ordering::Relaxed) {
+        OptStop::Cancelled
+    } else {
+        OptStop::NoProgress
+    };
+    Optimized {
+        steps_before: v0.len(),
+        steps_after: v0.len(),
+        nominal,
+        certificate,
+        history: vec![d0],
+        iterations: 0,
+        stop,
+    }
+}
