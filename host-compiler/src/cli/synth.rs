@@ -1,9 +1,11 @@
 //! `host-compiler synth SPEC --out DIR`: the whole pipeline, writing the image, the report and the
 //! certificate data.
 
-use crate::synth::{report_data, synthesize, SynthOptions};
+use crate::synth::{report_data, synthesize, Generator, StopReason, SynthOptions};
 use miette::{IntoDiagnostic, WrapErr};
 use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
 
 /// Arguments of `synth`.
 #[derive(clap::Args, Debug)]
@@ -21,6 +23,10 @@ pub struct SynthArgs {
     /// sample period.
     #[arg(long = "import", value_name = "FILE.csv")]
     pub imports: Vec<PathBuf>,
+    /// How trajectories after the first are made: `algorithm4` (§5.4: grow from the boundary of the
+    /// closest ball and maximise δ by §5.3) or `scp` (Algorithm 1: the SCP generator per uncovered seed).
+    #[arg(long, value_enum, default_value_t = Generator::Algorithm4)]
+    pub generator: Generator,
     /// Hide progress bars.
     #[arg(long)]
     pub quiet: bool,
@@ -35,10 +41,29 @@ pub fn run(a: &SynthArgs) -> miette::Result<()> {
             .map_err(|e| miette::miette!("{e}"))?;
         imports.push((p.display().to_string(), rec));
     }
+    // Ctrl-C: the first stops the growth loop cleanly (what is certified so far is verified, written
+    // and reported); a second one ends the process at once.
+    let cancel = Arc::new(AtomicBool::new(false));
+    {
+        let cancel = cancel.clone();
+        let handler = ctrlc::set_handler(move || {
+            if cancel.swap(true, Ordering::SeqCst) {
+                std::process::exit(130);
+            }
+            eprintln!(
+                "\ninterrupt: finishing with the trajectories certified so far (Ctrl-C again to abort)"
+            );
+        });
+        if let Err(e) = handler {
+            eprintln!("warning: Ctrl-C handler not installed: {e}");
+        }
+    }
     let opts = SynthOptions {
         verify_interior: a.verify_runs,
         progress: !a.quiet,
         imports,
+        generator: a.generator,
+        cancel,
         ..SynthOptions::default()
     };
     let s = synthesize(&problem, &opts).map_err(|e| miette::miette!("{e}"))?;
@@ -62,6 +87,8 @@ pub fn run(a: &SynthArgs) -> miette::Result<()> {
         "spec": a.spec.display().to_string(),
         "seed": problem.seed,
         "stop": s.stop.to_string(),
+        "generator": s.generator.to_string(),
+        "optimization": s.optimization,
         "coverage": s.coverage,
         "verify": s.verify,
         "sigma_min": s.constants.sigma_min,
@@ -99,6 +126,12 @@ pub fn run(a: &SynthArgs) -> miette::Result<()> {
         s.coverage.samples
     );
     println!("stop              {}", s.stop);
+    if let Some(g) = median_gain(&s) {
+        println!(
+            "optimisation      {} runs (§5.3), median δ gain {g:.3}",
+            s.optimization.len()
+        );
+    }
     println!(
         "verification      {} runs ({} interior, {} boundary), {} violations",
         s.verify.interior_runs + s.verify.boundary_runs - s.verify.boundary_rejected,
@@ -129,5 +162,28 @@ pub fn run(a: &SynthArgs) -> miette::Result<()> {
             s.verify.violations
         ));
     }
+    if let StopReason::Interrupted { trajectories } = s.stop {
+        return Err(miette::miette!(
+            "interrupted: {} holds the {trajectories} trajectories certified so far (verified, {} violations); \
+             the run did not finish",
+            img_path.display(),
+            s.verify.violations
+        ));
+    }
     Ok(())
+}
+
+/// Median of δ after ÷ δ before over the Algorithm 4 seeds (those started on a ball's boundary).
+fn median_gain(s: &crate::synth::Synthesis) -> Option<f64> {
+    let mut g: Vec<f64> = s
+        .optimization
+        .iter()
+        .filter(|r| r.origin.is_some())
+        .map(|r| r.gain())
+        .collect();
+    if g.is_empty() {
+        return None;
+    }
+    g.sort_by(|a, b| a.total_cmp(b));
+    Some(g[g.len() / 2])
 }

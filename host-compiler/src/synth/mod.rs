@@ -5,6 +5,7 @@
 //! Everything random is drawn from ChaCha streams seeded by the spec's seed, and parallel work is
 //! collected in a fixed order, so the same spec and seed give a byte-identical image.
 
+pub mod alg4;
 mod present;
 mod sets;
 
@@ -12,19 +13,53 @@ use crate::certify::{self, Certificate, ContinuousPart, Loop, LoopConstants};
 use crate::coverage::{CoverageEstimate, SampleBox};
 use crate::emit::{FallbackLaw, ImageBuilder, TrajectoryEntry};
 use crate::linalg::p_norm;
+use crate::optimize::{maximize_delta, BundleSettings, OptStop, Optimized};
 use crate::spec::Problem;
 use crate::trajectory::generate::{generate, GenProblem, GenSettings};
-use crate::trajectory::{simulate, Nominal};
+use crate::trajectory::Nominal;
 use crate::verify::{monte_carlo, Judge, VerifyReport};
 use faer::Mat;
 use indicatif::{ProgressBar, ProgressStyle};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
 use std::time::Instant;
 
 pub use present::report_data;
 pub use sets::input_bound;
+
+/// How the cover grows after its first trajectory.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, clap::ValueEnum)]
+pub enum Generator {
+    /// Algorithm 4 (§5.4): the nearest uncovered sample projected onto the closest ball, that ball's
+    /// feedback law simulated from there, δ maximised by §5.3 and re-certified (the default).
+    #[default]
+    #[value(name = "algorithm4")]
+    Algorithm4,
+    /// Algorithm 1 with the SCP generator from each uncovered seed, without §5.3 (the earlier pipeline).
+    Scp,
+}
+
+impl std::fmt::Display for Generator {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Generator::Algorithm4 => "algorithm4",
+            Generator::Scp => "scp",
+        })
+    }
+}
+
+/// Called with the number of trajectories after each one is accepted (e.g. to interrupt a run).
+#[derive(Clone)]
+pub struct AcceptHook(pub Arc<dyn Fn(usize) + Send + Sync>);
+
+impl std::fmt::Debug for AcceptHook {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("AcceptHook(..)")
+    }
+}
 
 /// Options of one run that are not part of the task (defaults documented per field).
 #[derive(Clone, Debug)]
@@ -39,6 +74,18 @@ pub struct SynthOptions {
     pub progress: bool,
     /// Recorded trajectories (e.g. from a person) to certify and use before generating any.
     pub imports: Vec<(String, crate::trajectory::csv::Recording)>,
+    /// How trajectories after the first are made (default [`Generator::Algorithm4`]).
+    pub generator: Generator,
+    /// Seeds tried per round, in parallel (default 4). Fixed, so results do not depend on the thread count.
+    pub batch: usize,
+    /// Settings of §5.3's bundle method (default: `BundleSettings::default()` with the spec's
+    /// `max_iterations`).
+    pub optimizer: Option<BundleSettings>,
+    /// Set to stop cleanly (Ctrl-C): the run ends with what is certified so far, verified and reported
+    /// (default: a fresh, unset flag).
+    pub cancel: Arc<AtomicBool>,
+    /// Called after each accepted trajectory (default none).
+    pub on_accept: Option<AcceptHook>,
 }
 
 impl Default for SynthOptions {
@@ -49,6 +96,11 @@ impl Default for SynthOptions {
             working_samples: 4_000,
             progress: true,
             imports: vec![],
+            generator: Generator::default(),
+            batch: 4,
+            optimizer: None,
+            cancel: Arc::new(AtomicBool::new(false)),
+            on_accept: None,
         }
     }
 }
@@ -62,6 +114,14 @@ pub enum StopReason {
     Budget { trajectories: usize },
     /// No uncovered sample admits a certifiable trajectory.
     Stuck { failed_seeds: usize },
+    /// Algorithm 4's second rule: no uncovered sample is reachable by local variation of the cover (and
+    /// a new SCP seed did not help either); `region` says where they lie.
+    NeedsSeed {
+        region: alg4::UncoveredRegion,
+        description: String,
+    },
+    /// Stopped on request (Ctrl-C) with this many certified trajectories.
+    Interrupted { trajectories: usize },
 }
 
 impl std::fmt::Display for StopReason {
@@ -75,6 +135,14 @@ impl std::fmt::Display for StopReason {
                 f,
                 "stopped: {failed_seeds} uncovered seed states admit no certifiable trajectory (needs a new seed trajectory)"
             ),
+            StopReason::NeedsSeed { description, .. } => write!(
+                f,
+                "no uncovered sample is reachable by local variation of the cover: needs a new seed trajectory ({description})"
+            ),
+            StopReason::Interrupted { trajectories } => write!(
+                f,
+                "interrupted: the image holds the {trajectories} trajectories certified so far"
+            ),
         }
     }
 }
@@ -85,6 +153,119 @@ pub struct CoverTrajectory {
     pub source: String,
     pub nominal: Nominal,
     pub certificate: Certificate,
+}
+
+/// One §5.3 optimisation of the growth loop (accepted or not).
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct OptRecord {
+    /// Growth round it belongs to.
+    pub round: usize,
+    /// The ball whose boundary it starts on (Algorithm 4), or `None` for an SCP seed.
+    pub origin: Option<usize>,
+    pub x0: Vec<f64>,
+    /// The shipped nominal before optimisation and its certified δ (0 when not certified).
+    #[serde(skip)]
+    pub before: Nominal,
+    pub delta_before: f64,
+    /// Certified δ of the re-certified result.
+    pub delta_after: f64,
+    /// Certified δ per iteration ([0] = start).
+    pub history: Vec<f64>,
+    pub iterations: usize,
+    pub stop: OptStop,
+    /// Its index among the trajectories when accepted.
+    pub accepted: Option<usize>,
+}
+
+impl OptRecord {
+    fn new(
+        round: usize,
+        origin: Option<usize>,
+        x0: &[f64],
+        before: (Nominal, Certificate),
+        after: &Certificate,
+        opt: &Optimized,
+        accepted: Option<usize>,
+    ) -> Self {
+        Self {
+            round,
+            origin,
+            x0: x0.to_vec(),
+            delta_before: before.1.delta.max(0.0),
+            before: before.0,
+            delta_after: after.delta.max(0.0),
+            history: opt.history.clone(),
+            iterations: opt.iterations,
+            stop: opt.stop,
+            accepted,
+        }
+    }
+
+    /// δ after ÷ δ before (∞ when the start was not certified).
+    pub fn gain(&self) -> f64 {
+        if self.delta_before > 0.0 {
+            self.delta_after / self.delta_before
+        } else {
+            f64::INFINITY
+        }
+    }
+}
+
+/// The cover after one growth round.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct CoverSnapshot {
+    pub round: usize,
+    /// Trajectories (the first `trajectories` of the final list).
+    pub trajectories: usize,
+    /// Working samples still uncovered (full states), discarded ones included.
+    #[serde(skip)]
+    pub uncovered: Vec<Vec<f64>>,
+}
+
+impl CoverSnapshot {
+    fn new(
+        round: usize,
+        trajs: &[CoverTrajectory],
+        work: &[Vec<f64>],
+        discarded: &[Vec<f64>],
+    ) -> Self {
+        Self {
+            round,
+            trajectories: trajs.len(),
+            uncovered: work.iter().chain(discarded).cloned().collect(),
+        }
+    }
+}
+
+/// Progress bars of the growth loop: accepted trajectories, and the seeds of the current round.
+struct Bars {
+    trajectories: ProgressBar,
+    batch: ProgressBar,
+}
+
+impl Bars {
+    fn new(progress: bool, budget: u64) -> Self {
+        if !progress {
+            return Self {
+                trajectories: ProgressBar::hidden(),
+                batch: ProgressBar::hidden(),
+            };
+        }
+        let mp = indicatif::MultiProgress::new();
+        let trajectories = mp.add(bar(true, budget, "trajectories"));
+        let batch = mp.add(bar(true, 0, "round"));
+        Self {
+            trajectories,
+            batch,
+        }
+    }
+    fn set_round(&self, round: usize, what: &str) {
+        self.batch.set_message(format!("round {round}: {what}"));
+    }
+    fn clear(&self) {
+        self.trajectories.finish_and_clear();
+        self.batch.finish_and_clear();
+    }
 }
 
 /// The sampled plant and its continuous origin.
@@ -112,6 +293,10 @@ pub struct Synthesis {
     /// Final coverage samples not covered (full state vectors).
     pub uncovered: Vec<Vec<f64>>,
     pub stop: StopReason,
+    /// How the cover grew, every §5.3 optimisation it ran, and the cover after each round.
+    pub generator: Generator,
+    pub optimization: Vec<OptRecord>,
+    pub snapshots: Vec<CoverSnapshot>,
     pub verify: VerifyReport,
     pub timings: Vec<(String, f64)>,
     pub warnings: Vec<String>,
@@ -327,37 +512,39 @@ pub fn synthesize(problem: &Problem, opts: &SynthOptions) -> Result<Synthesis, S
         excursion: &excursion,
     };
     let gs = GenSettings::default();
-    // What ships for a reference sequence: v rounded to f32, the nominal of the loop with the f32 gain
-    // from the (f32-representable) x0, and its certificate.
     let shipped = |x0: &[f64], v: &[Vec<f64>]| -> (Nominal, Certificate) {
-        let v32: Vec<Vec<f64>> = v
-            .iter()
-            .map(|r| r.iter().map(|&a| round32(a)).collect())
-            .collect();
-        let nom = simulate(
-            plant.A.as_ref(),
-            plant.B.as_ref(),
-            &plant.g,
-            Khat.as_ref(),
-            x0,
-            &v32,
-        );
-        let cert = certify::certify(&lp, &lc, &nom);
-        (nom, cert)
+        certify::shipped(&lp, &lc, x0, v)
     };
+    let delta_eps = problem.synthesis.min_robustness;
+    let accept = |c: &Certificate| c.is_certified() && c.delta >= delta_eps;
     let make = |x0: &[f64]| -> Option<CoverTrajectory> {
         let g = generate(&gp, x0, &gs).ok()?;
         let (nominal, certificate) = shipped(x0, &g.nominal.v);
-        (certificate.is_certified() && certificate.delta >= problem.synthesis.min_robustness).then(
-            || CoverTrajectory {
-                source: "generated".into(),
-                nominal,
-                certificate,
-            },
-        )
+        accept(&certificate).then(|| CoverTrajectory {
+            source: "generated".into(),
+            nominal,
+            certificate,
+        })
+    };
+    let bundle = opts.optimizer.clone().unwrap_or_else(|| {
+        BundleSettings::default().max_iterations(problem.synthesis.max_iterations)
+    });
+    let cancel: &AtomicBool = &opts.cancel;
+    let cancelled = || cancel.load(Ordering::Relaxed);
+    // §5.3 on a start (x0, v): maximise the certified δ, then re-certify what the optimiser returns through
+    // the shipping path (its answer is never trusted as is). Returns (before, after, optimiser result).
+    let optimise = |x0: &[f64], v: &[Vec<f64>]| {
+        let before = shipped(x0, v);
+        let opt = maximize_delta(&lp, &lc, x0, v, steps, &bundle, cancel);
+        let after = shipped(x0, &opt.nominal.v);
+        (before, after, opt)
+    };
+    // A new seed trajectory from the SCP generator, then §5.3 (Algorithm 4's start and its fallback).
+    let seed_scp = |x0: &[f64]| {
+        let g = generate(&gp, x0, &gs).ok()?;
+        Some(optimise(x0, &g.nominal.v))
     };
 
-    // Algorithm 1: grow the cover from uncovered samples, in parallel batches.
     let t1 = Instant::now();
     let init = SampleBox {
         lo: problem.init.lo.clone(),
@@ -390,8 +577,15 @@ pub fn synthesize(problem: &Problem, opts: &SynthOptions) -> Result<Synthesis, S
     }
     let mut failed = 0usize;
     let budget = problem.synthesis.max_trajectories;
-    let batch = rayon::current_num_threads().max(1) * 2;
-    let pb = bar(opts.progress, budget as u64, "trajectories");
+    // A fixed batch size: the seeds of a round, and so the result, must not depend on the thread count.
+    let batch = opts.batch.max(1);
+    let bars = Bars::new(opts.progress, budget as u64);
+    let on_accept = |count: usize| {
+        bars.trajectories.inc(1);
+        if let Some(h) = &opts.on_accept {
+            (h.0)(count);
+        }
+    };
     // Enough fresh samples that a fully covered sample proves the target (and the spec's tolerance).
     let n_final =
         problem
@@ -405,46 +599,141 @@ pub fn synthesize(problem: &Problem, opts: &SynthOptions) -> Result<Synthesis, S
             } else {
                 0 // a finite sample never proves 100 %: the loop stops on its budget and says so
             });
+    // Final, independent estimate on fresh samples through the f32 selection of the image.
+    let estimate = |trajs: &[CoverTrajectory],
+                    round: u64|
+     -> Result<(CoverageEstimate, Vec<Vec<f64>>, Vec<u8>), SynthError> {
+        let image = build_image(problem, &plant, &Khat, &P, trajs)?;
+        let img = shared_types::image::decode(&image)
+            .map_err(|e| SynthError::Nothing(format!("{e:?}")))?;
+        let ctl = shared_types::eval::Controller::new(img);
+        let mut frng =
+            ChaCha8Rng::seed_from_u64(problem.seed ^ 0x5eed_c0fe_u64.wrapping_add(round));
+        let pts = init.samples(n_final, &mut frng);
+        let unc: Vec<Vec<f64>> = pts
+            .par_iter()
+            .filter(|x| {
+                let xf: Vec<f32> = x.iter().map(|&v| v as f32).collect();
+                ctl.select(&xf).is_none()
+            })
+            .cloned()
+            .collect();
+        let est = CoverageEstimate::from_counts(
+            n_final,
+            n_final - unc.len(),
+            problem.synthesis.confidence,
+        );
+        Ok((est, unc, image))
+    };
+    let free = problem.init.free_coords();
     let mut final_round = 0u64;
+    let mut round = 0usize;
+    let mut records: Vec<OptRecord> = Vec::new();
+    let mut snapshots: Vec<CoverSnapshot> = Vec::new();
+    // Algorithm 4: uncovered samples whose projection no local variation certifies (δ < δε or nothing new).
+    let mut discarded: Vec<Vec<f64>> = Vec::new();
+    let outside = |trajs: &[CoverTrajectory], x: &[f64]| {
+        alg4::gap(P.as_ref(), x, trajs).is_none_or(|(d, _)| d > 0.0)
+    };
     let (stop, coverage, uncovered, image) = loop {
-        // Seeds: uncovered working samples, farthest first (greedy, spread by the typical radius).
-        let typical = median(trajs.iter().map(|t| t.certificate.delta)).unwrap_or(0.05);
-        let outside = |x: &[f64], extra: &[Vec<f64>]| -> f64 {
-            let mut d = f64::INFINITY;
-            for t in &trajs {
-                let e: Vec<f64> = x.iter().zip(&t.nominal.x[0]).map(|(a, b)| a - b).collect();
-                d = d.min(p_norm(P.as_ref(), &e) - t.certificate.delta_stored as f64);
-            }
-            for c in extra {
-                let e: Vec<f64> = x.iter().zip(c).map(|(a, b)| a - b).collect();
-                d = d.min(p_norm(P.as_ref(), &e) - typical);
-            }
-            d
-        };
-        work.retain(|x| outside(x, &[]) > 0.0);
-        if work.is_empty() || trajs.len() >= budget {
-            // Final, independent estimate on fresh samples through the f32 selection of the image.
-            let image = build_image(problem, &plant, &Khat, &P, &trajs)?;
-            let img = shared_types::image::decode(&image)
-                .map_err(|e| SynthError::Nothing(format!("{e:?}")))?;
-            let ctl = shared_types::eval::Controller::new(img);
-            let mut frng =
-                ChaCha8Rng::seed_from_u64(problem.seed ^ 0x5eed_c0fe_u64.wrapping_add(final_round));
-            final_round += 1;
-            let pts = init.samples(n_final, &mut frng);
-            let unc: Vec<Vec<f64>> = pts
-                .par_iter()
-                .filter(|x| {
-                    let xf: Vec<f32> = x.iter().map(|&v| v as f32).collect();
-                    ctl.select(&xf).is_none()
-                })
-                .cloned()
-                .collect();
-            let est = CoverageEstimate::from_counts(
-                n_final,
-                n_final - unc.len(),
-                problem.synthesis.confidence,
+        work.retain(|x| outside(&trajs, x));
+        discarded.retain(|x| outside(&trajs, x));
+        if !trajs.is_empty() && cancelled() {
+            let (est, unc, image) = estimate(&trajs, final_round)?;
+            break (
+                StopReason::Interrupted {
+                    trajectories: trajs.len(),
+                },
+                est,
+                unc,
+                image,
             );
+        }
+        if cancelled() {
+            bars.clear();
+            return Err(SynthError::Nothing(
+                "interrupted before any trajectory was certified".into(),
+            ));
+        }
+        // Algorithm 4's second stopping rule: every uncovered sample left was discarded. One new seed
+        // trajectory from the SCP generator (where the most distant of them lies) before giving up.
+        if opts.generator == Generator::Algorithm4
+            && work.is_empty()
+            && !discarded.is_empty()
+            && trajs.len() < budget
+        {
+            round += 1;
+            let far = discarded
+                .iter()
+                .enumerate()
+                .map(|(i, x)| {
+                    (
+                        i,
+                        alg4::gap(P.as_ref(), x, &trajs).map_or(f64::INFINITY, |g| g.0),
+                    )
+                })
+                .fold((0, f64::NEG_INFINITY), |a, b| if b.1 > a.1 { b } else { a })
+                .0;
+            let x0: Vec<f64> = discarded[far].iter().map(|&v| round32(v)).collect();
+            bars.set_round(round, "new seed trajectory (SCP)");
+            let made = seed_scp(&x0);
+            let mut ok = false;
+            if let Some((before, (nominal, certificate), opt)) = made {
+                ok = accept(&certificate)
+                    && !outside(
+                        std::slice::from_ref(&CoverTrajectory {
+                            source: String::new(),
+                            nominal: nominal.clone(),
+                            certificate: certificate.clone(),
+                        }),
+                        &discarded[far],
+                    );
+                records.push(OptRecord::new(
+                    round,
+                    None,
+                    &x0,
+                    before,
+                    &certificate,
+                    &opt,
+                    ok.then_some(trajs.len()),
+                ));
+                if ok {
+                    trajs.push(CoverTrajectory {
+                        source: "generated (SCP) + §5.3".into(),
+                        nominal,
+                        certificate,
+                    });
+                    on_accept(trajs.len());
+                }
+            }
+            if ok {
+                // The new seed may make the discarded samples reachable again.
+                work.append(&mut discarded);
+                snapshots.push(CoverSnapshot::new(round, &trajs, &work, &discarded));
+                continue;
+            }
+            let mut rest = discarded.clone();
+            let (est, unc, image) = estimate(&trajs, final_round)?;
+            rest.extend(unc.iter().cloned());
+            let typical =
+                median(trajs.iter().map(|t| t.certificate.delta_stored as f64)).unwrap_or(0.05);
+            let region = alg4::UncoveredRegion::of(P.as_ref(), &rest, 4.0 * typical)
+                .expect("discarded is not empty");
+            let description = region.describe(&free);
+            snapshots.push(CoverSnapshot::new(round, &trajs, &work, &discarded));
+            break (
+                StopReason::NeedsSeed {
+                    region,
+                    description,
+                },
+                est,
+                unc,
+                image,
+            );
+        }
+        if work.is_empty() || trajs.len() >= budget {
+            let (est, unc, image) = estimate(&trajs, final_round)?;
+            final_round += 1;
             let target = problem.synthesis.coverage_target;
             if est.lower >= target {
                 break (StopReason::Covered, est, unc, image);
@@ -473,56 +762,215 @@ pub fn synthesize(problem: &Problem, opts: &SynthOptions) -> Result<Synthesis, S
             work = unc;
             continue;
         }
-        let mut seeds: Vec<Vec<f64>> = Vec::new();
-        let mut cand = work.clone();
-        while seeds.len() < batch.min(budget - trajs.len()) && !cand.is_empty() {
-            let (best, _) = cand
+        round += 1;
+        let room = budget - trajs.len();
+        if opts.generator == Generator::Algorithm4 && trajs.is_empty() {
+            // The first seed: the SCP generator from the centre of Init (then from working samples in
+            // order), optimised by §5.3 like every later one.
+            bars.set_round(round, "first seed (SCP + §5.3)");
+            let centre: Vec<f64> = init
+                .lo
                 .iter()
-                .enumerate()
-                .map(|(i, x)| (i, outside(x, &seeds)))
-                .fold((0, f64::NEG_INFINITY), |a, b| if b.1 > a.1 { b } else { a });
-            let s: Vec<f64> = cand.swap_remove(best).iter().map(|&v| round32(v)).collect();
-            cand.retain(|x| {
-                let e: Vec<f64> = x.iter().zip(&s).map(|(a, b)| a - b).collect();
-                p_norm(P.as_ref(), &e) > typical
-            });
-            seeds.push(s);
-        }
-        let made: Vec<Option<CoverTrajectory>> = seeds.par_iter().map(|s| make(s)).collect();
-        let mut progress = false;
-        for (s, t) in seeds.iter().zip(made) {
-            match t {
-                Some(t) => {
-                    trajs.push(t);
-                    progress = true;
-                    pb.inc(1);
+                .zip(&init.hi)
+                .map(|(l, h)| round32(0.5 * (l + h)))
+                .collect();
+            let seeds: Vec<Vec<f64>> = std::iter::once(centre)
+                .chain(
+                    work.iter()
+                        .take(batch - 1)
+                        .map(|x| x.iter().map(|&v| round32(v)).collect()),
+                )
+                .collect();
+            let made: Vec<_> = seeds.par_iter().map(|s| seed_scp(s)).collect();
+            let mut got = false;
+            for (s, r) in seeds.iter().zip(made) {
+                match r {
+                    Some((before, (nominal, certificate), opt)) if !got && accept(&certificate) => {
+                        records.push(OptRecord::new(
+                            round,
+                            None,
+                            s,
+                            before,
+                            &certificate,
+                            &opt,
+                            Some(0),
+                        ));
+                        trajs.push(CoverTrajectory {
+                            source: "generated (SCP) + §5.3".into(),
+                            nominal,
+                            certificate,
+                        });
+                        on_accept(trajs.len());
+                        got = true;
+                    }
+                    Some(_) if got => {}
+                    _ => {
+                        failed += 1;
+                        work.retain(|x| alg4::dist(P.as_ref(), x, s) > 0.0125);
+                    }
                 }
-                None => {
-                    failed += 1;
-                    // Drop the seed and its close neighbours from the working set so the loop moves on; the
-                    // final fresh sample will find any hole this leaves.
-                    work.retain(|x| {
-                        let e: Vec<f64> = x.iter().zip(s).map(|(a, b)| a - b).collect();
-                        p_norm(P.as_ref(), &e) > 0.25 * typical
-                    });
+            }
+            if !got && work.is_empty() {
+                bars.clear();
+                return Err(SynthError::Nothing(format!(
+                    "{failed} seeds from Init gave no certifiable trajectory"
+                )));
+            }
+            snapshots.push(CoverSnapshot::new(round, &trajs, &work, &discarded));
+            continue;
+        }
+        let typical =
+            median(trajs.iter().map(|t| t.certificate.delta_stored as f64)).unwrap_or(0.05);
+        match opts.generator {
+            Generator::Algorithm4 => {
+                // (5.32) for every uncovered sample; nearest first (ties: sample order).
+                let mut pool: Vec<(f64, usize, usize)> = work
+                    .iter()
+                    .enumerate()
+                    .filter_map(|(i, y)| alg4::gap(P.as_ref(), y, &trajs).map(|(d, m)| (d, m, i)))
+                    .collect();
+                pool.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.2.cmp(&b.2)));
+                let mut items: Vec<(usize, usize, Vec<f64>)> = Vec::new(); // (sample, ball m, ŷ)
+                let mut drop: Vec<usize> = Vec::new();
+                for &(_, mi, i) in &pool {
+                    if items.len() >= batch.min(room) {
+                        break;
+                    }
+                    let tm = &trajs[mi];
+                    // The δε floor: a ball below it is not grown further.
+                    if (tm.certificate.delta_stored as f64) < delta_eps {
+                        drop.push(i);
+                        continue;
+                    }
+                    let Some(yh) = alg4::project_onto_boundary(
+                        P.as_ref(),
+                        &work[i],
+                        &tm.nominal.x[0],
+                        tm.certificate.delta_stored as f64,
+                    ) else {
+                        drop.push(i);
+                        continue;
+                    };
+                    // Spread a batch: one seed per neighbourhood of the typical radius.
+                    if items
+                        .iter()
+                        .any(|(_, _, z)| alg4::dist(P.as_ref(), z, &yh) < typical)
+                    {
+                        continue;
+                    }
+                    items.push((i, mi, yh));
+                }
+                bars.set_round(round, "optimising (Algorithm 4, §5.3)");
+                bars.batch.set_length(items.len() as u64);
+                bars.batch.set_position(0);
+                let made: Vec<_> = items
+                    .par_iter()
+                    .map(|(_, mi, yh)| {
+                        let v = alg4::feedback_law_reference(&trajs[*mi]);
+                        let r = optimise(yh, &v);
+                        bars.batch.inc(1);
+                        r
+                    })
+                    .collect();
+                for ((i, mi, yh), (before, (nominal, certificate), opt)) in items.iter().zip(made) {
+                    let cand = CoverTrajectory {
+                        source: format!("Algorithm 4 from #{mi} + §5.3"),
+                        nominal,
+                        certificate,
+                    };
+                    // Accept when certified at the δε floor and it covers its target or some sample
+                    // still uncovered (earlier acceptances of this round included).
+                    let ok = accept(&cand.certificate)
+                        && (alg4::covers(P.as_ref(), &cand, &work[*i])
+                            || work
+                                .iter()
+                                .any(|x| alg4::covers(P.as_ref(), &cand, x) && outside(&trajs, x)));
+                    records.push(OptRecord::new(
+                        round,
+                        Some(*mi),
+                        yh,
+                        before,
+                        &cand.certificate,
+                        &opt,
+                        ok.then_some(trajs.len()),
+                    ));
+                    if ok {
+                        trajs.push(cand);
+                        on_accept(trajs.len());
+                    } else {
+                        failed += 1;
+                        drop.push(*i);
+                    }
+                }
+                drop.sort_unstable();
+                drop.dedup();
+                for &i in drop.iter().rev() {
+                    discarded.push(work.swap_remove(i));
+                }
+            }
+            Generator::Scp => {
+                // Algorithm 1: seeds are uncovered working samples, farthest first (greedy, spread by the
+                // typical radius).
+                let outside_by = |x: &[f64], extra: &[Vec<f64>]| -> f64 {
+                    let mut d = alg4::gap(P.as_ref(), x, &trajs).map_or(f64::INFINITY, |g| g.0);
+                    for c in extra {
+                        d = d.min(alg4::dist(P.as_ref(), x, c) - typical);
+                    }
+                    d
+                };
+                let mut seeds: Vec<Vec<f64>> = Vec::new();
+                let mut cand = work.clone();
+                while seeds.len() < batch.min(room) && !cand.is_empty() {
+                    let (best, _) = cand
+                        .iter()
+                        .enumerate()
+                        .map(|(i, x)| (i, outside_by(x, &seeds)))
+                        .fold((0, f64::NEG_INFINITY), |a, b| if b.1 > a.1 { b } else { a });
+                    let s: Vec<f64> = cand.swap_remove(best).iter().map(|&v| round32(v)).collect();
+                    cand.retain(|x| alg4::dist(P.as_ref(), x, &s) > typical);
+                    seeds.push(s);
+                }
+                bars.set_round(round, "generating (SCP, Algorithm 1)");
+                let made: Vec<Option<CoverTrajectory>> =
+                    seeds.par_iter().map(|s| make(s)).collect();
+                let mut progress = false;
+                for (s, t) in seeds.iter().zip(made) {
+                    match t {
+                        Some(t) => {
+                            trajs.push(t);
+                            progress = true;
+                            on_accept(trajs.len());
+                        }
+                        None => {
+                            failed += 1;
+                            // Drop the seed and its close neighbours from the working set so the loop moves
+                            // on; the final fresh sample will find any hole this leaves.
+                            work.retain(|x| alg4::dist(P.as_ref(), x, s) > 0.25 * typical);
+                        }
+                    }
+                }
+                if !progress && work.is_empty() && trajs.is_empty() {
+                    bars.clear();
+                    return Err(SynthError::Nothing(format!(
+                        "{failed} seeds from Init gave no certifiable trajectory"
+                    )));
                 }
             }
         }
-        if !progress && work.is_empty() && trajs.is_empty() {
-            pb.finish_and_clear();
-            return Err(SynthError::Nothing(format!(
-                "{failed} seeds from Init gave no certifiable trajectory"
-            )));
-        }
+        snapshots.push(CoverSnapshot::new(round, &trajs, &work, &discarded));
     };
-    pb.finish_and_clear();
+    bars.clear();
     if trajs.is_empty() {
         return Err(SynthError::Nothing(
             "no trajectory could be certified".into(),
         ));
     }
     timings.push((
-        "cover (Algorithm 1)".to_string(),
+        match opts.generator {
+            Generator::Algorithm4 => "cover (Algorithm 4 + §5.3)",
+            Generator::Scp => "cover (Algorithm 1, SCP)",
+        }
+        .to_string(),
         t1.elapsed().as_secs_f64(),
     ));
     if stop != StopReason::Covered {
@@ -565,6 +1013,9 @@ pub fn synthesize(problem: &Problem, opts: &SynthOptions) -> Result<Synthesis, S
         coverage,
         uncovered,
         stop,
+        generator: opts.generator,
+        optimization: records,
+        snapshots,
         verify,
         timings,
         warnings,
