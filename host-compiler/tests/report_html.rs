@@ -150,6 +150,7 @@ fn sample() -> ReportData {
             worst_unsafe_margin: 0.12,
             worst_input_margin: 0.004,
         }),
+        optimization: None,
         timings: vec![
             ("caf".into(), 0.042),
             ("trajectories".into(), 3.5),
@@ -500,4 +501,108 @@ fn writes_example_report() {
     let written = std::fs::read_to_string(&path).unwrap();
     assert_eq!(written, render_html(&sample()));
     println!("report written to {}", path.display());
+}
+
+/// The optimisation section: summary with the median gain, one δ-history plot, the before/after tube
+/// plot, one frame per round (at most six), the run table, and the seed request when it is the stop reason.
+#[test]
+fn optimization_section_shows_history_tubes_frames_and_seed_request() {
+    use host_compiler::report::optimization::{
+        CoverageFrame, OptRun, OptimizationReport, SeedRequest, TubeComparison,
+    };
+    let mut d = sample();
+    assert!(
+        !render_html(&d).contains("id=\"optimization\""),
+        "no data, no section"
+    );
+    let run = |origin: Option<usize>, accepted: Option<usize>, before: f64, after: f64| OptRun {
+        round: 1,
+        origin,
+        accepted,
+        delta_before: before,
+        delta_after: after,
+        history: vec![before, 0.5 * (before + after), after],
+        iterations: 2,
+        stop: "Converged".into(),
+    };
+    let t = &d.trajectories[1];
+    let shrink = |e: &Ellipse2| Ellipse2 {
+        center: e.center,
+        M: [
+            [0.5 * e.M[0][0], 0.5 * e.M[0][1]],
+            [0.5 * e.M[1][0], 0.5 * e.M[1][1]],
+        ],
+    };
+    d.optimization = Some(OptimizationReport {
+        generator: "algorithm4".into(),
+        runs: vec![
+            run(None, Some(0), 0.1, 0.12),
+            run(Some(0), Some(1), 0.05, 0.15),
+            run(Some(0), None, 0.02, 0.03),
+            run(Some(1), Some(2), 0.04, 0.1),
+        ],
+        showcase: Some(TubeComparison {
+            trajectory: 1,
+            delta_before: 0.05,
+            delta_after: 0.15,
+            before_path: t.path.clone(),
+            before_tube: t.tube.iter().map(shrink).collect(),
+            after_path: t.path.clone(),
+            after_tube: t.tube.clone(),
+        }),
+        frames: (1..=9)
+            .map(|r| CoverageFrame {
+                round: r,
+                trajectories: r.min(3),
+                uncovered: vec![[0.02, 0.97]; 10 - r],
+                samples: 100,
+            })
+            .collect(),
+        needs_seed: Some(SeedRequest {
+            description: "2 uncovered samples in x1 ∈ [0.02, 0.05]".into(),
+            region: Shape2::Box {
+                lo: [0.02, 0.6],
+                hi: [0.05, 0.97],
+            },
+            clusters: vec![],
+        }),
+    });
+    let o = d.optimization.as_ref().unwrap();
+    // Gains of the Algorithm 4 seeds: 3, 1.5, 2.5 → median 2.5.
+    assert_eq!(o.median_gain(), Some(2.5));
+    let html = render_html(&d);
+    for id in [
+        "optimization",
+        "delta-history",
+        "tube-before-after",
+        "needs-seed",
+        "frame-1",
+        "frame-9",
+    ] {
+        assert!(html.contains(&format!("id=\"{id}\"")), "missing {id}");
+    }
+    assert_eq!(
+        html.matches("class=\"frame\"").count(),
+        6,
+        "six of nine rounds drawn"
+    );
+    // 3 main plots + δ history + before/after + 6 frames.
+    assert_eq!(html.matches("<svg").count(), 11);
+    assert_eq!(body_rows(table(&html, "optimization-table")), 4);
+    assert!(
+        html.contains("<tr><th>Median δ after ÷ δ before</th><td>2.5</td></tr>"),
+        "{}",
+        &html[html.find("id=\"optimization\"").unwrap()..][..1500]
+    );
+    assert!(
+        html.contains("needs a new seed trajectory")
+            || html.contains("Needs a new seed trajectory")
+    );
+    assert!(html.contains("x1 ∈ [0.02, 0.05]"));
+    assert!(html.contains("not accepted"));
+    write_report(
+        &d,
+        &std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("report-optimization"),
+    )
+    .unwrap();
 }

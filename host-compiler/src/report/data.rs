@@ -105,6 +105,8 @@ pub struct ReportData {
     pub image_bytes: usize,
     pub image_path: String,
     pub verify: Option<VerifySummary>,
+    /// How the cover grew and what §5.3 optimisation did (section `optimization`), when recorded.
+    pub optimization: Option<super::optimization::OptimizationReport>,
     /// (phase, seconds).
     pub timings: Vec<(String, f64)>,
     pub warnings: Vec<String>,

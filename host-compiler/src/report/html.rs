@@ -76,6 +76,7 @@ pub fn render_html(data: &ReportData) -> String {
     );
     header(&mut h, data);
     plots(&mut h, data);
+    super::optimization::section(&mut h, data);
     trajectory_table(&mut h, data);
     coverage_table(&mut h, data);
     certificate(&mut h, data);
@@ -116,6 +117,7 @@ figure svg{max-width:100%;height:auto;display:block}
 figcaption{font-size:.9em;color:#444;margin-top:.4em}
 .plots>figure{flex:1 1 520px;max-width:640px}
 #input-plot{max-width:940px}
+.plots.frames>figure{flex:0 1 380px}
 .legend{display:flex;flex-wrap:wrap;gap:.3em 1.1em;margin:.3em 0}
 .sw{display:inline-block;width:1.1em;height:.8em;border:1px solid #555;vertical-align:middle;margin-right:.3em}
 .ln{display:inline-block;width:1.6em;height:0;border-top:3px solid;vertical-align:middle;margin-right:.3em}
@@ -125,7 +127,7 @@ code{font-family:ui-monospace,SFMono-Regular,Menlo,Consolas,"DejaVu Sans Mono",m
 footer{margin-top:2.5em;color:#57606a;font-size:.85em}
 "#;
 
-fn kv(h: &mut String, rows: &[(&str, String)]) {
+pub(super) fn kv(h: &mut String, rows: &[(&str, String)]) {
     h.push_str("<table class=\"kv\">\n");
     for (k, v) in rows {
         let _ = writeln!(h, "<tr><th>{}</th><td>{}</td></tr>", escape(k), v);

@@ -9,8 +9,9 @@ use super::data::{ReportData, Shape2, TrajectoryReport};
 use super::format::{escape, num};
 use super::planar::{clip_to_rect, ellipse_points, ellipse_rect, shape_polygon, shape_rect, Rect};
 
-type Chart<'a, 'b> = ChartContext<'a, SVGBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
-type DynResult<T> = Result<T, Box<dyn std::error::Error>>;
+pub(super) type Chart<'a, 'b> =
+    ChartContext<'a, SVGBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+pub(super) type DynResult<T> = Result<T, Box<dyn std::error::Error>>;
 
 /// Tableau-10: distinguishable, and readable on white.
 const PALETTE: [RGBColor; 10] = [
@@ -32,7 +33,7 @@ pub const UNSAFE_COLOR: RGBColor = RGBColor(207, 34, 46);
 pub const BALL_COLOR: RGBColor = RGBColor(31, 119, 180);
 
 /// Width of the equal-aspect plots' canvas, in pixels.
-const PLANE_WIDTH: u32 = 600;
+pub(super) const PLANE_WIDTH: u32 = 600;
 /// Up to this many trajectories, plots and legends show each one individually.
 pub const FEW_TRAJECTORIES: usize = 12;
 /// Most tube ellipses drawn per trajectory (plus the first, the last and the one at t*).
@@ -125,7 +126,7 @@ pub fn input_measure(label: &str) -> String {
 }
 
 /// An SVG string, or an HTML note saying why the plot could not be drawn.
-fn svg_or_note(r: DynResult<String>) -> String {
+pub(super) fn svg_or_note(r: DynResult<String>) -> String {
     match r {
         Ok(s) => s,
         Err(e) => format!(
@@ -139,7 +140,7 @@ fn to_coords(ps: &[[f64; 2]]) -> Vec<(f64, f64)> {
     ps.iter().map(|p| (p[0], p[1])).collect()
 }
 
-fn closed(ps: &[[f64; 2]]) -> Vec<(f64, f64)> {
+pub(super) fn closed(ps: &[[f64; 2]]) -> Vec<(f64, f64)> {
     let mut v = to_coords(ps);
     if let Some(&f) = v.first() {
         v.push(f);
@@ -147,12 +148,12 @@ fn closed(ps: &[[f64; 2]]) -> Vec<(f64, f64)> {
     v
 }
 
-fn finite2(p: &[f64; 2]) -> bool {
+pub(super) fn finite2(p: &[f64; 2]) -> bool {
     p[0].is_finite() && p[1].is_finite()
 }
 
 /// Axis tick label: few digits, so ticks stay short.
-fn tick(v: &f64) -> String {
+pub(super) fn tick(v: &f64) -> String {
     if v.abs() < 1e-12 {
         "0".into()
     } else {
@@ -161,14 +162,14 @@ fn tick(v: &f64) -> String {
 }
 
 /// Canvas height for an equal-aspect plot of `view` on a `PLANE_WIDTH`-wide canvas.
-fn plane_height(view: &Rect) -> u32 {
+pub(super) fn plane_height(view: &Rect) -> u32 {
     let plot_w = (PLANE_WIDTH - 90) as f64;
     let ratio = (view.height() / view.width()).clamp(0.45, 1.25);
     (plot_w * ratio) as u32 + 70
 }
 
 /// A chart on `root` showing at least `view` with one data unit equally long on both axes.
-fn equal_aspect_chart<'a, 'b>(
+pub(super) fn equal_aspect_chart<'a, 'b>(
     root: &'a DrawingArea<SVGBackend<'b>, plotters::coord::Shift>,
     view: Rect,
     labels: &[String; 2],
@@ -199,7 +200,7 @@ fn equal_aspect_chart<'a, 'b>(
 }
 
 /// Fills and outlines a polygon, clipped to the view.
-fn draw_region(
+pub(super) fn draw_region(
     chart: &mut Chart,
     poly: &[[f64; 2]],
     view: &Rect,
@@ -228,7 +229,7 @@ fn draw_region(
 }
 
 /// The view of the workspace plot: Init, Goal, bounded Unsafe parts, paths and the drawn tubes.
-fn workspace_view(data: &ReportData) -> Rect {
+pub(super) fn workspace_view(data: &ReportData) -> Rect {
     let mut core = Rect::EMPTY;
     for t in &data.trajectories {
         core.include_all(&t.path);

@@ -297,6 +297,8 @@ pub struct Synthesis {
     pub generator: Generator,
     pub optimization: Vec<OptRecord>,
     pub snapshots: Vec<CoverSnapshot>,
+    /// Working samples drawn (the denominator of the snapshots).
+    pub working_samples: usize,
     pub verify: VerifyReport,
     pub timings: Vec<(String, f64)>,
     pub warnings: Vec<String>,
@@ -1016,6 +1018,7 @@ pub fn synthesize(problem: &Problem, opts: &SynthOptions) -> Result<Synthesis, S
         generator: opts.generator,
         optimization: records,
         snapshots,
+        working_samples: opts.working_samples,
         verify,
         timings,
         warnings,

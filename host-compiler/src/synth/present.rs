@@ -4,6 +4,7 @@
 use super::Synthesis;
 use crate::linalg::{spectral_norm, sym_fn, PdRoots};
 use crate::report::data::{Ellipse2, ReportData, Shape2, TrajectoryReport, VerifySummary};
+use crate::report::optimization::OptimizationReport;
 use crate::spec::sets::{Coords, SetDesc, Shape};
 use crate::spec::{InputSet, Problem};
 use faer::Mat;
@@ -229,6 +230,7 @@ pub fn report_data(
         r_crit: s.constants.r_crit(eps),
         image_bytes: s.image.len(),
         image_path: image_path.to_string(),
+        optimization: Some(optimization_data(s, pl, ipl, &|r| scale(Mtube, r))),
         verify: Some(VerifySummary {
             runs: s.verify.interior_runs + s.verify.boundary_runs - s.verify.boundary_rejected,
             violations: s.verify.violations,
@@ -238,5 +240,95 @@ pub fn report_data(
         }),
         timings: s.timings.clone(),
         warnings,
+    }
+}
+
+/// The optimisation section's data: every §5.3 run, the accepted Algorithm 4 trajectory with the largest
+/// gain before and after (workspace plane `pl`), the cover after each round and any seed request (Init
+/// plane `ipl`). `tube(r)` is the generator of a tube ellipse of radius r in the workspace plane.
+fn optimization_data(
+    s: &Synthesis,
+    pl: [usize; 2],
+    ipl: [usize; 2],
+    tube: &dyn Fn(f64) -> [[f64; 2]; 2],
+) -> OptimizationReport {
+    use crate::report::optimization::{CoverageFrame, OptRun, SeedRequest, TubeComparison};
+    let runs = s
+        .optimization
+        .iter()
+        .map(|r| OptRun {
+            round: r.round,
+            origin: r.origin,
+            accepted: r.accepted,
+            delta_before: r.delta_before,
+            delta_after: r.delta_after,
+            history: r.history.clone(),
+            iterations: r.iterations,
+            stop: format!("{:?}", r.stop),
+        })
+        .collect();
+    let project =
+        |xs: &[Vec<f64>]| -> Vec<[f64; 2]> { xs.iter().map(|x| [x[pl[0]], x[pl[1]]]).collect() };
+    let tubes = |xs: &[Vec<f64>], r: f64| -> Vec<Ellipse2> {
+        xs.iter()
+            .map(|x| Ellipse2 {
+                center: [x[pl[0]], x[pl[1]]],
+                M: tube(r),
+            })
+            .collect()
+    };
+    // The showcase: an accepted Algorithm 4 seed with the largest finite gain, else any accepted run.
+    let best = s
+        .optimization
+        .iter()
+        .filter(|r| r.accepted.is_some() && r.origin.is_some() && r.gain().is_finite())
+        .fold(None::<&crate::synth::OptRecord>, |b, r| match b {
+            Some(b) if b.gain() >= r.gain() => Some(b),
+            _ => Some(r),
+        })
+        .or_else(|| s.optimization.iter().find(|r| r.accepted.is_some()));
+    let showcase = best.and_then(|r| {
+        let t = s.trajectories.get(r.accepted?)?;
+        Some(TubeComparison {
+            trajectory: r.accepted?,
+            delta_before: r.delta_before,
+            delta_after: t.certificate.delta,
+            before_path: project(&r.before.x),
+            before_tube: tubes(&r.before.x, r.delta_before),
+            after_path: project(&t.nominal.x),
+            after_tube: tubes(&t.nominal.x, t.certificate.delta),
+        })
+    });
+    let frames = s
+        .snapshots
+        .iter()
+        .map(|f| CoverageFrame {
+            round: f.round,
+            trajectories: f.trajectories,
+            uncovered: f.uncovered.iter().map(|x| [x[ipl[0]], x[ipl[1]]]).collect(),
+            samples: s.working_samples,
+        })
+        .collect();
+    let bx = |lo: &[f64], hi: &[f64]| Shape2::Box {
+        lo: [lo[ipl[0]], lo[ipl[1]]],
+        hi: [hi[ipl[0]], hi[ipl[1]]],
+    };
+    let needs_seed = match &s.stop {
+        crate::synth::StopReason::NeedsSeed {
+            region,
+            description,
+        } => Some(SeedRequest {
+            description: description.clone(),
+            region: bx(&region.lo, &region.hi),
+            clusters: region.clusters.iter().map(|c| bx(&c.lo, &c.hi)).collect(),
+        }),
+        _ => None,
+    };
+    OptimizationReport {
+        generator: s.generator.to_string(),
+        runs,
+        showcase,
+        frames,
+        needs_seed,
     }
 }
