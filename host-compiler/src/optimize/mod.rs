@@ -7,9 +7,14 @@
 //!
 //! API changes for callers (newest first): none yet.
 
-use crate::certify::{self, Certificate, Loop, LoopConstants};
+mod bundle;
+pub mod pieces;
+pub mod potential;
+pub mod setup;
+
+use crate::certify::{Certificate, Loop, LoopConstants};
 use crate::trajectory::Nominal;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::AtomicBool;
 
 /// Settings of the bundle method for [`maximize_delta`], a builder with documented defaults.
 #[derive(Clone, Debug)]
@@ -124,22 +129,5 @@ pub fn maximize_delta(
     settings: &BundleSettings,
     cancel: &AtomicBool,
 ) -> Optimized {
-    let _ = (steps_max, settings);
-    // Temporary: the start, re-certified (the bundle method replaces this).
-    let (nominal, certificate) = certify::shipped(lp, lc, x0, v0);
-    let d0 = certificate.delta;
-    let stop = if cancel.load(Ordering::Relaxed) {
-        OptStop::Cancelled
-    } else {
-        OptStop::NoProgress
-    };
-    Optimized {
-        steps_before: v0.len(),
-        steps_after: v0.len(),
-        nominal,
-        certificate,
-        history: vec![d0],
-        iterations: 0,
-        stop,
-    }
+    bundle::maximize(lp, lc, x0, v0, steps_max, settings, cancel)
 }

@@ -1,0 +1,439 @@
+//! Potential-function descent (§5.2): a smooth cost that is zero exactly when the nominal keeps a desired
+//! robustness δ_d, its adjoint gradient (§5.2.1), the adaptive-step gradient descent of Algorithm 3, an
+//! L-BFGS alternative from `argmin`, and the time-optimal bisection over the terminal step of §5.2.3
+//! (Example 5.2).
+//!
+//! **Potentials** (§5.2.3, in the CAF metric and on the same pieces the certificate takes, so that zero
+//! cost means the certificate keeps δ_d). With δ_t = δ_d + 2μ (μ a small margin) and (·)₊ = max(·, 0):
+//!
+//! * Goal, terminal: G(x̃(N)) = α/2 · (δ_t − depth_P(x̃(N), Goal))₊²
+//! * Unsafe, incremental: h Σ_κ ½ (δ_t − δ_Unsafe(κ))₊², δ_Unsafe(κ) with the inter-sample margin
+//! * Input, incremental: β h Σ_κ ½ (δ_t − δ_Input(κ))₊², δ_Input(κ) with the f32 rounding margin
+//!
+//! (h the sample period, the text's integrals as sums). Example 5.2 uses a quadratic pull to the centre of
+//! Goal and a log barrier at Unsafe; both are nonzero for some acceptable trajectories or infinite for
+//! infeasible seeds, so here every potential is a squared hinge on the certificate's own piece: C¹, zero on
+//! the acceptable set and finite everywhere (an infeasible seed can be repaired).
+//!
+//! **Termination.** As in Example 5.2, a bound on the cost bounds every violation: J ≤ ½·min(α, h, βh)·μ²
+//! implies each piece is ≥ δ_t − μ = δ_d + μ. The answer is then re-certified through
+//! [`crate::certify::shipped`]; `reached` is true only when that certificate keeps δ_d.
+
+use super::pieces::{LocalGrad, Pieces};
+use crate::certify::{self, Certificate, Loop, LoopConstants};
+use crate::trajectory::{simulate, Nominal};
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::time::Instant;
+
+/// Settings of the potential-function descent, with documented defaults.
+#[derive(Clone, Debug)]
+pub struct PotentialSettings {
+    /// δ_d, the robustness the trajectory must keep (default 0.01).
+    pub delta: f64,
+    /// α, weight of the Goal potential (default 1).
+    pub weight_goal: f64,
+    /// β, weight of the Input potential relative to Unsafe (default 1).
+    pub weight_input: f64,
+    /// μ/δ_d, the margin that absorbs f32 rounding of v in the re-certification (default 1e-3).
+    pub margin: f64,
+    /// Algorithm 3: factor α > 1 on the step after a decrease (default 2).
+    pub grow: f64,
+    /// Algorithm 3: factor 0 < β < 1 on the step after an increase (default 0.5).
+    pub shrink: f64,
+    /// Algorithm 3: first step λ (default 1).
+    pub initial_step: f64,
+    /// Algorithm 3: stop when λ falls below ε (default 1e-12).
+    pub min_step: f64,
+    /// Iterations at most, per descent (default 2000).
+    pub max_iterations: usize,
+    /// L-BFGS memory (default 10).
+    pub lbfgs_memory: usize,
+}
+
+impl Default for PotentialSettings {
+    fn default() -> Self {
+        Self {
+            delta: 0.01,
+            weight_goal: 1.0,
+            weight_input: 1.0,
+            margin: 1e-3,
+            grow: 2.0,
+            shrink: 0.5,
+            initial_step: 1.0,
+            min_step: 1e-12,
+            max_iterations: 2000,
+            lbfgs_memory: 10,
+        }
+    }
+}
+
+impl PotentialSettings {
+    pub fn delta(mut self, v: f64) -> Self {
+        self.delta = v;
+        self
+    }
+    pub fn weight_goal(mut self, v: f64) -> Self {
+        self.weight_goal = v;
+        self
+    }
+    pub fn weight_input(mut self, v: f64) -> Self {
+        self.weight_input = v;
+        self
+    }
+    pub fn margin(mut self, v: f64) -> Self {
+        self.margin = v;
+        self
+    }
+    pub fn grow(mut self, v: f64) -> Self {
+        self.grow = v;
+        self
+    }
+    pub fn shrink(mut self, v: f64) -> Self {
+        self.shrink = v;
+        self
+    }
+    pub fn initial_step(mut self, v: f64) -> Self {
+        self.initial_step = v;
+        self
+    }
+    pub fn min_step(mut self, v: f64) -> Self {
+        self.min_step = v;
+        self
+    }
+    pub fn max_iterations(mut self, v: usize) -> Self {
+        self.max_iterations = v;
+        self
+    }
+    pub fn lbfgs_memory(mut self, v: usize) -> Self {
+        self.lbfgs_memory = v;
+        self
+    }
+}
+
+/// Which descent to run.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+pub enum DescentMethod {
+    /// Algorithm 3: gradient steps with the adaptive step size.
+    Algorithm3,
+    /// `argmin`'s L-BFGS with a Moré–Thuente line search.
+    Lbfgs,
+}
+
+/// The potential cost of §5.2.3 for one loop, start and terminal step count.
+pub struct Potential<'a, 'b> {
+    pc: Pieces<'a, 'b>,
+    x0: Vec<f64>,
+    steps: usize,
+    m: usize,
+    /// δ_t = δ_d + 2μ.
+    target: f64,
+    alpha: f64,
+    beta: f64,
+    h: f64,
+    /// Componentwise rounding bound and its 2-norm, held fixed (taken from the start's certificate, ×2).
+    eps: Vec<f64>,
+    eps_f32: f64,
+    /// J at or below this means every piece ≥ δ_d + μ.
+    pub zero_tol: f64,
+    evals: AtomicUsize,
+}
+
+impl<'a, 'b> Potential<'a, 'b> {
+    /// `eps_from`: a certificate whose rounding bound is taken (doubled) as the fixed ε of the Input and
+    /// Unsafe pieces.
+    pub fn new(
+        lp: &'a Loop<'b>,
+        lc: &'a LoopConstants,
+        x0: &[f64],
+        steps: usize,
+        eps_from: &Certificate,
+        s: &PotentialSettings,
+    ) -> Self {
+        let mu = s.margin * s.delta.abs() + 1e-12;
+        let h = lp.continuous.map(|c| c.h).unwrap_or(1.0);
+        let alpha = s.weight_goal;
+        let beta = s.weight_input;
+        Self {
+            pc: Pieces::new(lp, lc),
+            x0: x0.to_vec(),
+            steps,
+            m: lp.K.nrows(),
+            target: s.delta + 2.0 * mu,
+            alpha,
+            beta,
+            h,
+            eps: eps_from.eps_components.iter().map(|e| 2.0 * e).collect(),
+            eps_f32: 2.0 * eps_from.eps_f32,
+            zero_tol: 0.5 * alpha.min(h).min(beta * h) * mu * mu,
+            evals: AtomicUsize::new(0),
+        }
+    }
+
+    /// Number of cost evaluations so far.
+    pub fn evaluations(&self) -> usize {
+        self.evals.load(Ordering::Relaxed)
+    }
+
+    pub fn steps(&self) -> usize {
+        self.steps
+    }
+
+    fn nominal(&self, v: &[Vec<f64>]) -> Nominal {
+        let lp = self.pc.lp;
+        simulate(lp.A, lp.B, lp.g, lp.K, &self.x0, v)
+    }
+
+    /// J(v) and, when asked, ∂J/∂v by the adjoint sweep.
+    pub fn eval(&self, v: &[Vec<f64>], want_grad: bool) -> (f64, Option<Vec<Vec<f64>>>) {
+        self.evals.fetch_add(1, Ordering::Relaxed);
+        let nom = self.nominal(v);
+        let N = self.steps;
+        let t = self.target;
+        let mut J = 0.0;
+        let mut local: Vec<(f64, LocalGrad)> = Vec::new();
+        let (g, lg) = self.pc.goal_grad(&nom, N);
+        if g < t {
+            J += 0.5 * self.alpha * (t - g) * (t - g);
+            local.push((-self.alpha * (t - g), lg));
+        }
+        let uns = self.pc.unsafe_values(&nom, self.eps_f32);
+        for (k, &u) in uns.iter().enumerate() {
+            if u < t {
+                J += 0.5 * self.h * (t - u) * (t - u);
+                if want_grad {
+                    let (_, lg) = self.pc.unsafe_grad(&nom, k, self.eps_f32);
+                    local.push((-self.h * (t - u), lg));
+                }
+            }
+        }
+        let inp = self.pc.input_values(&nom, &self.eps);
+        for (k, &u) in inp.iter().enumerate() {
+            if u < t {
+                J += 0.5 * self.beta * self.h * (t - u) * (t - u);
+                if want_grad {
+                    let (_, lg) = self.pc.input_grad(&nom, k, &self.eps);
+                    local.push((-self.beta * self.h * (t - u), lg));
+                }
+            }
+        }
+        if !J.is_finite() {
+            return (f64::INFINITY, None);
+        }
+        if !want_grad {
+            return (J, None);
+        }
+        let refs: Vec<(f64, &LocalGrad)> = local.iter().map(|(w, l)| (*w, l)).collect();
+        (J, Some(self.pc.adjoint(N, &refs)))
+    }
+
+    fn unflatten(&self, z: &[f64]) -> Vec<Vec<f64>> {
+        z.chunks(self.m).map(|c| c.to_vec()).collect()
+    }
+}
+
+/// The result of one descent.
+#[derive(Clone, Debug)]
+pub struct Descent {
+    /// The final reference inputs (before f32 rounding).
+    pub v: Vec<Vec<f64>>,
+    /// J of the final iterate.
+    pub cost: f64,
+    /// J reached the zero tolerance.
+    pub zero_cost: bool,
+    /// The shipped nominal and its certificate.
+    pub nominal: Nominal,
+    pub certificate: Certificate,
+    /// Zero cost *and* the re-certified δ keeps δ_d.
+    pub reached: bool,
+    pub iterations: usize,
+    pub evaluations: usize,
+    pub seconds: f64,
+}
+
+/// Algorithm 3 on a potential: v ← v − λq; λ ← αλ after a decrease (the step is kept), λ ← βλ after an
+/// increase (the step is dropped), until J reaches the zero tolerance, λ < ε or the iteration cap.
+fn algorithm3(
+    pot: &Potential<'_, '_>,
+    v0: &[Vec<f64>],
+    s: &PotentialSettings,
+) -> (Vec<Vec<f64>>, f64, usize) {
+    let mut v = v0.to_vec();
+    let (mut J, mut q) = pot.eval(&v, true);
+    let mut lam = s.initial_step;
+    let mut it = 0;
+    while lam > s.min_step && J > pot.zero_tol && it < s.max_iterations {
+        let Some(qq) = q.as_ref() else { break };
+        let trial: Vec<Vec<f64>> = v
+            .iter()
+            .zip(qq)
+            .map(|(a, b)| a.iter().zip(b).map(|(x, y)| x - lam * y).collect())
+            .collect();
+        let (Jt, qt) = pot.eval(&trial, true);
+        if Jt < J {
+            v = trial;
+            J = Jt;
+            q = qt;
+            lam *= s.grow;
+        } else {
+            lam *= s.shrink;
+        }
+        it += 1;
+    }
+    (v, J, it)
+}
+
+struct ArgminProblem<'p, 'a, 'b>(&'p Potential<'a, 'b>);
+
+impl argmin::core::CostFunction for ArgminProblem<'_, '_, '_> {
+    type Param = Vec<f64>;
+    type Output = f64;
+    fn cost(&self, p: &Self::Param) -> Result<f64, argmin::core::Error> {
+        Ok(self.0.eval(&self.0.unflatten(p), false).0)
+    }
+}
+
+impl argmin::core::Gradient for ArgminProblem<'_, '_, '_> {
+    type Param = Vec<f64>;
+    type Gradient = Vec<f64>;
+    fn gradient(&self, p: &Self::Param) -> Result<Vec<f64>, argmin::core::Error> {
+        let (_, g) = self.0.eval(&self.0.unflatten(p), true);
+        let g = g.ok_or_else(|| argmin::core::Error::msg("cost is not finite"))?;
+        Ok(g.into_iter().flatten().collect())
+    }
+}
+
+/// L-BFGS from `argmin` (Moré–Thuente line search), stopped at the same zero tolerance.
+fn lbfgs(
+    pot: &Potential<'_, '_>,
+    v0: &[Vec<f64>],
+    s: &PotentialSettings,
+) -> (Vec<Vec<f64>>, f64, usize) {
+    use argmin::core::{Executor, State};
+    use argmin::solver::linesearch::MoreThuenteLineSearch;
+    use argmin::solver::quasinewton::LBFGS;
+    let z0: Vec<f64> = v0.iter().flatten().copied().collect();
+    let J0 = pot.eval(v0, false).0;
+    if J0 <= pot.zero_tol {
+        return (v0.to_vec(), J0, 0);
+    }
+    let solver = LBFGS::new(MoreThuenteLineSearch::new(), s.lbfgs_memory.max(1));
+    let solver = match solver
+        .with_tolerance_grad(0.0)
+        .and_then(|sv| sv.with_tolerance_cost(0.0))
+    {
+        Ok(sv) => sv,
+        Err(_) => return (v0.to_vec(), J0, 0),
+    };
+    let run = Executor::new(ArgminProblem(pot), solver)
+        .configure(|st| {
+            st.param(z0)
+                .max_iters(s.max_iterations as u64)
+                .target_cost(pot.zero_tol)
+        })
+        .run();
+    match run {
+        Ok(res) => {
+            let st = res.state();
+            match st.get_best_param() {
+                Some(p) => (pot.unflatten(p), st.get_best_cost(), st.get_iter() as usize),
+                None => (v0.to_vec(), J0, st.get_iter() as usize),
+            }
+        }
+        // A failed line search (e.g. at a kink of the hinge) ends the run; keep the start.
+        Err(_) => (v0.to_vec(), J0, 0),
+    }
+}
+
+/// Descend the potential of §5.2.3 from `v0` (its length is the terminal step N) and re-certify the
+/// answer through [`certify::shipped`].
+pub fn descend(
+    lp: &Loop<'_>,
+    lc: &LoopConstants,
+    x0: &[f64],
+    v0: &[Vec<f64>],
+    s: &PotentialSettings,
+    method: DescentMethod,
+) -> Descent {
+    let t = Instant::now();
+    let (_, c0) = certify::shipped(lp, lc, x0, v0);
+    let pot = Potential::new(lp, lc, x0, v0.len(), &c0, s);
+    let (v, cost, iterations) = match method {
+        DescentMethod::Algorithm3 => algorithm3(&pot, v0, s),
+        DescentMethod::Lbfgs => lbfgs(&pot, v0, s),
+    };
+    let (nominal, certificate) = certify::shipped(lp, lc, x0, &v);
+    let zero_cost = cost <= pot.zero_tol;
+    let reached = zero_cost && certificate.is_certified() && certificate.delta >= s.delta;
+    Descent {
+        v,
+        cost,
+        zero_cost,
+        nominal,
+        certificate,
+        reached,
+        iterations,
+        evaluations: pot.evaluations(),
+        seconds: t.elapsed().as_secs_f64(),
+    }
+}
+
+/// The result of the time-optimal bisection.
+#[derive(Clone, Debug)]
+pub struct TimeOptimal {
+    /// Terminal step of the seed (its k*) and of the answer.
+    pub steps_before: usize,
+    pub steps_after: usize,
+    /// δ the answer keeps (δ_d).
+    pub delta_kept: f64,
+    /// The shortest feasible descent found (None when even the seed's length failed).
+    pub best: Option<Descent>,
+    /// Every probe: (terminal step, feasible).
+    pub probes: Vec<(usize, bool)>,
+}
+
+/// §5.2.3: the shortest terminal step N for which the descent reaches zero cost at δ_d (and the shipped
+/// certificate keeps δ_d), by bisection between 0 and the seed's k*. Each probe starts from the shortest
+/// feasible answer so far, cut to the probed length (the text starts from the person's input, cut).
+pub fn time_optimal(
+    lp: &Loop<'_>,
+    lc: &LoopConstants,
+    x0: &[f64],
+    v_seed: &[Vec<f64>],
+    s: &PotentialSettings,
+    method: DescentMethod,
+) -> TimeOptimal {
+    let (_, c) = certify::shipped(lp, lc, x0, v_seed);
+    let hi0 = c.k_star.max(1).min(v_seed.len());
+    let mut probes = Vec::new();
+    let first = descend(lp, lc, x0, &v_seed[..hi0], s, method);
+    probes.push((hi0, first.reached));
+    if !first.reached {
+        return TimeOptimal {
+            steps_before: hi0,
+            steps_after: hi0,
+            delta_kept: s.delta,
+            best: None,
+            probes,
+        };
+    }
+    let (mut lo, mut hi) = (0usize, hi0);
+    let mut best = first;
+    while hi - lo > 1 {
+        let mid = lo + (hi - lo) / 2;
+        let d = descend(lp, lc, x0, &best.v[..mid], s, method);
+        probes.push((mid, d.reached));
+        if d.reached {
+            hi = mid;
+            best = d;
+        } else {
+            lo = mid;
+        }
+    }
+    TimeOptimal {
+        steps_before: hi0,
+        steps_after: hi,
+        delta_kept: s.delta,
+        best: Some(best),
+        probes,
+    }
+}
