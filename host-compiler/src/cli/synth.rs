@@ -58,12 +58,17 @@ pub fn run(a: &SynthArgs) -> miette::Result<()> {
             eprintln!("warning: Ctrl-C handler not installed: {e}");
         }
     }
+    // Without a terminal the bars are hidden; log each certified trajectory instead.
+    let log = !a.quiet && !std::io::IsTerminal::is_terminal(&std::io::stderr());
     let opts = SynthOptions {
         verify_interior: a.verify_runs,
         progress: !a.quiet,
         imports,
         generator: a.generator,
         cancel,
+        on_accept: log.then(|| {
+            crate::synth::AcceptHook(Arc::new(|count| eprintln!("certified trajectory {count}")))
+        }),
         ..SynthOptions::default()
     };
     let s = synthesize(&problem, &opts).map_err(|e| miette::miette!("{e}"))?;
