@@ -223,8 +223,10 @@ pub struct CoverSnapshot {
 }
 
 impl CoverSnapshot {
+    /// The cover `trajs` and the working samples (`work`, `discarded`) it does not cover yet.
     fn new(
         round: usize,
+        P: faer::MatRef<'_, f64>,
         trajs: &[CoverTrajectory],
         work: &[Vec<f64>],
         discarded: &[Vec<f64>],
@@ -232,7 +234,12 @@ impl CoverSnapshot {
         Self {
             round,
             trajectories: trajs.len(),
-            uncovered: work.iter().chain(discarded).cloned().collect(),
+            uncovered: work
+                .iter()
+                .chain(discarded)
+                .filter(|x| alg4::gap(P, x, trajs).is_none_or(|(d, _)| d > 0.0))
+                .cloned()
+                .collect(),
         }
     }
 }
@@ -711,7 +718,13 @@ pub fn synthesize(problem: &Problem, opts: &SynthOptions) -> Result<Synthesis, S
             if ok {
                 // The new seed may make the discarded samples reachable again.
                 work.append(&mut discarded);
-                snapshots.push(CoverSnapshot::new(round, &trajs, &work, &discarded));
+                snapshots.push(CoverSnapshot::new(
+                    round,
+                    P.as_ref(),
+                    &trajs,
+                    &work,
+                    &discarded,
+                ));
                 continue;
             }
             let mut rest = discarded.clone();
@@ -722,7 +735,13 @@ pub fn synthesize(problem: &Problem, opts: &SynthOptions) -> Result<Synthesis, S
             let region = alg4::UncoveredRegion::of(P.as_ref(), &rest, 4.0 * typical)
                 .expect("discarded is not empty");
             let description = region.describe(&free);
-            snapshots.push(CoverSnapshot::new(round, &trajs, &work, &discarded));
+            snapshots.push(CoverSnapshot::new(
+                round,
+                P.as_ref(),
+                &trajs,
+                &work,
+                &discarded,
+            ));
             break (
                 StopReason::NeedsSeed {
                     region,
@@ -818,7 +837,13 @@ pub fn synthesize(problem: &Problem, opts: &SynthOptions) -> Result<Synthesis, S
                     "{failed} seeds from Init gave no certifiable trajectory"
                 )));
             }
-            snapshots.push(CoverSnapshot::new(round, &trajs, &work, &discarded));
+            snapshots.push(CoverSnapshot::new(
+                round,
+                P.as_ref(),
+                &trajs,
+                &work,
+                &discarded,
+            ));
             continue;
         }
         let typical =
@@ -959,7 +984,13 @@ pub fn synthesize(problem: &Problem, opts: &SynthOptions) -> Result<Synthesis, S
                 }
             }
         }
-        snapshots.push(CoverSnapshot::new(round, &trajs, &work, &discarded));
+        snapshots.push(CoverSnapshot::new(
+            round,
+            P.as_ref(),
+            &trajs,
+            &work,
+            &discarded,
+        ));
     };
     bars.clear();
     if trajs.is_empty() {
