@@ -48,6 +48,9 @@ pub struct PotentialSettings {
     pub max_iterations: usize,
     /// L-BFGS memory (default 10).
     pub lbfgs_memory: usize,
+    /// Cost evaluations at most per descent (L-BFGS's line searches may take many per iteration;
+    /// default 20 000).
+    pub max_evaluations: usize,
 }
 
 impl Default for PotentialSettings {
@@ -63,6 +66,7 @@ impl Default for PotentialSettings {
             min_step: 1e-12,
             max_iterations: 2000,
             lbfgs_memory: 10,
+            max_evaluations: 20_000,
         }
     }
 }
@@ -106,6 +110,10 @@ impl PotentialSettings {
     }
     pub fn lbfgs_memory(mut self, v: usize) -> Self {
         self.lbfgs_memory = v;
+        self
+    }
+    pub fn max_evaluations(mut self, v: usize) -> Self {
+        self.max_evaluations = v;
         self
     }
 }
@@ -282,13 +290,39 @@ fn algorithm3(
     (v, J, it)
 }
 
-struct ArgminProblem<'p, 'a, 'b>(&'p Potential<'a, 'b>);
+/// The potential as an `argmin` problem; it remembers the best point it evaluated and refuses to evaluate
+/// past the budget (argmin has no evaluation cap of its own), so a run cut short still returns that point.
+struct ArgminProblem<'p, 'a, 'b> {
+    pot: &'p Potential<'a, 'b>,
+    best: &'p std::sync::Mutex<(f64, Vec<f64>)>,
+    max_evaluations: usize,
+    gradients: &'p AtomicUsize,
+}
+
+impl ArgminProblem<'_, '_, '_> {
+    fn eval(
+        &self,
+        p: &[f64],
+        grad: bool,
+    ) -> Result<(f64, Option<Vec<Vec<f64>>>), argmin::core::Error> {
+        if self.pot.evaluations() >= self.max_evaluations {
+            return Err(argmin::core::Error::msg("evaluation budget spent"));
+        }
+        let r = self.pot.eval(&self.pot.unflatten(p), grad);
+        if let Ok(mut b) = self.best.lock() {
+            if r.0 < b.0 {
+                *b = (r.0, p.to_vec());
+            }
+        }
+        Ok(r)
+    }
+}
 
 impl argmin::core::CostFunction for ArgminProblem<'_, '_, '_> {
     type Param = Vec<f64>;
     type Output = f64;
     fn cost(&self, p: &Self::Param) -> Result<f64, argmin::core::Error> {
-        Ok(self.0.eval(&self.0.unflatten(p), false).0)
+        Ok(self.eval(p, false)?.0)
     }
 }
 
@@ -296,7 +330,8 @@ impl argmin::core::Gradient for ArgminProblem<'_, '_, '_> {
     type Param = Vec<f64>;
     type Gradient = Vec<f64>;
     fn gradient(&self, p: &Self::Param) -> Result<Vec<f64>, argmin::core::Error> {
-        let (_, g) = self.0.eval(&self.0.unflatten(p), true);
+        self.gradients.fetch_add(1, Ordering::Relaxed);
+        let (_, g) = self.eval(p, true)?;
         let g = g.ok_or_else(|| argmin::core::Error::msg("cost is not finite"))?;
         Ok(g.into_iter().flatten().collect())
     }
@@ -324,24 +359,30 @@ fn lbfgs(
         Ok(sv) => sv,
         Err(_) => return (v0.to_vec(), J0, 0),
     };
-    let run = Executor::new(ArgminProblem(pot), solver)
+    let best = std::sync::Mutex::new((J0, z0.clone()));
+    let gradients = AtomicUsize::new(0);
+    let problem = ArgminProblem {
+        pot,
+        best: &best,
+        max_evaluations: s.max_evaluations,
+        gradients: &gradients,
+    };
+    let run = Executor::new(problem, solver)
         .configure(|st| {
-            st.param(z0)
+            st.param(z0.clone())
                 .max_iters(s.max_iterations as u64)
                 .target_cost(pot.zero_tol)
         })
         .run();
-    match run {
-        Ok(res) => {
-            let st = res.state();
-            match st.get_best_param() {
-                Some(p) => (pot.unflatten(p), st.get_best_cost(), st.get_iter() as usize),
-                None => (v0.to_vec(), J0, st.get_iter() as usize),
-            }
-        }
-        // A failed line search (e.g. at a kink of the hinge) ends the run; keep the start.
-        Err(_) => (v0.to_vec(), J0, 0),
-    }
+    let iterations = run
+        .as_ref()
+        .map(|r| r.state().get_iter() as usize)
+        // Cut short (budget, line search): count the gradients taken, one per iteration.
+        .unwrap_or_else(|_| gradients.load(Ordering::Relaxed));
+    // The best point evaluated, whether the run ended normally, on the evaluation budget or on a failed
+    // line search.
+    let (J, z) = best.into_inner().unwrap_or((J0, z0));
+    (pot.unflatten(&z), J, iterations)
 }
 
 /// Descend the potential of §5.2.3 from `v0` (its length is the terminal step N) and re-certify the

@@ -1,0 +1,144 @@
+//! §5.3 on the planar vehicle (Example 4.8): the proximal bundle method at least doubles the certified δ(0)
+//! of certified but unoptimised seeds, every answer re-certifies through the shipped path, a cancelled run
+//! returns its start, and a run cut short still returns a certified trajectory no worse than its start.
+
+use host_compiler::certify::{shipped, LoopConstants};
+use host_compiler::optimize::potential::{descend, DescentMethod, PotentialSettings};
+use host_compiler::optimize::setup::OwnedLoop;
+use host_compiler::optimize::{maximize_delta, BundleSettings, OptStop, Optimized};
+use std::sync::atomic::AtomicBool;
+
+fn planar() -> (OwnedLoop, LoopConstants) {
+    let p = host_compiler::spec::load(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../examples/planar-vehicle.toml"
+    ))
+    .unwrap();
+    let ol = OwnedLoop::from_problem(&p).unwrap();
+    let lc = ol.constants().unwrap();
+    (ol, lc)
+}
+
+/// A certified, unoptimised seed from a point of Init: the constant input that would hold the vehicle at
+/// the goal centre (infeasible as it is), repaired by the potential descent of §5.2 just until it keeps
+/// δ = 0.02.
+fn seed(ol: &OwnedLoop, lc: &LoopConstants, x0: &[f64]) -> (Vec<Vec<f64>>, f64) {
+    let lp = ol.lp();
+    let v = vec![vec![1.0, -1.0]; ol.steps];
+    let s = PotentialSettings::default().delta(0.02);
+    let d = descend(&lp, lc, x0, &v, &s, DescentMethod::Algorithm3);
+    assert!(d.reached, "seed descent: cost {:.3e}", d.cost);
+    let (_, c) = shipped(&lp, lc, x0, &d.v);
+    assert!(c.is_certified());
+    (d.v, c.delta)
+}
+
+fn assert_shipped(ol: &OwnedLoop, lc: &LoopConstants, x0: &[f64], o: &Optimized) {
+    let lp = ol.lp();
+    assert_eq!(o.nominal.x[0], x0);
+    // v is what the image stores: f32 values.
+    for r in &o.nominal.v {
+        for &a in r {
+            assert_eq!(a, a as f32 as f64);
+        }
+    }
+    let (nom, cert) = shipped(&lp, lc, x0, &o.nominal.v);
+    assert_eq!(nom, o.nominal, "the returned nominal is the shipped one");
+    assert_eq!(
+        cert, o.certificate,
+        "the returned certificate is the shipped one"
+    );
+    assert_eq!(o.steps_after, o.nominal.steps());
+    assert_eq!(o.history.last().copied(), Some(o.certificate.delta));
+    assert_eq!(
+        o.history.len(),
+        o.iterations + 1,
+        "one certified δ per iteration"
+    );
+    for w in o.history.windows(2) {
+        assert!(w[1] >= w[0], "best certified δ never decreases: {:?}", w);
+    }
+}
+
+#[test]
+fn bundle_at_least_doubles_delta_from_two_seeds() {
+    let (ol, lc) = planar();
+    let lp = ol.lp();
+    let cancel = AtomicBool::new(false);
+    for x0 in [[0.0, 0.0, 0.0, 1.0], [-0.2, -0.2, 0.0, 1.0]] {
+        let (v, d0) = seed(&ol, &lc, &x0);
+        let o = maximize_delta(
+            &lp,
+            &lc,
+            &x0,
+            &v,
+            ol.steps,
+            &BundleSettings::default(),
+            &cancel,
+        );
+        println!(
+            "x0 {x0:?}: δ {d0:.5} → {:.5} in {} iterations ({:?}), steps {} → {}",
+            o.certificate.delta, o.iterations, o.stop, o.steps_before, o.steps_after
+        );
+        assert_eq!(o.history[0], d0);
+        assert!(o.certificate.is_certified());
+        assert!(
+            o.certificate.delta >= 2.0 * d0,
+            "δ {d0} → {} is less than doubled",
+            o.certificate.delta
+        );
+        assert!(o.steps_after <= ol.steps);
+        assert!(o.stop != OptStop::Cancelled);
+        assert_shipped(&ol, &lc, &x0, &o);
+    }
+}
+
+#[test]
+fn cancelled_before_start_returns_the_start_certified() {
+    let (ol, lc) = planar();
+    let lp = ol.lp();
+    let x0 = [0.1, -0.1, 0.0, 1.0];
+    let (v, d0) = seed(&ol, &lc, &x0);
+    let cancel = AtomicBool::new(true);
+    let o = maximize_delta(
+        &lp,
+        &lc,
+        &x0,
+        &v,
+        ol.steps,
+        &BundleSettings::default(),
+        &cancel,
+    );
+    assert_eq!(o.stop, OptStop::Cancelled);
+    assert_eq!(o.iterations, 0);
+    assert_eq!(o.history, vec![d0]);
+    assert_eq!(o.certificate.delta, d0);
+    assert_eq!(o.steps_before, v.len());
+    assert_eq!(o.steps_after, v.len());
+    let (nom, _) = shipped(&lp, &lc, &x0, &v);
+    assert_eq!(o.nominal, nom);
+    assert_shipped(&ol, &lc, &x0, &o);
+}
+
+#[test]
+fn stopped_early_the_answer_is_certified_and_no_worse() {
+    let (ol, lc) = planar();
+    let lp = ol.lp();
+    let x0 = [0.2, 0.2, 0.0, 1.0];
+    let (v, d0) = seed(&ol, &lc, &x0);
+    let cancel = AtomicBool::new(false);
+    let o = maximize_delta(
+        &lp,
+        &lc,
+        &x0,
+        &v,
+        ol.steps,
+        &BundleSettings::default().max_iterations(3),
+        &cancel,
+    );
+    assert_eq!(o.stop, OptStop::IterationLimit);
+    assert!(o.iterations <= 3);
+    assert!(o.certificate.is_certified());
+    assert!(o.certificate.delta >= d0);
+    assert_shipped(&ol, &lc, &x0, &o);
+}

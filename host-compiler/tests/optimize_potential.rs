@@ -1,0 +1,87 @@
+//! §5.2 on the planar vehicle: the potential descent (Algorithm 3 and L-BFGS) repairs an infeasible seed
+//! until the shipped certificate keeps the desired δ, and the time-optimal bisection of §5.2.3 (Example 5.2)
+//! shortens the terminal time at the kept δ.
+
+use host_compiler::certify::{shipped, LoopConstants};
+use host_compiler::optimize::potential::{descend, time_optimal, DescentMethod, PotentialSettings};
+use host_compiler::optimize::setup::OwnedLoop;
+
+fn planar() -> (OwnedLoop, LoopConstants) {
+    let p = host_compiler::spec::load(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../examples/planar-vehicle.toml"
+    ))
+    .unwrap();
+    let ol = OwnedLoop::from_problem(&p).unwrap();
+    let lc = ol.constants().unwrap();
+    (ol, lc)
+}
+
+#[test]
+fn both_descents_repair_an_infeasible_seed_to_the_desired_delta() {
+    let (ol, lc) = planar();
+    let lp = ol.lp();
+    let x0 = [-0.2, 0.2, 0.0, 1.0];
+    let v = vec![vec![1.0, -1.0]; ol.steps];
+    let (_, c0) = shipped(&lp, &lc, &x0, &v);
+    assert!(!c0.is_certified(), "the seed must start infeasible");
+    for method in [DescentMethod::Algorithm3, DescentMethod::Lbfgs] {
+        let s = PotentialSettings::default().delta(0.04);
+        let d = descend(&lp, &lc, &x0, &v, &s, method);
+        println!(
+            "{method:?}: cost {:.2e} in {} iterations, {} evaluations, {:.3}s; δ {:.5}",
+            d.cost, d.iterations, d.evaluations, d.seconds, d.certificate.delta
+        );
+        assert!(d.zero_cost && d.reached, "{method:?}: cost {:.3e}", d.cost);
+        assert!(d.certificate.delta >= 0.04);
+        let (nom, cert) = shipped(&lp, &lc, &x0, &d.v);
+        assert_eq!(nom, d.nominal);
+        assert_eq!(cert, d.certificate);
+    }
+}
+
+#[test]
+fn a_short_horizon_cannot_reach_zero_cost() {
+    // 0.5 s is not enough to travel 2 units with ‖u‖ ≤ 1: the descent must say so, not claim success.
+    let (ol, lc) = planar();
+    let lp = ol.lp();
+    let x0 = [0.0, 0.0, 0.0, 1.0];
+    let v = vec![vec![1.0, -1.0]; 50];
+    let s = PotentialSettings::default().delta(0.02).max_iterations(200);
+    let d = descend(&lp, &lc, &x0, &v, &s, DescentMethod::Algorithm3);
+    assert!(!d.zero_cost && !d.reached);
+    assert!(d.cost > 0.0);
+}
+
+#[test]
+fn time_optimal_bisection_shortens_the_terminal_time_at_the_kept_delta() {
+    let (ol, lc) = planar();
+    let lp = ol.lp();
+    let x0 = [0.0, 0.0, 0.0, 1.0];
+    let v = vec![vec![1.0, -1.0]; ol.steps];
+    let seed = descend(
+        &lp,
+        &lc,
+        &x0,
+        &v,
+        &PotentialSettings::default().delta(0.05),
+        DescentMethod::Algorithm3,
+    );
+    assert!(seed.reached);
+    let kept = seed.certificate.delta;
+    let s = PotentialSettings::default().delta(kept).max_iterations(300);
+    let to = time_optimal(&lp, &lc, &x0, &seed.v, &s, DescentMethod::Algorithm3);
+    println!(
+        "terminal step {} → {} at δ {kept:.5}; probes {:?}",
+        to.steps_before, to.steps_after, to.probes
+    );
+    let best = to.best.as_ref().expect("the seed's own length is feasible");
+    assert_eq!(to.steps_before, seed.certificate.k_star);
+    assert!(to.steps_after < to.steps_before);
+    assert_eq!(best.v.len(), to.steps_after);
+    assert!(best.reached && best.certificate.delta >= kept);
+    let (_, cert) = shipped(&lp, &lc, &x0, &best.v);
+    assert_eq!(cert, best.certificate);
+    // Bisection: the step below the answer was probed and failed.
+    assert!(to.probes.contains(&(to.steps_after - 1, false)));
+}
