@@ -27,8 +27,8 @@ fn random_v(rng: &mut ChaCha8Rng, steps: usize, base: [f64; 2], spread: f64) -> 
     (0..steps)
         .map(|_| {
             vec![
-                base[0] + rng.gen_range(-spread..spread),
-                base[1] + rng.gen_range(-spread..spread),
+                base[0] + rng.random_range(-spread..spread),
+                base[1] + rng.random_range(-spread..spread),
             ]
         })
         .collect()
@@ -57,10 +57,10 @@ fn adjoint_sweep_matches_explicit_sensitivities() {
     for _ in 0..5 {
         // J = Σ_κ c_κᵀ x(κ) + Σ_κ e_κᵀ v(κ) with x(κ) = Σ_{j<κ} Ã^{κ−1−j} B v(j) + (terms free of v).
         let gx: Vec<Vec<f64>> = (0..=steps)
-            .map(|_| (0..4).map(|_| rng.gen_range(-1.0..1.0)).collect())
+            .map(|_| (0..4).map(|_| rng.random_range(-1.0..1.0)).collect())
             .collect();
         let gv: Vec<Vec<f64>> = (0..steps)
-            .map(|_| (0..2).map(|_| rng.gen_range(-1.0..1.0)).collect())
+            .map(|_| (0..2).map(|_| rng.random_range(-1.0..1.0)).collect())
             .collect();
         let adj = adjoint_sweep(lc.At.as_ref(), lc.B.as_ref(), &gx, gv.clone());
         for j in 0..steps {
