@@ -26,7 +26,6 @@
 use super::pieces::{delta_subgradient, Pieces};
 use super::{BundleSettings, OptStop, Optimized};
 use crate::certify::{self, Certificate, Loop, LoopConstants};
-use crate::trajectory::Nominal;
 use clarabel::algebra::CscMatrix;
 use clarabel::solver::{
     DefaultSettingsBuilder, DefaultSolver, IPSolver, SolverStatus, SupportedConeT,
@@ -36,8 +35,6 @@ use std::sync::atomic::{AtomicBool, Ordering};
 /// One evaluation: the shipped nominal, its certificate, f = −(4.11) before margins, and ∂f.
 struct Point {
     v: Vec<Vec<f64>>,
-    #[allow(dead_code)]
-    nom: Nominal,
     cert: Certificate,
     f: f64,
     g: Vec<f64>,
@@ -57,7 +54,6 @@ fn evaluate(lp: &Loop<'_>, lc: &LoopConstants, x0: &[f64], v: Vec<Vec<f64>>) -> 
     let g = gv.into_iter().flatten().map(|x| -x).collect();
     Point {
         v,
-        nom,
         cert,
         f: if f.is_nan() { f64::INFINITY } else { f },
         g,
@@ -268,9 +264,17 @@ pub(super) fn maximize(
     let start = evaluate(lp, lc, x0, v_start);
     let steps_before = start.v.len();
     let mut history = vec![start.cert.delta];
-    let finish = |best: Point, history: Vec<f64>, iterations: usize, stop: OptStop| {
-        // The answer as shipped, re-certified from scratch.
-        let (nominal, certificate) = certify::shipped(lp, lc, x0, &best.v);
+    let start_v = start.v.clone();
+    let start_delta = start.cert.delta;
+    let finish = |best: Point, mut history: Vec<f64>, iterations: usize, stop: OptStop| {
+        // The answer as shipped, re-certified from scratch; never worse than the start.
+        let (mut nominal, mut certificate) = certify::shipped(lp, lc, x0, &best.v);
+        if certificate.delta < start_delta {
+            (nominal, certificate) = certify::shipped(lp, lc, x0, &start_v);
+            if let Some(h) = history.last_mut() {
+                *h = certificate.delta;
+            }
+        }
         Optimized {
             steps_after: nominal.steps(),
             nominal,
@@ -288,36 +292,24 @@ pub(super) fn maximize(
         // a strictly better than b: certified δ first, then the raw value.
         (a.cert.delta, -a.f) > (b.cert.delta, -b.f)
     };
-    let mut t = 0.0f64;
     let mut best = start;
-    let mut iterations = 0usize;
-    let mut stop = OptStop::IterationLimit;
-    while iterations < s.max_iterations {
-        // Terminal step (outer, discrete): cut at k* (never worse: fewer samples to keep clear), or extend
-        // by a tenth holding the last input, when that certifies better.
-        if s.time_search_every > 0 {
-            let N = best.v.len();
-            let k = best.cert.k_star.max(1);
-            if k < N {
-                let cand = evaluate(lp, lc, x0, best.v[..k].to_vec());
-                if !better(&best, &cand) {
-                    best = cand;
-                }
-            }
-            let N = best.v.len();
-            if N < steps_max {
-                let ext = (N / 10).max(1).min(steps_max - N);
-                let mut v = best.v.clone();
-                let last = v.last().cloned().unwrap_or_else(|| vec![0.0; lp.K.nrows()]);
-                v.extend(std::iter::repeat(last).take(ext));
-                let cand = evaluate(lp, lc, x0, v);
-                if better(&cand, &best) {
-                    best = cand;
-                }
+    // Terminal step (a discrete variable, outside the bundle method): cutting at k* never lowers δ
+    // (fewer samples to keep clear of Unsafe and the input bound).
+    if s.terminal_time {
+        let k = best.cert.k_star.max(1);
+        if k < best.v.len() {
+            let cand = evaluate(lp, lc, x0, best.v[..k].to_vec());
+            if !better(&best, &cand) {
+                best = cand;
             }
         }
-        if t <= 0.0 {
-            // First step: a move of initial_step (RMS per input component) along the subgradient.
+    }
+    let mut t = 0.0f64;
+    let mut iterations = 0usize;
+    let stop = loop {
+        if t < s.min_step {
+            // First step (and after a collapse): a move of initial_step (RMS per input component) along
+            // the subgradient.
             let gn = dot(&best.g, &best.g).sqrt();
             let dim = best.g.len().max(1) as f64;
             t = if gn > 0.0 {
@@ -326,45 +318,33 @@ pub(super) fn maximize(
                 s.max_step
             };
         }
-        let budget = if s.time_search_every > 0 {
-            (s.time_search_every * 4).min(s.max_iterations - iterations)
-        } else {
-            s.max_iterations - iterations
-        };
-        let f_before = best.f;
-        let delta_before = best.cert.delta;
+        let budget = s.max_iterations - iterations;
         let (p, used, why) = bundle_run(lp, lc, x0, best, s, budget, &mut t, &mut history, cancel);
         iterations += used;
         best = p;
         match why {
-            OptStop::Cancelled => {
-                stop = OptStop::Cancelled;
-                break;
-            }
-            OptStop::IterationLimit if s.time_search_every > 0 => {
-                if iterations >= s.max_iterations {
-                    stop = OptStop::IterationLimit;
-                    break;
+            OptStop::Converged | OptStop::NoProgress
+                if s.terminal_time && iterations < s.max_iterations =>
+            {
+                // Longer horizon: a tenth more steps holding the last input, kept if it certifies better.
+                let N = best.v.len();
+                if N >= steps_max {
+                    break why;
                 }
-                continue;
-            }
-            OptStop::Converged | OptStop::NoProgress => {
-                // Restart only when this round gained something (a new terminal step may help more).
-                if s.time_search_every > 0 && (best.f < f_before || best.cert.delta > delta_before)
-                {
-                    if t < s.min_step {
-                        t = 0.0;
-                    }
-                    continue;
+                let ext = (N / 10).max(1).min(steps_max - N);
+                let mut v = best.v.clone();
+                let last = v.last().cloned().unwrap_or_else(|| vec![0.0; lp.K.nrows()]);
+                v.extend(std::iter::repeat(last).take(ext));
+                let cand = evaluate(lp, lc, x0, v);
+                if better(&cand, &best) {
+                    best = cand;
+                    t = 0.0;
+                } else {
+                    break why;
                 }
-                stop = why;
-                break;
             }
-            other => {
-                stop = other;
-                break;
-            }
+            other => break other,
         }
-    }
+    };
     finish(best, history, iterations, stop)
 }

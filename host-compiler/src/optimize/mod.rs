@@ -27,16 +27,18 @@ pub struct BundleSettings {
     pub min_step: f64,
     /// Largest proximal step parameter t (default 1e2).
     pub max_step: f64,
-    /// Initial proximal step parameter t (default 1e-2).
+    /// Size of the first move, as the RMS change per input component; sets the first proximal parameter
+    /// t (default 1e-2).
     pub initial_step: f64,
     /// Serious-step test: accept when the certified gain is at least this fraction of the predicted
     /// gain (default 0.1).
     pub serious_fraction: f64,
     /// Bundle size at most, before aggregation (default 30).
     pub bundle_size: usize,
-    /// Try shortening/lengthening the terminal time around k* every this many iterations (default 5;
-    /// 0 disables the terminal-time search).
-    pub time_search_every: usize,
+    /// Optimise the terminal step too (default true): cut the sequence at k* before the first run, and
+    /// whenever the bundle method stops converged, try a tenth more steps (holding the last input, up to
+    /// `steps_max`) and restart from it if it certifies better.
+    pub terminal_time: bool,
 }
 
 impl Default for BundleSettings {
@@ -49,7 +51,7 @@ impl Default for BundleSettings {
             initial_step: 1e-2,
             serious_fraction: 0.1,
             bundle_size: 30,
-            time_search_every: 5,
+            terminal_time: true,
         }
     }
 }
@@ -83,8 +85,8 @@ impl BundleSettings {
         self.bundle_size = v;
         self
     }
-    pub fn time_search_every(mut self, v: usize) -> Self {
-        self.time_search_every = v;
+    pub fn terminal_time(mut self, v: bool) -> Self {
+        self.terminal_time = v;
         self
     }
 }
