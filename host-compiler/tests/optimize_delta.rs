@@ -9,11 +9,12 @@ use host_compiler::optimize::{maximize_delta, BundleSettings, OptStop, Optimized
 use std::sync::atomic::AtomicBool;
 
 fn planar() -> (OwnedLoop, LoopConstants) {
-    let p = host_compiler::spec::load(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../examples/planar-vehicle.toml"
-    ))
-    .unwrap();
+    example("planar-vehicle.toml")
+}
+
+fn example(name: &str) -> (OwnedLoop, LoopConstants) {
+    let p = host_compiler::spec::load(format!("{}/../examples/{name}", env!("CARGO_MANIFEST_DIR")))
+        .unwrap();
     let ol = OwnedLoop::from_problem(&p).unwrap();
     let lc = ol.constants().unwrap();
     (ol, lc)
@@ -140,5 +141,66 @@ fn stopped_early_the_answer_is_certified_and_no_worse() {
     assert!(o.iterations <= 3);
     assert!(o.certificate.is_certified());
     assert!(o.certificate.delta >= d0);
+    assert_shipped(&ol, &lc, &x0, &o);
+}
+
+#[test]
+fn bundle_on_the_double_integrator_box_sets() {
+    // Box Goal, half-plane Unsafe, box input, discrete plant: the other branches of the pieces.
+    let (ol, lc) = example("double-integrator.toml");
+    let lp = ol.lp();
+    let x0 = [0.1, 0.0];
+    let v = vec![vec![0.0]; ol.steps];
+    let s = PotentialSettings::default().delta(0.005);
+    let d = descend(&lp, &lc, &x0, &v, &s, DescentMethod::Lbfgs);
+    assert!(d.reached);
+    let d0 = d.certificate.delta;
+    let cancel = AtomicBool::new(false);
+    let o = maximize_delta(
+        &lp,
+        &lc,
+        &x0,
+        &d.v,
+        ol.steps,
+        &BundleSettings::default(),
+        &cancel,
+    );
+    println!(
+        "double integrator: δ {d0:.5} → {:.5} in {} iterations ({:?})",
+        o.certificate.delta, o.iterations, o.stop
+    );
+    assert!(o.certificate.delta >= 2.0 * d0);
+    assert_shipped(&ol, &lc, &x0, &o);
+}
+
+#[test]
+fn a_tail_past_the_goal_is_cut_at_k_star() {
+    // The seed reaches Goal at its end; 100 more steps holding the last input carry it away again.
+    let (ol, lc) = planar();
+    let lp = ol.lp();
+    let x0 = [0.0, 0.0, 0.0, 1.0];
+    let (mut v, _) = seed(&ol, &lc, &x0);
+    let last = v.last().unwrap().clone();
+    v.extend(std::iter::repeat(last).take(100));
+    let (_, c) = shipped(&lp, &lc, &x0, &v);
+    assert!(c.k_star < v.len());
+    let cancel = AtomicBool::new(false);
+    let o = maximize_delta(
+        &lp,
+        &lc,
+        &x0,
+        &v,
+        v.len(),
+        &BundleSettings::default(),
+        &cancel,
+    );
+    assert_eq!(o.steps_before, v.len());
+    assert!(
+        o.steps_after < v.len(),
+        "steps {} → {}",
+        o.steps_before,
+        o.steps_after
+    );
+    assert!(o.certificate.delta >= c.delta);
     assert_shipped(&ol, &lc, &x0, &o);
 }

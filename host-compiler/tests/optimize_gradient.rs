@@ -118,6 +118,44 @@ fn potential_gradient_matches_finite_differences() {
 }
 
 #[test]
+fn potential_gradient_matches_finite_differences_with_box_sets() {
+    // Double integrator: box input, half-plane Unsafe, box Goal (the other branches of the pieces).
+    let p = host_compiler::spec::load(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../examples/double-integrator.toml"
+    ))
+    .unwrap();
+    let ol = OwnedLoop::from_problem(&p).unwrap();
+    let lc = ol.constants().unwrap();
+    let lp = ol.lp();
+    let mut rng = ChaCha8Rng::seed_from_u64(54);
+    let x0 = [0.05, 0.0];
+    let steps = ol.steps;
+    for case in 0..8 {
+        let v: Vec<Vec<f64>> = (0..steps)
+            .map(|_| vec![rng.random_range(-1.5..1.5)])
+            .collect();
+        let (_, c) = shipped(&lp, &lc, &x0, &v);
+        let s = PotentialSettings::default().delta(0.1);
+        let pot = Potential::new(&lp, &lc, &x0, steps, &c, &s);
+        let (J, g) = pot.eval(&v, true);
+        let g = g.unwrap();
+        assert!(J > 0.0);
+        let d: Vec<Vec<f64>> = (0..steps)
+            .map(|_| vec![rng.random_range(-1.0..1.0)])
+            .collect();
+        let h = 1e-6;
+        let fd = (pot.eval(&axpy(&v, h, &d), false).0 - pot.eval(&axpy(&v, -h, &d), false).0)
+            / (2.0 * h);
+        let an = inner(&g, &d);
+        assert!(
+            (fd - an).abs() <= 1e-4 * fd.abs().max(an.abs()) + 1e-9,
+            "case {case}: finite difference {fd}, adjoint {an}"
+        );
+    }
+}
+
+#[test]
 fn delta_subgradient_is_the_gradient_of_the_critical_piece() {
     let (ol, lc) = planar();
     let lp = ol.lp();

@@ -5,7 +5,16 @@
 //! Everything this module returns as *certified* went through [`crate::certify::shipped`]: v rounded to
 //! f32, simulated with the f32 gain, certified with the inter-sample and rounding margins.
 //!
-//! API changes for callers (newest first): none yet.
+//! * [`pieces`]: the pieces of δ(0) with gradients, the adjoint sweep, the subgradient of (5.28)–(5.29).
+//! * [`potential`]: the potentials of §5.2.3, Algorithm 3, `argmin`'s L-BFGS, the time-optimal bisection.
+//! * `bundle` (behind [`maximize_delta`]): the proximal bundle method of §5.3.
+//! * [`setup`]: a certified loop built from a spec the way `synth` builds it (tests, benches, tools).
+//!
+//! API changes for callers (newest first):
+//! * `BundleSettings::time_search_every: usize` is now `terminal_time: bool` (builder `terminal_time`); the
+//!   terminal step is searched between bundle runs instead of interrupting them. `initial_step` is the RMS
+//!   size of the first move per input component.
+//! * New modules `pieces`, `potential`, `setup` (additive).
 
 mod bundle;
 pub mod pieces;
