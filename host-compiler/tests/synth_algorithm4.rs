@@ -52,7 +52,11 @@ fn algorithm4_covers_and_is_independent_of_the_thread_count() {
             .expect("each trajectory has its optimisation record");
         assert_eq!(r.delta_after, t.certificate.delta);
         assert!(r.delta_after >= r.delta_before, "§5.3 never loses δ");
-        assert_eq!(r.history[0].max(0.0), r.delta_before, "history starts at the start's δ");
+        assert_eq!(
+            r.history[0].max(0.0),
+            r.delta_before,
+            "history starts at the start's δ"
+        );
     }
     // Later trajectories start on the boundary of an earlier ball (Algorithm 4, step 1).
     for r in a.optimization.iter().filter(|r| r.origin.is_some()) {
