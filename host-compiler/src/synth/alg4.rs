@@ -44,7 +44,7 @@ pub fn project_onto_boundary(
     delta: f64,
 ) -> Option<Vec<f64>> {
     let r = dist(P, y, c);
-    if !(r > 0.0) || !r.is_finite() {
+    if !r.is_finite() || r <= 0.0 {
         return None;
     }
     let s = delta / r;
@@ -136,7 +136,7 @@ impl UncoveredRegion {
             })
             .collect();
         // Stable sort: ties keep the order of discovery.
-        clusters.sort_by(|a, b| b.count.cmp(&a.count));
+        clusters.sort_by_key(|c| std::cmp::Reverse(c.count));
         clusters.truncate(MAX_CLUSTERS);
         Some(Self {
             count: points.len(),

@@ -155,6 +155,9 @@ pub struct CoverTrajectory {
     pub certificate: Certificate,
 }
 
+/// A coverage estimate through the image's f32 selection: the estimate, the uncovered fresh samples, the image.
+type Estimate = (CoverageEstimate, Vec<Vec<f64>>, Vec<u8>);
+
 /// One §5.3 optimisation of the growth loop (accepted or not).
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct OptRecord {
@@ -609,9 +612,7 @@ pub fn synthesize(problem: &Problem, opts: &SynthOptions) -> Result<Synthesis, S
                 0 // a finite sample never proves 100 %: the loop stops on its budget and says so
             });
     // Final, independent estimate on fresh samples through the f32 selection of the image.
-    let estimate = |trajs: &[CoverTrajectory],
-                    round: u64|
-     -> Result<(CoverageEstimate, Vec<Vec<f64>>, Vec<u8>), SynthError> {
+    let estimate = |trajs: &[CoverTrajectory], round: u64| -> Result<Estimate, SynthError> {
         let image = build_image(problem, &plant, &Khat, &P, trajs)?;
         let img = shared_types::image::decode(&image)
             .map_err(|e| SynthError::Nothing(format!("{e:?}")))?;
