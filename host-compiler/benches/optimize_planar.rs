@@ -40,8 +40,8 @@ fn descent_rows(ol: &OwnedLoop, lc: &LoopConstants, rows: &mut Vec<Row>) {
         let (mut ev, mut it, mut secs) = (vec![], vec![], vec![]);
         for x0 in &STARTS {
             // Best of two timings (the results are identical).
-            let a = descend(&lp, lc, x0, &v, &s, method);
-            let b = descend(&lp, lc, x0, &v, &s, method);
+            let a = descend(&lp, lc, x0, &v, &s, method).expect("valid input");
+            let b = descend(&lp, lc, x0, &v, &s, method).expect("valid input");
             assert!(a.reached, "{method:?} from {x0:?}: cost {:.3e}", a.cost);
             println!(
                 "descent {method:?} from {x0:?}: zero cost in {} iterations, {} evaluations, {:.3} s; δ {:.5}",
@@ -100,7 +100,8 @@ fn time_optimal_rows(ol: &OwnedLoop, lc: &LoopConstants, rows: &mut Vec<Row>) {
         &v,
         &PotentialSettings::default().delta(0.05),
         DescentMethod::Algorithm3,
-    );
+    )
+    .expect("valid input");
     assert!(seed.reached);
     let kept = seed.certificate.delta;
     for (method, name, iters) in [
@@ -112,7 +113,7 @@ fn time_optimal_rows(ol: &OwnedLoop, lc: &LoopConstants, rows: &mut Vec<Row>) {
             .max_iterations(iters)
             .max_evaluations(3000);
         let t = Instant::now();
-        let to = time_optimal(&lp, lc, &x0, &seed.v, &s, method);
+        let to = time_optimal(&lp, lc, &x0, &seed.v, &s, method).expect("valid input");
         let secs = t.elapsed().as_secs_f64();
         let best = to.best.as_ref().expect("the seed's length is feasible");
         println!(
@@ -151,7 +152,8 @@ fn bundle_rows(ol: &OwnedLoop, lc: &LoopConstants, rows: &mut Vec<Row>) {
             &v,
             &PotentialSettings::default().delta(0.02),
             DescentMethod::Algorithm3,
-        );
+        )
+        .expect("valid input");
         assert!(seed.reached);
         let t = Instant::now();
         let o = maximize_delta(

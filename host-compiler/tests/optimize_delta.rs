@@ -27,7 +27,7 @@ fn seed(ol: &OwnedLoop, lc: &LoopConstants, x0: &[f64]) -> (Vec<Vec<f64>>, f64) 
     let lp = ol.lp();
     let v = vec![vec![1.0, -1.0]; ol.steps];
     let s = PotentialSettings::default().delta(0.02);
-    let d = descend(&lp, lc, x0, &v, &s, DescentMethod::Algorithm3);
+    let d = descend(&lp, lc, x0, &v, &s, DescentMethod::Algorithm3).expect("valid input");
     assert!(d.reached, "seed descent: cost {:.3e}", d.cost);
     let (_, c) = shipped(&lp, lc, x0, &d.v);
     assert!(c.is_certified());
@@ -152,7 +152,7 @@ fn bundle_on_the_double_integrator_box_sets() {
     let x0 = [0.1, 0.0];
     let v = vec![vec![0.0]; ol.steps];
     let s = PotentialSettings::default().delta(0.005);
-    let d = descend(&lp, &lc, &x0, &v, &s, DescentMethod::Lbfgs);
+    let d = descend(&lp, &lc, &x0, &v, &s, DescentMethod::Lbfgs).expect("valid input");
     assert!(d.reached);
     let d0 = d.certificate.delta;
     let cancel = AtomicBool::new(false);

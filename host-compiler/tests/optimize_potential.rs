@@ -27,7 +27,7 @@ fn both_descents_repair_an_infeasible_seed_to_the_desired_delta() {
     assert!(!c0.is_certified(), "the seed must start infeasible");
     for method in [DescentMethod::Algorithm3, DescentMethod::Lbfgs] {
         let s = PotentialSettings::default().delta(0.04);
-        let d = descend(&lp, &lc, &x0, &v, &s, method);
+        let d = descend(&lp, &lc, &x0, &v, &s, method).expect("valid input");
         println!(
             "{method:?}: cost {:.2e} in {} iterations, {} evaluations, {:.3}s; δ {:.5}",
             d.cost, d.iterations, d.evaluations, d.seconds, d.certificate.delta
@@ -48,7 +48,7 @@ fn a_short_horizon_cannot_reach_zero_cost() {
     let x0 = [0.0, 0.0, 0.0, 1.0];
     let v = vec![vec![1.0, -1.0]; 50];
     let s = PotentialSettings::default().delta(0.02).max_iterations(200);
-    let d = descend(&lp, &lc, &x0, &v, &s, DescentMethod::Algorithm3);
+    let d = descend(&lp, &lc, &x0, &v, &s, DescentMethod::Algorithm3).expect("valid input");
     assert!(!d.zero_cost && !d.reached);
     assert!(d.cost > 0.0);
 }
@@ -66,11 +66,13 @@ fn time_optimal_bisection_shortens_the_terminal_time_at_the_kept_delta() {
         &v,
         &PotentialSettings::default().delta(0.05),
         DescentMethod::Algorithm3,
-    );
+    )
+    .expect("valid input");
     assert!(seed.reached);
     let kept = seed.certificate.delta;
     let s = PotentialSettings::default().delta(kept).max_iterations(300);
-    let to = time_optimal(&lp, &lc, &x0, &seed.v, &s, DescentMethod::Algorithm3);
+    let to =
+        time_optimal(&lp, &lc, &x0, &seed.v, &s, DescentMethod::Algorithm3).expect("valid input");
     println!(
         "terminal step {} → {} at δ {kept:.5}; probes {:?}",
         to.steps_before, to.steps_after, to.probes
@@ -84,4 +86,39 @@ fn time_optimal_bisection_shortens_the_terminal_time_at_the_kept_delta() {
     assert_eq!(cert, best.certificate);
     // Bisection: the step below the answer was probed and failed.
     assert!(to.probes.contains(&(to.steps_after - 1, false)));
+}
+
+#[test]
+fn bad_input_is_refused_with_a_clear_error() {
+    use host_compiler::optimize::{try_maximize_delta, BundleSettings, OptimizeError};
+    let (ol, lc) = planar();
+    let lp = ol.lp();
+    let v = vec![vec![1.0, -1.0]; 10];
+    let s = PotentialSettings::default();
+    let e = descend(&lp, &lc, &[0.0; 3], &v, &s, DescentMethod::Algorithm3).unwrap_err();
+    assert_eq!(e, OptimizeError::StateDimension { got: 3, n: 4 });
+    let x0 = [0.0, 0.0, 0.0, 1.0];
+    let mut bad = v.clone();
+    bad[4] = vec![1.0];
+    let e = descend(&lp, &lc, &x0, &bad, &s, DescentMethod::Lbfgs).unwrap_err();
+    assert_eq!(e, OptimizeError::InputDimension { k: 4, got: 1, m: 2 });
+    let e = time_optimal(&lp, &lc, &x0, &[], &s, DescentMethod::Algorithm3).unwrap_err();
+    assert_eq!(e, OptimizeError::Empty);
+    let e = descend(
+        &lp,
+        &lc,
+        &x0,
+        &v,
+        &s.clone().delta(-1.0),
+        DescentMethod::Algorithm3,
+    )
+    .unwrap_err();
+    assert_eq!(e, OptimizeError::BadDelta(-1.0));
+    let mut nan = v.clone();
+    nan[0][1] = f64::NAN;
+    let cancel = std::sync::atomic::AtomicBool::new(false);
+    let e = try_maximize_delta(&lp, &lc, &x0, &nan, 10, &BundleSettings::default(), &cancel)
+        .unwrap_err();
+    assert_eq!(e, OptimizeError::NotFinite);
+    assert!(e.to_string().contains("non-finite"));
 }

@@ -129,8 +129,60 @@ pub struct Optimized {
     pub stop: OptStop,
 }
 
+/// Why an optimiser refused its input.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum OptimizeError {
+    #[error("x0 has {got} components, but the plant has n = {n}")]
+    StateDimension { got: usize, n: usize },
+    #[error("v({k}) has {got} components, but the plant has m = {m}")]
+    InputDimension { k: usize, got: usize, m: usize },
+    #[error("the reference sequence v is empty")]
+    Empty,
+    #[error("x0 or v has a non-finite entry")]
+    NotFinite,
+    #[error("the desired robustness δ = {0} is not a positive finite number")]
+    BadDelta(f64),
+}
+
+/// Check that x0 and v fit the loop (dimensions, finiteness, at least one step).
+pub fn check_inputs(lp: &Loop<'_>, x0: &[f64], v: &[Vec<f64>]) -> Result<(), OptimizeError> {
+    let (n, m) = (lp.A.nrows(), lp.B.ncols());
+    if x0.len() != n {
+        return Err(OptimizeError::StateDimension { got: x0.len(), n });
+    }
+    if v.is_empty() {
+        return Err(OptimizeError::Empty);
+    }
+    if let Some((k, r)) = v.iter().enumerate().find(|(_, r)| r.len() != m) {
+        return Err(OptimizeError::InputDimension { k, got: r.len(), m });
+    }
+    if x0.iter().chain(v.iter().flatten()).any(|a| !a.is_finite()) {
+        return Err(OptimizeError::NotFinite);
+    }
+    Ok(())
+}
+
+/// [`maximize_delta`] on untrusted input: the inputs are checked first ([`check_inputs`]).
+pub fn try_maximize_delta(
+    lp: &Loop<'_>,
+    lc: &LoopConstants,
+    x0: &[f64],
+    v0: &[Vec<f64>],
+    steps_max: usize,
+    settings: &BundleSettings,
+    cancel: &AtomicBool,
+) -> Result<Optimized, OptimizeError> {
+    check_inputs(lp, x0, v0)?;
+    Ok(bundle::maximize(
+        lp, lc, x0, v0, steps_max, settings, cancel,
+    ))
+}
+
 /// §5.3: maximise the certified robustness δ(0) of the nominal from x0 over v and the terminal time
 /// (len(v) ≤ steps_max). Returns the best certified iterate (never worse than the start).
+///
+/// The pipeline calls this with inputs it built itself; x0 and v must fit the loop (n and m components,
+/// finite). An empty v starts from one zero input. For inputs from outside use [`try_maximize_delta`].
 pub fn maximize_delta(
     lp: &Loop<'_>,
     lc: &LoopConstants,

@@ -20,6 +20,7 @@
 //! [`crate::certify::shipped`]; `reached` is true only when that certificate keeps δ_d.
 
 use super::pieces::{LocalGrad, Pieces};
+use super::{check_inputs, OptimizeError};
 use crate::certify::{self, Certificate, Loop, LoopConstants};
 use crate::trajectory::{simulate, Nominal};
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -394,6 +395,21 @@ pub fn descend(
     v0: &[Vec<f64>],
     s: &PotentialSettings,
     method: DescentMethod,
+) -> Result<Descent, OptimizeError> {
+    check_inputs(lp, x0, v0)?;
+    if !(s.delta > 0.0 && s.delta.is_finite()) {
+        return Err(OptimizeError::BadDelta(s.delta));
+    }
+    Ok(descend_checked(lp, lc, x0, v0, s, method))
+}
+
+fn descend_checked(
+    lp: &Loop<'_>,
+    lc: &LoopConstants,
+    x0: &[f64],
+    v0: &[Vec<f64>],
+    s: &PotentialSettings,
+    method: DescentMethod,
 ) -> Descent {
     let t = Instant::now();
     let (_, c0) = certify::shipped(lp, lc, x0, v0);
@@ -442,26 +458,30 @@ pub fn time_optimal(
     v_seed: &[Vec<f64>],
     s: &PotentialSettings,
     method: DescentMethod,
-) -> TimeOptimal {
+) -> Result<TimeOptimal, OptimizeError> {
+    check_inputs(lp, x0, v_seed)?;
+    if !(s.delta > 0.0 && s.delta.is_finite()) {
+        return Err(OptimizeError::BadDelta(s.delta));
+    }
     let (_, c) = certify::shipped(lp, lc, x0, v_seed);
     let hi0 = c.k_star.max(1).min(v_seed.len());
     let mut probes = Vec::new();
-    let first = descend(lp, lc, x0, &v_seed[..hi0], s, method);
+    let first = descend_checked(lp, lc, x0, &v_seed[..hi0], s, method);
     probes.push((hi0, first.reached));
     if !first.reached {
-        return TimeOptimal {
+        return Ok(TimeOptimal {
             steps_before: hi0,
             steps_after: hi0,
             delta_kept: s.delta,
             best: None,
             probes,
-        };
+        });
     }
     let (mut lo, mut hi) = (0usize, hi0);
     let mut best = first;
     while hi - lo > 1 {
         let mid = lo + (hi - lo) / 2;
-        let d = descend(lp, lc, x0, &best.v[..mid], s, method);
+        let d = descend_checked(lp, lc, x0, &best.v[..mid], s, method);
         probes.push((mid, d.reached));
         if d.reached {
             hi = mid;
@@ -470,11 +490,11 @@ pub fn time_optimal(
             lo = mid;
         }
     }
-    TimeOptimal {
+    Ok(TimeOptimal {
         steps_before: hi0,
         steps_after: hi,
         delta_kept: s.delta,
         best: Some(best),
         probes,
-    }
+    })
 }
