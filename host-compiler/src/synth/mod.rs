@@ -928,6 +928,24 @@ pub fn synthesize(problem: &Problem, opts: &SynthOptions) -> Result<Synthesis, S
                     } else {
                         failed += 1;
                         drop.push(*i);
+                        // Samples that project onto the same ball within half the typical radius of ŷ
+                        // start the same reference sequence from nearly the same state, and δ depends
+                        // continuously on the start: discard them with it rather than retry each one.
+                        let tm = &trajs[*mi];
+                        for &(_, m2, j) in &pool {
+                            if m2 == *mi && j != *i {
+                                let close = alg4::project_onto_boundary(
+                                    P.as_ref(),
+                                    &work[j],
+                                    &tm.nominal.x[0],
+                                    tm.certificate.delta_stored as f64,
+                                )
+                                .is_some_and(|z| alg4::dist(P.as_ref(), &z, yh) < 0.5 * typical);
+                                if close {
+                                    drop.push(j);
+                                }
+                            }
+                        }
                     }
                 }
                 drop.sort_unstable();
