@@ -348,3 +348,32 @@ pub(super) fn maximize(
     };
     finish(best, history, iterations, stop)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::dual_qp;
+
+    fn close(a: &[f64], b: &[f64]) -> bool {
+        a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-6)
+    }
+
+    #[test]
+    fn dual_qp_balances_opposite_subgradients() {
+        // 0 ∈ conv{g₁, g₂}: the weights that reach it are (½, ½), so the step is zero (a stationary point).
+        let l = dual_qp(&[&[1.0, 0.0], &[-1.0, 0.0]], &[0.0, 0.0], 1.0).unwrap();
+        assert!(close(&l, &[0.5, 0.5]), "{l:?}");
+    }
+
+    #[test]
+    fn dual_qp_picks_the_shortest_combination() {
+        // Both point the same way: the shorter one alone.
+        let l = dual_qp(&[&[1.0, 0.0], &[2.0, 0.0]], &[0.0, 0.0], 1.0).unwrap();
+        assert!(close(&l, &[1.0, 0.0]), "{l:?}");
+        // ½‖λ₁e₁ + λ₂e₂‖² + 2λ₁: the linearisation error pushes all weight to the second cut.
+        let l = dual_qp(&[&[1.0, 0.0], &[0.0, 1.0]], &[2.0, 0.0], 1.0).unwrap();
+        assert!(close(&l, &[0.0, 1.0]), "{l:?}");
+        // Without the error the two orthogonal cuts share equally.
+        let l = dual_qp(&[&[1.0, 0.0], &[0.0, 1.0]], &[0.0, 0.0], 3.0).unwrap();
+        assert!(close(&l, &[0.5, 0.5]), "{l:?}");
+    }
+}
