@@ -204,3 +204,65 @@ fn a_tail_past_the_goal_is_cut_at_k_star() {
     assert!(o.certificate.delta >= c.delta);
     assert_shipped(&ol, &lc, &x0, &o);
 }
+
+#[test]
+fn an_uncertified_start_is_repaired_then_maximised() {
+    let (ol, lc) = planar();
+    let lp = ol.lp();
+    let x0 = [0.2, 0.2, 0.0, 1.0];
+    let v = vec![vec![1.0, -1.0]; ol.steps];
+    let (_, c0) = shipped(&lp, &lc, &x0, &v);
+    assert!(!c0.is_certified());
+    let cancel = AtomicBool::new(false);
+    let o = maximize_delta(
+        &lp,
+        &lc,
+        &x0,
+        &v,
+        ol.steps,
+        &BundleSettings::default(),
+        &cancel,
+    );
+    println!(
+        "uncertified start: δ → {:.5} in {} iterations ({:?}), steps {} → {}",
+        o.certificate.delta, o.iterations, o.stop, o.steps_before, o.steps_after
+    );
+    assert!(o.certificate.is_certified());
+    assert!(o.certificate.delta >= 0.05);
+    assert_shipped(&ol, &lc, &x0, &o);
+    // Without the repair the bundle method alone does not get there from this start.
+    let o2 = maximize_delta(
+        &lp,
+        &lc,
+        &x0,
+        &v,
+        ol.steps,
+        &BundleSettings::default().repair_delta(0.0),
+        &cancel,
+    );
+    assert!(o2.certificate.delta < o.certificate.delta);
+}
+
+#[test]
+fn same_input_same_answer_to_the_bit() {
+    let (ol, lc) = planar();
+    let lp = ol.lp();
+    let x0 = [-0.1, 0.15, 0.0, 1.0];
+    let (v, _) = seed(&ol, &lc, &x0);
+    let cancel = AtomicBool::new(false);
+    let run = || {
+        maximize_delta(
+            &lp,
+            &lc,
+            &x0,
+            &v,
+            ol.steps,
+            &BundleSettings::default(),
+            &cancel,
+        )
+    };
+    let (a, b) = (run(), run());
+    assert_eq!(a.nominal, b.nominal);
+    assert_eq!(a.certificate, b.certificate);
+    assert_eq!(a.history, b.history);
+}

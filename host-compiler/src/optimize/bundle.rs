@@ -24,6 +24,7 @@
 //! returned one is re-certified; only certified improvements are kept.
 
 use super::pieces::{delta_subgradient, Pieces};
+use super::potential::{descend, DescentMethod, PotentialSettings};
 use super::{BundleSettings, OptStop, Optimized};
 use crate::certify::{self, Certificate, Loop, LoopConstants};
 use clarabel::algebra::CscMatrix;
@@ -304,8 +305,23 @@ pub(super) fn maximize(
             }
         }
     }
-    let mut t = 0.0f64;
     let mut iterations = 0usize;
+    // Repair an uncertified start with the potentials of §5.2 (one iteration of the count).
+    if !best.cert.is_certified() && s.repair_delta > 0.0 && s.max_iterations > 0 {
+        let ps = PotentialSettings::default()
+            .delta(s.repair_delta)
+            .max_iterations(500)
+            .max_evaluations(2000);
+        if let Ok(d) = descend(lp, lc, x0, &best.v, &ps, DescentMethod::Lbfgs) {
+            let cand = evaluate(lp, lc, x0, d.v);
+            if better(&cand, &best) {
+                best = cand;
+            }
+        }
+        iterations += 1;
+        history.push(best.cert.delta.max(history[0]));
+    }
+    let mut t = 0.0f64;
     let stop = loop {
         if t < s.min_step {
             // First step (and after a collapse): a move of initial_step (RMS per input component) along
@@ -318,7 +334,7 @@ pub(super) fn maximize(
                 s.max_step
             };
         }
-        let budget = s.max_iterations - iterations;
+        let budget = s.max_iterations.saturating_sub(iterations);
         let (p, used, why) = bundle_run(lp, lc, x0, best, s, budget, &mut t, &mut history, cancel);
         iterations += used;
         best = p;

@@ -11,6 +11,8 @@
 //! * [`setup`]: a certified loop built from a spec the way `synth` builds it (tests, benches, tools).
 //!
 //! API changes for callers (newest first):
+//! * `BundleSettings::repair_delta` (default 1e-3): an uncertified start is first repaired by the §5.2
+//!   descent, then maximised. `try_maximize_delta` and [`OptimizeError`] for unchecked input.
 //! * `BundleSettings::time_search_every: usize` is now `terminal_time: bool` (builder `terminal_time`); the
 //!   terminal step is searched between bundle runs instead of interrupting them. `initial_step` is the RMS
 //!   size of the first move per input component.
@@ -48,6 +50,11 @@ pub struct BundleSettings {
     /// whenever the bundle method stops converged, try a tenth more steps (holding the last input, up to
     /// `steps_max`) and restart from it if it certifies better.
     pub terminal_time: bool,
+    /// When the start is not certified (some piece of δ(0) is not positive), first repair it with the
+    /// potential descent of §5.2 (L-BFGS) to this δ, one iteration of the count (default 1e-3; 0 turns
+    /// the repair off). The min of many violated pieces gives the bundle method one sample at a time; the
+    /// potentials' sum moves all of them at once.
+    pub repair_delta: f64,
 }
 
 impl Default for BundleSettings {
@@ -61,6 +68,7 @@ impl Default for BundleSettings {
             serious_fraction: 0.1,
             bundle_size: 30,
             terminal_time: true,
+            repair_delta: 1e-3,
         }
     }
 }
@@ -96,6 +104,10 @@ impl BundleSettings {
     }
     pub fn terminal_time(mut self, v: bool) -> Self {
         self.terminal_time = v;
+        self
+    }
+    pub fn repair_delta(mut self, v: f64) -> Self {
+        self.repair_delta = v;
         self
     }
 }
