@@ -2,6 +2,13 @@
 //! spec → sampled plant → CAF and feedback → trajectories grown until Init is covered → certified,
 //! f32-exact image → independent Monte Carlo verification → report.
 //!
+//! The cover grows by Algorithm 4 (§5.4) by default: the first trajectory from the SCP generator (or
+//! imports), each later one from the boundary of the ball closest to the nearest uncovered sample, with δ
+//! maximised by §5.3 ([`crate::optimize::maximize_delta`]) and re-certified through
+//! [`certify::shipped`]; [`Generator::Scp`] keeps Algorithm 1 with the SCP generator per seed. The run
+//! stops when Init is covered, the budget is spent, no local variation reaches the rest ("needs a new seed
+//! trajectory"), or on [`SynthOptions::cancel`] (Ctrl-C), always with a verified image of what is certified.
+//!
 //! Everything random is drawn from ChaCha streams seeded by the spec's seed, and parallel work is
 //! collected in a fixed order, so the same spec and seed give a byte-identical image.
 
