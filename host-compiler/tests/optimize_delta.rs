@@ -181,7 +181,7 @@ fn a_tail_past_the_goal_is_cut_at_k_star() {
     let x0 = [0.0, 0.0, 0.0, 1.0];
     let (mut v, _) = seed(&ol, &lc, &x0);
     let last = v.last().unwrap().clone();
-    v.extend(std::iter::repeat(last).take(100));
+    v.extend(std::iter::repeat_n(last, 100));
     let (_, c) = shipped(&lp, &lc, &x0, &v);
     assert!(c.k_star < v.len());
     let cancel = AtomicBool::new(false);

@@ -67,9 +67,9 @@ fn adjoint_sweep_matches_explicit_sensitivities() {
             // Explicit: ∂J/∂v(j) = e_j + Σ_{κ>j} Bᵀ (Ãᵀ)^{κ−1−j} c_κ.
             let mut M = lc.B.clone(); // Ã^{κ−1−j} B for κ = j+1
             let mut expect = gv[j].clone();
-            for k in (j + 1)..=steps {
+            for c in &gx[(j + 1)..=steps] {
                 for i in 0..2 {
-                    expect[i] += (0..4).map(|r| M[(r, i)] * gx[k][r]).sum::<f64>();
+                    expect[i] += (0..4).map(|r| M[(r, i)] * c[r]).sum::<f64>();
                 }
                 M = &lc.At * &M;
             }

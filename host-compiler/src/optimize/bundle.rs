@@ -132,6 +132,7 @@ const GAMMA: f64 = 1e-3;
 /// The proximal bundle method at a fixed terminal step, from `start`. Returns the best point (by the
 /// certified δ, then by f), the iterations used and why it stopped; pushes the best certified δ per
 /// iteration onto `history`.
+#[allow(clippy::too_many_arguments)]
 fn bundle_run(
     lp: &Loop<'_>,
     lc: &LoopConstants,
@@ -350,7 +351,7 @@ pub(super) fn maximize(
                 let ext = (N / 10).max(1).min(steps_max - N);
                 let mut v = best.v.clone();
                 let last = v.last().cloned().unwrap_or_else(|| vec![0.0; lp.K.nrows()]);
-                v.extend(std::iter::repeat(last).take(ext));
+                v.extend(std::iter::repeat_n(last, ext));
                 let cand = evaluate(lp, lc, x0, v);
                 if better(&cand, &best) {
                     best = cand;

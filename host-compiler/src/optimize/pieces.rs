@@ -240,12 +240,12 @@ impl<'a, 'b> Pieces<'a, 'b> {
         let mut gx = vec![vec![0.0; n]; steps + 1];
         let mut gv = vec![vec![0.0; m]; steps];
         for (w, lg) in local {
-            for i in 0..n {
-                gx[lg.k][i] += w * lg.gx[i];
+            for (a, b) in gx[lg.k].iter_mut().zip(&lg.gx) {
+                *a += w * b;
             }
             if lg.k < steps {
-                for i in 0..m {
-                    gv[lg.k][i] += w * lg.gv[i];
+                for (a, b) in gv[lg.k].iter_mut().zip(&lg.gv) {
+                    *a += w * b;
                 }
             }
         }
@@ -318,7 +318,7 @@ pub fn delta_subgradient(
     for c in &cands {
         let g = pc.adjoint(N, &[(1.0, c)]);
         let nn: f64 = g.iter().flatten().map(|v| v * v).sum();
-        if best.as_ref().map_or(true, |(b, _)| nn > *b) {
+        if best.as_ref().is_none_or(|(b, _)| nn > *b) {
             best = Some((nn, g));
         }
     }

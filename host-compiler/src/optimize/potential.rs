@@ -309,12 +309,11 @@ struct ArgminProblem<'p, 'a, 'b> {
     gradients: &'p AtomicUsize,
 }
 
+/// A cost and, when asked for, its gradient per step.
+type CostGrad = (f64, Option<Vec<Vec<f64>>>);
+
 impl ArgminProblem<'_, '_, '_> {
-    fn eval(
-        &self,
-        p: &[f64],
-        grad: bool,
-    ) -> Result<(f64, Option<Vec<Vec<f64>>>), argmin::core::Error> {
+    fn eval(&self, p: &[f64], grad: bool) -> Result<CostGrad, argmin::core::Error> {
         if self.pot.evaluations() >= self.max_evaluations {
             return Err(argmin::core::Error::msg("evaluation budget spent"));
         }
