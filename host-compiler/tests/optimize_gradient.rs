@@ -196,3 +196,31 @@ fn delta_subgradient_is_the_gradient_of_the_critical_piece() {
     println!("{checked} smooth directions checked");
     assert!(checked >= 10, "only {checked} smooth cases");
 }
+
+#[test]
+fn the_pieces_give_the_certificates_value() {
+    // The optimiser's model of (4.11) is the certifier's, on the shipped nominal, to the last bits.
+    let (ol, lc) = planar();
+    let lp = ol.lp();
+    let pc = Pieces::new(&lp, &lc);
+    let mut rng = ChaCha8Rng::seed_from_u64(55);
+    for case in 0..10 {
+        let x0 = [
+            rng.random_range(-0.2..0.2),
+            rng.random_range(-0.2..0.2),
+            0.0,
+            1.0,
+        ];
+        let v = random_v(&mut rng, 200 + 30 * case, [1.0, -1.0], 0.5);
+        let (nom, c) = shipped(&lp, &lc, &x0, &v);
+        let (d, _) = delta_subgradient(&pc, &nom, &c.eps_components, c.eps_f32);
+        let d47 = c
+            .delta_goal
+            .min(c.delta_unsafe_intersample)
+            .min(c.delta_input);
+        assert!(
+            (d - d47).abs() <= 1e-12 * d47.abs().max(1.0),
+            "case {case}: pieces {d}, certificate {d47}"
+        );
+    }
+}
