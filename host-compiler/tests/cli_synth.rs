@@ -32,6 +32,16 @@ fn synth_then_verify_simulate_and_inspect() {
     }
     let html = std::fs::read_to_string(out.join("report.html")).unwrap();
     assert!(html.contains("<svg"));
+    // Algorithm 4 by default: the report shows its optimisations and the cover after each round.
+    for id in [
+        "optimization",
+        "delta-history",
+        "tube-before-after",
+        "optimization-table",
+    ] {
+        assert!(html.contains(&format!("id=\"{id}\"")), "report lacks {id}");
+    }
+    assert!(html.contains("class=\"frame\""));
     let img = out.join("controller.img");
 
     let o = bin()
