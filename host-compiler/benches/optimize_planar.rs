@@ -38,7 +38,7 @@ fn descent_rows(ol: &OwnedLoop, lc: &LoopConstants, rows: &mut Vec<Row>) {
     let s = PotentialSettings::default().delta(0.04);
     let per = |method: DescentMethod| -> (Vec<f64>, Vec<f64>, Vec<f64>) {
         let (mut ev, mut it, mut secs) = (vec![], vec![], vec![]);
-        for x0 in &STARTS {
+        for x0 in &STARTS.map(|x| x.map(|a| a as f32 as f64)) {
             // Best of two timings (the results are identical).
             let a = descend(&lp, lc, x0, &v, &s, method).expect("valid input");
             let b = descend(&lp, lc, x0, &v, &s, method).expect("valid input");
@@ -144,7 +144,7 @@ fn bundle_rows(ol: &OwnedLoop, lc: &LoopConstants, rows: &mut Vec<Row>) {
     let v = vec![vec![1.0, -1.0]; ol.steps];
     let cancel = AtomicBool::new(false);
     let (mut before, mut after, mut secs) = (vec![], vec![], vec![]);
-    for x0 in &STARTS {
+    for x0 in &STARTS.map(|x| x.map(|a| a as f32 as f64)) {
         let seed = descend(
             &lp,
             lc,

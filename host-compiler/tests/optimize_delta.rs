@@ -61,12 +61,17 @@ fn assert_shipped(ol: &OwnedLoop, lc: &LoopConstants, x0: &[f64], o: &Optimized)
     }
 }
 
+/// A start the image can store exactly (f32 components), as the pipeline's starts are.
+fn f32x<const N: usize>(x: [f64; N]) -> [f64; N] {
+    x.map(|a| a as f32 as f64)
+}
+
 #[test]
 fn bundle_at_least_doubles_delta_from_two_seeds() {
     let (ol, lc) = planar();
     let lp = ol.lp();
     let cancel = AtomicBool::new(false);
-    for x0 in [[0.0, 0.0, 0.0, 1.0], [-0.2, -0.2, 0.0, 1.0]] {
+    for x0 in [[0.0, 0.0, 0.0, 1.0], [-0.2, -0.2, 0.0, 1.0]].map(f32x) {
         let (v, d0) = seed(&ol, &lc, &x0);
         let o = maximize_delta(
             &lp,
@@ -98,7 +103,7 @@ fn bundle_at_least_doubles_delta_from_two_seeds() {
 fn cancelled_before_start_returns_the_start_certified() {
     let (ol, lc) = planar();
     let lp = ol.lp();
-    let x0 = [0.1, -0.1, 0.0, 1.0];
+    let x0 = f32x([0.1, -0.1, 0.0, 1.0]);
     let (v, d0) = seed(&ol, &lc, &x0);
     let cancel = AtomicBool::new(true);
     let o = maximize_delta(
@@ -125,7 +130,7 @@ fn cancelled_before_start_returns_the_start_certified() {
 fn stopped_early_the_answer_is_certified_and_no_worse() {
     let (ol, lc) = planar();
     let lp = ol.lp();
-    let x0 = [0.2, 0.2, 0.0, 1.0];
+    let x0 = f32x([0.2, 0.2, 0.0, 1.0]);
     let (v, d0) = seed(&ol, &lc, &x0);
     let cancel = AtomicBool::new(false);
     let o = maximize_delta(
@@ -149,7 +154,7 @@ fn bundle_on_the_double_integrator_box_sets() {
     // Box Goal, half-plane Unsafe, box input, discrete plant: the other branches of the pieces.
     let (ol, lc) = example("double-integrator.toml");
     let lp = ol.lp();
-    let x0 = [0.1, 0.0];
+    let x0 = f32x([0.1, 0.0]);
     let v = vec![vec![0.0]; ol.steps];
     let s = PotentialSettings::default().delta(0.005);
     let d = descend(&lp, &lc, &x0, &v, &s, DescentMethod::Lbfgs).expect("valid input");
@@ -178,7 +183,7 @@ fn a_tail_past_the_goal_is_cut_at_k_star() {
     // The seed reaches Goal at its end; 100 more steps holding the last input carry it away again.
     let (ol, lc) = planar();
     let lp = ol.lp();
-    let x0 = [0.0, 0.0, 0.0, 1.0];
+    let x0 = f32x([0.0, 0.0, 0.0, 1.0]);
     let (mut v, _) = seed(&ol, &lc, &x0);
     let last = v.last().unwrap().clone();
     v.extend(std::iter::repeat_n(last, 100));
@@ -209,7 +214,7 @@ fn a_tail_past_the_goal_is_cut_at_k_star() {
 fn an_uncertified_start_is_repaired_then_maximised() {
     let (ol, lc) = planar();
     let lp = ol.lp();
-    let x0 = [0.2, 0.2, 0.0, 1.0];
+    let x0 = f32x([0.2, 0.2, 0.0, 1.0]);
     let v = vec![vec![1.0, -1.0]; ol.steps];
     let (_, c0) = shipped(&lp, &lc, &x0, &v);
     assert!(!c0.is_certified());
@@ -247,7 +252,7 @@ fn an_uncertified_start_is_repaired_then_maximised() {
 fn same_input_same_answer_to_the_bit() {
     let (ol, lc) = planar();
     let lp = ol.lp();
-    let x0 = [-0.1, 0.15, 0.0, 1.0];
+    let x0 = f32x([-0.1, 0.15, 0.0, 1.0]);
     let (v, _) = seed(&ol, &lc, &x0);
     let cancel = AtomicBool::new(false);
     let run = || {

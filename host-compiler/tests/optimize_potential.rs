@@ -17,11 +17,16 @@ fn planar() -> (OwnedLoop, LoopConstants) {
     (ol, lc)
 }
 
+/// A start the image can store exactly (f32 components), as the pipeline's starts are.
+fn f32x<const N: usize>(x: [f64; N]) -> [f64; N] {
+    x.map(|a| a as f32 as f64)
+}
+
 #[test]
 fn both_descents_repair_an_infeasible_seed_to_the_desired_delta() {
     let (ol, lc) = planar();
     let lp = ol.lp();
-    let x0 = [-0.2, 0.2, 0.0, 1.0];
+    let x0 = f32x([-0.2, 0.2, 0.0, 1.0]);
     let v = vec![vec![1.0, -1.0]; ol.steps];
     let (_, c0) = shipped(&lp, &lc, &x0, &v);
     assert!(!c0.is_certified(), "the seed must start infeasible");
@@ -45,7 +50,7 @@ fn a_short_horizon_cannot_reach_zero_cost() {
     // 0.5 s is not enough to travel 2 units with ‖u‖ ≤ 1: the descent must say so, not claim success.
     let (ol, lc) = planar();
     let lp = ol.lp();
-    let x0 = [0.0, 0.0, 0.0, 1.0];
+    let x0 = f32x([0.0, 0.0, 0.0, 1.0]);
     let v = vec![vec![1.0, -1.0]; 50];
     let s = PotentialSettings::default().delta(0.02).max_iterations(200);
     let d = descend(&lp, &lc, &x0, &v, &s, DescentMethod::Algorithm3).expect("valid input");
@@ -57,7 +62,7 @@ fn a_short_horizon_cannot_reach_zero_cost() {
 fn time_optimal_bisection_shortens_the_terminal_time_at_the_kept_delta() {
     let (ol, lc) = planar();
     let lp = ol.lp();
-    let x0 = [0.0, 0.0, 0.0, 1.0];
+    let x0 = f32x([0.0, 0.0, 0.0, 1.0]);
     let v = vec![vec![1.0, -1.0]; ol.steps];
     let seed = descend(
         &lp,
@@ -97,7 +102,7 @@ fn bad_input_is_refused_with_a_clear_error() {
     let s = PotentialSettings::default();
     let e = descend(&lp, &lc, &[0.0; 3], &v, &s, DescentMethod::Algorithm3).unwrap_err();
     assert_eq!(e, OptimizeError::StateDimension { got: 3, n: 4 });
-    let x0 = [0.0, 0.0, 0.0, 1.0];
+    let x0 = f32x([0.0, 0.0, 0.0, 1.0]);
     let mut bad = v.clone();
     bad[4] = vec![1.0];
     let e = descend(&lp, &lc, &x0, &bad, &s, DescentMethod::Lbfgs).unwrap_err();
