@@ -61,6 +61,8 @@ pub struct PotentialSettings {
     /// Cost evaluations at most per descent (L-BFGS's line searches may take many per iteration;
     /// default 20 000).
     pub max_evaluations: usize,
+    /// Show a progress bar over the probes of [`time_optimal`] (default false).
+    pub progress: bool,
 }
 
 impl Default for PotentialSettings {
@@ -77,6 +79,7 @@ impl Default for PotentialSettings {
             max_iterations: 2000,
             lbfgs_memory: 10,
             max_evaluations: 20_000,
+            progress: false,
         }
     }
 }
@@ -124,6 +127,10 @@ impl PotentialSettings {
     }
     pub fn max_evaluations(mut self, v: usize) -> Self {
         self.max_evaluations = v;
+        self
+    }
+    pub fn progress(mut self, v: bool) -> Self {
+        self.progress = v;
         self
     }
 }
@@ -474,10 +481,24 @@ pub fn time_optimal(
     }
     let (_, c) = certify::shipped(lp, lc, x0, v_seed);
     let hi0 = c.k_star.max(1).min(v_seed.len());
+    // One probe at k*, then ⌈log₂ k*⌉ bisection probes at most.
+    let pb = if s.progress {
+        let b = indicatif::ProgressBar::new(1 + (usize::BITS - hi0.leading_zeros()) as u64);
+        b.set_style(
+            indicatif::ProgressStyle::with_template("{msg:>28} [{bar:30}] {pos}/{len} {elapsed}")
+                .unwrap_or(indicatif::ProgressStyle::default_bar()),
+        );
+        b.set_message("time-optimal probes");
+        b
+    } else {
+        indicatif::ProgressBar::hidden()
+    };
     let mut probes = Vec::new();
     let first = descend_checked(lp, lc, x0, &v_seed[..hi0], s, method);
     probes.push((hi0, first.reached));
+    pb.inc(1);
     if !first.reached {
+        pb.finish_and_clear();
         return Ok(TimeOptimal {
             steps_before: hi0,
             steps_after: hi0,
@@ -492,6 +513,7 @@ pub fn time_optimal(
         let mid = lo + (hi - lo) / 2;
         let d = descend_checked(lp, lc, x0, &best.v[..mid], s, method);
         probes.push((mid, d.reached));
+        pb.inc(1);
         if d.reached {
             hi = mid;
             best = d;
@@ -499,6 +521,7 @@ pub fn time_optimal(
             lo = mid;
         }
     }
+    pb.finish_and_clear();
     Ok(TimeOptimal {
         steps_before: hi0,
         steps_after: hi,
