@@ -171,7 +171,7 @@ fn bundle_run(
             .collect();
         let G: Vec<&[f64]> = cuts.iter().map(|c| c.g.as_slice()).collect();
         let Some(lam) = dual_qp(&G, &alpha, *t) else {
-            history.push(best_delta(history));
+            history.push(best_delta(history).max(center.cert.delta));
             *t *= 0.5;
             continue;
         };
@@ -187,7 +187,7 @@ fn bundle_run(
         let ah: f64 = lam.iter().zip(&alpha).map(|(l, a)| l * a).sum();
         let pred = *t * dot(&gh, &gh) + ah;
         if pred <= s.tolerance {
-            history.push(best_delta(history));
+            history.push(best_delta(history).max(center.cert.delta));
             return (center, it, OptStop::Converged);
         }
         let d: Vec<f64> = gh.iter().map(|x| -*t * x).collect();
@@ -242,7 +242,7 @@ fn bundle_run(
             if nonconvex || nulls >= 2 {
                 *t *= 0.5;
             }
-            history.push(best_delta(history));
+            history.push(best_delta(history).max(center.cert.delta));
         }
     }
 }
@@ -269,10 +269,14 @@ pub(super) fn maximize(
     let start_v = start.v.clone();
     let start_delta = start.cert.delta;
     let finish = |best: Point, mut history: Vec<f64>, iterations: usize, stop: OptStop| {
-        // The answer as shipped, re-certified from scratch; never worse than the start.
-        let (mut nominal, mut certificate) = certify::shipped(lp, lc, x0, &best.v);
+        // The answer as shipped, re-certified from scratch; never worse than the start, and the start
+        // itself when no iteration ran.
+        let v = if iterations == 0 { &start_v } else { &best.v };
+        let (mut nominal, mut certificate) = certify::shipped(lp, lc, x0, v);
         if certificate.delta < start_delta {
             (nominal, certificate) = certify::shipped(lp, lc, x0, &start_v);
+        }
+        if iterations > 0 {
             if let Some(h) = history.last_mut() {
                 *h = certificate.delta;
             }
