@@ -149,6 +149,8 @@ fn sample() -> ReportData {
             worst_goal_margin: 0.031,
             worst_unsafe_margin: 0.12,
             worst_input_margin: 0.004,
+            after_goal_input_excursions: 3,
+            after_goal_unsafe: 0,
         }),
         optimization: None,
         timings: vec![
@@ -605,4 +607,14 @@ fn optimization_section_shows_history_tubes_frames_and_seed_request() {
         &std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("report-optimization"),
     )
     .unwrap();
+}
+
+#[test]
+fn verification_shows_what_the_terminal_law_did_after_goal() {
+    let html = render_html(&sample());
+    assert!(
+        html.contains("3 runs left the input set, 0 entered Unsafe under the terminal law"),
+        "the after-Goal counts are missing from the verification section"
+    );
+    assert!(html.contains("first sample in Goal"));
 }

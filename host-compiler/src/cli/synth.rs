@@ -144,6 +144,12 @@ pub fn run(a: &SynthArgs) -> miette::Result<()> {
         s.verify.boundary_runs - s.verify.boundary_rejected,
         s.verify.violations
     );
+    if s.verify.after_goal_input_excursions + s.verify.after_goal_unsafe > 0 {
+        println!(
+            "after Goal        {} runs left the input set, {} entered Unsafe under the terminal law (not judged: the task ends in Goal)",
+            s.verify.after_goal_input_excursions, s.verify.after_goal_unsafe
+        );
+    }
     println!(
         "image             {} ({} bytes)",
         img_path.display(),

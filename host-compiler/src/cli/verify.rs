@@ -73,6 +73,10 @@ pub fn run(a: &VerifyArgs) -> miette::Result<()> {
         for v in &r.first_violations {
             println!("violation from x0 = {:?}: {v:?}", v.x0);
         }
+        println!(
+            "after Goal (not judged, the task has ended): {} runs left the input set, {} entered Unsafe",
+            r.after_goal_input_excursions, r.after_goal_unsafe
+        );
         println!("violations {}", r.violations);
     }
     if r.violations > 0 {

@@ -63,6 +63,10 @@ pub struct VerifySummary {
     pub worst_goal_margin: f64,
     pub worst_unsafe_margin: f64,
     pub worst_input_margin: f64,
+    /// Runs whose terminal law left the input set / entered Unsafe after the task ended in Goal (not
+    /// judged; shown so that nobody mistakes the terminal law for a certified one).
+    pub after_goal_input_excursions: usize,
+    pub after_goal_unsafe: usize,
 }
 
 /// Everything `report.html` shows.

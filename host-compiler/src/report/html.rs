@@ -471,7 +471,19 @@ fn verification(h: &mut String, v: Option<&VerifySummary>) {
                     ("Worst Goal margin", margin(v.worst_goal_margin)),
                     ("Worst Unsafe margin", margin(v.worst_unsafe_margin)),
                     ("Worst input margin", margin(v.worst_input_margin)),
+                    (
+                        "After Goal (not judged)",
+                        format!(
+                            "{} runs left the input set, {} entered Unsafe under the terminal law",
+                            count(v.after_goal_input_excursions),
+                            count(v.after_goal_unsafe)
+                        ),
+                    ),
                 ],
+            );
+            h.push_str(
+                "<p class=\"note\">A run is judged until its first sample in Goal, where the reach-avoid \
+                 task of Theorem 4.7 ends; the terminal law that runs after it is not certified.</p>\n",
             );
         }
     }

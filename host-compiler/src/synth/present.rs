@@ -237,6 +237,8 @@ pub fn report_data(
             worst_goal_margin: s.verify.worst_goal_margin,
             worst_unsafe_margin: s.verify.worst_unsafe_margin,
             worst_input_margin: s.verify.worst_input_margin,
+            after_goal_input_excursions: s.verify.after_goal_input_excursions,
+            after_goal_unsafe: s.verify.after_goal_unsafe,
         }),
         timings: s.timings.clone(),
         warnings,

@@ -2,6 +2,14 @@
 //! in f32, on the exact discretised plant, from initial states drawn in the certified cover and on the
 //! boundary of every ball. Every run must reach Goal within the horizon, never enter Unsafe (also checked
 //! at sub-sample instants for continuous-time plants) and apply only inputs inside the input set.
+//!
+//! # When the task ends
+//! The task is the reach-avoid problem of Theorem 4.7: it is met at the first sample in Goal, provided
+//! Unsafe was avoided and every input was admissible up to then. That is exactly what a certificate
+//! proves (the ball reaches Goal at k* and the tube is checked up to the end of its table), so only that
+//! part of a run is judged. A run is still simulated to the horizon, and what the terminal law does after
+//! Goal (inputs outside the set, entering Unsafe) is counted and reported separately, not as a violation:
+//! a trajectory whose table the optimiser cut at k* (§5.3) certifies nothing after it.
 
 use crate::geometry::Region;
 use crate::linalg::mat_vec;
@@ -46,6 +54,12 @@ pub struct RunOutcome {
     pub goal_margin: f64,
     pub unsafe_margin: f64,
     pub input_margin: f64,
+    /// First sample in Goal (the task ends there; the rest of the run is not judged).
+    pub goal_step: Option<usize>,
+    /// After Goal, the terminal law applied an input outside the set (reported, not a violation).
+    pub after_goal_input_excursion: bool,
+    /// After Goal, the run entered Unsafe (reported, not a violation).
+    pub after_goal_unsafe: bool,
 }
 
 impl RunOutcome {
@@ -75,6 +89,10 @@ pub struct VerifyReport {
     pub worst_goal_margin: f64,
     pub worst_unsafe_margin: f64,
     pub worst_input_margin: f64,
+    /// Runs whose terminal law, after the task ended in Goal, left the input set / entered Unsafe (not
+    /// judged: see the module doc).
+    pub after_goal_input_excursions: usize,
+    pub after_goal_unsafe: usize,
 }
 
 fn input_slack(input: &InputBound, u: &[f64]) -> f64 {
@@ -111,12 +129,19 @@ pub fn run(judge: &Judge<'_>, image: &Image<'_>, x0: &[f64], margins: bool) -> R
         goal_margin: f64::NEG_INFINITY,
         unsafe_margin: f64::INFINITY,
         input_margin: f64::INFINITY,
+        goal_step: None,
+        after_goal_input_excursion: false,
+        after_goal_unsafe: false,
     };
+    // Judged until the first sample in Goal (module doc); after it, only recorded.
     let check = |x: &[f64], out: &mut RunOutcome, sample: bool| {
         if let Some(us) = judge.unsafe_set {
-            if us.contains(x) {
-                out.entered_unsafe = true;
+            let inside = us.contains(x);
+            if out.goal_step.is_some() {
+                out.after_goal_unsafe |= inside;
+                return;
             }
+            out.entered_unsafe |= inside;
             if margins && sample {
                 out.unsafe_margin = out.unsafe_margin.min(-us.signed_dist(x, &metric).value);
             }
@@ -124,8 +149,9 @@ pub fn run(judge: &Judge<'_>, image: &Image<'_>, x0: &[f64], margins: bool) -> R
     };
     check(&x, &mut out, true);
     for k in 0..=judge.steps {
-        if judge.goal.contains(&x) {
+        if out.goal_step.is_none() && judge.goal.contains(&x) {
             out.reached_goal = true;
+            out.goal_step = Some(k);
         }
         if margins {
             out.goal_margin = out
@@ -141,16 +167,20 @@ pub fn run(judge: &Judge<'_>, image: &Image<'_>, x0: &[f64], margins: bool) -> R
             Err(_) => {
                 if k == 0 {
                     out.rejected = true;
-                } else {
+                } else if out.goal_step.is_none() {
                     out.evaluator_error = true;
                 }
                 return out;
             }
         };
         let s = input_slack(judge.input, &u);
-        out.input_margin = out.input_margin.min(s);
-        if s < 0.0 {
-            out.input_violation = true;
+        if out.goal_step.is_some() {
+            out.after_goal_input_excursion |= s < 0.0;
+        } else {
+            out.input_margin = out.input_margin.min(s);
+            if s < 0.0 {
+                out.input_violation = true;
+            }
         }
         if let Some((As, Bs, gs, subs)) = judge.sub {
             let mut xs = x.clone();
@@ -259,5 +289,10 @@ pub fn monte_carlo(
         worst_goal_margin: wg,
         worst_unsafe_margin: wu,
         worst_input_margin: wi,
+        after_goal_input_excursions: outcomes
+            .iter()
+            .filter(|o| o.after_goal_input_excursion)
+            .count(),
+        after_goal_unsafe: outcomes.iter().filter(|o| o.after_goal_unsafe).count(),
     }
 }
