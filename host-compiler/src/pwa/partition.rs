@@ -32,7 +32,7 @@ use shared_types::capacity::MAX_LEAF_BALLS;
 use std::collections::HashMap;
 
 /// Sizes of the emitted partition.
-#[derive(Clone, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
 pub struct PartitionStats {
     /// Laws (partitions).
     pub partitions: usize,

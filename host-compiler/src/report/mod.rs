@@ -8,5 +8,6 @@ pub mod format;
 pub mod html;
 pub mod planar;
 pub mod plots;
+pub mod pwa;
 
 pub use html::{render_html, verdict, write_report, Verdict};

@@ -238,5 +238,6 @@ pub fn report_data(
         }),
         timings: s.timings.clone(),
         warnings,
+        pwa: None,
     }
 }

@@ -3,6 +3,8 @@
 //! boundary of every ball. Every run must reach Goal within the horizon, never enter Unsafe (also checked
 //! at sub-sample instants for continuous-time plants) and apply only inputs inside the input set.
 
+pub mod pwa;
+
 use crate::geometry::Region;
 use crate::linalg::mat_vec;
 use crate::trajectory::generate::InputBound;
@@ -77,7 +79,7 @@ pub struct VerifyReport {
     pub worst_input_margin: f64,
 }
 
-fn input_slack(input: &InputBound, u: &[f64]) -> f64 {
+pub(crate) fn input_slack(input: &InputBound, u: &[f64]) -> f64 {
     match input {
         InputBound::Box { lo, hi } => u
             .iter()
