@@ -48,14 +48,17 @@ pub fn fit(ctx: &PwaContext, members: &[usize], eps: f64) -> Option<(Mat<f64>, V
     // Well-scaled variables: θ = Θ P^{1/2} and the law's value at the first member x̄,
     // θ x + θ0 = Θ z + w with z = P^{1/2}(x − x̄), w = θ x̄ + θ0. ‖Θ‖ is the input change per unit of P-distance,
     // the quantity the input bound sees.
-    let nv = m * (n + 1); // Θ (row-major), then w
+    let nv = m * (n + 1) + 1; // Θ (row-major), then w, then the contraction s
+    let sv = nv - 1;
     let th = |i: usize, j: usize| i * n + j;
     let t0 = |i: usize| m * n + i;
     let xbar = &ctx.points[*members.first()?].x;
     let mut sdp = Sdp::new(nv);
-    for v in 0..nv {
+    for v in 0..m * (n + 1) {
         sdp.add_square_cost(v, if v < m * n { 2.0 } else { 1e-6 });
     }
+    sdp.add_lower_bound(sv, ctx.s_req);
+    sdp.add_linear_cost(sv, -1e-6);
     for &k in members {
         let p = &ctx.points[k];
         let d: Vec<f64> = (0..n).map(|j| p.x[j] - xbar[j]).collect();
@@ -72,22 +75,8 @@ pub fn fit(ctx: &PwaContext, members: &[usize], eps: f64) -> Option<(Mat<f64>, V
     // (6.6) with margin, in P^{1/2} coordinates: M = Ms + P^{1/2} B Θ.
     let Ms = &ctx.roots.sqrt * (&ctx.A + &ctx.B * &ctx.K) * &ctx.roots.inv_sqrt;
     let SB = &ctx.roots.sqrt * &ctx.B;
-    let c = 1.0 - ctx.s_req;
     let F0 = Mat::from_fn(2 * n, 2 * n, |i, j| match (i < n, j < n) {
-        (true, true) => {
-            if i == j {
-                c
-            } else {
-                0.0
-            }
-        }
-        (false, false) => {
-            if i == j {
-                1.0
-            } else {
-                0.0
-            }
-        }
+        (true, true) | (false, false) => (i == j) as u8 as f64,
         (false, true) => Ms[(i - n, j)],
         (true, false) => Ms[(j - n, i)],
     });
@@ -95,6 +84,7 @@ pub fn fit(ctx: &PwaContext, members: &[usize], eps: f64) -> Option<(Mat<f64>, V
         let Theta = Mat::from_fn(m, n, |i, j| x[th(i, j)]);
         let D = &SB * Theta;
         Mat::from_fn(2 * n, 2 * n, |i, j| match (i < n, j < n) {
+            (true, true) => -((i == j) as u8 as f64) * x[sv],
             (false, true) => D[(i - n, j)],
             (true, false) => D[(j - n, i)],
             _ => 0.0,
@@ -240,4 +230,44 @@ pub fn learn_laws(ctx: &PwaContext) -> (Vec<LearnedLaw>, Vec<usize>) {
     }
     bar.finish_and_clear();
     (laws, assignment)
+}
+
+/// The largest contraction s any law can have in the CAF metric: max s s.t. ‖A + BK + Bθ‖_P ≤ √(1 − s) over
+/// all θ (the LMI of [`fit`] without data). Bounds how large the fitting tolerance of modification 1 can be.
+pub fn max_contraction(ctx: &PwaContext) -> Option<f64> {
+    let (n, m) = (ctx.n, ctx.m);
+    let nv = m * n + 1;
+    let sv = m * n;
+    let mut sdp = Sdp::new(nv);
+    sdp.add_linear_cost(sv, -1.0);
+    for v in 0..m * n {
+        sdp.add_square_cost(v, 1e-6);
+    }
+    let Ms = &ctx.roots.sqrt * (&ctx.A + &ctx.B * &ctx.K) * &ctx.roots.inv_sqrt;
+    let SB = &ctx.roots.sqrt * &ctx.B;
+    let F0 = Mat::from_fn(2 * n, 2 * n, |i, j| match (i < n, j < n) {
+        (true, true) | (false, false) => (i == j) as u8 as f64,
+        (false, true) => Ms[(i - n, j)],
+        (true, false) => Ms[(j - n, i)],
+    });
+    sdp.add_lmi(&F0, |x| {
+        let Theta = Mat::from_fn(m, n, |i, j| x[i * n + j]);
+        let D = &SB * Theta;
+        Mat::from_fn(2 * n, 2 * n, |i, j| match (i < n, j < n) {
+            (true, true) => -((i == j) as u8 as f64) * x[sv],
+            (false, true) => D[(i - n, j)],
+            (true, false) => D[(j - n, i)],
+            _ => 0.0,
+        })
+    });
+    let st = DefaultSettingsBuilder::default()
+        .verbose(false)
+        .max_iter(200)
+        .build()
+        .ok()?;
+    let r = sdp.solve(st).ok()?;
+    match r.status {
+        SolverStatus::Solved | SolverStatus::AlmostSolved => Some(r.x[sv]),
+        _ => None,
+    }
 }

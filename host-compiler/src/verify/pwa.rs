@@ -147,8 +147,8 @@ pub fn recheck(
     let mut pairs: Vec<(usize, usize)> = Vec::new();
     for l in 0..image.n_leaves() {
         let j = image.leaf_partition(l);
-        let (s, e) = image.leaf_refs(l);
-        for k in 0..e - s {
+        let (_, len) = image.leaf_refs(l);
+        for k in 0..len {
             if let Some(b) = image.leaf_ball(l, k) {
                 pairs.push((b, j));
             }
@@ -288,8 +288,8 @@ pub fn recheck(
                 Child::Leaf(l) => {
                     containment_checks += 1;
                     depth = depth.max(d);
-                    let (s, e) = image.leaf_refs(l as usize);
-                    let listed = (0..e - s)
+                    let (_, len) = image.leaf_refs(l as usize);
+                    let listed = (0..len)
                         .filter_map(|k| image.leaf_ball(l as usize, k))
                         .any(|bb| same(bb, b));
                     if !listed {
