@@ -470,6 +470,18 @@ pub fn learn_pwa(
     let ctx = PwaContext::new(problem, syn, settings.clone())?;
     let (laws, assignment) = learn_laws(&ctx);
     let learn_seconds = t0.elapsed().as_secs_f64();
+    build_pwa(problem, ctx, laws, assignment, learn_seconds)
+}
+
+/// The second half of [`learn_pwa`]: the admissible laws of every ball, the tree (§6.3) and the image, for
+/// laws already learned.
+pub fn build_pwa(
+    problem: &crate::spec::Problem,
+    ctx: PwaContext,
+    laws: Vec<LearnedLaw>,
+    assignment: Vec<usize>,
+    learn_seconds: f64,
+) -> Result<PwaController, PwaError> {
     let t1 = std::time::Instant::now();
     let stored: Vec<&StoredLaw> = laws.iter().map(|l| &l.stored).collect();
     let admissible: Vec<Vec<usize>> = (0..ctx.points.len())
