@@ -119,8 +119,8 @@ pub fn run(a: &SynthArgs, problem: &Problem, s: &Synthesis) -> miette::Result<()
         st.partitions as f64 / 110.0
     );
     println!(
-        "tree              {} nodes, {} leaves, worst-case depth {} hyperplane tests, {} balls, {} references, {} dropped",
-        st.nodes, st.leaves, st.depth, st.balls, st.ball_refs, st.dropped
+        "tree              {} nodes, {} leaves, worst-case depth {} hyperplane tests, at most {} balls per leaf, {} balls, {} references, {} dropped",
+        st.nodes, st.leaves, st.depth, st.max_leaf_balls, st.balls, st.ball_refs, st.dropped
     );
     println!(
         "learning          {:.3} s (partition {:.3} s), eps_fit {:.3e}",

@@ -83,6 +83,10 @@ pub struct PwaSettings {
     pub max_depth: usize,
     /// Show a progress bar over the data points while learning. Default false.
     pub progress: bool,
+    /// Target number of balls per leaf: a node with one verified law is still split while it holds more
+    /// and a cut makes progress, since every ball of a leaf may be tested in one control step (the
+    /// out-of-envelope answer tests them all). Default 8.
+    pub leaf_balls: usize,
 }
 
 impl Default for PwaSettings {
@@ -95,6 +99,7 @@ impl Default for PwaSettings {
             eta: 1e-4,
             max_depth: shared_types::capacity::MAX_TREE_DEPTH,
             progress: false,
+            leaf_balls: 8,
         }
     }
 }
@@ -122,6 +127,10 @@ impl PwaSettings {
     }
     pub fn max_depth(mut self, v: usize) -> Self {
         self.max_depth = v;
+        self
+    }
+    pub fn leaf_balls(mut self, v: usize) -> Self {
+        self.leaf_balls = v;
         self
     }
     pub fn progress(mut self, v: bool) -> Self {

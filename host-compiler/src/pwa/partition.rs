@@ -49,6 +49,8 @@ pub struct PartitionStats {
     pub ball_refs: usize,
     /// (leaf, ball) pairs left out of a leaf by `MAX_LEAF_BALLS` (the build fails when > 0).
     pub dropped: usize,
+    /// Most balls listed by one leaf (ball tests of the worst control step).
+    pub max_leaf_balls: usize,
 }
 
 /// Largest mixed set (balls of several laws) that becomes a leaf without further cuts.
@@ -291,7 +293,7 @@ impl Tree<'_> {
         }
         let common = self.common_law(&set);
         if let Some(j) = common {
-            if set.len() <= MAX_LEAF_BALLS {
+            if set.len() <= self.ctx.settings.leaf_balls.min(MAX_LEAF_BALLS) {
                 return Ok(self.leaf(&set, j));
             }
         }
@@ -300,7 +302,11 @@ impl Tree<'_> {
             let j = common.unwrap_or_else(|| self.most_common(&set));
             return Ok(self.leaf(&set, j));
         }
-        if depth >= self.ctx.settings.max_depth {
+        if depth >= self.ctx.settings.max_depth
+            || (common.is_some()
+                && set.len() <= MAX_LEAF_BALLS
+                && self.balanced_cut(&set).is_none())
+        {
             let j = common.unwrap_or_else(|| self.most_common(&set));
             return Ok(self.leaf(&set, j));
         }
@@ -399,6 +405,7 @@ pub fn build_image(
         balls: t.b.balls.len(),
         ball_refs: t.b.total_ball_refs(),
         dropped: t.dropped,
+        max_leaf_balls: t.b.leaves.iter().map(|l| l.balls.len()).max().unwrap_or(0),
     };
     Ok((t.b, stats))
 }

@@ -181,7 +181,7 @@ pub fn section(h: &mut String, data: &ReportData, r: &PwaReport) {
          <tr><th>fitting tolerance ε_fit (§6.2, mod. 1)</th><td class=\"n\">{}</td></tr>\
          <tr><th>partitions (laws)</th><td class=\"n\">{} (dissertation: 110; ratio {})</td></tr>\
          <tr><th>tree</th><td class=\"n\">{} nodes, {} leaves, {} balls, {} references</td></tr>\
-         <tr><th>worst-case depth</th><td class=\"n\">{} hyperplane tests</td></tr>\
+         <tr><th>worst-case depth</th><td class=\"n\">{} hyperplane tests, then at most {} ball tests</td></tr>\
          <tr><th>balls dropped</th><td class=\"n\">{}</td></tr>\
          <tr><th>learning time</th><td class=\"n\">{} s (partitioning {} s)</td></tr>\
          <tr><th>image</th><td class=\"n\">{} bytes (feedforward image of the same cover: {} bytes)</td></tr>\
@@ -198,6 +198,7 @@ pub fn section(h: &mut String, data: &ReportData, r: &PwaReport) {
         st.balls,
         st.ball_refs,
         st.depth,
+        st.max_leaf_balls,
         st.dropped,
         num(s.learn_seconds),
         num(s.partition_seconds),
