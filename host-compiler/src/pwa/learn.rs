@@ -7,10 +7,10 @@
 //!    procedure terminates;
 //! 2. repeatedly take the unmapped point nearest (in the P-metric) to the cluster; if the current law
 //!    already fits it within ε_fit and passes [`super::check_point`], add it; otherwise solve the
-//!    bounded-error fit `min ‖θ‖²_F  s.t. |θ x̃ + θ0 − ṽ|_∞ ≤ ε_fit` over the cluster and the candidate
-//!    (a QP in clarabel; the small-θ objective keeps Ã_j near the contracting A + BK), and accept the new
-//!    law only if every member still passes [`super::check_point`] (modification 2: every candidate that
-//!    fits more points is verified with (6.6) and (6.7));
+//!    bounded-error fit `min ‖θ P^{-1/2}‖²_F  s.t. |θ x̃ + θ0 − ṽ|_∞ ≤ ε_fit` over the cluster and the
+//!    candidate, with the LMI (6.6) at the design contraction as a constraint ([`fit`], an SDP in clarabel),
+//!    and accept the new law only if every member still passes [`super::check_point`] (modification 2:
+//!    every candidate that fits more points is verified with (6.6) and (6.7), recomputed with faer);
 //! 3. stop after `max_failures` consecutive rejected candidates.
 //!
 //! ε_fit is chosen by [`super::PwaContext::new`] so that the disturbance keeps r_crit below the balls'
