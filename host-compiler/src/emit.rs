@@ -804,18 +804,11 @@ impl PwaImageBuilder {
             }
             capacity("balls of one leaf", leaf.balls.len(), 1, MAX_LEAF_BALLS)?;
             for &b in &leaf.balls {
-                let Some(ball) = self.balls.get(b) else {
+                let Some(_ball) = self.balls.get(b) else {
                     return Err(invalid(format!("leaf {l}: ball {b}"), "does not exist"));
                 };
-                if ball.partition != leaf.partition {
-                    return Err(invalid(
-                        format!(
-                            "leaf {l} (partition {}): ball {b} (partition {})",
-                            leaf.partition, ball.partition
-                        ),
-                        "is certified for another partition",
-                    ));
-                }
+                // A leaf may list balls of other partitions (mixed leaf): the evaluator applies the law of
+                // the ball that contains the state.
                 ball_ref.extend_from_slice(&(b as u16).to_le_bytes());
             }
             refs += leaf.balls.len() as u16; // ≤ MAX_BALL_REFS, checked above

@@ -183,3 +183,62 @@ fn sigint_keeps_a_valid_verified_image() {
     );
     let _ = std::fs::remove_dir_all(&out);
 }
+
+/// `synth` on a spec with `mode = "pwa"` writes the PWA image (and the feedforward one it was learned from),
+/// a report with the PWA section and re-checks it; `verify` on the PWA image rechecks every partition and runs
+/// closed loops from F with 0 violations.
+#[test]
+fn synth_and_verify_a_pwa_spec() {
+    let base = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../examples/double-integrator.toml"
+    ))
+    .unwrap();
+    let out = std::env::temp_dir().join(format!("hc-cli-pwa-{}", std::process::id()));
+    std::fs::create_dir_all(&out).unwrap();
+    let spec = out.join("di-pwa.toml");
+    std::fs::write(&spec, format!("{base}\n[synthesis]\nmode = \"pwa\"\n")).unwrap();
+    let o = bin()
+        .arg("synth")
+        .arg(&spec)
+        .arg("--out")
+        .arg(&out)
+        .args(["--quiet", "--verify-runs", "2000"])
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        o.status.success(),
+        "synth failed: {stdout}\n{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert!(stdout.contains("2000 runs from F"), "{stdout}");
+    assert!(stdout.contains(" 0 violations"), "{stdout}");
+    assert!(stdout.contains("0 failing balls"), "{stdout}");
+    for f in [
+        "controller.img",
+        "feedforward.img",
+        "report.html",
+        "certificate.json",
+    ] {
+        assert!(out.join(f).is_file(), "{f} missing");
+    }
+    let html = std::fs::read_to_string(out.join("report.html")).unwrap();
+    assert!(html.contains("id=\"pwa\"") && html.contains("id=\"pwa-table\""));
+    let o = bin()
+        .arg("verify")
+        .arg(&spec)
+        .arg(out.join("controller.img"))
+        .args(["--runs", "2000"])
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "verify failed: {stdout}");
+    assert_eq!(
+        stdout.lines().last().unwrap().trim(),
+        "violations 0",
+        "{stdout}"
+    );
+    assert!(stdout.contains("0 failing balls"), "{stdout}");
+    let _ = std::fs::remove_dir_all(&out);
+}

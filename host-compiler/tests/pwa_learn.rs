@@ -241,3 +241,87 @@ fn closed_loop(pwa: &PwaController, syn: &Synthesis, problem: &host_compiler::sp
         &failures[..failures.len().min(5)]
     );
 }
+
+fn judge_of(
+    f: &Fixture,
+) -> (
+    Box<dyn host_compiler::geometry::Region>,
+    Option<Box<dyn host_compiler::geometry::Region>>,
+    host_compiler::trajectory::generate::InputBound,
+) {
+    (
+        f.problem.goal_region().unwrap(),
+        f.problem.unsafe_region().unwrap(),
+        host_compiler::synth::input_bound(&f.problem.input),
+    )
+}
+
+/// `verify::pwa` re-derives the certificate from the image bytes alone: every partition passes (6.6), (6.7),
+/// the one-step inclusion, the input bound, and every ball is listed by every leaf its descent reaches; the
+/// Monte Carlo from F (terminating at Goal) finds no violation.
+#[test]
+fn the_image_alone_rechecks_and_monte_carlo_from_f_finds_no_violation() {
+    let f = fixture();
+    let (goal, unsafe_set, input) = judge_of(f);
+    let judge = host_compiler::synth::judge(
+        &f.problem,
+        &f.syn.plant,
+        goal.as_ref(),
+        unsafe_set.as_deref(),
+        &input,
+    );
+    let img = shared_types::image::decode(&f.pwa.image).unwrap();
+    let rc =
+        host_compiler::verify::pwa::recheck(&judge, f.syn.plant.continuous.as_ref(), &img).unwrap();
+    assert_eq!(rc.failures, 0, "{rc:?}");
+    assert!(rc.containment_checks >= img.n_balls());
+    assert!(rc.partitions.iter().all(|p| p.sigma > 0.0 && p.ok));
+    let x0s: Vec<Vec<f64>> = f
+        .syn
+        .trajectories
+        .iter()
+        .map(|t| t.nominal.x[0].clone())
+        .collect();
+    let mc = host_compiler::verify::pwa::monte_carlo_pwa(&judge, &img, &x0s, 2_000, 7, 0);
+    assert_eq!(mc.runs, 2_000);
+    assert!(mc.init_runs >= 1_000);
+    assert_eq!(mc.violations, 0, "{:?}", mc.first_violations);
+    assert!(mc.max_steps <= f.problem.horizon_steps());
+}
+
+/// Regression for the recheck's power: a law whose gain no longer contracts ((6.6) fails) and a ball
+/// removed from a leaf (containment across a boundary fails) are both found in the image bytes.
+#[test]
+fn the_recheck_finds_a_broken_law_and_a_missing_ball() {
+    let f = fixture();
+    let (goal, unsafe_set, input) = judge_of(f);
+    let judge = host_compiler::synth::judge(
+        &f.problem,
+        &f.syn.plant,
+        goal.as_ref(),
+        unsafe_set.as_deref(),
+        &input,
+    );
+    let mut b = f.pwa.builder.clone();
+    for g in &mut b.laws[0].gain {
+        *g = -*g; // positive feedback
+    }
+    let bytes = b.to_bytes().unwrap();
+    let img = shared_types::image::decode(&bytes).unwrap();
+    let rc = host_compiler::verify::pwa::recheck(&judge, None, &img).unwrap();
+    assert!(
+        rc.partitions[0].sigma < 0.0 && !rc.partitions[0].ok,
+        "{:?}",
+        rc.partitions[0]
+    );
+
+    let mut b = f.pwa.builder.clone();
+    let l = (0..b.leaves.len())
+        .find(|&l| b.leaves[l].balls.len() >= 2)
+        .expect("a leaf with two balls");
+    b.leaves[l].balls.pop();
+    let bytes = b.to_bytes().unwrap();
+    let img = shared_types::image::decode(&bytes).unwrap();
+    let rc = host_compiler::verify::pwa::recheck(&judge, None, &img).unwrap();
+    assert!(rc.containment_failures >= 1, "{rc:?}");
+}

@@ -160,6 +160,7 @@ fn sample() -> ReportData {
             ("verify".into(), 8.0),
         ],
         warnings: vec!["δ of trajectory 7 shrank by 2 % for the f32 margin".into()],
+        pwa: None,
     }
 }
 

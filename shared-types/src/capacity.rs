@@ -37,7 +37,7 @@ pub const MAX_BALLS: usize = 2048;
 /// the leaves on both sides).
 pub const MAX_BALL_REFS: usize = 4096;
 /// Largest number of balls one leaf may list: bounds the envelope test of one control step.
-pub const MAX_LEAF_BALLS: usize = 32;
+pub const MAX_LEAF_BALLS: usize = 64;
 
 /// Worst-case multiply-adds of one PWA control step at capacity (see the module docs).
 pub const PWA_STEP_MAX_MULADDS: usize =

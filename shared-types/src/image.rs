@@ -489,13 +489,6 @@ pub enum ImageError {
         /// The index found.
         value: u16,
     },
-    /// A leaf lists a ball certified for another partition's law.
-    BallPartitionMismatch {
-        /// The leaf.
-        leaf: u16,
-        /// The ball.
-        ball: u16,
-    },
     /// A ball's location index is not below the number of locations.
     BallLocationOutOfRange {
         /// The ball.
@@ -690,10 +683,6 @@ impl fmt::Display for ImageError {
             BallRefOutOfRange { leaf, value } => {
                 write!(f, "leaf {leaf}: ball {value} is out of range")
             }
-            BallPartitionMismatch { leaf, ball } => write!(
-                f,
-                "leaf {leaf}: ball {ball} is certified for another partition"
-            ),
             BallLocationOutOfRange { ball, value } => {
                 write!(f, "ball {ball}: location {value} is out of range")
             }

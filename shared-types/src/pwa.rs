@@ -26,11 +26,13 @@
 //!
 //! # The envelope: balls at the leaves
 //! F is a union of ellipsoids, not a polytope, so a leaf does not describe `cell ∩ F` by half-spaces (that
-//! could only be an inner approximation, found by an LP at build time). Each leaf instead names its
-//! partition j and lists the certified balls whose law is j: the balls `B_P(x̃_i(κ), δ_i)` with `x̃_i(κ)`
-//! in `X_j`, for which (6.5) (through (6.6)–(6.7)) was shown. A state gets `Ok(u)` only if it lies in one of
-//! the listed balls, which is exactly the hypothesis of Theorem 6.6 for that ball: the law of j maps the
-//! ball into `B_P(x̃_i(κ+1), δ_i) ⊂ F`. A state in no listed ball gets [`Region::OutsideBalls`], a state the
+//! could only be an inner approximation, found by an LP at build time). Each leaf instead names its main
+//! partition and lists the certified balls `B_P(x̃_i(κ), δ_i)` that meet its cell, each with the partition
+//! (law) for which (6.5) (through (6.6)–(6.7)) was shown for that ball. A state gets `Ok(u)` only if it lies
+//! in one of the listed balls, and the law applied is the law of the first listed ball that contains it:
+//! exactly the hypothesis of Theorem 6.6 for that ball (the law maps the ball into
+//! `B_P(x̃_i(κ+1), δ_i) ⊂ F`). This is the reassignment of Algorithm 5 (a state near a face that lies in a
+//! ball certified for another law gets that law), decided per ball instead of per face. A state in no listed ball gets [`Region::OutsideBalls`], a state the
 //! tree sends to [`OUTSIDE`] gets [`Region::OutsideTree`]; both are "out of envelope". So the tree only has
 //! to route; a hyperplane cutting a ball near a partition boundary (the situation Algorithm 5 repairs by
 //! moving the boundary to `b⁻_m`) is handled by listing the ball in the leaves on both sides of the cut
@@ -39,8 +41,7 @@
 //!
 //! Balls live in one table (centre, δ, location whose `P_ℓ` is the metric, partition it is certified for);
 //! leaves refer to them through a list of `u16` references (a leaf owns references `end[l−1]..end[l]`), so
-//! a ball cut by a hyperplane is stored once. Each ball records its partition and decoding checks that every
-//! leaf lists only balls of its own partition.
+//! a ball cut by a hyperplane is stored once per law. Each ball records its partition.
 //!
 //! # Cost of one step
 //! At most [`MAX_TREE_DEPTH`] hyperplane tests (n multiply-adds each; the stored depth is the exact worst
@@ -60,7 +61,7 @@
 //!   1 ≤ balls ≤ [`MAX_BALLS`], stored depth ≤ [`MAX_TREE_DEPTH`], references ≤ [`MAX_BALL_REFS`];
 //! * every field's byte length matches the counts and dimensions; every float finite; no zero normal;
 //! * each leaf's partition in range; leaf ends strictly increasing (every leaf lists ≥ 1 ball) and at most
-//!   [`MAX_LEAF_BALLS`] per leaf; every reference in range and to a ball of the leaf's partition;
+//!   [`MAX_LEAF_BALLS`] per leaf; every reference in range;
 //! * balls: `δ ≥ 0`, location and partition in range;
 //! * tree: every child node in range and after its parent, every child leaf in range, every node reachable
 //!   from the root, every leaf referenced, no node deeper than [`MAX_TREE_DEPTH`] tests, and the stored
@@ -328,24 +329,18 @@ pub(crate) fn validate_tables(dims: Dims, t: &PwaTables<'_>) -> Result<(), Image
         }
     }
 
-    // References: in range, and only to balls certified for the leaf's law.
+    // References: in range. A leaf may list balls of several partitions (the law applied is the law of the
+    // ball that contains the state, module doc).
     check_len(Field::BallRef, t.ball_ref, 2 * n_refs)?;
     let mut start = 0usize;
     for l in 0..nl {
         let end = u16_le(t.leaf_end, l) as usize;
-        let j = u16_le(t.leaf_partition, l);
         for k in start..end {
             let b = u16_le(t.ball_ref, k);
             if b as usize >= nb {
                 return Err(ImageError::BallRefOutOfRange {
                     leaf: sat16(l),
                     value: b,
-                });
-            }
-            if u16_le(t.ball_partition, b as usize) != j {
-                return Err(ImageError::BallPartitionMismatch {
-                    leaf: sat16(l),
-                    ball: b,
                 });
             }
         }
@@ -610,7 +605,7 @@ impl<'a> Image<'a> {
             }
         };
         let l = leaf as usize;
-        let partition = u16_le(t.leaf_partition, l);
+        let leaf_partition = u16_le(t.leaf_partition, l);
         let start = match l {
             0 => 0,
             _ => u16_le(t.leaf_end, l - 1) as usize,
@@ -640,11 +635,14 @@ impl<'a> Image<'a> {
             if d2 <= delta * delta {
                 return Region::Inside {
                     leaf,
-                    partition,
+                    partition: u16_le(t.ball_partition, bu),
                     ball: b,
                 };
             }
         }
-        Region::OutsideBalls { leaf, partition }
+        Region::OutsideBalls {
+            leaf,
+            partition: leaf_partition,
+        }
     }
 }

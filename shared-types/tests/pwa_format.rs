@@ -428,17 +428,43 @@ fn rejects_bad_leaves() {
         c.decode_err(),
         ImageError::BallRefOutOfRange { leaf: 1, value: 3 }
     );
-    // Leaf 1 (partition 1) listing ball 0 (certified for partition 0).
+}
+
+/// Regression: a leaf whose cell meets balls certified for different laws lists them all (no ball of F is
+/// dropped), and the law applied is that of the ball that contains the state, not the leaf's.
+#[test]
+fn a_mixed_leaf_applies_the_law_of_the_containing_ball() {
+    use shared_types::pwa::Region;
+    // Leaf 1 (main partition 1) also lists ball 0 (certified for partition 0), after ball 2.
     let mut c = two_partitions();
     c.leaf_balls[1] = vec![2, 0];
-    assert_eq!(
-        c.decode_err(),
-        ImageError::BallPartitionMismatch { leaf: 1, ball: 0 }
-    );
-    assert_eq!(
-        c.decode_err().to_string(),
-        "leaf 1: ball 0 is certified for another partition"
-    );
+    let bytes = c.to_bytes().expect("a mixed leaf is a valid image");
+    let img = shared_types::image::decode(&bytes).unwrap();
+    // x = (0.2, 0.5): right of x1 = 0, below x2 = 2 → leaf 1; outside ball 2 ((1,0), δ 1.5)? |(−0.8, 0.5)| = 0.94
+    // < 1.5, so ball 2 (partition 1) is found first.
+    match img.locate(&[0.2, 0.5]) {
+        Some(Region::Inside {
+            leaf: 1,
+            partition: 1,
+            ball: 2,
+        }) => {}
+        other => panic!("{other:?}"),
+    }
+    // With ball 2 shrunk to δ 0.5 and leaf 1 listing ball 1 ((−0.5, 1), δ 0.75, partition 0) after it, the
+    // state (0.1, 1.0) (right of x1 = 0: leaf 1) lies only in ball 1, so partition 0's law applies.
+    let mut c = two_partitions();
+    c.leaf_balls[1] = vec![2, 1];
+    c.ball_delta[2] = 0.5;
+    let bytes = c.to_bytes().unwrap();
+    let img = shared_types::image::decode(&bytes).unwrap();
+    match img.locate(&[0.1, 1.0]) {
+        Some(Region::Inside {
+            leaf: 1,
+            partition: 0,
+            ball: 1,
+        }) => {}
+        other => panic!("{other:?}"),
+    }
 }
 
 #[test]

@@ -48,7 +48,7 @@
 
 mod pbh;
 mod rcrit;
-mod sdp;
+pub(crate) mod sdp;
 mod settings;
 mod synth;
 mod validate;

@@ -95,6 +95,21 @@ impl Sdp {
         self.cones.push(SupportedConeT::NonnegativeConeT(1));
     }
 
+    /// Add `Σ a_v x_v ≤ rhs` (terms as (v, a_v)).
+    pub fn add_linear_le(&mut self, terms: &[(usize, f64)], rhs: f64) {
+        // s = rhs − aᵀx ≥ 0: b = rhs and A[row, v] = a_v.
+        let row = self.b.len();
+        for &(v, a) in terms {
+            if a != 0.0 {
+                self.rows.push(row);
+                self.cols.push(v);
+                self.vals.push(a);
+            }
+        }
+        self.b.push(rhs);
+        self.cones.push(SupportedConeT::NonnegativeConeT(1));
+    }
+
     /// Add `c · x_v` to the objective.
     pub fn add_linear_cost(&mut self, v: usize, c: f64) {
         self.q[v] += c;

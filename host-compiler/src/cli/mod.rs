@@ -6,6 +6,7 @@ pub mod inspect;
 pub mod mtl;
 pub mod simulate;
 pub mod synth;
+pub mod synth_pwa;
 pub mod verify;
 
 /// Synthesise controllers that are provably safe for one task, and the fixed-size image a

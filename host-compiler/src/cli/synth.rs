@@ -75,6 +75,9 @@ pub fn run(a: &SynthArgs) -> miette::Result<()> {
     std::fs::create_dir_all(&a.out)
         .into_diagnostic()
         .wrap_err_with(|| format!("creating {}", a.out.display()))?;
+    if problem.synthesis.mode == crate::spec::ControllerMode::Pwa {
+        return crate::cli::synth_pwa::run(a, &problem, &s);
+    }
     let img_path = a.out.join("controller.img");
     std::fs::write(&img_path, &s.image)
         .into_diagnostic()

@@ -52,6 +52,9 @@ pub fn run(a: &VerifyArgs) -> miette::Result<()> {
         unsafe_set.as_deref(),
         &input,
     );
+    if img.mode() == shared_types::image::Mode::PwaFeedback {
+        return run_pwa(a, &judge, &plant, &img);
+    }
     let r = monte_carlo(
         &judge,
         &img,
@@ -86,6 +89,59 @@ pub fn run(a: &VerifyArgs) -> miette::Result<()> {
         return Err(miette::miette!(
             "only {} of {} initial states could be drawn in the certified cover",
             r.interior_runs,
+            a.runs
+        ));
+    }
+    Ok(())
+}
+
+/// PWA images (Ch. 6): the independent certificate recheck and closed-loop Monte Carlo from F
+/// ([`crate::verify::pwa`]); runs terminate upon entering Goal (Theorem 6.5).
+fn run_pwa(
+    a: &VerifyArgs,
+    judge: &crate::verify::Judge<'_>,
+    plant: &crate::synth::SampledPlant,
+    img: &shared_types::image::Image<'_>,
+) -> miette::Result<()> {
+    let rc = crate::verify::pwa::recheck(judge, plant.continuous.as_ref(), img)
+        .map_err(|e| miette::miette!(e))?;
+    // The image does not mark which balls start a trajectory: all runs start anywhere in F.
+    let mc =
+        crate::verify::pwa::monte_carlo_pwa(judge, img, &[], a.runs, a.seed.unwrap_or(0x7e51f1), 0);
+    if a.json {
+        let j = serde_json::json!({ "recheck": rc, "monte_carlo": mc });
+        println!("{}", serde_json::to_string_pretty(&j).into_diagnostic()?);
+    } else {
+        println!(
+            "partitions {}, tree depth {}, containment across boundaries: {} leaf visits, {} failing balls",
+            rc.partitions.len(),
+            rc.depth,
+            rc.containment_checks,
+            rc.containment_failures
+        );
+        for p in rc.partitions.iter().filter(|p| !p.ok) {
+            println!("partition {} fails its certificate: {p:?}", p.partition);
+        }
+        println!(
+            "runs {} from F ({} drawn starts not accepted), at most {} steps to Goal",
+            mc.runs, mc.rejected, mc.max_steps
+        );
+        for v in &mc.first_violations {
+            println!("violation from x0 = {:?}: {v:?}", v.x0);
+        }
+        println!("violations {}", mc.violations);
+    }
+    if rc.failures > 0 || mc.violations > 0 {
+        return Err(miette::miette!(
+            "{} certificate failures, {} violations",
+            rc.failures,
+            mc.violations
+        ));
+    }
+    if mc.runs < a.runs {
+        return Err(miette::miette!(
+            "only {} of {} initial states could be drawn in F",
+            mc.runs,
             a.runs
         ));
     }

@@ -7,10 +7,10 @@
 //!    procedure terminates;
 //! 2. repeatedly take the unmapped point nearest (in the P-metric) to the cluster; if the current law
 //!    already fits it within ε_fit and passes [`super::check_point`], add it; otherwise solve the
-//!    bounded-error fit `min ‖θ‖²_F  s.t. |θ x̃ + θ0 − ṽ|_∞ ≤ ε_fit` over the cluster and the candidate
-//!    (a QP in clarabel; the small-θ objective keeps Ã_j near the contracting A + BK), and accept the new
-//!    law only if every member still passes [`super::check_point`] (modification 2: every candidate that
-//!    fits more points is verified with (6.6) and (6.7));
+//!    bounded-error fit `min ‖θ P^{-1/2}‖²_F  s.t. |θ x̃ + θ0 − ṽ|_∞ ≤ ε_fit` over the cluster and the
+//!    candidate, with the LMI (6.6) at the design contraction as a constraint ([`fit`], an SDP in clarabel),
+//!    and accept the new law only if every member still passes [`super::check_point`] (modification 2:
+//!    every candidate that fits more points is verified with (6.6) and (6.7), recomputed with faer);
 //! 3. stop after `max_failures` consecutive rejected candidates.
 //!
 //! ε_fit is chosen by [`super::PwaContext::new`] so that the disturbance keeps r_crit below the balls'
@@ -19,10 +19,9 @@
 //! thermal-relaxation search of [190] itself is not implemented.
 
 use super::{check_point, PwaContext, StoredLaw};
-use clarabel::algebra::CscMatrix;
-use clarabel::solver::{
-    DefaultSettingsBuilder, DefaultSolver, IPSolver, SolverStatus, SupportedConeT,
-};
+use crate::caf::sdp::Sdp;
+use crate::linalg::mat_vec;
+use clarabel::solver::{DefaultSettingsBuilder, SolverStatus};
 use faer::Mat;
 
 /// One learned affine law with its cluster of data points.
@@ -37,61 +36,75 @@ pub struct LearnedLaw {
     pub members: Vec<usize>,
 }
 
-/// Solves the bounded-error fit over `members` (module doc, step 2). `None` if infeasible or the solver
-/// fails.
+/// Solves the bounded-error fit over `members` (module doc, step 2) as a small SDP: minimise ‖θ‖²_F subject to
+/// `|θ x̃_k + θ0 − ṽ_k|_∞ ≤ eps` for every member and the LMI (6.6) with the contraction the learner needs,
+/// written in P^{1/2} coordinates: `[[(1 − s)I, Mᵀ], [M, I]] ⪰ 0` with `M = P^{1/2}(A + BK + Bθ)P^{-1/2}`,
+/// i.e. `‖Ã_j‖_P ≤ √(1 − s)` (s = `ctx.s_req`). Constraining the search to laws that satisfy (6.6) with
+/// margin, instead of fitting first and verifying after, is what lets a law follow a ramping reference
+/// (a least-norm fit alone makes Ã_j unstable there). The answer is still verified afterwards
+/// ([`super::check_point`]). `None` if infeasible or the solver fails.
 pub fn fit(ctx: &PwaContext, members: &[usize], eps: f64) -> Option<(Mat<f64>, Vec<f64>)> {
     let (n, m) = (ctx.n, ctx.m);
-    let nv = m * (n + 1); // θ (row-major), then θ0
+    // Well-scaled variables: θ = Θ P^{1/2} and the law's value at the first member x̄,
+    // θ x + θ0 = Θ z + w with z = P^{1/2}(x − x̄), w = θ x̄ + θ0. ‖Θ‖ is the input change per unit of P-distance,
+    // the quantity the input bound sees.
+    let nv = m * (n + 1) + 1; // Θ (row-major), then w, then the contraction s
+    let sv = nv - 1;
     let th = |i: usize, j: usize| i * n + j;
     let t0 = |i: usize| m * n + i;
-    // ½ zᵀ Pq z with Pq = 2 I on θ, a tiny weight on θ0 for strict convexity.
-    let (mut PI, mut PJ, mut PV) = (vec![], vec![], vec![]);
-    for v in 0..nv {
-        PI.push(v);
-        PJ.push(v);
-        PV.push(if v < m * n { 2.0 } else { 1e-9 });
+    let xbar = &ctx.points[*members.first()?].x;
+    let mut sdp = Sdp::new(nv);
+    for v in 0..m * (n + 1) {
+        sdp.add_square_cost(v, if v < m * n { 2.0 } else { 1e-6 });
     }
-    let (mut I, mut J, mut V, mut b) = (vec![], vec![], vec![], vec![]);
-    let mut row = 0;
-    // Scale of the state so the QP is well conditioned.
+    sdp.add_lower_bound(sv, ctx.s_req);
+    sdp.add_linear_cost(sv, -1e-6);
     for &k in members {
         let p = &ctx.points[k];
+        let d: Vec<f64> = (0..n).map(|j| p.x[j] - xbar[j]).collect();
+        let z = mat_vec(ctx.roots.sqrt.as_ref(), &d);
         for i in 0..m {
-            // θ_i x + θ0_i − v_i ≤ eps  and  −(θ_i x + θ0_i − v_i) ≤ eps
+            // ±(Θ_i z + w_i − v_i) ≤ eps
             for sgn in [1.0, -1.0] {
-                for j in 0..n {
-                    if p.x[j] != 0.0 {
-                        I.push(row);
-                        J.push(th(i, j));
-                        V.push(sgn * p.x[j]);
-                    }
-                }
-                I.push(row);
-                J.push(t0(i));
-                V.push(sgn);
-                b.push(eps + sgn * p.v[i]);
-                row += 1;
+                let mut terms: Vec<(usize, f64)> = (0..n).map(|j| (th(i, j), sgn * z[j])).collect();
+                terms.push((t0(i), sgn));
+                sdp.add_linear_le(&terms, eps + sgn * p.v[i]);
             }
         }
     }
-    let Pm = CscMatrix::new_from_triplets(nv, nv, PI, PJ, PV);
-    let Am = CscMatrix::new_from_triplets(row, nv, I, J, V);
-    let q = vec![0.0; nv];
-    let cones = [SupportedConeT::NonnegativeConeT(row)];
+    // (6.6) with margin, in P^{1/2} coordinates: M = Ms + P^{1/2} B Θ.
+    let Ms = &ctx.roots.sqrt * (&ctx.A + &ctx.B * &ctx.K) * &ctx.roots.inv_sqrt;
+    let SB = &ctx.roots.sqrt * &ctx.B;
+    let F0 = Mat::from_fn(2 * n, 2 * n, |i, j| match (i < n, j < n) {
+        (true, true) | (false, false) => (i == j) as u8 as f64,
+        (false, true) => Ms[(i - n, j)],
+        (true, false) => Ms[(j - n, i)],
+    });
+    sdp.add_lmi(&F0, |x| {
+        let Theta = Mat::from_fn(m, n, |i, j| x[th(i, j)]);
+        let D = &SB * Theta;
+        Mat::from_fn(2 * n, 2 * n, |i, j| match (i < n, j < n) {
+            (true, true) => -((i == j) as u8 as f64) * x[sv],
+            (false, true) => D[(i - n, j)],
+            (true, false) => D[(j - n, i)],
+            _ => 0.0,
+        })
+    });
     let st = DefaultSettingsBuilder::default()
         .verbose(false)
-        .max_iter(100)
+        .max_iter(200)
         .build()
         .ok()?;
-    let mut solver = DefaultSolver::new(&Pm, &q, &Am, &b, &cones, st).ok()?;
-    solver.solve();
-    match solver.solution.status {
+    let r = sdp.solve(st).ok()?;
+    match r.status {
         SolverStatus::Solved | SolverStatus::AlmostSolved => {}
         _ => return None,
     }
-    let z = &solver.solution.x;
-    let theta = Mat::from_fn(m, n, |i, j| z[th(i, j)]);
-    let theta0 = (0..m).map(|i| z[t0(i)]).collect();
+    let z = &r.x;
+    let Theta = Mat::from_fn(m, n, |i, j| z[th(i, j)]);
+    let theta = &Theta * &ctx.roots.sqrt;
+    let tx = mat_vec(theta.as_ref(), xbar);
+    let theta0 = (0..m).map(|i| z[t0(i)] - tx[i]).collect();
     Some((theta, theta0))
 }
 
@@ -184,6 +197,11 @@ pub fn learn_laws(ctx: &PwaContext) -> (Vec<LearnedLaw>, Vec<usize>) {
     let mut free = vec![true; np];
     let mut assignment = vec![usize::MAX; np];
     let mut laws = Vec::new();
+    let bar = if ctx.settings.progress {
+        indicatif::ProgressBar::new(np as u64)
+    } else {
+        indicatif::ProgressBar::hidden()
+    };
     loop {
         let unmapped: Vec<usize> = (0..np).filter(|&k| free[k]).collect();
         if unmapped.is_empty() {
@@ -207,7 +225,49 @@ pub fn learn_laws(ctx: &PwaContext) -> (Vec<LearnedLaw>, Vec<usize>) {
             free[k] = false;
             assignment[k] = laws.len();
         }
+        bar.inc(best.members.len() as u64);
         laws.push(best);
     }
+    bar.finish_and_clear();
     (laws, assignment)
+}
+
+/// The largest contraction s any law can have in the CAF metric: max s s.t. ‖A + BK + Bθ‖_P ≤ √(1 − s) over
+/// all θ (the LMI of [`fit`] without data). Bounds how large the fitting tolerance of modification 1 can be.
+pub fn max_contraction(ctx: &PwaContext) -> Option<f64> {
+    let (n, m) = (ctx.n, ctx.m);
+    let nv = m * n + 1;
+    let sv = m * n;
+    let mut sdp = Sdp::new(nv);
+    sdp.add_linear_cost(sv, -1.0);
+    for v in 0..m * n {
+        sdp.add_square_cost(v, 1e-6);
+    }
+    let Ms = &ctx.roots.sqrt * (&ctx.A + &ctx.B * &ctx.K) * &ctx.roots.inv_sqrt;
+    let SB = &ctx.roots.sqrt * &ctx.B;
+    let F0 = Mat::from_fn(2 * n, 2 * n, |i, j| match (i < n, j < n) {
+        (true, true) | (false, false) => (i == j) as u8 as f64,
+        (false, true) => Ms[(i - n, j)],
+        (true, false) => Ms[(j - n, i)],
+    });
+    sdp.add_lmi(&F0, |x| {
+        let Theta = Mat::from_fn(m, n, |i, j| x[i * n + j]);
+        let D = &SB * Theta;
+        Mat::from_fn(2 * n, 2 * n, |i, j| match (i < n, j < n) {
+            (true, true) => -((i == j) as u8 as f64) * x[sv],
+            (false, true) => D[(i - n, j)],
+            (true, false) => D[(j - n, i)],
+            _ => 0.0,
+        })
+    });
+    let st = DefaultSettingsBuilder::default()
+        .verbose(false)
+        .max_iter(200)
+        .build()
+        .ok()?;
+    let r = sdp.solve(st).ok()?;
+    match r.status {
+        SolverStatus::Solved | SolverStatus::AlmostSolved => Some(r.x[sv]),
+        _ => None,
+    }
 }

@@ -26,14 +26,33 @@
 //!   with a relative margin η for the f32 ball test.
 //! * **Input**: the law's input over the ball stays in the input set shrunk by the rounding bound
 //!   ([`crate::certify::input_distance`] with the law's gain).
+//! * **Between samples** (continuous-time plants, zero-order hold). The feedforward certificate bounded the
+//!   inter-sample excursion with K; under law j the held input is `u = K_j x + θ0_j`, so it is recomputed
+//!   per (law, ball) with the same bound as [`crate::certify`] item 2: for x = x̃ + e, ‖e‖_P ≤ δ_i, the
+//!   vector field at the sample is `f = f̃ + (A_c + B_c K_j) e + B_c ε` (f̃ = A_c x̃ + B_c ũ + c), hence
+//!   `‖x(κh+s) − x̃(κ)‖_P ≤ γ_j δ_i + φ‖f̃‖_P + φβε̄` on [0, h] with γ_j = 1 + φ(h)‖A_c + B_c K_j‖_P,
+//!   φ(h) = (e^{μh} − 1)/μ and β = ‖P^{1/2}B_c‖. The law is accepted on the ball only if this stays below
+//!   dist_P(x̃_i(κ), Unsafe). (For discrete plants φ = 0, γ_j = 1 and the check is the sample one.)
 //!
-//! Goal and Unsafe need no new check: the balls are the feedforward certificate's balls (Theorem 4.7).
+//! Goal and Unsafe at the samples need no new check: the balls are the feedforward certificate's balls
+//! (Theorem 4.7), which lie outside Unsafe, and the ball at κ*_i lies in Goal.
+//!
+//! # Reaching Goal within T
+//! Theorems 6.5–6.6 give invariance of F until Goal. The tree of [`partition`] gives more: every ball that
+//! meets a leaf's cell is listed by that leaf with a law verified for it (no ball is dropped, else the build
+//! fails). Then a state x in ball (i, κ) is accepted in whatever cell it lies, the law applied is verified
+//! for (i, κ), so x⁺ lies in ball (i, κ+1), which every cell it meets lists again. By induction a run that
+//! starts in ball (i, κ) is in ball (i, κ*_i) ⊂ Goal after κ*_i − κ ≤ T/h steps: the time-to-go strictly
+//! decreases along the ball chain, so switching laws between trajectories' balls cannot delay Goal.
 //!
 //! # Limits
-//! * Discrete-time loop only: for continuous-time plants the inter-sample bound of the certificate was
-//!   computed with K, not K + θ_j; [`learn_pwa`] refuses such plants rather than certify them wrongly.
-//! * Theorems 6.5–6.6 give safety (the run stays in F until Goal). Reaching Goal within T is not implied
-//!   when a run switches between trajectories' balls; it is checked empirically by the tests.
+//! * Example 6.4 (examples/planar-vehicle-pwa.toml) does not compress: consecutive samples of a nominal run
+//!   are about one ball radius apart in the CAF metric and ṽ changes by ~0.055 per step there, while the
+//!   one-step inclusion with ‖A + BK‖_P ≈ 0.998 leaves a disturbance budget of ~0.01; laws that contract
+//!   more (up to s ≈ 0.07 is feasible for this P, [`learn::max_contraction`]) react too strongly along the
+//!   direction of motion to fit two samples (the fit SDP is infeasible). Every data point ends in its own
+//!   law and the tree exceeds the image capacities; the build fails with that message rather than emit an
+//!   uncertified image.
 //! * The f32 ball test is assumed to accept only states within δ_i when ρ_i is the feedforward
 //!   certificate's stored radius (its selection shrink uses γ_{n+4}, larger than the γ_{2n} of the PWA test
 //!   for n ≤ 4).
@@ -53,9 +72,13 @@ pub use partition::{build_image, PartitionStats};
 /// Settings of the learning and partitioning, with documented defaults ([`PwaSettings::default`]).
 #[derive(Clone, Debug)]
 pub struct PwaSettings {
-    /// The fitting tolerance is chosen so that r_crit(A + BK, ε_fit + ε_f32) ≤ `rcrit_fraction` · min_i ρ_i
-    /// (Example 6.4 uses one half). Default 0.5.
+    /// The fitting tolerance is chosen so that a law with the design contraction has
+    /// r̃_crit(Ã_j, ε_fit + ε_f32) ≤ `rcrit_fraction` · min_i ρ_i (Example 6.4 uses one half). Default 0.5.
     pub rcrit_fraction: f64,
+    /// Design contraction s of the fitted laws: the fit (an SDP) asks `‖A + BK_j‖_P ≤ √(1 − s)` ((6.6) with
+    /// margin). Larger s allows a larger fitting tolerance (modification 1 of §6.2) at the price of larger
+    /// gains. `None`: the contraction of the CAF gain K itself, 1 − ‖A + BK‖²_P. Default `None`.
+    pub contraction: Option<f64>,
     /// Seeds tried per cluster (multi-start of the greedy search; the largest verified cluster wins).
     /// Default 4.
     pub seeds: usize,
@@ -65,16 +88,25 @@ pub struct PwaSettings {
     pub eta: f64,
     /// Largest tree depth (hyperplane tests). Default `shared_types::capacity::MAX_TREE_DEPTH`.
     pub max_depth: usize,
+    /// Show a progress bar over the data points while learning. Default false.
+    pub progress: bool,
+    /// Target number of balls per leaf: a node with one verified law is still split while it holds more
+    /// and a cut makes progress, since every ball of a leaf may be tested in one control step (the
+    /// out-of-envelope answer tests them all). Default 8.
+    pub leaf_balls: usize,
 }
 
 impl Default for PwaSettings {
     fn default() -> Self {
         Self {
             rcrit_fraction: 0.5,
+            contraction: None,
             seeds: 4,
             max_failures: 12,
             eta: 1e-4,
             max_depth: shared_types::capacity::MAX_TREE_DEPTH,
+            progress: false,
+            leaf_balls: 8,
         }
     }
 }
@@ -82,6 +114,10 @@ impl Default for PwaSettings {
 impl PwaSettings {
     pub fn rcrit_fraction(mut self, v: f64) -> Self {
         self.rcrit_fraction = v;
+        self
+    }
+    pub fn contraction(mut self, v: Option<f64>) -> Self {
+        self.contraction = v;
         self
     }
     pub fn seeds(mut self, v: usize) -> Self {
@@ -100,13 +136,21 @@ impl PwaSettings {
         self.max_depth = v;
         self
     }
+    pub fn leaf_balls(mut self, v: usize) -> Self {
+        self.leaf_balls = v;
+        self
+    }
+    pub fn progress(mut self, v: bool) -> Self {
+        self.progress = v;
+        self
+    }
 }
 
 /// Why no PWA controller could be built.
 #[derive(Debug, thiserror::Error)]
 pub enum PwaError {
-    #[error("PWA feedback is implemented for discrete-time loops only (inter-sample bound not rechecked)")]
-    ContinuousPlant,
+    #[error("sets of the spec: {0}")]
+    Sets(String),
     #[error("no certified trajectory with a step before Goal: nothing to learn from")]
     NoData,
     #[error("the CAF metric P is not positive definite")]
@@ -134,6 +178,21 @@ pub struct DataPoint {
     pub delta: f64,
     /// The stored radius ρ_i (f32, rounded down), the image's ball.
     pub rho: f64,
+    /// dist_P(x̃_i(κ), Unsafe) (∞ without Unsafe).
+    pub unsafe_dist: f64,
+    /// φ(h)‖A_c x̃ + B_c ũ + c‖_P: the nominal's inter-sample excursion (0 for discrete plants).
+    pub excursion: f64,
+}
+
+/// Inter-sample constants of a continuous-time plant (module doc, "Between samples").
+#[derive(Clone, Debug)]
+pub struct InterSample {
+    pub Ac: Mat<f64>,
+    pub Bc: Mat<f64>,
+    /// φ(h) = (e^{μh} − 1)/μ, μ the P-logarithmic norm of A_c.
+    pub phi: f64,
+    /// β = ‖P^{1/2} B_c‖₂.
+    pub beta: f64,
 }
 
 /// The loop and data the learning works on.
@@ -152,9 +211,13 @@ pub struct PwaContext {
     /// sqrt((P⁻¹)_jj): the largest |e_j| over ‖e‖_P ≤ 1.
     pub axis: Vec<f64>,
     pub input: InputBound,
+    /// Continuous-time plants: the inter-sample constants; `None` for discrete-time plants.
+    pub intersample: Option<InterSample>,
     pub points: Vec<DataPoint>,
     /// Per-component fitting tolerance ε_fit of the bounded-error fit (modification 1 of §6.2).
     pub eps_fit: f64,
+    /// Contraction s asked of fitted laws in the fit's LMI: ‖A + BK_j‖_P ≤ √(1 − s).
+    pub s_req: f64,
     pub settings: PwaSettings,
 }
 
@@ -169,12 +232,22 @@ impl PwaContext {
         syn: &Synthesis,
         settings: PwaSettings,
     ) -> Result<Self, PwaError> {
-        if syn.plant.continuous.is_some() {
-            return Err(PwaError::ContinuousPlant);
-        }
         let (n, m) = (syn.K.ncols(), syn.K.nrows());
         let roots = PdRoots::new(syn.P.as_ref()).ok_or(PwaError::MetricNotPd)?;
         let axis: Vec<f64> = (0..n).map(|j| roots.inv[(j, j)].max(0.0).sqrt()).collect();
+        let unsafe_set = problem
+            .unsafe_region()
+            .map_err(|e| PwaError::Sets(e.to_string()))?;
+        let metric = crate::geometry::Metric {
+            n,
+            R: crate::linalg::to_row_major(syn.P.as_ref()),
+        };
+        let intersample = syn.plant.continuous.as_ref().map(|cp| InterSample {
+            Ac: cp.Ac.clone(),
+            Bc: cp.Bc.clone(),
+            phi: syn.constants.phi,
+            beta: syn.constants.beta,
+        });
         let mut points = Vec::new();
         for (i, t) in syn.trajectories.iter().enumerate() {
             let c = &t.certificate;
@@ -182,7 +255,22 @@ impl PwaContext {
                 continue;
             }
             for k in 0..c.k_star.min(t.nominal.v.len()) {
+                let x = &t.nominal.x[k];
+                let unsafe_dist = unsafe_set
+                    .as_deref()
+                    .map_or(f64::INFINITY, |us| -us.signed_dist(x, &metric).value);
+                let excursion = match (&syn.plant.continuous, &intersample) {
+                    (Some(cp), Some(is)) => {
+                        let ax = mat_vec(cp.Ac.as_ref(), x);
+                        let bu = mat_vec(cp.Bc.as_ref(), &t.nominal.u[k]);
+                        let f: Vec<f64> = (0..n).map(|i| ax[i] + bu[i] + cp.c[i]).collect();
+                        is.phi * crate::linalg::p_norm(syn.P.as_ref(), &f)
+                    }
+                    _ => 0.0,
+                };
                 points.push(DataPoint {
+                    unsafe_dist,
+                    excursion,
                     traj: i,
                     kappa: k,
                     x: t.nominal.x[k].clone(),
@@ -211,9 +299,20 @@ impl PwaContext {
             let e = evaluator_error_bound(syn.K.as_ref(), &p.v, &X);
             eps_round = eps_round.max(e.iter().map(|e| e * e).sum::<f64>().sqrt());
         }
-        let budget = settings.rcrit_fraction * rho_min / rc1;
-        let eps_fit = ((budget - 2.0 * eps_round) / (m as f64).sqrt()).max(0.0);
         let norm_B = roots.norm_into(syn.plant.B.as_ref());
+        // Modification 1 of §6.2. For a law with ‖Ã_j‖_P ≤ q the invariant radius of (3.83)–(3.87) is about
+        // ‖P^{1/2}B‖ε/(1 − q); asking it below f·ρ_min with q = √(1 − s) ≤ 1 − s/2 gives
+        // ε ≤ f ρ_min s / (2‖P^{1/2}B‖). For K itself (s = s_K) the exact r_crit of (3.87) is used instead.
+        let nK = roots.induced_norm(At.as_ref());
+        let s_K = 1.0 - nK * nK;
+        let f = settings.rcrit_fraction;
+        let (eps2, s_req) = match settings.contraction {
+            Some(s) if s > s_K => (f * rho_min * s / (2.0 * norm_B), s),
+            _ => (f * rho_min / rc1, s_K),
+        };
+        // Leave the one-step margin η (6.5) out of the budget as well.
+        let eps2 = eps2 - settings.eta * rho_min / norm_B;
+        let eps_fit = ((eps2 - 2.0 * eps_round) / (m as f64).sqrt()).max(0.0);
         Ok(Self {
             n,
             m,
@@ -225,8 +324,10 @@ impl PwaContext {
             norm_B,
             axis,
             input: crate::synth::input_bound(&problem.input),
+            intersample,
             points,
             eps_fit,
+            s_req,
             settings,
         })
     }
@@ -246,6 +347,8 @@ pub struct StoredLaw {
     pub norm_At: f64,
     /// r̃_crit(Ã_j, ε = 1) (3.87); r̃_crit is linear in ε. ∞ if it does not exist.
     pub rcrit_unit: f64,
+    /// γ_j = 1 + φ(h)‖A_c + B_c K_j‖_P (1 for discrete plants; module doc, "Between samples").
+    pub gamma_is: f64,
 }
 
 impl StoredLaw {
@@ -266,6 +369,13 @@ impl StoredLaw {
         } else {
             f64::INFINITY
         };
+        let gamma_is = match &ctx.intersample {
+            None => 1.0,
+            Some(is) => {
+                let Acl = &is.Ac + &is.Bc * &gain;
+                1.0 + is.phi * ctx.roots.induced_norm(Acl.as_ref())
+            }
+        };
         Self {
             gain,
             offset,
@@ -273,6 +383,7 @@ impl StoredLaw {
             sigma,
             norm_At,
             rcrit_unit,
+            gamma_is,
         }
     }
 
@@ -301,6 +412,8 @@ pub struct PointCheck {
     pub reach: f64,
     /// P-distance from the ball centre to inputs outside the (shrunk) input set.
     pub input_dist: f64,
+    /// dist_P(x̃, Unsafe) − (γ_j δ_i + φ‖f̃‖_P + φβε̄): Unsafe clearance between samples (> 0 required).
+    pub clearance: f64,
     /// All conditions hold.
     pub ok: bool,
 }
@@ -323,10 +436,16 @@ pub fn check_point(ctx: &PwaContext, law: &StoredLaw, k: usize) -> PointCheck {
     let r_crit = law.rcrit_unit * eps;
     let reach = law.norm_At * p.delta + ctx.norm_B * eps;
     let input_dist = input_distance(law.gain.as_ref(), &ctx.roots, &uc, &ctx.input, &round);
+    let (phi, beta) = ctx
+        .intersample
+        .as_ref()
+        .map_or((0.0, 0.0), |is| (is.phi, is.beta));
+    let clearance = p.unsafe_dist - (law.gamma_is * p.delta + p.excursion + phi * beta * eps);
     let ok = law.sigma > 0.0
         && r_crit < p.rho
         && reach <= (1.0 - ctx.settings.eta) * p.rho
-        && input_dist >= p.delta;
+        && input_dist >= p.delta
+        && clearance > 0.0;
     PointCheck {
         fit_err,
         eps,
@@ -334,6 +453,7 @@ pub fn check_point(ctx: &PwaContext, law: &StoredLaw, k: usize) -> PointCheck {
         r_crit,
         reach,
         input_dist,
+        clearance,
         ok,
     }
 }
@@ -366,6 +486,18 @@ pub fn learn_pwa(
     let ctx = PwaContext::new(problem, syn, settings.clone())?;
     let (laws, assignment) = learn_laws(&ctx);
     let learn_seconds = t0.elapsed().as_secs_f64();
+    build_pwa(problem, ctx, laws, assignment, learn_seconds)
+}
+
+/// The second half of [`learn_pwa`]: the admissible laws of every ball, the tree (§6.3) and the image, for
+/// laws already learned.
+pub fn build_pwa(
+    problem: &crate::spec::Problem,
+    ctx: PwaContext,
+    laws: Vec<LearnedLaw>,
+    assignment: Vec<usize>,
+    learn_seconds: f64,
+) -> Result<PwaController, PwaError> {
     let t1 = std::time::Instant::now();
     let stored: Vec<&StoredLaw> = laws.iter().map(|l| &l.stored).collect();
     let admissible: Vec<Vec<usize>> = (0..ctx.points.len())
@@ -375,7 +507,16 @@ pub fn learn_pwa(
                 .collect()
         })
         .collect();
-    let (mut builder, stats) = build_image(&ctx, &laws, &assignment, &admissible)?;
+    let (mut builder, stats) =
+        build_image(&ctx, &laws, &assignment, &admissible).map_err(|e| match e {
+            PwaError::Capacity(s) => PwaError::Capacity(format!(
+                "{s} ({} laws learned from {} data points in {learn_seconds:.1} s, ε_fit = {:.3e})",
+                laws.len(),
+                ctx.points.len(),
+                ctx.eps_fit
+            )),
+            e => e,
+        })?;
     builder.period = problem.plant.period;
     if let crate::spec::InputSet::Box { lo, hi } = &problem.input {
         builder.input_box = Some((lo.clone(), hi.clone()));

@@ -16,10 +16,14 @@
 //! Mangasarian [192] between the centres of the most frequent cluster and the others (the sub-clusters of
 //! §6.3 are the leaves' sets), solved with clarabel; when it does not split the set, or the node is too
 //! full rather than mixed, the most balanced of the coordinate and principal-direction cuts at the
-//! quartiles is used. Children with no ball are
-//! "outside the envelope". At the depth limit a mixed node becomes a leaf with its most common law and
-//! lists only the balls verified for it; the balls (parts of F) left out there are counted in
-//! [`PartitionStats::dropped`] (the image then reports those states as out of envelope, never a wrong law).
+//! quartiles is used. Children with no ball are "outside the envelope".
+//!
+//! A mixed node (no single law verified for all its balls) that is small (≤ `MIXED_LEAF_BALLS`), at the
+//! depth limit, or that no hyperplane can split (its balls overlap) becomes a *mixed leaf*: it lists every
+//! ball with a law verified for it, and the evaluator applies the law of the ball that contains the state
+//! (`shared_types::pwa`). So every ball that meets a cell is listed by its leaf, which gives the induction of
+//! [`super`] ("Reaching Goal within T"). Only `MAX_LEAF_BALLS` can leave balls out; they are counted in
+//! [`PartitionStats::dropped`] and the build fails rather than shrink F silently.
 
 use super::{LearnedLaw, PwaContext, PwaError};
 use crate::emit::Child;
@@ -32,7 +36,7 @@ use shared_types::capacity::MAX_LEAF_BALLS;
 use std::collections::HashMap;
 
 /// Sizes of the emitted partition.
-#[derive(Clone, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
 pub struct PartitionStats {
     /// Laws (partitions).
     pub partitions: usize,
@@ -43,9 +47,14 @@ pub struct PartitionStats {
     /// Stored balls (a ball verified for several laws used in different leaves is stored once per law).
     pub balls: usize,
     pub ball_refs: usize,
-    /// (leaf, ball) pairs left out of a mixed leaf at the depth limit.
+    /// (leaf, ball) pairs left out of a leaf by `MAX_LEAF_BALLS` (the build fails when > 0).
     pub dropped: usize,
+    /// Most balls listed by one leaf (ball tests of the worst control step).
+    pub max_leaf_balls: usize,
 }
+
+/// Largest mixed set (balls of several laws) that becomes a leaf without further cuts.
+const MIXED_LEAF_BALLS: usize = 4;
 
 struct Tree<'a> {
     ctx: &'a PwaContext,
@@ -216,18 +225,27 @@ impl Tree<'_> {
         i
     }
 
+    /// A leaf with main law `law` listing every ball of `set`: under `law` when it is verified for the ball,
+    /// else under the ball's own cluster law (a mixed leaf; the evaluator applies the law of the ball that
+    /// contains the state). Only the capacity `MAX_LEAF_BALLS` can leave balls out; they are counted in
+    /// `dropped` and [`build_image`] then fails.
     fn leaf(&mut self, set: &[usize], law: usize) -> Child {
         let mut balls: Vec<usize> = vec![];
-        // Order: balls of the law's own cluster first (learned for it), then admitted ones.
-        let mut ks: Vec<usize> = set
+        // Order: balls of the main law first, then the others.
+        let mut ks: Vec<(usize, usize)> = set
             .iter()
-            .copied()
-            .filter(|&k| self.admissible[k].contains(&law))
+            .map(|&k| {
+                let j = if self.admissible[k].contains(&law) {
+                    law
+                } else {
+                    self.assignment[k]
+                };
+                (k, j)
+            })
             .collect();
-        ks.sort_by_key(|&k| (self.assignment[k] != law, k));
-        self.dropped += set.len() - ks.len();
-        for &k in ks.iter().take(MAX_LEAF_BALLS) {
-            let i = self.ball(k, law);
+        ks.sort_by_key(|&(k, j)| (j != law, k));
+        for &(k, j) in ks.iter().take(MAX_LEAF_BALLS) {
+            let i = self.ball(k, j);
             balls.push(i);
         }
         self.dropped += ks.len().saturating_sub(MAX_LEAF_BALLS);
@@ -275,11 +293,20 @@ impl Tree<'_> {
         }
         let common = self.common_law(&set);
         if let Some(j) = common {
-            if set.len() <= MAX_LEAF_BALLS {
+            if set.len() <= self.ctx.settings.leaf_balls.min(MAX_LEAF_BALLS) {
                 return Ok(self.leaf(&set, j));
             }
         }
-        if depth >= self.ctx.settings.max_depth {
+        // Small mixed sets become mixed leaves once cutting stops paying: at most a few balls.
+        if set.len() <= MIXED_LEAF_BALLS {
+            let j = common.unwrap_or_else(|| self.most_common(&set));
+            return Ok(self.leaf(&set, j));
+        }
+        if depth >= self.ctx.settings.max_depth
+            || (common.is_some()
+                && set.len() <= MAX_LEAF_BALLS
+                && self.balanced_cut(&set).is_none())
+        {
             let j = common.unwrap_or_else(|| self.most_common(&set));
             return Ok(self.leaf(&set, j));
         }
@@ -362,6 +389,13 @@ pub fn build_image(
     } else if let Child::Outside = root {
         return Err(PwaError::NoData);
     }
+    if t.dropped > 0 {
+        return Err(PwaError::Capacity(format!(
+            "{} (leaf, ball) pairs exceed MAX_LEAF_BALLS = {MAX_LEAF_BALLS}: part of F would be reported out of \
+             envelope, so the certificate would not hold",
+            t.dropped
+        )));
+    }
     let depth = t.b.tree_depth()?;
     let stats = PartitionStats {
         partitions: laws.len(),
@@ -371,6 +405,7 @@ pub fn build_image(
         balls: t.b.balls.len(),
         ball_refs: t.b.total_ball_refs(),
         dropped: t.dropped,
+        max_leaf_balls: t.b.leaves.iter().map(|l| l.balls.len()).max().unwrap_or(0),
     };
     Ok((t.b, stats))
 }

@@ -114,4 +114,6 @@ pub struct ReportData {
     /// (phase, seconds).
     pub timings: Vec<(String, f64)>,
     pub warnings: Vec<String>,
+    /// PWA-feedback section (Ch. 6), for `mode = "pwa"`.
+    pub pwa: Option<super::pwa::PwaReport>,
 }

@@ -82,6 +82,9 @@ pub fn render_html(data: &ReportData) -> String {
     certificate(&mut h, data);
     image(&mut h, data);
     verification(&mut h, data.verify.as_ref());
+    if let Some(p) = &data.pwa {
+        super::pwa::section(&mut h, data, p);
+    }
     timings(&mut h, data);
     let _ = write!(
         h,

@@ -9,5 +9,6 @@ pub mod html;
 pub mod optimization;
 pub mod planar;
 pub mod plots;
+pub mod pwa;
 
 pub use html::{render_html, verdict, write_report, Verdict};

@@ -242,6 +242,7 @@ pub fn report_data(
         }),
         timings: s.timings.clone(),
         warnings,
+        pwa: None,
     }
 }
 

@@ -11,6 +11,8 @@
 //! Goal (inputs outside the set, entering Unsafe) is counted and reported separately, not as a violation:
 //! a trajectory whose table the optimiser cut at k* (§5.3) certifies nothing after it.
 
+pub mod pwa;
+
 use crate::geometry::Region;
 use crate::linalg::mat_vec;
 use crate::trajectory::generate::InputBound;
@@ -95,7 +97,7 @@ pub struct VerifyReport {
     pub after_goal_unsafe: usize,
 }
 
-fn input_slack(input: &InputBound, u: &[f64]) -> f64 {
+pub(crate) fn input_slack(input: &InputBound, u: &[f64]) -> f64 {
     match input {
         InputBound::Box { lo, hi } => u
             .iter()

@@ -1,0 +1,73 @@
+//! PWA feedback for the setting of Example 6.4 (examples/planar-vehicle-pwa.toml): the number of partitions
+//! the learner (§6.2) needs, against the dissertation's 110 for its data; the learning time; and the PWA
+//! image size against the feedforward image of the same cover. One learning run takes seconds to minutes,
+//! so it is timed directly; it is deterministic (seeded), so every figure but the times repeats exactly.
+//!
+//! Rows: `pwa_partitions_example_6_4` (baseline 110), `pwa_learning_s`, and `pwa_image_bytes` (baseline:
+//! feedforward image bytes) when the image could be built; when it cannot (capacity), the reason is printed
+//! and the row is absent, so the table shows the gap.
+
+use host_compiler::benchkit::{write_rows, Row};
+use host_compiler::pwa::{build_pwa, learn_laws, PwaContext, PwaSettings};
+use host_compiler::synth::{synthesize, SynthOptions};
+use std::time::Instant;
+
+fn main() {
+    let spec = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../examples/planar-vehicle-pwa.toml"
+    );
+    let problem = host_compiler::spec::load(spec).expect("the shipped example parses");
+    let opts = SynthOptions {
+        progress: false,
+        verify_interior: 1_000,
+        ..SynthOptions::default()
+    };
+    let s = synthesize(&problem, &opts).expect("the feedforward cover is synthesized");
+    let ctx = PwaContext::new(&problem, &s, PwaSettings::default()).expect("PWA context");
+    let points = ctx.points.len();
+    let t = Instant::now();
+    let (laws, assignment) = learn_laws(&ctx);
+    let learn_s = t.elapsed().as_secs_f64();
+    let partitions = laws.len();
+    println!(
+        "pwa example 6.4: {} data points from {} trajectories, eps_fit {:.3e}, {} partitions (ratio to 110: {:.3}), learning {:.2} s",
+        points,
+        s.trajectories.len(),
+        ctx.eps_fit,
+        partitions,
+        partitions as f64 / 110.0,
+        learn_s
+    );
+    let mut rows = vec![
+        Row::with_baseline(
+            "pwa_partitions_example_6_4",
+            partitions as f64,
+            "partitions",
+            110.0,
+            partitions as f64 / 110.0,
+        ),
+        Row::new("pwa_learning_s", learn_s, "s"),
+    ];
+    let ff = s.image.len() as f64;
+    match build_pwa(&problem, ctx, laws, assignment, learn_s) {
+        Ok(c) => {
+            let b = c.image.len() as f64;
+            println!(
+                "pwa image {} bytes (feedforward image of the same cover {} bytes), tree depth {}",
+                b, ff, c.stats.depth
+            );
+            rows.push(Row::with_baseline(
+                "pwa_image_bytes",
+                b,
+                "bytes",
+                ff,
+                b / ff,
+            ));
+        }
+        Err(e) => {
+            println!("pwa image: NOT built ({e}); feedforward image of the same cover {ff} bytes")
+        }
+    }
+    write_rows("pwa_example_6_4", &rows).expect("rows written");
+}

@@ -1,0 +1,168 @@
+//! `synth` for a spec with `mode = "pwa"`: learns the piecewise-affine feedback (Ch. 6) from the certified
+//! feedforward cover, re-checks the emitted image independently ([`crate::verify::pwa`]) and writes
+//! `controller.img` (the PWA image), `feedforward.img` (the cover it was learned from, the size baseline),
+//! `report.html` with its PWA section and `certificate.json`.
+
+use super::synth::SynthArgs;
+use crate::pwa::{learn_pwa, PwaSettings};
+use crate::spec::Problem;
+use crate::synth::{report_data, Synthesis};
+use crate::verify::pwa::{monte_carlo_pwa, recheck};
+use miette::{IntoDiagnostic, WrapErr};
+
+/// What a PWA synthesis produced and how it was checked (also written to `certificate.json`).
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct PwaSummary {
+    pub data_points: usize,
+    pub trajectories: usize,
+    pub eps_fit: f64,
+    pub stats: crate::pwa::PartitionStats,
+    pub learn_seconds: f64,
+    pub partition_seconds: f64,
+    pub image_bytes: usize,
+    pub feedforward_image_bytes: usize,
+    pub recheck: crate::verify::pwa::PwaRecheck,
+    pub monte_carlo: crate::verify::pwa::PwaMonteCarlo,
+}
+
+/// Learns, checks and writes the PWA controller (module doc). Fails when any check fails.
+pub fn run(a: &SynthArgs, problem: &Problem, s: &Synthesis) -> miette::Result<()> {
+    let pwa = learn_pwa(problem, s, &PwaSettings::default().progress(!a.quiet))
+        .map_err(|e| miette::miette!("PWA learning: {e}"))?;
+    let img = shared_types::image::decode(&pwa.image)
+        .map_err(|e| miette::miette!("the emitted PWA image is rejected: {e:?}"))?;
+    let goal = problem.goal_region()?;
+    let unsafe_set = problem.unsafe_region()?;
+    let input = crate::synth::input_bound(&problem.input);
+    let judge = crate::synth::judge(
+        problem,
+        &s.plant,
+        goal.as_ref(),
+        unsafe_set.as_deref(),
+        &input,
+    );
+    let rc = recheck(&judge, s.plant.continuous.as_ref(), &img).map_err(|e| miette::miette!(e))?;
+    let init_centres: Vec<Vec<f64>> = s
+        .trajectories
+        .iter()
+        .filter(|t| t.certificate.is_certified())
+        .map(|t| t.nominal.x[0].clone())
+        .collect();
+    let mc = monte_carlo_pwa(
+        &judge,
+        &img,
+        &init_centres,
+        a.verify_runs,
+        problem.seed ^ 0x7e51f1,
+        64,
+    );
+    let summary = PwaSummary {
+        data_points: pwa.ctx.points.len(),
+        trajectories: init_centres.len(),
+        eps_fit: pwa.ctx.eps_fit,
+        stats: pwa.stats.clone(),
+        learn_seconds: pwa.learn_seconds,
+        partition_seconds: pwa.partition_seconds,
+        image_bytes: pwa.image.len(),
+        feedforward_image_bytes: s.image.len(),
+        recheck: rc,
+        monte_carlo: mc,
+    };
+    let img_path = a.out.join("controller.img");
+    std::fs::write(&img_path, &pwa.image)
+        .into_diagnostic()
+        .wrap_err("writing the image")?;
+    std::fs::write(a.out.join("feedforward.img"), &s.image)
+        .into_diagnostic()
+        .wrap_err("writing the feedforward image")?;
+    let mut data = report_data(
+        problem,
+        &a.spec.display().to_string(),
+        s,
+        &img_path.display().to_string(),
+    );
+    data.image_bytes = pwa.image.len();
+    data.pwa = Some(crate::report::pwa::pwa_report(
+        problem, &pwa, &img, &summary,
+    ));
+    let report = crate::report::write_report(&data, &a.out)
+        .into_diagnostic()
+        .wrap_err("writing the report")?;
+    let cert = serde_json::json!({
+        "spec": a.spec.display().to_string(),
+        "seed": problem.seed,
+        "mode": "pwa",
+        "sigma_min": s.constants.sigma_min,
+        "K": crate::linalg::to_rows(s.K.as_ref()),
+        "P": crate::linalg::to_rows(s.P.as_ref()),
+        "coverage": s.coverage,
+        "feedforward_verify": s.verify,
+        "pwa": summary,
+        "trajectories": s.trajectories.iter().map(|t| serde_json::json!({
+            "source": t.source, "x0": t.nominal.x[0], "certificate": t.certificate,
+        })).collect::<Vec<_>>(),
+        "timings": s.timings,
+    });
+    std::fs::write(
+        a.out.join("certificate.json"),
+        serde_json::to_string_pretty(&cert).into_diagnostic()?,
+    )
+    .into_diagnostic()?;
+    let st = &summary.stats;
+    println!(
+        "cover             {} trajectories, {} data points, coverage of Init {:.5} (lower bound {:.5})",
+        summary.trajectories, summary.data_points, s.coverage.mean, s.coverage.lower
+    );
+    println!(
+        "partitions        {} (ratio to the dissertation's 110: {:.3})",
+        st.partitions,
+        st.partitions as f64 / 110.0
+    );
+    println!(
+        "tree              {} nodes, {} leaves, worst-case depth {} hyperplane tests, at most {} balls per leaf, {} balls, {} references, {} dropped",
+        st.nodes, st.leaves, st.depth, st.max_leaf_balls, st.balls, st.ball_refs, st.dropped
+    );
+    println!(
+        "learning          {:.3} s (partition {:.3} s), eps_fit {:.3e}",
+        summary.learn_seconds, summary.partition_seconds, summary.eps_fit
+    );
+    println!(
+        "image             {} ({} bytes; feedforward image of the same cover {} bytes)",
+        img_path.display(),
+        summary.image_bytes,
+        summary.feedforward_image_bytes
+    );
+    let bad_parts = summary.recheck.partitions.iter().filter(|p| !p.ok).count();
+    println!(
+        "recheck           {} partitions, {} failing; containment across boundaries {} leaf visits, {} failing balls",
+        summary.recheck.partitions.len(),
+        bad_parts,
+        summary.recheck.containment_checks,
+        summary.recheck.containment_failures
+    );
+    let mc = &summary.monte_carlo;
+    println!(
+        "verification      {} runs from F ({} from the balls over Init), {} starts not accepted, {} violations, at most {} steps to Goal",
+        mc.runs, mc.init_runs, mc.rejected, mc.violations, mc.max_steps
+    );
+    for v in &mc.first_violations {
+        println!("violation from x0 = {:?}: {v:?}", v.x0);
+    }
+    println!("report            {}", report.display());
+    if summary.recheck.failures > 0 || mc.violations > 0 || st.dropped > 0 {
+        return Err(miette::miette!(
+            "the PWA image is NOT certified: {} recheck failures, {} violations, {} dropped balls",
+            summary.recheck.failures,
+            mc.violations,
+            st.dropped
+        ));
+    }
+    if mc.runs < a.verify_runs {
+        return Err(miette::miette!(
+            "only {} of {} initial states could be drawn in F",
+            mc.runs,
+            a.verify_runs
+        ));
+    }
+    Ok(())
+}

@@ -1,0 +1,501 @@
+//! Independent re-check of a PWA-feedback image (Ch. 6) from the image bytes and the spec alone: the
+//! certificate of every partition recomputed from the stored f32 tables, and closed-loop Monte Carlo from
+//! states drawn in the certified envelope F (6.2) through the shared f32 evaluator.
+//!
+//! # What a PWA run must do (Theorem 6.5)
+//! A run starts in a certified ball of F and *terminates upon entering Goal*. It meets the spec when it
+//! enters Goal within the horizon, never enters Unsafe (at the samples and at the sub-sample instants of a
+//! continuous-time plant), applies only inputs inside the input set, and the evaluator never answers
+//! "out of envelope" before Goal. After Goal the run is over: the firmware may then report out of envelope.
+//!
+//! # The certificate, recomputed (nothing from the learner is trusted)
+//! With P the image's metric, K_j, θ0_j the stored law of partition j and (A, B, g) the spec's sampled plant:
+//! * **(6.6)** for every partition: σ_j = λ_min(P − Ã_jᵀPÃ_j) > 0 with Ã_j = A + B K_j.
+//! * **Containment across boundaries** (the hypothesis of Theorem 6.6, what Algorithm 5 repairs): every
+//!   stored ball is sent down the tree with the conservative ball–hyperplane test of §6.3
+//!   (`aᵀc − b ≤ ‖P^{-1/2}a‖ρ` goes left, `≥ −‖P^{-1/2}a‖ρ` goes right); every leaf it reaches must list a ball
+//!   with the same centre and radius, and no branch may reach "outside".
+//! * **(6.7) and (6.5)** for every (leaf, ball) pair (c, ρ, law j): the input u* that maps c onto the centre
+//!   c_b of another stored ball in one step (least squares, residual r = Ac + g + Bu* − c_b) is the nominal
+//!   input; the law's deviation from it, ε = ‖K_j c + θ0_j − u*‖ plus the f32 rounding bound, is the bounded
+//!   disturbance of Theorem 3.21. Then r̃_crit(Ã_j, ε) < ρ_b (3.83)–(3.87) and
+//!   ‖Ã_j‖_P ρ + ‖P^{1/2}B‖ε + ‖r‖_P ≤ ρ_b (one step into ball b), choosing the ball b of smallest margin need;
+//!   or the whole image of the ball lies in Goal.
+//! * **Input** over every listed ball, and **Unsafe between samples** for continuous plants (the bound of
+//!   [`crate::certify`] item 2 with the law's gain).
+
+use super::{input_slack, plant_step, Judge, RunOutcome};
+use crate::certify::{evaluator_error_bound, input_distance};
+use crate::linalg::{mat_vec, p_norm, sym, sym_eigenvalues, PdRoots};
+use faer::Mat;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rayon::prelude::*;
+use shared_types::eval::Controller;
+use shared_types::image::Image;
+use shared_types::pwa::{Child, Region as Located};
+
+/// The recomputed certificate of one partition (law).
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct PartitionCheck {
+    pub partition: usize,
+    /// λ_min(P − Ã_jᵀPÃ_j) of (6.6).
+    pub sigma: f64,
+    /// Balls listed for this law (over all leaves).
+    pub balls: usize,
+    /// Largest r̃_crit / ρ_b over its balls (< 1 required, (6.7)).
+    pub worst_rcrit_ratio: f64,
+    /// Largest one-step reach / ρ_b over its balls (≤ 1 required, (6.5)); 0 when every image lies in Goal.
+    pub worst_reach_ratio: f64,
+    /// Smallest input-set distance minus ρ over its balls (≥ 0 required).
+    pub worst_input_slack: f64,
+    /// Smallest Unsafe clearance between samples over its balls (> 0 required).
+    pub worst_unsafe_clearance: f64,
+    pub ok: bool,
+}
+
+/// Everything [`recheck`] found.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct PwaRecheck {
+    pub partitions: Vec<PartitionCheck>,
+    /// Stored balls whose descent reached a leaf that does not list them, or "outside".
+    pub containment_failures: usize,
+    /// Leaf visits checked by the descent.
+    pub containment_checks: usize,
+    /// Worst-case hyperplane tests of the tree (recomputed by walking it).
+    pub depth: usize,
+    pub failures: usize,
+}
+
+/// Recomputes the certificate of every partition of a PWA image (module doc). `judge` gives the sampled
+/// plant and sets; `continuous` the plant for the inter-sample check.
+pub fn recheck(
+    judge: &Judge<'_>,
+    continuous: Option<&crate::certify::ContinuousPart>,
+    image: &Image<'_>,
+) -> Result<PwaRecheck, String> {
+    let (n, m) = (image.n(), image.m());
+    let P = sym(Mat::from_fn(n, n, |i, j| image.P(0, i, j) as f64).as_ref());
+    let roots = PdRoots::new(P.as_ref()).ok_or("the image's P is not positive definite")?;
+    let np = image.n_partitions();
+    let nb = image.n_balls();
+    let metric = crate::geometry::Metric {
+        n,
+        R: crate::linalg::to_row_major(P.as_ref()),
+    };
+    let centre =
+        |b: usize| -> Vec<f64> { (0..n).map(|i| image.ball_centre(b, i) as f64).collect() };
+    let rho = |b: usize| image.ball_delta(b) as f64;
+    let centres: Vec<Vec<f64>> = (0..nb).map(centre).collect();
+    let axis: Vec<f64> = (0..n).map(|j| roots.inv[(j, j)].max(0.0).sqrt()).collect();
+    let normB = roots.norm_into(judge.B);
+    // B⁺ for the nominal input between two centres.
+    let BtB = judge.B.transpose() * judge.B;
+    let BtB_inv = crate::linalg::sym_fn(sym(BtB.as_ref()).as_ref(), |l| 1.0 / l)
+        .ok_or("BᵀB is singular: B has no full column rank")?;
+    let Bpinv = &BtB_inv * judge.B.transpose();
+    let (phi, beta) = match continuous {
+        None => (0.0, 0.0),
+        Some(cp) => {
+            let As = &roots.sqrt * &cp.Ac * &roots.inv_sqrt;
+            let mu = sym_eigenvalues(sym(As.as_ref()).as_ref())
+                .and_then(|e| e.last().copied())
+                .unwrap_or(f64::INFINITY);
+            let phi = if (mu * cp.h).abs() < 1e-12 {
+                cp.h
+            } else {
+                (mu * cp.h).exp_m1() / mu
+            };
+            (phi, roots.norm_into(cp.Bc.as_ref()))
+        }
+    };
+    // Per law: gain, offset, Ã_j, σ_j, ‖Ã_j‖_P, r̃_crit(ε = 1), γ_j.
+    struct Law {
+        K: Mat<f64>,
+        off: Vec<f64>,
+        sigma: f64,
+        norm: f64,
+        rc1: f64,
+        gamma: f64,
+    }
+    let laws: Vec<Law> = (0..np)
+        .map(|j| {
+            let K = Mat::from_fn(m, n, |r, c| image.law_gain(j, r, c) as f64);
+            let off: Vec<f64> = (0..m).map(|r| image.law_offset(j, r) as f64).collect();
+            let At = judge.A + judge.B * &K;
+            let M = &P - At.transpose() * &P * &At;
+            let sigma = sym_eigenvalues(sym(M.as_ref()).as_ref())
+                .and_then(|e| e.first().copied())
+                .unwrap_or(f64::NAN);
+            let rc1 = crate::caf::r_crit(At.as_ref(), P.as_ref(), judge.B, 1.0)
+                .map(|r| r.r_crit)
+                .unwrap_or(f64::INFINITY);
+            let gamma = continuous.map_or(1.0, |cp| {
+                1.0 + phi * roots.induced_norm((&cp.Ac + &cp.Bc * &K).as_ref())
+            });
+            Law {
+                norm: roots.induced_norm(At.as_ref()),
+                K,
+                off,
+                sigma,
+                rc1,
+                gamma,
+            }
+        })
+        .collect();
+    // (leaf, ball) pairs, checked once per (ball, law).
+    let mut pairs: Vec<(usize, usize)> = Vec::new();
+    for l in 0..image.n_leaves() {
+        let j = image.leaf_partition(l);
+        let (_, len) = image.leaf_refs(l);
+        for k in 0..len {
+            if let Some(b) = image.leaf_ball(l, k) {
+                pairs.push((b, j));
+            }
+        }
+    }
+    pairs.sort_unstable();
+    pairs.dedup();
+    struct PairCheck {
+        law: usize,
+        rcrit_ratio: f64,
+        reach_ratio: f64,
+        input_slack: f64,
+        clearance: f64,
+    }
+    let checks: Vec<PairCheck> = pairs
+        .par_iter()
+        .map(|&(b, j)| {
+            let L = &laws[j];
+            let c = &centres[b];
+            let r = rho(b);
+            let X: Vec<f64> = c.iter().zip(&axis).map(|(x, a)| x.abs() + r * a).collect();
+            let round = evaluator_error_bound(L.K.as_ref(), &L.off, &X);
+            let eps_round = round.iter().map(|e| e * e).sum::<f64>().sqrt();
+            let u: Vec<f64> = mat_vec(L.K.as_ref(), c)
+                .iter()
+                .zip(&L.off)
+                .map(|(a, o)| a + o)
+                .collect();
+            let free = plant_step(judge.A, judge.B, judge.g, c, &vec![0.0; m]);
+            // Image of the ball lies in Goal?
+            let cplus = plant_step(judge.A, judge.B, judge.g, c, &u);
+            let r_plus = L.norm * r + normB * eps_round;
+            let in_goal = judge.goal.signed_dist(&cplus, &metric).value > r_plus;
+            let (mut rcrit_ratio, mut reach_ratio) = (f64::INFINITY, f64::INFINITY);
+            if in_goal {
+                rcrit_ratio = 0.0;
+                reach_ratio = 0.0;
+            } else {
+                for (bb, cb) in centres.iter().enumerate() {
+                    let rb = rho(bb);
+                    // Quick reject: centres farther apart than the budget allows.
+                    let d: Vec<f64> = (0..n).map(|i| cplus[i] - cb[i]).collect();
+                    if p_norm(P.as_ref(), &d) > 2.0 * rb + r_plus {
+                        continue;
+                    }
+                    let target: Vec<f64> = (0..n).map(|i| cb[i] - free[i]).collect();
+                    let ustar = mat_vec(Bpinv.as_ref(), &target);
+                    let bu = mat_vec(judge.B, &ustar);
+                    let res: Vec<f64> = (0..n).map(|i| bu[i] - target[i]).collect();
+                    let fit = u
+                        .iter()
+                        .zip(&ustar)
+                        .map(|(a, s)| (a - s) * (a - s))
+                        .sum::<f64>()
+                        .sqrt();
+                    let eps = fit + eps_round;
+                    let reach = L.norm * r + normB * eps + p_norm(P.as_ref(), &res);
+                    let rr = reach / rb;
+                    if rr < reach_ratio {
+                        reach_ratio = rr;
+                        rcrit_ratio = L.rc1 * eps / rb;
+                    }
+                }
+            }
+            let input_slack = input_distance(L.K.as_ref(), &roots, &u, judge.input, &round) - r;
+            let clearance = match (judge.unsafe_set, continuous) {
+                (None, _) => f64::INFINITY,
+                (Some(us), cp) => {
+                    let d = -us.signed_dist(c, &metric).value;
+                    let exc = cp.map_or(0.0, |cp| {
+                        let ax = mat_vec(cp.Ac.as_ref(), c);
+                        let bu = mat_vec(cp.Bc.as_ref(), &u);
+                        let f: Vec<f64> = (0..n).map(|i| ax[i] + bu[i] + cp.c[i]).collect();
+                        phi * p_norm(P.as_ref(), &f)
+                    });
+                    d - (L.gamma * r + exc + phi * beta * eps_round)
+                }
+            };
+            PairCheck {
+                law: j,
+                rcrit_ratio,
+                reach_ratio,
+                input_slack,
+                clearance,
+            }
+        })
+        .collect();
+    let mut partitions: Vec<PartitionCheck> = laws
+        .iter()
+        .enumerate()
+        .map(|(j, L)| PartitionCheck {
+            partition: j,
+            sigma: L.sigma,
+            balls: 0,
+            worst_rcrit_ratio: 0.0,
+            worst_reach_ratio: 0.0,
+            worst_input_slack: f64::INFINITY,
+            worst_unsafe_clearance: f64::INFINITY,
+            ok: true,
+        })
+        .collect();
+    for c in &checks {
+        let p = &mut partitions[c.law];
+        p.balls += 1;
+        p.worst_rcrit_ratio = p.worst_rcrit_ratio.max(c.rcrit_ratio);
+        p.worst_reach_ratio = p.worst_reach_ratio.max(c.reach_ratio);
+        p.worst_input_slack = p.worst_input_slack.min(c.input_slack);
+        p.worst_unsafe_clearance = p.worst_unsafe_clearance.min(c.clearance);
+    }
+    for p in &mut partitions {
+        p.ok = p.sigma > 0.0
+            && p.worst_rcrit_ratio < 1.0
+            && p.worst_reach_ratio <= 1.0
+            && p.worst_input_slack >= 0.0
+            && p.worst_unsafe_clearance > 0.0;
+    }
+    // Containment across boundaries: descend every ball.
+    let same = |a: usize, b: usize| centres[a] == centres[b] && rho(a) == rho(b);
+    let mut containment_failures = 0;
+    let mut containment_checks = 0;
+    let mut depth = 0;
+    for b in 0..nb {
+        let c = &centres[b];
+        let r = rho(b);
+        let mut stack = vec![(
+            if image.n_nodes() == 0 {
+                Child::Leaf(0)
+            } else {
+                Child::Node(0)
+            },
+            0usize,
+        )];
+        let mut failed = false;
+        while let Some((ch, d)) = stack.pop() {
+            match ch {
+                Child::Outside => failed = true,
+                Child::Leaf(l) => {
+                    containment_checks += 1;
+                    depth = depth.max(d);
+                    let (_, len) = image.leaf_refs(l as usize);
+                    let listed = (0..len)
+                        .filter_map(|k| image.leaf_ball(l as usize, k))
+                        .any(|bb| same(bb, b));
+                    if !listed {
+                        failed = true;
+                    }
+                }
+                Child::Node(i) => {
+                    let i = i as usize;
+                    let a: Vec<f64> = (0..n).map(|q| image.node_normal(i, q) as f64).collect();
+                    let s = a.iter().zip(c).map(|(a, x)| a * x).sum::<f64>()
+                        - image.node_offset(i) as f64;
+                    let w = roots.dual_norm(&a) * r;
+                    let Some((left, right)) = image.node_children(i) else {
+                        failed = true;
+                        continue;
+                    };
+                    if s <= w {
+                        stack.push((left, d + 1));
+                    }
+                    if s >= -w {
+                        stack.push((right, d + 1));
+                    }
+                }
+            }
+        }
+        if failed {
+            containment_failures += 1;
+        }
+    }
+    let failures = partitions.iter().filter(|p| !p.ok).count() + containment_failures;
+    Ok(PwaRecheck {
+        partitions,
+        containment_failures,
+        containment_checks,
+        depth: depth.max(image.tree_depth()),
+        failures,
+    })
+}
+
+/// One closed-loop run of a PWA image from `x0`, terminating upon entering Goal (module doc).
+pub fn run_pwa(judge: &Judge<'_>, image: &Image<'_>, x0: &[f64]) -> (RunOutcome, Vec<Vec<f64>>) {
+    let mut ctl = Controller::new(*image);
+    let mut x = x0.to_vec();
+    let mut path = vec![x.clone()];
+    let mut out = RunOutcome {
+        x0: x0.to_vec(),
+        reached_goal: false,
+        entered_unsafe: false,
+        input_violation: false,
+        rejected: false,
+        evaluator_error: false,
+        goal_margin: f64::NEG_INFINITY,
+        unsafe_margin: f64::INFINITY,
+        input_margin: f64::INFINITY,
+        goal_step: None,
+        // The PWA run stops at Goal; nothing after it is simulated.
+        after_goal_input_excursion: false,
+        after_goal_unsafe: false,
+    };
+    let hit = |x: &[f64]| judge.unsafe_set.is_some_and(|us| us.contains(x));
+    out.entered_unsafe |= hit(&x);
+    for k in 0..=judge.steps {
+        if judge.goal.contains(&x) {
+            out.reached_goal = true;
+            out.goal_step = Some(k);
+            break;
+        }
+        if k == judge.steps {
+            break;
+        }
+        let xf: Vec<f32> = x.iter().map(|&v| v as f32).collect();
+        let u: Vec<f64> = match ctl.step(&xf) {
+            Ok(u) => u.as_slice().iter().map(|&v| v as f64).collect(),
+            Err(_) => {
+                if k == 0 {
+                    out.rejected = true;
+                } else {
+                    out.evaluator_error = true;
+                }
+                break;
+            }
+        };
+        let s = input_slack(judge.input, &u);
+        out.input_margin = out.input_margin.min(s);
+        out.input_violation |= s < 0.0;
+        if let Some((As, Bs, gs, subs)) = judge.sub {
+            let mut xs = x.clone();
+            for _ in 0..subs.saturating_sub(1) {
+                xs = plant_step(As, Bs, gs, &xs, &u);
+                out.entered_unsafe |= hit(&xs);
+            }
+        }
+        x = plant_step(judge.A, judge.B, judge.g, &x, &u);
+        out.entered_unsafe |= hit(&x);
+        path.push(x.clone());
+    }
+    (out, path)
+}
+
+/// Result of a PWA Monte Carlo campaign.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct PwaMonteCarlo {
+    /// Runs from states drawn uniformly in a uniformly chosen stored ball of F.
+    pub runs: usize,
+    /// Of them, starts in a ball at κ = 0 (the cover of Init) — drawn first, half of the runs.
+    pub init_runs: usize,
+    /// Drawn starts the evaluator did not accept (at the ball's edge, f32); not counted as runs.
+    pub rejected: usize,
+    pub violations: usize,
+    pub first_violations: Vec<RunOutcome>,
+    /// Largest number of steps to Goal.
+    pub max_steps: usize,
+    /// A few runs (sample paths), for the report.
+    pub sample_paths: Vec<Vec<Vec<f64>>>,
+}
+
+/// Draws a point uniformly in the P-ball (c, r).
+pub fn draw_in_ball(rng: &mut ChaCha8Rng, Pis: &Mat<f64>, c: &[f64], r: f64) -> Vec<f64> {
+    let n = c.len();
+    let w: Vec<f64> = (0..n)
+        .map(|_| rng.sample::<f64, _>(rand_distr::StandardNormal))
+        .collect();
+    let wn = w.iter().map(|a| a * a).sum::<f64>().sqrt().max(1e-300);
+    let rad = r * rng.random::<f64>().powf(1.0 / n as f64);
+    let e = mat_vec(Pis.as_ref(), &w);
+    (0..n).map(|i| c[i] + rad * e[i] / wn).collect()
+}
+
+/// Closed-loop Monte Carlo of a PWA image: `runs` starts, half in the balls whose centre starts a
+/// trajectory (`init_centres`: the image does not mark them, the caller passes the cover's x̃_i(0)), half
+/// anywhere in F; each drawn uniformly in a uniformly chosen ball (radius less one part in 10⁶).
+/// Deterministic for a seed; runs in parallel, collected in order.
+pub fn monte_carlo_pwa(
+    judge: &Judge<'_>,
+    image: &Image<'_>,
+    init_centres: &[Vec<f64>],
+    runs: usize,
+    seed: u64,
+    keep_paths: usize,
+) -> PwaMonteCarlo {
+    let n = image.n();
+    let nb = image.n_balls();
+    let P = sym(Mat::from_fn(n, n, |i, j| image.P(0, i, j) as f64).as_ref());
+    let Pis = crate::linalg::sym_fn(P.as_ref(), |l| 1.0 / l.max(1e-300).sqrt())
+        .expect("P decodes as symmetric");
+    let centre =
+        |b: usize| -> Vec<f64> { (0..n).map(|i| image.ball_centre(b, i) as f64).collect() };
+    let init_balls: Vec<usize> = (0..nb)
+        .filter(|&b| {
+            let c = centre(b);
+            init_centres
+                .iter()
+                .any(|x| x.iter().zip(&c).all(|(a, b)| (*a as f32) as f64 == *b))
+        })
+        .collect();
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let ctl = Controller::new(*image);
+    let mut starts = Vec::with_capacity(runs);
+    let mut rejected = 0;
+    let mut init_runs = 0;
+    let mut draws = 0usize;
+    while starts.len() < runs && draws < runs.saturating_mul(10) {
+        draws += 1;
+        let from_init = starts.len() < runs / 2 && !init_balls.is_empty();
+        let b = if from_init {
+            init_balls[rng.random_range(0..init_balls.len())]
+        } else {
+            rng.random_range(0..nb)
+        };
+        let x = draw_in_ball(
+            &mut rng,
+            &Pis,
+            &centre(b),
+            image.ball_delta(b) as f64 * (1.0 - 1e-6),
+        );
+        let xf: Vec<f32> = x.iter().map(|&v| v as f32).collect();
+        match ctl.locate(&xf) {
+            Some(Located::Inside { .. }) => {
+                init_runs += from_init as usize;
+                starts.push(x);
+            }
+            _ => rejected += 1,
+        }
+    }
+    let outcomes: Vec<(RunOutcome, Vec<Vec<f64>>, usize)> = starts
+        .par_iter()
+        .enumerate()
+        .map(|(i, x0)| {
+            let (o, p) = run_pwa(judge, image, x0);
+            let steps = p.len() - 1;
+            (o, if i < keep_paths { p } else { vec![] }, steps)
+        })
+        .collect();
+    let bad: Vec<&RunOutcome> = outcomes
+        .iter()
+        .map(|o| &o.0)
+        .filter(|o| o.violated() || o.rejected)
+        .collect();
+    let max_steps = outcomes.iter().map(|o| o.2).max().unwrap_or(0);
+    PwaMonteCarlo {
+        runs: starts.len(),
+        init_runs,
+        rejected,
+        violations: bad.len(),
+        first_violations: bad.into_iter().take(10).cloned().collect(),
+        max_steps,
+        sample_paths: outcomes.into_iter().take(keep_paths).map(|o| o.1).collect(),
+    }
+}
