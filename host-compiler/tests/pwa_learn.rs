@@ -31,6 +31,8 @@ fn fixture() -> &'static Fixture {
             verify_interior: 200,
             verify_per_ball: 4,
             progress: false,
+            // PWA learning takes SCP-grown covers (see cli/synth.rs).
+            generator: host_compiler::synth::Generator::Scp,
             ..SynthOptions::default()
         };
         let syn = synthesize(&problem, &opts).unwrap();
