@@ -65,6 +65,25 @@ pub struct RunOutcome {
 }
 
 impl RunOutcome {
+    /// A run from `x0` before its first step: nothing reached, nothing violated, margins at their
+    /// neutral values.
+    pub fn new(x0: &[f64]) -> Self {
+        Self {
+            x0: x0.to_vec(),
+            reached_goal: false,
+            entered_unsafe: false,
+            input_violation: false,
+            rejected: false,
+            evaluator_error: false,
+            goal_margin: f64::NEG_INFINITY,
+            unsafe_margin: f64::INFINITY,
+            input_margin: f64::INFINITY,
+            goal_step: None,
+            after_goal_input_excursion: false,
+            after_goal_unsafe: false,
+        }
+    }
+
     pub fn violated(&self) -> bool {
         !self.rejected
             && (!self.reached_goal
@@ -121,20 +140,7 @@ pub fn run(judge: &Judge<'_>, image: &Image<'_>, x0: &[f64], margins: bool) -> R
     let metric = crate::geometry::Metric::euclidean(x0.len());
     let mut ctl = Controller::new(*image);
     let mut x = x0.to_vec();
-    let mut out = RunOutcome {
-        x0: x0.to_vec(),
-        reached_goal: false,
-        entered_unsafe: false,
-        input_violation: false,
-        rejected: false,
-        evaluator_error: false,
-        goal_margin: f64::NEG_INFINITY,
-        unsafe_margin: f64::INFINITY,
-        input_margin: f64::INFINITY,
-        goal_step: None,
-        after_goal_input_excursion: false,
-        after_goal_unsafe: false,
-    };
+    let mut out = RunOutcome::new(x0);
     // Judged until the first sample in Goal (module doc); after it, only recorded.
     let check = |x: &[f64], out: &mut RunOutcome, sample: bool| {
         if let Some(us) = judge.unsafe_set {

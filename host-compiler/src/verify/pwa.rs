@@ -334,21 +334,8 @@ pub fn run_pwa(judge: &Judge<'_>, image: &Image<'_>, x0: &[f64]) -> (RunOutcome,
     let mut ctl = Controller::new(*image);
     let mut x = x0.to_vec();
     let mut path = vec![x.clone()];
-    let mut out = RunOutcome {
-        x0: x0.to_vec(),
-        reached_goal: false,
-        entered_unsafe: false,
-        input_violation: false,
-        rejected: false,
-        evaluator_error: false,
-        goal_margin: f64::NEG_INFINITY,
-        unsafe_margin: f64::INFINITY,
-        input_margin: f64::INFINITY,
-        goal_step: None,
-        // The PWA run stops at Goal; nothing after it is simulated.
-        after_goal_input_excursion: false,
-        after_goal_unsafe: false,
-    };
+    // The run stops at Goal; nothing after it is simulated, so the after-Goal fields stay false.
+    let mut out = RunOutcome::new(x0);
     let hit = |x: &[f64]| judge.unsafe_set.is_some_and(|us| us.contains(x));
     out.entered_unsafe |= hit(&x);
     for k in 0..=judge.steps {
