@@ -21,8 +21,6 @@ fn main() {
     let opts = SynthOptions {
         progress: false,
         verify_interior: 1_000,
-        // PWA learning takes SCP-grown covers (see cli/synth.rs).
-        generator: host_compiler::synth::Generator::Scp,
         ..SynthOptions::default()
     };
     let s = synthesize(&problem, &opts).expect("the feedforward cover is synthesized");

@@ -31,8 +31,6 @@ fn fixture() -> &'static Fixture {
             verify_interior: 200,
             verify_per_ball: 4,
             progress: false,
-            // PWA learning takes SCP-grown covers (see cli/synth.rs).
-            generator: host_compiler::synth::Generator::Scp,
             ..SynthOptions::default()
         };
         let syn = synthesize(&problem, &opts).unwrap();
@@ -119,10 +117,21 @@ fn every_emitted_ball_satisfies_6_6_and_6_7() {
         assert!(c.r_crit < ctx.points[k].rho);
         assert!(ball.delta <= ctx.points[k].rho);
     }
-    // Every leaf lists only balls of its own partition.
-    for leaf in &pwa.builder.leaves {
-        for &b in &leaf.balls {
-            assert_eq!(pwa.builder.balls[b].partition, leaf.partition);
+    // A leaf may list balls of several laws; the evaluator must apply the law of the ball it finds the
+    // state in, and the image must route every ball centre to a ball that holds it.
+    let img = shared_types::image::decode(&pwa.image).expect("PWA image decodes");
+    for (b, ball) in pwa.builder.balls.iter().enumerate() {
+        let x: Vec<f32> = ball.centre.iter().map(|&v| v as f32).collect();
+        match img.locate(&x) {
+            Some(shared_types::pwa::Region::Inside {
+                partition,
+                ball: hit,
+                ..
+            }) => assert_eq!(
+                partition as usize, pwa.builder.balls[hit as usize].partition,
+                "ball {b}: the evaluator applied another law than the ball's own"
+            ),
+            other => panic!("ball {b}: its centre is not located in a certified ball: {other:?}"),
         }
     }
 }
@@ -326,4 +335,45 @@ fn the_recheck_finds_a_broken_law_and_a_missing_ball() {
     let img = shared_types::image::decode(&bytes).unwrap();
     let rc = host_compiler::verify::pwa::recheck(&judge, None, &img).unwrap();
     assert!(rc.containment_failures >= 1, "{rc:?}");
+}
+
+/// Regression: a leaf may list balls of several laws and the evaluator applies the law of the ball that
+/// holds the state, but the re-check used to pair every listed ball with the leaf's law. A ball whose own
+/// law is wrong went unchecked (and a correct ball failed against a law it never runs).
+#[test]
+fn the_recheck_judges_each_ball_with_its_own_law_in_mixed_leaves() {
+    let f = fixture();
+    let (goal, unsafe_set, input) = judge_of(f);
+    let judge = host_compiler::synth::judge(
+        &f.problem,
+        &f.syn.plant,
+        goal.as_ref(),
+        unsafe_set.as_deref(),
+        &input,
+    );
+    let mut b = f.pwa.builder.clone();
+    let ball = b
+        .leaves
+        .iter()
+        .flat_map(|leaf| leaf.balls.iter().map(move |&i| (leaf.partition, i)))
+        .find(|&(p, i)| b.balls[i].partition != p)
+        .map(|(_, i)| i)
+        .expect("the fixture has a mixed leaf");
+    // A stable law (same gain) whose offset pushes the ball's image far off: wrong for this ball only.
+    let mut law = b.laws[b.balls[ball].partition].clone();
+    for o in &mut law.offset {
+        *o += 0.5;
+    }
+    b.laws.push(law);
+    let q = b.laws.len() - 1;
+    b.balls[ball].partition = q;
+    let bytes = b.to_bytes().unwrap();
+    let img = shared_types::image::decode(&bytes).unwrap();
+    let rc = host_compiler::verify::pwa::recheck(&judge, None, &img).unwrap();
+    assert!(rc.partitions[q].sigma > 0.0, "{:?}", rc.partitions[q]);
+    assert!(
+        !rc.partitions[q].ok && rc.failures >= 1,
+        "the ball's own law must be checked: {:?}",
+        rc.partitions[q]
+    );
 }

@@ -32,8 +32,6 @@ fn pwa_controller_meets_the_spec_on_the_target_from_50_initial_states() {
         verify_interior: 500,
         verify_per_ball: 4,
         progress: false,
-        // PWA learning takes SCP-grown covers (see cli/synth.rs).
-        generator: host_compiler::synth::Generator::Scp,
         ..SynthOptions::default()
     };
     let s = synthesize(&problem, &opts).expect("synthesis succeeds");

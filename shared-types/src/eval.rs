@@ -12,7 +12,7 @@
 //!
 //! PWA-feedback mode (Ch. 6, law (6.1)) is pure feedback: at every step, locate x (a bounded-depth tree
 //! walk, then the envelope test against the leaf's certified balls, see [`crate::pwa`]); inside a ball,
-//! `u = K_j x + θ0_j` with `K_j = K + θ_j` of the leaf's partition j; otherwise [`Status::OutOfEnvelope`]
+//! `u = K_j x + θ0_j` with `K_j = K + θ_j` of that ball's partition j; otherwise [`Status::OutOfEnvelope`]
 //! for this step only (nothing is latched, and there is no default region).
 //!
 //! Distances are compared squared (`(x − c)ᵀP(x − c) ≤ δ²`), so no square root is needed. Arithmetic is

@@ -64,13 +64,7 @@ pub fn run(a: &SynthArgs) -> miette::Result<()> {
         verify_interior: a.verify_runs,
         progress: !a.quiet,
         imports,
-        // The PWA learner does not yet accept covers grown by Algorithm 4 (their laws fail its own (6.7)
-        // re-check; open in issue #6), so a PWA spec grows its feedforward cover with the SCP generator.
-        generator: if problem.synthesis.mode == crate::spec::ControllerMode::Pwa {
-            Generator::Scp
-        } else {
-            a.generator
-        },
+        generator: a.generator,
         cancel,
         on_accept: log.then(|| {
             crate::synth::AcceptHook(Arc::new(|count| eprintln!("certified trajectory {count}")))

@@ -46,10 +46,6 @@
 //! decreases along the ball chain, so switching laws between trajectories' balls cannot delay Goal.
 //!
 //! # Limits
-//! * Covers grown by Algorithm 4 (§5.4, tables cut at k* by §5.3) are not learned correctly yet: the
-//!   learner emits laws that fail its own (6.7) check on some balls (r_crit above the stored radius), which the
-//!   image re-check ([`crate::verify::pwa::recheck`]) catches. PWA specs therefore grow their cover with the
-//!   SCP generator (`cli/synth.rs`); open in issue #6.
 //! * Example 6.4 (examples/planar-vehicle-pwa.toml) does not compress: consecutive samples of a nominal run
 //!   are about one ball radius apart in the CAF metric and ṽ changes by ~0.055 per step there, while the
 //!   one-step inclusion with ‖A + BK‖_P ≈ 0.998 leaves a disturbance budget of ~0.01; laws that contract

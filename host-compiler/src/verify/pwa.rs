@@ -143,14 +143,14 @@ pub fn recheck(
             }
         })
         .collect();
-    // (leaf, ball) pairs, checked once per (ball, law).
+    // (ball, law) pairs, once each. The evaluator applies the law of the ball that holds the state (the
+    // ball's partition, not the leaf's: a leaf may list balls of several laws), so that is the law checked.
     let mut pairs: Vec<(usize, usize)> = Vec::new();
     for l in 0..image.n_leaves() {
-        let j = image.leaf_partition(l);
         let (_, len) = image.leaf_refs(l);
         for k in 0..len {
             if let Some(b) = image.leaf_ball(l, k) {
-                pairs.push((b, j));
+                pairs.push((b, image.ball_partition(b)));
             }
         }
     }

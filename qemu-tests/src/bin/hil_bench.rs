@@ -102,8 +102,6 @@ fn pwa_step_max() -> Result<u32, Box<dyn std::error::Error>> {
         verify_interior: 200,
         verify_per_ball: 2,
         progress: false,
-        // PWA learning takes SCP-grown covers (see cli/synth.rs).
-        generator: host_compiler::synth::Generator::Scp,
         ..SynthOptions::default()
     };
     let s = synthesize(&problem, &opts)?;
