@@ -46,13 +46,13 @@
 //! decreases along the ball chain, so switching laws between trajectories' balls cannot delay Goal.
 //!
 //! # Limits
-//! * Example 6.4 (examples/planar-vehicle-pwa.toml) does not compress: consecutive samples of a nominal run
-//!   are about one ball radius apart in the CAF metric and ṽ changes by ~0.055 per step there, while the
+//! * Example 6.4 (examples/planar-vehicle-pwa.toml) compresses too little: consecutive samples of a nominal
+//!   run are about one ball radius apart in the CAF metric and ṽ changes by up to ~0.055 per step, while the
 //!   one-step inclusion with ‖A + BK‖_P ≈ 0.998 leaves a disturbance budget of ~0.01; laws that contract
 //!   more (up to s ≈ 0.07 is feasible for this P, [`learn::max_contraction`]) react too strongly along the
-//!   direction of motion to fit two samples (the fit SDP is infeasible). Every data point ends in its own
-//!   law and the tree exceeds the image capacities; the build fails with that message rather than emit an
-//!   uncertified image.
+//!   direction of motion to fit many samples. On the Algorithm 4 cover (§5.3-optimised, 4 trajectories)
+//!   1 972 data points give 518 laws (110 in the text), and the tree exceeds the image capacities; the
+//!   build fails with that message rather than emit an uncertified image.
 //! * The f32 ball test is assumed to accept only states within δ_i when ρ_i is the feedforward
 //!   certificate's stored radius (its selection shrink uses γ_{n+4}, larger than the γ_{2n} of the PWA test
 //!   for n ≤ 4).
