@@ -94,6 +94,22 @@ pub enum CertifyError {
     NotContracting(f64),
 }
 
+/// The inter-sample constants in the CAF metric for a plant held over one period h: φ = (e^{μh} − 1)/μ
+/// (= h as μh → 0) with μ the logarithmic norm of A_c in the P-metric, so that ‖x(κh+τ) − x_κ‖_P ≤ φ‖f_κ‖_P
+/// for τ ∈ [0, h] (the P-metric version of `model::InterSampleBound`), and β = ‖B_c‖ into the P-metric.
+pub fn intersample_phi_beta(roots: &PdRoots, cp: &ContinuousPart) -> (f64, f64) {
+    let As = &roots.sqrt * &cp.Ac * &roots.inv_sqrt;
+    let mu = sym_eigenvalues(As.as_ref())
+        .and_then(|e| e.last().copied())
+        .unwrap_or(f64::INFINITY);
+    let phi = if (mu * cp.h).abs() < 1e-12 {
+        cp.h
+    } else {
+        (mu * cp.h).exp_m1() / mu
+    };
+    (phi, roots.norm_into(cp.Bc.as_ref()))
+}
+
 impl LoopConstants {
     pub fn new(lp: &Loop<'_>) -> Result<Self, CertifyError> {
         let roots = PdRoots::new(lp.P).ok_or(CertifyError::MetricNotPd)?;
@@ -108,21 +124,9 @@ impl LoopConstants {
         let (phi, gamma, beta) = match lp.continuous {
             None => (0.0, 1.0, 0.0),
             Some(cp) => {
-                let At = &roots.sqrt * &cp.Ac * &roots.inv_sqrt;
-                let mu = sym_eigenvalues(At.as_ref())
-                    .and_then(|e| e.last().copied())
-                    .unwrap_or(f64::INFINITY);
-                let phi = if (mu * cp.h).abs() < 1e-12 {
-                    cp.h
-                } else {
-                    (mu * cp.h).exp_m1() / mu
-                };
+                let (phi, beta) = intersample_phi_beta(&roots, cp);
                 let Acl = &cp.Ac + &cp.Bc * lp.K;
-                (
-                    phi,
-                    1.0 + phi * roots.induced_norm(Acl.as_ref()),
-                    roots.norm_into(cp.Bc.as_ref()),
-                )
+                (phi, 1.0 + phi * roots.induced_norm(Acl.as_ref()), beta)
             }
         };
         let n = lp.P.nrows();

@@ -25,7 +25,7 @@
 //!   [`crate::certify`] item 2 with the law's gain).
 
 use super::{input_slack, plant_step, Judge, RunOutcome};
-use crate::certify::{evaluator_error_bound, input_distance};
+use crate::certify::{evaluator_error_bound, input_distance, intersample_phi_beta};
 use crate::linalg::{mat_vec, p_norm, sym, sym_eigenvalues, PdRoots};
 use faer::Mat;
 use rand::{Rng, SeedableRng};
@@ -94,21 +94,7 @@ pub fn recheck(
     let BtB_inv = crate::linalg::sym_fn(sym(BtB.as_ref()).as_ref(), |l| 1.0 / l)
         .ok_or("BᵀB is singular: B has no full column rank")?;
     let Bpinv = &BtB_inv * judge.B.transpose();
-    let (phi, beta) = match continuous {
-        None => (0.0, 0.0),
-        Some(cp) => {
-            let As = &roots.sqrt * &cp.Ac * &roots.inv_sqrt;
-            let mu = sym_eigenvalues(sym(As.as_ref()).as_ref())
-                .and_then(|e| e.last().copied())
-                .unwrap_or(f64::INFINITY);
-            let phi = if (mu * cp.h).abs() < 1e-12 {
-                cp.h
-            } else {
-                (mu * cp.h).exp_m1() / mu
-            };
-            (phi, roots.norm_into(cp.Bc.as_ref()))
-        }
-    };
+    let (phi, beta) = continuous.map_or((0.0, 0.0), |cp| intersample_phi_beta(&roots, cp));
     // Per law: gain, offset, Ã_j, σ_j, ‖Ã_j‖_P, r̃_crit(ε = 1), γ_j.
     struct Law {
         K: Mat<f64>,
