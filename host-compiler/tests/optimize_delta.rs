@@ -271,3 +271,35 @@ fn same_input_same_answer_to_the_bit() {
     assert_eq!(a.certificate, b.certificate);
     assert_eq!(a.history, b.history);
 }
+
+#[test]
+fn a_held_reference_stays_held_and_is_still_improved() {
+    // reference_hold: the descent and the bundle method keep v constant over blocks of 20 samples.
+    let (ol, lc) = planar();
+    let lp = ol.lp();
+    let cancel = AtomicBool::new(false);
+    let x0 = f32x([0.0, 0.0, 0.0, 1.0]);
+    let v = vec![vec![1.0, -1.0]; ol.steps];
+    let s = PotentialSettings::default().delta(0.02).hold(20);
+    let d = descend(&lp, &lc, &x0, &v, &s, DescentMethod::Lbfgs).expect("valid input");
+    assert!(d.reached, "held descent: cost {:.3e}", d.cost);
+    assert!(host_compiler::trajectory::hold::is_held(&d.v, 20));
+    let d0 = d.certificate.delta;
+    let o = maximize_delta(
+        &lp,
+        &lc,
+        &x0,
+        &d.v,
+        ol.steps,
+        &BundleSettings::default().hold(20),
+        &cancel,
+    );
+    println!(
+        "held: δ {d0:.5} → {:.5} in {} iterations ({:?})",
+        o.certificate.delta, o.iterations, o.stop
+    );
+    assert!(host_compiler::trajectory::hold::is_held(&o.nominal.v, 20));
+    assert!(o.certificate.is_certified());
+    assert!(o.certificate.delta > 1.5 * d0, "δ {d0} → {}", o.certificate.delta);
+    assert_shipped(&ol, &lc, &x0, &o);
+}

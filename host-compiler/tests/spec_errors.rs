@@ -380,6 +380,13 @@ fn max_trajectories_zero() {
 }
 
 #[test]
+fn zero_reference_hold() {
+    let src = format!("{BASE}\n[synthesis]\nreference_hold = 0\n");
+    let e = expect(&src, ErrorKind::Setting, "reference_hold", "0");
+    assert!(e.message().contains("at least 1"), "{}", e.message());
+}
+
+#[test]
 fn unknown_synthesis_setting() {
     let src = format!("{BASE}\n[synthesis]\nconfidance = 0.9\n");
     expect(&src, ErrorKind::UnknownKey, "confidance", "confidance");

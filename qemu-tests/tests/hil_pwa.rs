@@ -1,15 +1,17 @@
-//! The PWA-feedback image (Ch. 6) on the target. The controller is learned from the double-integrator
-//! cover (examples/double-integrator.toml; the Example 6.4 setting, examples/planar-vehicle-pwa.toml, does not
-//! yet yield an image within the capacities, see host-compiler's `pwa_example_6_4` bench), re-checked with
-//! `verify::pwa::recheck`, embedded in the firmware, and run on the emulated Cortex-M4F from 50 initial states
-//! drawn uniformly in balls of the certified envelope F (half of them in the balls over Init). Every run
-//! must get `Ok` at every step until it enters Goal, within T, apply inputs inside the input set, and the
-//! firmware's inputs must equal the host evaluator's bit for bit.
+//! The PWA-feedback image (Ch. 6) on the target, for two covers: the double integrator
+//! (examples/double-integrator.toml) and the setting of Example 6.4 (examples/planar-vehicle-pwa.toml, the
+//! planar vehicle of Example 4.8). Each controller is learned from its certified feedforward cover,
+//! re-checked with `verify::pwa::recheck`, embedded in the firmware, and run on the emulated Cortex-M4F from
+//! 50 initial states drawn uniformly in balls of the certified envelope F (half of them in the balls over
+//! Init). Every run must get `Ok` at every step until it enters Goal, within T, stay out of Unsafe at the
+//! samples, apply inputs inside the input set, and the firmware's inputs must equal the host evaluator's
+//! bit for bit.
 
 #![allow(non_snake_case)]
 
 use host_compiler::pwa::{learn_pwa, PwaSettings};
 use host_compiler::synth::{synthesize, SynthOptions};
+use host_compiler::trajectory::generate::InputBound;
 use host_compiler::verify::plant_step as step;
 use qemu_tests::closed_loop::{exchange, HostEvaluator};
 use qemu_tests::firmware::{self, FirmwareConfig};
@@ -23,10 +25,29 @@ const RUNS: usize = 50;
 
 #[test]
 fn pwa_controller_meets_the_spec_on_the_target_from_50_initial_states() {
-    let spec = concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../examples/double-integrator.toml"
+    run(
+        concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../examples/double-integrator.toml"
+        ),
+        "pwa_double_integrator",
+        "double integrator",
     );
+}
+
+#[test]
+fn pwa_controller_of_example_6_4_meets_the_spec_on_the_target_from_50_initial_states() {
+    run(
+        concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../examples/planar-vehicle-pwa.toml"
+        ),
+        "pwa_example_6_4",
+        "Example 6.4",
+    );
+}
+
+fn run(spec: &str, tag: &str, label: &str) {
     let problem = host_compiler::spec::load(spec).expect("the example parses");
     let opts = SynthOptions {
         verify_interior: 500,
@@ -53,9 +74,9 @@ fn pwa_controller_meets_the_spec_on_the_target_from_50_initial_states() {
         rc.failures, 0,
         "the image's certificate must recheck: {rc:?}"
     );
-    let path = firmware::write_image("pwa_double_integrator", &pwa.image).expect("image written");
+    let path = firmware::write_image(tag, &pwa.image).expect("image written");
     let elf = firmware::build(
-        "pwa_double_integrator",
+        tag,
         &FirmwareConfig {
             image: Some(path),
             ..Default::default()
@@ -122,12 +143,23 @@ fn pwa_controller_meets_the_spec_on_the_target_from_50_initial_states() {
             );
             worst_cost = worst_cost.max(reply.cost);
             let u: Vec<f64> = reply.u.as_slice().iter().map(|&v| v as f64).collect();
-            if let host_compiler::trajectory::generate::InputBound::Box { lo, hi } = &input {
-                for (i, &ui) in u.iter().enumerate() {
-                    assert!(
-                        lo[i] <= ui && ui <= hi[i],
-                        "run {run}: u = {u:?} at step {k}"
-                    );
+            match &input {
+                InputBound::Box { lo, hi } => {
+                    for (i, &ui) in u.iter().enumerate() {
+                        assert!(
+                            lo[i] <= ui && ui <= hi[i],
+                            "run {run}: u = {u:?} at step {k}"
+                        );
+                    }
+                }
+                InputBound::Norm2 { center, max } => {
+                    let r = u
+                        .iter()
+                        .zip(center)
+                        .map(|(a, c)| (a - c) * (a - c))
+                        .sum::<f64>()
+                        .sqrt();
+                    assert!(r <= *max, "run {run}: ‖u − c‖ = {r} > {max} at step {k}");
                 }
             }
             x = step(s.plant.A.as_ref(), s.plant.B.as_ref(), &s.plant.g, &x, &u);
@@ -139,7 +171,7 @@ fn pwa_controller_meets_the_spec_on_the_target_from_50_initial_states() {
         assert_eq!(exit.code, Some(0), "run {run}: firmware exit");
     }
     println!(
-        "HIL PWA (double integrator): {RUNS} runs met the spec (Goal within {longest} ≤ {steps} steps); {} partitions, tree depth {}, image {} bytes, worst step cost {worst_cost} instructions",
+        "HIL PWA ({label}): {RUNS} runs met the spec (Goal within {longest} ≤ {steps} steps); {} partitions, tree depth {}, image {} bytes, worst step cost {worst_cost} instructions",
         pwa.stats.partitions,
         pwa.stats.depth,
         pwa.image.len()

@@ -27,6 +27,7 @@ use super::pieces::{delta_subgradient, Pieces};
 use super::potential::{descend, DescentMethod, PotentialSettings};
 use super::{BundleSettings, OptStop, Optimized};
 use crate::certify::{self, Certificate, Loop, LoopConstants};
+use crate::trajectory::hold;
 use clarabel::algebra::CscMatrix;
 use clarabel::solver::{
     DefaultSettingsBuilder, DefaultSolver, IPSolver, SolverStatus, SupportedConeT,
@@ -47,12 +48,21 @@ fn d47(c: &Certificate) -> f64 {
         .min(c.delta_input)
 }
 
-fn evaluate(lp: &Loop<'_>, lc: &LoopConstants, x0: &[f64], v: Vec<Vec<f64>>) -> Point {
+/// Evaluates the shipped nominal of `v`; with `hold` > 1 the subgradient is projected onto block-constant
+/// sequences, so steps keep v block-constant.
+fn evaluate(
+    lp: &Loop<'_>,
+    lc: &LoopConstants,
+    x0: &[f64],
+    v: Vec<Vec<f64>>,
+    hold: usize,
+) -> Point {
     let (nom, cert) = certify::shipped(lp, lc, x0, &v);
     let pc = Pieces::new(lp, lc);
     let (_, gv) = delta_subgradient(&pc, &nom, &cert.eps_components, cert.eps_f32);
     let f = -d47(&cert);
-    let g = gv.into_iter().flatten().map(|x| -x).collect();
+    let mut g: Vec<f64> = gv.into_iter().flatten().map(|x| -x).collect();
+    hold::project_flat(&mut g, lp.K.nrows(), hold);
     Point {
         v,
         cert,
@@ -201,7 +211,7 @@ fn bundle_run(
             .chunks(m)
             .map(|c| c.to_vec())
             .collect();
-        let trial = evaluate(lp, lc, x0, vt);
+        let trial = evaluate(lp, lc, x0, vt, s.hold);
         // Aggregate when full: keep the cuts with weight, fold them into one aggregate cut.
         if cuts.len() + 1 > s.bundle_size.max(2) {
             let agg = Cut {
@@ -263,7 +273,8 @@ pub(super) fn maximize(
     if v_start.is_empty() {
         v_start.push(vec![0.0; lp.K.nrows()]);
     }
-    let start = evaluate(lp, lc, x0, v_start);
+    hold::project(&mut v_start, s.hold);
+    let start = evaluate(lp, lc, x0, v_start, s.hold);
     let steps_before = start.v.len();
     let mut history = vec![start.cert.delta];
     let start_v = start.v.clone();
@@ -304,7 +315,7 @@ pub(super) fn maximize(
     if s.terminal_time {
         let k = best.cert.k_star.max(1);
         if k < best.v.len() {
-            let cand = evaluate(lp, lc, x0, best.v[..k].to_vec());
+            let cand = evaluate(lp, lc, x0, best.v[..k].to_vec(), s.hold);
             if !better(&best, &cand) {
                 best = cand;
             }
@@ -316,9 +327,10 @@ pub(super) fn maximize(
         let ps = PotentialSettings::default()
             .delta(s.repair_delta)
             .max_iterations(500)
-            .max_evaluations(2000);
+            .max_evaluations(2000)
+            .hold(s.hold);
         if let Ok(d) = descend(lp, lc, x0, &best.v, &ps, DescentMethod::Lbfgs) {
-            let cand = evaluate(lp, lc, x0, d.v);
+            let cand = evaluate(lp, lc, x0, d.v, s.hold);
             if better(&cand, &best) {
                 best = cand;
             }
@@ -356,7 +368,7 @@ pub(super) fn maximize(
                 let mut v = best.v.clone();
                 let last = v.last().cloned().unwrap_or_else(|| vec![0.0; lp.K.nrows()]);
                 v.extend(std::iter::repeat_n(last, ext));
-                let cand = evaluate(lp, lc, x0, v);
+                let cand = evaluate(lp, lc, x0, v, s.hold);
                 if better(&cand, &best) {
                     best = cand;
                     t = 0.0;

@@ -11,6 +11,8 @@
 //! * [`setup`]: a certified loop built from a spec the way `synth` builds it (tests, benches, tools).
 //!
 //! API changes for callers (newest first):
+//! * `BundleSettings::hold` and `PotentialSettings::hold` (default 1): keep v block-constant
+//!   ([`crate::trajectory::hold`]).
 //! * `BundleSettings::repair_delta` (default 1e-3): an uncertified start is first repaired by the §5.2
 //!   descent, then maximised. `try_maximize_delta` and [`OptimizeError`] for unchecked input.
 //! * `BundleSettings::time_search_every: usize` is now `terminal_time: bool` (builder `terminal_time`); the
@@ -55,6 +57,9 @@ pub struct BundleSettings {
     /// the repair off). The min of many violated pieces gives the bundle method one sample at a time; the
     /// potentials' sum moves all of them at once.
     pub repair_delta: f64,
+    /// Reference hold L ([`crate::trajectory::hold`]): v is kept constant over blocks of L samples (the
+    /// start is projected, every subgradient is projected). Default 1 (no blocks).
+    pub hold: usize,
 }
 
 impl Default for BundleSettings {
@@ -69,6 +74,7 @@ impl Default for BundleSettings {
             bundle_size: 30,
             terminal_time: true,
             repair_delta: 1e-3,
+            hold: 1,
         }
     }
 }
@@ -108,6 +114,10 @@ impl BundleSettings {
     }
     pub fn repair_delta(mut self, v: f64) -> Self {
         self.repair_delta = v;
+        self
+    }
+    pub fn hold(mut self, v: usize) -> Self {
+        self.hold = v;
         self
     }
 }

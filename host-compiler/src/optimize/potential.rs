@@ -63,6 +63,9 @@ pub struct PotentialSettings {
     pub max_evaluations: usize,
     /// Show a progress bar over the probes of [`time_optimal`] (default false).
     pub progress: bool,
+    /// Reference hold L ([`crate::trajectory::hold`]): the start is projected onto block-constant
+    /// sequences and so is every gradient, so the descent stays block-constant. Default 1.
+    pub hold: usize,
 }
 
 impl Default for PotentialSettings {
@@ -80,6 +83,7 @@ impl Default for PotentialSettings {
             lbfgs_memory: 10,
             max_evaluations: 20_000,
             progress: false,
+            hold: 1,
         }
     }
 }
@@ -129,6 +133,10 @@ impl PotentialSettings {
         self.max_evaluations = v;
         self
     }
+    pub fn hold(mut self, v: usize) -> Self {
+        self.hold = v;
+        self
+    }
     pub fn progress(mut self, v: bool) -> Self {
         self.progress = v;
         self
@@ -162,6 +170,8 @@ pub struct Potential<'a, 'b> {
     /// J at or below this means every piece ≥ δ_d + μ.
     pub zero_tol: f64,
     evals: AtomicUsize,
+    /// Reference hold L: gradients are projected onto block-constant sequences.
+    hold: usize,
 }
 
 impl<'a, 'b> Potential<'a, 'b> {
@@ -192,6 +202,7 @@ impl<'a, 'b> Potential<'a, 'b> {
             eps_f32: 2.0 * eps_from.eps_f32,
             zero_tol: 0.5 * alpha.min(h).min(beta * h) * mu * mu,
             evals: AtomicUsize::new(0),
+            hold: s.hold,
         }
     }
 
@@ -249,7 +260,9 @@ impl<'a, 'b> Potential<'a, 'b> {
             return (J, None);
         }
         let refs: Vec<(f64, &LocalGrad)> = local.iter().map(|(w, l)| (*w, l)).collect();
-        (J, Some(self.pc.adjoint(N, &refs)))
+        let mut g = self.pc.adjoint(N, &refs);
+        crate::trajectory::hold::project(&mut g, self.hold);
+        (J, Some(g))
     }
 
     fn unflatten(&self, z: &[f64]) -> Vec<Vec<f64>> {
@@ -428,6 +441,9 @@ fn descend_checked(
     method: DescentMethod,
 ) -> Descent {
     let t = Instant::now();
+    let mut v0 = v0.to_vec();
+    crate::trajectory::hold::project(&mut v0, s.hold);
+    let v0 = &v0[..];
     let (_, c0) = certify::shipped(lp, lc, x0, v0);
     let pot = Potential::new(lp, lc, x0, v0.len(), &c0, s);
     let (v, cost, iterations) = match method {

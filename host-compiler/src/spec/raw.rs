@@ -128,6 +128,7 @@ pub(crate) struct RawSynthesis {
     pub max_iterations: Option<Spanned<i128>>,
     pub sigma_margin: Option<RawF>,
     pub min_robustness: Option<RawF>,
+    pub reference_hold: Option<Spanned<i128>>,
 }
 
 /// `[mtl]`.

@@ -60,6 +60,11 @@ pub struct SynthesisSettings {
     /// δε of §5.4: robust neighbourhoods with radius below this are not worth growing from; their seeds are
     /// discarded and a new trajectory is requested. Finite, ≥ 0. Default 1e-3.
     pub min_robustness: f64,
+    /// Reference hold L in samples: generated and optimised reference sequences ṽ are constant over
+    /// blocks of L samples (move blocking, [`crate::trajectory::hold`]). A PWA law (Ch. 6) then needs
+    /// about one partition per block instead of nearly one per sample (§6.2). Recorded (CSV) trajectories
+    /// are used as recorded. ≥ 1. Default 1 (every sample free).
+    pub reference_hold: usize,
 }
 
 impl Default for SynthesisSettings {
@@ -73,6 +78,7 @@ impl Default for SynthesisSettings {
             max_iterations: 200,
             sigma_margin: 0.1,
             min_robustness: 1e-3,
+            reference_hold: 1,
         }
     }
 }
@@ -137,6 +143,13 @@ impl SynthesisSettings {
         if self.max_iterations == 0 {
             return Err(SettingsError::new(
                 "max_iterations",
+                0.0,
+                "must be at least 1",
+            ));
+        }
+        if self.reference_hold == 0 {
+            return Err(SettingsError::new(
+                "reference_hold",
                 0.0,
                 "must be at least 1",
             ));
@@ -232,6 +245,11 @@ impl SynthesisSettingsBuilder {
     /// See [`SynthesisSettings::sigma_margin`].
     pub fn sigma_margin(mut self, v: f64) -> Self {
         self.s.sigma_margin = v;
+        self
+    }
+    /// See [`SynthesisSettings::reference_hold`].
+    pub fn reference_hold(mut self, v: usize) -> Self {
+        self.s.reference_hold = v;
         self
     }
     /// See [`SynthesisSettings::min_robustness`].

@@ -578,6 +578,7 @@ fn synthesis(r: &RawSynthesis) -> Result<SynthesisSettings, SpecError> {
             &mut s.max_trajectories,
         ),
         ("max_iterations", &r.max_iterations, &mut s.max_iterations),
+        ("reference_hold", &r.reference_hold, &mut s.reference_hold),
     ] {
         if let Some(x) = v {
             let k = *x.get_ref();

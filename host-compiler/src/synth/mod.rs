@@ -536,18 +536,30 @@ pub fn synthesize(problem: &Problem, opts: &SynthOptions) -> Result<Synthesis, S
     };
     let delta_eps = problem.synthesis.min_robustness;
     let accept = |c: &Certificate| c.is_certified() && c.delta >= delta_eps;
+    // Generated references are held over blocks of `reference_hold` samples (move blocking); recorded
+    // ones are used as recorded. Algorithm 4's seeds reuse a held reference, and §5.3 keeps it held.
+    let hold = problem.synthesis.reference_hold;
+    let generated = |x0: &[f64]| -> Option<Vec<Vec<f64>>> {
+        let mut v = generate(&gp, x0, &gs).ok()?.nominal.v;
+        crate::trajectory::hold::project(&mut v, hold);
+        Some(v)
+    };
     let make = |x0: &[f64]| -> Option<CoverTrajectory> {
-        let g = generate(&gp, x0, &gs).ok()?;
-        let (nominal, certificate) = shipped(x0, &g.nominal.v);
+        let v = generated(x0)?;
+        let (nominal, certificate) = shipped(x0, &v);
         accept(&certificate).then(|| CoverTrajectory {
             source: "generated".into(),
             nominal,
             certificate,
         })
     };
-    let bundle = opts.optimizer.clone().unwrap_or_else(|| {
-        BundleSettings::default().max_iterations(problem.synthesis.max_iterations)
-    });
+    let bundle = opts
+        .optimizer
+        .clone()
+        .unwrap_or_else(|| {
+            BundleSettings::default().max_iterations(problem.synthesis.max_iterations)
+        })
+        .hold(hold);
     let cancel: &AtomicBool = &opts.cancel;
     let cancelled = || cancel.load(Ordering::Relaxed);
     // §5.3 on a start (x0, v): maximise the certified δ, then re-certify what the optimiser returns through
@@ -560,8 +572,8 @@ pub fn synthesize(problem: &Problem, opts: &SynthOptions) -> Result<Synthesis, S
     };
     // A new seed trajectory from the SCP generator, then §5.3 (Algorithm 4's start and its fallback).
     let seed_scp = |x0: &[f64]| {
-        let g = generate(&gp, x0, &gs).ok()?;
-        Some(optimise(x0, &g.nominal.v))
+        let v = generated(x0)?;
+        Some(optimise(x0, &v))
     };
 
     let t1 = Instant::now();

@@ -3,6 +3,7 @@
 
 pub mod csv;
 pub mod generate;
+pub mod hold;
 
 use faer::MatRef;
 
