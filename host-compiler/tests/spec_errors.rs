@@ -59,7 +59,7 @@ fn pos(src: &str, anchor: &str, needle: &str) -> (usize, usize) {
 fn render(e: &SpecError) -> String {
     let mut out = String::new();
     miette::GraphicalReportHandler::new_themed(miette::GraphicalTheme::unicode_nocolor())
-        .with_width(200)
+        .with_width(400)
         .render_report(&mut out, e)
         .unwrap();
     out
