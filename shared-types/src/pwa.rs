@@ -119,7 +119,7 @@ use crate::capacity::{
     MAX_PARTITIONS, MAX_TREE_DEPTH, MAX_TREE_NODES,
 };
 use crate::image::{
-    check_dim, check_finite, check_len, div, f32_at, f32_span, floats, rem, sat16, sat32, u16_le,
+    check_dim, check_finite, check_len, div, f32_at, floats, rem, sat16, sat32, u16_le,
     Dim, Dims, Field, Image, ImageError, Mode, Pos,
 };
 
@@ -685,8 +685,36 @@ impl<'a> Image<'a> {
     }
 
     /// [`Image::locate`] without the argument checks (`x.len() == n`, `1 ≤ n ≤ MAX_N`). Every loop is
-    /// bounded by a capacity; on a validated image the walk ends within `depth` tests.
+    /// bounded by a capacity; on a validated image the walk ends within `depth` tests. Dispatches to
+    /// [`Image::locate_n`] for the image's n, so that the n-length loops are unrolled at compile time (the
+    /// arithmetic, and its order, is the same for every n).
     pub(crate) fn locate_in(&self, x: &[f32], n: usize) -> Region {
+        match n {
+            1 => self.locate_n::<1>(x),
+            2 => self.locate_n::<2>(x),
+            3 => self.locate_n::<3>(x),
+            4 => self.locate_n::<4>(x),
+            5 => self.locate_n::<5>(x),
+            6 => self.locate_n::<6>(x),
+            7 => self.locate_n::<7>(x),
+            8 => self.locate_n::<8>(x),
+            9 => self.locate_n::<9>(x),
+            10 => self.locate_n::<10>(x),
+            11 => self.locate_n::<11>(x),
+            12 => self.locate_n::<12>(x),
+            // Unreachable for a validated image (1 ≤ n ≤ MAX_N); total anyway.
+            _ => Region::OutsideTree,
+        }
+    }
+
+    /// Point location for state dimension `N` (module doc): the tree walk, then the whitened ball test of
+    /// the leaf's balls in listing order. Reads are total (a short table reads as "outside"), which a
+    /// validated image never meets.
+    fn locate_n<const N: usize>(&self, x: &[f32]) -> Region {
+        const { assert!(N <= MAX_N) };
+        let Some(x) = load_x::<N>(x) else {
+            return Region::OutsideTree;
+        };
         let t = &self.pwa;
         let mut code = if t.n_nodes == 0 { LEAF_BASE } else { 0 };
         let mut tests = 0usize;
@@ -701,9 +729,12 @@ impl<'a> Image<'a> {
                     }
                     tests += 1;
                     let i = i as usize;
+                    let Some(a) = load::<N>(t.node_a, i * N) else {
+                        return Region::OutsideTree;
+                    };
                     let mut s = 0.0f32;
-                    for (ai, &xi) in floats(f32_span(t.node_a, i * n, n)).zip(x) {
-                        s += ai * xi;
+                    for k in 0..N {
+                        s += a[k] * x[k];
                     }
                     let side = if s <= f32_at(t.node_b, i) { 0 } else { 1 };
                     code = u16_le(t.node_child, 2 * i + side);
@@ -721,19 +752,29 @@ impl<'a> Image<'a> {
         let refs = t.ball_ref.get(2 * start..2 * end).unwrap_or(&[]);
         // z = fl(R̂_ℓ x) for the location ℓ of the ball being tested (module doc, "The whitened ball
         // test"); recomputed only when the location changes.
-        let mut z = [0.0f32; MAX_N];
+        let mut z = [0.0f32; N];
         let mut z_loc = usize::MAX;
         for r in refs.chunks_exact(2).take(MAX_LEAF_BALLS) {
             let b = u16::from_le_bytes([r[0], r[1]]);
             let bu = b as usize;
             let loc = t.ball_location.get(bu).copied().unwrap_or(0) as usize;
             if loc != z_loc {
-                whiten(&mut z, f32_span(t.R, loc * n * n, n * n), x, n);
+                for (i, zi) in z.iter_mut().enumerate() {
+                    let row = load::<N>(t.R, (loc * N + i) * N).unwrap_or([0.0; N]);
+                    let mut s = 0.0f32;
+                    for j in i..N {
+                        s += row[j] * x[j];
+                    }
+                    *zi = s;
+                }
                 z_loc = loc;
             }
+            let Some(cz) = load::<N>(t.ball_centre_z, bu * N) else {
+                continue;
+            };
             let mut d2 = 0.0f32;
-            for (&zi, ci) in z.iter().zip(floats(f32_span(t.ball_centre_z, bu * n, n))) {
-                let d = zi - ci;
+            for i in 0..N {
+                let d = z[i] - cz[i];
                 d2 += d * d;
             }
             let rho = f32_at(t.ball_delta, bu);
@@ -752,15 +793,23 @@ impl<'a> Image<'a> {
     }
 }
 
-/// `z_i = fl(Σ_{j=i}^{n−1} R_ij x_j)`, summed left to right from 0 (module doc), for the upper-triangular
-/// n × n row-major `R` (`1 ≤ n ≤ MAX_N`, `x.len() == n`); entries of `z` past n are left alone.
+/// The first `N` values of `x` as an array; `None` if `x` is shorter.
 #[inline(always)]
-fn whiten(z: &mut [f32; MAX_N], R: &[u8], x: &[f32], n: usize) {
-    for (i, (zi, row)) in z.iter_mut().zip(R.chunks_exact(4 * n)).enumerate() {
-        let mut s = 0.0f32;
-        for (rij, &xj) in floats(row.get(4 * i..).unwrap_or(&[])).zip(x.get(i..).unwrap_or(&[])) {
-            s += rij * xj;
-        }
-        *zi = s;
+fn load_x<const N: usize>(x: &[f32]) -> Option<[f32; N]> {
+    let x = x.get(..N)?;
+    let mut out = [0.0f32; N];
+    out.copy_from_slice(x);
+    Some(out)
+}
+
+/// `N` little-endian f32 values of `bytes` starting at value index `start`; `None` if out of range.
+#[inline(always)]
+fn load<const N: usize>(bytes: &[u8], start: usize) -> Option<[f32; N]> {
+    let s = start.checked_mul(4)?;
+    let b = bytes.get(s..s.checked_add(4 * N)?)?;
+    let mut out = [0.0f32; N];
+    for (o, c) in out.iter_mut().zip(b.chunks_exact(4)) {
+        *o = f32::from_le_bytes([c[0], c[1], c[2], c[3]]);
     }
+    Some(out)
 }
