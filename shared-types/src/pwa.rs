@@ -748,26 +748,27 @@ impl<'a> Image<'a> {
             _ => u16_le(t.leaf_end, l - 1) as usize,
         };
         let end = u16_le(t.leaf_end, l) as usize;
-        // Validated: end − start ≤ MAX_LEAF_BALLS; the `take` makes the bound explicit.
+        // Validated: end − start ≤ MAX_LEAF_BALLS; the truncation makes the bound explicit.
         let refs = t.ball_ref.get(2 * start..2 * end).unwrap_or(&[]);
+        let refs = refs.get(..2 * MAX_LEAF_BALLS).unwrap_or(refs);
         // z = fl(R̂_ℓ x) for the location ℓ of the ball being tested (module doc, "The whitened ball
-        // test"); recomputed only when the location changes.
+        // test"); computed once for a single-location image, else recomputed when the location changes.
+        let single = self.dims.n_locations == 1;
         let mut z = [0.0f32; N];
         let mut z_loc = usize::MAX;
-        for r in refs.chunks_exact(2).take(MAX_LEAF_BALLS) {
+        if single {
+            whiten::<N>(&mut z, t.R, 0, &x);
+            z_loc = 0;
+        }
+        for r in refs.chunks_exact(2) {
             let b = u16::from_le_bytes([r[0], r[1]]);
             let bu = b as usize;
-            let loc = t.ball_location.get(bu).copied().unwrap_or(0) as usize;
-            if loc != z_loc {
-                for (i, zi) in z.iter_mut().enumerate() {
-                    let row = load::<N>(t.R, (loc * N + i) * N).unwrap_or([0.0; N]);
-                    let mut s = 0.0f32;
-                    for j in i..N {
-                        s += row[j] * x[j];
-                    }
-                    *zi = s;
+            if !single {
+                let loc = t.ball_location.get(bu).copied().unwrap_or(0) as usize;
+                if loc != z_loc {
+                    whiten::<N>(&mut z, t.R, loc, &x);
+                    z_loc = loc;
                 }
-                z_loc = loc;
             }
             let Some(cz) = load::<N>(t.ball_centre_z, bu * N) else {
                 continue;
@@ -790,6 +791,20 @@ impl<'a> Image<'a> {
             leaf,
             partition: leaf_partition,
         }
+    }
+}
+
+/// `z_i = fl(Σ_{j=i}^{N−1} R̂_ij x_j)` for the factor of location `loc`, summed left to right from 0 (module
+/// doc); a short table reads as zeros (never for a validated image).
+#[inline(always)]
+fn whiten<const N: usize>(z: &mut [f32; N], R: &[u8], loc: usize, x: &[f32; N]) {
+    for (i, zi) in z.iter_mut().enumerate() {
+        let row = load::<N>(R, (loc * N + i) * N).unwrap_or([0.0; N]);
+        let mut s = 0.0f32;
+        for j in i..N {
+            s += row[j] * x[j];
+        }
+        *zi = s;
     }
 }
 
