@@ -368,7 +368,8 @@ pub(crate) fn validate_tables(dims: Dims, t: &PwaTables<'_>) -> Result<(), Image
                     });
                 }
             }
-            if !(f32_at(t.R, (l * n + r) * n + r) > 0.0) {
+            let d = f32_at(t.R, (l * n + r) * n + r);
+            if d.is_nan() || d <= 0.0 {
                 return Err(ImageError::FactorDiagonal {
                     location: sat16(l),
                     row: sat16(r),

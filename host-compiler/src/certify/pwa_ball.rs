@@ -193,7 +193,7 @@ pub fn pwa_ball_radius(P: MatRef<'_, f64>, c: &[f64], delta: f64) -> Option<f32>
     let Rh = metric_factor_f32(&crate::linalg::to_row_major(P), n)?;
     let cz = whitened_centre(&Rh, c);
     let b = AcceptBound::new(P, &Rh, c, &cz)?;
-    if !(delta >= 0.0) || b.radius(0.0) > delta {
+    if delta.is_nan() || delta < 0.0 || b.radius(0.0) > delta {
         return None;
     }
     // Closed form of radius(ρ) = δ, then step down until the forward bound holds (it is monotone in ρ).

@@ -429,7 +429,7 @@ pub fn factor_of(P: &[f32], n: usize) -> Option<Vec<f32>> {
         for k in 0..i {
             d -= R[k * n + i] * R[k * n + i];
         }
-        if !(d > 0.0) {
+        if d.is_nan() || d <= 0.0 {
             return None;
         }
         R[i * n + i] = d.sqrt();
