@@ -17,8 +17,10 @@
 //! hyperplanes, its leaves (a partition and the certified balls that may use its law) and the ball table
 //! (the pieces `B_P(x̃_i(κ), δ_i)` of the envelope F of (6.2), each with the partition it is certified for).
 //! It checks shapes, capacities and indices with errors that name the offending item, computes the tree's
-//! worst-case depth, rounds every ball radius down as above, and then runs the decoder's validation (which
-//! also refuses unreachable nodes, unreferenced leaves and zero normals).
+//! worst-case depth, rounds every ball radius down as above, stores per location the f32 Cholesky factor
+//! R̂ of `P` and per ball its whitened centre `fl32(R̂ ĉ)` (the evaluator's whitened ball test; the radius a
+//! ball needs for it comes from `crate::certify::pwa_ball_radius`), and then runs the decoder's validation
+//! (which also refuses unreachable nodes, unreferenced leaves and zero normals).
 #![allow(non_snake_case)]
 
 use std::path::Path;
@@ -521,9 +523,11 @@ pub struct PwaLeaf {
 /// trajectory ((6.5) via (6.6)–(6.7)).
 #[derive(Clone, Debug, PartialEq)]
 pub struct CertifiedBall {
-    /// Centre `x̃_i(κ)`, n values.
+    /// Centre `x̃_i(κ)`, n values (stored as f32; the whitened centre is computed from that f32 value).
     pub centre: Vec<f64>,
-    /// Radius `δ_i` in the metric `P` of `location` (rounded down to f32 when emitted).
+    /// Stored radius ρ̂ of the evaluator's whitened test (rounded down to f32 when emitted). For the
+    /// evaluator to accept only states within the certified δ_i, pass
+    /// `crate::certify::pwa_ball_radius(P, centre, δ_i)`.
     pub delta: f64,
     /// Location whose `P` is the ball's metric.
     pub location: u8,
@@ -543,6 +547,11 @@ pub struct PwaImageBuilder {
     pub period: f64,
     /// Per-location CAF gain `K` (kept for reports) and ball metric `P`.
     pub locations: Vec<LocationLaw>,
+    /// Per location, the factor `R̂ = fl32(R)` of its `P = RᵀR` (n × n row-major, f32 values widened),
+    /// stored for the whitened ball test: computed by [`PwaImageBuilder::add_location`]
+    /// ([`crate::certify::metric_factor_f32`]; empty if `P` is not positive definite), read back by
+    /// [`PwaImageBuilder::from_image`].
+    pub factors: Vec<Vec<f64>>,
     /// Per-partition laws (index = partition).
     pub laws: Vec<PwaLaw>,
     /// Internal tree nodes; node 0 is the root. Empty: the tree is leaf 0 alone.
@@ -644,6 +653,7 @@ impl PwaImageBuilder {
             m,
             period,
             locations: Vec::new(),
+            factors: Vec::new(),
             laws: Vec::new(),
             nodes: Vec::new(),
             leaves: Vec::new(),
@@ -653,8 +663,11 @@ impl PwaImageBuilder {
         }
     }
 
-    /// Adds a location with CAF gain `K` (m×n) and metric `P` (n×n); returns its index.
+    /// Adds a location with CAF gain `K` (m×n) and metric `P` (n×n), and the factor of `P` for the ball
+    /// test; returns its index.
     pub fn add_location(&mut self, K: Vec<f64>, P: Vec<f64>) -> usize {
+        self.factors
+            .push(crate::certify::metric_factor_f32(&P, self.n).unwrap_or_default());
         self.locations.push(LocationLaw { K, P });
         self.locations.len() - 1
     }
@@ -760,9 +773,18 @@ impl PwaImageBuilder {
 
         let mut K = Vec::new();
         let mut P = Vec::new();
+        let mut R = Vec::new();
         for (l, law) in self.locations.iter().enumerate() {
             K.extend(le_bytes(&format!("location {l}: K"), &law.K, m * n)?);
             P.extend(le_bytes(&format!("location {l}: P"), &law.P, n * n)?);
+            let f = self.factors.get(l).map_or(&[][..], |f| &f[..]);
+            if f.is_empty() {
+                return Err(invalid(
+                    format!("location {l}: P"),
+                    "has no Cholesky factor (not positive definite)",
+                ));
+            }
+            R.extend(le_bytes(&format!("location {l}: factor R"), f, n * n)?);
         }
 
         let mut gain = Vec::new();
@@ -817,6 +839,7 @@ impl PwaImageBuilder {
         let leaf_partition = le_u16(self.leaves.iter().map(|l| l.partition as u16));
 
         let mut ball_centre = Vec::new();
+        let mut ball_centre_z = Vec::new();
         let mut ball_delta = Vec::new();
         let mut ball_location = Vec::new();
         for (b, ball) in self.balls.iter().enumerate() {
@@ -832,6 +855,9 @@ impl PwaImageBuilder {
                     "does not exist",
                 ));
             }
+            // The factor has n × n values (checked above); the centre n finite f32 values.
+            let cz = crate::certify::whitened_centre(&self.factors[ball.location as usize], &ball.centre);
+            ball_centre_z.extend(le_bytes(&format!("ball {b}: whitened centre"), &cz, n)?);
             ball_location.push(ball.location);
             if ball.partition >= self.laws.len() {
                 return Err(invalid(
@@ -859,7 +885,9 @@ impl PwaImageBuilder {
                 leaf_partition: &leaf_partition,
                 leaf_end: &leaf_end,
                 ball_ref: &ball_ref,
+                R: &R,
                 ball_centre: &ball_centre,
+                ball_centre_z: &ball_centre_z,
                 ball_delta: &ball_delta,
                 ball_location: &ball_location,
                 ball_partition: &ball_partition,
@@ -898,6 +926,13 @@ impl PwaImageBuilder {
                 .map(|l| LocationLaw {
                     K: (0..m * n).map(|i| img.K(l, i / n, i % n) as f64).collect(),
                     P: (0..n * n).map(|i| img.P(l, i / n, i % n) as f64).collect(),
+                })
+                .collect(),
+            factors: (0..img.n_locations())
+                .map(|l| {
+                    (0..n * n)
+                        .map(|i| img.factor(l, i / n, i % n) as f64)
+                        .collect()
                 })
                 .collect(),
             laws: (0..img.n_partitions())

@@ -260,3 +260,106 @@ fn inter_sample_excursion_is_bounded() {
     }
     assert!(tight > 0.3, "bound far from tight: {tight}");
 }
+
+/// The PWA evaluator's whitened ball test (`shared_types::pwa`) with the radius of
+/// [`host_compiler::certify::pwa_ball_radius`]: every f32 state it accepts, and the real state it was
+/// rounded from, lies in the certified f64 ball `‖x − c‖_P ≤ δ` — probed on shells straddling both the
+/// stored and the certified radius, for unit-scale and large-magnitude centres (f64 centres that are not
+/// f32 values) and condition numbers up to 10³. The radius is not absurdly small: for unit-scale data
+/// (|c| ≤ 3, δ ≥ 0.1, cond(P) ≤ 10) the relative shrink 1 − ρ̂/δ stays below 10⁻⁴, and states within
+/// (1 − 10⁻⁴)ρ̂ are all accepted (the margin η of the PWA learner's one-step inclusion).
+#[test]
+fn pwa_whitened_test_accepts_only_states_in_the_certified_ball() {
+    use host_compiler::certify::{pwa_accept_radius, pwa_ball_radius};
+    use host_compiler::emit::{CertifiedBall, PwaImageBuilder, PwaLaw, PwaLeaf};
+    use shared_types::pwa::Region;
+    let mut rng = ChaCha8Rng::seed_from_u64(0x3A11);
+    let (mut accepted, mut rejected, mut inner) = (0usize, 0usize, 0usize);
+    let (mut worst_unit_shrink, mut worst_shrink) = (0.0f64, 0.0f64);
+    for trial in 0..400 {
+        let n = [1, 2, 3, 4, 4, 6, 8, 12][trial % 8];
+        // Unit scale: |c| ≤ 3, δ ∈ [0.1, 1], cond(P) ≤ 10. Otherwise cond(P) up to 10³, δ down to 10⁻²·scale.
+        let kind = (trial / 8) % 4;
+        let scale = [1.0, 1.0, 1e2, 1e4][kind];
+        let unit = kind == 0;
+        let cond = if unit { 10.0 } else { 1e3 };
+        let P = random_pd(n, 1.0 + cond * rng.random::<f64>().powi(2), &mut rng);
+        let c: Vec<f64> = (0..n).map(|_| scale * rng.random_range(-3.0..3.0)).collect();
+        let delta = if unit {
+            rng.random_range(0.1..1.0)
+        } else {
+            rng.random_range(0.01..1.0) * scale.max(1.0)
+        };
+        let rho = pwa_ball_radius(P.as_ref(), &c, delta)
+            .unwrap_or_else(|| panic!("trial {trial}: no radius for δ = {delta}, scale {scale}"));
+        let shrink = 1.0 - rho as f64 / delta;
+        assert!(rho > 0.0 && shrink > 0.0, "trial {trial}: ρ̂ = {rho}, δ = {delta}");
+        if unit {
+            worst_unit_shrink = worst_unit_shrink.max(shrink);
+        }
+        worst_shrink = worst_shrink.max(shrink);
+        let Prm = host_compiler::linalg::to_row_major(P.as_ref());
+        let mut b = PwaImageBuilder::new(n, 1, 0.01);
+        b.add_location(vec![0.0; n], Prm);
+        b.add_law(PwaLaw {
+            gain: vec![0.0; n],
+            offset: vec![0.0],
+        });
+        b.add_ball(CertifiedBall {
+            centre: c.clone(),
+            delta: rho as f64,
+            location: 0,
+            partition: 0,
+        });
+        b.add_leaf(PwaLeaf {
+            partition: 0,
+            balls: vec![0],
+        });
+        let bytes = b.to_bytes().unwrap();
+        let img = shared_types::image::decode(&bytes).unwrap();
+        // The bound read back from the image agrees: the stored radius is certified within δ.
+        let Rh: Vec<f64> = (0..n * n).map(|i| img.factor(0, i / n, i % n) as f64).collect();
+        let cz: Vec<f64> = (0..n).map(|i| img.ball_centre_z(0, i) as f64).collect();
+        assert!(pwa_accept_radius(P.as_ref(), &Rh, &c, &cz, rho) <= delta);
+        let roots = host_compiler::linalg::PdRoots::new(P.as_ref()).unwrap();
+        let dist = |x: &[f64]| p_norm(P.as_ref(), &(0..n).map(|i| x[i] - c[i]).collect::<Vec<_>>());
+        for k in 0..300 {
+            let w: Vec<f64> = (0..n).map(|_| rng.random_range(-1.0..1.0)).collect();
+            let wn = w.iter().map(|a| a * a).sum::<f64>().sqrt();
+            let e = mat_vec(roots.inv_sqrt.as_ref(), &w);
+            // Shells: around ρ̂, across (ρ̂, δ] and just beyond δ, and well inside.
+            let r = match k % 4 {
+                0 => rho as f64 * (1.0 + rng.random_range(-1e-6..1e-6)),
+                1 => rho as f64 + (delta - rho as f64) * rng.random_range(0.0..1.5),
+                2 => delta * (1.0 + rng.random_range(-1e-7..1e-7)),
+                _ => rho as f64 * (1.0 - 1e-4) * rng.random::<f64>(),
+            };
+            let x: Vec<f64> = (0..n).map(|i| c[i] + r * e[i] / wn).collect();
+            let xf: Vec<f32> = x.iter().map(|&a| a as f32).collect();
+            let xh: Vec<f64> = xf.iter().map(|&a| a as f64).collect();
+            let inside = matches!(img.locate(&xf), Some(Region::Inside { .. }));
+            if k % 4 == 3 && unit {
+                assert!(inside, "trial {trial}: rejected a state within (1 − 1e-4)ρ̂");
+                inner += 1;
+            }
+            if inside {
+                accepted += 1;
+                for (what, d) in [("f32 state", dist(&xh)), ("real state", dist(&x))] {
+                    assert!(
+                        d <= delta,
+                        "trial {trial}: accepted a {what} at P-distance {d} > certified {delta} \
+                         (ρ̂ = {rho}, scale {scale})"
+                    );
+                }
+            } else {
+                rejected += 1;
+            }
+        }
+    }
+    eprintln!(
+        "accepted {accepted}, rejected {rejected}, inner {inner}, worst shrink: unit scale \
+         {worst_unit_shrink:e}, all {worst_shrink:e}"
+    );
+    assert!(accepted > 40_000 && rejected > 20_000, "{accepted} {rejected}");
+    assert!(worst_unit_shrink < 1e-4, "shrink {worst_unit_shrink}");
+}

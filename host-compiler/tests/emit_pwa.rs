@@ -413,8 +413,10 @@ fn inspect_json_contains_the_pwa_content() {
     assert_eq!(p["balls"], 3);
     assert_eq!(p["ball_refs"], 3);
     assert_eq!(p["max_leaf_balls"], 2);
-    // depth·n + max_leaf_balls·(n² + n) + m·n = 4 + 12 + 2.
-    assert_eq!(p["worst_case_muladds"], 18);
+    // depth·n + (one whitening n(n+1)/2 + max_leaf_balls·n) + m·n = 4 + (3 + 4) + 2.
+    assert_eq!(p["worst_case_muladds"], 13);
+    assert_eq!(p["factors"][0], serde_json::json!([[1.0, 0.0], [0.0, 1.0]]));
+    assert_eq!(p["ball_table"][2]["centre_z"], serde_json::json!([1.0, 0.0]));
     assert_eq!(p["laws"][0]["K"], serde_json::json!([[-1.0, -2.0]]));
     assert_eq!(p["laws"][0]["theta"], serde_json::json!([[0.0, -1.0]]));
     assert_eq!(p["laws"][1]["theta0"], serde_json::json!([-1.0]));
@@ -431,7 +433,7 @@ fn inspect_json_contains_the_pwa_content() {
         "mode: pwa_feedback (2), sample period 0.05 s",
         "n = 2, m = 1, locations = 1, partitions = 2",
         "tree: 2 nodes, depth 2 (worst case), 2 leaves; 3 certified balls (3 references, at most 2 per leaf)",
-        "worst case per step: 2 hyperplane tests, 2 ball tests, 18 multiply-adds",
+        "worst case per step: 2 hyperplane tests, 2 ball tests, 13 multiply-adds",
         "partition 1: u = K_j x + theta0_j, theta0_j = [-1]",
         "  K_j[0] = [-3, 0]",
         "  theta_j[0] = [-2, 1]",

@@ -7,9 +7,11 @@
 //! # Worst-case work per control step
 //! * Feedforward (Algorithm 2): at κ = 0 one quadratic form per trajectory (`MAX_TRAJECTORIES` of them),
 //!   then `m·n` multiply-adds per step.
-//! * PWA feedback: at most [`MAX_TREE_DEPTH`] hyperplane tests (`n` multiply-adds each), then at most
-//!   [`MAX_LEAF_BALLS`] ball tests (`n² + n` multiply-adds and `n` subtractions each), then `m·n`
-//!   multiply-adds for the law; [`PWA_STEP_MAX_MULADDS`] is the total at capacity.
+//! * PWA feedback: at most [`MAX_TREE_DEPTH`] hyperplane tests (`n` multiply-adds each), then the
+//!   whitening `z = R̂x` (`n(n+1)/2` multiply-adds, repeated only where consecutive listed balls change
+//!   location) and at most [`MAX_LEAF_BALLS`] whitened ball tests (`n` subtractions and `n` multiply-adds
+//!   each, [`crate::pwa`]), then `m·n` multiply-adds for the law; [`PWA_STEP_MAX_MULADDS`] is the total at
+//!   capacity, counting a location change before every ball (a single-location image whitens once).
 
 /// Largest state dimension `n`.
 pub const MAX_N: usize = 12;
@@ -39,9 +41,11 @@ pub const MAX_BALL_REFS: usize = 4096;
 /// Largest number of balls one leaf may list: bounds the envelope test of one control step.
 pub const MAX_LEAF_BALLS: usize = 64;
 
-/// Worst-case multiply-adds of one PWA control step at capacity (see the module docs).
-pub const PWA_STEP_MAX_MULADDS: usize =
-    MAX_TREE_DEPTH * MAX_N + MAX_LEAF_BALLS * (MAX_N * MAX_N + MAX_N) + MAX_M * MAX_N;
+/// Worst-case multiply-adds of one PWA control step at capacity (see the module docs): tree, whitening
+/// before every ball (the worst case of alternating locations), ball tests, law.
+pub const PWA_STEP_MAX_MULADDS: usize = MAX_TREE_DEPTH * MAX_N
+    + MAX_LEAF_BALLS * (MAX_N * (MAX_N + 1) / 2 + MAX_N)
+    + MAX_M * MAX_N;
 
 /// Size in bytes of the fixed image header that precedes the postcard payload.
 pub const HEADER_LEN: usize = 32;
@@ -65,7 +69,8 @@ const FEEDFORWARD_PAYLOAD_LEN: usize = COMMON_PAYLOAD_LEN
 const PWA_PAYLOAD_LEN: usize = COMMON_PAYLOAD_LEN
     + 4 * (MAX_PARTITIONS * (MAX_M * MAX_N + MAX_M)  // gains K_j and offsets θ0_j
         + MAX_TREE_NODES * (MAX_N + 1)              // hyperplanes a, b
-        + MAX_BALLS * (MAX_N + 1))                  // ball centres and radii
+        + MAX_LOCATIONS * MAX_N * MAX_N             // factors R̂_ℓ
+        + MAX_BALLS * (2 * MAX_N + 1))              // ball centres, whitened centres and radii
     + 2 * (2 * MAX_TREE_NODES                       // children (u16)
         + 2 * MAX_LEAVES                            // leaf partition and ball end (u16)
         + MAX_BALL_REFS                             // ball references (u16)

@@ -35,7 +35,9 @@
 //! * per location ℓ: `K_ℓ` and `P_ℓ` as above (`P_ℓ` is the metric of the certified balls; `K_ℓ` is the CAF
 //!   gain the laws were learned around, kept so that `θ_j = K_j − K` can be reported);
 //! * the [`crate::pwa::PwaTables`]: per partition the full gain `K_j = K + θ_j` and offset `θ0_j`, the
-//!   point-location tree, its leaves and the certified balls (layout and rationale in [`crate::pwa`]);
+//!   point-location tree, its leaves, the certified balls (centre, whitened centre, radius) and per location
+//!   the upper-triangular factor `R_ℓ` of `P_ℓ` used by the whitened ball test (layout, rationale and
+//!   rounding analysis in [`crate::pwa`]);
 //! * the fallback law and an optional input box. There are no trajectories (`trajectories = 0` in the
 //!   header) and no terminal behaviour.
 //!
@@ -60,8 +62,9 @@ use crate::pwa::PwaTables;
 
 /// First four bytes of every image ("safe controller image").
 pub const MAGIC: [u8; 4] = *b"SFCI";
-/// Version of the layout described in this module. Decoding rejects every other version.
-pub const FORMAT_VERSION: u16 = 1;
+/// Version of the layout described in this module. Decoding rejects every other version. Version 2 added
+/// the whitened ball test of PWA images (per-location factor `R`, whitened ball centres; [`crate::pwa`]).
+pub const FORMAT_VERSION: u16 = 2;
 
 /// Byte offset of the CRC in the header; the CRC covers the header bytes before it and the payload.
 const CRC_OFFSET: usize = 28;
@@ -286,13 +289,17 @@ pub enum Field {
     BallLocation,
     /// Partition (law) each certified ball is certified for.
     BallPartition,
+    /// Upper-triangular factors `R_ℓ` (`P_ℓ = R_ℓᵀR_ℓ`) of the PWA ball test.
+    Factor,
+    /// Whitened ball centres `c_z = fl32(R̂ c)`.
+    BallCentreZ,
 }
 
 /// Position of a bad value. Its meaning depends on the field: `K`, `P`: (location, row, col); `Centre`:
 /// (trajectory, component, 0); `Delta`: (trajectory, 0, 0); `V`: (trajectory, step, component);
 /// `FallbackK`: (row, col, 0); `LawGain`: (partition, row, col); `LawOffset`: (partition, component, 0);
-/// `NodeNormal`: (node, component, 0); `NodeOffset`: (node, 0, 0); `BallCentre`: (ball, component, 0);
-/// `BallDelta`: (ball, 0, 0); vectors: (component, 0, 0).
+/// `NodeNormal`: (node, component, 0); `NodeOffset`: (node, 0, 0); `BallCentre`, `BallCentreZ`: (ball,
+/// component, 0); `BallDelta`: (ball, 0, 0); `Factor`: (location, row, col); vectors: (component, 0, 0).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Pos(pub u16, pub u16, pub u16);
 
@@ -508,6 +515,22 @@ pub enum ImageError {
         /// The ball.
         ball: u16,
     },
+    /// The factor `R_ℓ` of a PWA ball test has a non-zero entry below its diagonal.
+    FactorNotUpperTriangular {
+        /// Location.
+        location: u16,
+        /// Row.
+        row: u16,
+        /// Column (< row).
+        col: u16,
+    },
+    /// The factor `R_ℓ` of a PWA ball test has a diagonal entry that is not positive.
+    FactorDiagonal {
+        /// Location.
+        location: u16,
+        /// Row (= column) of the entry.
+        row: u16,
+    },
     /// The output buffer of [`encode`] is too small.
     BufferTooSmall {
         /// Bytes needed.
@@ -562,6 +585,8 @@ impl fmt::Display for Field {
             Field::BallDelta => "ball radii",
             Field::BallLocation => "ball locations",
             Field::BallPartition => "ball partitions",
+            Field::Factor => "factor R",
+            Field::BallCentreZ => "whitened ball centres",
         })
     }
 }
@@ -611,7 +636,7 @@ impl fmt::Display for ImageError {
                 write!(f, "{field}: expected {expected} bytes, found {found}")
             }
             NonFinite { field, pos: Pos(a, b, c) } => match field {
-                Field::K | Field::P => {
+                Field::K | Field::P | Field::Factor => {
                     write!(f, "location {a}: {field}[{b},{c}] is not finite")
                 }
                 Field::Centre => write!(f, "trajectory {a}: centre[{b}] is not finite"),
@@ -623,6 +648,7 @@ impl fmt::Display for ImageError {
                 Field::NodeNormal => write!(f, "node {a}: a[{b}] is not finite"),
                 Field::NodeOffset => write!(f, "node {a}: b is not finite"),
                 Field::BallCentre => write!(f, "ball {a}: centre[{b}] is not finite"),
+                Field::BallCentreZ => write!(f, "ball {a}: whitened centre[{b}] is not finite"),
                 Field::BallDelta => write!(f, "ball {a}: delta is not finite"),
                 _ => write!(f, "{field}[{a}] is not finite"),
             },
@@ -690,6 +716,14 @@ impl fmt::Display for ImageError {
                 write!(f, "ball {ball}: partition {value} is out of range")
             }
             NegativeBallRadius { ball } => write!(f, "ball {ball}: delta is negative"),
+            FactorNotUpperTriangular { location, row, col } => write!(
+                f,
+                "location {location}: factor R is not upper triangular (R[{row},{col}] != 0)"
+            ),
+            FactorDiagonal { location, row } => write!(
+                f,
+                "location {location}: factor R has a non-positive diagonal entry R[{row},{row}]"
+            ),
             BufferTooSmall { needed } => write!(f, "output buffer too small: {needed} bytes needed"),
             Encode => f.write_str("payload could not be serialised"),
         }

@@ -39,22 +39,64 @@
 //! that use its law, and listing it in no other leaf. The same holds for f32 rounding of the hyperplane
 //! tests: a misrouted state is either in a ball certified for the law it gets, or out of envelope.
 //!
-//! Balls live in one table (centre, δ, location whose `P_ℓ` is the metric, partition it is certified for);
-//! leaves refer to them through a list of `u16` references (a leaf owns references `end[l−1]..end[l]`), so
-//! a ball cut by a hyperplane is stored once per law. Each ball records its partition.
+//! Balls live in one table (centre, whitened centre, radius, location whose `P_ℓ` is the metric, partition
+//! it is certified for); leaves refer to them through a list of `u16` references (a leaf owns references
+//! `end[l−1]..end[l]`), so a ball cut by a hyperplane is stored once per law. Each ball records its
+//! partition.
+//!
+//! # The whitened ball test
+//! With the upper-triangular Cholesky factor `R_ℓ` of the metric (`P_ℓ = R_ℓᵀR_ℓ`, positive diagonal),
+//! `‖x − c‖_P = ‖R_ℓ x − R_ℓ c‖₂`. The image stores, per location, `R̂_ℓ = fl32(R_ℓ)` (n × n, row-major,
+//! zeros below the diagonal) and, per ball, its centre ĉ = fl32(c) (for reports and re-checks; the
+//! evaluator does not read it), its *whitened centre* `ĉ_z = fl32(R̂ ĉ)` and its stored radius ρ̂. Per step
+//! the evaluator forms `z = fl(R̂_ℓ x̂)` once (row i: `Σ_{j=i}^{n−1} R̂_ij x̂_j` summed left to right from 0,
+//! n(n+1)/2 multiply-adds; recomputed only when consecutive listed balls differ in location, so never for a
+//! single-location image), and tests each listed ball with
+//!
+//! ```text
+//! d_i = fl(z_i − ĉ_z,i),   s = fl(d_0·d_0 + d_1·d_1 + … + d_{n−1}·d_{n−1}),   accept ⇔ s ≤ fl(ρ̂·ρ̂)
+//! ```
+//!
+//! (n subtractions and n multiply-adds per ball, against n² + n multiply-adds for `(x − c)ᵀP(x − c)`).
+//! Plain f32 multiply and add in this fixed order, without fused multiply-add (a non-fused `VMLA` on the
+//! Cortex-M4F gives the same bits), so host and target agree bit for bit. A state whose arithmetic
+//! overflows is rejected: an infinite or NaN `z_i`, `d_i` or `s` makes the comparison false.
+//!
+//! # Rounding of the ball test
+//! What the host must guarantee is: every f32 state x̂ the evaluator accepts in a ball, and every real x with
+//! `fl32(x) = x̂`, lies in the certified ball, `‖x − c‖_P ≤ δ` (δ and c the certificate's f64 radius and
+//! centre, P its f64 metric). With u = 2⁻²⁴, γ_k = k·u/(1 − k·u) (Higham, *Accuracy and Stability of
+//! Numerical Algorithms*, §3.1), η = 2⁻¹⁵⁰ (the absolute error of an underflowing f32 product), R the f64
+//! Cholesky factor of P, `D = |R̂ − R|`, `e_c = ĉ_z − R c` and `w = R(x̂ − c)`, componentwise:
+//!
+//! 1. `|fl(R̂x̂) − R̂x̂| ≤ γ_n|R̂||x̂| + 2nη` (recursive summation of at most n products) and
+//!    `|R̂x̂ − Rx̂| ≤ D|x̂|` (D ≤ u|R| + η when R̂ is R rounded to nearest), so
+//!    `z − ĉ_z = w + f` with `|f| ≤ (γ_n|R̂| + D)|x̂| + |e_c| + 2nη`;
+//! 2. `d = (z − ĉ_z)(1 + θ)`, |θ_i| ≤ u (a subtraction is exact when it underflows), so
+//!    `‖d‖ ≥ (1 − u)‖w + f‖`;
+//! 3. `s ≥ (1 − γ_n)‖d‖² − 2nη` and `fl(ρ̂·ρ̂) ≤ ρ̂²(1 + u) + η`, so acceptance gives
+//!    `‖w + f‖ ≤ S := sqrt((ρ̂²(1 + u) + (2n + 1)η)/(1 − γ_n))/(1 − u)`;
+//! 4. for a real x with `fl32(x) = x̂`, `|x − x̂| ≤ u|x̂| + η`, so `W := ‖w‖ + u‖|R||x̂|‖ + η‖|R|𝟙‖` bounds
+//!    both `‖R(x̂ − c)‖` and `‖R(x − c)‖`, and with `G = γ_n|R̂| + D`,
+//!    `W ≤ S + ‖G|x̂|‖ + u‖|R||x̂|‖ + ‖e_c‖ + 2n^{3/2}η + η‖|R|𝟙‖`;
+//! 5. |x̂| is bounded by acceptance itself, with no assumption: `|x̂_j − c_j| ≤ a_j‖x̂ − c‖_P ≤ a_j' W`,
+//!    `a_j = sqrt((P⁻¹)_jj)` and `a_j' = a_j·sqrt(1 + χ)` (χ below), so `|x̂| ≤ |c| + a'W` componentwise.
+//!    With `α = ‖G a'‖ + u‖|R|a'‖` (< 1) and
+//!    `β = ‖G|c|‖ + u‖|R||c|‖ + ‖e_c‖ + (2n^{3/2} + ‖|R|𝟙‖)η` step 4 is the linear inequality
+//!    `W ≤ S + β + αW`, hence `W ≤ (S + β)/(1 − α)`;
+//! 6. R is the f64 factor: `RᵀR = P + E`, `|E| ≤ γ⁽⁶⁴⁾_{n+1}|Rᵀ||R|` (Higham Thm 10.3), so
+//!    `‖v‖²_P ≤ ‖Rv‖²(1 + χ)` with `χ = γ⁽⁶⁴⁾_{n+1}(‖|R|‖₂‖R⁻¹‖₂)²`.
+//!
+//! Together: an accepted state satisfies `‖x − c‖_P ≤ sqrt(1 + χ)·(S(ρ̂) + β)/(1 − α)`. The host stores the
+//! largest f32 ρ̂ for which this is ≤ δ (`host_compiler::certify::pwa_ball_radius`; the same bound, read
+//! backwards from an image, is `host_compiler::certify::pwa_accept_radius`, used by the verifier). For
+//! unit-scale data the shrink `1 − ρ̂/δ` is of order γ_{n+2}·‖|R||c|‖/δ, a few parts in 10⁷.
 //!
 //! # Cost of one step
 //! At most [`MAX_TREE_DEPTH`] hyperplane tests (n multiply-adds each; the stored depth is the exact worst
-//! case of this image), at most [`MAX_LEAF_BALLS`] ball tests (`(x − c)ᵀP(x − c) ≤ δ²`, n subtractions and
-//! n² + n multiply-adds each; the scan stops at the first ball containing x) and m·n multiply-adds for the
-//! law: see [`crate::capacity::PWA_STEP_MAX_MULADDS`]. Arithmetic is plain f32 in a fixed order, without
-//! fused multiply-add, as in the feedforward mode.
-//!
-//! # Rounding of the ball test
-//! With `ẽ = fl(x − c)` (each component within a relative `u = 2⁻²⁴` of `x − c`), the computed d̂² satisfies
-//! `|d̂² − ẽᵀPẽ| ≤ γ_{2n} |ẽ|ᵀ|P||ẽ|` (γ_k = k·u/(1 − k·u)), and fl(δ·δ) ≤ δ²(1 + u). A state accepted by the
-//! evaluator therefore satisfies `ẽᵀPẽ ≤ δ²(1 + u) + γ_{2n}|ẽ|ᵀ|P||ẽ|`; certification accounts for this
-//! margin as it does for the feedforward balls (DESIGN §5).
+//! case of this image), the whitening (n(n+1)/2 multiply-adds, again at a change of location), at most
+//! [`MAX_LEAF_BALLS`] ball tests (n subtractions and n multiply-adds each; the scan stops at the first ball
+//! containing x) and m·n multiply-adds for the law: see [`crate::capacity::PWA_STEP_MAX_MULADDS`].
 //!
 //! # Validation (run by [`crate::image::decode`] and [`crate::image::Image::new_pwa`])
 //! * counts within capacity: nodes ≤ [`MAX_TREE_NODES`], 1 ≤ leaves ≤ [`MAX_LEAVES`],
@@ -62,7 +104,9 @@
 //! * every field's byte length matches the counts and dimensions; every float finite; no zero normal;
 //! * each leaf's partition in range; leaf ends strictly increasing (every leaf lists ≥ 1 ball) and at most
 //!   [`MAX_LEAF_BALLS`] per leaf; every reference in range;
-//! * balls: `δ ≥ 0`, location and partition in range;
+//! * per location, the factor `R̂_ℓ` upper triangular (every entry below the diagonal exactly 0) with a
+//!   positive diagonal;
+//! * balls: radius `ρ̂ ≥ 0`, location and partition in range;
 //! * tree: every child node in range and after its parent, every child leaf in range, every node reachable
 //!   from the root, every leaf referenced, no node deeper than [`MAX_TREE_DEPTH`] tests, and the stored
 //!   depth equal to the tree's worst case.
@@ -75,7 +119,7 @@ use crate::capacity::{
     MAX_PARTITIONS, MAX_TREE_DEPTH, MAX_TREE_NODES,
 };
 use crate::image::{
-    check_dim, check_finite, check_len, div, f32_at, f32_span, floats, rem, sat16, sat32, u16_le,
+    check_dim, check_finite, check_len, div, f32_at, floats, rem, sat16, sat32, u16_le,
     Dim, Dims, Field, Image, ImageError, Mode, Pos,
 };
 
@@ -147,9 +191,14 @@ pub struct PwaTables<'a> {
     pub leaf_end: &'a [u8],
     /// Ball references (`u16` indices into the ball table).
     pub ball_ref: &'a [u8],
-    /// Ball centres `x̃_i(κ)`: balls × n values.
+    /// Per location ℓ, the upper-triangular factor `R̂_ℓ = fl32(R_ℓ)` of the metric (`P_ℓ = R_ℓᵀR_ℓ`):
+    /// locations × n × n values, zero below the diagonal.
+    pub R: &'a [u8],
+    /// Ball centres `x̃_i(κ)` (not read by the evaluator; for reports and re-checks): balls × n values.
     pub ball_centre: &'a [u8],
-    /// Ball radii `δ_i`, in the metric of the ball's location: one value per ball.
+    /// Whitened ball centres `ĉ_z = fl32(R̂ ĉ)` in the factor of the ball's location: balls × n values.
+    pub ball_centre_z: &'a [u8],
+    /// Stored ball radii ρ̂ of the whitened test (module doc), one value per ball.
     pub ball_delta: &'a [u8],
     /// Location of each ball (one byte): its metric is that location's `P`.
     pub ball_location: &'a [u8],
@@ -172,7 +221,9 @@ impl PwaTables<'static> {
         leaf_partition: &[],
         leaf_end: &[],
         ball_ref: &[],
+        R: &[],
         ball_centre: &[],
+        ball_centre_z: &[],
         ball_delta: &[],
         ball_location: &[],
         ball_partition: &[],
@@ -297,9 +348,43 @@ pub(crate) fn validate_tables(dims: Dims, t: &PwaTables<'_>) -> Result<(), Image
     }
     let n_refs = prev as usize;
 
+    // Factors R̂_ℓ: upper triangular with a positive diagonal.
+    check_len(Field::Factor, t.R, 4 * n_loc * n * n)?;
+    check_finite(Field::Factor, t.R, |i| {
+        Pos(
+            sat16(div(i, n * n)),
+            sat16(div(rem(i, n * n), n)),
+            sat16(rem(i, n)),
+        )
+    })?;
+    for l in 0..n_loc {
+        for r in 0..n {
+            for c in 0..r {
+                if f32_at(t.R, (l * n + r) * n + c) != 0.0 {
+                    return Err(ImageError::FactorNotUpperTriangular {
+                        location: sat16(l),
+                        row: sat16(r),
+                        col: sat16(c),
+                    });
+                }
+            }
+            let d = f32_at(t.R, (l * n + r) * n + r);
+            if d.is_nan() || d <= 0.0 {
+                return Err(ImageError::FactorDiagonal {
+                    location: sat16(l),
+                    row: sat16(r),
+                });
+            }
+        }
+    }
+
     // Balls.
     check_len(Field::BallCentre, t.ball_centre, 4 * nb * n)?;
     check_finite(Field::BallCentre, t.ball_centre, |i| {
+        Pos(sat16(div(i, n)), sat16(rem(i, n)), 0)
+    })?;
+    check_len(Field::BallCentreZ, t.ball_centre_z, 4 * nb * n)?;
+    check_finite(Field::BallCentreZ, t.ball_centre_z, |i| {
         Pos(sat16(div(i, n)), sat16(rem(i, n)), 0)
     })?;
     check_len(Field::BallDelta, t.ball_delta, 4 * nb)?;
@@ -544,7 +629,29 @@ impl<'a> Image<'a> {
         f32_at(self.pwa.ball_centre, ball * self.dims.n + i)
     }
 
-    /// Radius of ball `ball`; 0.0 out of range.
+    /// Component `i` of the whitened centre `ĉ_z = fl32(R̂ ĉ)` of ball `ball`; 0.0 out of range.
+    pub fn ball_centre_z(&self, ball: usize, i: usize) -> f32 {
+        if ball >= self.n_balls() || i >= self.dims.n {
+            return 0.0;
+        }
+        f32_at(self.pwa.ball_centre_z, ball * self.dims.n + i)
+    }
+
+    /// `R̂_ℓ[row, col]`, the factor of location ℓ's metric used by the ball test; 0.0 out of range.
+    pub fn factor(&self, location: usize, row: usize, col: usize) -> f32 {
+        let n = self.dims.n;
+        if self.mode != Mode::PwaFeedback
+            || location >= self.dims.n_locations
+            || row >= n
+            || col >= n
+        {
+            return 0.0;
+        }
+        f32_at(self.pwa.R, (location * n + row) * n + col)
+    }
+
+    /// Stored radius ρ̂ of ball `ball` (the whitened test accepts `‖fl(R̂x̂) − ĉ_z‖² ≤ fl(ρ̂²)`, module
+    /// doc); 0.0 out of range.
     pub fn ball_delta(&self, ball: usize) -> f32 {
         if ball >= self.n_balls() {
             return 0.0;
@@ -579,8 +686,36 @@ impl<'a> Image<'a> {
     }
 
     /// [`Image::locate`] without the argument checks (`x.len() == n`, `1 ≤ n ≤ MAX_N`). Every loop is
-    /// bounded by a capacity; on a validated image the walk ends within `depth` tests.
+    /// bounded by a capacity; on a validated image the walk ends within `depth` tests. Dispatches to
+    /// [`Image::locate_n`] for the image's n, so that the n-length loops are unrolled at compile time (the
+    /// arithmetic, and its order, is the same for every n).
     pub(crate) fn locate_in(&self, x: &[f32], n: usize) -> Region {
+        match n {
+            1 => self.locate_n::<1>(x),
+            2 => self.locate_n::<2>(x),
+            3 => self.locate_n::<3>(x),
+            4 => self.locate_n::<4>(x),
+            5 => self.locate_n::<5>(x),
+            6 => self.locate_n::<6>(x),
+            7 => self.locate_n::<7>(x),
+            8 => self.locate_n::<8>(x),
+            9 => self.locate_n::<9>(x),
+            10 => self.locate_n::<10>(x),
+            11 => self.locate_n::<11>(x),
+            12 => self.locate_n::<12>(x),
+            // Unreachable for a validated image (1 ≤ n ≤ MAX_N); total anyway.
+            _ => Region::OutsideTree,
+        }
+    }
+
+    /// Point location for state dimension `N` (module doc): the tree walk, then the whitened ball test of
+    /// the leaf's balls in listing order. Reads are total (a short table reads as "outside"), which a
+    /// validated image never meets.
+    fn locate_n<const N: usize>(&self, x: &[f32]) -> Region {
+        const { assert!(N <= MAX_N) };
+        let Some(x) = load_x::<N>(x) else {
+            return Region::OutsideTree;
+        };
         let t = &self.pwa;
         let mut code = if t.n_nodes == 0 { LEAF_BASE } else { 0 };
         let mut tests = 0usize;
@@ -595,9 +730,12 @@ impl<'a> Image<'a> {
                     }
                     tests += 1;
                     let i = i as usize;
+                    let Some(a) = load::<N>(t.node_a, i * N) else {
+                        return Region::OutsideTree;
+                    };
                     let mut s = 0.0f32;
-                    for (ai, &xi) in floats(f32_span(t.node_a, i * n, n)).zip(x) {
-                        s += ai * xi;
+                    for k in 0..N {
+                        s += a[k] * x[k];
                     }
                     let side = if s <= f32_at(t.node_b, i) { 0 } else { 1 };
                     code = u16_le(t.node_child, 2 * i + side);
@@ -611,28 +749,38 @@ impl<'a> Image<'a> {
             _ => u16_le(t.leaf_end, l - 1) as usize,
         };
         let end = u16_le(t.leaf_end, l) as usize;
-        // Validated: end − start ≤ MAX_LEAF_BALLS; the `take` makes the bound explicit.
+        // Validated: end − start ≤ MAX_LEAF_BALLS; the truncation makes the bound explicit.
         let refs = t.ball_ref.get(2 * start..2 * end).unwrap_or(&[]);
-        let mut e = [0.0f32; MAX_N];
-        for r in refs.chunks_exact(2).take(MAX_LEAF_BALLS) {
+        let refs = refs.get(..2 * MAX_LEAF_BALLS).unwrap_or(refs);
+        // z = fl(R̂_ℓ x) for the location ℓ of the ball being tested (module doc, "The whitened ball
+        // test"); computed once for a single-location image, else recomputed when the location changes.
+        let single = self.dims.n_locations == 1;
+        let mut z = [0.0f32; N];
+        let mut z_loc = usize::MAX;
+        if single {
+            whiten::<N>(&mut z, t.R, 0, &x);
+            z_loc = 0;
+        }
+        for r in refs.chunks_exact(2) {
             let b = u16::from_le_bytes([r[0], r[1]]);
             let bu = b as usize;
-            let centre = f32_span(t.ball_centre, bu * n, n);
-            for ((ei, &xi), ci) in e.iter_mut().zip(x).zip(floats(centre)) {
-                *ei = xi - ci;
-            }
-            let loc = t.ball_location.get(bu).copied().unwrap_or(0) as usize;
-            let P = f32_span(self.payload.P, loc * n * n, n * n);
-            let mut d2 = 0.0f32;
-            for (row, &ei) in P.chunks_exact(4 * n).zip(&e) {
-                let mut s = 0.0f32;
-                for (pij, &ej) in floats(row).zip(&e) {
-                    s += pij * ej;
+            if !single {
+                let loc = t.ball_location.get(bu).copied().unwrap_or(0) as usize;
+                if loc != z_loc {
+                    whiten::<N>(&mut z, t.R, loc, &x);
+                    z_loc = loc;
                 }
-                d2 += ei * s;
             }
-            let delta = f32_at(t.ball_delta, bu);
-            if d2 <= delta * delta {
+            let Some(cz) = load::<N>(t.ball_centre_z, bu * N) else {
+                continue;
+            };
+            let mut d2 = 0.0f32;
+            for i in 0..N {
+                let d = z[i] - cz[i];
+                d2 += d * d;
+            }
+            let rho = f32_at(t.ball_delta, bu);
+            if d2 <= rho * rho {
                 return Region::Inside {
                     leaf,
                     partition: u16_le(t.ball_partition, bu),
@@ -645,4 +793,39 @@ impl<'a> Image<'a> {
             partition: leaf_partition,
         }
     }
+}
+
+/// `z_i = fl(Σ_{j=i}^{N−1} R̂_ij x_j)` for the factor of location `loc`, summed left to right from 0 (module
+/// doc); a short table reads as zeros (never for a validated image).
+#[inline(always)]
+fn whiten<const N: usize>(z: &mut [f32; N], R: &[u8], loc: usize, x: &[f32; N]) {
+    for (i, zi) in z.iter_mut().enumerate() {
+        let row = load::<N>(R, (loc * N + i) * N).unwrap_or([0.0; N]);
+        let mut s = 0.0f32;
+        for j in i..N {
+            s += row[j] * x[j];
+        }
+        *zi = s;
+    }
+}
+
+/// The first `N` values of `x` as an array; `None` if `x` is shorter.
+#[inline(always)]
+fn load_x<const N: usize>(x: &[f32]) -> Option<[f32; N]> {
+    let x = x.get(..N)?;
+    let mut out = [0.0f32; N];
+    out.copy_from_slice(x);
+    Some(out)
+}
+
+/// `N` little-endian f32 values of `bytes` starting at value index `start`; `None` if out of range.
+#[inline(always)]
+fn load<const N: usize>(bytes: &[u8], start: usize) -> Option<[f32; N]> {
+    let s = start.checked_mul(4)?;
+    let b = bytes.get(s..s.checked_add(4 * N)?)?;
+    let mut out = [0.0f32; N];
+    for (o, c) in out.iter_mut().zip(b.chunks_exact(4)) {
+        *o = f32::from_le_bytes([c[0], c[1], c[2], c[3]]);
+    }
+    Some(out)
 }

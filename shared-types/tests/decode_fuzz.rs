@@ -56,6 +56,8 @@ fn kind(e: &ImageError) -> &'static str {
         BallLocationOutOfRange { .. } => "BallLocationOutOfRange",
         BallPartitionOutOfRange { .. } => "BallPartitionOutOfRange",
         NegativeBallRadius { .. } => "NegativeBallRadius",
+        FactorNotUpperTriangular { .. } => "FactorNotUpperTriangular",
+        FactorDiagonal { .. } => "FactorDiagonal",
         BufferTooSmall { .. } => "BufferTooSmall",
         Encode => "Encode",
     }

@@ -243,9 +243,12 @@ fn rejects_short_input_and_bad_magic_version_reserved() {
     let mut b = bytes.clone();
     b[0] = b'X';
     assert!(matches!(decode(&b), Err(ImageError::BadMagic { found }) if found[0] == b'X'));
-    let mut b = bytes.clone();
-    b[4] = 2;
-    assert_eq!(decode(&b), Err(ImageError::UnsupportedVersion { found: 2 }));
+    // Every other version is refused, the previous one (before the whitened PWA ball test) included.
+    for v in [FORMAT_VERSION - 1, FORMAT_VERSION + 1] {
+        let mut b = bytes.clone();
+        b[4..6].copy_from_slice(&v.to_le_bytes());
+        assert_eq!(decode(&b), Err(ImageError::UnsupportedVersion { found: v }));
+    }
     let mut b = bytes.clone();
     b[7] = 1;
     assert_eq!(decode(&b), Err(ImageError::ReservedNotZero));

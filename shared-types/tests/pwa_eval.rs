@@ -254,6 +254,7 @@ fn the_deepest_path_is_walked_to_the_end() {
     let mut far = two_partitions().ball_centre;
     far[0] = -(len as f32) + 1.5; // ball 0 at x₀ = −22.5
     c.ball_centre = far;
+    c.whiten();
     with(&c, |ctl| {
         assert_eq!(ctl.image().tree_depth(), MAX_TREE_DEPTH);
         // x₀ = −22.5 goes left at nodes 0..=22 and right at the last node: leaf 0, in ball 0.
@@ -274,7 +275,8 @@ struct Reference {
     region: Region,
     /// Smallest relative margin |aᵀx − b| / (Σ|aᵢxᵢ| + |b|) over every hyperplane of every path.
     plane_margin: f64,
-    /// Smallest relative margin |d² − δ²| / (|e|ᵀ|P||e| + δ²) over the balls of the leaf reached.
+    /// Smallest relative margin |d² − ρ²| / (Σ_i (|e_i| + (|R̂||x|)_i + |ĉ_z,i|)² + ρ²) over the balls of the
+    /// leaf reached, with e = R̂x − ĉ_z.
     ball_margin: f64,
 }
 
@@ -313,18 +315,21 @@ fn reference(c: &PwaContent, paths: &[(Vec<(usize, bool)>, Child)], x: &[f64]) -
             let partition = c.leaf_partition[l as usize];
             let mut found = None;
             for &b in &c.leaf_balls[l as usize] {
+                // The whitened test in f64: ‖R̂x − ĉ_z‖² ≤ ρ̂².
                 let bu = b as usize;
                 let loc = c.ball_location[bu] as usize;
-                let P = &c.P[loc * n * n..(loc + 1) * n * n];
-                let e: Vec<f64> = (0..n)
-                    .map(|i| x[i] - c.ball_centre[bu * n + i] as f64)
-                    .collect();
+                let R = &c.R[loc * n * n..(loc + 1) * n * n];
                 let (mut d2, mut abs) = (0.0, 0.0);
                 for i in 0..n {
-                    for j in 0..n {
-                        d2 += e[i] * P[i * n + j] as f64 * e[j];
-                        abs += (e[i] * P[i * n + j] as f64 * e[j]).abs();
+                    let (mut zi, mut zabs) = (0.0, 0.0);
+                    for j in i..n {
+                        zi += R[i * n + j] as f64 * x[j];
+                        zabs += (R[i * n + j] as f64 * x[j]).abs();
                     }
+                    let cz = c.ball_centre_z[bu * n + i] as f64;
+                    let e = zi - cz;
+                    d2 += e * e;
+                    abs += (e.abs() + zabs + cz.abs()).powi(2);
                 }
                 let r2 = (c.ball_delta[bu] as f64).powi(2);
                 ball_margin = ball_margin.min((d2 - r2).abs() / (abs + r2 + 1e-300));
@@ -466,15 +471,19 @@ fn f32_law_matches_f64_reference_within_rounding_bound() {
 
 #[test]
 fn ball_test_acceptance_respects_the_documented_rounding_bound() {
-    // One leaf, one ball; states placed at relative distance 1 ± 1e-6 from the boundary.
+    // One leaf, one ball; states placed at relative distance 1 ± 1e-6 from the boundary of the whitened
+    // ball ‖R̂x − ĉ_z‖ ≤ ρ̂. An accepted state must satisfy steps 1–3 of `shared_types::pwa` ("Rounding of
+    // the ball test") with the stored data (D = 0, e_c = 0): ‖R̂x̂ − ĉ_z‖ ≤ S(ρ̂) + ‖γ_n|R̂||x̂|‖ + 2n^{3/2}η.
     let mut rng = ChaCha8Rng::seed_from_u64(4242);
     let u = f64::from(f32::EPSILON) / 2.0;
+    let eta = 2f64.powi(-150);
     let (mut accepted, mut rejected) = (0, 0);
     for _ in 0..200 {
         let n = rng.random_range(1..=MAX_N);
         let P = random_spd(&mut rng, n);
-        let centre: Vec<f32> = (0..n).map(|_| rng.random_range(-5.0f32..5.0)).collect();
-        let delta: f32 = rng.random_range(0.01..3.0);
+        let scale: f32 = [1.0, 1e3, 1e-3][rng.random_range(0..3)];
+        let centre: Vec<f32> = (0..n).map(|_| rng.random_range(-5.0f32..5.0) * scale).collect();
+        let delta: f32 = rng.random_range(0.01..3.0) * scale;
         let c = PwaContent {
             n,
             m: 1,
@@ -491,7 +500,9 @@ fn ball_test_acceptance_respects_the_documented_rounding_bound() {
             node_child: vec![],
             leaf_partition: vec![0],
             leaf_balls: vec![vec![0]],
+            R: vec![],
             ball_centre: centre.clone(),
+            ball_centre_z: vec![],
             ball_delta: vec![delta],
             ball_location: vec![0],
             ball_partition: vec![0],
@@ -499,38 +510,40 @@ fn ball_test_acceptance_respects_the_documented_rounding_bound() {
             input_box: None,
             n_trajectories: 0,
             counts: None,
-        };
+        }
+        .whitened();
         let bytes = c.to_bytes().unwrap();
         let img = decode(&bytes).unwrap();
-        let Pf: Vec<f64> = P.iter().map(|&v| v as f64).collect();
+        let R: Vec<f64> = c.R.iter().map(|&v| v as f64).collect();
+        let cz: Vec<f64> = c.ball_centre_z.iter().map(|&v| v as f64).collect();
+        // A direction v, scaled so that ‖R̂v‖ = ρ̂(1 ± 1e-6).
+        let gn = n as f64 * u / (1.0 - n as f64 * u);
+        let rho = delta as f64;
+        let S = ((rho * rho * (1.0 + u) + (2 * n + 1) as f64 * eta) / (1.0 - gn)).sqrt() / (1.0 - u);
         for _ in 0..50 {
             let dir: Vec<f64> = (0..n).map(|_| rng.random_range(-1.0..1.0)).collect();
             let q: f64 = (0..n)
-                .flat_map(|i| (0..n).map(move |j| (i, j)))
-                .map(|(i, j)| dir[i] * Pf[i * n + j] * dir[j])
-                .sum();
-            let scale = delta as f64 * (1.0 + rng.random_range(-1e-6..1e-6)) / q.sqrt();
+                .map(|i| (i..n).map(|j| R[i * n + j] * dir[j]).sum::<f64>().powi(2))
+                .sum::<f64>()
+                .sqrt();
+            let t = rho * (1.0 + rng.random_range(-1e-6..1e-6)) / q;
             let x: Vec<f32> = (0..n)
-                .map(|i| (centre[i] as f64 + scale * dir[i]) as f32)
+                .map(|i| (centre[i] as f64 + t * dir[i]) as f32)
                 .collect();
             if matches!(img.locate(&x), Some(Region::Inside { .. })) {
                 accepted += 1;
-                // ẽ = fl(x − c), exactly as the evaluator forms it.
-                let e: Vec<f64> = (0..n).map(|i| (x[i] - centre[i]) as f64).collect();
-                let (mut q, mut abs) = (0.0, 0.0);
+                let (mut w2, mut g2) = (0.0, 0.0);
                 for i in 0..n {
-                    for j in 0..n {
-                        q += e[i] * Pf[i * n + j] * e[j];
-                        abs += (e[i] * Pf[i * n + j] * e[j]).abs();
-                    }
+                    let zi: f64 = (i..n).map(|j| R[i * n + j] * x[j] as f64).sum();
+                    let za: f64 = (i..n).map(|j| (R[i * n + j] * x[j] as f64).abs()).sum();
+                    w2 += (zi - cz[i]).powi(2);
+                    g2 += (gn * za).powi(2);
                 }
-                let k = (2 * n) as f64;
-                let gamma = k * u / (1.0 - k * u);
-                let d2 = (delta as f64).powi(2);
+                let bound = S + g2.sqrt() + 2.0 * (n as f64).powf(1.5) * eta;
                 assert!(
-                    q <= d2 * (1.0 + u) + gamma * abs,
-                    "accepted with ẽᵀPẽ = {q} > bound {}",
-                    d2 * (1.0 + u) + gamma * abs
+                    w2.sqrt() <= bound,
+                    "accepted with ‖R̂x̂ − ĉ_z‖ = {} > bound {bound}",
+                    w2.sqrt()
                 );
             } else {
                 rejected += 1;

@@ -161,7 +161,9 @@ fn largest_image_fits_max_image_len() {
         node_child,
         leaf_partition,
         leaf_balls,
+        R: vec![],
         ball_centre: vec![0.25; nb * n],
+        ball_centre_z: vec![],
         ball_delta: vec![1.0; nb],
         ball_location: (0..nb).map(|b| (b % nl) as u8).collect(),
         ball_partition: (0..nb).map(|b| (b % np) as u16).collect(),
@@ -173,7 +175,8 @@ fn largest_image_fits_max_image_len() {
         input_box: Some((vec![-1.0; m], vec![1.0; m])),
         n_trajectories: 0,
         counts: None,
-    };
+    }
+    .whitened();
     let bytes = c.to_bytes().unwrap();
     assert!(
         bytes.len() <= MAX_IMAGE_LEN,
@@ -491,6 +494,24 @@ fn rejects_bad_balls() {
         }
     );
     let mut c = two_partitions();
+    c.ball_centre_z[5] = f32::NAN;
+    assert_eq!(
+        c.decode_err(),
+        ImageError::NonFinite {
+            field: Field::BallCentreZ,
+            pos: Pos(2, 1, 0)
+        }
+    );
+    let mut c = two_partitions();
+    c.ball_centre_z.pop();
+    assert!(matches!(
+        c.decode_err(),
+        ImageError::FieldLength {
+            field: Field::BallCentreZ,
+            ..
+        }
+    ));
+    let mut c = two_partitions();
     c.ball_location[1] = 1;
     assert_eq!(
         c.decode_err(),
@@ -609,6 +630,58 @@ fn rejects_bad_period_and_bad_P_in_pwa_mode_too() {
     let mut c = two_partitions();
     c.input_box = Some((vec![1.0], vec![0.0]));
     assert_eq!(c.decode_err(), ImageError::EmptyInputBox { input: 0 });
+}
+
+#[test]
+fn rejects_a_factor_that_is_not_upper_triangular_with_positive_diagonal() {
+    let mut c = two_partitions();
+    c.R[2] = 0.5; // R[1,0]
+    let e = c.decode_err();
+    assert_eq!(
+        e,
+        ImageError::FactorNotUpperTriangular {
+            location: 0,
+            row: 1,
+            col: 0
+        }
+    );
+    assert_eq!(
+        e.to_string(),
+        "location 0: factor R is not upper triangular (R[1,0] != 0)"
+    );
+    // Above the diagonal anything finite is allowed.
+    let mut c = two_partitions();
+    c.R[1] = -3.0;
+    assert!(c.to_bytes().is_ok());
+    for bad in [0.0, -1.0, -0.0] {
+        let mut c = two_partitions();
+        c.R[3] = bad;
+        let e = c.decode_err();
+        assert_eq!(e, ImageError::FactorDiagonal { location: 0, row: 1 });
+        assert_eq!(
+            e.to_string(),
+            "location 0: factor R has a non-positive diagonal entry R[1,1]"
+        );
+    }
+    let mut c = two_partitions();
+    c.R[1] = f32::INFINITY;
+    assert_eq!(
+        c.decode_err(),
+        ImageError::NonFinite {
+            field: Field::Factor,
+            pos: Pos(0, 0, 1)
+        }
+    );
+    let mut c = two_partitions();
+    c.R.push(0.0);
+    assert!(matches!(
+        c.decode_err(),
+        ImageError::FieldLength {
+            field: Field::Factor,
+            expected: 16,
+            found: 20
+        }
+    ));
 }
 
 #[test]

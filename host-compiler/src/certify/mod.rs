@@ -23,6 +23,14 @@
 //!    the tube. ε̄ is the largest 2-norm of that bound. r_crit (3.83–3.87) must stay below the radius.
 //! 4. **Ball selection in f32.** The firmware accepts x when fl32((x̂−c)ᵀP̂(x̂−c)) ≤ fl32(δ̂²); the stored δ̂
 //!    is shrunk so that every accepted x lies in the certified ball (bound derived in [`selection_radius`]).
+//! 5. **PWA balls in f32.** The PWA evaluator's whitened ball test (`shared_types::pwa`) gets its own
+//!    per-ball stored radius, [`pwa_ball_radius`] (in [`pwa_ball`]).
+
+pub mod pwa_ball;
+
+pub use pwa_ball::{
+    cholesky_upper, metric_factor_f32, pwa_accept_radius, pwa_ball_radius, whitened_centre,
+};
 
 use crate::geometry::{Metric, Region};
 use crate::linalg::{mat_vec, p_norm, sym_eigenvalues, PdRoots};

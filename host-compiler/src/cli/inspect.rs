@@ -4,8 +4,9 @@
 //!
 //! For a PWA-feedback image (Ch. 6) the content is the laws `u = K_j x + θ0_j` (with `θ_j = K_j − K` when
 //! the image has one location), the point-location tree (depth, nodes with their hyperplanes and
-//! children), the leaves (partition and certified balls), the ball table, and the worst-case work of one
-//! control step for this image.
+//! children), the leaves (partition and certified balls), the ball table (centre, whitened centre, stored
+//! radius), the factors R̂ of the whitened ball test, and the worst-case work of one control step for this
+//! image.
 #![allow(non_snake_case)]
 
 use std::fmt::Write as _;
@@ -221,6 +222,8 @@ struct LeafJson {
 struct BallJson {
     ball: usize,
     centre: Vec<f32>,
+    /// Whitened centre `fl32(R̂ ĉ)` of the evaluator's ball test.
+    centre_z: Vec<f32>,
     delta: f32,
     location: usize,
     partition: usize,
@@ -234,12 +237,34 @@ struct PwaJson {
     balls: usize,
     ball_refs: usize,
     max_leaf_balls: usize,
-    /// Worst-case multiply-adds of one step for this image: depth·n + max_leaf_balls·(n² + n) + m·n.
+    /// Worst-case multiply-adds of one step for this image: depth·n + the largest over leaves of
+    /// (whitenings·n(n+1)/2 + balls·n), whitenings = 1 + location changes along the leaf's list, + m·n.
     worst_case_muladds: usize,
+    /// Per location, the upper-triangular factor R̂ of `P` used by the ball test.
+    factors: Vec<Vec<Vec<f32>>>,
     laws: Vec<LawJson>,
     tree: Vec<NodeJson>,
     leaf_table: Vec<LeafJson>,
     ball_table: Vec<BallJson>,
+}
+
+/// The largest envelope-test work of one leaf, in multiply-adds: the whitening `z = R̂x` (n(n+1)/2, once
+/// per run of balls of one location) and n per ball (`shared_types::pwa`, "Cost of one step").
+fn leaf_muladds_max(img: &Image<'_>) -> usize {
+    let n = img.n();
+    (0..img.n_leaves())
+        .map(|l| {
+            let balls: Vec<usize> = (0..img.leaf_refs(l).1)
+                .filter_map(|k| img.leaf_ball(l, k))
+                .collect();
+            let whitenings = 1 + balls
+                .windows(2)
+                .filter(|w| img.ball_location(w[0]) != img.ball_location(w[1]))
+                .count();
+            whitenings * n * (n + 1) / 2 + balls.len() * n
+        })
+        .max()
+        .unwrap_or(0)
 }
 
 impl PwaJson {
@@ -256,7 +281,10 @@ impl PwaJson {
             balls: img.n_balls(),
             ball_refs: img.n_ball_refs(),
             max_leaf_balls,
-            worst_case_muladds: img.tree_depth() * n + max_leaf_balls * (n * n + n) + m * n,
+            worst_case_muladds: img.tree_depth() * n + leaf_muladds_max(img) + m * n,
+            factors: (0..img.n_locations())
+                .map(|l| matrix(n, n, |r, c| img.factor(l, r, c)))
+                .collect(),
             laws: (0..img.n_partitions())
                 .map(|j| LawJson {
                     partition: j,
@@ -300,6 +328,7 @@ impl PwaJson {
                 .map(|b| BallJson {
                     ball: b,
                     centre: (0..n).map(|i| img.ball_centre(b, i)).collect(),
+                    centre_z: (0..n).map(|i| img.ball_centre_z(b, i)).collect(),
                     delta: img.ball_delta(b),
                     location: img.ball_location(b),
                     partition: img.ball_partition(b),

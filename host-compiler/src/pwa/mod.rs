@@ -53,9 +53,10 @@
 //!   explains why): 332 data points, 51 laws. A held reference ([`crate::trajectory::hold`], spec key
 //!   `reference_hold`) makes the data piecewise constant, which θ_j = 0 laws fit exactly (§6.2's
 //!   piecewise-constant case): at 0.01 s with 20-sample blocks, 86 laws for 1 964 points.
-//! * The f32 ball test is assumed to accept only states within δ_i when ρ_i is the feedforward
-//!   certificate's stored radius (its selection shrink uses γ_{n+4}, larger than the γ_{2n} of the PWA test
-//!   for n ≤ 4).
+//! * The f32 ball test accepts only states within δ_i: each ball's stored radius ρ_i is its own
+//!   [`crate::certify::pwa_ball_radius`] for (x̃_i(κ), δ_i), derived from the evaluator's whitened test
+//!   (`shared_types::pwa`, "Rounding of the ball test"); that the states within (1 − η)ρ_i are accepted is
+//!   the relative margin η, far above the test's rounding for unit-scale data, not a proved bound.
 
 pub mod learn;
 pub mod partition;
@@ -157,6 +158,10 @@ pub enum PwaError {
     MetricNotPd,
     #[error("no critical radius for A + BK: {0}")]
     RCrit(String),
+    #[error(
+        "ball of trajectory {traj} at step {kappa}: the f32 ball test certifies no radius within δ = {delta:e}"
+    )]
+    BallTest { traj: usize, kappa: usize, delta: f64 },
     #[error("the tree needs more than the image capacities allow: {0}")]
     Capacity(String),
     #[error(transparent)]
@@ -176,7 +181,8 @@ pub struct DataPoint {
     pub u: Vec<f64>,
     /// The certified radius δ_i (accepted states lie within it).
     pub delta: f64,
-    /// The stored radius ρ_i (f32, rounded down), the image's ball.
+    /// The stored radius ρ_i of the image's whitened ball test for this ball
+    /// ([`crate::certify::pwa_ball_radius`]: accepted states lie within δ_i).
     pub rho: f64,
     /// dist_P(x̃_i(κ), Unsafe) (∞ without Unsafe).
     pub unsafe_dist: f64,
@@ -277,7 +283,13 @@ impl PwaContext {
                     v: t.nominal.v[k].clone(),
                     u: t.nominal.u[k].clone(),
                     delta: c.delta,
-                    rho: c.delta_stored as f64,
+                    rho: crate::certify::pwa_ball_radius(syn.P.as_ref(), x, c.delta).ok_or(
+                        PwaError::BallTest {
+                            traj: i,
+                            kappa: k,
+                            delta: c.delta,
+                        },
+                    )? as f64,
                 });
             }
         }

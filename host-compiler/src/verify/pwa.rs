@@ -11,15 +11,18 @@
 //! # The certificate, recomputed (nothing from the learner is trusted)
 //! With P the image's metric, K_j, θ0_j the stored law of partition j and (A, B, g) the spec's sampled plant:
 //! * **(6.6)** for every partition: σ_j = λ_min(P − Ã_jᵀPÃ_j) > 0 with Ã_j = A + B K_j.
+//! * **The f32 ball test**: the states the evaluator accepts in ball (c, ρ) lie within
+//!   r = [`crate::certify::pwa_accept_radius`] of c, recomputed from the stored factor R̂, whitened centre and
+//!   ρ (slightly above ρ); r, not ρ, is the radius of the states a law is applied to below.
 //! * **Containment across boundaries** (the hypothesis of Theorem 6.6, what Algorithm 5 repairs): every
 //!   stored ball is sent down the tree with the conservative ball–hyperplane test of §6.3
-//!   (`aᵀc − b ≤ ‖P^{-1/2}a‖ρ` goes left, `≥ −‖P^{-1/2}a‖ρ` goes right); every leaf it reaches must list a ball
+//!   (`aᵀc − b ≤ ‖P^{-1/2}a‖r` goes left, `≥ −‖P^{-1/2}a‖r` goes right); every leaf it reaches must list a ball
 //!   with the same centre and radius, and no branch may reach "outside".
 //! * **(6.7) and (6.5)** for every (leaf, ball) pair (c, ρ, law j): the input u* that maps c onto the centre
-//!   c_b of another stored ball in one step (least squares, residual r = Ac + g + Bu* − c_b) is the nominal
+//!   c_b of another stored ball in one step (least squares, residual res = Ac + g + Bu* − c_b) is the nominal
 //!   input; the law's deviation from it, ε = ‖K_j c + θ0_j − u*‖ plus the f32 rounding bound, is the bounded
 //!   disturbance of Theorem 3.21. Then r̃_crit(Ã_j, ε) < ρ_b (3.83)–(3.87) and
-//!   ‖Ã_j‖_P ρ + ‖P^{1/2}B‖ε + ‖r‖_P ≤ ρ_b (one step into ball b), choosing the ball b of smallest margin need;
+//!   ‖Ã_j‖_P r + ‖P^{1/2}B‖ε + ‖res‖_P ≤ ρ_b (one step into ball b), choosing the ball b of smallest margin need;
 //!   or the whole image of the ball lies in Goal.
 //! * **Input** over every listed ball, and **Unsafe between samples** for continuous plants (the bound of
 //!   [`crate::certify`] item 2 with the law's gain).
@@ -87,6 +90,19 @@ pub fn recheck(
         |b: usize| -> Vec<f64> { (0..n).map(|i| image.ball_centre(b, i) as f64).collect() };
     let rho = |b: usize| image.ball_delta(b) as f64;
     let centres: Vec<Vec<f64>> = (0..nb).map(centre).collect();
+    // The radius within which every state the f32 ball test accepts lies (about the stored centre, in the
+    // image's metric), recomputed from the stored factor, whitened centre and radius: the states the law
+    // is applied to. A ball whose data admit no bound makes every check of it fail (∞).
+    let r_acc: Vec<f64> = (0..nb)
+        .map(|b| {
+            let l = image.ball_location(b);
+            let Pl: Vec<f64> = (0..n * n).map(|i| image.P(l, i / n, i % n) as f64).collect();
+            let Pl = crate::linalg::from_row_major(n, n, &Pl);
+            let Rh: Vec<f64> = (0..n * n).map(|i| image.factor(l, i / n, i % n) as f64).collect();
+            let cz: Vec<f64> = (0..n).map(|i| image.ball_centre_z(b, i) as f64).collect();
+            crate::certify::pwa_accept_radius(Pl.as_ref(), &Rh, &centres[b], &cz, image.ball_delta(b))
+        })
+        .collect();
     let axis: Vec<f64> = (0..n).map(|j| roots.inv[(j, j)].max(0.0).sqrt()).collect();
     let normB = roots.norm_into(judge.B);
     // B⁺ for the nominal input between two centres.
@@ -154,7 +170,7 @@ pub fn recheck(
         .map(|&(b, j)| {
             let L = &laws[j];
             let c = &centres[b];
-            let r = rho(b);
+            let r = r_acc[b];
             let X: Vec<f64> = c.iter().zip(&axis).map(|(x, a)| x.abs() + r * a).collect();
             let round = evaluator_error_bound(L.K.as_ref(), &L.off, &X);
             let eps_round = round.iter().map(|e| e * e).sum::<f64>().sqrt();
@@ -258,7 +274,7 @@ pub fn recheck(
     let mut depth = 0;
     for b in 0..nb {
         let c = &centres[b];
-        let r = rho(b);
+        let r = r_acc[b];
         let mut stack = vec![(
             if image.n_nodes() == 0 {
                 Child::Leaf(0)

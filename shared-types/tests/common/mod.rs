@@ -314,7 +314,11 @@ pub struct PwaContent {
     pub node_child: Vec<u16>,
     pub leaf_partition: Vec<u16>,
     pub leaf_balls: Vec<Vec<u16>>,
+    /// Per location the upper-triangular factor of `P` (see [`PwaContent::whiten`]).
+    pub R: Vec<f32>,
     pub ball_centre: Vec<f32>,
+    /// Whitened centres `fl32(R̂ ĉ)` (see [`PwaContent::whiten`]).
+    pub ball_centre_z: Vec<f32>,
     pub ball_delta: Vec<f32>,
     pub ball_location: Vec<u8>,
     pub ball_partition: Vec<u16>,
@@ -342,7 +346,9 @@ pub struct OwnedPwa {
     pub leaf_partition: Vec<u8>,
     pub leaf_end: Vec<u8>,
     pub ball_ref: Vec<u8>,
+    pub R: Vec<u8>,
     pub ball_centre: Vec<u8>,
+    pub ball_centre_z: Vec<u8>,
     pub ball_delta: Vec<u8>,
     pub ball_location: Vec<u8>,
     pub ball_partition: Vec<u8>,
@@ -371,7 +377,9 @@ impl OwnedPwa {
                 leaf_partition: &self.leaf_partition,
                 leaf_end: &self.leaf_end,
                 ball_ref: &self.ball_ref,
+                R: &self.R,
                 ball_centre: &self.ball_centre,
+                ball_centre_z: &self.ball_centre_z,
                 ball_delta: &self.ball_delta,
                 ball_location: &self.ball_location,
                 ball_partition: &self.ball_partition,
@@ -412,7 +420,63 @@ pub fn tree_depth(node_child: &[u16]) -> u8 {
     d.into_iter().max().unwrap_or(0).min(255) as u8
 }
 
+/// The upper Cholesky factor of the f32 metric `P` (n × n), computed in f64 and rounded to f32, as the
+/// host emits it; `None` if `P` is not positive definite in f64.
+pub fn factor_of(P: &[f32], n: usize) -> Option<Vec<f32>> {
+    let mut R = vec![0.0f64; n * n];
+    for i in 0..n {
+        let mut d = P[i * n + i] as f64;
+        for k in 0..i {
+            d -= R[k * n + i] * R[k * n + i];
+        }
+        if d.is_nan() || d <= 0.0 {
+            return None;
+        }
+        R[i * n + i] = d.sqrt();
+        for j in (i + 1)..n {
+            let mut s = P[i * n + j] as f64;
+            for k in 0..i {
+                s -= R[k * n + i] * R[k * n + j];
+            }
+            R[i * n + j] = s / R[i * n + i];
+        }
+    }
+    Some(R.iter().map(|&r| r as f32).collect())
+}
+
+/// `fl32(R̂ c)` for an upper-triangular n × n `R̂`, summed in f64.
+pub fn whiten_centre(R: &[f32], c: &[f32]) -> Vec<f32> {
+    let n = c.len();
+    (0..n)
+        .map(|i| (i..n).map(|j| R[i * n + j] as f64 * c[j] as f64).sum::<f64>() as f32)
+        .collect()
+}
+
 impl PwaContent {
+    /// [`PwaContent::whiten`], by value.
+    pub fn whitened(mut self) -> Self {
+        self.whiten();
+        self
+    }
+
+    /// Recomputes `R` from `P` (every location) and the whitened centres from the centres, as the host
+    /// emitter does. Panics if a `P` is not positive definite (test content only).
+    pub fn whiten(&mut self) {
+        let n = self.n;
+        self.R = (0..self.nl)
+            .flat_map(|l| factor_of(&self.P[l * n * n..(l + 1) * n * n], n).expect("P is PD"))
+            .collect();
+        self.ball_centre_z = (0..self.ball_location.len())
+            .flat_map(|b| {
+                let l = self.ball_location[b] as usize;
+                whiten_centre(
+                    &self.R[l * n * n..(l + 1) * n * n],
+                    &self.ball_centre[b * n..(b + 1) * n],
+                )
+            })
+            .collect();
+    }
+
     pub fn dims(&self) -> Dims {
         Dims {
             n: self.n,
@@ -441,7 +505,9 @@ impl PwaContent {
             leaf_partition: le16(&self.leaf_partition),
             leaf_end: le16(&ends),
             ball_ref: le16(&refs),
+            R: le(&self.R),
             ball_centre: le(&self.ball_centre),
+            ball_centre_z: le(&self.ball_centre_z),
             ball_delta: le(&self.ball_delta),
             ball_location: self.ball_location.clone(),
             ball_partition: le16(&self.ball_partition),
@@ -550,9 +616,16 @@ impl PwaContent {
                         .collect()
                 })
                 .collect(),
+            R: (0..nl * n * n)
+                .map(|i| img.factor(i / (n * n), (i / n) % n, i % n))
+                .collect(),
             ball_centre: (0..img.n_balls())
                 .flat_map(|b| (0..n).map(move |i| (b, i)))
                 .map(|(b, i)| img.ball_centre(b, i))
+                .collect(),
+            ball_centre_z: (0..img.n_balls())
+                .flat_map(|b| (0..n).map(move |i| (b, i)))
+                .map(|(b, i)| img.ball_centre_z(b, i))
                 .collect(),
             ball_delta: (0..img.n_balls()).map(|b| img.ball_delta(b)).collect(),
             ball_location: (0..img.n_balls())
@@ -817,7 +890,9 @@ pub fn random_pwa(rng: &mut ChaCha8Rng, s: PwaShape) -> PwaContent {
         node_child,
         leaf_partition,
         leaf_balls,
+        R: vec![],
         ball_centre,
+        ball_centre_z: vec![],
         ball_delta,
         ball_location,
         ball_partition,
@@ -826,6 +901,7 @@ pub fn random_pwa(rng: &mut ChaCha8Rng, s: PwaShape) -> PwaContent {
         n_trajectories: 0,
         counts: None,
     }
+    .whitened()
 }
 
 pub const L0: u16 = LEAF_BASE;
@@ -854,7 +930,9 @@ pub fn two_partitions() -> PwaContent {
         node_child: vec![1, L1, L0, OUTSIDE],
         leaf_partition: vec![0, 1],
         leaf_balls: vec![vec![0, 1], vec![2]],
+        R: vec![1.0, 0.0, 0.0, 1.0],
         ball_centre: vec![-1.0, 0.0, -0.5, 1.0, 1.0, 0.0],
+        ball_centre_z: vec![-1.0, 0.0, -0.5, 1.0, 1.0, 0.0],
         ball_delta: vec![1.0, 0.75, 1.5],
         ball_location: vec![0, 0, 0],
         ball_partition: vec![0, 0, 1],
