@@ -80,7 +80,11 @@ fn main() {
         p.synthesis.reference_hold = hold;
         let s = synthesize(&p, &opts).expect("the 0.01 s cover is synthesized");
         let ctx = PwaContext::new(&p, &s, PwaSettings::default()).expect("PWA context");
-        let rho = ctx.points.iter().map(|q| q.rho).fold(f64::INFINITY, f64::min);
+        let rho = ctx
+            .points
+            .iter()
+            .map(|q| q.rho)
+            .fold(f64::INFINITY, f64::min);
         let (laws, _) = learn_laws(&ctx);
         (laws.len(), ctx.points.len(), rho)
     };

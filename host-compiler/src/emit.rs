@@ -856,7 +856,10 @@ impl PwaImageBuilder {
                 ));
             }
             // The factor has n × n values (checked above); the centre n finite f32 values.
-            let cz = crate::certify::whitened_centre(&self.factors[ball.location as usize], &ball.centre);
+            let cz = crate::certify::whitened_centre(
+                &self.factors[ball.location as usize],
+                &ball.centre,
+            );
             ball_centre_z.extend(le_bytes(&format!("ball {b}: whitened centre"), &cz, n)?);
             ball_location.push(ball.location);
             if ball.partition >= self.laws.len() {

@@ -284,7 +284,9 @@ fn pwa_whitened_test_accepts_only_states_in_the_certified_ball() {
         let unit = kind == 0;
         let cond = if unit { 10.0 } else { 1e3 };
         let P = random_pd(n, 1.0 + cond * rng.random::<f64>().powi(2), &mut rng);
-        let c: Vec<f64> = (0..n).map(|_| scale * rng.random_range(-3.0..3.0)).collect();
+        let c: Vec<f64> = (0..n)
+            .map(|_| scale * rng.random_range(-3.0..3.0))
+            .collect();
         let delta = if unit {
             rng.random_range(0.1..1.0)
         } else {
@@ -293,7 +295,10 @@ fn pwa_whitened_test_accepts_only_states_in_the_certified_ball() {
         let rho = pwa_ball_radius(P.as_ref(), &c, delta)
             .unwrap_or_else(|| panic!("trial {trial}: no radius for δ = {delta}, scale {scale}"));
         let shrink = 1.0 - rho as f64 / delta;
-        assert!(rho > 0.0 && shrink > 0.0, "trial {trial}: ρ̂ = {rho}, δ = {delta}");
+        assert!(
+            rho > 0.0 && shrink > 0.0,
+            "trial {trial}: ρ̂ = {rho}, δ = {delta}"
+        );
         if unit {
             worst_unit_shrink = worst_unit_shrink.max(shrink);
         }
@@ -318,7 +323,9 @@ fn pwa_whitened_test_accepts_only_states_in_the_certified_ball() {
         let bytes = b.to_bytes().unwrap();
         let img = shared_types::image::decode(&bytes).unwrap();
         // The bound read back from the image agrees: the stored radius is certified within δ.
-        let Rh: Vec<f64> = (0..n * n).map(|i| img.factor(0, i / n, i % n) as f64).collect();
+        let Rh: Vec<f64> = (0..n * n)
+            .map(|i| img.factor(0, i / n, i % n) as f64)
+            .collect();
         let cz: Vec<f64> = (0..n).map(|i| img.ball_centre_z(0, i) as f64).collect();
         assert!(pwa_accept_radius(P.as_ref(), &Rh, &c, &cz, rho) <= delta);
         let roots = host_compiler::linalg::PdRoots::new(P.as_ref()).unwrap();
@@ -360,6 +367,9 @@ fn pwa_whitened_test_accepts_only_states_in_the_certified_ball() {
         "accepted {accepted}, rejected {rejected}, inner {inner}, worst shrink: unit scale \
          {worst_unit_shrink:e}, all {worst_shrink:e}"
     );
-    assert!(accepted > 40_000 && rejected > 20_000, "{accepted} {rejected}");
+    assert!(
+        accepted > 40_000 && rejected > 20_000,
+        "{accepted} {rejected}"
+    );
     assert!(worst_unit_shrink < 1e-4, "shrink {worst_unit_shrink}");
 }

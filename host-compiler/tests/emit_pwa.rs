@@ -416,7 +416,10 @@ fn inspect_json_contains_the_pwa_content() {
     // depth·n + (one whitening n(n+1)/2 + max_leaf_balls·n) + m·n = 4 + (3 + 4) + 2.
     assert_eq!(p["worst_case_muladds"], 13);
     assert_eq!(p["factors"][0], serde_json::json!([[1.0, 0.0], [0.0, 1.0]]));
-    assert_eq!(p["ball_table"][2]["centre_z"], serde_json::json!([1.0, 0.0]));
+    assert_eq!(
+        p["ball_table"][2]["centre_z"],
+        serde_json::json!([1.0, 0.0])
+    );
     assert_eq!(p["laws"][0]["K"], serde_json::json!([[-1.0, -2.0]]));
     assert_eq!(p["laws"][0]["theta"], serde_json::json!([[0.0, -1.0]]));
     assert_eq!(p["laws"][1]["theta0"], serde_json::json!([-1.0]));

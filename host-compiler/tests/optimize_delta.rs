@@ -300,6 +300,10 @@ fn a_held_reference_stays_held_and_is_still_improved() {
     );
     assert!(host_compiler::trajectory::hold::is_held(&o.nominal.v, 20));
     assert!(o.certificate.is_certified());
-    assert!(o.certificate.delta > 1.5 * d0, "δ {d0} → {}", o.certificate.delta);
+    assert!(
+        o.certificate.delta > 1.5 * d0,
+        "δ {d0} → {}",
+        o.certificate.delta
+    );
     assert_shipped(&ol, &lc, &x0, &o);
 }

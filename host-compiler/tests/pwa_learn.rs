@@ -377,3 +377,42 @@ fn the_recheck_judges_each_ball_with_its_own_law_in_mixed_leaves() {
         rc.partitions[q]
     );
 }
+
+#[test]
+fn every_leaf_lists_its_balls_by_increasing_time_to_go() {
+    // The liveness argument (pwa module doc, "Reaching Goal within T"): the first listed ball containing a
+    // state has the smallest time-to-go among the listed balls that contain it.
+    let f = fixture();
+    let image = shared_types::image::decode(&f.pwa.image).unwrap();
+    let n = image.n();
+    let to_go = |b: usize| -> usize {
+        let c: Vec<f32> = (0..n).map(|i| image.ball_centre(b, i)).collect();
+        let hits: Vec<usize> = f
+            .pwa
+            .ctx
+            .points
+            .iter()
+            .filter(|p| p.x.iter().zip(&c).all(|(a, b)| *a as f32 == *b))
+            .map(|p| p.to_go)
+            .collect();
+        assert!(!hits.is_empty(), "ball {b} is no data point's ball");
+        // Coinciding centres (two trajectories through one point) take the smallest time-to-go.
+        hits.into_iter().min().unwrap()
+    };
+    let mut ordered = 0;
+    for l in 0..image.n_leaves() {
+        let len = image.leaf_refs(l).1;
+        let taus: Vec<usize> = (0..len)
+            .map(|k| to_go(image.leaf_ball(l, k).unwrap()))
+            .collect();
+        assert!(
+            taus.windows(2).all(|w| w[0] <= w[1]),
+            "leaf {l}: time-to-go {taus:?}"
+        );
+        ordered += (len > 1) as usize;
+    }
+    assert!(
+        ordered > 0,
+        "no leaf with two balls: the check checked nothing"
+    );
+}

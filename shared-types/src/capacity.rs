@@ -43,9 +43,8 @@ pub const MAX_LEAF_BALLS: usize = 64;
 
 /// Worst-case multiply-adds of one PWA control step at capacity (see the module docs): tree, whitening
 /// before every ball (the worst case of alternating locations), ball tests, law.
-pub const PWA_STEP_MAX_MULADDS: usize = MAX_TREE_DEPTH * MAX_N
-    + MAX_LEAF_BALLS * (MAX_N * (MAX_N + 1) / 2 + MAX_N)
-    + MAX_M * MAX_N;
+pub const PWA_STEP_MAX_MULADDS: usize =
+    MAX_TREE_DEPTH * MAX_N + MAX_LEAF_BALLS * (MAX_N * (MAX_N + 1) / 2 + MAX_N) + MAX_M * MAX_N;
 
 /// Size in bytes of the fixed image header that precedes the postcard payload.
 pub const HEADER_LEN: usize = 32;

@@ -119,8 +119,8 @@ use crate::capacity::{
     MAX_PARTITIONS, MAX_TREE_DEPTH, MAX_TREE_NODES,
 };
 use crate::image::{
-    check_dim, check_finite, check_len, div, f32_at, floats, rem, sat16, sat32, u16_le,
-    Dim, Dims, Field, Image, ImageError, Mode, Pos,
+    check_dim, check_finite, check_len, div, f32_at, floats, rem, sat16, sat32, u16_le, Dim, Dims,
+    Field, Image, ImageError, Mode, Pos,
 };
 
 /// Child codes from here up to `OUTSIDE − 1` name leaves: leaf `code − LEAF_BASE`.

@@ -482,7 +482,9 @@ fn ball_test_acceptance_respects_the_documented_rounding_bound() {
         let n = rng.random_range(1..=MAX_N);
         let P = random_spd(&mut rng, n);
         let scale: f32 = [1.0, 1e3, 1e-3][rng.random_range(0..3)];
-        let centre: Vec<f32> = (0..n).map(|_| rng.random_range(-5.0f32..5.0) * scale).collect();
+        let centre: Vec<f32> = (0..n)
+            .map(|_| rng.random_range(-5.0f32..5.0) * scale)
+            .collect();
         let delta: f32 = rng.random_range(0.01..3.0) * scale;
         let c = PwaContent {
             n,
@@ -519,7 +521,8 @@ fn ball_test_acceptance_respects_the_documented_rounding_bound() {
         // A direction v, scaled so that ‖R̂v‖ = ρ̂(1 ± 1e-6).
         let gn = n as f64 * u / (1.0 - n as f64 * u);
         let rho = delta as f64;
-        let S = ((rho * rho * (1.0 + u) + (2 * n + 1) as f64 * eta) / (1.0 - gn)).sqrt() / (1.0 - u);
+        let S =
+            ((rho * rho * (1.0 + u) + (2 * n + 1) as f64 * eta) / (1.0 - gn)).sqrt() / (1.0 - u);
         for _ in 0..50 {
             let dir: Vec<f64> = (0..n).map(|_| rng.random_range(-1.0..1.0)).collect();
             let q: f64 = (0..n)

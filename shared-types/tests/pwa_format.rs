@@ -657,7 +657,13 @@ fn rejects_a_factor_that_is_not_upper_triangular_with_positive_diagonal() {
         let mut c = two_partitions();
         c.R[3] = bad;
         let e = c.decode_err();
-        assert_eq!(e, ImageError::FactorDiagonal { location: 0, row: 1 });
+        assert_eq!(
+            e,
+            ImageError::FactorDiagonal {
+                location: 0,
+                row: 1
+            }
+        );
         assert_eq!(
             e.to_string(),
             "location 0: factor R has a non-positive diagonal entry R[1,1]"

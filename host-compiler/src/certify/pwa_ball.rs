@@ -132,7 +132,8 @@ impl AcceptBound {
             .collect();
         let gn = gamma(n, U32);
         // G = γ_n|R̂| + D and |R|, upper triangular.
-        let G = |i: usize, j: usize| gn * Rh[i * n + j].abs() + (Rh[i * n + j] - R[i * n + j]).abs();
+        let G =
+            |i: usize, j: usize| gn * Rh[i * n + j].abs() + (Rh[i * n + j] - R[i * n + j]).abs();
         let absR = |i: usize, j: usize| R[i * n + j].abs();
         let apply = |M: &dyn Fn(usize, usize) -> f64, v: &[f64]| -> f64 {
             norm2((0..n).map(|i| (i..n).map(|j| M(i, j) * v[j]).sum::<f64>()))

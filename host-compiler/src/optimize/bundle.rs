@@ -50,13 +50,7 @@ fn d47(c: &Certificate) -> f64 {
 
 /// Evaluates the shipped nominal of `v`; with `hold` > 1 the subgradient is projected onto block-constant
 /// sequences, so steps keep v block-constant.
-fn evaluate(
-    lp: &Loop<'_>,
-    lc: &LoopConstants,
-    x0: &[f64],
-    v: Vec<Vec<f64>>,
-    hold: usize,
-) -> Point {
+fn evaluate(lp: &Loop<'_>, lc: &LoopConstants, x0: &[f64], v: Vec<Vec<f64>>, hold: usize) -> Point {
     let (nom, cert) = certify::shipped(lp, lc, x0, &v);
     let pc = Pieces::new(lp, lc);
     let (_, gv) = delta_subgradient(&pc, &nom, &cert.eps_components, cert.eps_f32);

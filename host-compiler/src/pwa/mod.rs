@@ -38,12 +38,15 @@
 //! (Theorem 4.7), which lie outside Unsafe, and the ball at κ*_i lies in Goal.
 //!
 //! # Reaching Goal within T
-//! Theorems 6.5–6.6 give invariance of F until Goal. The tree of [`partition`] gives more: every ball that
-//! meets a leaf's cell is listed by that leaf with a law verified for it (no ball is dropped, else the build
-//! fails). Then a state x in ball (i, κ) is accepted in whatever cell it lies, the law applied is verified
-//! for (i, κ), so x⁺ lies in ball (i, κ+1), which every cell it meets lists again. By induction a run that
-//! starts in ball (i, κ) is in ball (i, κ*_i) ⊂ Goal after κ*_i − κ ≤ T/h steps: the time-to-go strictly
-//! decreases along the ball chain, so switching laws between trajectories' balls cannot delay Goal.
+//! Theorems 6.5–6.6 give invariance of F until Goal. Reaching Goal within T needs one more property of the
+//! tree of [`partition`], because a state may lie in several balls and the evaluator applies the law of the
+//! first listed ball that contains it. Let τ(i, κ) = κ*_i − κ be a ball's time-to-go. Every ball that meets
+//! a leaf's cell is listed by that leaf with a law verified for it (no ball is dropped, else the build
+//! fails), and every leaf lists its balls by increasing τ. Suppose x is accepted by ball b = (i, κ). Its law
+//! maps x into b⁺ = (i, κ+1), so x⁺ lies in b⁺, which the leaf of x⁺ lists; the first listed ball
+//! containing x⁺ therefore has τ ≤ τ(b⁺) = τ(b) − 1. The time-to-go of the accepting ball drops by at least
+//! one per step, and a ball with τ = 0 is the ball at κ*_i, which lies in Goal. A run accepted at its
+//! first step in a ball with time-to-go τ is in Goal after at most τ ≤ T/h steps.
 //!
 //! # Limits
 //! * How much the law compresses depends on how fast ṽ = ũ − K x̃ changes per sample against the fitting
@@ -161,7 +164,11 @@ pub enum PwaError {
     #[error(
         "ball of trajectory {traj} at step {kappa}: the f32 ball test certifies no radius within δ = {delta:e}"
     )]
-    BallTest { traj: usize, kappa: usize, delta: f64 },
+    BallTest {
+        traj: usize,
+        kappa: usize,
+        delta: f64,
+    },
     #[error("the tree needs more than the image capacities allow: {0}")]
     Capacity(String),
     #[error(transparent)]
@@ -173,6 +180,8 @@ pub enum PwaError {
 pub struct DataPoint {
     pub traj: usize,
     pub kappa: usize,
+    /// Time-to-go τ = κ*_i − κ (module doc, "Reaching Goal within T").
+    pub to_go: usize,
     /// x̃_i(κ).
     pub x: Vec<f64>,
     /// ṽ_i(κ).
@@ -278,6 +287,7 @@ impl PwaContext {
                     unsafe_dist,
                     excursion,
                     traj: i,
+                    to_go: c.k_star - k,
                     kappa: k,
                     x: t.nominal.x[k].clone(),
                     v: t.nominal.v[k].clone(),

@@ -195,8 +195,8 @@ impl Tree<'_> {
                 .map(|&k| Self::dot(&a, &self.ctx.points[k].x))
                 .collect();
             vals.sort_by(|x, y| x.total_cmp(y));
-            for q in [1usize, 2, 3] {
-                let b = vals[(vals.len() * q / 4).min(vals.len() - 1)];
+            for q in 1usize..8 {
+                let b = vals[(vals.len() * q / 8).min(vals.len() - 1)];
                 let (l, r) = self.split_set(set, &a, b);
                 if l.len() >= set.len() || r.len() >= set.len() {
                     continue;
@@ -225,25 +225,16 @@ impl Tree<'_> {
         i
     }
 
-    /// A leaf with main law `law` listing every ball of `set`: under `law` when it is verified for the ball,
-    /// else under the ball's own cluster law (a mixed leaf; the evaluator applies the law of the ball that
-    /// contains the state). Only the capacity `MAX_LEAF_BALLS` can leave balls out; they are counted in
-    /// `dropped` and [`build_image`] then fails.
+    /// A leaf labelled with law `law` listing every ball of `set`, each under its own cluster law (verified
+    /// for it; the evaluator applies the law of the ball that contains the state), so that a ball listed by
+    /// several leaves is stored once. Only the capacity `MAX_LEAF_BALLS` can leave balls out; they are
+    /// counted in `dropped` and [`build_image`] then fails.
     fn leaf(&mut self, set: &[usize], law: usize) -> Child {
         let mut balls: Vec<usize> = vec![];
-        // Order: balls of the main law first, then the others.
-        let mut ks: Vec<(usize, usize)> = set
-            .iter()
-            .map(|&k| {
-                let j = if self.admissible[k].contains(&law) {
-                    law
-                } else {
-                    self.assignment[k]
-                };
-                (k, j)
-            })
-            .collect();
-        ks.sort_by_key(|&(k, j)| (j != law, k));
+        // Order: by increasing time-to-go (the liveness argument of the module doc of `pwa`), then the
+        // data order.
+        let mut ks: Vec<(usize, usize)> = set.iter().map(|&k| (k, self.assignment[k])).collect();
+        ks.sort_by_key(|&(k, _)| (self.ctx.points[k].to_go, k));
         for &(k, j) in ks.iter().take(MAX_LEAF_BALLS) {
             let i = self.ball(k, j);
             balls.push(i);

@@ -84,7 +84,9 @@ mod tests {
 
     #[test]
     fn flat_and_nested_agree() {
-        let v: Vec<Vec<f64>> = (0..7).map(|k| vec![k as f64, (k * k) as f64, -1.0]).collect();
+        let v: Vec<Vec<f64>> = (0..7)
+            .map(|k| vec![k as f64, (k * k) as f64, -1.0])
+            .collect();
         let mut a = v.clone();
         project(&mut a, 3);
         let mut z: Vec<f64> = v.into_iter().flatten().collect();

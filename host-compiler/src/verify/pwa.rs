@@ -96,11 +96,21 @@ pub fn recheck(
     let r_acc: Vec<f64> = (0..nb)
         .map(|b| {
             let l = image.ball_location(b);
-            let Pl: Vec<f64> = (0..n * n).map(|i| image.P(l, i / n, i % n) as f64).collect();
+            let Pl: Vec<f64> = (0..n * n)
+                .map(|i| image.P(l, i / n, i % n) as f64)
+                .collect();
             let Pl = crate::linalg::from_row_major(n, n, &Pl);
-            let Rh: Vec<f64> = (0..n * n).map(|i| image.factor(l, i / n, i % n) as f64).collect();
+            let Rh: Vec<f64> = (0..n * n)
+                .map(|i| image.factor(l, i / n, i % n) as f64)
+                .collect();
             let cz: Vec<f64> = (0..n).map(|i| image.ball_centre_z(b, i) as f64).collect();
-            crate::certify::pwa_accept_radius(Pl.as_ref(), &Rh, &centres[b], &cz, image.ball_delta(b))
+            crate::certify::pwa_accept_radius(
+                Pl.as_ref(),
+                &Rh,
+                &centres[b],
+                &cz,
+                image.ball_delta(b),
+            )
         })
         .collect();
     let axis: Vec<f64> = (0..n).map(|j| roots.inv[(j, j)].max(0.0).sqrt()).collect();

@@ -448,7 +448,11 @@ pub fn factor_of(P: &[f32], n: usize) -> Option<Vec<f32>> {
 pub fn whiten_centre(R: &[f32], c: &[f32]) -> Vec<f32> {
     let n = c.len();
     (0..n)
-        .map(|i| (i..n).map(|j| R[i * n + j] as f64 * c[j] as f64).sum::<f64>() as f32)
+        .map(|i| {
+            (i..n)
+                .map(|j| R[i * n + j] as f64 * c[j] as f64)
+                .sum::<f64>() as f32
+        })
         .collect()
 }
 
