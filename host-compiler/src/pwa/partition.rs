@@ -28,6 +28,7 @@
 use super::{LearnedLaw, PwaContext, PwaError};
 use crate::emit::Child;
 use crate::emit::{CertifiedBall, PwaImageBuilder, PwaLaw, PwaLeaf, TreeNode};
+use crate::synth::round32;
 use clarabel::algebra::CscMatrix;
 use clarabel::solver::{
     DefaultSettingsBuilder, DefaultSolver, IPSolver, SolverStatus, SupportedConeT,
@@ -133,17 +134,30 @@ impl Tree<'_> {
         a.iter().zip(x).map(|(a, x)| a * x).sum()
     }
 
-    /// Balls of `set` meeting {aᵀx ≤ b} and {aᵀx ≥ b} (module doc).
+    /// Balls of `set` that the evaluator can route to the left child ({fl(aᵀx) ≤ b}) and to the right child
+    /// (module doc). `a`, `b` are the f32 values stored in the image. A ball B_P(c, δ) reaches the left side
+    /// when min_B aᵀx − b = aᵀc − b − ‖a‖_{P⁻¹}δ is at most the rounding of the evaluator's dot product,
+    /// |fl(aᵀx) − aᵀx| ≤ γ_n Σ_j |a_j||x_j| (Higham §3.1) with |x_j| ≤ |c_j| + δ·sqrt((P⁻¹)_jj) on the
+    /// ball; the right side likewise. Listing a ball on every side a state of it can be routed to keeps
+    /// the "every ball meeting the cell is listed" property of the liveness argument under f32 routing.
     fn split_set(&self, set: &[usize], a: &[f64], b: f64) -> (Vec<usize>, Vec<usize>) {
         let w = self.ctx.roots.dual_norm(a);
+        let n = a.len();
+        let ku = n as f64 * crate::certify::U32;
+        let gamma = ku / (1.0 - ku);
         let (mut l, mut r) = (vec![], vec![]);
         for &k in set {
             let p = &self.ctx.points[k];
             let s = Self::dot(a, &p.x) - b;
-            if s <= w * p.delta {
+            let round: f64 = gamma
+                * (0..n)
+                    .map(|j| a[j].abs() * (p.x[j].abs() + p.delta * self.ctx.axis[j]))
+                    .sum::<f64>();
+            let reach = w * p.delta + round;
+            if s <= reach {
                 l.push(k);
             }
-            if s >= -w * p.delta {
+            if s >= -reach {
                 r.push(k);
             }
         }
@@ -322,7 +336,17 @@ impl Tree<'_> {
                 }
             }
         }
-        let (a, b, l, r) = match cut.or_else(|| self.balanced_cut(&set)) {
+        // The hyperplane as the image stores it (f32), and the balls each side lists for it.
+        let cut = cut
+            .or_else(|| self.balanced_cut(&set))
+            .and_then(|(a, b, _, _)| {
+                let a: Vec<f64> = a.iter().map(|&v| round32(v)).collect();
+                let b = round32(b);
+                let (l, r) = self.split_set(&set, &a, b);
+                (l.len() < set.len() && r.len() < set.len() && a.iter().any(|v| *v != 0.0))
+                    .then_some((a, b, l, r))
+            });
+        let (a, b, l, r) = match cut {
             Some(c) => c,
             None => {
                 // No hyperplane makes progress (every cut meets all balls): stop here.
