@@ -58,7 +58,8 @@
 //! so the decision is bit-identical to that evaluator; ρ̂ itself is not stored. Per step
 //! the evaluator forms `z = fl(R̂_ℓ x̂)` once (row i: `Σ_{j=i}^{n−1} R̂_ij x̂_j` summed left to right from 0,
 //! n(n+1)/2 multiply-adds; recomputed only when consecutive listed balls differ in location, so never for a
-//! single-location image), and tests each listed ball with
+//! single-location image, whose ball loop is a separate instance without any per-ball location check), and
+//! tests each listed ball with
 //!
 //! ```text
 //! d_i = fl(z_i − ĉ_z,i),   s = fl(d_0·d_0 + d_1·d_1 + … + d_{n−1}·d_{n−1}),   accept ⇔ s ≤ ŝ
