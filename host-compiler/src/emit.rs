@@ -17,9 +17,10 @@
 //! hyperplanes, its leaves (a partition and the certified balls that may use its law) and the ball table
 //! (the pieces `B_P(x̃_i(κ), δ_i)` of the envelope F of (6.2), each with the partition it is certified for).
 //! It checks shapes, capacities and indices with errors that name the offending item, computes the tree's
-//! worst-case depth, rounds every ball radius down as above, stores per location the f32 Cholesky factor
-//! R̂ of `P` and per ball its whitened centre `fl32(R̂ ĉ)` (the evaluator's whitened ball test; the radius a
-//! ball needs for it comes from `crate::certify::pwa_ball_radius`), and then runs the decoder's validation
+//! worst-case depth, rounds every ball threshold down as above, stores per location the f32 Cholesky
+//! factor R̂ of `P` and per ball its whitened centre `fl32(R̂ ĉ)` with its squared threshold (the
+//! evaluator's whitened ball test; the threshold a ball needs for it comes from
+//! `crate::certify::pwa_ball_threshold`), and then runs the decoder's validation
 //! (which also refuses unreachable nodes, unreferenced leaves and zero normals).
 #![allow(non_snake_case)]
 
@@ -525,10 +526,10 @@ pub struct PwaLeaf {
 pub struct CertifiedBall {
     /// Centre `x̃_i(κ)`, n values (stored as f32; the whitened centre is computed from that f32 value).
     pub centre: Vec<f64>,
-    /// Stored radius ρ̂ of the evaluator's whitened test (rounded down to f32 when emitted). For the
-    /// evaluator to accept only states within the certified δ_i, pass
-    /// `crate::certify::pwa_ball_radius(P, centre, δ_i)`.
-    pub delta: f64,
+    /// Stored squared threshold ŝ of the evaluator's whitened test (rounded down to f32 when emitted; the
+    /// test accepts iff the computed squared whitened distance is ≤ ŝ). For the evaluator to accept only
+    /// states within the certified δ_i, pass `crate::certify::pwa_ball_threshold(P, centre, δ_i)`.
+    pub threshold: f64,
     /// Location whose `P` is the ball's metric.
     pub location: u8,
     /// Partition whose law the ball is certified for.
@@ -798,19 +799,18 @@ impl PwaImageBuilder {
             )?);
         }
 
-        let mut node_a = Vec::new();
-        let mut node_b = Vec::new();
-        let mut node_child = Vec::new();
+        // One record per node: a (n f32), b (f32), left and right child codes (u16).
+        let mut node_rec = Vec::new();
         for (i, node) in self.nodes.iter().enumerate() {
-            node_a.extend(le_bytes(&format!("tree node {i}: a"), &node.a, n)?);
+            node_rec.extend(le_bytes(&format!("tree node {i}: a"), &node.a, n)?);
             let b = to_f32(|| format!("tree node {i}: b"), node.b)?;
-            node_b.extend_from_slice(&b.to_le_bytes());
+            node_rec.extend_from_slice(&b.to_le_bytes());
             for c in [node.left, node.right] {
                 // In range (checked by tree_depth), so the code exists.
                 let code = c
                     .code()
                     .ok_or_else(|| invalid(format!("tree node {i}: child {c:?}"), "has no code"))?;
-                node_child.extend_from_slice(&code.to_le_bytes());
+                node_rec.extend_from_slice(&code.to_le_bytes());
             }
         }
 
@@ -839,16 +839,16 @@ impl PwaImageBuilder {
         let leaf_partition = le_u16(self.leaves.iter().map(|l| l.partition as u16));
 
         let mut ball_centre = Vec::new();
-        let mut ball_centre_z = Vec::new();
-        let mut ball_delta = Vec::new();
+        // One test record per ball: whitened centre (n f32), squared threshold ŝ (f32).
+        let mut ball_test = Vec::new();
         let mut ball_location = Vec::new();
         for (b, ball) in self.balls.iter().enumerate() {
             ball_centre.extend(le_bytes(&format!("ball {b}: centre"), &ball.centre, n)?);
-            let d32 = to_f32(|| format!("ball {b}: delta"), ball.delta)?;
-            if ball.delta < 0.0 {
-                return Err(invalid(format!("ball {b}: delta"), "is negative"));
+            let s32 = to_f32(|| format!("ball {b}: threshold"), ball.threshold)?;
+            if ball.threshold < 0.0 {
+                return Err(invalid(format!("ball {b}: threshold"), "is negative"));
             }
-            ball_delta.extend_from_slice(&f32_round_down(d32, ball.delta).to_le_bytes());
+            let s32 = f32_round_down(s32, ball.threshold);
             if ball.location as usize >= self.locations.len() {
                 return Err(invalid(
                     format!("ball {b}: location {}", ball.location),
@@ -860,7 +860,8 @@ impl PwaImageBuilder {
                 &self.factors[ball.location as usize],
                 &ball.centre,
             );
-            ball_centre_z.extend(le_bytes(&format!("ball {b}: whitened centre"), &cz, n)?);
+            ball_test.extend(le_bytes(&format!("ball {b}: whitened centre"), &cz, n)?);
+            ball_test.extend_from_slice(&s32.to_le_bytes());
             ball_location.push(ball.location);
             if ball.partition >= self.laws.len() {
                 return Err(invalid(
@@ -882,16 +883,13 @@ impl PwaImageBuilder {
                 n_balls: self.balls.len() as u16,
                 gain: &gain,
                 offset: &offset,
-                node_a: &node_a,
-                node_b: &node_b,
-                node_child: &node_child,
+                node: &node_rec,
                 leaf_partition: &leaf_partition,
                 leaf_end: &leaf_end,
                 ball_ref: &ball_ref,
                 R: &R,
                 ball_centre: &ball_centre,
-                ball_centre_z: &ball_centre_z,
-                ball_delta: &ball_delta,
+                ball_test: &ball_test,
                 ball_location: &ball_location,
                 ball_partition: &ball_partition,
             },
@@ -970,7 +968,7 @@ impl PwaImageBuilder {
             balls: (0..img.n_balls())
                 .map(|b| CertifiedBall {
                     centre: (0..n).map(|i| img.ball_centre(b, i) as f64).collect(),
-                    delta: img.ball_delta(b) as f64,
+                    threshold: img.ball_threshold(b) as f64,
                     location: img.ball_location(b) as u8,
                     partition: img.ball_partition(b),
                 })

@@ -261,8 +261,9 @@ fn inter_sample_excursion_is_bounded() {
     assert!(tight > 0.3, "bound far from tight: {tight}");
 }
 
-/// The PWA evaluator's whitened ball test (`shared_types::pwa`) with the radius of
-/// [`host_compiler::certify::pwa_ball_radius`]: every f32 state it accepts, and the real state it was
+/// The PWA evaluator's whitened ball test (`shared_types::pwa`) with the threshold of
+/// [`host_compiler::certify::pwa_ball_threshold`] (the square of [`host_compiler::certify::pwa_ball_radius`]):
+/// every f32 state it accepts, and the real state it was
 /// rounded from, lies in the certified f64 ball `‖x − c‖_P ≤ δ` — probed on shells straddling both the
 /// stored and the certified radius, for unit-scale and large-magnitude centres (f64 centres that are not
 /// f32 values) and condition numbers up to 10³. The radius is not absurdly small: for unit-scale data
@@ -270,7 +271,7 @@ fn inter_sample_excursion_is_bounded() {
 /// (1 − 10⁻⁴)ρ̂ are all accepted (the margin η of the PWA learner's one-step inclusion).
 #[test]
 fn pwa_whitened_test_accepts_only_states_in_the_certified_ball() {
-    use host_compiler::certify::{pwa_accept_radius, pwa_ball_radius};
+    use host_compiler::certify::{pwa_accept_radius, pwa_ball_radius, pwa_ball_threshold};
     use host_compiler::emit::{CertifiedBall, PwaImageBuilder, PwaLaw, PwaLeaf};
     use shared_types::pwa::Region;
     let mut rng = ChaCha8Rng::seed_from_u64(0x3A11);
@@ -310,9 +311,12 @@ fn pwa_whitened_test_accepts_only_states_in_the_certified_ball() {
             gain: vec![0.0; n],
             offset: vec![0.0],
         });
+        // The stored threshold is fl32(ρ̂·ρ̂), one f32 product.
+        let threshold = pwa_ball_threshold(P.as_ref(), &c, delta).unwrap();
+        assert_eq!(threshold, rho * rho);
         b.add_ball(CertifiedBall {
             centre: c.clone(),
-            delta: rho as f64,
+            threshold: threshold as f64,
             location: 0,
             partition: 0,
         });
@@ -322,12 +326,13 @@ fn pwa_whitened_test_accepts_only_states_in_the_certified_ball() {
         });
         let bytes = b.to_bytes().unwrap();
         let img = shared_types::image::decode(&bytes).unwrap();
-        // The bound read back from the image agrees: the stored radius is certified within δ.
+        // The bound read back from the image (from the stored threshold) agrees: certified within δ.
         let Rh: Vec<f64> = (0..n * n)
             .map(|i| img.factor(0, i / n, i % n) as f64)
             .collect();
         let cz: Vec<f64> = (0..n).map(|i| img.ball_centre_z(0, i) as f64).collect();
-        assert!(pwa_accept_radius(P.as_ref(), &Rh, &c, &cz, rho) <= delta);
+        assert_eq!(img.ball_threshold(0), threshold);
+        assert!(pwa_accept_radius(P.as_ref(), &Rh, &c, &cz, threshold) <= delta);
         let roots = host_compiler::linalg::PdRoots::new(P.as_ref()).unwrap();
         let dist = |x: &[f64]| p_norm(P.as_ref(), &(0..n).map(|i| x[i] - c[i]).collect::<Vec<_>>());
         for k in 0..300 {

@@ -46,14 +46,15 @@ fn builder() -> PwaImageBuilder {
         partition: 1,
         balls: vec![2],
     });
-    for (centre, delta, partition) in [
+    // Radii 1, 0.75, 1.5: thresholds (squared radii) 1, 0.5625, 2.25.
+    for (centre, threshold, partition) in [
         (vec![-1.0, 0.0], 1.0, 0),
-        (vec![-0.5, 1.0], 0.75, 0),
-        (vec![1.0, 0.0], 1.5, 1),
+        (vec![-0.5, 1.0], 0.5625, 0),
+        (vec![1.0, 0.0], 2.25, 1),
     ] {
         b.add_ball(CertifiedBall {
             centre,
-            delta,
+            threshold,
             location: 0,
             partition,
         });
@@ -113,14 +114,19 @@ fn emitted_laws_run_in_the_shared_evaluator() {
 }
 
 #[test]
-fn ball_radius_is_rounded_down_never_up() {
+fn ball_threshold_is_rounded_down_never_up() {
     let mut b = builder();
-    b.balls[0].delta = 0.1;
+    b.balls[0].threshold = 0.1;
     let bytes = b.to_bytes().unwrap();
     let img = decode(&bytes).unwrap();
-    assert!((img.ball_delta(0) as f64) <= 0.1);
-    assert_eq!(img.ball_delta(0), 0.1f32.next_down());
-    assert_eq!(img.ball_delta(1), 0.75);
+    assert!((img.ball_threshold(0) as f64) <= 0.1);
+    assert_eq!(img.ball_threshold(0), 0.1f32.next_down());
+    assert_eq!(img.ball_threshold(1), 0.5625);
+    // The whitened centre and the threshold sit in one record; the accessors read their own parts.
+    assert_eq!(img.ball_centre_z(1, 0), -0.5);
+    assert_eq!(img.ball_centre_z(1, 1), 1.0);
+    assert_eq!(img.ball_threshold(3), 0.0);
+    assert_eq!(img.ball_centre_z(3, 0), 0.0);
 }
 
 /// A random valid builder: a random tree in preorder, random laws around K, leaves listing balls of
@@ -156,7 +162,7 @@ fn random_builder(rng: &mut ChaCha8Rng) -> PwaImageBuilder {
             for _ in 0..rng.random_range(1..=4) {
                 balls.push(b.add_ball(CertifiedBall {
                     centre: (0..n).map(|_| rng.random_range(-3.0..3.0)).collect(),
-                    delta: rng.random_range(0.0..2.0),
+                    threshold: rng.random_range(0.0..4.0),
                     location: 0,
                     partition,
                 }));
@@ -179,7 +185,7 @@ fn random_builder(rng: &mut ChaCha8Rng) -> PwaImageBuilder {
     if b.leaves.is_empty() {
         let c = b.add_ball(CertifiedBall {
             centre: vec![0.0; n],
-            delta: 1.0,
+            threshold: 1.0,
             location: 0,
             partition: 0,
         });
@@ -214,8 +220,8 @@ fn random_builders_round_trip_and_evaluate_like_f64() {
             }
         }
         for (b0, b1) in b.balls.iter().zip(&back.balls) {
-            assert!(b1.delta <= b0.delta);
-            assert!(b0.delta - b1.delta <= b0.delta * f64::from(f32::EPSILON));
+            assert!(b1.threshold <= b0.threshold);
+            assert!(b0.threshold - b1.threshold <= b0.threshold * f64::from(f32::EPSILON));
         }
         assert_eq!(back.leaves, b.leaves);
         assert_eq!(back.to_bytes().unwrap(), bytes);
@@ -305,8 +311,8 @@ fn refusals_say_what_is_wrong() {
     assert_eq!(err(&b), "ball 1: location 1 does not exist");
 
     let mut b = builder();
-    b.balls[1].delta = -0.5;
-    assert_eq!(err(&b), "ball 1: delta is negative");
+    b.balls[1].threshold = -0.5;
+    assert_eq!(err(&b), "ball 1: threshold is negative");
 
     let mut b = builder();
     b.balls[2].centre[1] = f64::NAN;
@@ -430,6 +436,8 @@ fn inspect_json_contains_the_pwa_content() {
     assert_eq!(p["leaf_table"][0]["balls"], serde_json::json!([0, 1]));
     assert_eq!(p["ball_table"][2]["centre"], serde_json::json!([1.0, 0.0]));
     assert_eq!(p["ball_table"][2]["partition"], 1);
+    assert_eq!(p["ball_table"][2]["threshold"], 2.25);
+    assert_eq!(p["ball_table"][1]["centre_z"], serde_json::json!([-0.5, 1.0]));
 
     let text = render(&bytes, "p.img", false).unwrap();
     for line in [
@@ -443,7 +451,7 @@ fn inspect_json_contains_the_pwa_content() {
         "  node 0: a = [1, 0], b = 0 -> left node 1, right leaf 1",
         "  node 1: a = [0, 1], b = 2 -> left leaf 0, right OUTSIDE",
         "leaf 0: partition 0, balls [0, 1]",
-        "ball 1: centre [-0.5, 1], delta 0.75, location 0, partition 0",
+        "ball 1: centre [-0.5, 1], threshold 0.5625, location 0, partition 0",
     ] {
         assert!(text.contains(line), "missing {line:?} in\n{text}");
     }

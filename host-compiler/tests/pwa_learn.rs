@@ -115,7 +115,9 @@ fn every_emitted_ball_satisfies_6_6_and_6_7() {
         let c = check_point(ctx, &stored, k);
         assert!(c.ok, "ball {k} law {}: {c:?}", ball.partition);
         assert!(c.r_crit < ctx.points[k].rho);
-        assert!(ball.delta <= ctx.points[k].rho);
+        // The stored threshold is fl32(ρ̂·ρ̂) of the point's certified radius ρ̂.
+        let rho = ctx.points[k].rho as f32;
+        assert_eq!(ball.threshold, (rho * rho) as f64);
     }
     // A leaf may list balls of several laws; the evaluator must apply the law of the ball it finds the
     // state in, and the image must route every ball centre to a ball that holds it.

@@ -116,7 +116,7 @@ fn run(spec: &str, tag: &str, label: &str) {
             &mut rng,
             &Pis,
             &centre(b),
-            image.ball_delta(b) as f64 * (1.0 - 1e-6),
+            (image.ball_threshold(b) as f64).sqrt() * (1.0 - 1e-6),
         );
         let mut q = Qemu::launch(&elf, Duration::from_secs(120)).unwrap_or_else(|e| panic!("{e}"));
         let mut host = HostEvaluator::new(image);

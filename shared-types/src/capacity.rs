@@ -67,10 +67,10 @@ const FEEDFORWARD_PAYLOAD_LEN: usize = COMMON_PAYLOAD_LEN
 /// Largest PWA-feedback payload.
 const PWA_PAYLOAD_LEN: usize = COMMON_PAYLOAD_LEN
     + 4 * (MAX_PARTITIONS * (MAX_M * MAX_N + MAX_M)  // gains K_j and offsets θ0_j
-        + MAX_TREE_NODES * (MAX_N + 1)              // hyperplanes a, b
+        + MAX_TREE_NODES * (MAX_N + 1)              // node records: a, b (f32)
         + MAX_LOCATIONS * MAX_N * MAX_N             // factors R̂_ℓ
-        + MAX_BALLS * (2 * MAX_N + 1))              // ball centres, whitened centres and radii
-    + 2 * (2 * MAX_TREE_NODES                       // children (u16)
+        + MAX_BALLS * (2 * MAX_N + 1))              // ball centres; test records (whitened centre, ŝ)
+    + 2 * (2 * MAX_TREE_NODES                       // node records: children (u16)
         + 2 * MAX_LEAVES                            // leaf partition and ball end (u16)
         + MAX_BALL_REFS                             // ball references (u16)
         + MAX_BALLS)                                // ball partition (u16)

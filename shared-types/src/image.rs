@@ -35,7 +35,8 @@
 //! * per location ℓ: `K_ℓ` and `P_ℓ` as above (`P_ℓ` is the metric of the certified balls; `K_ℓ` is the CAF
 //!   gain the laws were learned around, kept so that `θ_j = K_j − K` can be reported);
 //! * the [`crate::pwa::PwaTables`]: per partition the full gain `K_j = K + θ_j` and offset `θ0_j`, the
-//!   point-location tree, its leaves, the certified balls (centre, whitened centre, radius) and per location
+//!   point-location tree, its leaves, the certified balls (centre; whitened centre and squared threshold,
+//!   one record per ball) and per location
 //!   the upper-triangular factor `R_ℓ` of `P_ℓ` used by the whitened ball test (layout, rationale and
 //!   rounding analysis in [`crate::pwa`]);
 //! * the fallback law and an optional input box. There are no trajectories (`trajectories = 0` in the
@@ -64,7 +65,9 @@ use crate::pwa::PwaTables;
 pub const MAGIC: [u8; 4] = *b"SFCI";
 /// Version of the layout described in this module. Decoding rejects every other version. Version 2 added
 /// the whitened ball test of PWA images (per-location factor `R`, whitened ball centres; [`crate::pwa`]).
-pub const FORMAT_VERSION: u16 = 2;
+/// Version 3 stores PWA tree nodes as one record each (`a`, `b`, children) and each ball's test data as one
+/// record (whitened centre and squared threshold ŝ instead of the radius ρ̂).
+pub const FORMAT_VERSION: u16 = 3;
 
 /// Byte offset of the CRC in the header; the CRC covers the header bytes before it and the payload.
 const CRC_OFFSET: usize = 28;
@@ -269,12 +272,12 @@ pub enum Field {
     LawGain,
     /// PWA offsets `θ0_j`.
     LawOffset,
-    /// Hyperplane normals `a` of the tree nodes.
+    /// Tree node records `[a, b, left, right]` (the length check).
+    Node,
+    /// Hyperplane normals `a` of the tree nodes (within their records).
     NodeNormal,
-    /// Hyperplane offsets `b` of the tree nodes.
+    /// Hyperplane offsets `b` of the tree nodes (within their records).
     NodeOffset,
-    /// Child codes of the tree nodes.
-    NodeChildren,
     /// Partition of each leaf.
     LeafPartition,
     /// Exclusive end of each leaf's run of ball references.
@@ -283,23 +286,25 @@ pub enum Field {
     BallRef,
     /// Certified ball centres.
     BallCentre,
-    /// Certified ball radii.
-    BallDelta,
     /// Location (metric) of each certified ball.
     BallLocation,
     /// Partition (law) each certified ball is certified for.
     BallPartition,
     /// Upper-triangular factors `R_ℓ` (`P_ℓ = R_ℓᵀR_ℓ`) of the PWA ball test.
     Factor,
-    /// Whitened ball centres `c_z = fl32(R̂ c)`.
+    /// Ball test records `[c_z, ŝ]` (the length check).
+    BallTest,
+    /// Whitened ball centres `c_z = fl32(R̂ c)` (within the test records).
     BallCentreZ,
+    /// Squared ball thresholds ŝ (within the test records).
+    BallThreshold,
 }
 
 /// Position of a bad value. Its meaning depends on the field: `K`, `P`: (location, row, col); `Centre`:
 /// (trajectory, component, 0); `Delta`: (trajectory, 0, 0); `V`: (trajectory, step, component);
 /// `FallbackK`: (row, col, 0); `LawGain`: (partition, row, col); `LawOffset`: (partition, component, 0);
 /// `NodeNormal`: (node, component, 0); `NodeOffset`: (node, 0, 0); `BallCentre`, `BallCentreZ`: (ball,
-/// component, 0); `BallDelta`: (ball, 0, 0); `Factor`: (location, row, col); vectors: (component, 0, 0).
+/// component, 0); `BallThreshold`: (ball, 0, 0); `Factor`: (location, row, col); vectors: (component, 0, 0).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Pos(pub u16, pub u16, pub u16);
 
@@ -510,8 +515,8 @@ pub enum ImageError {
         /// The index found.
         value: u16,
     },
-    /// A certified ball has a negative radius.
-    NegativeBallRadius {
+    /// A certified ball has a negative squared threshold ŝ.
+    NegativeBallThreshold {
         /// The ball.
         ball: u16,
     },
@@ -575,18 +580,19 @@ impl fmt::Display for Field {
             Field::BoxHi => "input box upper bounds",
             Field::LawGain => "law gain K_j",
             Field::LawOffset => "law offset theta0_j",
+            Field::Node => "tree node records",
             Field::NodeNormal => "node normal a",
             Field::NodeOffset => "node offset b",
-            Field::NodeChildren => "node children",
             Field::LeafPartition => "leaf partitions",
             Field::LeafEnd => "leaf ball ends",
             Field::BallRef => "ball references",
             Field::BallCentre => "ball centres",
-            Field::BallDelta => "ball radii",
             Field::BallLocation => "ball locations",
             Field::BallPartition => "ball partitions",
             Field::Factor => "factor R",
+            Field::BallTest => "ball test records",
             Field::BallCentreZ => "whitened ball centres",
+            Field::BallThreshold => "ball thresholds",
         })
     }
 }
@@ -649,7 +655,7 @@ impl fmt::Display for ImageError {
                 Field::NodeOffset => write!(f, "node {a}: b is not finite"),
                 Field::BallCentre => write!(f, "ball {a}: centre[{b}] is not finite"),
                 Field::BallCentreZ => write!(f, "ball {a}: whitened centre[{b}] is not finite"),
-                Field::BallDelta => write!(f, "ball {a}: delta is not finite"),
+                Field::BallThreshold => write!(f, "ball {a}: threshold is not finite"),
                 _ => write!(f, "{field}[{a}] is not finite"),
             },
             NotSymmetric { location, row, col } => write!(
@@ -715,7 +721,7 @@ impl fmt::Display for ImageError {
             BallPartitionOutOfRange { ball, value } => {
                 write!(f, "ball {ball}: partition {value} is out of range")
             }
-            NegativeBallRadius { ball } => write!(f, "ball {ball}: delta is negative"),
+            NegativeBallThreshold { ball } => write!(f, "ball {ball}: threshold is negative"),
             FactorNotUpperTriangular { location, row, col } => write!(
                 f,
                 "location {location}: factor R is not upper triangular (R[{row},{col}] != 0)"

@@ -11,7 +11,10 @@
 //! # Point location
 //! A binary tree over hyperplanes. Internal node i holds `a_i` (n values) and `b_i`; at node i the state
 //! goes to the left child if `a_iᵀx ≤ b_i` and to the right child otherwise (a non-finite `a_iᵀx`, which
-//! only huge states can produce, goes right). A child is a 16-bit code:
+//! only huge states can produce, goes right). Each node is one record of `4n + 8` bytes,
+//! `[a_0 … a_{n−1}, b]` (n + 1 little-endian f32) followed by the left and right child codes (two
+//! little-endian `u16`), so one step reads one contiguous record per node (a single bounds check). A child
+//! is a 16-bit code:
 //!
 //! | code              | meaning                                                    |
 //! |-------------------|------------------------------------------------------------|
@@ -39,8 +42,8 @@
 //! that use its law, and listing it in no other leaf. The same holds for f32 rounding of the hyperplane
 //! tests: a misrouted state is either in a ball certified for the law it gets, or out of envelope.
 //!
-//! Balls live in one table (centre, whitened centre, radius, location whose `P_ℓ` is the metric, partition
-//! it is certified for); leaves refer to them through a list of `u16` references (a leaf owns references
+//! Balls live in one table (centre, test record, location whose `P_ℓ` is the metric, partition it is
+//! certified for); leaves refer to them through a list of `u16` references (a leaf owns references
 //! `end[l−1]..end[l]`), so a ball cut by a hyperplane is stored once per law. Each ball records its
 //! partition.
 //!
@@ -48,13 +51,18 @@
 //! With the upper-triangular Cholesky factor `R_ℓ` of the metric (`P_ℓ = R_ℓᵀR_ℓ`, positive diagonal),
 //! `‖x − c‖_P = ‖R_ℓ x − R_ℓ c‖₂`. The image stores, per location, `R̂_ℓ = fl32(R_ℓ)` (n × n, row-major,
 //! zeros below the diagonal) and, per ball, its centre ĉ = fl32(c) (for reports and re-checks; the
-//! evaluator does not read it), its *whitened centre* `ĉ_z = fl32(R̂ ĉ)` and its stored radius ρ̂. Per step
+//! evaluator does not read it) and one *test record* of n + 1 f32 values `[ĉ_z,0 … ĉ_z,n−1, ŝ]`: the
+//! whitened centre `ĉ_z = fl32(R̂ ĉ)` and the squared threshold ŝ (finite, ≥ 0), so one listed ball costs
+//! one contiguous read with a single bounds check. The host computes `ŝ = fl32(ρ̂·ρ̂)` from a radius ρ̂
+//! (below) with the same single f32 multiplication the evaluator of format version 2 performed per step,
+//! so the decision is bit-identical to that evaluator; ρ̂ itself is not stored. Per step
 //! the evaluator forms `z = fl(R̂_ℓ x̂)` once (row i: `Σ_{j=i}^{n−1} R̂_ij x̂_j` summed left to right from 0,
 //! n(n+1)/2 multiply-adds; recomputed only when consecutive listed balls differ in location, so never for a
-//! single-location image), and tests each listed ball with
+//! single-location image, whose ball loop is a separate instance without any per-ball location check), and
+//! tests each listed ball with
 //!
 //! ```text
-//! d_i = fl(z_i − ĉ_z,i),   s = fl(d_0·d_0 + d_1·d_1 + … + d_{n−1}·d_{n−1}),   accept ⇔ s ≤ fl(ρ̂·ρ̂)
+//! d_i = fl(z_i − ĉ_z,i),   s = fl(d_0·d_0 + d_1·d_1 + … + d_{n−1}·d_{n−1}),   accept ⇔ s ≤ ŝ
 //! ```
 //!
 //! (n subtractions and n multiply-adds per ball, against n² + n multiply-adds for `(x − c)ᵀP(x − c)`).
@@ -74,8 +82,9 @@
 //!    `z − ĉ_z = w + f` with `|f| ≤ (γ_n|R̂| + D)|x̂| + |e_c| + 2nη`;
 //! 2. `d = (z − ĉ_z)(1 + θ)`, |θ_i| ≤ u (a subtraction is exact when it underflows), so
 //!    `‖d‖ ≥ (1 − u)‖w + f‖`;
-//! 3. `s ≥ (1 − γ_n)‖d‖² − 2nη` and `fl(ρ̂·ρ̂) ≤ ρ̂²(1 + u) + η`, so acceptance gives
-//!    `‖w + f‖ ≤ S := sqrt((ρ̂²(1 + u) + (2n + 1)η)/(1 − γ_n))/(1 − u)`;
+//! 3. `s ≥ (1 − γ_n)‖d‖² − 2nη`, so acceptance (`s ≤ ŝ`, ŝ the stored threshold) gives
+//!    `‖w + f‖ ≤ S(ŝ) := sqrt((ŝ + 2nη)/(1 − γ_n))/(1 − u)`. For `ŝ = fl32(ρ̂·ρ̂)`, `ŝ ≤ ρ̂²(1 + u) + η`, so
+//!    `S(ŝ) ≤ S_ρ(ρ̂) := sqrt((ρ̂²(1 + u) + (2n + 1)η)/(1 − γ_n))/(1 − u)`;
 //! 4. for a real x with `fl32(x) = x̂`, `|x − x̂| ≤ u|x̂| + η`, so `W := ‖w‖ + u‖|R||x̂|‖ + η‖|R|𝟙‖` bounds
 //!    both `‖R(x̂ − c)‖` and `‖R(x − c)‖`, and with `G = γ_n|R̂| + D`,
 //!    `W ≤ S + ‖G|x̂|‖ + u‖|R||x̂|‖ + ‖e_c‖ + 2n^{3/2}η + η‖|R|𝟙‖`;
@@ -87,9 +96,11 @@
 //! 6. R is the f64 factor: `RᵀR = P + E`, `|E| ≤ γ⁽⁶⁴⁾_{n+1}|Rᵀ||R|` (Higham Thm 10.3), so
 //!    `‖v‖²_P ≤ ‖Rv‖²(1 + χ)` with `χ = γ⁽⁶⁴⁾_{n+1}(‖|R|‖₂‖R⁻¹‖₂)²`.
 //!
-//! Together: an accepted state satisfies `‖x − c‖_P ≤ sqrt(1 + χ)·(S(ρ̂) + β)/(1 − α)`. The host stores the
-//! largest f32 ρ̂ for which this is ≤ δ (`host_compiler::certify::pwa_ball_radius`; the same bound, read
-//! backwards from an image, is `host_compiler::certify::pwa_accept_radius`, used by the verifier). For
+//! Together: an accepted state satisfies `‖x − c‖_P ≤ sqrt(1 + χ)·(S(ŝ) + β)/(1 − α)
+//! ≤ sqrt(1 + χ)·(S_ρ(ρ̂) + β)/(1 − α)`. The host takes the largest f32 ρ̂ for which the right-hand bound
+//! is ≤ δ (`host_compiler::certify::pwa_ball_radius`) and stores `ŝ = fl32(ρ̂·ρ̂)`
+//! (`host_compiler::certify::pwa_ball_threshold`); the bound read backwards from an image, from the stored
+//! ŝ directly, is `host_compiler::certify::pwa_accept_radius`, used by the verifier. For
 //! unit-scale data the shrink `1 − ρ̂/δ` is of order γ_{n+2}·‖|R||c|‖/δ, a few parts in 10⁷.
 //!
 //! # Cost of one step
@@ -101,12 +112,13 @@
 //! # Validation (run by [`crate::image::decode`] and [`crate::image::Image::new_pwa`])
 //! * counts within capacity: nodes ≤ [`MAX_TREE_NODES`], 1 ≤ leaves ≤ [`MAX_LEAVES`],
 //!   1 ≤ balls ≤ [`MAX_BALLS`], stored depth ≤ [`MAX_TREE_DEPTH`], references ≤ [`MAX_BALL_REFS`];
-//! * every field's byte length matches the counts and dimensions; every float finite; no zero normal;
+//! * every field's byte length matches the counts and dimensions (node records `4n + 8` bytes, ball test
+//!   records `4(n + 1)` bytes); every float finite; no zero normal;
 //! * each leaf's partition in range; leaf ends strictly increasing (every leaf lists ≥ 1 ball) and at most
 //!   [`MAX_LEAF_BALLS`] per leaf; every reference in range;
 //! * per location, the factor `R̂_ℓ` upper triangular (every entry below the diagonal exactly 0) with a
 //!   positive diagonal;
-//! * balls: radius `ρ̂ ≥ 0`, location and partition in range;
+//! * balls: threshold `ŝ ≥ 0`, location and partition in range;
 //! * tree: every child node in range and after its parent, every child leaf in range, every node reachable
 //!   from the root, every leaf referenced, no node deeper than [`MAX_TREE_DEPTH`] tests, and the stored
 //!   depth equal to the tree's worst case.
@@ -119,7 +131,7 @@ use crate::capacity::{
     MAX_PARTITIONS, MAX_TREE_DEPTH, MAX_TREE_NODES,
 };
 use crate::image::{
-    check_dim, check_finite, check_len, div, f32_at, floats, rem, sat16, sat32, u16_le, Dim, Dims,
+    check_dim, check_finite, check_len, div, f32_at, rem, sat16, sat32, u16_le, Dim, Dims,
     Field, Image, ImageError, Mode, Pos,
 };
 
@@ -179,12 +191,9 @@ pub struct PwaTables<'a> {
     pub gain: &'a [u8],
     /// `θ0_j` per partition: partitions × m values.
     pub offset: &'a [u8],
-    /// Hyperplane normals `a_i`: nodes × n values.
-    pub node_a: &'a [u8],
-    /// Hyperplane offsets `b_i`: one value per node.
-    pub node_b: &'a [u8],
-    /// Child codes (left, right) per node: nodes × 2 `u16`.
-    pub node_child: &'a [u8],
+    /// Tree node records (module doc): per node `[a_0 … a_{n−1}, b]` (n + 1 f32) then the child codes
+    /// (left, right) as two `u16`; nodes × (4n + 8) bytes.
+    pub node: &'a [u8],
     /// Partition of each leaf (`u16`).
     pub leaf_partition: &'a [u8],
     /// Exclusive end of each leaf's run in `ball_ref` (`u16`, strictly increasing).
@@ -196,10 +205,9 @@ pub struct PwaTables<'a> {
     pub R: &'a [u8],
     /// Ball centres `x̃_i(κ)` (not read by the evaluator; for reports and re-checks): balls × n values.
     pub ball_centre: &'a [u8],
-    /// Whitened ball centres `ĉ_z = fl32(R̂ ĉ)` in the factor of the ball's location: balls × n values.
-    pub ball_centre_z: &'a [u8],
-    /// Stored ball radii ρ̂ of the whitened test (module doc), one value per ball.
-    pub ball_delta: &'a [u8],
+    /// Ball test records (module doc): per ball the whitened centre `ĉ_z = fl32(R̂ ĉ)` in the factor of the
+    /// ball's location, then the squared threshold ŝ: balls × (n + 1) values.
+    pub ball_test: &'a [u8],
     /// Location of each ball (one byte): its metric is that location's `P`.
     pub ball_location: &'a [u8],
     /// Partition each ball is certified for (`u16`).
@@ -215,16 +223,13 @@ impl PwaTables<'static> {
         n_balls: 0,
         gain: &[],
         offset: &[],
-        node_a: &[],
-        node_b: &[],
-        node_child: &[],
+        node: &[],
         leaf_partition: &[],
         leaf_end: &[],
         ball_ref: &[],
         R: &[],
         ball_centre: &[],
-        ball_centre_z: &[],
-        ball_delta: &[],
+        ball_test: &[],
         ball_location: &[],
         ball_partition: &[],
     };
@@ -298,19 +303,27 @@ pub(crate) fn validate_tables(dims: Dims, t: &PwaTables<'_>) -> Result<(), Image
         Pos(sat16(div(i, m)), sat16(rem(i, m)), 0)
     })?;
 
-    // Hyperplanes.
-    check_len(Field::NodeNormal, t.node_a, 4 * nn * n)?;
-    check_finite(Field::NodeNormal, t.node_a, |i| {
-        Pos(sat16(div(i, n)), sat16(rem(i, n)), 0)
-    })?;
+    // Hyperplanes: one record [a_0 … a_{n−1}, b, left, right] per node.
+    check_len(Field::Node, t.node, nn * node_record_len(n))?;
     for i in 0..nn {
-        if (0..n).all(|k| f32_at(t.node_a, i * n + k) == 0.0) {
+        for k in 0..n {
+            if !node_value(t.node, n, i, k).is_finite() {
+                return Err(ImageError::NonFinite {
+                    field: Field::NodeNormal,
+                    pos: Pos(sat16(i), sat16(k), 0),
+                });
+            }
+        }
+        if !node_value(t.node, n, i, n).is_finite() {
+            return Err(ImageError::NonFinite {
+                field: Field::NodeOffset,
+                pos: Pos(sat16(i), 0, 0),
+            });
+        }
+        if (0..n).all(|k| node_value(t.node, n, i, k) == 0.0) {
             return Err(ImageError::DegenerateHyperplane { node: sat16(i) });
         }
     }
-    check_len(Field::NodeOffset, t.node_b, 4 * nn)?;
-    check_finite(Field::NodeOffset, t.node_b, |i| Pos(sat16(i), 0, 0))?;
-    check_len(Field::NodeChildren, t.node_child, 4 * nn)?;
 
     // Leaves: partition and run of ball references.
     check_len(Field::LeafPartition, t.leaf_partition, 2 * nl)?;
@@ -383,15 +396,26 @@ pub(crate) fn validate_tables(dims: Dims, t: &PwaTables<'_>) -> Result<(), Image
     check_finite(Field::BallCentre, t.ball_centre, |i| {
         Pos(sat16(div(i, n)), sat16(rem(i, n)), 0)
     })?;
-    check_len(Field::BallCentreZ, t.ball_centre_z, 4 * nb * n)?;
-    check_finite(Field::BallCentreZ, t.ball_centre_z, |i| {
-        Pos(sat16(div(i, n)), sat16(rem(i, n)), 0)
-    })?;
-    check_len(Field::BallDelta, t.ball_delta, 4 * nb)?;
-    check_finite(Field::BallDelta, t.ball_delta, |i| Pos(sat16(i), 0, 0))?;
-    for (b, d) in floats(t.ball_delta).enumerate() {
-        if d < 0.0 {
-            return Err(ImageError::NegativeBallRadius { ball: sat16(b) });
+    // Test records [ĉ_z,0 … ĉ_z,n−1, ŝ], one per ball.
+    check_len(Field::BallTest, t.ball_test, 4 * nb * (n + 1))?;
+    for b in 0..nb {
+        for k in 0..n {
+            if !f32_at(t.ball_test, b * (n + 1) + k).is_finite() {
+                return Err(ImageError::NonFinite {
+                    field: Field::BallCentreZ,
+                    pos: Pos(sat16(b), sat16(k), 0),
+                });
+            }
+        }
+        let s = f32_at(t.ball_test, b * (n + 1) + n);
+        if !s.is_finite() {
+            return Err(ImageError::NonFinite {
+                field: Field::BallThreshold,
+                pos: Pos(sat16(b), 0, 0),
+            });
+        }
+        if s < 0.0 {
+            return Err(ImageError::NegativeBallThreshold { ball: sat16(b) });
         }
     }
     check_len(Field::BallLocation, t.ball_location, nb)?;
@@ -432,13 +456,30 @@ pub(crate) fn validate_tables(dims: Dims, t: &PwaTables<'_>) -> Result<(), Image
         start = end;
     }
 
-    validate_tree(t, nn, nl)
+    validate_tree(t, n, nn, nl)
+}
+
+/// Bytes of one tree node record: n + 1 f32 (`a`, `b`) and two `u16` child codes.
+pub(crate) const fn node_record_len(n: usize) -> usize {
+    4 * n + 8
+}
+
+/// Value `k` of node `i`'s record (`a_k` for k < n, `b` for k = n); 0.0 out of range.
+fn node_value(node: &[u8], n: usize, i: usize, k: usize) -> f32 {
+    let rec = node_record_len(n) / 4;
+    f32_at(node, i.saturating_mul(rec).saturating_add(k))
+}
+
+/// Child code of node `i` on `side` (0 left, 1 right); 0 out of range (never for a validated image).
+fn node_child(node: &[u8], n: usize, i: usize, side: usize) -> u16 {
+    let rec = node_record_len(n) / 2;
+    u16_le(node, i.saturating_mul(rec).saturating_add(2 * (n + 1) + side))
 }
 
 /// The tree rules: children after parents and in range, everything reachable, depth within capacity and
 /// equal to the stored one. One pass in index order: since every parent precedes its children, a node's
 /// depth (tests up to and including it) is final when the pass reaches it.
-fn validate_tree(t: &PwaTables<'_>, nn: usize, nl: usize) -> Result<(), ImageError> {
+fn validate_tree(t: &PwaTables<'_>, n: usize, nn: usize, nl: usize) -> Result<(), ImageError> {
     let nn = nn.min(MAX_TREE_NODES);
     let nl = nl.min(MAX_LEAVES);
     if nn == 0 {
@@ -466,7 +507,7 @@ fn validate_tree(t: &PwaTables<'_>, nn: usize, nl: usize) -> Result<(), ImageErr
         }
         worst = worst.max(d);
         for side in 0..2 {
-            match Child::from_code(u16_le(t.node_child, 2 * i + side)) {
+            match Child::from_code(node_child(t.node, n, i, side)) {
                 Child::Outside => {}
                 Child::Leaf(l) => {
                     if l as usize >= nl {
@@ -572,7 +613,7 @@ impl<'a> Image<'a> {
         if node >= self.n_nodes() || i >= self.dims.n {
             return 0.0;
         }
-        f32_at(self.pwa.node_a, node * self.dims.n + i)
+        node_value(self.pwa.node, self.dims.n, node, i)
     }
 
     /// Offset `b` of node `node`; 0.0 out of range.
@@ -580,7 +621,7 @@ impl<'a> Image<'a> {
         if node >= self.n_nodes() {
             return 0.0;
         }
-        f32_at(self.pwa.node_b, node)
+        node_value(self.pwa.node, self.dims.n, node, self.dims.n)
     }
 
     /// Children (left: `aᵀx ≤ b`, right: otherwise) of node `node`; `None` out of range.
@@ -589,8 +630,8 @@ impl<'a> Image<'a> {
             return None;
         }
         Some((
-            Child::from_code(u16_le(self.pwa.node_child, 2 * node)),
-            Child::from_code(u16_le(self.pwa.node_child, 2 * node + 1)),
+            Child::from_code(node_child(self.pwa.node, self.dims.n, node, 0)),
+            Child::from_code(node_child(self.pwa.node, self.dims.n, node, 1)),
         ))
     }
 
@@ -634,7 +675,7 @@ impl<'a> Image<'a> {
         if ball >= self.n_balls() || i >= self.dims.n {
             return 0.0;
         }
-        f32_at(self.pwa.ball_centre_z, ball * self.dims.n + i)
+        f32_at(self.pwa.ball_test, ball * (self.dims.n + 1) + i)
     }
 
     /// `R̂_ℓ[row, col]`, the factor of location ℓ's metric used by the ball test; 0.0 out of range.
@@ -650,13 +691,15 @@ impl<'a> Image<'a> {
         f32_at(self.pwa.R, (location * n + row) * n + col)
     }
 
-    /// Stored radius ρ̂ of ball `ball` (the whitened test accepts `‖fl(R̂x̂) − ĉ_z‖² ≤ fl(ρ̂²)`, module
-    /// doc); 0.0 out of range.
-    pub fn ball_delta(&self, ball: usize) -> f32 {
+    /// Stored squared threshold ŝ of ball `ball`: the whitened test accepts x̂ iff the computed
+    /// `fl(‖fl(R̂x̂) − ĉ_z‖²) ≤ ŝ` (module doc), so accepted states have computed squared whitened
+    /// distance ≤ ŝ; 0.0 out of range.
+    pub fn ball_threshold(&self, ball: usize) -> f32 {
         if ball >= self.n_balls() {
             return 0.0;
         }
-        f32_at(self.pwa.ball_delta, ball)
+        let n = self.dims.n;
+        f32_at(self.pwa.ball_test, ball * (n + 1) + n)
     }
 
     /// Location (metric) of ball `ball`; 0 out of range.
@@ -717,33 +760,31 @@ impl<'a> Image<'a> {
             return Region::OutsideTree;
         };
         let t = &self.pwa;
-        let mut code = if t.n_nodes == 0 { LEAF_BASE } else { 0 };
-        let mut tests = 0usize;
-        let leaf = loop {
-            match Child::from_code(code) {
-                Child::Outside => return Region::OutsideTree,
-                Child::Leaf(l) => break l,
-                Child::Node(i) => {
-                    if tests >= MAX_TREE_DEPTH {
-                        // Unreachable for a validated image (depth ≤ MAX_TREE_DEPTH); total anyway.
-                        return Region::OutsideTree;
-                    }
-                    tests += 1;
-                    let i = i as usize;
-                    let Some(a) = load::<N>(t.node_a, i * N) else {
-                        return Region::OutsideTree;
-                    };
-                    let mut s = 0.0f32;
-                    for k in 0..N {
-                        s += a[k] * x[k];
-                    }
-                    let side = if s <= f32_at(t.node_b, i) { 0 } else { 1 };
-                    code = u16_le(t.node_child, 2 * i + side);
+        // The walk: at most MAX_TREE_DEPTH tests (validated: the tree's depth is at most that).
+        let leaf = 'walk: {
+            if t.n_nodes == 0 {
+                break 'walk 0u16;
+            }
+            let mut i = 0usize;
+            for _ in 0..MAX_TREE_DEPTH {
+                let Some((a, b, children)) = load_node::<N>(t.node, i) else {
+                    return Region::OutsideTree;
+                };
+                let mut s = 0.0f32;
+                for k in 0..N {
+                    s += a[k] * x[k];
+                }
+                let code = if s <= b { children[0] } else { children[1] };
+                match Child::from_code(code) {
+                    Child::Node(c) => i = c as usize,
+                    Child::Leaf(l) => break 'walk l,
+                    Child::Outside => return Region::OutsideTree,
                 }
             }
+            // Unreachable for a validated image (depth ≤ MAX_TREE_DEPTH); total anyway.
+            return Region::OutsideTree;
         };
         let l = leaf as usize;
-        let leaf_partition = u16_le(t.leaf_partition, l);
         let start = match l {
             0 => 0,
             _ => u16_le(t.leaf_end, l - 1) as usize,
@@ -752,47 +793,64 @@ impl<'a> Image<'a> {
         // Validated: end − start ≤ MAX_LEAF_BALLS; the truncation makes the bound explicit.
         let refs = t.ball_ref.get(2 * start..2 * end).unwrap_or(&[]);
         let refs = refs.get(..2 * MAX_LEAF_BALLS).unwrap_or(refs);
-        // z = fl(R̂_ℓ x) for the location ℓ of the ball being tested (module doc, "The whitened ball
-        // test"); computed once for a single-location image, else recomputed when the location changes.
-        let single = self.dims.n_locations == 1;
-        let mut z = [0.0f32; N];
-        let mut z_loc = usize::MAX;
-        if single {
-            whiten::<N>(&mut z, t.R, 0, &x);
-            z_loc = 0;
-        }
-        for r in refs.chunks_exact(2) {
-            let b = u16::from_le_bytes([r[0], r[1]]);
-            let bu = b as usize;
-            if !single {
-                let loc = t.ball_location.get(bu).copied().unwrap_or(0) as usize;
-                if loc != z_loc {
-                    whiten::<N>(&mut z, t.R, loc, &x);
-                    z_loc = loc;
-                }
-            }
-            let Some(cz) = load::<N>(t.ball_centre_z, bu * N) else {
-                continue;
-            };
-            let mut d2 = 0.0f32;
-            for i in 0..N {
-                let d = z[i] - cz[i];
-                d2 += d * d;
-            }
-            let rho = f32_at(t.ball_delta, bu);
-            if d2 <= rho * rho {
-                return Region::Inside {
-                    leaf,
-                    partition: u16_le(t.ball_partition, bu),
-                    ball: b,
-                };
-            }
-        }
-        Region::OutsideBalls {
-            leaf,
-            partition: leaf_partition,
+        // The location check is hoisted out of the ball loop for a single-location image.
+        let found = if self.dims.n_locations == 1 {
+            scan_balls::<N, true>(t, refs, &x)
+        } else {
+            scan_balls::<N, false>(t, refs, &x)
+        };
+        match found {
+            Some(b) => Region::Inside {
+                leaf,
+                partition: u16_le(t.ball_partition, b as usize),
+                ball: b,
+            },
+            None => Region::OutsideBalls {
+                leaf,
+                partition: u16_le(t.leaf_partition, l),
+            },
         }
     }
+}
+
+/// The whitened ball test (module doc) of the balls referenced by `refs` (little-endian `u16`), in order:
+/// the first ball containing `x`, or `None`. `z = fl(R̂_ℓ x)` is formed for the location ℓ of the ball being
+/// tested: once, for location 0, when `SINGLE` (a single-location image, so the loop body has no location
+/// check), else again whenever the location changes from one listed ball to the next.
+#[inline(always)]
+fn scan_balls<const N: usize, const SINGLE: bool>(
+    t: &PwaTables<'_>,
+    refs: &[u8],
+    x: &[f32; N],
+) -> Option<u16> {
+    let mut z = [0.0f32; N];
+    let mut z_loc = usize::MAX;
+    if SINGLE {
+        whiten::<N>(&mut z, t.R, 0, x);
+    }
+    for r in refs.chunks_exact(2) {
+        let b = u16::from_le_bytes([r[0], r[1]]);
+        let bu = b as usize;
+        if !SINGLE {
+            let loc = t.ball_location.get(bu).copied().unwrap_or(0) as usize;
+            if loc != z_loc {
+                whiten::<N>(&mut z, t.R, loc, x);
+                z_loc = loc;
+            }
+        }
+        let Some((cz, threshold)) = load_ball::<N>(t.ball_test, bu) else {
+            continue;
+        };
+        let mut d2 = 0.0f32;
+        for i in 0..N {
+            let d = z[i] - cz[i];
+            d2 += d * d;
+        }
+        if d2 <= threshold {
+            return Some(b);
+        }
+    }
+    None
 }
 
 /// `z_i = fl(Σ_{j=i}^{N−1} R̂_ij x_j)` for the factor of location `loc`, summed left to right from 0 (module
@@ -818,14 +876,46 @@ fn load_x<const N: usize>(x: &[f32]) -> Option<[f32; N]> {
     Some(out)
 }
 
+/// `N` little-endian f32 values from the start of `b` (which holds at least `4N` bytes when called).
+#[inline(always)]
+fn floats_n<const N: usize>(b: &[u8]) -> [f32; N] {
+    let mut out = [0.0f32; N];
+    for (o, c) in out.iter_mut().zip(b.chunks_exact(4)) {
+        *o = f32::from_le_bytes([c[0], c[1], c[2], c[3]]);
+    }
+    out
+}
+
 /// `N` little-endian f32 values of `bytes` starting at value index `start`; `None` if out of range.
 #[inline(always)]
 fn load<const N: usize>(bytes: &[u8], start: usize) -> Option<[f32; N]> {
     let s = start.checked_mul(4)?;
     let b = bytes.get(s..s.checked_add(4 * N)?)?;
-    let mut out = [0.0f32; N];
-    for (o, c) in out.iter_mut().zip(b.chunks_exact(4)) {
-        *o = f32::from_le_bytes([c[0], c[1], c[2], c[3]]);
-    }
-    Some(out)
+    Some(floats_n::<N>(b))
+}
+
+/// Record `i` of the tree node table: `(a, b, [left, right])`, read with one bounds check; `None` if out of
+/// range.
+#[inline(always)]
+fn load_node<const N: usize>(bytes: &[u8], i: usize) -> Option<([f32; N], f32, [u16; 2])> {
+    let len = node_record_len(N);
+    let s = i.checked_mul(len)?;
+    let rec = bytes.get(s..s.checked_add(len)?)?;
+    let (head, &[l0, l1, r0, r1]) = rec.split_last_chunk::<4>()?;
+    let (head, &b) = head.split_last_chunk::<4>()?;
+    Some((
+        floats_n::<N>(head),
+        f32::from_le_bytes(b),
+        [u16::from_le_bytes([l0, l1]), u16::from_le_bytes([r0, r1])],
+    ))
+}
+
+/// Test record `i` of the ball table: `(ĉ_z, ŝ)`, read with one bounds check; `None` if out of range.
+#[inline(always)]
+fn load_ball<const N: usize>(bytes: &[u8], i: usize) -> Option<([f32; N], f32)> {
+    let len = 4 * (N + 1);
+    let s = i.checked_mul(len)?;
+    let rec = bytes.get(s..s.checked_add(len)?)?;
+    let (head, &t) = rec.split_last_chunk::<4>()?;
+    Some((floats_n::<N>(head), f32::from_le_bytes(t)))
 }

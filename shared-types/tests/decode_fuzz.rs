@@ -55,7 +55,7 @@ fn kind(e: &ImageError) -> &'static str {
         BallRefOutOfRange { .. } => "BallRefOutOfRange",
         BallLocationOutOfRange { .. } => "BallLocationOutOfRange",
         BallPartitionOutOfRange { .. } => "BallPartitionOutOfRange",
-        NegativeBallRadius { .. } => "NegativeBallRadius",
+        NegativeBallThreshold { .. } => "NegativeBallThreshold",
         FactorNotUpperTriangular { .. } => "FactorNotUpperTriangular",
         FactorDiagonal { .. } => "FactorDiagonal",
         BufferTooSmall { .. } => "BufferTooSmall",

@@ -141,7 +141,7 @@ fn bad_state_is_bad_frame_and_does_not_advance() {
 fn overflowing_input_is_out_of_envelope() {
     let mut c = two_partitions();
     c.gain[2] = 3.0e38;
-    c.ball_delta[2] = 100.0;
+    c.ball_threshold[2] = 1.0e4;
     with(&c, |mut ctl| {
         assert_eq!(ctl.step(&[10.0, 0.0]), Err(Status::OutOfEnvelope));
         assert_eq!(ctl.step_index(), 0);
@@ -315,7 +315,7 @@ fn reference(c: &PwaContent, paths: &[(Vec<(usize, bool)>, Child)], x: &[f64]) -
             let partition = c.leaf_partition[l as usize];
             let mut found = None;
             for &b in &c.leaf_balls[l as usize] {
-                // The whitened test in f64: ‖R̂x − ĉ_z‖² ≤ ρ̂².
+                // The whitened test in f64: ‖R̂x − ĉ_z‖² ≤ ŝ.
                 let bu = b as usize;
                 let loc = c.ball_location[bu] as usize;
                 let R = &c.R[loc * n * n..(loc + 1) * n * n];
@@ -331,7 +331,7 @@ fn reference(c: &PwaContent, paths: &[(Vec<(usize, bool)>, Child)], x: &[f64]) -
                     d2 += e * e;
                     abs += (e.abs() + zabs + cz.abs()).powi(2);
                 }
-                let r2 = (c.ball_delta[bu] as f64).powi(2);
+                let r2 = c.ball_threshold[bu] as f64;
                 ball_margin = ball_margin.min((d2 - r2).abs() / (abs + r2 + 1e-300));
                 if found.is_none() && d2 <= r2 {
                     found = Some(b);
@@ -362,7 +362,7 @@ fn random_state(rng: &mut ChaCha8Rng, c: &PwaContent, box_half: f32) -> Vec<f32>
             .map(|_| rng.random_range(-box_half..box_half))
             .collect()
     } else {
-        let b = rng.random_range(0..c.ball_delta.len());
+        let b = rng.random_range(0..c.ball_threshold.len());
         (0..n)
             .map(|i| c.ball_centre[b * n + i] + rng.random_range(-1.0f32..1.0))
             .collect()
@@ -432,7 +432,7 @@ fn f32_law_matches_f64_reference_within_rounding_bound() {
         let (n, m) = (c.n, c.m);
         for _ in 0..60 {
             // Mostly just off a ball centre, so that most states are inside the envelope.
-            let b = rng.random_range(0..c.ball_delta.len());
+            let b = rng.random_range(0..c.ball_threshold.len());
             let x: Vec<f32> = (0..n)
                 .map(|i| c.ball_centre[b * n + i] + rng.random_range(-0.2f32..0.2))
                 .collect();
@@ -472,8 +472,8 @@ fn f32_law_matches_f64_reference_within_rounding_bound() {
 #[test]
 fn ball_test_acceptance_respects_the_documented_rounding_bound() {
     // One leaf, one ball; states placed at relative distance 1 ± 1e-6 from the boundary of the whitened
-    // ball ‖R̂x − ĉ_z‖ ≤ ρ̂. An accepted state must satisfy steps 1–3 of `shared_types::pwa` ("Rounding of
-    // the ball test") with the stored data (D = 0, e_c = 0): ‖R̂x̂ − ĉ_z‖ ≤ S(ρ̂) + ‖γ_n|R̂||x̂|‖ + 2n^{3/2}η.
+    // ball ‖R̂x − ĉ_z‖² ≤ ŝ. An accepted state must satisfy steps 1–3 of `shared_types::pwa` ("Rounding of
+    // the ball test") with the stored data (D = 0, e_c = 0): ‖R̂x̂ − ĉ_z‖ ≤ S(ŝ) + ‖γ_n|R̂||x̂|‖ + 2n^{3/2}η.
     let mut rng = ChaCha8Rng::seed_from_u64(4242);
     let u = f64::from(f32::EPSILON) / 2.0;
     let eta = 2f64.powi(-150);
@@ -486,6 +486,8 @@ fn ball_test_acceptance_respects_the_documented_rounding_bound() {
             .map(|_| rng.random_range(-5.0f32..5.0) * scale)
             .collect();
         let delta: f32 = rng.random_range(0.01..3.0) * scale;
+        // The stored threshold as the host forms it from a radius: one f32 product.
+        let threshold = delta * delta;
         let c = PwaContent {
             n,
             m: 1,
@@ -505,7 +507,7 @@ fn ball_test_acceptance_respects_the_documented_rounding_bound() {
             R: vec![],
             ball_centre: centre.clone(),
             ball_centre_z: vec![],
-            ball_delta: vec![delta],
+            ball_threshold: vec![threshold],
             ball_location: vec![0],
             ball_partition: vec![0],
             fallback: FallbackC::Zero,
@@ -518,11 +520,10 @@ fn ball_test_acceptance_respects_the_documented_rounding_bound() {
         let img = decode(&bytes).unwrap();
         let R: Vec<f64> = c.R.iter().map(|&v| v as f64).collect();
         let cz: Vec<f64> = c.ball_centre_z.iter().map(|&v| v as f64).collect();
-        // A direction v, scaled so that ‖R̂v‖ = ρ̂(1 ± 1e-6).
+        // A direction v, scaled so that ‖R̂v‖ = √ŝ(1 ± 1e-6).
         let gn = n as f64 * u / (1.0 - n as f64 * u);
-        let rho = delta as f64;
-        let S =
-            ((rho * rho * (1.0 + u) + (2 * n + 1) as f64 * eta) / (1.0 - gn)).sqrt() / (1.0 - u);
+        let rho = (threshold as f64).sqrt();
+        let S = ((threshold as f64 + (2 * n) as f64 * eta) / (1.0 - gn)).sqrt() / (1.0 - u);
         for _ in 0..50 {
             let dir: Vec<f64> = (0..n).map(|_| rng.random_range(-1.0..1.0)).collect();
             let q: f64 = (0..n)

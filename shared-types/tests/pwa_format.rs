@@ -45,7 +45,10 @@ fn round_trip_fixed_content() {
     assert_eq!(img.leaf_refs(1), (2, 1));
     assert_eq!(img.leaf_ball(1, 0), Some(2));
     assert_eq!(img.leaf_ball(1, 1), None);
-    assert_eq!(img.ball_delta(1), 0.75);
+    assert_eq!(img.ball_threshold(1), 0.5625);
+    assert_eq!(img.ball_centre_z(2, 0), 1.0);
+    assert_eq!(img.node_normal(1, 1), 1.0);
+    assert_eq!(img.node_offset(1), 2.0);
     assert_eq!(img.ball_partition(2), 1);
     // Out-of-range accessors are total.
     assert_eq!(img.law_gain(2, 0, 0), 0.0);
@@ -164,7 +167,7 @@ fn largest_image_fits_max_image_len() {
         R: vec![],
         ball_centre: vec![0.25; nb * n],
         ball_centre_z: vec![],
-        ball_delta: vec![1.0; nb],
+        ball_threshold: vec![1.0; nb],
         ball_location: (0..nb).map(|b| (b % nl) as u8).collect(),
         ball_partition: (0..nb).map(|b| (b % np) as u16).collect(),
         fallback: FallbackC::Linear {
@@ -367,6 +370,18 @@ fn rejects_degenerate_and_non_finite_hyperplanes() {
             pos: Pos(0, 0, 0)
         }
     );
+    assert_eq!(c.decode_err().to_string(), "node 0: b is not finite");
+    // A node record short by one child code: the record table has the wrong length.
+    let mut c = two_partitions();
+    c.node_child.pop();
+    assert_eq!(
+        c.decode_err(),
+        ImageError::FieldLength {
+            field: Field::Node,
+            expected: 32,
+            found: 30
+        }
+    );
 }
 
 #[test]
@@ -453,11 +468,11 @@ fn a_mixed_leaf_applies_the_law_of_the_containing_ball() {
         }) => {}
         other => panic!("{other:?}"),
     }
-    // With ball 2 shrunk to δ 0.5 and leaf 1 listing ball 1 ((−0.5, 1), δ 0.75, partition 0) after it, the
+    // With ball 2 shrunk to δ 0.5 (threshold 0.25) and leaf 1 listing ball 1 ((−0.5, 1), δ 0.75, partition 0) after it, the
     // state (0.1, 1.0) (right of x1 = 0: leaf 1) lies only in ball 1, so partition 0's law applies.
     let mut c = two_partitions();
     c.leaf_balls[1] = vec![2, 1];
-    c.ball_delta[2] = 0.5;
+    c.ball_threshold[2] = 0.25;
     let bytes = c.to_bytes().unwrap();
     let img = shared_types::image::decode(&bytes).unwrap();
     match img.locate(&[0.1, 1.0]) {
@@ -473,17 +488,27 @@ fn a_mixed_leaf_applies_the_law_of_the_containing_ball() {
 #[test]
 fn rejects_bad_balls() {
     let mut c = two_partitions();
-    c.ball_delta[2] = -0.5;
-    assert_eq!(c.decode_err(), ImageError::NegativeBallRadius { ball: 2 });
+    c.ball_threshold[2] = -0.5;
+    assert_eq!(c.decode_err(), ImageError::NegativeBallThreshold { ball: 2 });
+    assert_eq!(c.decode_err().to_string(), "ball 2: threshold is negative");
     let mut c = two_partitions();
-    c.ball_delta[2] = f32::NAN;
-    assert_eq!(
-        c.decode_err(),
-        ImageError::NonFinite {
-            field: Field::BallDelta,
-            pos: Pos(2, 0, 0)
-        }
-    );
+    c.ball_threshold[2] = -f32::MIN_POSITIVE;
+    assert_eq!(c.decode_err(), ImageError::NegativeBallThreshold { ball: 2 });
+    for bad in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
+        let mut c = two_partitions();
+        c.ball_threshold[2] = bad;
+        assert_eq!(
+            c.decode_err(),
+            ImageError::NonFinite {
+                field: Field::BallThreshold,
+                pos: Pos(2, 0, 0)
+            }
+        );
+        assert_eq!(
+            c.decode_err().to_string(),
+            "ball 2: threshold is not finite"
+        );
+    }
     let mut c = two_partitions();
     c.ball_centre[3] = f32::INFINITY;
     assert_eq!(
@@ -504,13 +529,25 @@ fn rejects_bad_balls() {
     );
     let mut c = two_partitions();
     c.ball_centre_z.pop();
-    assert!(matches!(
+    assert_eq!(
         c.decode_err(),
         ImageError::FieldLength {
-            field: Field::BallCentreZ,
-            ..
+            field: Field::BallTest,
+            expected: 36,
+            found: 32
         }
-    ));
+    );
+    let mut c = two_partitions();
+    c.ball_threshold.pop();
+    c.counts = Some((2, 2, 3));
+    assert_eq!(
+        c.decode_err(),
+        ImageError::FieldLength {
+            field: Field::BallTest,
+            expected: 36,
+            found: 32
+        }
+    );
     let mut c = two_partitions();
     c.ball_location[1] = 1;
     assert_eq!(
@@ -533,9 +570,11 @@ fn rejects_bad_balls() {
             found: 2
         }
     );
-    // A zero radius is allowed (a single certified point).
+    // A zero threshold is allowed (a single certified point), and so is −0.
     let mut c = two_partitions();
-    c.ball_delta[0] = 0.0;
+    c.ball_threshold[0] = 0.0;
+    assert!(c.to_bytes().is_ok());
+    c.ball_threshold[0] = -0.0;
     assert!(c.to_bytes().is_ok());
 }
 
@@ -609,9 +648,9 @@ fn rejects_counts_and_dimensions_outside_capacity() {
     assert_eq!(
         c.decode_err(),
         ImageError::FieldLength {
-            field: Field::NodeNormal,
-            expected: 24,
-            found: 16
+            field: Field::Node,
+            expected: 48,
+            found: 32
         }
     );
 }

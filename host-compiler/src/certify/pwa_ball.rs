@@ -1,20 +1,23 @@
-//! The stored radius of a PWA ball for the evaluator's whitened f32 test (`shared_types::pwa`, "The whitened
-//! ball test" and "Rounding of the ball test"), and the same bound read backwards for the verifier.
+//! The stored threshold of a PWA ball for the evaluator's whitened f32 test (`shared_types::pwa`, "The
+//! whitened ball test" and "Rounding of the ball test"), and the same bound read backwards for the
+//! verifier.
 //!
 //! The image stores per location `R̂ = fl32(R)`, R the upper Cholesky factor of the CAF metric P
-//! (`P = RᵀR`, (3.8)), and per ball the whitened centre `ĉ_z = fl32(R̂ ĉ)` (ĉ = fl32(c)) and a radius ρ̂.
-//! The evaluator accepts x̂ when `fl(Σ_i fl(fl(R̂x̂)_i − ĉ_z,i)²) ≤ fl(ρ̂·ρ̂)`. The derivation in
+//! (`P = RᵀR`, (3.8)), and per ball the whitened centre `ĉ_z = fl32(R̂ ĉ)` (ĉ = fl32(c)) and a squared
+//! threshold ŝ. The evaluator accepts x̂ when `fl(Σ_i fl(fl(R̂x̂)_i − ĉ_z,i)²) ≤ ŝ`. The derivation in
 //! `shared_types::pwa` shows that every accepted x̂, and every real x with `fl32(x) = x̂`, satisfies
 //!
 //! ```text
-//! ‖x − c‖_P ≤ sqrt(1 + χ) · (S(ρ̂) + β) / (1 − α)
+//! ‖x − c‖_P ≤ sqrt(1 + χ) · (S(ŝ) + β) / (1 − α)  ≤  sqrt(1 + χ) · (S_ρ(ρ̂) + β) / (1 − α)   (ŝ = fl32(ρ̂·ρ̂))
 //! ```
 //!
-//! with S, α, β, χ computed here from P, R̂, c and ĉ_z ([`pwa_accept_radius`]). The discrepancies
+//! with S, α, β, χ computed here from P, R̂, c and ĉ_z ([`pwa_accept_radius`], from ŝ). The discrepancies
 //! `D = |R̂ − R|` and `e_c = ĉ_z − R c` are *measured* (not assumed to be the rounding bounds), so the same
 //! function also bounds an image whose factor was computed from a slightly different P (the verifier
-//! passes the image's f32 P). [`pwa_ball_radius`] returns the largest f32 ρ̂ whose bound is ≤ δ, the
-//! certified radius (Theorem 6.6 needs every accepted state in `B_P(x̃_i(κ), δ_i)`).
+//! passes the image's f32 P). [`pwa_ball_radius`] returns the largest f32 ρ̂ whose bound (the right-hand
+//! one) is ≤ δ, the certified radius (Theorem 6.6 needs every accepted state in `B_P(x̃_i(κ), δ_i)`), and
+//! [`pwa_ball_threshold`] the threshold `ŝ = fl32(ρ̂·ρ̂)` the image stores: the single f32 product the
+//! evaluator of image format 2 formed per step, so acceptance is bit-identical to it.
 //!
 //! Host f64 rounding: every term of the bound is a sum of non-negative quantities except `e_c`, which
 //! carries its own γ⁽⁶⁴⁾ term; the few dozen f64 operations on the positive terms are covered by a final
@@ -161,31 +164,66 @@ impl AcceptBound {
         })
     }
 
-    /// S(ρ̂) = sqrt((ρ̂²(1 + u) + (2n + 1)η)/(1 − γ_n))/(1 − u): the largest ‖w + f‖ acceptance allows.
-    fn s_of(&self, rho: f64) -> f64 {
+    /// S_ρ(ρ̂) = sqrt((ρ̂²(1 + u) + (2n + 1)η)/(1 − γ_n))/(1 − u): the largest ‖w + f‖ acceptance allows
+    /// with threshold fl32(ρ̂·ρ̂).
+    fn s_of_rho(&self, rho: f64) -> f64 {
         let extra = (2 * self.n + 1) as f64 * ETA;
         ((rho * rho * (1.0 + U32) + extra) / (1.0 - gamma(self.n, U32))).sqrt() / (1.0 - U32)
     }
 
-    /// Upper bound on ‖x − c‖_P over accepted states for stored radius ρ̂.
+    /// S(ŝ) = sqrt((ŝ + 2nη)/(1 − γ_n))/(1 − u): the largest ‖w + f‖ acceptance allows with threshold ŝ.
+    fn s_of_threshold(&self, s: f64) -> f64 {
+        let extra = (2 * self.n) as f64 * ETA;
+        ((s + extra) / (1.0 - gamma(self.n, U32))).sqrt() / (1.0 - U32)
+    }
+
+    /// Upper bound on ‖x − c‖_P over accepted states, from S.
+    fn radius_of_s(&self, s_bound: f64) -> f64 {
+        self.k * (s_bound + self.beta) / (1.0 - self.alpha) * (1.0 + HOST_SLACK)
+    }
+
+    /// Upper bound on ‖x − c‖_P over accepted states for threshold fl32(ρ̂·ρ̂).
     fn radius(&self, rho: f64) -> f64 {
-        self.k * (self.s_of(rho) + self.beta) / (1.0 - self.alpha) * (1.0 + HOST_SLACK)
+        self.radius_of_s(self.s_of_rho(rho))
     }
 }
 
 /// Upper bound on `‖x − c‖_P` over every f32 state x̂ that the evaluator's whitened test accepts for a
-/// ball stored as (`Rh`, `cz`, `rho`), and every real x with `fl32(x) = x̂` (module doc; derivation in
-/// `shared_types::pwa`). `P` is the metric (n × n), `Rh` the stored factor (n × n row-major, f32 values),
-/// `c` the centre the bound is about, `cz` the stored whitened centre. `+∞` when the data do not admit a
-/// bound (P not positive definite, shapes wrong, or α ≥ 1/2).
-pub fn pwa_accept_radius(P: MatRef<'_, f64>, Rh: &[f64], c: &[f64], cz: &[f64], rho: f32) -> f64 {
+/// ball stored as (`Rh`, `cz`, `threshold`), and every real x with `fl32(x) = x̂` (module doc; derivation
+/// in `shared_types::pwa`): acceptance means the computed squared whitened distance is ≤ the stored
+/// threshold ŝ. `P` is the metric (n × n), `Rh` the stored factor (n × n row-major, f32 values), `c` the
+/// centre the bound is about, `cz` the stored whitened centre. `+∞` when the data do not admit a bound (P
+/// not positive definite, shapes wrong, α ≥ 1/2, or ŝ negative or not finite).
+pub fn pwa_accept_radius(
+    P: MatRef<'_, f64>,
+    Rh: &[f64],
+    c: &[f64],
+    cz: &[f64],
+    threshold: f32,
+) -> f64 {
     match AcceptBound::new(P, Rh, c, cz) {
-        Some(b) if rho >= 0.0 => b.radius(rho as f64),
+        Some(b) if threshold >= 0.0 && threshold.is_finite() => {
+            b.radius_of_s(b.s_of_threshold(threshold as f64))
+        }
         _ => f64::INFINITY,
     }
 }
 
-/// The radius ρ̂ to store for the certified ball `B_P(c, δ)` of a PWA image (module doc): the largest f32
+/// The squared threshold ŝ to store for the certified ball `B_P(c, δ)` of a PWA image: `fl32(ρ̂·ρ̂)` with
+/// ρ̂ = [`pwa_ball_radius`] (module doc; its [`pwa_accept_radius`] is ≤ δ). `None` where
+/// [`pwa_ball_radius`] is `None` or the square overflows.
+pub fn pwa_ball_threshold(P: MatRef<'_, f64>, c: &[f64], delta: f64) -> Option<f32> {
+    pwa_ball_radius(P, c, delta).and_then(threshold_of_radius)
+}
+
+/// `fl32(ρ̂·ρ̂)`, the stored threshold for radius ρ̂ (one f32 multiplication, as the evaluator of image
+/// format 2 computed it per step); `None` if ρ̂ is negative or the square is not finite.
+pub fn threshold_of_radius(rho: f32) -> Option<f32> {
+    let s = rho * rho;
+    (rho >= 0.0 && s.is_finite()).then_some(s)
+}
+
+/// The radius ρ̂ behind the threshold ŝ = fl32(ρ̂·ρ̂) stored for the certified ball `B_P(c, δ)` of a PWA image (module doc): the largest f32
 /// whose [`pwa_accept_radius`] is ≤ δ, with the factor [`metric_factor_f32`] and the whitened centre
 /// [`whitened_centre`] of `fl32(c)` that the emitter stores. `None` if no radius ≥ 0 is certified (δ too
 /// small for the f32 resolution at c, or P not positive definite).

@@ -224,7 +224,8 @@ struct BallJson {
     centre: Vec<f32>,
     /// Whitened centre `fl32(R̂ ĉ)` of the evaluator's ball test.
     centre_z: Vec<f32>,
-    delta: f32,
+    /// Squared threshold ŝ of the ball test (accept iff the computed squared whitened distance is ≤ ŝ).
+    threshold: f32,
     location: usize,
     partition: usize,
 }
@@ -329,7 +330,7 @@ impl PwaJson {
                     ball: b,
                     centre: (0..n).map(|i| img.ball_centre(b, i)).collect(),
                     centre_z: (0..n).map(|i| img.ball_centre_z(b, i)).collect(),
-                    delta: img.ball_delta(b),
+                    threshold: img.ball_threshold(b),
                     location: img.ball_location(b),
                     partition: img.ball_partition(b),
                 })
@@ -623,10 +624,10 @@ fn pwa_summary(s: &mut String, p: &PwaJson) {
     for b in p.ball_table.iter().take(SUMMARY_ITEMS) {
         let _ = writeln!(
             s,
-            "ball {}: centre {}, delta {}, location {}, partition {}",
+            "ball {}: centre {}, threshold {}, location {}, partition {}",
             b.ball,
             vec_str(&b.centre),
-            b.delta,
+            b.threshold,
             b.location,
             b.partition
         );

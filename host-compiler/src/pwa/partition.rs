@@ -231,7 +231,9 @@ impl Tree<'_> {
         let p = &self.ctx.points[k];
         let i = self.b.add_ball(CertifiedBall {
             centre: p.x.clone(),
-            delta: p.rho,
+            // ρ̂ is an f32 radius widened exactly; ŝ = fl32(ρ̂·ρ̂) is what the image stores (always finite for
+            // the radii `pwa_ball_radius` returns; 0 would only shrink the ball).
+            threshold: crate::certify::threshold_of_radius(p.rho as f32).unwrap_or(0.0) as f64,
             location: 0,
             partition: law,
         });

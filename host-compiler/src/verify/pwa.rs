@@ -11,9 +11,10 @@
 //! # The certificate, recomputed (nothing from the learner is trusted)
 //! With P the image's metric, K_j, θ0_j the stored law of partition j and (A, B, g) the spec's sampled plant:
 //! * **(6.6)** for every partition: σ_j = λ_min(P − Ã_jᵀPÃ_j) > 0 with Ã_j = A + B K_j.
-//! * **The f32 ball test**: the states the evaluator accepts in ball (c, ρ) lie within
-//!   r = [`crate::certify::pwa_accept_radius`] of c, recomputed from the stored factor R̂, whitened centre and
-//!   ρ (slightly above ρ); r, not ρ, is the radius of the states a law is applied to below.
+//! * **The f32 ball test**: a ball is (c, ρ) with ρ = √ŝ, ŝ its stored squared threshold; the states the
+//!   evaluator accepts in it lie within r = [`crate::certify::pwa_accept_radius`] of c, recomputed from the
+//!   stored factor R̂, whitened centre and ŝ (slightly above ρ); r, not ρ, is the radius of the states a law
+//!   is applied to below.
 //! * **Containment across boundaries** (the hypothesis of Theorem 6.6, what Algorithm 5 repairs): every
 //!   stored ball is sent down the tree with the conservative ball–hyperplane test of §6.3
 //!   (`aᵀc − b ≤ ‖P^{-1/2}a‖r` goes left, `≥ −‖P^{-1/2}a‖r` goes right); every leaf it reaches must list a ball
@@ -88,7 +89,8 @@ pub fn recheck(
     };
     let centre =
         |b: usize| -> Vec<f64> { (0..n).map(|i| image.ball_centre(b, i) as f64).collect() };
-    let rho = |b: usize| image.ball_delta(b) as f64;
+    // ρ = √ŝ: the radius of the stored squared threshold.
+    let rho = |b: usize| (image.ball_threshold(b) as f64).sqrt();
     let centres: Vec<Vec<f64>> = (0..nb).map(centre).collect();
     // The radius within which every state the f32 ball test accepts lies (about the stored centre, in the
     // image's metric), recomputed from the stored factor, whitened centre and radius: the states the law
@@ -109,7 +111,7 @@ pub fn recheck(
                 &Rh,
                 &centres[b],
                 &cz,
-                image.ball_delta(b),
+                image.ball_threshold(b),
             )
         })
         .collect();
@@ -462,7 +464,7 @@ pub fn monte_carlo_pwa(
             &mut rng,
             &Pis,
             &centre(b),
-            image.ball_delta(b) as f64 * (1.0 - 1e-6),
+            (image.ball_threshold(b) as f64).sqrt() * (1.0 - 1e-6),
         );
         let xf: Vec<f32> = x.iter().map(|&v| v as f32).collect();
         match ctl.locate(&xf) {

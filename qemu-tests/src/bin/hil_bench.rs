@@ -176,7 +176,7 @@ fn pwa_step_max(spec: &str, tag: &str) -> Result<(u32, String), Box<dyn std::err
             let mut d: Vec<f64> = (0..n).map(|_| rng.random_range(-1.0..1.0)).collect();
             let norm = d.iter().map(|v| v * v).sum::<f64>().sqrt().max(1e-12);
             d.iter_mut().for_each(|v| *v /= norm);
-            let r = 1.02 * image.ball_delta(b) as f64;
+            let r = 1.02 * (image.ball_threshold(b) as f64).sqrt();
             let x: Vec<f64> = (0..n)
                 .map(|i| c[i] + r * (0..n).map(|j| Pis[(i, j)] * d[j]).sum::<f64>())
                 .collect();

@@ -295,7 +295,10 @@ use shared_types::capacity::{MAX_TREE_DEPTH, MAX_TREE_NODES};
 use shared_types::pwa::{Child, PwaTables, LEAF_BASE, OUTSIDE};
 
 /// PWA image content with owned arrays, as a test would write it down. Counts are the array lengths
-/// (nodes = `node_b.len()`, leaves = `leaf_partition.len()`, balls = `ball_delta.len()`) unless overridden.
+/// (nodes = `node_b.len()`, leaves = `leaf_partition.len()`, balls = `ball_threshold.len()`) unless overridden.
+/// The node fields and the ball test fields are kept apart here and interleaved into the image's records
+/// by [`PwaContent::owned`] (values missing from a short field are left out, so the record table comes out
+/// short).
 #[derive(Clone, Debug, PartialEq)]
 pub struct PwaContent {
     pub n: usize,
@@ -319,7 +322,8 @@ pub struct PwaContent {
     pub ball_centre: Vec<f32>,
     /// Whitened centres `fl32(R̂ ĉ)` (see [`PwaContent::whiten`]).
     pub ball_centre_z: Vec<f32>,
-    pub ball_delta: Vec<f32>,
+    /// Squared thresholds ŝ of the ball test.
+    pub ball_threshold: Vec<f32>,
     pub ball_location: Vec<u8>,
     pub ball_partition: Vec<u16>,
     pub fallback: FallbackC,
@@ -340,16 +344,13 @@ pub struct OwnedPwa {
     pub P: Vec<u8>,
     pub gain: Vec<u8>,
     pub offset: Vec<u8>,
-    pub node_a: Vec<u8>,
-    pub node_b: Vec<u8>,
-    pub node_child: Vec<u8>,
+    pub node: Vec<u8>,
     pub leaf_partition: Vec<u8>,
     pub leaf_end: Vec<u8>,
     pub ball_ref: Vec<u8>,
     pub R: Vec<u8>,
     pub ball_centre: Vec<u8>,
-    pub ball_centre_z: Vec<u8>,
-    pub ball_delta: Vec<u8>,
+    pub ball_test: Vec<u8>,
     pub ball_location: Vec<u8>,
     pub ball_partition: Vec<u8>,
     pub fb: Option<(Vec<u8>, Vec<u8>, Vec<u8>)>,
@@ -371,16 +372,13 @@ impl OwnedPwa {
                 n_balls: self.counts.2,
                 gain: &self.gain,
                 offset: &self.offset,
-                node_a: &self.node_a,
-                node_b: &self.node_b,
-                node_child: &self.node_child,
+                node: &self.node,
                 leaf_partition: &self.leaf_partition,
                 leaf_end: &self.leaf_end,
                 ball_ref: &self.ball_ref,
                 R: &self.R,
                 ball_centre: &self.ball_centre,
-                ball_centre_z: &self.ball_centre_z,
-                ball_delta: &self.ball_delta,
+                ball_test: &self.ball_test,
                 ball_location: &self.ball_location,
                 ball_partition: &self.ball_partition,
             },
@@ -503,16 +501,13 @@ impl PwaContent {
             P: le(&self.P),
             gain: le(&self.gain),
             offset: le(&self.offset),
-            node_a: le(&self.node_a),
-            node_b: le(&self.node_b),
-            node_child: le16(&self.node_child),
+            node: self.node_records(),
             leaf_partition: le16(&self.leaf_partition),
             leaf_end: le16(&ends),
             ball_ref: le16(&refs),
             R: le(&self.R),
             ball_centre: le(&self.ball_centre),
-            ball_centre_z: le(&self.ball_centre_z),
-            ball_delta: le(&self.ball_delta),
+            ball_test: self.ball_records(),
             ball_location: self.ball_location.clone(),
             ball_partition: le16(&self.ball_partition),
             fb: match &self.fallback {
@@ -529,9 +524,59 @@ impl PwaContent {
             counts: self.counts.unwrap_or((
                 self.node_b.len() as u16,
                 self.leaf_partition.len() as u16,
-                self.ball_delta.len() as u16,
+                self.ball_threshold.len() as u16,
             )),
         }
+    }
+
+    /// The node record table: per node `a` (n f32), `b` (f32), left and right child (u16), for as many
+    /// nodes as any node field covers; values a short field lacks are left out.
+    pub fn node_records(&self) -> Vec<u8> {
+        let n = self.n;
+        let count = self
+            .node_b
+            .len()
+            .max(self.node_a.len().div_ceil(n.max(1)))
+            .max(self.node_child.len().div_ceil(2));
+        let mut out = Vec::new();
+        for i in 0..count {
+            for k in 0..n {
+                if let Some(v) = self.node_a.get(i * n + k) {
+                    out.extend_from_slice(&v.to_le_bytes());
+                }
+            }
+            if let Some(v) = self.node_b.get(i) {
+                out.extend_from_slice(&v.to_le_bytes());
+            }
+            for side in 0..2 {
+                if let Some(c) = self.node_child.get(2 * i + side) {
+                    out.extend_from_slice(&c.to_le_bytes());
+                }
+            }
+        }
+        out
+    }
+
+    /// The ball test record table: per ball the whitened centre (n f32) and the threshold (f32), for as
+    /// many balls as either field covers; values a short field lacks are left out.
+    pub fn ball_records(&self) -> Vec<u8> {
+        let n = self.n;
+        let count = self
+            .ball_threshold
+            .len()
+            .max(self.ball_centre_z.len().div_ceil(n.max(1)));
+        let mut out = Vec::new();
+        for b in 0..count {
+            for k in 0..n {
+                if let Some(v) = self.ball_centre_z.get(b * n + k) {
+                    out.extend_from_slice(&v.to_le_bytes());
+                }
+            }
+            if let Some(v) = self.ball_threshold.get(b) {
+                out.extend_from_slice(&v.to_le_bytes());
+            }
+        }
+        out
     }
 
     /// Validates (through `Image::new_pwa`) and encodes.
@@ -631,7 +676,7 @@ impl PwaContent {
                 .flat_map(|b| (0..n).map(move |i| (b, i)))
                 .map(|(b, i)| img.ball_centre_z(b, i))
                 .collect(),
-            ball_delta: (0..img.n_balls()).map(|b| img.ball_delta(b)).collect(),
+            ball_threshold: (0..img.n_balls()).map(|b| img.ball_threshold(b)).collect(),
             ball_location: (0..img.n_balls())
                 .map(|b| img.ball_location(b) as u8)
                 .collect(),
@@ -838,7 +883,7 @@ pub fn random_pwa(rng: &mut ChaCha8Rng, s: PwaShape) -> PwaContent {
 
     // Balls: per partition a pool; each leaf lists a random subset of its partition's pool.
     let mut ball_centre = Vec::new();
-    let mut ball_delta = Vec::new();
+    let mut ball_threshold = Vec::new();
     let mut ball_location = Vec::new();
     let mut ball_partition = Vec::new();
     let mut pools: Vec<Vec<u16>> = vec![Vec::new(); np];
@@ -851,9 +896,10 @@ pub fn random_pwa(rng: &mut ChaCha8Rng, s: PwaShape) -> PwaContent {
             if !pool.is_empty() && rng.random_bool(0.3) {
                 listed.push(pool[rng.random_range(0..pool.len())]);
             } else {
-                let b = ball_delta.len() as u16;
+                let b = ball_threshold.len() as u16;
                 ball_centre.extend((0..n).map(|_| rng.random_range(-s.box_half..s.box_half)));
-                ball_delta.push(rng.random_range(0.3f32..2.0));
+                let r = rng.random_range(0.3f32..2.0);
+                ball_threshold.push(r * r);
                 ball_location.push(rng.random_range(0..nl as u8));
                 ball_partition.push(j);
                 pool.push(b);
@@ -897,7 +943,7 @@ pub fn random_pwa(rng: &mut ChaCha8Rng, s: PwaShape) -> PwaContent {
         R: vec![],
         ball_centre,
         ball_centre_z: vec![],
-        ball_delta,
+        ball_threshold,
         ball_location,
         ball_partition,
         fallback,
@@ -915,7 +961,8 @@ pub const L1: u16 = LEAF_BASE + 1;
 /// * law 0: `u = −x₀ − 2x₁ + 0.5`; law 1: `u = −3x₀ − 1`;
 /// * node 0: `x₀ ≤ 0` → node 1, else leaf 1 (partition 1);
 /// * node 1: `x₁ ≤ 2` → leaf 0 (partition 0), else OUTSIDE;
-/// * balls: 0 at (−1, 0) δ 1 and 1 at (−0.5, 1) δ 0.75 for partition 0; 2 at (1, 0) δ 1.5 for partition 1;
+/// * balls: 0 at (−1, 0) δ 1 and 1 at (−0.5, 1) δ 0.75 for partition 0; 2 at (1, 0) δ 1.5 for partition 1
+///   (stored thresholds δ²: 1, 0.5625, 2.25);
 ///   leaf 0 lists 0 and 1, leaf 1 lists 2.
 pub fn two_partitions() -> PwaContent {
     PwaContent {
@@ -937,7 +984,7 @@ pub fn two_partitions() -> PwaContent {
         R: vec![1.0, 0.0, 0.0, 1.0],
         ball_centre: vec![-1.0, 0.0, -0.5, 1.0, 1.0, 0.0],
         ball_centre_z: vec![-1.0, 0.0, -0.5, 1.0, 1.0, 0.0],
-        ball_delta: vec![1.0, 0.75, 1.5],
+        ball_threshold: vec![1.0, 0.5625, 2.25],
         ball_location: vec![0, 0, 0],
         ball_partition: vec![0, 0, 1],
         fallback: FallbackC::Linear {
