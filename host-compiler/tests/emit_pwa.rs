@@ -437,7 +437,10 @@ fn inspect_json_contains_the_pwa_content() {
     assert_eq!(p["ball_table"][2]["centre"], serde_json::json!([1.0, 0.0]));
     assert_eq!(p["ball_table"][2]["partition"], 1);
     assert_eq!(p["ball_table"][2]["threshold"], 2.25);
-    assert_eq!(p["ball_table"][1]["centre_z"], serde_json::json!([-0.5, 1.0]));
+    assert_eq!(
+        p["ball_table"][1]["centre_z"],
+        serde_json::json!([-0.5, 1.0])
+    );
 
     let text = render(&bytes, "p.img", false).unwrap();
     for line in [

@@ -131,8 +131,8 @@ use crate::capacity::{
     MAX_PARTITIONS, MAX_TREE_DEPTH, MAX_TREE_NODES,
 };
 use crate::image::{
-    check_dim, check_finite, check_len, div, f32_at, rem, sat16, sat32, u16_le, Dim, Dims,
-    Field, Image, ImageError, Mode, Pos,
+    check_dim, check_finite, check_len, div, f32_at, rem, sat16, sat32, u16_le, Dim, Dims, Field,
+    Image, ImageError, Mode, Pos,
 };
 
 /// Child codes from here up to `OUTSIDE − 1` name leaves: leaf `code − LEAF_BASE`.
@@ -473,7 +473,10 @@ fn node_value(node: &[u8], n: usize, i: usize, k: usize) -> f32 {
 /// Child code of node `i` on `side` (0 left, 1 right); 0 out of range (never for a validated image).
 fn node_child(node: &[u8], n: usize, i: usize, side: usize) -> u16 {
     let rec = node_record_len(n) / 2;
-    u16_le(node, i.saturating_mul(rec).saturating_add(2 * (n + 1) + side))
+    u16_le(
+        node,
+        i.saturating_mul(rec).saturating_add(2 * (n + 1) + side),
+    )
 }
 
 /// The tree rules: children after parents and in range, everything reachable, depth within capacity and

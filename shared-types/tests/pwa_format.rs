@@ -489,11 +489,17 @@ fn a_mixed_leaf_applies_the_law_of_the_containing_ball() {
 fn rejects_bad_balls() {
     let mut c = two_partitions();
     c.ball_threshold[2] = -0.5;
-    assert_eq!(c.decode_err(), ImageError::NegativeBallThreshold { ball: 2 });
+    assert_eq!(
+        c.decode_err(),
+        ImageError::NegativeBallThreshold { ball: 2 }
+    );
     assert_eq!(c.decode_err().to_string(), "ball 2: threshold is negative");
     let mut c = two_partitions();
     c.ball_threshold[2] = -f32::MIN_POSITIVE;
-    assert_eq!(c.decode_err(), ImageError::NegativeBallThreshold { ball: 2 });
+    assert_eq!(
+        c.decode_err(),
+        ImageError::NegativeBallThreshold { ball: 2 }
+    );
     for bad in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
         let mut c = two_partitions();
         c.ball_threshold[2] = bad;

@@ -15,8 +15,14 @@
 //!
 //! ε_fit is chosen by [`super::PwaContext::new`] so that the disturbance keeps r_crit below the balls'
 //! radii (modification 1). Several seeds are tried (multi-start) and the largest verified cluster is kept,
-//! which is the maximum-feasible-subsystem criterion of [190] applied to one cluster at a time; the
-//! thermal-relaxation search of [190] itself is not implemented.
+//! which is the maximum-feasible-subsystem criterion of [190] applied to one cluster at a time.
+//!
+//! From every seed a second search runs: the thermal relaxation of [190] ([`thermal`]). Starting from the
+//! same θ_j = 0, θ0_j = ṽ_s, it sweeps the free points in a seeded random order and, for a point whose fit
+//! error exceeds ε_fit by d, moves (θ_j, θ0_j) towards it by a step that decays as exp(−d/T) while the
+//! temperature T is lowered cycle by cycle, so far-away points (other clusters) stop pulling the law. The
+//! law that fits the most free points is verified on them (modification 2) whenever it beats the best
+//! verified count, and the largest verified set wins against the greedy cluster of the same seed.
 
 use super::{check_point, PwaContext, StoredLaw};
 use crate::caf::sdp::Sdp;
@@ -190,6 +196,103 @@ fn grow(ctx: &PwaContext, free: &[bool], seed: usize) -> LearnedLaw {
     }
 }
 
+/// The thermal-relaxation search of [190] from `seed` over the free points (module doc). Works in the
+/// scaled coordinates of [`fit`]: the law's value at x is Θ z + w with z = P^{1/2}(x − x̃_s), so a step
+/// along z moves the input by the same amount per unit of P-distance in every direction. Returns the
+/// verified law with the most members found, if it has more than the seed alone. Deterministic
+/// (`rng_seed`).
+fn thermal(ctx: &PwaContext, free: &[bool], seed: usize, rng_seed: u64) -> Option<LearnedLaw> {
+    use rand::seq::SliceRandom;
+    use rand::SeedableRng;
+    let (n, m) = (ctx.n, ctx.m);
+    let xbar = &ctx.points[seed].x;
+    let pts: Vec<usize> = (0..ctx.points.len()).filter(|&k| free[k]).collect();
+    let z: Vec<Vec<f64>> = pts
+        .iter()
+        .map(|&k| {
+            let d: Vec<f64> = (0..n).map(|j| ctx.points[k].x[j] - xbar[j]).collect();
+            mat_vec(ctx.roots.sqrt.as_ref(), &d)
+        })
+        .collect();
+    let eps = ctx.eps_fit * (1.0 - 1e-3);
+    let mut Theta = vec![vec![0.0f64; n]; m];
+    let mut w = ctx.points[seed].v.clone();
+    // Initial temperature: the spread of the references around the seed's.
+    let t0 = pts
+        .iter()
+        .map(|&k| {
+            (0..m)
+                .map(|i| (ctx.points[k].v[i] - w[i]).abs())
+                .fold(0.0f64, f64::max)
+        })
+        .fold(0.0f64, f64::max)
+        .max(eps);
+    let residual = |Theta: &[Vec<f64>], w: &[f64], q: usize, i: usize| -> f64 {
+        let k = pts[q];
+        (0..n).map(|j| Theta[i][j] * z[q][j]).sum::<f64>() + w[i] - ctx.points[k].v[i]
+    };
+    let fitted = |Theta: &[Vec<f64>], w: &[f64]| -> Vec<usize> {
+        (0..pts.len())
+            .filter(|&q| (0..m).all(|i| residual(Theta, w, q, i).abs() <= eps))
+            .map(|q| pts[q])
+            .collect()
+    };
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(rng_seed);
+    let mut order: Vec<usize> = (0..pts.len()).collect();
+    let mut best: Option<LearnedLaw> = None;
+    let mut best_count = 1usize;
+    let cycles = ctx.settings.thermal_cycles;
+    for c in 0..cycles {
+        let temp = t0 * (1.0 - c as f64 / cycles as f64);
+        order.shuffle(&mut rng);
+        for &q in &order {
+            let zn2: f64 = 1.0 + z[q].iter().map(|v| v * v).sum::<f64>();
+            for i in 0..m {
+                let r = residual(&Theta, &w, q, i);
+                let d = r.abs() - eps;
+                if d <= 0.0 {
+                    continue;
+                }
+                // Move the law a fraction exp(−d/T) of the way that would fit this point.
+                let eta = (-d / temp).exp() * d / zn2;
+                let sg = r.signum();
+                for j in 0..n {
+                    Theta[i][j] -= eta * sg * z[q][j];
+                }
+                w[i] -= eta * sg;
+            }
+        }
+        let members = fitted(&Theta, &w);
+        if members.len() <= best_count {
+            continue;
+        }
+        // The relaxation ignores (6.6); the points it fits are handed to the constrained fit of [`fit`]
+        // (the LMI at the design contraction), whose law is then verified on them (modification 2).
+        let Some((theta, theta0)) = fit(ctx, &members, eps) else {
+            continue;
+        };
+        let stored = StoredLaw::new(ctx, &theta, &theta0);
+        let ok: Vec<usize> = members
+            .iter()
+            .copied()
+            .filter(|&k| {
+                let c = check_point(ctx, &stored, k);
+                c.ok && c.fit_err <= ctx.eps_fit
+            })
+            .collect();
+        if stored.sigma > 0.0 && ok.len() > best_count {
+            best_count = ok.len();
+            best = Some(LearnedLaw {
+                theta,
+                theta0,
+                stored,
+                members: ok,
+            });
+        }
+    }
+    best
+}
+
 /// Learns laws until every data point is mapped (§6.2). Returns the laws (index = partition) and the law of
 /// each data point. Deterministic.
 pub fn learn_laws(ctx: &PwaContext) -> (Vec<LearnedLaw>, Vec<usize>) {
@@ -212,12 +315,17 @@ pub fn learn_laws(ctx: &PwaContext) -> (Vec<LearnedLaw>, Vec<usize>) {
         let mut best: Option<LearnedLaw> = None;
         for q in 0..s {
             let seed = unmapped[q * unmapped.len() / s];
-            let c = grow(ctx, &free, seed);
-            if best
-                .as_ref()
-                .is_none_or(|b| c.members.len() > b.members.len())
-            {
-                best = Some(c);
+            let greedy = grow(ctx, &free, seed);
+            let relaxed = (ctx.settings.thermal_cycles > 0)
+                .then(|| thermal(ctx, &free, seed, laws.len() as u64 * 1_000 + q as u64))
+                .flatten();
+            for c in std::iter::once(greedy).chain(relaxed) {
+                if best
+                    .as_ref()
+                    .is_none_or(|b| c.members.len() > b.members.len())
+                {
+                    best = Some(c);
+                }
             }
         }
         let Some(best) = best else { break };
