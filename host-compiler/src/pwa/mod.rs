@@ -52,10 +52,11 @@
 //! * How much the law compresses depends on how fast ṽ = ũ − K x̃ changes per sample against the fitting
 //!   tolerance, which (6.5) makes proportional to the per-step contraction 1 − ‖A + BK‖_P. Sampled finely
 //!   (Example 4.8 at 0.01 s), ṽ moves by up to ~0.05 per step against a tolerance of ~1e-3, and 1 972 data
-//!   points need 518 laws. Example 6.4's setting is sampled at 0.06 s (examples/planar-vehicle-pwa.toml
-//!   explains why): 332 data points, 51 laws. A held reference ([`crate::trajectory::hold`], spec key
+//!   points need 517 laws (greedy search). Example 6.4's setting is sampled at 0.06 s (examples/planar-vehicle-pwa.toml
+//!   explains why): 332 data points, 52 laws. A held reference ([`crate::trajectory::hold`], spec key
 //!   `reference_hold`) makes the data piecewise constant, which θ_j = 0 laws fit exactly (§6.2's
-//!   piecewise-constant case): at 0.01 s with 20-sample blocks, 86 laws for 1 964 points.
+//!   piecewise-constant case): at 0.01 s with 20-sample blocks, 54 laws for 1 964 points, at a certified
+//!   radius of 0.030 instead of 0.109 (the input bound binds at the end of the first block).
 //! * The f32 ball test accepts only states within δ_i: each ball's stored radius ρ_i is its own
 //!   [`crate::certify::pwa_ball_radius`] for (x̃_i(κ), δ_i), derived from the evaluator's whitened test
 //!   (`shared_types::pwa`, "Rounding of the ball test"); that the states within (1 − η)ρ_i are accepted is
