@@ -78,35 +78,8 @@ pub fn fit(ctx: &PwaContext, members: &[usize], eps: f64) -> Option<(Mat<f64>, V
             }
         }
     }
-    // (6.6) with margin, in P^{1/2} coordinates: M = Ms + P^{1/2} B Θ.
-    let Ms = &ctx.roots.sqrt * (&ctx.A + &ctx.B * &ctx.K) * &ctx.roots.inv_sqrt;
-    let SB = &ctx.roots.sqrt * &ctx.B;
-    let F0 = Mat::from_fn(2 * n, 2 * n, |i, j| match (i < n, j < n) {
-        (true, true) | (false, false) => (i == j) as u8 as f64,
-        (false, true) => Ms[(i - n, j)],
-        (true, false) => Ms[(j - n, i)],
-    });
-    sdp.add_lmi(&F0, |x| {
-        let Theta = Mat::from_fn(m, n, |i, j| x[th(i, j)]);
-        let D = &SB * Theta;
-        Mat::from_fn(2 * n, 2 * n, |i, j| match (i < n, j < n) {
-            (true, true) => -((i == j) as u8 as f64) * x[sv],
-            (false, true) => D[(i - n, j)],
-            (true, false) => D[(j - n, i)],
-            _ => 0.0,
-        })
-    });
-    let st = DefaultSettingsBuilder::default()
-        .verbose(false)
-        .max_iter(200)
-        .build()
-        .ok()?;
-    let r = sdp.solve(st).ok()?;
-    match r.status {
-        SolverStatus::Solved | SolverStatus::AlmostSolved => {}
-        _ => return None,
-    }
-    let z = &r.x;
+    add_contraction_lmi(&mut sdp, ctx, sv);
+    let z = &solve(sdp)?;
     let Theta = Mat::from_fn(m, n, |i, j| z[th(i, j)]);
     let theta = &Theta * &ctx.roots.sqrt;
     let tx = mat_vec(theta.as_ref(), xbar);
@@ -114,13 +87,15 @@ pub fn fit(ctx: &PwaContext, members: &[usize], eps: f64) -> Option<(Mat<f64>, V
     Some((theta, theta0))
 }
 
-/// Whether the stored law fits every member within ε_fit and passes [`check_point`] on it.
+/// Whether the stored law fits data point `k` within ε_fit and passes [`check_point`] on its ball.
+fn verified_at(ctx: &PwaContext, law: &StoredLaw, k: usize) -> bool {
+    let c = check_point(ctx, law, k);
+    c.ok && c.fit_err <= ctx.eps_fit
+}
+
+/// Whether the stored law satisfies (6.6) strictly and [`verified_at`] holds for every member.
 fn verified(ctx: &PwaContext, law: &StoredLaw, members: &[usize]) -> bool {
-    law.sigma > 0.0
-        && members.iter().all(|&k| {
-            let c = check_point(ctx, law, k);
-            c.ok && c.fit_err <= ctx.eps_fit
-        })
+    law.sigma > 0.0 && members.iter().all(|&k| verified_at(ctx, law, k))
 }
 
 /// Grows one cluster from `seed` over the points with `free[k]` (module doc).
@@ -275,10 +250,7 @@ fn thermal(ctx: &PwaContext, free: &[bool], seed: usize, rng_seed: u64) -> Optio
         let ok: Vec<usize> = members
             .iter()
             .copied()
-            .filter(|&k| {
-                let c = check_point(ctx, &stored, k);
-                c.ok && c.fit_err <= ctx.eps_fit
-            })
+            .filter(|&k| verified_at(ctx, &stored, k))
             .collect();
         if stored.sigma > 0.0 && ok.len() > best_count {
             best_count = ok.len();
@@ -351,6 +323,14 @@ pub fn max_contraction(ctx: &PwaContext) -> Option<f64> {
     for v in 0..m * n {
         sdp.add_square_cost(v, 1e-6);
     }
+    add_contraction_lmi(&mut sdp, ctx, sv);
+    Some(solve(sdp)?[sv])
+}
+
+/// The LMI (6.6) with margin s in P^{1/2} coordinates, `[[(1 − s)I, Mᵀ], [M, I]] ⪰ 0` with
+/// `M = P^{1/2}(A + BK)P^{-1/2} + P^{1/2}BΘ`, for Θ stored row-major in variables 0..m·n and s in `sv`.
+fn add_contraction_lmi(sdp: &mut Sdp, ctx: &PwaContext, sv: usize) {
+    let (n, m) = (ctx.n, ctx.m);
     let Ms = &ctx.roots.sqrt * (&ctx.A + &ctx.B * &ctx.K) * &ctx.roots.inv_sqrt;
     let SB = &ctx.roots.sqrt * &ctx.B;
     let F0 = Mat::from_fn(2 * n, 2 * n, |i, j| match (i < n, j < n) {
@@ -368,6 +348,10 @@ pub fn max_contraction(ctx: &PwaContext) -> Option<f64> {
             _ => 0.0,
         })
     });
+}
+
+/// Solves with clarabel; the primal solution when solved (or almost), else `None`.
+fn solve(sdp: Sdp) -> Option<Vec<f64>> {
     let st = DefaultSettingsBuilder::default()
         .verbose(false)
         .max_iter(200)
@@ -375,7 +359,7 @@ pub fn max_contraction(ctx: &PwaContext) -> Option<f64> {
         .ok()?;
     let r = sdp.solve(st).ok()?;
     match r.status {
-        SolverStatus::Solved | SolverStatus::AlmostSolved => Some(r.x[sv]),
+        SolverStatus::Solved | SolverStatus::AlmostSolved => Some(r.x),
         _ => None,
     }
 }
