@@ -53,10 +53,10 @@ fn d47(c: &Certificate) -> f64 {
 fn evaluate(lp: &Loop<'_>, lc: &LoopConstants, x0: &[f64], v: Vec<Vec<f64>>, hold: usize) -> Point {
     let (nom, cert) = certify::shipped(lp, lc, x0, &v);
     let pc = Pieces::new(lp, lc);
-    let (_, gv) = delta_subgradient(&pc, &nom, &cert.eps_components, cert.eps_f32);
+    let (_, mut gv) = delta_subgradient(&pc, &nom, &cert.eps_components, cert.eps_f32);
+    hold::project(&mut gv, hold);
     let f = -d47(&cert);
-    let mut g: Vec<f64> = gv.into_iter().flatten().map(|x| -x).collect();
-    hold::project_flat(&mut g, lp.K.nrows(), hold);
+    let g = gv.into_iter().flatten().map(|x| -x).collect();
     Point {
         v,
         cert,

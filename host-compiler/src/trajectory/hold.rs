@@ -30,22 +30,6 @@ pub fn project(v: &mut [Vec<f64>], hold: usize) {
     }
 }
 
-/// [`project`] of a sequence stored flat, `m` values per sample.
-pub fn project_flat(z: &mut [f64], m: usize, hold: usize) {
-    if hold <= 1 || m == 0 {
-        return;
-    }
-    for block in z.chunks_mut(hold * m) {
-        let len = (block.len() / m) as f64;
-        for i in 0..m {
-            let mean = block.iter().skip(i).step_by(m).sum::<f64>() / len;
-            for x in block.iter_mut().skip(i).step_by(m) {
-                *x = mean;
-            }
-        }
-    }
-}
-
 /// Whether `v` is constant over every block of `hold` samples (exactly).
 pub fn is_held(v: &[Vec<f64>], hold: usize) -> bool {
     hold <= 1 || v.chunks(hold).all(|b| b.iter().all(|r| r == &b[0]))
@@ -80,17 +64,5 @@ mod tests {
         let w = v.clone();
         project(&mut v, 2);
         assert_eq!(v, w);
-    }
-
-    #[test]
-    fn flat_and_nested_agree() {
-        let v: Vec<Vec<f64>> = (0..7)
-            .map(|k| vec![k as f64, (k * k) as f64, -1.0])
-            .collect();
-        let mut a = v.clone();
-        project(&mut a, 3);
-        let mut z: Vec<f64> = v.into_iter().flatten().collect();
-        project_flat(&mut z, 3, 3);
-        assert_eq!(a.into_iter().flatten().collect::<Vec<_>>(), z);
     }
 }
