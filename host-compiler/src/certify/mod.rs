@@ -46,7 +46,7 @@ pub const U32: f64 = 5.960_464_477_539_063e-8; // 2^-24
 const F32_ABS: f64 = 1.0e-45;
 
 /// γ_k = k u / (1 − k u).
-fn gamma_k(k: usize) -> f64 {
+pub(crate) fn gamma_k(k: usize) -> f64 {
     let ku = k as f64 * U32;
     ku / (1.0 - ku)
 }

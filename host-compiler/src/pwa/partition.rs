@@ -143,8 +143,7 @@ impl Tree<'_> {
     fn split_set(&self, set: &[usize], a: &[f64], b: f64) -> (Vec<usize>, Vec<usize>) {
         let w = self.ctx.roots.dual_norm(a);
         let n = a.len();
-        let ku = n as f64 * crate::certify::U32;
-        let gamma = ku / (1.0 - ku);
+        let gamma = crate::certify::gamma_k(n);
         let (mut l, mut r) = (vec![], vec![]);
         for &k in set {
             let p = &self.ctx.points[k];
