@@ -44,32 +44,25 @@ fn norm2(v: impl Iterator<Item = f64>) -> f64 {
 }
 
 /// The upper Cholesky factor R of a symmetric positive definite n × n row-major `P` (`P = RᵀR`, positive
-/// diagonal), row-major with zeros below the diagonal; `None` if a pivot is not positive. Plain and
-/// deterministic, so host and emitter get the same bits.
+/// diagonal), row-major with zeros below the diagonal, from faer's LLᵀ factorisation (R = Lᵀ; the lower
+/// triangle of P is read); `None` if P is not positive definite. Host and emitter call this one function,
+/// so they get the same bits.
 pub fn cholesky_upper(P: &[f64], n: usize) -> Option<Vec<f64>> {
     if P.len() != n * n {
         return None;
     }
+    let m = faer::Mat::from_fn(n, n, |i, j| P[i * n + j]);
+    let llt = m.llt(faer::Side::Lower).ok()?;
+    let L = llt.L();
     let mut R = vec![0.0f64; n * n];
     for i in 0..n {
-        let mut d = P[i * n + i];
-        for k in 0..i {
-            d -= R[k * n + i] * R[k * n + i];
-        }
-        if !(d > 0.0 && d.is_finite()) {
-            return None;
-        }
-        let rii = d.sqrt();
-        R[i * n + i] = rii;
-        for j in (i + 1)..n {
-            let mut s = P[i * n + j];
-            for k in 0..i {
-                s -= R[k * n + i] * R[k * n + j];
-            }
-            R[i * n + j] = s / rii;
+        for j in i..n {
+            R[i * n + j] = L[(j, i)];
         }
     }
-    Some(R)
+    (0..n)
+        .all(|i| R[i * n + i] > 0.0 && R[i * n + i].is_finite())
+        .then_some(R)
 }
 
 /// `R̂ = fl32(R)` for the metric `P` (n × n row-major), widened exactly to f64: the factor the image stores.
