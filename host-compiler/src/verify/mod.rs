@@ -116,7 +116,9 @@ pub struct VerifyReport {
     pub after_goal_unsafe: usize,
 }
 
-pub(crate) fn input_slack(input: &InputBound, u: &[f64]) -> f64 {
+/// How far `u` lies inside the input set (negative outside): the distance to the nearest box face, or
+/// `max − ‖u − center‖₂`.
+pub fn input_slack(input: &InputBound, u: &[f64]) -> f64 {
     match input {
         InputBound::Box { lo, hi } => u
             .iter()
