@@ -267,16 +267,21 @@ fn inter_sample_excursion_is_bounded() {
 /// rounded from, lies in the certified f64 ball `‖x − c‖_P ≤ δ` — probed on shells straddling both the
 /// stored and the certified radius, for unit-scale and large-magnitude centres (f64 centres that are not
 /// f32 values) and condition numbers up to 10³. The radius is not absurdly small: for unit-scale data
-/// (|c| ≤ 3, δ ≥ 0.1, cond(P) ≤ 10) the relative shrink 1 − ρ̂/δ stays below 10⁻⁴, and states within
-/// (1 − 10⁻⁴)ρ̂ are all accepted (the margin η of the PWA learner's one-step inclusion).
+/// (|c| ≤ 3, δ ≥ 0.1, cond(P) ≤ 10) the relative shrink 1 − ρ̂/δ stays below 10⁻⁴. Conversely every state
+/// within the completeness radius r_in ([`host_compiler::certify::pwa_complete_radius`]) is accepted, at
+/// every scale, probed on the shell just inside r_in; for unit-scale data r_in is within 10⁻⁴ of ρ̂.
 #[test]
 fn pwa_whitened_test_accepts_only_states_in_the_certified_ball() {
-    use host_compiler::certify::{pwa_accept_radius, pwa_ball_radius, pwa_ball_threshold};
+    use host_compiler::certify::{
+        pwa_accept_radius, pwa_ball_complete_radius, pwa_ball_radius, pwa_ball_threshold,
+        pwa_complete_radius,
+    };
     use host_compiler::emit::{CertifiedBall, PwaImageBuilder, PwaLaw, PwaLeaf};
     use shared_types::pwa::Region;
     let mut rng = ChaCha8Rng::seed_from_u64(0x3A11);
     let (mut accepted, mut rejected, mut inner) = (0usize, 0usize, 0usize);
     let (mut worst_unit_shrink, mut worst_shrink) = (0.0f64, 0.0f64);
+    let mut worst_unit_gap = 0.0f64;
     for trial in 0..400 {
         let n = [1, 2, 3, 4, 4, 6, 8, 12][trial % 8];
         // Unit scale: |c| ≤ 3, δ ∈ [0.1, 1], cond(P) ≤ 10. Otherwise cond(P) up to 10³, δ down to 10⁻²·scale.
@@ -333,25 +338,39 @@ fn pwa_whitened_test_accepts_only_states_in_the_certified_ball() {
         let cz: Vec<f64> = (0..n).map(|i| img.ball_centre_z(0, i) as f64).collect();
         assert_eq!(img.ball_threshold(0), threshold);
         assert!(pwa_accept_radius(P.as_ref(), &Rh, &c, &cz, threshold) <= delta);
+        let r_in = pwa_complete_radius(P.as_ref(), &Rh, &c, &cz, threshold);
+        assert_eq!(r_in, pwa_ball_complete_radius(P.as_ref(), &c, delta));
+        assert!(
+            r_in > 0.0 && r_in < rho as f64,
+            "trial {trial}: r_in = {r_in}, ρ̂ = {rho}"
+        );
+        if unit {
+            worst_unit_gap = worst_unit_gap.max(1.0 - r_in / rho as f64);
+        }
         let roots = host_compiler::linalg::PdRoots::new(P.as_ref()).unwrap();
         let dist = |x: &[f64]| p_norm(P.as_ref(), &(0..n).map(|i| x[i] - c[i]).collect::<Vec<_>>());
         for k in 0..300 {
             let w: Vec<f64> = (0..n).map(|_| rng.random_range(-1.0..1.0)).collect();
             let wn = w.iter().map(|a| a * a).sum::<f64>().sqrt();
             let e = mat_vec(roots.inv_sqrt.as_ref(), &w);
-            // Shells: around ρ̂, across (ρ̂, δ] and just beyond δ, and well inside.
-            let r = match k % 4 {
+            // Shells: around ρ̂, across (ρ̂, δ] and just beyond δ, just inside r_in, and well inside.
+            let r = match k % 5 {
                 0 => rho as f64 * (1.0 + rng.random_range(-1e-6..1e-6)),
                 1 => rho as f64 + (delta - rho as f64) * rng.random_range(0.0..1.5),
                 2 => delta * (1.0 + rng.random_range(-1e-7..1e-7)),
-                _ => rho as f64 * (1.0 - 1e-4) * rng.random::<f64>(),
+                3 => r_in * (1.0 - 1e-12 * rng.random::<f64>()),
+                _ => r_in * rng.random::<f64>(),
             };
             let x: Vec<f64> = (0..n).map(|i| c[i] + r * e[i] / wn).collect();
             let xf: Vec<f32> = x.iter().map(|&a| a as f32).collect();
             let xh: Vec<f64> = xf.iter().map(|&a| a as f64).collect();
             let inside = matches!(img.locate(&xf), Some(Region::Inside { .. }));
-            if k % 4 == 3 && unit {
-                assert!(inside, "trial {trial}: rejected a state within (1 − 1e-4)ρ̂");
+            if k % 5 >= 3 {
+                assert!(
+                    inside,
+                    "trial {trial}: rejected a state at P-distance {} ≤ r_in = {r_in} (scale {scale})",
+                    dist(&x)
+                );
                 inner += 1;
             }
             if inside {
@@ -370,8 +389,9 @@ fn pwa_whitened_test_accepts_only_states_in_the_certified_ball() {
     }
     eprintln!(
         "accepted {accepted}, rejected {rejected}, inner {inner}, worst shrink: unit scale \
-         {worst_unit_shrink:e}, all {worst_shrink:e}"
+         {worst_unit_shrink:e}, all {worst_shrink:e}; worst 1 − r_in/ρ̂ at unit scale {worst_unit_gap:e}"
     );
+    assert!(worst_unit_gap < 1e-4, "r_in gap {worst_unit_gap}");
     assert!(
         accepted > 40_000 && rejected > 20_000,
         "{accepted} {rejected}"

@@ -300,6 +300,48 @@ fn the_image_alone_rechecks_and_monte_carlo_from_f_finds_no_violation() {
     assert!(mc.init_runs >= 1_000);
     assert_eq!(mc.violations, 0, "{:?}", mc.first_violations);
     assert!(mc.max_steps <= f.problem.horizon_steps());
+    // Goal within T, proved from the bytes; no sampled run takes longer than the proved bound.
+    let bound = rc
+        .liveness
+        .max_steps_to_goal
+        .unwrap_or_else(|| panic!("{:?}", rc.liveness.failure));
+    assert!(bound <= f.problem.horizon_steps(), "{:?}", rc.liveness);
+    assert!(mc.max_steps <= bound, "{} > {bound}", mc.max_steps);
+}
+
+/// Goal within T depends on the order in which leaves list their balls (pwa module doc, "Reaching Goal
+/// within T"): with every leaf's list reversed (largest time-to-go first) the invariance checks all still
+/// pass, but the recheck finds no time-to-go ranking within the horizon.
+#[test]
+fn the_recheck_finds_leaf_orders_that_lose_goal_within_t() {
+    let f = fixture();
+    let (goal, unsafe_set, input) = judge_of(f);
+    let judge = host_compiler::synth::judge(
+        &f.problem,
+        &f.syn.plant,
+        goal.as_ref(),
+        unsafe_set.as_deref(),
+        &input,
+    );
+    let mut b = f.pwa.builder.clone();
+    let mut reversed = 0;
+    for leaf in &mut b.leaves {
+        if leaf.balls.len() >= 2 {
+            leaf.balls.reverse();
+            reversed += 1;
+        }
+    }
+    assert!(reversed >= 1);
+    let bytes = b.to_bytes().unwrap();
+    let img = shared_types::image::decode(&bytes).unwrap();
+    let rc = host_compiler::verify::pwa::recheck(&judge, None, &img).unwrap();
+    assert!(rc.partitions.iter().all(|p| p.ok), "{:?}", rc.partitions);
+    assert_eq!(rc.containment_failures, 0);
+    assert!(
+        rc.liveness.failure.is_some() && rc.failures == 1,
+        "{:?}",
+        rc.liveness
+    );
 }
 
 /// Regression for the recheck's power: a law whose gain no longer contracts ((6.6) fails) and a ball

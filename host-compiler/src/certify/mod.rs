@@ -30,8 +30,8 @@
 pub mod pwa_ball;
 
 pub use pwa_ball::{
-    cholesky_upper, metric_factor_f32, pwa_accept_radius, pwa_ball_radius, pwa_ball_threshold,
-    threshold_of_radius, whitened_centre,
+    cholesky_upper, metric_factor_f32, pwa_accept_radius, pwa_ball_complete_radius,
+    pwa_ball_radius, pwa_ball_threshold, pwa_complete_radius, threshold_of_radius, whitened_centre,
 };
 
 use crate::geometry::{Metric, Region};
@@ -49,6 +49,20 @@ const F32_ABS: f64 = 1.0e-45;
 pub(crate) fn gamma_k(k: usize) -> f64 {
     let ku = k as f64 * U32;
     ku / (1.0 - ku)
+}
+
+/// How far the PWA evaluator's routing value `fl(aᵀx̂) − b` can lie from `aᵀc − b` for an f32 state x̂ in
+/// `B_P(c, r)` (`a`, `b` the f32 values a tree node stores): `‖a‖_{P⁻¹} r` for the ball, plus the rounding
+/// of the n-term dot product, `γ_n Σ_j |a_j||x̂_j|` (Higham §3.1), with `|x̂_j| ≤ |c_j| + r·axis_j`,
+/// `axis_j = sqrt((P⁻¹)_jj)`. A ball can be routed left only if `aᵀc − b ≤` this, right only if `≥ −`it.
+/// The partitioner lists balls and the verifier re-checks containment with this one bound.
+pub fn hyperplane_reach(roots: &PdRoots, axis: &[f64], a: &[f64], c: &[f64], r: f64) -> f64 {
+    let n = a.len();
+    let round: f64 = gamma_k(n)
+        * (0..n)
+            .map(|j| a[j].abs() * (c[j].abs() + r * axis[j]))
+            .sum::<f64>();
+    roots.dual_norm(a) * r + round
 }
 
 /// The continuous-time plant behind a sampled loop, for the inter-sample bound.

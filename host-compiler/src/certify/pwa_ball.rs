@@ -19,6 +19,22 @@
 //! [`pwa_ball_threshold`] the threshold `ŝ = fl32(ρ̂·ρ̂)` the image stores: the single f32 product the
 //! evaluator of image format 2 formed per step, so acceptance is bit-identical to it.
 //!
+//! # Completeness
+//! The converse, that every state near enough to c *is* accepted, is what the PWA certificate's one-step
+//! inclusion (6.5) needs of the ball a run steps into (the run must be recognised there, not reported out of
+//! the envelope). For a real x with `‖x − c‖_P ≤ r` and `x̂ = fl32(x)`, with the same R, R̂, G, e_c, a' and
+//! χ: `|x| ≤ X := |c| + a'r`, `|x̂| ≤ (1 + u)X + η`, `‖R(x − c)‖ ≤ r/sqrt(1 − χ)` (step 6 read the other
+//! way), so by steps 1–2 `‖w + f‖ ≤ t0 + t1·r` with
+//!
+//! ```text
+//! t1 = 1/sqrt(1 − χ) + u‖|R|a'‖ + (1 + u)‖G a'‖,
+//! t0 = u‖|R||c|‖ + η‖|R|𝟙‖ + (1 + u)‖G|c|‖ + η‖G𝟙‖ + ‖e_c‖ + 2n^{3/2}η,
+//! ```
+//!
+//! and the computed sum is `s ≤ (1 + γ_n)(1 + u)²‖w + f‖² + 2nη`. Acceptance `s ≤ ŝ` therefore holds for
+//! every r up to [`pwa_complete_radius`]. For unit-scale data (|c| ≤ 3, δ ≥ 0.1,
+//! cond(P) ≤ 10, n ≤ 12) it lies less than 10⁻⁴ (relative) below ρ̂ (`tests/certify_bounds.rs`).
+//!
 //! Host f64 rounding: every term of the bound is a sum of non-negative quantities except `e_c`, which
 //! carries its own γ⁽⁶⁴⁾ term; the few dozen f64 operations on the positive terms are covered by a final
 //! factor 1 + 10⁻¹², and the norms ‖|R|‖₂, ‖R⁻¹‖₂ of χ by their Frobenius upper bounds.
@@ -95,6 +111,9 @@ struct AcceptBound {
     beta: f64,
     /// sqrt(1 + χ).
     k: f64,
+    /// Completeness (module doc, "Completeness"): ‖w + f‖ ≤ t0 + t1·r for every real x with ‖x − c‖_P ≤ r.
+    t0: f64,
+    t1: f64,
 }
 
 impl AcceptBound {
@@ -149,11 +168,28 @@ impl AcceptBound {
             + U32 * apply(&absR, &absc)
             + ec
             + (2.0 * nf * nf.sqrt() + apply(&absR, &ones)) * ETA;
-        (alpha.is_finite() && beta.is_finite() && alpha < 0.5).then_some(AcceptBound {
+        // Completeness: X = |c| + a'r bounds |x|, X̂ = (1 + u)X + η𝟙 bounds |x̂|, and
+        // ‖R(x − c)‖ ≤ r/sqrt(1 − χ), so ‖w + f‖ ≤ t0 + t1·r (module doc).
+        let t1 = 1.0 / (1.0 - chi).sqrt() + U32 * apply(&absR, &a) + (1.0 + U32) * apply(&G, &a);
+        let t0 = U32 * apply(&absR, &absc)
+            + ETA * apply(&absR, &ones)
+            + (1.0 + U32) * apply(&G, &absc)
+            + ETA * apply(&G, &ones)
+            + ec
+            + 2.0 * nf * nf.sqrt() * ETA;
+        (alpha.is_finite()
+            && beta.is_finite()
+            && alpha < 0.5
+            && chi < 0.5
+            && t0.is_finite()
+            && t1.is_finite())
+        .then_some(AcceptBound {
             n,
             alpha,
             beta,
             k,
+            t0,
+            t1,
         })
     }
 
@@ -179,6 +215,22 @@ impl AcceptBound {
     fn radius(&self, rho: f64) -> f64 {
         self.radius_of_s(self.s_of_rho(rho))
     }
+
+    /// Radius r such that every real x with ‖x − c‖_P ≤ r is accepted with threshold ŝ: the largest r with
+    /// (1 + γ_n)(1 + u)²(t0 + t1 r)² + 2nη ≤ ŝ, less the host's slack; 0 when none is positive.
+    fn complete_radius(&self, s: f64) -> f64 {
+        let extra = (2 * self.n) as f64 * ETA;
+        let room = (s - extra) / ((1.0 + gamma(self.n, U32)) * (1.0 + U32).powi(2));
+        if !(room > 0.0) {
+            return 0.0;
+        }
+        let r = (room.sqrt() * (1.0 - HOST_SLACK) - self.t0) / self.t1 * (1.0 - HOST_SLACK);
+        if r > 0.0 {
+            r
+        } else {
+            0.0
+        }
+    }
 }
 
 /// Upper bound on `‖x − c‖_P` over every f32 state x̂ that the evaluator's whitened test accepts for a
@@ -200,6 +252,39 @@ pub fn pwa_accept_radius(
         }
         _ => f64::INFINITY,
     }
+}
+
+/// Radius r_in about `c` such that every real state x with `‖x − c‖_P ≤ r_in` is accepted by the
+/// evaluator's whitened f32 test of a ball stored as (`Rh`, `cz`, `threshold`), when the evaluator is given
+/// `x̂ = fl32(x)` (module doc, "Completeness"; derivation in `shared_types::pwa`): the converse of
+/// [`pwa_accept_radius`]. 0 when the data admit no positive radius (same failure cases as
+/// [`pwa_accept_radius`], or a threshold too small for the rounding at c).
+pub fn pwa_complete_radius(
+    P: MatRef<'_, f64>,
+    Rh: &[f64],
+    c: &[f64],
+    cz: &[f64],
+    threshold: f32,
+) -> f64 {
+    match AcceptBound::new(P, Rh, c, cz) {
+        Some(b) if threshold >= 0.0 && threshold.is_finite() => b.complete_radius(threshold as f64),
+        _ => 0.0,
+    }
+}
+
+/// [`pwa_complete_radius`] of the ball the emitter stores for `B_P(c, δ)`: factor [`metric_factor_f32`],
+/// whitened centre [`whitened_centre`] of fl32(c), threshold [`pwa_ball_threshold`]. 0 where that ball
+/// has no threshold.
+pub fn pwa_ball_complete_radius(P: MatRef<'_, f64>, c: &[f64], delta: f64) -> f64 {
+    let n = P.nrows();
+    let (Some(Rh), Some(s)) = (
+        metric_factor_f32(&crate::linalg::to_row_major(P), n),
+        pwa_ball_threshold(P, c, delta),
+    ) else {
+        return 0.0;
+    };
+    let cz = whitened_centre(&Rh, c);
+    pwa_complete_radius(P, &Rh, c, &cz, s)
 }
 
 /// The squared threshold ŝ to store for the certified ball `B_P(c, δ)` of a PWA image: `fl32(ρ̂·ρ̂)` with

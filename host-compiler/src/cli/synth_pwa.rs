@@ -140,6 +140,7 @@ pub fn run(a: &SynthArgs, problem: &Problem, s: &Synthesis) -> miette::Result<()
         summary.recheck.containment_checks,
         summary.recheck.containment_failures
     );
+    println!("goal within T      {}", summary.recheck.liveness.describe());
     let mc = &summary.monte_carlo;
     println!(
         "verification      {} runs from F ({} from the balls over Init), {} starts not accepted, {} violations, at most {} steps to Goal",

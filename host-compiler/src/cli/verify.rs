@@ -122,6 +122,7 @@ fn run_pwa(
         for p in rc.partitions.iter().filter(|p| !p.ok) {
             println!("partition {} fails its certificate: {p:?}", p.partition);
         }
+        println!("goal within T: {}", rc.liveness.describe());
         println!(
             "runs {} from F ({} drawn starts not accepted), at most {} steps to Goal",
             mc.runs, mc.rejected, mc.max_steps

@@ -136,23 +136,16 @@ impl Tree<'_> {
 
     /// Balls of `set` that the evaluator can route to the left child ({fl(aᵀx) ≤ b}) and to the right child
     /// (module doc). `a`, `b` are the f32 values stored in the image. A ball B_P(c, δ) reaches the left side
-    /// when min_B aᵀx − b = aᵀc − b − ‖a‖_{P⁻¹}δ is at most the rounding of the evaluator's dot product,
-    /// |fl(aᵀx) − aᵀx| ≤ γ_n Σ_j |a_j||x_j| (Higham §3.1) with |x_j| ≤ |c_j| + δ·sqrt((P⁻¹)_jj) on the
-    /// ball; the right side likewise. Listing a ball on every side a state of it can be routed to keeps
+    /// when aᵀc − b is at most [`crate::certify::hyperplane_reach`] (the ball's extent along a plus the
+    /// rounding of the evaluator's dot product); the right side likewise. Listing a ball on every side a state of it can be routed to keeps
     /// the "every ball meeting the cell is listed" property of the liveness argument under f32 routing.
     fn split_set(&self, set: &[usize], a: &[f64], b: f64) -> (Vec<usize>, Vec<usize>) {
-        let w = self.ctx.roots.dual_norm(a);
-        let n = a.len();
-        let gamma = crate::certify::gamma_k(n);
         let (mut l, mut r) = (vec![], vec![]);
         for &k in set {
             let p = &self.ctx.points[k];
             let s = Self::dot(a, &p.x) - b;
-            let round: f64 = gamma
-                * (0..n)
-                    .map(|j| a[j].abs() * (p.x[j].abs() + p.delta * self.ctx.axis[j]))
-                    .sum::<f64>();
-            let reach = w * p.delta + round;
+            let reach =
+                crate::certify::hyperplane_reach(&self.ctx.roots, &self.ctx.axis, a, &p.x, p.delta);
             if s <= reach {
                 l.push(k);
             }

@@ -186,6 +186,7 @@ pub fn section(h: &mut String, data: &ReportData, r: &PwaReport) {
          <tr><th>learning time</th><td class=\"n\">{} s (partitioning {} s)</td></tr>\
          <tr><th>image</th><td class=\"n\">{} bytes (feedforward image of the same cover: {} bytes)</td></tr>\
          <tr><th>containment across boundaries</th><td class=\"n\">{} leaf visits, {} failing balls</td></tr>\
+         <tr><th>Goal within T (time-to-go ranking)</th><td class=\"n\">{}</td></tr>\
          <tr><th>closed-loop runs from F</th><td class=\"n\">{} ({} over Init), {} violations, ≤ {} steps to Goal</td></tr>\
          </table>\n",
         s.data_points,
@@ -206,6 +207,7 @@ pub fn section(h: &mut String, data: &ReportData, r: &PwaReport) {
         s.feedforward_image_bytes,
         s.recheck.containment_checks,
         s.recheck.containment_failures,
+        escape(&s.recheck.liveness.describe()),
         mc.runs,
         mc.init_runs,
         mc.violations,

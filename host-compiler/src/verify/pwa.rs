@@ -16,15 +16,25 @@
 //!   stored factor R̂, whitened centre and ŝ (slightly above ρ); r, not ρ, is the radius of the states a law
 //!   is applied to below.
 //! * **Containment across boundaries** (the hypothesis of Theorem 6.6, what Algorithm 5 repairs): every
-//!   stored ball is sent down the tree with the conservative ball–hyperplane test of §6.3
-//!   (`aᵀc − b ≤ ‖P^{-1/2}a‖r` goes left, `≥ −‖P^{-1/2}a‖r` goes right); every leaf it reaches must list a ball
-//!   with the same centre and radius, and no branch may reach "outside".
-//! * **(6.7) and (6.5)** for every (leaf, ball) pair (c, ρ, law j): the input u* that maps c onto the centre
-//!   c_b of another stored ball in one step (least squares, residual res = Ac + g + Bu* − c_b) is the nominal
-//!   input; the law's deviation from it, ε = ‖K_j c + θ0_j − u*‖ plus the f32 rounding bound, is the bounded
-//!   disturbance of Theorem 3.21. Then r̃_crit(Ã_j, ε) < ρ_b (3.83)–(3.87) and
-//!   ‖Ã_j‖_P r + ‖P^{1/2}B‖ε + ‖res‖_P ≤ ρ_b (one step into ball b), choosing the ball b of smallest margin need;
-//!   or the whole image of the ball lies in Goal.
+//!   stored ball is sent down the tree with the conservative ball–hyperplane test of §6.3, widened by the
+//!   rounding of the evaluator's f32 dot product ([`crate::certify::hyperplane_reach`] h: `aᵀc − b ≤ h`
+//!   goes left, `≥ −h` goes right); every leaf it reaches must list a ball with the same centre and
+//!   radius, and no branch may reach "outside".
+//! * **(6.7) and (6.5)** for every (leaf, ball) pair (c, ρ, law j) and every candidate successor ball b:
+//!   the input u* that maps c onto the centre c_b in one step (least squares, residual
+//!   res = Ac + g + Bu* − c_b) is the nominal input; the law's deviation from it, ε = ‖K_j c + θ0_j − u*‖
+//!   plus the f32 rounding bound, is the bounded disturbance of Theorem 3.21. b is a *successor* when
+//!   r̃_crit(Ã_j, ε) < ρ_b (3.83)–(3.87) and ‖Ã_j‖_P r + ‖P^{1/2}B‖ε + ‖res‖_P ≤ r_in,b, the radius within
+//!   which ball b's f32 test provably accepts ([`crate::certify::pwa_complete_radius`]): the whole one-step
+//!   image is then recognised in b. Alternatively the whole image lies in Goal. Each pair needs one of the
+//!   two.
+//! * **Goal within T** ([`time_to_go_ranks`]). Invariance alone allows a run to circle in F. The evaluator
+//!   applies the law of the first listed ball containing the state, so the recheck looks for ranks τ with
+//!   τ = 0 where the image lies in Goal, τ(b) ≥ 1 + τ(some successor), and τ nondecreasing along every
+//!   leaf's list. Then if x is handled by b, x⁺ lies in a successor b', the leaf of x⁺ lists b' (containment),
+//!   and the first listed ball containing x⁺ has rank ≤ τ(b') ≤ τ(b) − 1: Goal is reached after at most
+//!   τ(b) + 1 steps. The least ranks must give at most the horizon's steps. The learner's order
+//!   (increasing κ*_i − κ) is one such ranking; the recheck derives its own from the bytes.
 //! * **Input** over every listed ball, and **Unsafe between samples** for continuous plants (the bound of
 //!   [`crate::certify`] item 2 with the law's gain).
 
@@ -68,7 +78,104 @@ pub struct PwaRecheck {
     pub containment_checks: usize,
     /// Worst-case hyperplane tests of the tree (recomputed by walking it).
     pub depth: usize,
+    /// Goal within the horizon, from the time-to-go ranking ([`time_to_go_ranks`]).
+    pub liveness: Liveness,
     pub failures: usize,
+}
+
+/// Whether every run from F provably reaches Goal within the horizon (module doc, "Goal within T").
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct Liveness {
+    /// Largest number of steps to Goal the ranking proves, over the listed balls; `None` on failure.
+    pub max_steps_to_goal: Option<usize>,
+    /// Steps in the spec's horizon.
+    pub horizon: usize,
+    /// Why no ranking within the horizon exists.
+    pub failure: Option<String>,
+}
+
+impl Liveness {
+    /// One line for people: the proved bound against the horizon, or why there is none.
+    pub fn describe(&self) -> String {
+        match (&self.failure, self.max_steps_to_goal) {
+            (None, Some(k)) => format!(
+                "proved: at most {k} of the horizon's {} steps",
+                self.horizon
+            ),
+            (Some(e), _) => format!("NOT proved: {e}"),
+            (None, None) => "NOT proved: no ball is listed".to_string(),
+        }
+    }
+}
+
+/// The least time-to-go ranking τ of the stored balls (module doc, "Goal within T"), or why none is at
+/// most `cap`. `goal[b]`: the one-step image of ball b under its law lies in Goal; `succ[b]`: the balls
+/// that image provably lands in; `class[b]`: the first ball of b's geometry (centre, threshold, location),
+/// since a leaf may list another ball of the same geometry; `leaves`: each leaf's ball list in the order
+/// the evaluator scans it. The constraints are τ(b) = 0 if `goal[b]`, else
+/// τ(b) ≥ 1 + min over successors b' of max{τ(b'') : b'' listed, class(b'') = class(b')}, and τ
+/// nondecreasing along every leaf's list. Kleene iteration from τ = 0 of this monotone system reaches its
+/// least solution, or exceeds `cap`.
+pub fn time_to_go_ranks(
+    goal: &[bool],
+    succ: &[Vec<usize>],
+    class: &[usize],
+    leaves: &[Vec<usize>],
+    cap: usize,
+) -> Result<Vec<usize>, String> {
+    let nb = goal.len();
+    let mut listed = vec![false; nb];
+    for &b in leaves.iter().flatten() {
+        listed[b] = true;
+    }
+    let members: Vec<Vec<usize>> = (0..nb)
+        .map(|g| (0..nb).filter(|&b| class[b] == g && listed[b]).collect())
+        .collect();
+    let listed_balls: Vec<usize> = (0..nb).filter(|&b| listed[b]).collect();
+    if let Some(&b) = listed_balls
+        .iter()
+        .find(|&&b| !goal[b] && succ[b].iter().all(|&s| members[class[s]].is_empty()))
+    {
+        return Err(format!(
+            "ball {b}: its law's one-step image neither lies in Goal nor provably lands in a listed ball"
+        ));
+    }
+    let mut tau = vec![0usize; nb];
+    loop {
+        let mut changed = false;
+        for &b in &listed_balls {
+            let base = if goal[b] {
+                0
+            } else {
+                1 + succ[b]
+                    .iter()
+                    .filter_map(|&s| members[class[s]].iter().map(|&m| tau[m]).max())
+                    .min()
+                    .unwrap_or(usize::MAX - 1)
+            };
+            if base > tau[b] {
+                tau[b] = base;
+                changed = true;
+            }
+        }
+        for leaf in leaves {
+            for w in leaf.windows(2) {
+                if tau[w[1]] < tau[w[0]] {
+                    tau[w[1]] = tau[w[0]];
+                    changed = true;
+                }
+            }
+        }
+        if let Some(&b) = listed_balls.iter().find(|&&b| tau[b] > cap) {
+            return Err(format!(
+                "ball {b}: no time-to-go ranking within {cap} steps: its successors and the order of \
+                 the leaves that list it give no bound on the steps to Goal within the horizon"
+            ));
+        }
+        if !changed {
+            return Ok(tau);
+        }
+    }
 }
 
 /// Recomputes the certificate of every partition of a PWA image (module doc). `judge` gives the sampled
@@ -95,7 +202,8 @@ pub fn recheck(
     // The radius within which every state the f32 ball test accepts lies (about the stored centre, in the
     // image's metric), recomputed from the stored factor, whitened centre and radius: the states the law
     // is applied to. A ball whose data admit no bound makes every check of it fail (∞).
-    let r_acc: Vec<f64> = (0..nb)
+    // Likewise the radius within which every state is accepted (completeness): where a step must land.
+    let (r_acc, r_in): (Vec<f64>, Vec<f64>) = (0..nb)
         .map(|b| {
             let l = image.ball_location(b);
             let Pl: Vec<f64> = (0..n * n)
@@ -106,15 +214,13 @@ pub fn recheck(
                 .map(|i| image.factor(l, i / n, i % n) as f64)
                 .collect();
             let cz: Vec<f64> = (0..n).map(|i| image.ball_centre_z(b, i) as f64).collect();
-            crate::certify::pwa_accept_radius(
-                Pl.as_ref(),
-                &Rh,
-                &centres[b],
-                &cz,
-                image.ball_threshold(b),
+            let s = image.ball_threshold(b);
+            (
+                crate::certify::pwa_accept_radius(Pl.as_ref(), &Rh, &centres[b], &cz, s),
+                crate::certify::pwa_complete_radius(Pl.as_ref(), &Rh, &centres[b], &cz, s),
             )
         })
-        .collect();
+        .unzip();
     let axis: Vec<f64> = (0..n).map(|j| roots.inv[(j, j)].max(0.0).sqrt()).collect();
     let normB = roots.norm_into(judge.B);
     // B⁺ for the nominal input between two centres.
@@ -171,11 +277,16 @@ pub fn recheck(
     pairs.sort_unstable();
     pairs.dedup();
     struct PairCheck {
+        ball: usize,
         law: usize,
         rcrit_ratio: f64,
         reach_ratio: f64,
         input_slack: f64,
         clearance: f64,
+        /// The whole one-step image lies in Goal.
+        in_goal: bool,
+        /// Balls the whole one-step image provably lands in (reach ≤ r_in and r̃_crit < ρ).
+        succ: Vec<usize>,
     }
     let checks: Vec<PairCheck> = pairs
         .par_iter()
@@ -197,6 +308,8 @@ pub fn recheck(
             let r_plus = L.norm * r + normB * eps_round;
             let in_goal = judge.goal.signed_dist(&cplus, &metric).value > r_plus;
             let (mut rcrit_ratio, mut reach_ratio) = (f64::INFINITY, f64::INFINITY);
+            let mut succ = Vec::new();
+            let mut best_valid = false;
             if in_goal {
                 rcrit_ratio = 0.0;
                 reach_ratio = 0.0;
@@ -220,10 +333,18 @@ pub fn recheck(
                         .sqrt();
                     let eps = fit + eps_round;
                     let reach = L.norm * r + normB * eps + p_norm(P.as_ref(), &res);
-                    let rr = reach / rb;
-                    if rr < reach_ratio {
+                    // The step must land where ball bb provably accepts (r_in, a hair below ρ).
+                    let rr = reach / r_in[bb];
+                    let rc = L.rc1 * eps / rb;
+                    let valid = rr <= 1.0 && rc < 1.0;
+                    if valid {
+                        succ.push(bb);
+                    }
+                    // Report the best successor: valid ones first, then the smallest reach.
+                    if (valid, -rr) > (best_valid, -reach_ratio) {
+                        best_valid = valid;
                         reach_ratio = rr;
-                        rcrit_ratio = L.rc1 * eps / rb;
+                        rcrit_ratio = rc;
                     }
                 }
             }
@@ -242,11 +363,14 @@ pub fn recheck(
                 }
             };
             PairCheck {
+                ball: b,
                 law: j,
                 rcrit_ratio,
                 reach_ratio,
                 input_slack,
                 clearance,
+                in_goal,
+                succ,
             }
         })
         .collect();
@@ -279,6 +403,40 @@ pub fn recheck(
             && p.worst_input_slack >= 0.0
             && p.worst_unsafe_clearance > 0.0;
     }
+    // Reaching Goal within the horizon: rank the balls by time to go.
+    let same_geometry = |a: usize, b: usize| {
+        centres[a] == centres[b]
+            && image.ball_threshold(a).to_bits() == image.ball_threshold(b).to_bits()
+            && image.ball_location(a) == image.ball_location(b)
+    };
+    let class: Vec<usize> = (0..nb)
+        .map(|b| (0..=b).find(|&a| same_geometry(a, b)).unwrap_or(b))
+        .collect();
+    let mut goal = vec![false; nb];
+    let mut succ = vec![Vec::new(); nb];
+    for c in &checks {
+        goal[c.ball] = c.in_goal;
+        succ[c.ball] = c.succ.clone();
+    }
+    let leaves: Vec<Vec<usize>> = (0..image.n_leaves())
+        .map(|l| {
+            let (_, len) = image.leaf_refs(l);
+            (0..len).filter_map(|k| image.leaf_ball(l, k)).collect()
+        })
+        .collect();
+    let cap = judge.steps.saturating_sub(1);
+    let liveness = match time_to_go_ranks(&goal, &succ, &class, &leaves, cap) {
+        Ok(tau) => Liveness {
+            max_steps_to_goal: checks.iter().map(|c| tau[c.ball] + 1).max(),
+            horizon: judge.steps,
+            failure: None,
+        },
+        Err(e) => Liveness {
+            max_steps_to_goal: None,
+            horizon: judge.steps,
+            failure: Some(e),
+        },
+    };
     // Containment across boundaries: descend every ball.
     let same = |a: usize, b: usize| centres[a] == centres[b] && rho(a) == rho(b);
     let mut containment_failures = 0;
@@ -315,7 +473,7 @@ pub fn recheck(
                     let a: Vec<f64> = (0..n).map(|q| image.node_normal(i, q) as f64).collect();
                     let s = a.iter().zip(c).map(|(a, x)| a * x).sum::<f64>()
                         - image.node_offset(i) as f64;
-                    let w = roots.dual_norm(&a) * r;
+                    let w = crate::certify::hyperplane_reach(&roots, &axis, &a, c, r);
                     let Some((left, right)) = image.node_children(i) else {
                         failed = true;
                         continue;
@@ -333,11 +491,14 @@ pub fn recheck(
             containment_failures += 1;
         }
     }
-    let failures = partitions.iter().filter(|p| !p.ok).count() + containment_failures;
+    let failures = partitions.iter().filter(|p| !p.ok).count()
+        + containment_failures
+        + liveness.failure.is_some() as usize;
     Ok(PwaRecheck {
         partitions,
         containment_failures,
         containment_checks,
+        liveness,
         depth: depth.max(image.tree_depth()),
         failures,
     })
@@ -498,5 +659,75 @@ pub fn monte_carlo_pwa(
         first_violations: bad.into_iter().take(10).cloned().collect(),
         max_steps,
         sample_paths: outcomes.into_iter().take(keep_paths).map(|o| o.1).collect(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::time_to_go_ranks;
+
+    fn classes(n: usize) -> Vec<usize> {
+        (0..n).collect()
+    }
+
+    #[test]
+    fn a_chain_is_ranked_by_its_steps_to_goal() {
+        // 0 → 1 → 2 → Goal, one leaf listing them nearest-Goal first.
+        let succ = vec![vec![1], vec![2], vec![]];
+        let goal = [false, false, true];
+        let leaves = vec![vec![2, 1, 0]];
+        let tau = time_to_go_ranks(&goal, &succ, &classes(3), &leaves, 2).unwrap();
+        assert_eq!(tau, vec![2, 1, 0]);
+        // Three steps do not fit a horizon of two.
+        assert!(time_to_go_ranks(&goal, &succ, &classes(3), &leaves, 1).is_err());
+    }
+
+    #[test]
+    fn the_shortest_successor_counts_and_leaf_order_raises_ranks() {
+        // 0 may land in 1 (two steps from Goal) or in 2 (in Goal next): rank 1.
+        let succ = vec![vec![1, 2], vec![3], vec![], vec![]];
+        let goal = [false, false, true, true];
+        let tau = time_to_go_ranks(&goal, &succ, &classes(4), &[vec![2, 0, 3, 1]], 9).unwrap();
+        // The leaf lists 0 before 3, so 3 is ranked at least as 0, and 1, which lands in 3, one above.
+        assert_eq!(tau, vec![1, 2, 0, 1]);
+    }
+
+    #[test]
+    fn a_leaf_that_hands_states_back_up_the_chain_has_no_ranking() {
+        // 0 → 1 → 2 → Goal, but a leaf lists 0 before 2: a state in both is run with 0's law, so the chain
+        // can start over and no bound on the steps to Goal exists.
+        let succ = vec![vec![1], vec![2], vec![]];
+        let goal = [false, false, true];
+        let leaves = vec![vec![0, 2], vec![1]];
+        let err = time_to_go_ranks(&goal, &succ, &classes(3), &leaves, 50).unwrap_err();
+        assert!(
+            err.contains("no time-to-go ranking within 50 steps"),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn a_successor_of_the_same_geometry_is_ranked_by_its_worst_listed_copy() {
+        // Balls 1 and 2 have the same geometry; a leaf may list either, so 0's successor counts as the
+        // larger of their ranks.
+        let succ = vec![vec![1], vec![], vec![3], vec![]];
+        let goal = [false, true, false, true];
+        let class = vec![0, 1, 1, 3];
+        let leaves = vec![vec![1, 0], vec![3, 2]];
+        let tau = time_to_go_ranks(&goal, &succ, &class, &leaves, 9).unwrap();
+        assert_eq!(tau, vec![2, 0, 1, 0]);
+    }
+
+    #[test]
+    fn a_ball_without_successor_or_goal_is_named() {
+        let err = time_to_go_ranks(
+            &[false, true],
+            &[vec![], vec![]],
+            &classes(2),
+            &[vec![1, 0]],
+            9,
+        )
+        .unwrap_err();
+        assert!(err.starts_with("ball 0:"), "{err}");
     }
 }
