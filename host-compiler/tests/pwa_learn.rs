@@ -255,18 +255,31 @@ fn closed_loop(pwa: &PwaController, syn: &Synthesis, problem: &host_compiler::sp
     );
 }
 
-fn judge_of(
-    f: &Fixture,
-) -> (
-    Box<dyn host_compiler::geometry::Region>,
-    Option<Box<dyn host_compiler::geometry::Region>>,
-    host_compiler::trajectory::generate::InputBound,
-) {
-    (
-        f.problem.goal_region().unwrap(),
-        f.problem.unsafe_region().unwrap(),
-        host_compiler::synth::input_bound(&f.problem.input),
-    )
+/// The fixture's sets, owned, so that tests can borrow a [`host_compiler::verify::Judge`] from them.
+struct Sets {
+    goal: Box<dyn host_compiler::geometry::Region>,
+    unsafe_set: Option<Box<dyn host_compiler::geometry::Region>>,
+    input: host_compiler::trajectory::generate::InputBound,
+}
+
+impl Sets {
+    fn of(f: &Fixture) -> Self {
+        Self {
+            goal: f.problem.goal_region().unwrap(),
+            unsafe_set: f.problem.unsafe_region().unwrap(),
+            input: host_compiler::synth::input_bound(&f.problem.input),
+        }
+    }
+
+    fn judge<'a>(&'a self, f: &'a Fixture) -> host_compiler::verify::Judge<'a> {
+        host_compiler::synth::judge(
+            &f.problem,
+            &f.syn.plant,
+            self.goal.as_ref(),
+            self.unsafe_set.as_deref(),
+            &self.input,
+        )
+    }
 }
 
 /// `verify::pwa` re-derives the certificate from the image bytes alone: every partition passes (6.6), (6.7),
@@ -275,14 +288,8 @@ fn judge_of(
 #[test]
 fn the_image_alone_rechecks_and_monte_carlo_from_f_finds_no_violation() {
     let f = fixture();
-    let (goal, unsafe_set, input) = judge_of(f);
-    let judge = host_compiler::synth::judge(
-        &f.problem,
-        &f.syn.plant,
-        goal.as_ref(),
-        unsafe_set.as_deref(),
-        &input,
-    );
+    let sets = Sets::of(f);
+    let judge = sets.judge(f);
     let img = shared_types::image::decode(&f.pwa.image).unwrap();
     let rc =
         host_compiler::verify::pwa::recheck(&judge, f.syn.plant.continuous.as_ref(), &img).unwrap();
@@ -315,14 +322,8 @@ fn the_image_alone_rechecks_and_monte_carlo_from_f_finds_no_violation() {
 #[test]
 fn the_recheck_finds_leaf_orders_that_lose_goal_within_t() {
     let f = fixture();
-    let (goal, unsafe_set, input) = judge_of(f);
-    let judge = host_compiler::synth::judge(
-        &f.problem,
-        &f.syn.plant,
-        goal.as_ref(),
-        unsafe_set.as_deref(),
-        &input,
-    );
+    let sets = Sets::of(f);
+    let judge = sets.judge(f);
     let mut b = f.pwa.builder.clone();
     let mut reversed = 0;
     for leaf in &mut b.leaves {
@@ -349,14 +350,8 @@ fn the_recheck_finds_leaf_orders_that_lose_goal_within_t() {
 #[test]
 fn the_recheck_finds_a_broken_law_and_a_missing_ball() {
     let f = fixture();
-    let (goal, unsafe_set, input) = judge_of(f);
-    let judge = host_compiler::synth::judge(
-        &f.problem,
-        &f.syn.plant,
-        goal.as_ref(),
-        unsafe_set.as_deref(),
-        &input,
-    );
+    let sets = Sets::of(f);
+    let judge = sets.judge(f);
     let mut b = f.pwa.builder.clone();
     for g in &mut b.laws[0].gain {
         *g = -*g; // positive feedback
@@ -387,14 +382,8 @@ fn the_recheck_finds_a_broken_law_and_a_missing_ball() {
 #[test]
 fn the_recheck_judges_each_ball_with_its_own_law_in_mixed_leaves() {
     let f = fixture();
-    let (goal, unsafe_set, input) = judge_of(f);
-    let judge = host_compiler::synth::judge(
-        &f.problem,
-        &f.syn.plant,
-        goal.as_ref(),
-        unsafe_set.as_deref(),
-        &input,
-    );
+    let sets = Sets::of(f);
+    let judge = sets.judge(f);
     let mut b = f.pwa.builder.clone();
     let ball = b
         .leaves
