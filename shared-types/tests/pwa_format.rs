@@ -1,6 +1,7 @@
-//! PWA-feedback images (mode 2): round trips (fixed, random, at capacity), canonical re-encoding, and one
-//! test per validation rule, each fed to `decode` as raw bytes with a correct CRC and checked to name what
-//! is wrong (and `Image::new_pwa` to agree).
+//! PWA-feedback images (mode 2): round trips (fixed, random, at capacity), canonical re-encoding, and a
+//! table of rejections, one row per validation check: each mutates the fixed content (fed to `decode` as
+//! raw bytes with a correct CRC, and `Image::new_pwa` checked to agree) or its encoded bytes, and names the
+//! error expected.
 #![allow(non_snake_case)]
 
 mod common;
@@ -14,7 +15,7 @@ use shared_types::capacity::{
     MAX_BALLS, MAX_BALL_REFS, MAX_IMAGE_LEN, MAX_LEAF_BALLS, MAX_LEAVES, MAX_M, MAX_N,
     MAX_PARTITIONS, MAX_TREE_DEPTH, MAX_TREE_NODES,
 };
-use shared_types::image::{decode, encode, Dim, Field, Header, ImageError, Mode, Pos};
+use shared_types::image::{decode, encode, Dim, Field, Header, Image, ImageError, Mode, Pos};
 use shared_types::pwa::{Child, LEAF_BASE, OUTSIDE};
 
 #[test]
@@ -213,241 +214,6 @@ fn chain(len: usize) -> PwaContent {
     c
 }
 
-#[test]
-fn a_chain_of_max_depth_is_accepted_one_longer_is_not() {
-    let c = chain(MAX_TREE_DEPTH);
-    let img_bytes = c.to_bytes().unwrap();
-    assert_eq!(decode(&img_bytes).unwrap().tree_depth(), MAX_TREE_DEPTH);
-
-    let mut c = chain(MAX_TREE_DEPTH + 1);
-    c.depth = MAX_TREE_DEPTH as u8;
-    assert_eq!(
-        c.decode_err(),
-        ImageError::TreeTooDeep {
-            node: MAX_TREE_DEPTH as u16
-        }
-    );
-    c.depth = (MAX_TREE_DEPTH + 1) as u8;
-    assert_eq!(
-        c.decode_err(),
-        ImageError::DimOutOfRange {
-            dim: Dim::TreeDepth,
-            value: MAX_TREE_DEPTH as u32 + 1,
-            min: 0,
-            max: MAX_TREE_DEPTH as u32
-        }
-    );
-    assert!(c.decode_err().to_string().contains("tree depth"));
-}
-
-#[test]
-fn rejects_cycles_and_back_edges() {
-    // Self loop.
-    let mut c = two_partitions();
-    c.node_child[2] = 1;
-    assert_eq!(c.decode_err(), ImageError::BackEdge { node: 1, child: 1 });
-    // Edge back to the root: a cycle 0 → 1 → 0.
-    let mut c = two_partitions();
-    c.node_child[3] = 0;
-    assert_eq!(c.decode_err(), ImageError::BackEdge { node: 1, child: 0 });
-    assert_eq!(
-        c.decode_err().to_string(),
-        "tree node 1: child node 0 does not come after its parent (back edge)"
-    );
-}
-
-#[test]
-fn rejects_children_out_of_range() {
-    let mut c = two_partitions();
-    c.node_child[1] = 2; // only nodes 0 and 1
-    assert_eq!(
-        c.decode_err(),
-        ImageError::ChildOutOfRange { node: 0, child: 2 }
-    );
-    let mut c = two_partitions();
-    c.node_child[1] = 0x7FFF;
-    assert_eq!(
-        c.decode_err(),
-        ImageError::ChildOutOfRange {
-            node: 0,
-            child: 0x7FFF
-        }
-    );
-    let mut c = two_partitions();
-    c.node_child[2] = LEAF_BASE + 2; // only leaves 0 and 1
-    assert_eq!(
-        c.decode_err(),
-        ImageError::LeafOutOfRange { node: 1, leaf: 2 }
-    );
-    let mut c = two_partitions();
-    c.node_child[2] = OUTSIDE - 1;
-    assert_eq!(
-        c.decode_err(),
-        ImageError::LeafOutOfRange {
-            node: 1,
-            leaf: OUTSIDE - 1 - LEAF_BASE
-        }
-    );
-}
-
-#[test]
-fn rejects_unreachable_nodes_and_unreferenced_leaves() {
-    // Node 2 exists but nothing points to it.
-    let mut c = two_partitions();
-    c.node_a.extend_from_slice(&[1.0, 1.0]);
-    c.node_b.push(0.0);
-    c.node_child.extend_from_slice(&[L0, L1]);
-    assert_eq!(c.decode_err(), ImageError::UnreachableNode { node: 2 });
-    // Leaf 2 exists but no node names it.
-    let mut c = two_partitions();
-    c.leaf_partition.push(0);
-    c.leaf_balls.push(vec![0]);
-    assert_eq!(c.decode_err(), ImageError::UnreferencedLeaf { leaf: 2 });
-    // Leaf 0 replaced by OUTSIDE: leaf 0 is now unreferenced.
-    let mut c = two_partitions();
-    c.node_child[2] = OUTSIDE;
-    assert_eq!(c.decode_err(), ImageError::UnreferencedLeaf { leaf: 0 });
-    // Without nodes the tree is leaf 0 alone: a second leaf is unreferenced.
-    let mut c = two_partitions();
-    c.node_a.clear();
-    c.node_b.clear();
-    c.node_child.clear();
-    c.depth = 0;
-    assert_eq!(c.decode_err(), ImageError::UnreferencedLeaf { leaf: 1 });
-    c.leaf_partition.pop();
-    c.leaf_balls.pop();
-    assert!(c.to_bytes().is_ok());
-}
-
-#[test]
-fn rejects_a_wrong_stored_depth() {
-    for stored in [0u8, 1, 3] {
-        let mut c = two_partitions();
-        c.depth = stored;
-        assert_eq!(
-            c.decode_err(),
-            ImageError::TreeDepthMismatch { stored, actual: 2 }
-        );
-    }
-    let mut c = two_partitions();
-    c.node_a.clear();
-    c.node_b.clear();
-    c.node_child.clear();
-    c.leaf_partition.pop();
-    c.leaf_balls.pop();
-    c.depth = 1;
-    assert_eq!(
-        c.decode_err(),
-        ImageError::TreeDepthMismatch {
-            stored: 1,
-            actual: 0
-        }
-    );
-}
-
-#[test]
-fn rejects_degenerate_and_non_finite_hyperplanes() {
-    let mut c = two_partitions();
-    c.node_a[2] = 0.0;
-    c.node_a[3] = -0.0;
-    assert_eq!(c.decode_err(), ImageError::DegenerateHyperplane { node: 1 });
-    let mut c = two_partitions();
-    c.node_a[3] = f32::NAN;
-    assert_eq!(
-        c.decode_err(),
-        ImageError::NonFinite {
-            field: Field::NodeNormal,
-            pos: Pos(1, 1, 0)
-        }
-    );
-    assert_eq!(c.decode_err().to_string(), "node 1: a[1] is not finite");
-    let mut c = two_partitions();
-    c.node_b[0] = f32::INFINITY;
-    assert_eq!(
-        c.decode_err(),
-        ImageError::NonFinite {
-            field: Field::NodeOffset,
-            pos: Pos(0, 0, 0)
-        }
-    );
-    assert_eq!(c.decode_err().to_string(), "node 0: b is not finite");
-    // A node record short by one child code: the record table has the wrong length.
-    let mut c = two_partitions();
-    c.node_child.pop();
-    assert_eq!(
-        c.decode_err(),
-        ImageError::FieldLength {
-            field: Field::Node,
-            expected: 32,
-            found: 30
-        }
-    );
-}
-
-#[test]
-fn rejects_bad_laws() {
-    let mut c = two_partitions();
-    c.gain[3] = f32::NEG_INFINITY;
-    assert_eq!(
-        c.decode_err(),
-        ImageError::NonFinite {
-            field: Field::LawGain,
-            pos: Pos(1, 0, 1)
-        }
-    );
-    let mut c = two_partitions();
-    c.offset[1] = f32::NAN;
-    assert_eq!(
-        c.decode_err(),
-        ImageError::NonFinite {
-            field: Field::LawOffset,
-            pos: Pos(1, 0, 0)
-        }
-    );
-    let mut c = two_partitions();
-    c.gain.pop();
-    assert_eq!(
-        c.decode_err(),
-        ImageError::FieldLength {
-            field: Field::LawGain,
-            expected: 16,
-            found: 12
-        }
-    );
-}
-
-#[test]
-fn rejects_bad_leaves() {
-    let mut c = two_partitions();
-    c.leaf_partition[1] = 2;
-    assert_eq!(
-        c.decode_err(),
-        ImageError::PartitionOutOfRange { leaf: 1, value: 2 }
-    );
-    // A leaf without balls: ends 2, 2.
-    let mut c = two_partitions();
-    c.leaf_balls[1].clear();
-    assert_eq!(c.decode_err(), ImageError::LeafBallEnds { leaf: 1 });
-    let mut c = two_partitions();
-    c.leaf_balls[0] = vec![0; MAX_LEAF_BALLS + 1];
-    assert_eq!(
-        c.decode_err(),
-        ImageError::LeafTooManyBalls {
-            leaf: 0,
-            count: MAX_LEAF_BALLS as u16 + 1
-        }
-    );
-    let mut c = two_partitions();
-    c.leaf_balls[0] = vec![0; MAX_LEAF_BALLS];
-    assert!(c.to_bytes().is_ok());
-    let mut c = two_partitions();
-    c.leaf_balls[1] = vec![3];
-    assert_eq!(
-        c.decode_err(),
-        ImageError::BallRefOutOfRange { leaf: 1, value: 3 }
-    );
-}
-
 /// Regression: a leaf whose cell meets balls certified for different laws lists them all (no ball of F is
 /// dropped), and the law applied is that of the ball that contains the state, not the leaf's.
 #[test]
@@ -486,253 +252,11 @@ fn a_mixed_leaf_applies_the_law_of_the_containing_ball() {
 }
 
 #[test]
-fn rejects_bad_balls() {
-    let mut c = two_partitions();
-    c.ball_threshold[2] = -0.5;
-    assert_eq!(
-        c.decode_err(),
-        ImageError::NegativeBallThreshold { ball: 2 }
-    );
-    assert_eq!(c.decode_err().to_string(), "ball 2: threshold is negative");
-    let mut c = two_partitions();
-    c.ball_threshold[2] = -f32::MIN_POSITIVE;
-    assert_eq!(
-        c.decode_err(),
-        ImageError::NegativeBallThreshold { ball: 2 }
-    );
-    for bad in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
-        let mut c = two_partitions();
-        c.ball_threshold[2] = bad;
-        assert_eq!(
-            c.decode_err(),
-            ImageError::NonFinite {
-                field: Field::BallThreshold,
-                pos: Pos(2, 0, 0)
-            }
-        );
-        assert_eq!(
-            c.decode_err().to_string(),
-            "ball 2: threshold is not finite"
-        );
-    }
-    let mut c = two_partitions();
-    c.ball_centre[3] = f32::INFINITY;
-    assert_eq!(
-        c.decode_err(),
-        ImageError::NonFinite {
-            field: Field::BallCentre,
-            pos: Pos(1, 1, 0)
-        }
-    );
-    let mut c = two_partitions();
-    c.ball_centre_z[5] = f32::NAN;
-    assert_eq!(
-        c.decode_err(),
-        ImageError::NonFinite {
-            field: Field::BallCentreZ,
-            pos: Pos(2, 1, 0)
-        }
-    );
-    let mut c = two_partitions();
-    c.ball_centre_z.pop();
-    assert_eq!(
-        c.decode_err(),
-        ImageError::FieldLength {
-            field: Field::BallTest,
-            expected: 36,
-            found: 32
-        }
-    );
-    let mut c = two_partitions();
-    c.ball_threshold.pop();
-    c.counts = Some((2, 2, 3));
-    assert_eq!(
-        c.decode_err(),
-        ImageError::FieldLength {
-            field: Field::BallTest,
-            expected: 36,
-            found: 32
-        }
-    );
-    let mut c = two_partitions();
-    c.ball_location[1] = 1;
-    assert_eq!(
-        c.decode_err(),
-        ImageError::BallLocationOutOfRange { ball: 1, value: 1 }
-    );
-    let mut c = two_partitions();
-    c.ball_partition[0] = 5;
-    assert_eq!(
-        c.decode_err(),
-        ImageError::BallPartitionOutOfRange { ball: 0, value: 5 }
-    );
-    let mut c = two_partitions();
-    c.ball_location.pop();
-    assert_eq!(
-        c.decode_err(),
-        ImageError::FieldLength {
-            field: Field::BallLocation,
-            expected: 3,
-            found: 2
-        }
-    );
-    // A zero threshold is allowed (a single certified point), and so is −0.
-    let mut c = two_partitions();
-    c.ball_threshold[0] = 0.0;
-    assert!(c.to_bytes().is_ok());
-    c.ball_threshold[0] = -0.0;
-    assert!(c.to_bytes().is_ok());
-}
-
-#[test]
-fn rejects_counts_and_dimensions_outside_capacity() {
-    let mut c = two_partitions();
-    c.np = 0;
-    c.gain.clear();
-    c.offset.clear();
-    assert_eq!(
-        c.decode_err(),
-        ImageError::DimOutOfRange {
-            dim: Dim::Partitions,
-            value: 0,
-            min: 1,
-            max: MAX_PARTITIONS as u32
-        }
-    );
-    let mut c = two_partitions();
-    c.np = MAX_PARTITIONS + 1;
-    assert!(matches!(
-        c.decode_err(),
-        ImageError::DimOutOfRange {
-            dim: Dim::Partitions,
-            ..
-        }
-    ));
-    let mut c = two_partitions();
-    c.n_trajectories = 1;
-    assert_eq!(
-        c.decode_err(),
-        ImageError::DimOutOfRange {
-            dim: Dim::Trajectories,
-            value: 1,
-            min: 0,
-            max: 0
-        }
-    );
-    let mut c = two_partitions();
-    c.counts = Some((MAX_TREE_NODES as u16 + 1, 2, 3));
-    assert!(matches!(
-        c.decode_err(),
-        ImageError::DimOutOfRange {
-            dim: Dim::TreeNodes,
-            ..
-        }
-    ));
-    let mut c = two_partitions();
-    c.counts = Some((2, 0, 3));
-    assert!(matches!(
-        c.decode_err(),
-        ImageError::DimOutOfRange {
-            dim: Dim::Leaves,
-            value: 0,
-            ..
-        }
-    ));
-    let mut c = two_partitions();
-    c.counts = Some((2, 2, 0));
-    assert!(matches!(
-        c.decode_err(),
-        ImageError::DimOutOfRange {
-            dim: Dim::Balls,
-            value: 0,
-            ..
-        }
-    ));
-    // Counts that disagree with the arrays: a field length error names the first array that disagrees.
-    let mut c = two_partitions();
-    c.counts = Some((3, 2, 3));
-    assert_eq!(
-        c.decode_err(),
-        ImageError::FieldLength {
-            field: Field::Node,
-            expected: 48,
-            found: 32
-        }
-    );
-}
-
-#[test]
-fn rejects_bad_period_and_bad_P_in_pwa_mode_too() {
-    let mut c = two_partitions();
-    c.period = 0.0;
-    assert_eq!(c.decode_err(), ImageError::BadPeriod);
-    let mut c = two_partitions();
-    c.P = vec![1.0, 2.0, 2.0, 1.0];
-    assert_eq!(
-        c.decode_err(),
-        ImageError::NotPositiveDefinite { location: 0 }
-    );
-    let mut c = two_partitions();
-    c.input_box = Some((vec![1.0], vec![0.0]));
-    assert_eq!(c.decode_err(), ImageError::EmptyInputBox { input: 0 });
-}
-
-#[test]
-fn rejects_a_factor_that_is_not_upper_triangular_with_positive_diagonal() {
-    let mut c = two_partitions();
-    c.R[2] = 0.5; // R[1,0]
-    let e = c.decode_err();
-    assert_eq!(
-        e,
-        ImageError::FactorNotUpperTriangular {
-            location: 0,
-            row: 1,
-            col: 0
-        }
-    );
-    assert_eq!(
-        e.to_string(),
-        "location 0: factor R is not upper triangular (R[1,0] != 0)"
-    );
-    // Above the diagonal anything finite is allowed.
-    let mut c = two_partitions();
-    c.R[1] = -3.0;
-    assert!(c.to_bytes().is_ok());
-    for bad in [0.0, -1.0, -0.0] {
-        let mut c = two_partitions();
-        c.R[3] = bad;
-        let e = c.decode_err();
-        assert_eq!(
-            e,
-            ImageError::FactorDiagonal {
-                location: 0,
-                row: 1
-            }
-        );
-        assert_eq!(
-            e.to_string(),
-            "location 0: factor R has a non-positive diagonal entry R[1,1]"
-        );
-    }
-    let mut c = two_partitions();
-    c.R[1] = f32::INFINITY;
-    assert_eq!(
-        c.decode_err(),
-        ImageError::NonFinite {
-            field: Field::Factor,
-            pos: Pos(0, 0, 1)
-        }
-    );
-    let mut c = two_partitions();
-    c.R.push(0.0);
-    assert!(matches!(
-        c.decode_err(),
-        ImageError::FieldLength {
-            field: Field::Factor,
-            expected: 16,
-            found: 20
-        }
-    ));
+fn a_chain_of_max_depth_is_accepted() {
+    // One longer is rejected: see the "tree:" rows of `rejects_invalid_content`.
+    let c = chain(MAX_TREE_DEPTH);
+    let img_bytes = c.to_bytes().unwrap();
+    assert_eq!(decode(&img_bytes).unwrap().tree_depth(), MAX_TREE_DEPTH);
 }
 
 #[test]
@@ -744,48 +268,345 @@ fn shared_subtrees_are_allowed_and_counted_once_for_depth() {
     assert_eq!(decode(&img_bytes).unwrap().tree_depth(), 2);
 }
 
-#[test]
-fn rejects_overlong_varints_and_trailing_bytes_in_pwa_payloads() {
-    // The first payload field is K's byte string: length prefix 8 (0x08). Re-encode it as the overlong
-    // varint 0x88 0x00: same content, non-canonical bytes.
-    let b = two_partitions().to_bytes().unwrap();
-    assert_eq!(b[32], 8);
-    let mut x = b[..32].to_vec();
-    x.extend_from_slice(&[0x88, 0x00]);
-    x.extend_from_slice(&b[33..]);
-    common::fix_header(&mut x);
-    assert_eq!(decode(&x), Err(ImageError::NotCanonical));
-    let mut x = b.clone();
-    x.push(0);
-    common::fix_header(&mut x);
-    assert_eq!(decode(&x), Err(ImageError::TrailingBytes));
-    let mut x = b[..b.len() - 1].to_vec();
-    common::fix_header(&mut x);
-    assert_eq!(decode(&x), Err(ImageError::Malformed));
+// ---- Rejection tables -----------------------------------------------------------------------------------
+
+/// The error a row expects.
+enum Expect {
+    /// Exactly this error.
+    Is(ImageError),
+    /// An error matching a pattern (fields the pattern leaves out are free); the text is the pattern.
+    Like(&'static str, fn(&ImageError) -> bool),
+}
+use Expect::Is;
+
+/// `Expect::Like` from a pattern.
+macro_rules! like {
+    ($p:pat) => {
+        Expect::Like(stringify!($p), |e| matches!(e, $p))
+    };
 }
 
+/// What the error's `Display` must say, if anything.
+enum Says {
+    Anything,
+    Exactly(&'static str),
+    Contains(&'static str),
+}
+
+/// One rejection check: `mutate` applied to `two_partitions()` (or, for byte rows, to its encoded bytes,
+/// after which the header's length and CRC are fixed) must be rejected with `expect`.
+struct Row<T> {
+    what: &'static str,
+    mutate: fn(&mut T),
+    expect: Expect,
+    says: Says,
+}
+
+/// A row of the content table.
+fn row(what: &'static str, mutate: fn(&mut PwaContent), expect: Expect) -> Row<PwaContent> {
+    Row {
+        what,
+        mutate,
+        expect,
+        says: Says::Anything,
+    }
+}
+
+/// A row of the byte table.
+fn byte_row(what: &'static str, mutate: fn(&mut Vec<u8>), expect: Expect) -> Row<Vec<u8>> {
+    Row {
+        what,
+        mutate,
+        expect,
+        says: Says::Anything,
+    }
+}
+
+impl<T> Row<T> {
+    fn says(self, text: &'static str) -> Self {
+        Row {
+            says: Says::Exactly(text),
+            ..self
+        }
+    }
+    fn says_something_with(self, text: &'static str) -> Self {
+        Row {
+            says: Says::Contains(text),
+            ..self
+        }
+    }
+}
+
+/// `Err` with what is wrong if `e` is not what the row expects.
+fn check_error<T>(row: &Row<T>, e: ImageError) -> Result<(), String> {
+    match &row.expect {
+        Is(want) if e != *want => return Err(format!("got {e:?}, expected {want:?}")),
+        Expect::Like(pattern, ok) if !ok(&e) => {
+            return Err(format!("got {e:?}, expected an error like {pattern}"))
+        }
+        _ => {}
+    }
+    let text = e.to_string();
+    match row.says {
+        Says::Exactly(want) if text != want => Err(format!("message {text:?}, expected {want:?}")),
+        Says::Contains(want) if !text.contains(want) => {
+            Err(format!("message {text:?} does not contain {want:?}"))
+        }
+        _ => Ok(()),
+    }
+}
+
+/// Runs every row and fails naming each row whose check fails (all of them, not just the first).
+fn run_rows<T>(rows: &[Row<T>], check: impl Fn(&Row<T>) -> Result<(), String>) {
+    let mut names = std::collections::HashSet::new();
+    for r in rows {
+        assert!(
+            names.insert(r.what),
+            "duplicate row description {:?}",
+            r.what
+        );
+    }
+    let failures: Vec<String> = rows
+        .iter()
+        .enumerate()
+        .filter_map(|(i, r)| {
+            check(r)
+                .err()
+                .map(|why| format!("  row {i} \"{}\": {why}", r.what))
+        })
+        .collect();
+    assert!(
+        failures.is_empty(),
+        "{} of {} rows failed:\n{}",
+        failures.len(),
+        rows.len(),
+        failures.join("\n")
+    );
+}
+
+/// Content mutations: `decode` of the raw bytes (correct CRC) must report the expected error, and
+/// `Image::new_pwa` must report the same.
 #[test]
-fn a_header_dimension_that_disagrees_with_the_payload_is_a_field_length_error() {
-    let mut b = two_partitions().to_bytes().unwrap();
-    b[8..10].copy_from_slice(&3u16.to_le_bytes()); // n = 3
-    common::fix_header(&mut b);
-    assert_eq!(
-        decode(&b),
-        Err(ImageError::FieldLength {
-            field: Field::K,
-            expected: 12,
-            found: 8
+fn rejects_invalid_content() {
+    #[rustfmt::skip]
+    let rows: Vec<Row<PwaContent>> = vec![
+        // Tree shape.
+        row("tree: chain of MAX_TREE_DEPTH + 1 nodes, stored depth MAX_TREE_DEPTH",
+            |c| { *c = chain(MAX_TREE_DEPTH + 1); c.depth = MAX_TREE_DEPTH as u8; },
+            Is(ImageError::TreeTooDeep { node: MAX_TREE_DEPTH as u16 })),
+        row("tree: chain of MAX_TREE_DEPTH + 1 nodes, stored depth MAX_TREE_DEPTH + 1",
+            |c| { *c = chain(MAX_TREE_DEPTH + 1); c.depth = (MAX_TREE_DEPTH + 1) as u8; },
+            Is(ImageError::DimOutOfRange { dim: Dim::TreeDepth, value: MAX_TREE_DEPTH as u32 + 1, min: 0, max: MAX_TREE_DEPTH as u32 }))
+            .says_something_with("tree depth"),
+        row("tree: self loop at node 1", |c| c.node_child[2] = 1,
+            Is(ImageError::BackEdge { node: 1, child: 1 })),
+        row("tree: edge back to the root (cycle 0 → 1 → 0)", |c| c.node_child[3] = 0,
+            Is(ImageError::BackEdge { node: 1, child: 0 }))
+            .says("tree node 1: child node 0 does not come after its parent (back edge)"),
+        row("tree: child node 2 of 2 nodes", |c| c.node_child[1] = 2,
+            Is(ImageError::ChildOutOfRange { node: 0, child: 2 })),
+        row("tree: child node 0x7FFF", |c| c.node_child[1] = 0x7FFF,
+            Is(ImageError::ChildOutOfRange { node: 0, child: 0x7FFF })),
+        row("tree: leaf 2 of 2 leaves", |c| c.node_child[2] = LEAF_BASE + 2,
+            Is(ImageError::LeafOutOfRange { node: 1, leaf: 2 })),
+        row("tree: leaf code OUTSIDE - 1", |c| c.node_child[2] = OUTSIDE - 1,
+            Is(ImageError::LeafOutOfRange { node: 1, leaf: OUTSIDE - 1 - LEAF_BASE })),
+        row("tree: node 2 exists but nothing points to it",
+            |c| { c.node_a.extend_from_slice(&[1.0, 1.0]); c.node_b.push(0.0); c.node_child.extend_from_slice(&[L0, L1]); },
+            Is(ImageError::UnreachableNode { node: 2 })),
+        row("tree: leaf 2 exists but no node names it",
+            |c| { c.leaf_partition.push(0); c.leaf_balls.push(vec![0]); },
+            Is(ImageError::UnreferencedLeaf { leaf: 2 })),
+        row("tree: leaf 0 replaced by OUTSIDE", |c| c.node_child[2] = OUTSIDE,
+            Is(ImageError::UnreferencedLeaf { leaf: 0 })),
+        row("tree: no nodes (leaf 0 alone) but a second leaf",
+            |c| { c.node_a.clear(); c.node_b.clear(); c.node_child.clear(); c.depth = 0; },
+            Is(ImageError::UnreferencedLeaf { leaf: 1 })),
+        row("tree: stored depth 0, actual 2", |c| c.depth = 0,
+            Is(ImageError::TreeDepthMismatch { stored: 0, actual: 2 })),
+        row("tree: stored depth 1, actual 2", |c| c.depth = 1,
+            Is(ImageError::TreeDepthMismatch { stored: 1, actual: 2 })),
+        row("tree: stored depth 3, actual 2", |c| c.depth = 3,
+            Is(ImageError::TreeDepthMismatch { stored: 3, actual: 2 })),
+        row("tree: no nodes, one leaf, stored depth 1",
+            |c| { c.node_a.clear(); c.node_b.clear(); c.node_child.clear(); c.leaf_partition.pop(); c.leaf_balls.pop(); c.depth = 1; },
+            Is(ImageError::TreeDepthMismatch { stored: 1, actual: 0 })),
+        // Hyperplanes.
+        row("node: normal (0, −0)", |c| { c.node_a[2] = 0.0; c.node_a[3] = -0.0; },
+            Is(ImageError::DegenerateHyperplane { node: 1 })),
+        row("node: NaN in a normal", |c| c.node_a[3] = f32::NAN,
+            Is(ImageError::NonFinite { field: Field::NodeNormal, pos: Pos(1, 1, 0) }))
+            .says("node 1: a[1] is not finite"),
+        row("node: infinite offset", |c| c.node_b[0] = f32::INFINITY,
+            Is(ImageError::NonFinite { field: Field::NodeOffset, pos: Pos(0, 0, 0) }))
+            .says("node 0: b is not finite"),
+        row("node: record short by one child code", |c| { c.node_child.pop(); },
+            Is(ImageError::FieldLength { field: Field::Node, expected: 32, found: 30 })),
+        // Laws.
+        row("law: −∞ in a gain", |c| c.gain[3] = f32::NEG_INFINITY,
+            Is(ImageError::NonFinite { field: Field::LawGain, pos: Pos(1, 0, 1) })),
+        row("law: NaN in an offset", |c| c.offset[1] = f32::NAN,
+            Is(ImageError::NonFinite { field: Field::LawOffset, pos: Pos(1, 0, 0) })),
+        row("law: gain table one entry short", |c| { c.gain.pop(); },
+            Is(ImageError::FieldLength { field: Field::LawGain, expected: 16, found: 12 })),
+        // Leaves.
+        row("leaf: partition 2 of 2", |c| c.leaf_partition[1] = 2,
+            Is(ImageError::PartitionOutOfRange { leaf: 1, value: 2 })),
+        row("leaf: no balls (ends 2, 2)", |c| c.leaf_balls[1].clear(),
+            Is(ImageError::LeafBallEnds { leaf: 1 })),
+        row("leaf: MAX_LEAF_BALLS + 1 balls", |c| c.leaf_balls[0] = vec![0; MAX_LEAF_BALLS + 1],
+            Is(ImageError::LeafTooManyBalls { leaf: 0, count: MAX_LEAF_BALLS as u16 + 1 })),
+        row("leaf: ball 3 of 3", |c| c.leaf_balls[1] = vec![3],
+            Is(ImageError::BallRefOutOfRange { leaf: 1, value: 3 })),
+        // Balls.
+        row("ball: threshold −0.5", |c| c.ball_threshold[2] = -0.5,
+            Is(ImageError::NegativeBallThreshold { ball: 2 }))
+            .says("ball 2: threshold is negative"),
+        row("ball: threshold −MIN_POSITIVE", |c| c.ball_threshold[2] = -f32::MIN_POSITIVE,
+            Is(ImageError::NegativeBallThreshold { ball: 2 })),
+        row("ball: threshold NaN", |c| c.ball_threshold[2] = f32::NAN,
+            Is(ImageError::NonFinite { field: Field::BallThreshold, pos: Pos(2, 0, 0) }))
+            .says("ball 2: threshold is not finite"),
+        row("ball: threshold +∞", |c| c.ball_threshold[2] = f32::INFINITY,
+            Is(ImageError::NonFinite { field: Field::BallThreshold, pos: Pos(2, 0, 0) }))
+            .says("ball 2: threshold is not finite"),
+        row("ball: threshold −∞", |c| c.ball_threshold[2] = f32::NEG_INFINITY,
+            Is(ImageError::NonFinite { field: Field::BallThreshold, pos: Pos(2, 0, 0) }))
+            .says("ball 2: threshold is not finite"),
+        row("ball: infinite centre", |c| c.ball_centre[3] = f32::INFINITY,
+            Is(ImageError::NonFinite { field: Field::BallCentre, pos: Pos(1, 1, 0) })),
+        row("ball: NaN whitened centre", |c| c.ball_centre_z[5] = f32::NAN,
+            Is(ImageError::NonFinite { field: Field::BallCentreZ, pos: Pos(2, 1, 0) })),
+        row("ball: whitened centres one short", |c| { c.ball_centre_z.pop(); },
+            Is(ImageError::FieldLength { field: Field::BallTest, expected: 36, found: 32 })),
+        row("ball: thresholds one short (ball count kept at 3)",
+            |c| { c.ball_threshold.pop(); c.counts = Some((2, 2, 3)); },
+            Is(ImageError::FieldLength { field: Field::BallTest, expected: 36, found: 32 })),
+        row("ball: location 1 of 1", |c| c.ball_location[1] = 1,
+            Is(ImageError::BallLocationOutOfRange { ball: 1, value: 1 })),
+        row("ball: partition 5 of 2", |c| c.ball_partition[0] = 5,
+            Is(ImageError::BallPartitionOutOfRange { ball: 0, value: 5 })),
+        row("ball: locations one short", |c| { c.ball_location.pop(); },
+            Is(ImageError::FieldLength { field: Field::BallLocation, expected: 3, found: 2 })),
+        // Counts and dimensions.
+        row("dims: no partitions", |c| { c.np = 0; c.gain.clear(); c.offset.clear(); },
+            Is(ImageError::DimOutOfRange { dim: Dim::Partitions, value: 0, min: 1, max: MAX_PARTITIONS as u32 })),
+        row("dims: MAX_PARTITIONS + 1 partitions", |c| c.np = MAX_PARTITIONS + 1,
+            like!(ImageError::DimOutOfRange { dim: Dim::Partitions, .. })),
+        row("dims: a trajectory in a PWA image", |c| c.n_trajectories = 1,
+            Is(ImageError::DimOutOfRange { dim: Dim::Trajectories, value: 1, min: 0, max: 0 })),
+        row("dims: MAX_TREE_NODES + 1 nodes", |c| c.counts = Some((MAX_TREE_NODES as u16 + 1, 2, 3)),
+            like!(ImageError::DimOutOfRange { dim: Dim::TreeNodes, .. })),
+        row("dims: no leaves", |c| c.counts = Some((2, 0, 3)),
+            like!(ImageError::DimOutOfRange { dim: Dim::Leaves, value: 0, .. })),
+        row("dims: no balls", |c| c.counts = Some((2, 2, 0)),
+            like!(ImageError::DimOutOfRange { dim: Dim::Balls, value: 0, .. })),
+        row("dims: node count disagrees with the arrays", |c| c.counts = Some((3, 2, 3)),
+            Is(ImageError::FieldLength { field: Field::Node, expected: 48, found: 32 })),
+        // Period, P, input box.
+        row("period 0", |c| c.period = 0.0,
+            Is(ImageError::BadPeriod)),
+        row("P not positive definite", |c| c.P = vec![1.0, 2.0, 2.0, 1.0],
+            Is(ImageError::NotPositiveDefinite { location: 0 })),
+        row("input box empty", |c| c.input_box = Some((vec![1.0], vec![0.0])),
+            Is(ImageError::EmptyInputBox { input: 0 })),
+        // The metric factor R.
+        row("factor: R[1,0] = 0.5", |c| c.R[2] = 0.5,
+            Is(ImageError::FactorNotUpperTriangular { location: 0, row: 1, col: 0 }))
+            .says("location 0: factor R is not upper triangular (R[1,0] != 0)"),
+        row("factor: R[1,1] = 0", |c| c.R[3] = 0.0,
+            Is(ImageError::FactorDiagonal { location: 0, row: 1 }))
+            .says("location 0: factor R has a non-positive diagonal entry R[1,1]"),
+        row("factor: R[1,1] = −1", |c| c.R[3] = -1.0,
+            Is(ImageError::FactorDiagonal { location: 0, row: 1 }))
+            .says("location 0: factor R has a non-positive diagonal entry R[1,1]"),
+        row("factor: R[1,1] = −0", |c| c.R[3] = -0.0,
+            Is(ImageError::FactorDiagonal { location: 0, row: 1 }))
+            .says("location 0: factor R has a non-positive diagonal entry R[1,1]"),
+        row("factor: R[0,1] = +∞", |c| c.R[1] = f32::INFINITY,
+            Is(ImageError::NonFinite { field: Field::Factor, pos: Pos(0, 0, 1) })),
+        row("factor: one entry too many", |c| c.R.push(0.0),
+            Is(ImageError::FieldLength { field: Field::Factor, expected: 16, found: 20 })),
+    ];
+    assert_eq!(rows.len(), 55);
+    run_rows(&rows, |r| {
+        let mut c = two_partitions();
+        (r.mutate)(&mut c);
+        let e = match decode(&c.raw_bytes()) {
+            Ok(_) => return Err("decode accepted the content".into()),
+            Err(e) => e,
+        };
+        let owned = c.owned();
+        let built = Image::new_pwa(c.dims(), c.period, owned.payload()).map(|_| ());
+        if built != Err(e) {
+            return Err(format!(
+                "Image::new_pwa and decode disagree: {built:?} vs Err({e:?})"
+            ));
+        }
+        check_error(r, e)
+    });
+}
+
+/// A change to the fixed content.
+type Mutation = fn(&mut PwaContent);
+
+/// Boundary cases next to the rejections above: `mutate` applied to `two_partitions()` must still encode.
+#[test]
+fn accepts_content_next_to_the_rejections() {
+    #[rustfmt::skip]
+    let rows: [(&str, Mutation); 5] = [
+        ("tree: no nodes, leaf 0 alone",
+            |c| { c.node_a.clear(); c.node_b.clear(); c.node_child.clear(); c.depth = 0; c.leaf_partition.pop(); c.leaf_balls.pop(); }),
+        ("leaf: MAX_LEAF_BALLS balls", |c| c.leaf_balls[0] = vec![0; MAX_LEAF_BALLS]),
+        ("ball: threshold 0 (a single certified point)", |c| c.ball_threshold[0] = 0.0),
+        ("ball: threshold −0", |c| c.ball_threshold[0] = -0.0),
+        ("factor: anything finite above the diagonal (R[0,1] = −3)", |c| c.R[1] = -3.0),
+    ];
+    let failures: Vec<String> = rows
+        .iter()
+        .filter_map(|(what, mutate)| {
+            let mut c = two_partitions();
+            mutate(&mut c);
+            c.to_bytes()
+                .err()
+                .map(|e| format!("  \"{what}\": rejected with {e:?}"))
         })
+        .collect();
+    assert!(
+        failures.is_empty(),
+        "rows rejected:\n{}",
+        failures.join("\n")
     );
-    let mut b = two_partitions().to_bytes().unwrap();
-    b[16..18].copy_from_slice(&3u16.to_le_bytes()); // 3 partitions
-    common::fix_header(&mut b);
-    assert_eq!(
-        decode(&b),
-        Err(ImageError::FieldLength {
-            field: Field::LawGain,
-            expected: 24,
-            found: 16
-        })
-    );
+}
+
+/// Byte mutations of the encoded `two_partitions()` (header length and CRC fixed afterwards): `decode`
+/// must report the expected error.
+#[test]
+fn rejects_invalid_payload_bytes() {
+    #[rustfmt::skip]
+    let rows: Vec<Row<Vec<u8>>> = vec![
+        // The first payload field is K's byte string: length prefix 8 (0x08). Re-encode it as the
+        // overlong varint 0x88 0x00: same content, non-canonical bytes.
+        byte_row("payload: overlong varint 0x88 0x00 for K's length 8",
+            |b| { assert_eq!(b[32], 8); b.splice(32..33, [0x88, 0x00]); },
+            Is(ImageError::NotCanonical)),
+        byte_row("payload: a trailing zero byte", |b| b.push(0),
+            Is(ImageError::TrailingBytes)),
+        byte_row("payload: last byte cut off", |b| { b.pop(); },
+            Is(ImageError::Malformed)),
+        byte_row("header: n = 3 (payload has n = 2)", |b| b[8..10].copy_from_slice(&3u16.to_le_bytes()),
+            Is(ImageError::FieldLength { field: Field::K, expected: 12, found: 8 })),
+        byte_row("header: 3 partitions (payload has 2)", |b| b[16..18].copy_from_slice(&3u16.to_le_bytes()),
+            Is(ImageError::FieldLength { field: Field::LawGain, expected: 24, found: 16 })),
+    ];
+    let good = two_partitions().to_bytes().unwrap();
+    run_rows(&rows, |r| {
+        let mut b = good.clone();
+        (r.mutate)(&mut b);
+        common::fix_header(&mut b);
+        match decode(&b) {
+            Ok(_) => Err("decode accepted the bytes".into()),
+            Err(e) => check_error(r, e),
+        }
+    });
 }
