@@ -438,28 +438,30 @@ impl EllipsoidBounds {
     }
 }
 
-/// Lower Cholesky factor of a symmetric positive definite n×n matrix (row-major), or `None`.
+/// Lower Cholesky factor L (A = LLᵀ, row-major, zeros above the diagonal) of a symmetric positive definite
+/// n×n row-major matrix, from faer's LLᵀ factorisation (the lower triangle of A is read), or `None` when A is
+/// not positive definite: faer finds a non-positive pivot, or a pivot L[i,i]² is not above 1e-12 times the
+/// largest diagonal entry of A (numerically singular, the tolerance of the hand-written factorisation this
+/// replaces), or an entry is not finite. Called once per ellipsoidal set per robustness call (setup, not per
+/// sample), so faer's per-call overhead (about 0.6–1.5 µs against 0.05–0.4 µs hand-written, n = 2..12) is
+/// not measurable in the safety_robustness bench.
 fn cholesky(A: &[f64], n: usize) -> Option<Vec<f64>> {
-    let mut L = vec![0.0; n * n];
     let scale = (0..n).map(|i| A[i * n + i].abs()).fold(0.0, f64::max);
+    let llt = faer::Mat::from_fn(n, n, |i, j| A[i * n + j])
+        .llt(faer::Side::Lower)
+        .ok()?;
+    let Lf = llt.L();
+    let mut L = vec![0.0; n * n];
     for i in 0..n {
+        #[allow(clippy::neg_cmp_op_on_partial_ord)] // also rejects NaN
+        if !(Lf[(i, i)] * Lf[(i, i)] > 1e-12 * scale) {
+            return None;
+        }
         for j in 0..=i {
-            let mut s = A[i * n + j];
-            for k in 0..j {
-                s -= L[i * n + k] * L[j * n + k];
-            }
-            if i == j {
-                #[allow(clippy::neg_cmp_op_on_partial_ord)] // also rejects NaN
-                if !(s > 1e-12 * scale) {
-                    return None;
-                }
-                L[i * n + i] = s.sqrt();
-            } else {
-                L[i * n + j] = s / L[j * n + j];
-            }
+            L[i * n + j] = Lf[(i, j)];
         }
     }
-    Some(L)
+    L.iter().all(|v| v.is_finite()).then_some(L)
 }
 
 /// L⁻¹B for lower-triangular L and B (both n×n, row-major), by forward substitution per column.
