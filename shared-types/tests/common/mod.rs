@@ -615,17 +615,21 @@ impl PwaContent {
         buf
     }
 
-    /// The error `decode` reports for the raw bytes; also checks that `Image::new_pwa` agrees.
-    pub fn decode_err(&self) -> ImageError {
-        let bytes = self.raw_bytes();
-        let e = shared_types::image::decode(&bytes).expect_err("content should be rejected");
+    /// The error `decode` reports for the raw bytes, checked against `Image::new_pwa` (which must report
+    /// the same); `Err` says what went wrong instead.
+    pub fn decode_err(&self) -> Result<ImageError, String> {
+        let e = match shared_types::image::decode(&self.raw_bytes()) {
+            Ok(_) => return Err("decode accepted the content".into()),
+            Err(e) => e,
+        };
         let owned = self.owned();
-        assert_eq!(
-            Image::new_pwa(self.dims(), self.period, owned.payload()).map(|_| ()),
-            Err(e),
-            "Image::new_pwa and decode disagree"
-        );
-        e
+        let built = Image::new_pwa(self.dims(), self.period, owned.payload()).map(|_| ());
+        if built != Err(e) {
+            return Err(format!(
+                "Image::new_pwa and decode disagree: {built:?} vs Err({e:?})"
+            ));
+        }
+        Ok(e)
     }
 
     /// Reads the content back out of a decoded image through its accessors.
