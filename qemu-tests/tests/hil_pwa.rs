@@ -103,6 +103,10 @@ fn run(spec: &str, tag: &str, label: &str) {
     assert!(!init_balls.is_empty());
     let mut rng = ChaCha8Rng::seed_from_u64(problem.seed ^ 0x6a4);
     let steps = problem.horizon_steps();
+    let proved = rc
+        .liveness
+        .max_steps_to_goal
+        .expect("a recheck without failures proves a steps-to-Goal bound");
     let mut worst_cost = 0u32;
     let mut longest = 0usize;
     for run in 0..RUNS {
@@ -152,11 +156,16 @@ fn run(spec: &str, tag: &str, label: &str) {
         let k = reached
             .unwrap_or_else(|| panic!("run {run} from {x0:?} never reached Goal; ends at {x:?}"));
         longest = longest.max(k);
+        // The recheck proved a bound on the steps to Goal from the bytes; the firmware must honour it.
+        assert!(
+            k <= proved,
+            "run {run} from {x0:?}: Goal after {k} steps, beyond the proved {proved}"
+        );
         let exit = q.shutdown().unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(exit.code, Some(0), "run {run}: firmware exit");
     }
     println!(
-        "HIL PWA ({label}): {RUNS} runs met the spec (Goal within {longest} ≤ {steps} steps); {} partitions, tree depth {}, image {} bytes, worst step cost {worst_cost} instructions",
+        "HIL PWA ({label}): {RUNS} runs met the spec (Goal within {longest} ≤ {proved} proved ≤ {steps} steps); {} partitions, tree depth {}, image {} bytes, worst step cost {worst_cost} instructions",
         pwa.stats.partitions,
         pwa.stats.depth,
         pwa.image.len()
