@@ -35,6 +35,13 @@ pub enum Command {
     /// Synthesise a certified controller image and report from a task spec (TOML).
     Synth(synth::SynthArgs),
     /// Re-check an image against its spec by closed-loop Monte Carlo through the shared f32 evaluator.
+    ///
+    /// Every run must reach Goal within the horizon, stay out of Unsafe (also between samples for
+    /// continuous-time plants) and apply only inputs in the input set. For a PWA-feedback image the
+    /// certificate is first recomputed from the image bytes alone: (6.6) and (6.7) per partition, the
+    /// one-step inclusion of every ball into a ball whose f32 test provably accepts, the input bound,
+    /// containment of every ball across the tree's boundaries, and a bound on the steps to Goal from the
+    /// order in which the leaves list their balls. Exits non-zero on any failure or violation.
     Verify(verify::VerifyArgs),
     /// Simulate the closed loop of a spec's plant with an image from one initial state; writes CSV.
     Simulate(simulate::SimulateArgs),
