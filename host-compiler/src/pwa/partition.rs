@@ -137,8 +137,9 @@ impl Tree<'_> {
     /// Balls of `set` that the evaluator can route to the left child ({fl(aᵀx) ≤ b}) and to the right child
     /// (module doc). `a`, `b` are the f32 values stored in the image. A ball B_P(c, δ) reaches the left side
     /// when aᵀc − b is at most [`crate::certify::hyperplane_reach`] (the ball's extent along a plus the
-    /// rounding of the evaluator's dot product); the right side likewise. Listing a ball on every side a state of it can be routed to keeps
-    /// the "every ball meeting the cell is listed" property of the liveness argument under f32 routing.
+    /// rounding of the evaluator's dot product); the right side likewise. Listing a ball on every side a
+    /// state of it can be routed to keeps the "every ball meeting the cell is listed" property of the
+    /// liveness argument under f32 routing.
     fn split_set(&self, set: &[usize], a: &[f64], b: f64) -> (Vec<usize>, Vec<usize>) {
         let (mut l, mut r) = (vec![], vec![]);
         for &k in set {

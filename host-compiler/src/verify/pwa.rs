@@ -31,10 +31,10 @@
 //! * **Goal within T** ([`time_to_go_ranks`]). Invariance alone allows a run to circle in F. The evaluator
 //!   applies the law of the first listed ball containing the state, so the recheck looks for ranks τ with
 //!   τ = 0 where the image lies in Goal, τ(b) ≥ 1 + τ(some successor), and τ nondecreasing along every
-//!   leaf's list. Then if x is handled by b, x⁺ lies in a successor b', the leaf of x⁺ lists b' (containment),
-//!   and the first listed ball containing x⁺ has rank ≤ τ(b') ≤ τ(b) − 1: Goal is reached after at most
-//!   τ(b) + 1 steps. The least ranks must give at most the horizon's steps. The learner's order
-//!   (increasing κ*_i − κ) is one such ranking; the recheck derives its own from the bytes.
+//!   leaf's list. Then if x is handled by b, x⁺ lies in a successor b', the leaf of x⁺ lists b'
+//!   (containment), and the first listed ball containing x⁺ has rank ≤ τ(b') ≤ τ(b) − 1: Goal is reached
+//!   after at most τ(b) + 1 steps. The least ranks must give at most the horizon's steps. The learner's
+//!   order (increasing κ*_i − κ) is one such ranking; the recheck derives its own from the bytes.
 //! * **Input** over every listed ball, and **Unsafe between samples** for continuous plants (the bound of
 //!   [`crate::certify`] item 2 with the law's gain).
 
