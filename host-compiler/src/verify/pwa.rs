@@ -18,8 +18,8 @@
 //! * **Containment across boundaries** (the hypothesis of Theorem 6.6, what Algorithm 5 repairs): every
 //!   stored ball is sent down the tree with the conservative ball–hyperplane test of §6.3, widened by the
 //!   rounding of the evaluator's f32 dot product ([`crate::certify::hyperplane_reach`] h: `aᵀc − b ≤ h`
-//!   goes left, `≥ −h` goes right); every leaf it reaches must list a ball with the same centre and
-//!   radius, and no branch may reach "outside".
+//!   goes left, `≥ −h` goes right); every leaf it reaches must list a ball of the same geometry (centre,
+//!   threshold and location), and no branch may reach "outside".
 //! * **(6.7) and (6.5)** for every (leaf, ball) pair (c, ρ, law j) and every candidate successor ball b:
 //!   the input u* that maps c onto the centre c_b in one step (least squares, residual
 //!   res = Ac + g + Bu* − c_b) is the nominal input; the law's deviation from it, ε = ‖K_j c + θ0_j − u*‖
@@ -403,7 +403,8 @@ pub fn recheck(
             && p.worst_input_slack >= 0.0
             && p.worst_unsafe_clearance > 0.0;
     }
-    // Reaching Goal within the horizon: rank the balls by time to go.
+    // Balls of one geometry (centre, threshold, location) accept the same states: a leaf that lists any
+    // of them lists that ball. `class[b]` is the first ball of b's geometry.
     let same_geometry = |a: usize, b: usize| {
         centres[a] == centres[b]
             && image.ball_threshold(a).to_bits() == image.ball_threshold(b).to_bits()
@@ -412,6 +413,7 @@ pub fn recheck(
     let class: Vec<usize> = (0..nb)
         .map(|b| (0..=b).find(|&a| same_geometry(a, b)).unwrap_or(b))
         .collect();
+    // Reaching Goal within the horizon: rank the balls by time to go.
     let mut goal = vec![false; nb];
     let mut succ = vec![Vec::new(); nb];
     for c in &checks {
@@ -438,7 +440,6 @@ pub fn recheck(
         },
     };
     // Containment across boundaries: descend every ball.
-    let same = |a: usize, b: usize| centres[a] == centres[b] && rho(a) == rho(b);
     let mut containment_failures = 0;
     let mut containment_checks = 0;
     let mut depth = 0;
@@ -463,7 +464,7 @@ pub fn recheck(
                     let (_, len) = image.leaf_refs(l as usize);
                     let listed = (0..len)
                         .filter_map(|k| image.leaf_ball(l as usize, k))
-                        .any(|bb| same(bb, b));
+                        .any(|bb| class[bb] == class[b]);
                     if !listed {
                         failed = true;
                     }
