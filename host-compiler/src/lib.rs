@@ -10,7 +10,7 @@ pub mod benchkit;
 pub mod caf;
 pub mod certify;
 pub mod cli;
-pub mod coverage;
+pub mod cover;
 pub mod emit;
 pub mod geometry;
 pub mod linalg;

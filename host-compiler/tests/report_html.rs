@@ -2,7 +2,7 @@
 //! Unsafe, a box Init): sections, table rows, one `<svg` per plot, the verdict, escaping, formatting;
 //! and an example report written to `target/tmp/report-example/report.html` for looking at.
 
-use host_compiler::coverage::CoverageEstimate;
+use host_compiler::cover::CoverageEstimate;
 use host_compiler::report::data::{Ellipse2, ReportData, Shape2, TrajectoryReport, VerifySummary};
 use host_compiler::report::format::{count, escape, num, pct, sig};
 use host_compiler::report::plots::{

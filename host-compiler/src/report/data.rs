@@ -92,7 +92,7 @@ pub struct ReportData {
     pub balls: Vec<Ellipse2>,
     /// Coverage samples that no ball covers, in the Init plane.
     pub uncovered: Vec<[f64; 2]>,
-    pub coverage: crate::coverage::CoverageEstimate,
+    pub coverage: crate::cover::CoverageEstimate,
     /// The coverage the spec asks for (its `coverage_target`).
     pub coverage_target: f64,
     /// "covered at the requested confidence" or why the loop stopped.

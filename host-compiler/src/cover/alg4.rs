@@ -3,10 +3,11 @@
 //! closest ball in the CAF metric, the reference sequence of that ball's feedback law, and a summary of
 //! where the samples lie that local variation cannot reach ("needs a new seed trajectory").
 //!
-//! The growth loop itself (batches, optimisation, acceptance) lives in `synth/mod.rs`.
+//! The growth loop itself (batches, optimisation, acceptance) is [`super::grow`].
 
-use super::{round32, CoverTrajectory};
+use super::CoverTrajectory;
 use crate::linalg::p_norm;
+use crate::linalg::round32;
 use faer::MatRef;
 
 /// (5.32): ψ₀(y, S) = min_i ‖y − x̃_i(0)‖_P − δ_i over the certified balls (δ_i as stored in the image),

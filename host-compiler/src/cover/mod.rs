@@ -1,0 +1,312 @@
+//! The certified cover of Init and how it grows (Algorithms 1 and 4, §5.4; the coverage estimate of
+//! §2.5.2): the balls certified so far, the one path by which a trajectory joins them, the record of every
+//! §5.3 optimisation, and the cover after each round.
+//!
+//! * [`estimate`]: uniform sampling of Init and the coverage estimate with its Chernoff bounds (§2.5.2);
+//! * [`alg4`]: the geometry of Algorithm 4 (the gap (5.32), projection onto the closest ball, where the
+//!   unreachable samples lie);
+//! * [`grow`]: the growth loop itself, from the first seed to the stop.
+
+pub mod alg4;
+pub mod estimate;
+mod grow;
+
+pub use estimate::{CoverageEstimate, SampleBox};
+pub use grow::{grow, GrowError, GrowOptions, Grown};
+
+use crate::certify::Certificate;
+use crate::emit::{EmitError, FallbackLaw, ImageBuilder, TrajectoryEntry};
+use crate::optimize::{OptStop, Optimized};
+use crate::task::Task;
+use crate::trajectory::Nominal;
+use faer::Mat;
+use std::sync::Arc;
+
+/// How the cover grows after its first trajectory.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, clap::ValueEnum)]
+pub enum Generator {
+    /// Algorithm 4 (§5.4): the nearest uncovered sample projected onto the closest ball, that ball's
+    /// feedback law simulated from there, δ maximised by §5.3 and re-certified (the default).
+    #[default]
+    #[value(name = "algorithm4")]
+    Algorithm4,
+    /// Algorithm 1 with the SCP generator from each uncovered seed, without §5.3 (the earlier pipeline).
+    Scp,
+}
+
+impl std::fmt::Display for Generator {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Generator::Algorithm4 => "algorithm4",
+            Generator::Scp => "scp",
+        })
+    }
+}
+
+/// Called with the number of trajectories after each one is accepted (e.g. to interrupt a run).
+#[derive(Clone)]
+pub struct AcceptHook(pub Arc<dyn Fn(usize) + Send + Sync>);
+
+impl std::fmt::Debug for AcceptHook {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("AcceptHook(..)")
+    }
+}
+
+/// Why the growth loop stopped.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub enum StopReason {
+    /// The coverage lower bound met the target at the requested confidence.
+    Covered,
+    /// The trajectory budget ran out first.
+    Budget { trajectories: usize },
+    /// No uncovered sample admits a certifiable trajectory.
+    Stuck { failed_seeds: usize },
+    /// Algorithm 4's second rule: no uncovered sample is reachable by local variation of the cover (and
+    /// a new SCP seed did not help either); `region` says where they lie.
+    NeedsSeed {
+        region: alg4::UncoveredRegion,
+        description: String,
+    },
+    /// Stopped on request (Ctrl-C) with this many certified trajectories.
+    Interrupted { trajectories: usize },
+}
+
+impl std::fmt::Display for StopReason {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            StopReason::Covered => write!(f, "Init covered at the requested confidence"),
+            StopReason::Budget { trajectories } => {
+                write!(f, "trajectory budget ({trajectories}) ran out before Init was covered")
+            }
+            StopReason::Stuck { failed_seeds } => write!(
+                f,
+                "stopped: {failed_seeds} uncovered seed states admit no certifiable trajectory (needs a new seed trajectory)"
+            ),
+            StopReason::NeedsSeed { description, .. } => write!(
+                f,
+                "no uncovered sample is reachable by local variation of the cover: needs a new seed trajectory ({description})"
+            ),
+            StopReason::Interrupted { trajectories } => write!(
+                f,
+                "interrupted: the image holds the {trajectories} trajectories certified so far"
+            ),
+        }
+    }
+}
+
+/// One certified trajectory of the cover.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct CoverTrajectory {
+    pub source: String,
+    pub nominal: Nominal,
+    pub certificate: Certificate,
+}
+
+/// One §5.3 optimisation of the growth loop (accepted or not).
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct OptRecord {
+    /// Growth round it belongs to.
+    pub round: usize,
+    /// The ball whose boundary it starts on (Algorithm 4), or `None` for an SCP seed.
+    pub origin: Option<usize>,
+    pub x0: Vec<f64>,
+    /// The shipped nominal before optimisation and its certified δ (0 when not certified).
+    #[serde(skip)]
+    pub before: Nominal,
+    pub delta_before: f64,
+    /// Certified δ of the re-certified result.
+    pub delta_after: f64,
+    /// Certified δ per iteration ([0] = start).
+    pub history: Vec<f64>,
+    pub iterations: usize,
+    pub stop: OptStop,
+    /// Its index among the trajectories when accepted.
+    pub accepted: Option<usize>,
+}
+
+impl OptRecord {
+    fn new(
+        round: usize,
+        origin: Option<usize>,
+        x0: &[f64],
+        before: (Nominal, Certificate),
+        after: &Certificate,
+        opt: &Optimized,
+        accepted: Option<usize>,
+    ) -> Self {
+        Self {
+            round,
+            origin,
+            x0: x0.to_vec(),
+            delta_before: before.1.delta.max(0.0),
+            before: before.0,
+            delta_after: after.delta.max(0.0),
+            history: opt.history.clone(),
+            iterations: opt.iterations,
+            stop: opt.stop,
+            accepted,
+        }
+    }
+
+    /// δ after ÷ δ before (∞ when the start was not certified).
+    pub fn gain(&self) -> f64 {
+        if self.delta_before > 0.0 {
+            self.delta_after / self.delta_before
+        } else {
+            f64::INFINITY
+        }
+    }
+}
+
+/// The cover after one growth round.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct CoverSnapshot {
+    pub round: usize,
+    /// Trajectories (the first `trajectories` of the final list).
+    pub trajectories: usize,
+    /// Working samples still uncovered (full states), discarded ones included.
+    #[serde(skip)]
+    pub uncovered: Vec<Vec<f64>>,
+}
+
+impl CoverSnapshot {
+    /// The cover `trajs` and the working samples (`work`, `discarded`) it does not cover yet.
+    fn new(
+        round: usize,
+        P: faer::MatRef<'_, f64>,
+        trajs: &[CoverTrajectory],
+        work: &[Vec<f64>],
+        discarded: &[Vec<f64>],
+    ) -> Self {
+        Self {
+            round,
+            trajectories: trajs.len(),
+            uncovered: work
+                .iter()
+                .chain(discarded)
+                .filter(|x| alg4::gap(P, x, trajs).is_none_or(|(d, _)| d > 0.0))
+                .cloned()
+                .collect(),
+        }
+    }
+}
+
+/// A §5.3 optimisation of the growth loop before its result is judged: where it started, the shipped
+/// start and what the optimiser returned.
+pub struct OptStart<'a> {
+    round: usize,
+    origin: Option<usize>,
+    x0: &'a [f64],
+    before: (Nominal, Certificate),
+    opt: Optimized,
+}
+
+impl<'a> OptStart<'a> {
+    pub fn new(
+        round: usize,
+        origin: Option<usize>,
+        x0: &'a [f64],
+        before: (Nominal, Certificate),
+        opt: Optimized,
+    ) -> Self {
+        Self {
+            round,
+            origin,
+            x0,
+            before,
+            opt,
+        }
+    }
+}
+
+/// The certified cover and its history.
+#[derive(Clone, Debug)]
+pub struct Cover {
+    /// The CAF metric the balls live in.
+    P: Mat<f64>,
+    /// The certified trajectories, in the order they joined.
+    pub trajectories: Vec<CoverTrajectory>,
+    /// Every §5.3 optimisation the growth ran, accepted or not.
+    pub records: Vec<OptRecord>,
+    /// The cover after each round.
+    pub snapshots: Vec<CoverSnapshot>,
+}
+
+impl Cover {
+    /// An empty cover in the metric P.
+    pub fn new(P: Mat<f64>) -> Self {
+        Self {
+            P,
+            trajectories: Vec::new(),
+            records: Vec::new(),
+            snapshots: Vec::new(),
+        }
+    }
+
+    /// A trajectory joins the cover (recorded, generated without §5.3); `on_accept` hears the new count.
+    pub fn push(&mut self, t: CoverTrajectory, on_accept: Option<&dyn Fn(usize)>) {
+        self.trajectories.push(t);
+        if let Some(f) = on_accept {
+            f(self.trajectories.len());
+        }
+    }
+
+    /// The one accept path of an optimised candidate: its §5.3 run is recorded, and when `ok` the candidate
+    /// joins the cover (the record names its index) and `on_accept` hears the new count.
+    pub fn record(
+        &mut self,
+        start: OptStart<'_>,
+        candidate: CoverTrajectory,
+        ok: bool,
+        on_accept: &dyn Fn(usize),
+    ) {
+        self.records.push(OptRecord::new(
+            start.round,
+            start.origin,
+            start.x0,
+            start.before,
+            &candidate.certificate,
+            &start.opt,
+            ok.then_some(self.trajectories.len()),
+        ));
+        if ok {
+            self.push(candidate, Some(on_accept));
+        }
+    }
+
+    /// Records the cover after `round`, with the working samples it does not cover yet.
+    pub fn snapshot(&mut self, round: usize, work: &[Vec<f64>], discarded: &[Vec<f64>]) {
+        let s = CoverSnapshot::new(round, self.P.as_ref(), &self.trajectories, work, discarded);
+        self.snapshots.push(s);
+    }
+}
+
+/// The feedforward image of a cover (Algorithm 2): the f32 gain and metric, each ball with its stored
+/// radius, and each reference table; terminal behaviour keeps the last law; fallback per the input set.
+pub fn feedforward_image(
+    task: &Task,
+    Khat: &Mat<f64>,
+    P: &Mat<f64>,
+    trajs: &[CoverTrajectory],
+) -> Result<Vec<u8>, EmitError> {
+    let plant = &*task.plant;
+    let mut b = ImageBuilder::new(plant.n(), plant.m(), plant.period());
+    b.add_location(
+        crate::linalg::to_row_major(Khat.as_ref()),
+        crate::linalg::to_row_major(P.as_ref()),
+    );
+    for t in trajs {
+        b.add_trajectory(TrajectoryEntry {
+            x0: t.nominal.x[0].clone(),
+            delta: t.certificate.delta_stored as f64,
+            v: t.nominal.v.concat(),
+            location: vec![0; t.nominal.v.len()],
+        });
+    }
+    if let crate::spec::InputSet::Box { lo, hi } = &task.problem.input {
+        b.input_box = Some((lo.clone(), hi.clone()));
+    }
+    b.fallback = FallbackLaw::Zero;
+    b.to_bytes()
+}
