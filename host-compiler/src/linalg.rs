@@ -27,6 +27,13 @@ pub fn mat_vec(m: MatRef<'_, f64>, x: &[f64]) -> Vec<f64> {
         .collect()
 }
 
+/// Mᵀ y.
+pub fn mat_t_vec(m: MatRef<'_, f64>, y: &[f64]) -> Vec<f64> {
+    (0..m.ncols())
+        .map(|j| (0..m.nrows()).map(|i| m[(i, j)] * y[i]).sum())
+        .collect()
+}
+
 /// Symmetrise (M + Mᵀ)/2.
 pub fn sym(m: MatRef<'_, f64>) -> Mat<f64> {
     Mat::from_fn(m.nrows(), m.ncols(), |i, j| 0.5 * (m[(i, j)] + m[(j, i)]))

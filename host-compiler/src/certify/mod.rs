@@ -27,16 +27,18 @@
 //!    per-ball stored squared threshold, [`pwa_ball_threshold`] (from the radius [`pwa_ball_radius`], in
 //!    [`pwa_ball`]).
 
+pub mod pieces;
 pub mod pwa_ball;
 
+pub use pieces::Pieces;
 pub use pwa_ball::{
     cholesky_upper, metric_factor_f32, pwa_accept_radius, pwa_ball_complete_radius,
     pwa_ball_radius, pwa_ball_threshold, pwa_complete_radius, threshold_of_radius, whitened_centre,
 };
 
 use crate::caf::Design;
-use crate::geometry::{Metric, Region};
-use crate::linalg::{p_norm, sym_eigenvalues, PdRoots};
+use crate::geometry::Region;
+use crate::linalg::{sym_eigenvalues, PdRoots};
 use crate::model::{ContinuousPlant, DiscretePlant, Plant};
 use crate::property::{InputBound, ReachAvoid};
 use crate::spec::Problem;
@@ -380,23 +382,30 @@ pub fn round_down_f32(x: f64) -> f32 {
     }
 }
 
-/// Certify one nominal trajectory (simulated with the shipped K̂, v̂) for the loop.
-pub fn certify(lp: &Loop<'_>, lc: &LoopConstants, nom: &Nominal) -> Certificate {
-    let metric = Metric {
-        n: lp.P.nrows(),
-        R: crate::linalg::to_row_major(lp.P),
+/// The first index whose value beats every earlier one under `better` (strict), and that value; (0, the
+/// neutral start) for no values: −∞ for a maximum, +∞ for a minimum.
+fn extremum(values: &[f64], better: impl Fn(f64, f64) -> bool) -> (usize, f64) {
+    let start = if better(0.0, f64::INFINITY) {
+        f64::INFINITY
+    } else {
+        f64::NEG_INFINITY
     };
-    let N = nom.steps();
-    // 1. Goal (4.12)–(4.13): the sample of greatest depth.
-    let mut delta_goal = f64::NEG_INFINITY;
-    let mut k_star = 0;
-    for (k, x) in nom.x.iter().enumerate() {
-        let d = lp.goal().signed_dist(x, &metric).value;
-        if d > delta_goal {
-            delta_goal = d;
-            k_star = k;
+    let mut best = (0, start);
+    for (k, &d) in values.iter().enumerate() {
+        if better(d, best.1) {
+            best = (k, d);
         }
     }
+    best
+}
+
+/// Certify one nominal trajectory (simulated with the shipped K̂, v̂) for the loop: the critical samples
+/// of Theorem 4.7's pieces ([`Pieces`]), the f32 rounding bound, r_crit and the stored radius.
+pub fn certify(lp: &Loop<'_>, lc: &LoopConstants, nom: &Nominal) -> Certificate {
+    let pc = Pieces::new(lp, lc);
+    let N = nom.steps();
+    // 1. Goal (4.12)–(4.13): the sample of greatest depth (the earliest of equals).
+    let (k_star, delta_goal) = extremum(&pc.goal_values(nom), |d, best| d > best);
     // Rounding bound over the table, with the tube radius at its largest possible value δ_Goal.
     let r_max = delta_goal.max(0.0);
     let m = lp.K.nrows();
@@ -412,34 +421,15 @@ pub fn certify(lp: &Loop<'_>, lc: &LoopConstants, nom: &Nominal) -> Certificate 
     }
     let eps_f32 = eps_components.iter().map(|e| e * e).sum::<f64>().sqrt();
     // 2. Unsafe (4.14) at samples and between them.
-    let (mut delta_unsafe, mut k_unsafe, mut delta_unsafe_is) = (f64::INFINITY, 0, f64::INFINITY);
-    if let Some(us) = lp.unsafe_set() {
-        for (k, x) in nom.x.iter().enumerate() {
-            let d = -us.signed_dist(x, &metric).value; // dist outside (> 0), −depth inside
-            if d < delta_unsafe {
-                delta_unsafe = d;
-                k_unsafe = k;
-            }
-            let f = (k < N).then(|| lp.plant.vector_field(0, x, &nom.u[k]));
-            let di = match f.flatten() {
-                Some(f) => {
-                    let rho = lc.phi * p_norm(lp.P, &f);
-                    (d - rho - lc.phi * lc.beta * eps_f32) / lc.gamma
-                }
-                _ => d,
-            };
-            delta_unsafe_is = delta_unsafe_is.min(di);
-        }
-    }
+    let dist = pc.unsafe_distances(nom);
+    let (k_unsafe, delta_unsafe) = extremum(&dist, |d, best| d < best);
+    let (_, delta_unsafe_is) = extremum(
+        &pc.unsafe_between_samples(nom, &dist, eps_f32),
+        |d, best| d < best,
+    );
     // 3. Input (4.15) with the rounding margin.
-    let (mut delta_input, mut k_input) = (f64::INFINITY, 0);
-    for k in 0..N {
-        let d = input_distance(lp.K, &lc.roots, &nom.u[k], lp.input(), &eps_components);
-        if d < delta_input {
-            delta_input = d;
-            k_input = k;
-        }
-    }
+    let (k_input, delta_input) =
+        extremum(&pc.input_values(nom, &eps_components), |d, best| d < best);
     let r_crit = lc.r_crit(eps_f32);
     let d47 = delta_goal.min(delta_unsafe_is).min(delta_input);
     // Theorem 3.21: any r in [r_crit, d47) works; the strict inequalities of Lemma 4.4 need r < d47.

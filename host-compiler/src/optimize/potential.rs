@@ -28,7 +28,7 @@
 //! bisection about 4× sooner (L-BFGS found a slightly shorter terminal time, 315 against 323 steps).
 //! Both stay available.
 
-use super::pieces::{LocalGrad, Pieces};
+use super::pieces::{adjoint, LocalGrad, Pieces};
 use super::{check_inputs, OptimizeError};
 use crate::certify::{self, Certificate, Loop, LoopConstants};
 use crate::trajectory::Nominal;
@@ -260,7 +260,7 @@ impl<'a, 'b> Potential<'a, 'b> {
             return (J, None);
         }
         let refs: Vec<(f64, &LocalGrad)> = local.iter().map(|(w, l)| (*w, l)).collect();
-        let mut g = self.pc.adjoint(N, &refs);
+        let mut g = adjoint(&self.pc, N, &refs);
         crate::trajectory::hold::project(&mut g, self.hold);
         (J, Some(g))
     }

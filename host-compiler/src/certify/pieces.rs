@@ -1,0 +1,237 @@
+//! Theorem 4.7 per sample for the sampled f32 loop: the pieces of δ(0) (4.11) at every sample, each with
+//! its gradient with respect to the nominal state and reference input. This is the one implementation of
+//! the reach-avoid robustness's terms: [`super::certify`] takes the critical samples of the values, and
+//! the optimiser (§5.2–5.3, [`crate::optimize`]) the gradients at them.
+//!
+//! * **Goal** (4.12)–(4.13): the signed depth in Goal in the CAF metric.
+//! * **Unsafe** (4.14): the distance from Unsafe; between samples (continuous-time plants) reduced by the
+//!   inter-sample excursion and the rounding disturbance, (dist − φ‖f‖_P − φβε̄)/γ ([`super`] doc, item 2).
+//! * **Input** (4.15): the P-distance to inputs outside the input set shrunk by the rounding bound.
+//!
+//! Signed distances come with their witness point y* (the nearest point of the boundary); by the envelope
+//! theorem ∇ₓ ‖x − y*‖_P = P(x − y*)/‖x − y*‖_P, with the sign of the signed distance. These are the
+//! gradients at the critical points of (5.27)–(5.28).
+
+use super::{input_distance, Loop, LoopConstants};
+use crate::geometry::{Metric, Region};
+use crate::linalg::{mat_t_vec, mat_vec, p_norm};
+use crate::property::InputBound;
+use crate::trajectory::Nominal;
+
+/// Which piece of δ(0) (4.11).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PieceKind {
+    /// Depth in Goal at a sample (4.12)–(4.13).
+    Goal,
+    /// Distance from Unsafe with the inter-sample margin (4.14).
+    Unsafe,
+    /// Distance to input violation with the rounding margin (4.15).
+    Input,
+}
+
+/// A piece's gradient at one sample: with respect to x̃(κ) and (when κ < N) v(κ).
+#[derive(Clone, Debug)]
+pub struct LocalGrad {
+    pub k: usize,
+    pub gx: Vec<f64>,
+    pub gv: Vec<f64>,
+}
+
+/// Evaluates pieces of δ on nominal trajectories of one loop.
+pub struct Pieces<'a, 'b> {
+    pub lp: &'a Loop<'b>,
+    pub lc: &'a LoopConstants,
+    metric: Metric,
+}
+
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}
+
+impl<'a, 'b> Pieces<'a, 'b> {
+    pub fn new(lp: &'a Loop<'b>, lc: &'a LoopConstants) -> Self {
+        Self {
+            lp,
+            lc,
+            metric: Metric {
+                n: lp.P.nrows(),
+                R: crate::linalg::to_row_major(lp.P),
+            },
+        }
+    }
+
+    /// Signed distance (2.8) in the P-metric and its gradient (envelope theorem at the witness).
+    fn signed(&self, region: &dyn Region, x: &[f64]) -> (f64, Vec<f64>) {
+        let w = region.signed_dist(x, &self.metric);
+        let n = x.len();
+        if w.point.len() != n {
+            return (w.value, vec![0.0; n]);
+        }
+        let e: Vec<f64> = x.iter().zip(&w.point).map(|(a, b)| a - b).collect();
+        let r = p_norm(self.lp.P, &e);
+        if !(r > 0.0) {
+            return (w.value, vec![0.0; n]);
+        }
+        let s = if w.value < 0.0 { -1.0 } else { 1.0 };
+        let pe = mat_vec(self.lp.P, &e);
+        (w.value, pe.iter().map(|v| s * v / r).collect())
+    }
+
+    /// Goal depth (signed) at every sample.
+    pub fn goal_values(&self, nom: &Nominal) -> Vec<f64> {
+        nom.x
+            .iter()
+            .map(|x| self.lp.goal().signed_dist(x, &self.metric).value)
+            .collect()
+    }
+
+    /// Goal piece and its gradient at sample k.
+    pub fn goal_grad(&self, nom: &Nominal, k: usize) -> (f64, LocalGrad) {
+        let (v, gx) = self.signed(self.lp.goal(), &nom.x[k]);
+        let m = self.lp.K.nrows();
+        (
+            v,
+            LocalGrad {
+                k,
+                gx,
+                gv: vec![0.0; m],
+            },
+        )
+    }
+
+    /// The inter-sample excursion vector f = A_c x + B_c u + c of (certify doc, item 2) at sample k < N.
+    fn excursion(&self, nom: &Nominal, k: usize) -> Option<Vec<f64>> {
+        if k >= nom.steps() {
+            return None;
+        }
+        self.lp.plant.vector_field(0, &nom.x[k], &nom.u[k])
+    }
+
+    /// The distance from Unsafe (−signed distance) at every sample (+∞ without Unsafe).
+    pub fn unsafe_distances(&self, nom: &Nominal) -> Vec<f64> {
+        let Some(us) = self.lp.unsafe_set() else {
+            return vec![f64::INFINITY; nom.x.len()];
+        };
+        nom.x
+            .iter()
+            .map(|x| -us.signed_dist(x, &self.metric).value)
+            .collect()
+    }
+
+    /// Unsafe piece at every sample from its distances `d` ([`Pieces::unsafe_distances`]):
+    /// (d − φ‖f‖_P − φβε̄)/γ between samples, d at the last sample and for discrete-time plants.
+    pub fn unsafe_between_samples(&self, nom: &Nominal, d: &[f64], eps_f32: f64) -> Vec<f64> {
+        if self.lp.unsafe_set().is_none() {
+            return d.to_vec();
+        }
+        d.iter()
+            .enumerate()
+            .map(|(k, &d)| match self.excursion(nom, k) {
+                Some(f) => {
+                    let rho = self.lc.phi * p_norm(self.lp.P, &f);
+                    (d - rho - self.lc.phi * self.lc.beta * eps_f32) / self.lc.gamma
+                }
+                None => d,
+            })
+            .collect()
+    }
+
+    /// Unsafe piece at every sample (+∞ without Unsafe).
+    pub fn unsafe_values(&self, nom: &Nominal, eps_f32: f64) -> Vec<f64> {
+        self.unsafe_between_samples(nom, &self.unsafe_distances(nom), eps_f32)
+    }
+
+    /// Unsafe piece and its gradient at sample k (ε̄ held fixed).
+    pub fn unsafe_grad(&self, nom: &Nominal, k: usize, eps_f32: f64) -> (f64, LocalGrad) {
+        let (n, m) = (self.lp.P.nrows(), self.lp.K.nrows());
+        let Some(us) = self.lp.unsafe_set() else {
+            return (
+                f64::INFINITY,
+                LocalGrad {
+                    k,
+                    gx: vec![0.0; n],
+                    gv: vec![0.0; m],
+                },
+            );
+        };
+        let (s, gs) = self.signed(us, &nom.x[k]);
+        let d = -s;
+        let mut gx: Vec<f64> = gs.iter().map(|v| -v).collect();
+        let mut gv = vec![0.0; m];
+        let Some(f) = self.excursion(nom, k) else {
+            return (d, LocalGrad { k, gx, gv });
+        };
+        let Some(cp) = self.lp.plant.continuous(0) else {
+            return (d, LocalGrad { k, gx, gv });
+        };
+        let fn_ = p_norm(self.lp.P, &f);
+        let rho = self.lc.phi * fn_;
+        let val = (d - rho - self.lc.phi * self.lc.beta * eps_f32) / self.lc.gamma;
+        if fn_ > 0.0 {
+            // ∇_f ‖f‖_P = P f/‖f‖_P; f = A_c x + B_c (K̂x + v).
+            let pf: Vec<f64> = mat_vec(self.lp.P, &f).iter().map(|v| v / fn_).collect();
+            let bt = mat_t_vec(cp.B.as_ref(), &pf);
+            let at = mat_t_vec(cp.A.as_ref(), &pf);
+            let kt = mat_t_vec(self.lp.K, &bt);
+            for i in 0..n {
+                gx[i] -= self.lc.phi * (at[i] + kt[i]);
+            }
+            for i in 0..m {
+                gv[i] -= self.lc.phi * bt[i];
+            }
+        }
+        for g in gx.iter_mut().chain(gv.iter_mut()) {
+            *g /= self.lc.gamma;
+        }
+        (val, LocalGrad { k, gx, gv })
+    }
+
+    /// Input piece at every step κ < N (with the componentwise rounding bound `eps`).
+    pub fn input_values(&self, nom: &Nominal, eps: &[f64]) -> Vec<f64> {
+        (0..nom.steps())
+            .map(|k| input_distance(self.lp.K, &self.lc.roots, &nom.u[k], self.lp.input(), eps))
+            .collect()
+    }
+
+    /// Input piece and its gradient at step k: through ũ = K̂x̃ + v, ∂/∂x = K̂ᵀ∂/∂ũ and ∂/∂v = ∂/∂ũ.
+    pub fn input_grad(&self, nom: &Nominal, k: usize, eps: &[f64]) -> (f64, LocalGrad) {
+        let K = self.lp.K;
+        let (m, n) = (K.nrows(), K.ncols());
+        let u = &nom.u[k];
+        let val = input_distance(K, &self.lc.roots, u, self.lp.input(), eps);
+        let mut gu = vec![0.0; m];
+        match self.lp.input() {
+            InputBound::Box { lo, hi } => {
+                // The active face: the component and side of the smallest scaled slack.
+                let mut best = (f64::INFINITY, 0usize, 0.0f64);
+                for i in 0..m {
+                    let Ki: Vec<f64> = (0..n).map(|j| K[(i, j)]).collect();
+                    let s = self.lc.roots.dual_norm(&Ki);
+                    let s = if s > 0.0 { s } else { 1.0 };
+                    let up = (hi[i] - eps[i] - u[i]) / s;
+                    let dn = (u[i] - lo[i] - eps[i]) / s;
+                    if up < best.0 {
+                        best = (up, i, -1.0 / s);
+                    }
+                    if dn < best.0 {
+                        best = (dn, i, 1.0 / s);
+                    }
+                }
+                gu[best.1] = best.2;
+            }
+            InputBound::Norm2 { center, .. } => {
+                let s = self.lc.roots.norm_from(K);
+                let s = if s > 0.0 { s } else { 1.0 };
+                let e: Vec<f64> = u.iter().zip(center).map(|(a, c)| a - c).collect();
+                let r = dot(&e, &e).sqrt();
+                if r > 0.0 {
+                    for i in 0..m {
+                        gu[i] = -e[i] / (r * s);
+                    }
+                }
+            }
+        }
+        let gx = mat_t_vec(K, &gu);
+        (val, LocalGrad { k, gx, gv: gu })
+    }
+}
