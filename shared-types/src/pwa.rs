@@ -102,7 +102,7 @@
 //! (`host_compiler::certify::pwa_ball_threshold`); the bound read backwards from an image, from the stored
 //! ŝ directly, is `host_compiler::certify::pwa_accept_radius`, used by the verifier. For
 //! unit-scale data the shrink `1 − ρ̂/δ` is of order γ_{n+2}·‖|R||c|‖/δ: below 10⁻⁴ for |c| ≤ 3,
-//! δ ≥ 0.1, cond(P) ≤ 10, n ≤ 12 (measured in `host_compiler`'s `tests/certify_bounds.rs`).
+//! δ ≥ 0.1, cond(P) ≤ 10, n ≤ 12 (measured in `host_compiler`'s `tests/host/certify_bounds.rs`).
 //!
 //! **Completeness** (the converse: states near c are accepted). For a real x with `‖x − c‖_P ≤ r` and
 //! `x̂ = fl32(x)`, the same steps read as upper bounds give `‖w + f‖ ≤ t0 + t1·r`, where t1 ≈ 1 collects

@@ -33,7 +33,7 @@
 //!
 //! and the computed sum is `s ≤ (1 + γ_n)(1 + u)²‖w + f‖² + 2nη`. Acceptance `s ≤ ŝ` therefore holds for
 //! every r up to [`pwa_complete_radius`]. For unit-scale data (|c| ≤ 3, δ ≥ 0.1,
-//! cond(P) ≤ 10, n ≤ 12) it lies less than 10⁻⁴ (relative) below ρ̂ (`tests/certify_bounds.rs`).
+//! cond(P) ≤ 10, n ≤ 12) it lies less than 10⁻⁴ (relative) below ρ̂ (`tests/host/certify_bounds.rs`).
 //!
 //! Host f64 rounding: every term of the bound is a sum of non-negative quantities except `e_c`, which
 //! carries its own γ⁽⁶⁴⁾ term; the few dozen f64 operations on the positive terms are covered by a final

@@ -24,7 +24,7 @@
 //! * **(6.5), one step**: `‖Ã_j‖_P δ_i + ‖P^{1/2} B ε̄‖ ≤ r_in(i, κ+1)`: every state the image accepts in
 //!   the ball at κ (they lie within the certified δ_i ≥ ρ_i) lands where the f32 test of the ball at κ+1
 //!   provably accepts it, r_in being [`crate::certify::pwa_ball_complete_radius`] (below ρ_i by less than
-//!   10⁻⁴ relative for unit-scale data, `tests/certify_bounds.rs`); at κ+1 = κ*_i the bound is δ_i,
+//!   10⁻⁴ relative for unit-scale data, `tests/host/certify_bounds.rs`); at κ+1 = κ*_i the bound is δ_i,
 //!   since that ball lies in Goal.
 //! * **Input**: the law's input over the ball stays in the input set shrunk by the rounding bound
 //!   ([`crate::certify::input_distance`] with the law's gain).

@@ -3,7 +3,7 @@
 //! Def 2.16 sign convention throughout.
 #![allow(non_snake_case)]
 
-mod geometry_common;
+use crate::geometry_common;
 
 use geometry_common::*;
 use host_compiler::geometry::{

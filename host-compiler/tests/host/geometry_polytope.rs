@@ -3,7 +3,7 @@
 //! sampled boundary points for the depth.
 #![allow(non_snake_case)]
 
-mod geometry_common;
+use crate::geometry_common;
 
 use geometry_common::*;
 use host_compiler::geometry::{Metric, Polytope, Region};

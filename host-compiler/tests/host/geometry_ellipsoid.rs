@@ -1,10 +1,10 @@
 //! The §7.2 ellipsoid boundary distance: the dissertation's worked examples (7.3, 7.8) and property tests
-//! against an independent global brute force (tests/geometry_common) on random problems, n = 2..12, with
+//! against an independent global brute force (tests/host/geometry_common) on random problems, n = 2..12, with
 //! degenerate and near-degenerate shapes, repeated eigenvalues, singular metrics, and points inside, outside,
 //! on the axes and at the centre.
 #![allow(non_snake_case)]
 
-mod geometry_common;
+use crate::geometry_common;
 
 use geometry_common::*;
 use host_compiler::geometry::ellipsoid_distance::StandardForm;

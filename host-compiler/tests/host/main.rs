@@ -1,0 +1,42 @@
+//! The host-compiler integration tests, as one test binary: each module is a former `tests/<name>.rs`
+//! (kept under its old name). One binary links faer, clarabel and plotters once instead of once per file.
+//! A new test file goes here as `tests/host/<name>.rs` with a `mod <name>;` below, not in `tests/`.
+//!
+//! The modules share one process. None of them changes process-wide state (environment variables, the
+//! current directory, the global rayon pool's configuration, a Ctrl-C handler, a panic hook or a tracing
+//! subscriber): the Ctrl-C handler is installed only by `host-compiler synth`, which the CLI tests run as a
+//! child process (`CARGO_BIN_EXE_host-compiler`), and `synth_algorithm4` sets thread counts with local pools
+//! (`ThreadPoolBuilder::build` + `install`). Keep it so: a test that needs such state runs the binary in a
+//! child process instead. Scratch files are named per test (`CARGO_TARGET_TMPDIR`, or the system temp dir
+//! with the process id), so two tests never share one.
+
+mod caf_example33;
+mod caf_props;
+mod caf_status;
+mod certify_bounds;
+mod cli_synth;
+mod emit_image;
+mod emit_pwa;
+mod geometry_common;
+mod geometry_ellipsoid;
+mod geometry_polytope;
+mod geometry_regions;
+mod model_zoh;
+mod mtl_cli;
+mod mtl_errors;
+mod mtl_props;
+mod mtl_semantics;
+mod optimize_delta;
+mod optimize_gradient;
+mod optimize_potential;
+mod pwa_example_6_4_period;
+mod pwa_learn;
+mod report_clip;
+mod report_html;
+mod robustness_safety;
+mod spec_errors;
+mod spec_examples;
+mod spec_parse;
+mod synth_algorithm4;
+mod synth_end_to_end;
+mod verify_semantics;
