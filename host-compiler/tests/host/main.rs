@@ -31,6 +31,7 @@ mod optimize_gradient;
 mod optimize_potential;
 mod pwa_example_6_4_period;
 mod pwa_learn;
+mod refactor_fixtures;
 mod report_clip;
 mod report_html;
 mod robustness_safety;
