@@ -13,8 +13,8 @@
 
 use host_compiler::benchkit::{write_rows, Row};
 use host_compiler::certify::LoopConstants;
+use host_compiler::certify::OwnedLoop;
 use host_compiler::optimize::potential::{descend, time_optimal, DescentMethod, PotentialSettings};
-use host_compiler::optimize::setup::OwnedLoop;
 use host_compiler::optimize::{maximize_delta, BundleSettings};
 use std::sync::atomic::AtomicBool;
 use std::time::Instant;
@@ -34,7 +34,7 @@ const STARTS: [[f64; 4]; 5] = [
 
 fn descent_rows(ol: &OwnedLoop, lc: &LoopConstants, rows: &mut Vec<Row>) {
     let lp = ol.lp();
-    let v = vec![vec![1.0, -1.0]; ol.steps];
+    let v = vec![vec![1.0, -1.0]; ol.task.steps];
     let s = PotentialSettings::default().delta(0.04);
     let per = |method: DescentMethod| -> (Vec<f64>, Vec<f64>, Vec<f64>) {
         let (mut ev, mut it, mut secs) = (vec![], vec![], vec![]);
@@ -92,7 +92,7 @@ fn descent_rows(ol: &OwnedLoop, lc: &LoopConstants, rows: &mut Vec<Row>) {
 fn time_optimal_rows(ol: &OwnedLoop, lc: &LoopConstants, rows: &mut Vec<Row>) {
     let lp = ol.lp();
     let x0 = [0.0, 0.0, 0.0, 1.0];
-    let v = vec![vec![1.0, -1.0]; ol.steps];
+    let v = vec![vec![1.0, -1.0]; ol.task.steps];
     let seed = descend(
         &lp,
         lc,
@@ -121,8 +121,8 @@ fn time_optimal_rows(ol: &OwnedLoop, lc: &LoopConstants, rows: &mut Vec<Row>) {
              (certified {:.5}); {} probes, {secs:.1} s",
             to.steps_before,
             to.steps_after,
-            to.steps_before as f64 * ol.period,
-            to.steps_after as f64 * ol.period,
+            to.steps_before as f64 * ol.task.plant.period(),
+            to.steps_after as f64 * ol.task.plant.period(),
             best.certificate.delta,
             to.probes.len()
         );
@@ -141,7 +141,7 @@ fn time_optimal_rows(ol: &OwnedLoop, lc: &LoopConstants, rows: &mut Vec<Row>) {
 
 fn bundle_rows(ol: &OwnedLoop, lc: &LoopConstants, rows: &mut Vec<Row>) {
     let lp = ol.lp();
-    let v = vec![vec![1.0, -1.0]; ol.steps];
+    let v = vec![vec![1.0, -1.0]; ol.task.steps];
     let cancel = AtomicBool::new(false);
     let (mut before, mut after, mut secs) = (vec![], vec![], vec![]);
     for x0 in &STARTS.map(|x| x.map(|a| a as f32 as f64)) {
@@ -161,7 +161,7 @@ fn bundle_rows(ol: &OwnedLoop, lc: &LoopConstants, rows: &mut Vec<Row>) {
             lc,
             x0,
             &seed.v,
-            ol.steps,
+            ol.task.steps,
             &BundleSettings::default(),
             &cancel,
         );

@@ -15,6 +15,7 @@
 use host_compiler::benchkit::{write_rows, Row};
 use host_compiler::pwa::{build_pwa, learn_laws, PwaContext, PwaSettings};
 use host_compiler::synth::{synthesize, SynthOptions};
+use host_compiler::task::Task;
 use std::time::Instant;
 
 fn main() {
@@ -28,8 +29,9 @@ fn main() {
         verify_interior: 1_000,
         ..SynthOptions::default()
     };
-    let s = synthesize(&problem, &opts).expect("the feedforward cover is synthesized");
-    let ctx = PwaContext::new(&problem, &s, PwaSettings::default()).expect("PWA context");
+    let task = Task::new(problem.clone()).expect("the shipped example is a task");
+    let s = synthesize(&task, &opts).expect("the feedforward cover is synthesized");
+    let ctx = PwaContext::new(&task, &s, PwaSettings::default()).expect("PWA context");
     let points = ctx.points.len();
     let t = Instant::now();
     let (laws, assignment) = learn_laws(&ctx);
@@ -55,7 +57,7 @@ fn main() {
         Row::new("pwa_learning_s", learn_s, "s"),
     ];
     let ff = s.image.len() as f64;
-    match build_pwa(&problem, ctx, laws, assignment, learn_s) {
+    match build_pwa(&task, ctx, laws, assignment, learn_s) {
         Ok(c) => {
             let b = c.image.len() as f64;
             println!(
@@ -79,10 +81,11 @@ fn main() {
         let mut p = problem.clone();
         p.plant.period = 0.01;
         p.synthesis.reference_hold = hold;
-        let s = synthesize(&p, &opts).expect("the 0.01 s cover is synthesized");
+        let task = Task::new(p).expect("the 0.01 s task");
+        let s = synthesize(&task, &opts).expect("the 0.01 s cover is synthesized");
         // Greedy search only: the thermal relaxation would take minutes on ~2 000 points.
-        let ctx =
-            PwaContext::new(&p, &s, PwaSettings::default().thermal_cycles(0)).expect("PWA context");
+        let ctx = PwaContext::new(&task, &s, PwaSettings::default().thermal_cycles(0))
+            .expect("PWA context");
         let rho = ctx
             .points
             .iter()

@@ -8,6 +8,7 @@
 
 use host_compiler::benchkit::{write_rows, Row};
 use host_compiler::synth::{synthesize, Generator, SynthOptions, Synthesis};
+use host_compiler::task::Task;
 use std::time::Instant;
 
 fn run(problem: &host_compiler::spec::Problem, generator: Generator) -> (Synthesis, f64) {
@@ -17,7 +18,8 @@ fn run(problem: &host_compiler::spec::Problem, generator: Generator) -> (Synthes
         ..SynthOptions::default()
     };
     let t = Instant::now();
-    let s = synthesize(problem, &opts).expect("synthesis succeeds on the shipped example");
+    let task = Task::new(problem.clone()).expect("the shipped example is a task");
+    let s = synthesize(&task, &opts).expect("synthesis succeeds on the shipped example");
     let secs = t.elapsed().as_secs_f64();
     assert_eq!(
         s.verify.violations, 0,

@@ -142,3 +142,8 @@ mod tests {
         assert!(PdRoots::new(from_row_major(2, 2, &[1.0, 0.0, 0.0, -1.0]).as_ref()).is_none());
     }
 }
+
+/// f32 rounding (the values the image stores), widened back exactly.
+pub fn round32(x: f64) -> f64 {
+    x as f32 as f64
+}

@@ -4,13 +4,12 @@
 #![allow(non_snake_case)]
 
 use faer::Mat;
-use host_compiler::certify::{
-    evaluator_error_bound, selection_radius, ContinuousPart, Loop, LoopConstants,
-};
+use host_compiler::certify::{evaluator_error_bound, selection_radius, Loop, LoopConstants};
 use host_compiler::emit::{ImageBuilder, TrajectoryEntry};
 use host_compiler::geometry::{Metric, Region, Witness};
 use host_compiler::linalg::{mat_vec, p_norm};
-use host_compiler::trajectory::generate::InputBound;
+use host_compiler::model::LinearAffine;
+use host_compiler::property::{InputBound, ReachAvoid};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use shared_types::eval::Controller;
@@ -193,30 +192,23 @@ fn inter_sample_excursion_is_bounded() {
         [[-2.0, 0.0, -2.5, 0.0], [0.0, -2.0, 0.0, -2.5]][i][j]
     });
     let P = random_pd(4, 5.0, &mut ChaCha8Rng::seed_from_u64(3));
-    let cp = ContinuousPart {
-        Ac: Ac.clone(),
-        Bc: Bc.clone(),
-        c: c.clone(),
-        h,
-    };
-    let nowhere = Nowhere(4);
-    let input = InputBound::Norm2 {
-        center: vec![0.0, 0.0],
-        max: 1e9,
+    let sampled = LinearAffine::sampled(plant.clone(), h).unwrap();
+    let property = ReachAvoid {
+        goal: Box::new(Nowhere(4)),
+        unsafe_set: None,
+        input: InputBound::Norm2 {
+            center: vec![0.0, 0.0],
+            max: 1e9,
+        },
     };
     let At = &d.A + &d.B * &K;
     let sigma = host_compiler::linalg::sym_eigenvalues((&P - At.transpose() * &P * &At).as_ref())
         .unwrap()[0];
     let lp = Loop {
-        A: d.A.as_ref(),
-        B: d.B.as_ref(),
-        g: &d.g,
+        plant: &sampled,
         K: K.as_ref(),
         P: P.as_ref(),
-        continuous: Some(&cp),
-        goal: &nowhere,
-        unsafe_set: None,
-        input: &input,
+        property: &property,
     };
     if sigma <= 0.0 {
         // Not contracting in this random metric: then the constants must refuse the loop.

@@ -374,12 +374,12 @@ fn sampled_plant_from_spec() {
         period: 0.5,
         C: Matrix::identity(2),
     };
-    let s = SampledPlant::from_spec(&spec).unwrap();
+    let s = LinearAffine::from_spec(&spec).unwrap();
     assert!(s.continuous.is_some());
     assert!(
         (s.discrete.A[(0, 1)] - 0.5).abs() < 1e-15 && (s.discrete.B[(0, 0)] - 0.125).abs() < 1e-15
     );
-    let d = SampledPlant::from_spec(&Plant {
+    let d = LinearAffine::from_spec(&Plant {
         time: TimeDomain::Discrete,
         ..spec
     })

@@ -2,9 +2,9 @@
 //! of certified but unoptimised seeds, every answer re-certifies through the shipped path, a cancelled run
 //! returns its start, and a run cut short still returns a certified trajectory no worse than its start.
 
+use host_compiler::certify::OwnedLoop;
 use host_compiler::certify::{shipped, LoopConstants};
 use host_compiler::optimize::potential::{descend, DescentMethod, PotentialSettings};
-use host_compiler::optimize::setup::OwnedLoop;
 use host_compiler::optimize::{maximize_delta, BundleSettings, OptStop, Optimized};
 use std::sync::atomic::AtomicBool;
 
@@ -25,7 +25,7 @@ fn example(name: &str) -> (OwnedLoop, LoopConstants) {
 /// δ = 0.02.
 fn seed(ol: &OwnedLoop, lc: &LoopConstants, x0: &[f64]) -> (Vec<Vec<f64>>, f64) {
     let lp = ol.lp();
-    let v = vec![vec![1.0, -1.0]; ol.steps];
+    let v = vec![vec![1.0, -1.0]; ol.task.steps];
     let s = PotentialSettings::default().delta(0.02);
     let d = descend(&lp, lc, x0, &v, &s, DescentMethod::Algorithm3).expect("valid input");
     assert!(d.reached, "seed descent: cost {:.3e}", d.cost);
@@ -78,7 +78,7 @@ fn bundle_at_least_doubles_delta_from_two_seeds() {
             &lc,
             &x0,
             &v,
-            ol.steps,
+            ol.task.steps,
             &BundleSettings::default(),
             &cancel,
         );
@@ -93,7 +93,7 @@ fn bundle_at_least_doubles_delta_from_two_seeds() {
             "δ {d0} → {} is less than doubled",
             o.certificate.delta
         );
-        assert!(o.steps_after <= ol.steps);
+        assert!(o.steps_after <= ol.task.steps);
         assert!(o.stop != OptStop::Cancelled);
         assert_shipped(&ol, &lc, &x0, &o);
     }
@@ -111,7 +111,7 @@ fn cancelled_before_start_returns_the_start_certified() {
         &lc,
         &x0,
         &v,
-        ol.steps,
+        ol.task.steps,
         &BundleSettings::default(),
         &cancel,
     );
@@ -138,7 +138,7 @@ fn stopped_early_the_answer_is_certified_and_no_worse() {
         &lc,
         &x0,
         &v,
-        ol.steps,
+        ol.task.steps,
         &BundleSettings::default().max_iterations(3),
         &cancel,
     );
@@ -155,7 +155,7 @@ fn bundle_on_the_double_integrator_box_sets() {
     let (ol, lc) = example("double-integrator.toml");
     let lp = ol.lp();
     let x0 = f32x([0.1, 0.0]);
-    let v = vec![vec![0.0]; ol.steps];
+    let v = vec![vec![0.0]; ol.task.steps];
     let s = PotentialSettings::default().delta(0.005);
     let d = descend(&lp, &lc, &x0, &v, &s, DescentMethod::Lbfgs).expect("valid input");
     assert!(d.reached);
@@ -166,7 +166,7 @@ fn bundle_on_the_double_integrator_box_sets() {
         &lc,
         &x0,
         &d.v,
-        ol.steps,
+        ol.task.steps,
         &BundleSettings::default(),
         &cancel,
     );
@@ -215,7 +215,7 @@ fn an_uncertified_start_is_repaired_then_maximised() {
     let (ol, lc) = planar();
     let lp = ol.lp();
     let x0 = f32x([0.2, 0.2, 0.0, 1.0]);
-    let v = vec![vec![1.0, -1.0]; ol.steps];
+    let v = vec![vec![1.0, -1.0]; ol.task.steps];
     let (_, c0) = shipped(&lp, &lc, &x0, &v);
     assert!(!c0.is_certified());
     let cancel = AtomicBool::new(false);
@@ -224,7 +224,7 @@ fn an_uncertified_start_is_repaired_then_maximised() {
         &lc,
         &x0,
         &v,
-        ol.steps,
+        ol.task.steps,
         &BundleSettings::default(),
         &cancel,
     );
@@ -241,7 +241,7 @@ fn an_uncertified_start_is_repaired_then_maximised() {
         &lc,
         &x0,
         &v,
-        ol.steps,
+        ol.task.steps,
         &BundleSettings::default().repair_delta(0.0),
         &cancel,
     );
@@ -261,7 +261,7 @@ fn same_input_same_answer_to_the_bit() {
             &lc,
             &x0,
             &v,
-            ol.steps,
+            ol.task.steps,
             &BundleSettings::default(),
             &cancel,
         )
@@ -279,7 +279,7 @@ fn a_held_reference_stays_held_and_is_still_improved() {
     let lp = ol.lp();
     let cancel = AtomicBool::new(false);
     let x0 = f32x([0.0, 0.0, 0.0, 1.0]);
-    let v = vec![vec![1.0, -1.0]; ol.steps];
+    let v = vec![vec![1.0, -1.0]; ol.task.steps];
     let s = PotentialSettings::default().delta(0.02).hold(20);
     let d = descend(&lp, &lc, &x0, &v, &s, DescentMethod::Lbfgs).expect("valid input");
     assert!(d.reached, "held descent: cost {:.3e}", d.cost);
@@ -290,7 +290,7 @@ fn a_held_reference_stays_held_and_is_still_improved() {
         &lc,
         &x0,
         &d.v,
-        ol.steps,
+        ol.task.steps,
         &BundleSettings::default().hold(20),
         &cancel,
     );

@@ -4,11 +4,10 @@
 
 #![allow(non_snake_case)]
 
+use host_compiler::certify::OwnedLoop;
 use host_compiler::certify::{shipped, LoopConstants};
 use host_compiler::optimize::pieces::{adjoint_sweep, delta_subgradient, Pieces};
 use host_compiler::optimize::potential::{Potential, PotentialSettings};
-use host_compiler::optimize::setup::OwnedLoop;
-use host_compiler::trajectory::simulate;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -130,7 +129,7 @@ fn potential_gradient_matches_finite_differences_with_box_sets() {
     let lp = ol.lp();
     let mut rng = ChaCha8Rng::seed_from_u64(54);
     let x0 = [0.05, 0.0];
-    let steps = ol.steps;
+    let steps = ol.task.steps;
     for case in 0..8 {
         let v: Vec<Vec<f64>> = (0..steps)
             .map(|_| vec![rng.random_range(-1.5..1.5)])
@@ -169,7 +168,7 @@ fn delta_subgradient_is_the_gradient_of_the_critical_piece() {
         let (_, c) = shipped(&lp, &lc, &x0, &v);
         let (eps, e2) = (c.eps_components.clone(), c.eps_f32);
         let delta = |v: &[Vec<f64>]| {
-            let nom = simulate(lp.A, lp.B, lp.g, lp.K, &x0, v);
+            let nom = lp.simulate(&x0, v);
             delta_subgradient(&pc, &nom, &eps, e2)
         };
         let (d, g) = delta(&v);

@@ -2,9 +2,9 @@
 //! until the shipped certificate keeps the desired δ, and the time-optimal bisection of §5.2.3 (Example 5.2)
 //! shortens the terminal time at the kept δ.
 
+use host_compiler::certify::OwnedLoop;
 use host_compiler::certify::{shipped, LoopConstants};
 use host_compiler::optimize::potential::{descend, time_optimal, DescentMethod, PotentialSettings};
-use host_compiler::optimize::setup::OwnedLoop;
 
 fn planar() -> (OwnedLoop, LoopConstants) {
     let p = host_compiler::spec::load(concat!(
@@ -27,7 +27,7 @@ fn both_descents_repair_an_infeasible_seed_to_the_desired_delta() {
     let (ol, lc) = planar();
     let lp = ol.lp();
     let x0 = f32x([-0.2, 0.2, 0.0, 1.0]);
-    let v = vec![vec![1.0, -1.0]; ol.steps];
+    let v = vec![vec![1.0, -1.0]; ol.task.steps];
     let (_, c0) = shipped(&lp, &lc, &x0, &v);
     assert!(!c0.is_certified(), "the seed must start infeasible");
     for method in [DescentMethod::Algorithm3, DescentMethod::Lbfgs] {
@@ -63,7 +63,7 @@ fn time_optimal_bisection_shortens_the_terminal_time_at_the_kept_delta() {
     let (ol, lc) = planar();
     let lp = ol.lp();
     let x0 = f32x([0.0, 0.0, 0.0, 1.0]);
-    let v = vec![vec![1.0, -1.0]; ol.steps];
+    let v = vec![vec![1.0, -1.0]; ol.task.steps];
     let seed = descend(
         &lp,
         &lc,

@@ -8,13 +8,15 @@
 use host_compiler::linalg::{mat_vec, sym_eigenvalues};
 use host_compiler::pwa::{check_point, learn_pwa, PwaController, PwaSettings, StoredLaw};
 use host_compiler::synth::{synthesize, SynthOptions, Synthesis};
+use host_compiler::task::Task;
+use host_compiler::verify::Judge;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use shared_types::eval::Controller;
 use std::sync::OnceLock;
 
 struct Fixture {
-    problem: host_compiler::spec::Problem,
+    task: Task,
     syn: Synthesis,
     pwa: PwaController,
 }
@@ -33,8 +35,9 @@ fn fixture() -> &'static Fixture {
             progress: false,
             ..SynthOptions::default()
         };
-        let syn = synthesize(&problem, &opts).unwrap();
-        let pwa = learn_pwa(&problem, &syn, &PwaSettings::default()).unwrap();
+        let task = Task::new(problem).unwrap();
+        let syn = synthesize(&task, &opts).unwrap();
+        let pwa = learn_pwa(&task, &syn, &PwaSettings::default()).unwrap();
         eprintln!(
             "pwa: {} data points from {} trajectories, eps_fit = {:.3e}, {:?}, learn {:.2}s, partition {:.2}s, image {} bytes",
             pwa.ctx.points.len(),
@@ -45,7 +48,7 @@ fn fixture() -> &'static Fixture {
             pwa.partition_seconds,
             pwa.image.len()
         );
-        Fixture { problem, syn, pwa }
+        Fixture { task, syn, pwa }
     })
 }
 
@@ -150,7 +153,7 @@ fn the_image_decodes() {
 #[test]
 fn closed_loop_from_initial_balls_stays_in_envelope_and_meets_the_spec() {
     let f = fixture();
-    closed_loop(&f.pwa, &f.syn, &f.problem);
+    closed_loop(&f.pwa, &f.task);
 }
 
 /// A much tighter fitting tolerance (r_crit ≤ 2% of the radius) forces several partitions; the same
@@ -159,7 +162,7 @@ fn closed_loop_from_initial_balls_stays_in_envelope_and_meets_the_spec() {
 fn tight_tolerance_gives_several_partitions_and_the_same_guarantees() {
     let f = fixture();
     let pwa = learn_pwa(
-        &f.problem,
+        &f.task,
         &f.syn,
         &PwaSettings::default().rcrit_fraction(0.02),
     )
@@ -174,15 +177,16 @@ fn tight_tolerance_gives_several_partitions_and_the_same_guarantees() {
         assert!(c.ok && c.fit_err <= pwa.ctx.eps_fit, "{k}: {c:?} {p:?}");
     }
     shared_types::image::decode(&pwa.image).unwrap();
-    closed_loop(&pwa, &f.syn, &f.problem);
+    closed_loop(&pwa, &f.task);
 }
 
-fn closed_loop(pwa: &PwaController, syn: &Synthesis, problem: &host_compiler::spec::Problem) {
+fn closed_loop(pwa: &PwaController, task: &Task) {
     let img = shared_types::image::decode(&pwa.image).unwrap();
-    let goal = problem.goal_region().unwrap();
-    let unsafe_set = problem.unsafe_region().unwrap();
-    let input = host_compiler::synth::input_bound(&problem.input);
-    let steps = problem.horizon_steps();
+    let goal = &task.property.goal;
+    let unsafe_set = &task.property.unsafe_set;
+    let input = &task.property.input;
+    let model = task.plant.error_dynamics(0);
+    let steps = task.steps;
     let ctx = &pwa.ctx;
     let starts: Vec<usize> = (0..ctx.points.len())
         .filter(|&k| ctx.points[k].kappa == 0)
@@ -226,7 +230,7 @@ fn closed_loop(pwa: &PwaController, syn: &Synthesis, problem: &host_compiler::sp
                     break;
                 }
             };
-            if let host_compiler::trajectory::generate::InputBound::Box { lo, hi } = &input {
+            if let host_compiler::property::InputBound::Box { lo, hi } = input {
                 if u.iter()
                     .zip(lo.iter().zip(hi))
                     .any(|(u, (l, h))| u < l || u > h)
@@ -235,9 +239,9 @@ fn closed_loop(pwa: &PwaController, syn: &Synthesis, problem: &host_compiler::sp
                     break;
                 }
             }
-            let ax = mat_vec(syn.plant.A.as_ref(), &x);
-            let bu = mat_vec(syn.plant.B.as_ref(), &u);
-            x = (0..ctx.n).map(|i| ax[i] + bu[i] + syn.plant.g[i]).collect();
+            let ax = mat_vec(model.A.as_ref(), &x);
+            let bu = mat_vec(model.B.as_ref(), &u);
+            x = (0..ctx.n).map(|i| ax[i] + bu[i] + model.g[i]).collect();
         }
         if let Err(e) = outcome {
             failures.push((r, e));
@@ -255,44 +259,15 @@ fn closed_loop(pwa: &PwaController, syn: &Synthesis, problem: &host_compiler::sp
     );
 }
 
-/// The fixture's sets, owned, so that tests can borrow a [`host_compiler::verify::Judge`] from them.
-struct Sets {
-    goal: Box<dyn host_compiler::geometry::Region>,
-    unsafe_set: Option<Box<dyn host_compiler::geometry::Region>>,
-    input: host_compiler::trajectory::generate::InputBound,
-}
-
-impl Sets {
-    fn of(f: &Fixture) -> Self {
-        Self {
-            goal: f.problem.goal_region().unwrap(),
-            unsafe_set: f.problem.unsafe_region().unwrap(),
-            input: host_compiler::synth::input_bound(&f.problem.input),
-        }
-    }
-
-    fn judge<'a>(&'a self, f: &'a Fixture) -> host_compiler::verify::Judge<'a> {
-        host_compiler::synth::judge(
-            &f.problem,
-            &f.syn.plant,
-            self.goal.as_ref(),
-            self.unsafe_set.as_deref(),
-            &self.input,
-        )
-    }
-}
-
 /// `verify::pwa` re-derives the certificate from the image bytes alone: every partition passes (6.6), (6.7),
 /// the one-step inclusion, the input bound, and every ball is listed by every leaf its descent reaches; the
 /// Monte Carlo from F (terminating at Goal) finds no violation.
 #[test]
 fn the_image_alone_rechecks_and_monte_carlo_from_f_finds_no_violation() {
     let f = fixture();
-    let sets = Sets::of(f);
-    let judge = sets.judge(f);
+    let judge = Judge::new(&f.task);
     let img = shared_types::image::decode(&f.pwa.image).unwrap();
-    let rc =
-        host_compiler::verify::pwa::recheck(&judge, f.syn.plant.continuous.as_ref(), &img).unwrap();
+    let rc = host_compiler::verify::pwa::recheck(&judge, &img).unwrap();
     assert_eq!(rc.failures, 0, "{rc:?}");
     assert!(rc.containment_checks >= img.n_balls());
     assert!(rc.partitions.iter().all(|p| p.sigma > 0.0 && p.ok));
@@ -306,13 +281,13 @@ fn the_image_alone_rechecks_and_monte_carlo_from_f_finds_no_violation() {
     assert_eq!(mc.runs, 2_000);
     assert!(mc.init_runs >= 1_000);
     assert_eq!(mc.violations, 0, "{:?}", mc.first_violations);
-    assert!(mc.max_steps <= f.problem.horizon_steps());
+    assert!(mc.max_steps <= f.task.steps);
     // Goal within T, proved from the bytes; no sampled run takes longer than the proved bound.
     let bound = rc
         .liveness
         .max_steps_to_goal
         .unwrap_or_else(|| panic!("{:?}", rc.liveness.failure));
-    assert!(bound <= f.problem.horizon_steps(), "{:?}", rc.liveness);
+    assert!(bound <= f.task.steps, "{:?}", rc.liveness);
     assert!(mc.max_steps <= bound, "{} > {bound}", mc.max_steps);
 }
 
@@ -322,8 +297,7 @@ fn the_image_alone_rechecks_and_monte_carlo_from_f_finds_no_violation() {
 #[test]
 fn the_recheck_finds_leaf_orders_that_lose_goal_within_t() {
     let f = fixture();
-    let sets = Sets::of(f);
-    let judge = sets.judge(f);
+    let judge = Judge::new(&f.task);
     let mut b = f.pwa.builder.clone();
     let mut reversed = 0;
     for leaf in &mut b.leaves {
@@ -335,7 +309,7 @@ fn the_recheck_finds_leaf_orders_that_lose_goal_within_t() {
     assert!(reversed >= 1);
     let bytes = b.to_bytes().unwrap();
     let img = shared_types::image::decode(&bytes).unwrap();
-    let rc = host_compiler::verify::pwa::recheck(&judge, None, &img).unwrap();
+    let rc = host_compiler::verify::pwa::recheck(&judge, &img).unwrap();
     assert!(rc.partitions.iter().all(|p| p.ok), "{:?}", rc.partitions);
     assert_eq!(rc.containment_failures, 0);
     assert!(
@@ -350,15 +324,14 @@ fn the_recheck_finds_leaf_orders_that_lose_goal_within_t() {
 #[test]
 fn the_recheck_finds_a_broken_law_and_a_missing_ball() {
     let f = fixture();
-    let sets = Sets::of(f);
-    let judge = sets.judge(f);
+    let judge = Judge::new(&f.task);
     let mut b = f.pwa.builder.clone();
     for g in &mut b.laws[0].gain {
         *g = -*g; // positive feedback
     }
     let bytes = b.to_bytes().unwrap();
     let img = shared_types::image::decode(&bytes).unwrap();
-    let rc = host_compiler::verify::pwa::recheck(&judge, None, &img).unwrap();
+    let rc = host_compiler::verify::pwa::recheck(&judge, &img).unwrap();
     assert!(
         rc.partitions[0].sigma < 0.0 && !rc.partitions[0].ok,
         "{:?}",
@@ -372,7 +345,7 @@ fn the_recheck_finds_a_broken_law_and_a_missing_ball() {
     b.leaves[l].balls.pop();
     let bytes = b.to_bytes().unwrap();
     let img = shared_types::image::decode(&bytes).unwrap();
-    let rc = host_compiler::verify::pwa::recheck(&judge, None, &img).unwrap();
+    let rc = host_compiler::verify::pwa::recheck(&judge, &img).unwrap();
     assert!(rc.containment_failures >= 1, "{rc:?}");
 }
 
@@ -382,8 +355,7 @@ fn the_recheck_finds_a_broken_law_and_a_missing_ball() {
 #[test]
 fn the_recheck_judges_each_ball_with_its_own_law_in_mixed_leaves() {
     let f = fixture();
-    let sets = Sets::of(f);
-    let judge = sets.judge(f);
+    let judge = Judge::new(&f.task);
     let mut b = f.pwa.builder.clone();
     let ball = b
         .leaves
@@ -402,7 +374,7 @@ fn the_recheck_judges_each_ball_with_its_own_law_in_mixed_leaves() {
     b.balls[ball].partition = q;
     let bytes = b.to_bytes().unwrap();
     let img = shared_types::image::decode(&bytes).unwrap();
-    let rc = host_compiler::verify::pwa::recheck(&judge, None, &img).unwrap();
+    let rc = host_compiler::verify::pwa::recheck(&judge, &img).unwrap();
     assert!(rc.partitions[q].sigma > 0.0, "{:?}", rc.partitions[q]);
     assert!(
         !rc.partitions[q].ok && rc.failures >= 1,

@@ -4,6 +4,7 @@
 //! and a δε floor no local variation can meet ends the run with "needs a new seed trajectory".
 
 use host_compiler::synth::{synthesize, AcceptHook, Generator, StopReason, SynthOptions};
+use host_compiler::task::Task;
 use std::sync::atomic::Ordering;
 use std::sync::Arc;
 
@@ -35,7 +36,9 @@ fn in_pool<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> T {
 #[test]
 fn algorithm4_covers_and_is_independent_of_the_thread_count() {
     let p = problem();
-    let a = in_pool(1, || synthesize(&p, &quick()).unwrap());
+    let a = in_pool(1, || {
+        synthesize(&Task::new(p.clone()).unwrap(), &quick()).unwrap()
+    });
     assert_eq!(a.stop, StopReason::Covered, "{}", a.stop);
     assert_eq!(a.generator, Generator::Algorithm4);
     assert_eq!(a.verify.violations, 0, "{:?}", a.verify.first_violations);
@@ -67,7 +70,9 @@ fn algorithm4_covers_and_is_independent_of_the_thread_count() {
         .snapshots
         .windows(2)
         .all(|w| w[0].trajectories <= w[1].trajectories));
-    let b = in_pool(2, || synthesize(&p, &quick()).unwrap());
+    let b = in_pool(2, || {
+        synthesize(&Task::new(p.clone()).unwrap(), &quick()).unwrap()
+    });
     assert_eq!(
         a.image, b.image,
         "the image must not depend on the thread count"
@@ -85,7 +90,7 @@ fn interrupted_after_first(p: &host_compiler::spec::Problem) -> host_compiler::s
         }))),
         ..opts
     };
-    synthesize(p, &opts).unwrap()
+    synthesize(&Task::new(p.clone()).unwrap(), &opts).unwrap()
 }
 
 #[test]
@@ -121,7 +126,7 @@ fn unreachable_floor_asks_for_a_new_seed_trajectory() {
         imports: vec![("recorded.csv".into(), rec)],
         ..quick()
     };
-    let s = synthesize(&p, &opts).unwrap();
+    let s = synthesize(&Task::new(p.clone()).unwrap(), &opts).unwrap();
     let StopReason::NeedsSeed {
         region,
         description,

@@ -3,6 +3,7 @@
 //! are certified (or refused when they are not safe).
 
 use host_compiler::synth::{synthesize, SynthOptions};
+use host_compiler::task::Task;
 use host_compiler::trajectory::csv::parse_recording;
 
 fn problem() -> host_compiler::spec::Problem {
@@ -25,7 +26,7 @@ fn quick() -> SynthOptions {
 #[test]
 fn double_integrator_is_covered_verified_and_deterministic() {
     let p = problem();
-    let a = synthesize(&p, &quick()).unwrap();
+    let a = synthesize(&Task::new(p.clone()).unwrap(), &quick()).unwrap();
     assert_eq!(
         a.stop,
         host_compiler::synth::StopReason::Covered,
@@ -43,7 +44,7 @@ fn double_integrator_is_covered_verified_and_deterministic() {
         assert!(t.certificate.delta > 0.0 && t.certificate.r_crit < t.certificate.delta);
         assert!((t.certificate.delta_stored as f64) < t.certificate.delta);
     }
-    let b = synthesize(&p, &quick()).unwrap();
+    let b = synthesize(&Task::new(p.clone()).unwrap(), &quick()).unwrap();
     assert_eq!(
         a.image, b.image,
         "same spec and seed must give the same image bytes"
@@ -53,7 +54,7 @@ fn double_integrator_is_covered_verified_and_deterministic() {
 #[test]
 fn recorded_trajectories_are_certified_or_refused() {
     let p = problem();
-    let base = synthesize(&p, &quick()).unwrap();
+    let base = synthesize(&Task::new(p.clone()).unwrap(), &quick()).unwrap();
     // Re-record the first generated trajectory as a person's CSV: x0 and the reference inputs v.
     let t0 = &base.trajectories[0];
     let mut csv = format!(
@@ -78,7 +79,7 @@ fn recorded_trajectories_are_certified_or_refused() {
         imports: vec![("good.csv".into(), good), ("bad.csv".into(), bad)],
         ..quick()
     };
-    let s = synthesize(&p, &opts).unwrap();
+    let s = synthesize(&Task::new(p.clone()).unwrap(), &opts).unwrap();
     assert_eq!(s.trajectories[0].source, "csv:good.csv");
     assert_eq!(
         s.trajectories[0].certificate, t0.certificate,

@@ -6,7 +6,9 @@
 use faer::Mat;
 use host_compiler::emit::{ImageBuilder, Terminal, TrajectoryEntry};
 use host_compiler::geometry::Ball;
-use host_compiler::trajectory::generate::InputBound;
+use host_compiler::model::{DiscretePlant, LinearAffine};
+use host_compiler::property::{InputBound, ReachAvoid};
+use host_compiler::spec::InitBox;
 use host_compiler::verify::{run, Judge};
 use shared_types::image::decode;
 
@@ -30,23 +32,24 @@ fn judge_run(goal_centre: f64) -> host_compiler::verify::RunOutcome {
     let img = decode(&bytes).expect("decodes");
     let A = Mat::from_fn(1, 1, |_, _| 1.0);
     let B = Mat::from_fn(1, 1, |_, _| 1.0);
-    let goal = Ball::new(vec![goal_centre], vec![1.0], 0.2).unwrap();
-    let unsafe_set = Ball::new(vec![-5.0], vec![1.0], 0.5).unwrap();
-    let input = InputBound::Box {
-        lo: vec![-1.5],
-        hi: vec![1.5],
+    let plant = LinearAffine::discrete(DiscretePlant::new(A, B, vec![0.0], 0.1).unwrap());
+    let property = ReachAvoid {
+        goal: Box::new(Ball::new(vec![goal_centre], vec![1.0], 0.2).unwrap()),
+        unsafe_set: Some(Box::new(Ball::new(vec![-5.0], vec![1.0], 0.5).unwrap())),
+        input: InputBound::Box {
+            lo: vec![-1.5],
+            hi: vec![1.5],
+        },
+    };
+    let init = InitBox {
+        lo: vec![0.0],
+        hi: vec![0.0],
     };
     let judge = Judge {
-        A: A.as_ref(),
-        B: B.as_ref(),
-        g: &[0.0],
-        sub: None,
-        goal: &goal,
-        unsafe_set: Some(&unsafe_set),
-        input: &input,
+        plant: &plant,
+        property: &property,
         steps: 6,
-        init_lo: &[0.0],
-        init_hi: &[0.0],
+        init: &init,
     };
     run(&judge, &img, &[0.0], true)
 }

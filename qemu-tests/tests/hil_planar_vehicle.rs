@@ -5,8 +5,8 @@
 
 #![allow(non_snake_case)]
 
-use host_compiler::synth::{sampled_plant, synthesize, SynthOptions};
-use host_compiler::verify::plant_step as step;
+use host_compiler::synth::{synthesize, SynthOptions};
+use host_compiler::task::Task;
 use qemu_tests::closed_loop::{exchange, HostEvaluator};
 use qemu_tests::firmware::{self, FirmwareConfig};
 use qemu_tests::qemu::Qemu;
@@ -30,7 +30,9 @@ fn planar_vehicle_meets_the_spec_on_the_target_from_50_initial_states() {
         progress: false,
         ..SynthOptions::default()
     };
-    let s = synthesize(&problem, &opts).expect("synthesis succeeds");
+    let task = Task::new(problem).expect("the example is a task");
+    let problem = &task.problem;
+    let s = synthesize(&task, &opts).expect("synthesis succeeds");
     assert_eq!(s.verify.violations, 0);
     let path = firmware::write_image("planar_vehicle", &s.image).expect("image written");
     let elf = firmware::build(
@@ -42,17 +44,13 @@ fn planar_vehicle_meets_the_spec_on_the_target_from_50_initial_states() {
     )
     .unwrap_or_else(|e| panic!("{e}"));
     let image = shared_types::image::decode(&s.image).expect("the image decodes");
-    let plant = sampled_plant(&problem).expect("plant");
-    let (As, Bs, gs, subs) = plant
-        .sub
-        .as_ref()
-        .expect("continuous plant has a sub-sample model");
-    let goal = problem.goal_region().unwrap();
-    let unsafe_set = problem
+    let plant = &*task.plant;
+    let goal = &task.property.goal;
+    let unsafe_set = task
+        .property
         .unsafe_region()
-        .unwrap()
         .expect("the example has an obstacle");
-    let steps = problem.horizon_steps();
+    let steps = task.steps;
     let mut rng = ChaCha8Rng::seed_from_u64(problem.seed ^ 0x4111);
     let mut worst_cost = 0u32;
     for run in 0..RUNS {
@@ -89,15 +87,18 @@ fn planar_vehicle_meets_the_spec_on_the_target_from_50_initial_states() {
             let u: Vec<f64> = reply.u.as_slice().iter().map(|&v| v as f64).collect();
             let un = u.iter().map(|a| a * a).sum::<f64>().sqrt();
             assert!(un <= 1.0, "run {run}: ‖u‖ = {un} > 1 at step {k}");
-            let mut xs = x.clone();
-            for _ in 0..subs - 1 {
-                xs = step(As.as_ref(), Bs.as_ref(), gs, &xs, &u);
+            let between = plant.between_samples(0, &x, &u);
+            assert!(
+                !between.is_empty(),
+                "a continuous plant is checked between samples"
+            );
+            for xs in between {
                 assert!(
                     !unsafe_set.contains(&xs),
                     "run {run}: in Unsafe between samples after step {k}"
                 );
             }
-            x = step(plant.A.as_ref(), plant.B.as_ref(), &plant.g, &x, &u);
+            x = plant.step(0, &x, &u);
         }
         let k = reached
             .unwrap_or_else(|| panic!("run {run} from {x0:?} never reached Goal; ends at {x:?}"));

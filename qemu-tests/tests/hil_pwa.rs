@@ -11,7 +11,8 @@
 
 use host_compiler::pwa::{learn_pwa, PwaSettings};
 use host_compiler::synth::{synthesize, SynthOptions};
-use host_compiler::verify::plant_step as step;
+use host_compiler::task::Task;
+use host_compiler::verify::Judge;
 use qemu_tests::closed_loop::{exchange, HostEvaluator};
 use qemu_tests::firmware::{self, FirmwareConfig};
 use qemu_tests::qemu::Qemu;
@@ -54,21 +55,14 @@ fn run(spec: &str, tag: &str, label: &str) {
         progress: false,
         ..SynthOptions::default()
     };
-    let s = synthesize(&problem, &opts).expect("synthesis succeeds");
-    let pwa = learn_pwa(&problem, &s, &PwaSettings::default()).expect("PWA learning succeeds");
+    let task = Task::new(problem).expect("the example is a task");
+    let problem = &task.problem;
+    let s = synthesize(&task, &opts).expect("synthesis succeeds");
+    let pwa = learn_pwa(&task, &s, &PwaSettings::default()).expect("PWA learning succeeds");
     let image = shared_types::image::decode(&pwa.image).expect("the image decodes");
-    let goal = problem.goal_region().unwrap();
-    let unsafe_set = problem.unsafe_region().unwrap();
-    let input = host_compiler::synth::input_bound(&problem.input);
-    let judge = host_compiler::synth::judge(
-        &problem,
-        &s.plant,
-        goal.as_ref(),
-        unsafe_set.as_deref(),
-        &input,
-    );
-    let rc = host_compiler::verify::pwa::recheck(&judge, s.plant.continuous.as_ref(), &image)
-        .expect("recheck runs");
+    let judge = Judge::new(&task);
+    let (goal, unsafe_set, input) = (judge.goal(), judge.unsafe_set(), judge.input());
+    let rc = host_compiler::verify::pwa::recheck(&judge, &image).expect("recheck runs");
     assert_eq!(
         rc.failures, 0,
         "the image's certificate must recheck: {rc:?}"
@@ -146,12 +140,12 @@ fn run(spec: &str, tag: &str, label: &str) {
             );
             worst_cost = worst_cost.max(reply.cost);
             let u: Vec<f64> = reply.u.as_slice().iter().map(|&v| v as f64).collect();
-            let slack = host_compiler::verify::input_slack(&input, &u);
+            let slack = host_compiler::verify::input_slack(input, &u);
             assert!(
                 slack >= 0.0,
                 "run {run}: u = {u:?} outside the input set at step {k}"
             );
-            x = step(s.plant.A.as_ref(), s.plant.B.as_ref(), &s.plant.g, &x, &u);
+            x = task.plant.step(0, &x, &u);
         }
         let k = reached
             .unwrap_or_else(|| panic!("run {run} from {x0:?} never reached Goal; ends at {x:?}"));

@@ -46,6 +46,7 @@
 // Negated comparisons (`!(x > 0.0)`) are deliberate throughout: they reject NaN as well.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
+mod design;
 mod pbh;
 mod rcrit;
 pub(crate) mod sdp;
@@ -53,6 +54,7 @@ mod settings;
 mod synth;
 mod validate;
 
+pub use design::{design, outcome_message, Design, DesignError};
 pub use pbh::{uncontrollable_modes, UncontrollableMode};
 pub use rcrit::{r_crit, RCrit};
 pub use settings::{CafSettings, CafSettingsBuilder, Formulation};

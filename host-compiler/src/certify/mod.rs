@@ -34,9 +34,13 @@ pub use pwa_ball::{
     pwa_ball_radius, pwa_ball_threshold, pwa_complete_radius, threshold_of_radius, whitened_centre,
 };
 
+use crate::caf::Design;
 use crate::geometry::{Metric, Region};
-use crate::linalg::{mat_vec, p_norm, sym_eigenvalues, PdRoots};
-use crate::trajectory::generate::InputBound;
+use crate::linalg::{p_norm, sym_eigenvalues, PdRoots};
+use crate::model::{ContinuousPlant, DiscretePlant, Plant};
+use crate::property::{InputBound, ReachAvoid};
+use crate::spec::Problem;
+use crate::task::Task;
 use crate::trajectory::Nominal;
 use faer::{Mat, MatRef};
 
@@ -65,30 +69,88 @@ pub fn hyperplane_reach(roots: &PdRoots, axis: &[f64], a: &[f64], c: &[f64], r: 
     roots.dual_norm(a) * r + round
 }
 
-/// The continuous-time plant behind a sampled loop, for the inter-sample bound.
-#[derive(Clone, Debug)]
-pub struct ContinuousPart {
-    pub Ac: Mat<f64>,
-    pub Bc: Mat<f64>,
-    pub c: Vec<f64>,
-    /// Sample period h.
-    pub h: f64,
-}
-
-/// The loop being certified.
+/// The loop being certified: the task's plant and property under the shipped gain K̂ and the CAF metric P.
+#[derive(Clone, Copy)]
 pub struct Loop<'a> {
-    /// Discrete plant x⁺ = A x + B u + g.
-    pub A: MatRef<'a, f64>,
-    pub B: MatRef<'a, f64>,
-    pub g: &'a [f64],
+    pub plant: &'a dyn Plant,
     /// The gain as shipped (f32 values widened exactly to f64).
     pub K: MatRef<'a, f64>,
     /// The CAF metric.
     pub P: MatRef<'a, f64>,
-    pub continuous: Option<&'a ContinuousPart>,
-    pub goal: &'a dyn Region,
-    pub unsafe_set: Option<&'a dyn Region>,
-    pub input: &'a InputBound,
+    pub property: &'a ReachAvoid,
+}
+
+impl<'a> Loop<'a> {
+    /// The loop of a task with its designed CAF.
+    pub fn new(task: &'a Task, design: &'a Design) -> Self {
+        Self {
+            plant: &*task.plant,
+            K: design.K.as_ref(),
+            P: design.P.as_ref(),
+            property: &task.property,
+        }
+    }
+    /// The sampled model x⁺ = A x + B u + g the CAF lives in.
+    pub fn model(&self) -> &'a DiscretePlant {
+        self.plant.error_dynamics(0)
+    }
+    pub fn A(&self) -> MatRef<'a, f64> {
+        self.model().A.as_ref()
+    }
+    pub fn B(&self) -> MatRef<'a, f64> {
+        self.model().B.as_ref()
+    }
+    pub fn g(&self) -> &'a [f64] {
+        &self.model().g
+    }
+    pub fn goal(&self) -> &'a dyn Region {
+        self.property.goal.as_ref()
+    }
+    pub fn unsafe_set(&self) -> Option<&'a dyn Region> {
+        self.property.unsafe_region()
+    }
+    pub fn input(&self) -> &'a InputBound {
+        &self.property.input
+    }
+    /// The nominal of this loop from `x0` under the reference sequence `v`.
+    pub fn simulate(&self, x0: &[f64], v: &[Vec<f64>]) -> Nominal {
+        crate::trajectory::simulate(self.model(), self.K, x0, v)
+    }
+}
+
+/// A task with its designed CAF: everything a [`Loop`] borrows, owned (for the optimiser's tests, benches
+/// and callers outside the synthesis pipeline).
+pub struct OwnedLoop {
+    pub task: Task,
+    pub design: Design,
+}
+
+/// Why a loop could not be built from a spec.
+#[derive(Debug, thiserror::Error)]
+pub enum SetupError {
+    #[error(transparent)]
+    Task(#[from] crate::task::TaskError),
+    #[error("no CAF and feedback: {0}")]
+    Caf(#[from] crate::caf::DesignError),
+    #[error(transparent)]
+    Certify(#[from] CertifyError),
+}
+
+impl OwnedLoop {
+    /// The task of a validated spec and its CAF, as `synth` builds them.
+    pub fn from_problem(problem: &Problem) -> Result<Self, SetupError> {
+        let task = Task::new(problem.clone())?;
+        let design = crate::caf::design(&task)?;
+        Ok(Self { task, design })
+    }
+    /// The borrowed view the certifier and the optimiser take.
+    pub fn lp(&self) -> Loop<'_> {
+        Loop::new(&self.task, &self.design)
+    }
+    /// Its trajectory-independent constants.
+    pub fn constants(&self) -> Result<LoopConstants, SetupError> {
+        Ok(LoopConstants::new(&self.lp())?)
+    }
 }
 
 /// Constants of a loop that do not depend on the trajectory.
@@ -121,23 +183,23 @@ pub enum CertifyError {
 /// The inter-sample constants in the CAF metric for a plant held over one period h: φ = (e^{μh} − 1)/μ
 /// (= h as μh → 0) with μ the logarithmic norm of A_c in the P-metric, so that ‖x(κh+τ) − x_κ‖_P ≤ φ‖f_κ‖_P
 /// for τ ∈ [0, h] (the P-metric version of `model::InterSampleBound`), and β = ‖B_c‖ into the P-metric.
-pub fn intersample_phi_beta(roots: &PdRoots, cp: &ContinuousPart) -> (f64, f64) {
-    let As = &roots.sqrt * &cp.Ac * &roots.inv_sqrt;
+pub fn intersample_phi_beta(roots: &PdRoots, cp: &ContinuousPlant, h: f64) -> (f64, f64) {
+    let As = &roots.sqrt * &cp.A * &roots.inv_sqrt;
     let mu = sym_eigenvalues(As.as_ref())
         .and_then(|e| e.last().copied())
         .unwrap_or(f64::INFINITY);
-    let phi = if (mu * cp.h).abs() < 1e-12 {
-        cp.h
+    let phi = if (mu * h).abs() < 1e-12 {
+        h
     } else {
-        (mu * cp.h).exp_m1() / mu
+        (mu * h).exp_m1() / mu
     };
-    (phi, roots.norm_into(cp.Bc.as_ref()))
+    (phi, roots.norm_into(cp.B.as_ref()))
 }
 
 impl LoopConstants {
     pub fn new(lp: &Loop<'_>) -> Result<Self, CertifyError> {
         let roots = PdRoots::new(lp.P).ok_or(CertifyError::MetricNotPd)?;
-        let At = lp.A + lp.B * lp.K;
+        let At = lp.A() + lp.B() * lp.K;
         let M = lp.P - At.transpose() * lp.P * &At;
         let sigma_min = sym_eigenvalues(M.as_ref())
             .and_then(|e| e.first().copied())
@@ -145,11 +207,11 @@ impl LoopConstants {
         if !(sigma_min > 0.0) {
             return Err(CertifyError::NotContracting(sigma_min));
         }
-        let (phi, gamma, beta) = match lp.continuous {
+        let (phi, gamma, beta) = match lp.plant.continuous(0) {
             None => (0.0, 1.0, 0.0),
             Some(cp) => {
-                let (phi, beta) = intersample_phi_beta(&roots, cp);
-                let Acl = &cp.Ac + &cp.Bc * lp.K;
+                let (phi, beta) = intersample_phi_beta(&roots, cp, lp.plant.period());
+                let Acl = &cp.A + &cp.B * lp.K;
                 (phi, 1.0 + phi * roots.induced_norm(Acl.as_ref()), beta)
             }
         };
@@ -159,7 +221,7 @@ impl LoopConstants {
             roots,
             sigma_min,
             At,
-            B: lp.B.to_owned(),
+            B: lp.B().to_owned(),
             P: lp.P.to_owned(),
             phi,
             gamma,
@@ -329,7 +391,7 @@ pub fn certify(lp: &Loop<'_>, lc: &LoopConstants, nom: &Nominal) -> Certificate 
     let mut delta_goal = f64::NEG_INFINITY;
     let mut k_star = 0;
     for (k, x) in nom.x.iter().enumerate() {
-        let d = lp.goal.signed_dist(x, &metric).value;
+        let d = lp.goal().signed_dist(x, &metric).value;
         if d > delta_goal {
             delta_goal = d;
             k_star = k;
@@ -351,20 +413,16 @@ pub fn certify(lp: &Loop<'_>, lc: &LoopConstants, nom: &Nominal) -> Certificate 
     let eps_f32 = eps_components.iter().map(|e| e * e).sum::<f64>().sqrt();
     // 2. Unsafe (4.14) at samples and between them.
     let (mut delta_unsafe, mut k_unsafe, mut delta_unsafe_is) = (f64::INFINITY, 0, f64::INFINITY);
-    if let Some(us) = lp.unsafe_set {
+    if let Some(us) = lp.unsafe_set() {
         for (k, x) in nom.x.iter().enumerate() {
             let d = -us.signed_dist(x, &metric).value; // dist outside (> 0), −depth inside
             if d < delta_unsafe {
                 delta_unsafe = d;
                 k_unsafe = k;
             }
-            let di = match lp.continuous {
-                Some(cp) if k < N => {
-                    let f: Vec<f64> = {
-                        let ax = mat_vec(cp.Ac.as_ref(), x);
-                        let bu = mat_vec(cp.Bc.as_ref(), &nom.u[k]);
-                        (0..x.len()).map(|i| ax[i] + bu[i] + cp.c[i]).collect()
-                    };
+            let f = (k < N).then(|| lp.plant.vector_field(0, x, &nom.u[k]));
+            let di = match f.flatten() {
+                Some(f) => {
                     let rho = lc.phi * p_norm(lp.P, &f);
                     (d - rho - lc.phi * lc.beta * eps_f32) / lc.gamma
                 }
@@ -376,7 +434,7 @@ pub fn certify(lp: &Loop<'_>, lc: &LoopConstants, nom: &Nominal) -> Certificate 
     // 3. Input (4.15) with the rounding margin.
     let (mut delta_input, mut k_input) = (f64::INFINITY, 0);
     for k in 0..N {
-        let d = input_distance(lp.K, &lc.roots, &nom.u[k], lp.input, &eps_components);
+        let d = input_distance(lp.K, &lc.roots, &nom.u[k], lp.input(), &eps_components);
         if d < delta_input {
             delta_input = d;
             k_input = k;
@@ -419,7 +477,7 @@ pub fn shipped(
         .iter()
         .map(|r| r.iter().map(|&a| a as f32 as f64).collect())
         .collect();
-    let nom = crate::trajectory::simulate(lp.A, lp.B, lp.g, lp.K, x0, &v32);
+    let nom = lp.simulate(x0, &v32);
     let cert = certify(lp, lc, &nom);
     (nom, cert)
 }

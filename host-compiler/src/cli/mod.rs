@@ -1,6 +1,7 @@
 //! Command-line interface: argument parsing and dispatch. Each subcommand lives in its own file.
 
 use clap::{Parser, Subcommand};
+use std::path::PathBuf;
 
 pub mod inspect;
 pub mod mtl;
@@ -33,7 +34,7 @@ pub struct Cli {
 #[derive(Subcommand, Debug)]
 pub enum Command {
     /// Synthesise a certified controller image and report from a task spec (TOML).
-    Synth(synth::SynthArgs),
+    Synth(SynthArgs),
     /// Re-check an image against its spec by closed-loop Monte Carlo through the shared f32 evaluator.
     ///
     /// Every run must reach Goal within the horizon, stay out of Unsafe (also between samples for
@@ -61,4 +62,29 @@ pub fn main() -> miette::Result<()> {
         Command::Verify(a) => verify::run(&a),
         Command::Simulate(a) => simulate::run(&a),
     }
+}
+
+/// Arguments of `synth`.
+#[derive(clap::Args, Debug)]
+pub struct SynthArgs {
+    /// Task spec (TOML); see examples/README.md for the format.
+    pub spec: PathBuf,
+    /// Output directory: controller.img, report.html and certificate.json are written there.
+    #[arg(long, default_value = "out")]
+    pub out: PathBuf,
+    /// Monte Carlo runs from the certified cover in the final verification.
+    #[arg(long, default_value_t = 10_000)]
+    pub verify_runs: usize,
+    /// A recorded trajectory to certify and use before any is generated (repeatable): CSV with a comment
+    /// line `# x0 = …` giving the initial state, a header `t,v1,…,vm` and one row of reference inputs per
+    /// sample period.
+    #[arg(long = "import", value_name = "FILE.csv")]
+    pub imports: Vec<PathBuf>,
+    /// How trajectories after the first are made: `algorithm4` (§5.4: grow from the boundary of the
+    /// closest ball and maximise δ by §5.3) or `scp` (Algorithm 1: the SCP generator per uncovered seed).
+    #[arg(long, value_enum, default_value_t = crate::synth::Generator::Algorithm4)]
+    pub generator: crate::synth::Generator,
+    /// Hide progress bars.
+    #[arg(long)]
+    pub quiet: bool,
 }

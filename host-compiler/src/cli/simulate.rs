@@ -1,7 +1,7 @@
 //! `host-compiler simulate SPEC IMAGE --x0 …`: one closed-loop run through the shared f32 evaluator,
 //! written as CSV (t, x…, u…, status).
 
-use crate::synth::sampled_plant;
+use crate::task::Task;
 use miette::IntoDiagnostic;
 use shared_types::eval::Controller;
 use std::io::Write;
@@ -43,7 +43,8 @@ pub fn run(a: &SimulateArgs) -> miette::Result<()> {
             img.n()
         ));
     }
-    let plant = sampled_plant(&problem).map_err(|e| miette::miette!("{e}"))?;
+    let task = Task::new(problem).map_err(|e| miette::miette!("{e}"))?;
+    let problem = &task.problem;
     let steps = a.steps.unwrap_or(problem.horizon_steps());
     let mut ctl = Controller::new(img);
     let mut out: Box<dyn Write> = match &a.out {
@@ -73,7 +74,7 @@ pub fn run(a: &SimulateArgs) -> miette::Result<()> {
             .chain(std::iter::once(status))
             .collect();
         writeln!(out, "{}", row.join(",")).into_diagnostic()?;
-        x = crate::verify::plant_step(plant.A.as_ref(), plant.B.as_ref(), &plant.g, &x, &uf);
+        x = task.plant.step(0, &x, &uf);
     }
     Ok(())
 }

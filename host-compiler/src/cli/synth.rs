@@ -1,36 +1,13 @@
 //! `host-compiler synth SPEC --out DIR`: the whole pipeline, writing the image, the report and the
 //! certificate data.
 
-use crate::synth::{report_data, synthesize, Generator, StopReason, SynthOptions};
+use super::SynthArgs;
+use crate::report::report_data;
+use crate::synth::{synthesize, StopReason, SynthOptions};
+use crate::task::Task;
 use miette::{IntoDiagnostic, WrapErr};
-use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
-
-/// Arguments of `synth`.
-#[derive(clap::Args, Debug)]
-pub struct SynthArgs {
-    /// Task spec (TOML); see examples/README.md for the format.
-    pub spec: PathBuf,
-    /// Output directory: controller.img, report.html and certificate.json are written there.
-    #[arg(long, default_value = "out")]
-    pub out: PathBuf,
-    /// Monte Carlo runs from the certified cover in the final verification.
-    #[arg(long, default_value_t = 10_000)]
-    pub verify_runs: usize,
-    /// A recorded trajectory to certify and use before any is generated (repeatable): CSV with a comment
-    /// line `# x0 = …` giving the initial state, a header `t,v1,…,vm` and one row of reference inputs per
-    /// sample period.
-    #[arg(long = "import", value_name = "FILE.csv")]
-    pub imports: Vec<PathBuf>,
-    /// How trajectories after the first are made: `algorithm4` (§5.4: grow from the boundary of the
-    /// closest ball and maximise δ by §5.3) or `scp` (Algorithm 1: the SCP generator per uncovered seed).
-    #[arg(long, value_enum, default_value_t = Generator::Algorithm4)]
-    pub generator: Generator,
-    /// Hide progress bars.
-    #[arg(long)]
-    pub quiet: bool,
-}
 
 pub fn run(a: &SynthArgs) -> miette::Result<()> {
     let problem = crate::spec::load(&a.spec)?;
@@ -71,19 +48,21 @@ pub fn run(a: &SynthArgs) -> miette::Result<()> {
         }),
         ..SynthOptions::default()
     };
-    let s = synthesize(&problem, &opts).map_err(|e| miette::miette!("{e}"))?;
+    let task = Task::new(problem).map_err(|e| miette::miette!("{e}"))?;
+    let problem = &task.problem;
+    let s = synthesize(&task, &opts).map_err(|e| miette::miette!("{e}"))?;
     std::fs::create_dir_all(&a.out)
         .into_diagnostic()
         .wrap_err_with(|| format!("creating {}", a.out.display()))?;
     if problem.synthesis.mode == crate::spec::ControllerMode::Pwa {
-        return crate::cli::synth_pwa::run(a, &problem, &s);
+        return crate::cli::synth_pwa::run(a, &task, &s);
     }
     let img_path = a.out.join("controller.img");
     std::fs::write(&img_path, &s.image)
         .into_diagnostic()
         .wrap_err("writing the image")?;
     let data = report_data(
-        &problem,
+        problem,
         &a.spec.display().to_string(),
         &s,
         &img_path.display().to_string(),

@@ -3,45 +3,25 @@
 //! `controller.img` (the PWA image), `feedforward.img` (the cover it was learned from, the size baseline),
 //! `report.html` with its PWA section and `certificate.json`.
 
-use super::synth::SynthArgs;
+use super::SynthArgs;
 use crate::pwa::{learn_pwa, PwaSettings};
-use crate::spec::Problem;
-use crate::synth::{report_data, Synthesis};
+use crate::report::pwa::PwaSummary;
+use crate::report::report_data;
+use crate::synth::Synthesis;
+use crate::task::Task;
 use crate::verify::pwa::{monte_carlo_pwa, recheck};
+use crate::verify::Judge;
 use miette::{IntoDiagnostic, WrapErr};
 
-/// What a PWA synthesis produced and how it was checked (also written to `certificate.json`).
-#[derive(Clone, Debug, PartialEq, serde::Serialize)]
-pub struct PwaSummary {
-    pub data_points: usize,
-    pub trajectories: usize,
-    pub eps_fit: f64,
-    pub stats: crate::pwa::PartitionStats,
-    pub learn_seconds: f64,
-    pub partition_seconds: f64,
-    pub image_bytes: usize,
-    pub feedforward_image_bytes: usize,
-    pub recheck: crate::verify::pwa::PwaRecheck,
-    pub monte_carlo: crate::verify::pwa::PwaMonteCarlo,
-}
-
 /// Learns, checks and writes the PWA controller (module doc). Fails when any check fails.
-pub fn run(a: &SynthArgs, problem: &Problem, s: &Synthesis) -> miette::Result<()> {
-    let pwa = learn_pwa(problem, s, &PwaSettings::default().progress(!a.quiet))
+pub fn run(a: &SynthArgs, task: &Task, s: &Synthesis) -> miette::Result<()> {
+    let problem = &task.problem;
+    let pwa = learn_pwa(task, s, &PwaSettings::default().progress(!a.quiet))
         .map_err(|e| miette::miette!("PWA learning: {e}"))?;
     let img = shared_types::image::decode(&pwa.image)
         .map_err(|e| miette::miette!("the emitted PWA image is rejected: {e:?}"))?;
-    let goal = problem.goal_region()?;
-    let unsafe_set = problem.unsafe_region()?;
-    let input = crate::synth::input_bound(&problem.input);
-    let judge = crate::synth::judge(
-        problem,
-        &s.plant,
-        goal.as_ref(),
-        unsafe_set.as_deref(),
-        &input,
-    );
-    let rc = recheck(&judge, s.plant.continuous.as_ref(), &img).map_err(|e| miette::miette!(e))?;
+    let judge = Judge::new(task);
+    let rc = recheck(&judge, &img).map_err(|e| miette::miette!(e))?;
     let init_centres: Vec<Vec<f64>> = s
         .trajectories
         .iter()
@@ -82,9 +62,7 @@ pub fn run(a: &SynthArgs, problem: &Problem, s: &Synthesis) -> miette::Result<()
         &img_path.display().to_string(),
     );
     data.image_bytes = pwa.image.len();
-    data.pwa = Some(crate::report::pwa::pwa_report(
-        problem, &pwa, &img, &summary,
-    ));
+    data.pwa = Some(crate::report::pwa::pwa_report(&pwa, &img, &summary));
     let report = crate::report::write_report(&data, &a.out)
         .into_diagnostic()
         .wrap_err("writing the report")?;

@@ -1,8 +1,8 @@
 //! `host-compiler verify SPEC IMAGE`: closed-loop Monte Carlo of an image against its spec through the
 //! shared f32 evaluator.
 
-use crate::synth::sampled_plant;
-use crate::verify::monte_carlo;
+use crate::task::Task;
+use crate::verify::{monte_carlo, Judge};
 use miette::IntoDiagnostic;
 use std::path::PathBuf;
 
@@ -41,19 +41,11 @@ pub fn run(a: &VerifyArgs) -> miette::Result<()> {
             problem.plant.m()
         ));
     }
-    let plant = sampled_plant(&problem).map_err(|e| miette::miette!("{e}"))?;
-    let goal = problem.goal_region()?;
-    let unsafe_set = problem.unsafe_region()?;
-    let input = crate::synth::input_bound(&problem.input);
-    let judge = crate::synth::judge(
-        &problem,
-        &plant,
-        goal.as_ref(),
-        unsafe_set.as_deref(),
-        &input,
-    );
+    let task = Task::new(problem).map_err(|e| miette::miette!("{e}"))?;
+    let problem = &task.problem;
+    let judge = Judge::new(&task);
     if img.mode() == shared_types::image::Mode::PwaFeedback {
-        return run_pwa(a, &judge, &plant, &img);
+        return run_pwa(a, &judge, &img);
     }
     let r = monte_carlo(
         &judge,
@@ -99,12 +91,10 @@ pub fn run(a: &VerifyArgs) -> miette::Result<()> {
 /// ([`crate::verify::pwa`]); runs terminate upon entering Goal (Theorem 6.5).
 fn run_pwa(
     a: &VerifyArgs,
-    judge: &crate::verify::Judge<'_>,
-    plant: &crate::synth::SampledPlant,
+    judge: &Judge<'_>,
     img: &shared_types::image::Image<'_>,
 ) -> miette::Result<()> {
-    let rc = crate::verify::pwa::recheck(judge, plant.continuous.as_ref(), img)
-        .map_err(|e| miette::miette!(e))?;
+    let rc = crate::verify::pwa::recheck(judge, img).map_err(|e| miette::miette!(e))?;
     // The image does not mark which balls start a trajectory: all runs start anywhere in F.
     let mc =
         crate::verify::pwa::monte_carlo_pwa(judge, img, &[], a.runs, a.seed.unwrap_or(0x7e51f1), 0);

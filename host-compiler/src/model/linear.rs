@@ -1,6 +1,6 @@
 //! Linear affine plants (3.1)/(3.60) and their exact zero-order-hold discretisation.
 
-use super::{check_finite, check_len, expm, ModelError};
+use super::{check_finite, check_len, expm, Location, ModelError, Plant};
 use faer::{Mat, MatRef};
 
 /// ẋ = A x + B u + c (3.1).
@@ -27,12 +27,16 @@ pub struct DiscretePlant {
     pub period: f64,
 }
 
-/// What the firmware controls: always a discrete-time plant (DESIGN §5), plus the continuous plant it was
-/// sampled from when the spec is in continuous time (needed for the inter-sample excursion bound).
+/// A linear affine plant as the firmware controls it (the first [`Plant`] class): the sampled model the
+/// loop runs on (DESIGN §6), with the continuous plant it was sampled from when the spec is in continuous
+/// time (for the inter-sample bound) and the exact sub-period model the verifier checks between samples
+/// with.
 #[derive(Clone, Debug, PartialEq)]
-pub struct SampledPlant {
+pub struct LinearAffine {
     pub discrete: DiscretePlant,
     pub continuous: Option<ContinuousPlant>,
+    /// Exact ZOH over h / [`LinearAffine::SUBSTEPS`] (continuous plants only).
+    sub: Option<DiscretePlant>,
 }
 
 fn check_AB(A: MatRef<'_, f64>, B: MatRef<'_, f64>) -> Result<(), ModelError> {
@@ -170,7 +174,30 @@ impl DiscretePlant {
     }
 }
 
-impl SampledPlant {
+impl LinearAffine {
+    /// Sub-periods per period at which the verifier checks a continuous plant between samples.
+    pub const SUBSTEPS: usize = 8;
+
+    /// A plant given in discrete time.
+    pub fn discrete(d: DiscretePlant) -> Self {
+        Self {
+            discrete: d,
+            continuous: None,
+            sub: None,
+        }
+    }
+
+    /// A plant given in continuous time, sampled with period `h` by an exact zero-order hold.
+    pub fn sampled(c: ContinuousPlant, h: f64) -> Result<Self, ModelError> {
+        let discrete = c.zoh(h)?;
+        let sub = Some(c.zoh(h / Self::SUBSTEPS as f64)?);
+        Ok(Self {
+            discrete,
+            continuous: Some(c),
+            sub,
+        })
+    }
+
     /// The model of a validated spec plant: a continuous plant is discretised with its period (ZOH), a
     /// discrete plant is taken as is.
     pub fn from_spec(p: &crate::spec::Plant) -> Result<Self, ModelError> {
@@ -178,17 +205,47 @@ impl SampledPlant {
         let B = p.B.to_faer();
         match p.time {
             crate::spec::TimeDomain::Continuous => {
-                let c = ContinuousPlant::new(A, B, p.offset.clone())?;
-                let discrete = c.zoh(p.period)?;
-                Ok(Self {
-                    discrete,
-                    continuous: Some(c),
-                })
+                Self::sampled(ContinuousPlant::new(A, B, p.offset.clone())?, p.period)
             }
-            crate::spec::TimeDomain::Discrete => Ok(Self {
-                discrete: DiscretePlant::new(A, B, p.offset.clone(), p.period)?,
-                continuous: None,
-            }),
+            crate::spec::TimeDomain::Discrete => Ok(Self::discrete(DiscretePlant::new(
+                A,
+                B,
+                p.offset.clone(),
+                p.period,
+            )?)),
         }
+    }
+}
+
+impl Plant for LinearAffine {
+    fn n(&self) -> usize {
+        self.discrete.n()
+    }
+    fn m(&self) -> usize {
+        self.discrete.m()
+    }
+    fn period(&self) -> f64 {
+        self.discrete.period
+    }
+    fn error_dynamics(&self, _loc: Location) -> &DiscretePlant {
+        &self.discrete
+    }
+    fn continuous(&self, _loc: Location) -> Option<&ContinuousPlant> {
+        self.continuous.as_ref()
+    }
+    fn step(&self, _loc: Location, x: &[f64], u: &[f64]) -> Vec<f64> {
+        self.discrete.step(x, u)
+    }
+    fn between_samples(&self, _loc: Location, x: &[f64], u: &[f64]) -> Vec<Vec<f64>> {
+        let Some(sub) = &self.sub else {
+            return Vec::new();
+        };
+        let mut xs = x.to_vec();
+        (1..Self::SUBSTEPS)
+            .map(|_| {
+                xs = sub.step(&xs, u);
+                xs.clone()
+            })
+            .collect()
     }
 }

@@ -1,5 +1,6 @@
-//! Plant models: linear affine plants in continuous time (ẋ = A x + B u + c, with a sample period) and
-//! discrete time (x⁺ = A x + B u + g); the exact zero-order-hold discretisation ([`zoh`], via the matrix
+//! Plant models: the [`Plant`] interface every plant class implements (module `plant`), and its first
+//! class, [`LinearAffine`]: linear affine plants in continuous time (ẋ = A x + B u + c, with a sample
+//! period) and discrete time (x⁺ = A x + B u + g); the exact zero-order-hold discretisation ([`zoh`], via the matrix
 //! exponential [`expm`]); closed-loop simulation with the feedback law u = K x + v(κ) of (3.5)/(3.63); and the
 //! inter-sample excursion bound ([`InterSampleBound`]) the certification uses to account for what the
 //! continuous plant does between samples.
@@ -9,11 +10,13 @@
 mod expm;
 mod intersample;
 mod linear;
+mod plant;
 mod sim;
 
 pub use expm::expm;
 pub use intersample::InterSampleBound;
-pub use linear::{zoh, ContinuousPlant, DiscretePlant, SampledPlant};
+pub use linear::{zoh, ContinuousPlant, DiscretePlant, LinearAffine};
+pub use plant::{Location, Plant};
 pub use sim::{reference_inputs, simulate_closed_loop, ClosedLoopRun};
 
 /// Bad input to a model constructor or helper (dimensions, non-finite numbers, periods).

@@ -8,7 +8,6 @@
 //! * [`pieces`]: the pieces of δ(0) with gradients, the adjoint sweep, the subgradient of (5.28)–(5.29).
 //! * [`potential`]: the potentials of §5.2.3, Algorithm 3, `argmin`'s L-BFGS, the time-optimal bisection.
 //! * `bundle` (behind [`maximize_delta`]): the proximal bundle method of §5.3.
-//! * [`setup`]: a certified loop built from a spec the way `synth` builds it (tests, benches, tools).
 //!
 //! API changes for callers (newest first):
 //! * `BundleSettings::hold` and `PotentialSettings::hold` (default 1): keep v block-constant
@@ -18,12 +17,12 @@
 //! * `BundleSettings::time_search_every: usize` is now `terminal_time: bool` (builder `terminal_time`); the
 //!   terminal step is searched between bundle runs instead of interrupting them. `initial_step` is the RMS
 //!   size of the first move per input component.
+//! * `setup::OwnedLoop` is now [`crate::certify::OwnedLoop`] (a task with its designed CAF).
 //! * New modules `pieces`, `potential`, `setup` (additive).
 
 mod bundle;
 pub mod pieces;
 pub mod potential;
-pub mod setup;
 
 use crate::certify::{Certificate, Loop, LoopConstants};
 use crate::trajectory::Nominal;
@@ -168,7 +167,7 @@ pub enum OptimizeError {
 
 /// Check that x0 and v fit the loop (dimensions, finiteness, at least one step).
 pub fn check_inputs(lp: &Loop<'_>, x0: &[f64], v: &[Vec<f64>]) -> Result<(), OptimizeError> {
-    let (n, m) = (lp.A.nrows(), lp.B.ncols());
+    let (n, m) = (lp.plant.n(), lp.plant.m());
     if x0.len() != n {
         return Err(OptimizeError::StateDimension { got: x0.len(), n });
     }

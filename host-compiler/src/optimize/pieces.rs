@@ -88,13 +88,13 @@ impl<'a, 'b> Pieces<'a, 'b> {
     pub fn goal_values(&self, nom: &Nominal) -> Vec<f64> {
         nom.x
             .iter()
-            .map(|x| self.lp.goal.signed_dist(x, &self.metric).value)
+            .map(|x| self.lp.goal().signed_dist(x, &self.metric).value)
             .collect()
     }
 
     /// Goal piece and its gradient at sample k.
     pub fn goal_grad(&self, nom: &Nominal, k: usize) -> (f64, LocalGrad) {
-        let (v, gx) = self.signed(self.lp.goal, &nom.x[k]);
+        let (v, gx) = self.signed(self.lp.goal(), &nom.x[k]);
         let m = self.lp.K.nrows();
         (
             v,
@@ -108,20 +108,16 @@ impl<'a, 'b> Pieces<'a, 'b> {
 
     /// The inter-sample excursion vector f = A_c x + B_c u + c of (certify doc, item 2) at sample k < N.
     fn excursion(&self, nom: &Nominal, k: usize) -> Option<Vec<f64>> {
-        let cp = self.lp.continuous?;
         if k >= nom.steps() {
             return None;
         }
-        let x = &nom.x[k];
-        let ax = mat_vec(cp.Ac.as_ref(), x);
-        let bu = mat_vec(cp.Bc.as_ref(), &nom.u[k]);
-        Some((0..x.len()).map(|i| ax[i] + bu[i] + cp.c[i]).collect())
+        self.lp.plant.vector_field(0, &nom.x[k], &nom.u[k])
     }
 
     /// Unsafe piece at every sample: (dist − φ‖f‖_P − φβε̄)/γ between samples, dist at the last sample
     /// (+∞ without Unsafe), as in [`crate::certify::certify`].
     pub fn unsafe_values(&self, nom: &Nominal, eps_f32: f64) -> Vec<f64> {
-        let Some(us) = self.lp.unsafe_set else {
+        let Some(us) = self.lp.unsafe_set() else {
             return vec![f64::INFINITY; nom.x.len()];
         };
         (0..nom.x.len())
@@ -141,7 +137,7 @@ impl<'a, 'b> Pieces<'a, 'b> {
     /// Unsafe piece and its gradient at sample k (ε̄ held fixed).
     pub fn unsafe_grad(&self, nom: &Nominal, k: usize, eps_f32: f64) -> (f64, LocalGrad) {
         let (n, m) = (self.lp.P.nrows(), self.lp.K.nrows());
-        let Some(us) = self.lp.unsafe_set else {
+        let Some(us) = self.lp.unsafe_set() else {
             return (
                 f64::INFINITY,
                 LocalGrad {
@@ -158,18 +154,17 @@ impl<'a, 'b> Pieces<'a, 'b> {
         let Some(f) = self.excursion(nom, k) else {
             return (d, LocalGrad { k, gx, gv });
         };
-        let cp = self
-            .lp
-            .continuous
-            .expect("excursion needs the continuous part");
+        let Some(cp) = self.lp.plant.continuous(0) else {
+            return (d, LocalGrad { k, gx, gv });
+        };
         let fn_ = p_norm(self.lp.P, &f);
         let rho = self.lc.phi * fn_;
         let val = (d - rho - self.lc.phi * self.lc.beta * eps_f32) / self.lc.gamma;
         if fn_ > 0.0 {
             // ∇_f ‖f‖_P = P f/‖f‖_P; f = A_c x + B_c (K̂x + v).
             let pf: Vec<f64> = mat_vec(self.lp.P, &f).iter().map(|v| v / fn_).collect();
-            let bt = mat_t_vec(cp.Bc.as_ref(), &pf);
-            let at = mat_t_vec(cp.Ac.as_ref(), &pf);
+            let bt = mat_t_vec(cp.B.as_ref(), &pf);
+            let at = mat_t_vec(cp.A.as_ref(), &pf);
             let kt = mat_t_vec(self.lp.K, &bt);
             for i in 0..n {
                 gx[i] -= self.lc.phi * (at[i] + kt[i]);
@@ -187,7 +182,7 @@ impl<'a, 'b> Pieces<'a, 'b> {
     /// Input piece at every step κ < N (with the componentwise rounding bound `eps`).
     pub fn input_values(&self, nom: &Nominal, eps: &[f64]) -> Vec<f64> {
         (0..nom.steps())
-            .map(|k| input_distance(self.lp.K, &self.lc.roots, &nom.u[k], self.lp.input, eps))
+            .map(|k| input_distance(self.lp.K, &self.lc.roots, &nom.u[k], self.lp.input(), eps))
             .collect()
     }
 
@@ -196,9 +191,9 @@ impl<'a, 'b> Pieces<'a, 'b> {
         let K = self.lp.K;
         let (m, n) = (K.nrows(), K.ncols());
         let u = &nom.u[k];
-        let val = input_distance(K, &self.lc.roots, u, self.lp.input, eps);
+        let val = input_distance(K, &self.lc.roots, u, self.lp.input(), eps);
         let mut gu = vec![0.0; m];
-        match self.lp.input {
+        match self.lp.input() {
             InputBound::Box { lo, hi } => {
                 // The active face: the component and side of the smallest scaled slack.
                 let mut best = (f64::INFINITY, 0usize, 0.0f64);

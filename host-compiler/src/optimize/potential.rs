@@ -31,7 +31,7 @@
 use super::pieces::{LocalGrad, Pieces};
 use super::{check_inputs, OptimizeError};
 use crate::certify::{self, Certificate, Loop, LoopConstants};
-use crate::trajectory::{simulate, Nominal};
+use crate::trajectory::Nominal;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
 
@@ -186,7 +186,7 @@ impl<'a, 'b> Potential<'a, 'b> {
         s: &PotentialSettings,
     ) -> Self {
         let mu = s.margin * s.delta.abs() + 1e-12;
-        let h = lp.continuous.map(|c| c.h).unwrap_or(1.0);
+        let h = lp.plant.continuous(0).map_or(1.0, |_| lp.plant.period());
         let alpha = s.weight_goal;
         let beta = s.weight_input;
         Self {
@@ -217,7 +217,7 @@ impl<'a, 'b> Potential<'a, 'b> {
 
     fn nominal(&self, v: &[Vec<f64>]) -> Nominal {
         let lp = self.pc.lp;
-        simulate(lp.A, lp.B, lp.g, lp.K, &self.x0, v)
+        lp.simulate(&self.x0, v)
     }
 
     /// J(v) and, when asked, ∂J/∂v by the adjoint sweep.

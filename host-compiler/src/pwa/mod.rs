@@ -68,9 +68,11 @@ pub mod learn;
 pub mod partition;
 
 use crate::certify::{evaluator_error_bound, input_distance};
+use crate::linalg::round32;
 use crate::linalg::{mat_vec, sym_eigenvalues, PdRoots};
-use crate::synth::{round32, Synthesis};
-use crate::trajectory::generate::InputBound;
+use crate::property::InputBound;
+use crate::synth::Synthesis;
+use crate::task::Task;
 use faer::Mat;
 
 pub use learn::{learn_laws, LearnedLaw};
@@ -263,24 +265,19 @@ impl PwaContext {
     /// largest rounding bound of the evaluator over the data, ε_fit (2-norm ε_fit·√m) is the largest value
     /// with r_crit(A + BK, ε_fit√m + ε̄) ≤ `rcrit_fraction` · min_i ρ_i, using that r_crit (3.87) is linear
     /// in the disturbance bound.
-    pub fn new(
-        problem: &crate::spec::Problem,
-        syn: &Synthesis,
-        settings: PwaSettings,
-    ) -> Result<Self, PwaError> {
+    pub fn new(task: &Task, syn: &Synthesis, settings: PwaSettings) -> Result<Self, PwaError> {
         let (n, m) = (syn.K.ncols(), syn.K.nrows());
         let roots = PdRoots::new(syn.P.as_ref()).ok_or(PwaError::MetricNotPd)?;
         let axis: Vec<f64> = (0..n).map(|j| roots.inv[(j, j)].max(0.0).sqrt()).collect();
-        let unsafe_set = problem
-            .unsafe_region()
-            .map_err(|e| PwaError::Sets(e.to_string()))?;
+        let unsafe_set = task.property.unsafe_region();
+        let model = task.plant.error_dynamics(0);
         let metric = crate::geometry::Metric {
             n,
             R: crate::linalg::to_row_major(syn.P.as_ref()),
         };
-        let intersample = syn.plant.continuous.as_ref().map(|cp| InterSample {
-            Ac: cp.Ac.clone(),
-            Bc: cp.Bc.clone(),
+        let intersample = task.plant.continuous(0).map(|cp| InterSample {
+            Ac: cp.A.clone(),
+            Bc: cp.B.clone(),
             phi: syn.constants.phi,
             beta: syn.constants.beta,
         });
@@ -292,16 +289,11 @@ impl PwaContext {
             }
             for k in 0..c.k_star.min(t.nominal.v.len()) {
                 let x = &t.nominal.x[k];
-                let unsafe_dist = unsafe_set
-                    .as_deref()
-                    .map_or(f64::INFINITY, |us| -us.signed_dist(x, &metric).value);
-                let excursion = match (&syn.plant.continuous, &intersample) {
-                    (Some(cp), Some(is)) => {
-                        let ax = mat_vec(cp.Ac.as_ref(), x);
-                        let bu = mat_vec(cp.Bc.as_ref(), &t.nominal.u[k]);
-                        let f: Vec<f64> = (0..n).map(|i| ax[i] + bu[i] + cp.c[i]).collect();
-                        is.phi * crate::linalg::p_norm(syn.P.as_ref(), &f)
-                    }
+                let unsafe_dist =
+                    unsafe_set.map_or(f64::INFINITY, |us| -us.signed_dist(x, &metric).value);
+                let excursion = match (task.plant.vector_field(0, x, &t.nominal.u[k]), &intersample)
+                {
+                    (Some(f), Some(is)) => is.phi * crate::linalg::p_norm(syn.P.as_ref(), &f),
                     _ => 0.0,
                 };
                 points.push(DataPoint {
@@ -336,8 +328,8 @@ impl PwaContext {
         if points.is_empty() {
             return Err(PwaError::NoData);
         }
-        let At = &syn.plant.A + &syn.plant.B * &syn.K;
-        let rc1 = crate::caf::r_crit(At.as_ref(), syn.P.as_ref(), syn.plant.B.as_ref(), 1.0)
+        let At = &model.A + &model.B * &syn.K;
+        let rc1 = crate::caf::r_crit(At.as_ref(), syn.P.as_ref(), model.B.as_ref(), 1.0)
             .map_err(|e| PwaError::RCrit(e.to_string()))?
             .r_crit;
         let rho_min = points.iter().map(|p| p.rho).fold(f64::INFINITY, f64::min);
@@ -351,7 +343,7 @@ impl PwaContext {
             let e = evaluator_error_bound(syn.K.as_ref(), &p.v, &X);
             eps_round = eps_round.max(e.iter().map(|e| e * e).sum::<f64>().sqrt());
         }
-        let norm_B = roots.norm_into(syn.plant.B.as_ref());
+        let norm_B = roots.norm_into(model.B.as_ref());
         // Modification 1 of §6.2. For a law with ‖Ã_j‖_P ≤ q the invariant radius of (3.83)–(3.87) is about
         // ‖P^{1/2}B‖ε/(1 − q); asking it below f·ρ_min with q = √(1 − s) ≤ 1 − s/2 gives
         // ε ≤ f ρ_min s / (2‖P^{1/2}B‖). For K itself (s = s_K) the exact r_crit of (3.87) is used instead.
@@ -374,14 +366,14 @@ impl PwaContext {
         Ok(Self {
             n,
             m,
-            A: syn.plant.A.clone(),
-            B: syn.plant.B.clone(),
+            A: model.A.clone(),
+            B: model.B.clone(),
             K: syn.K.clone(),
             P: syn.P.clone(),
             roots,
             norm_B,
             axis,
-            input: crate::synth::input_bound(&problem.input),
+            input: task.property.input.clone(),
             intersample,
             points,
             eps_fit,
@@ -536,21 +528,21 @@ pub struct PwaController {
 /// Learns the PWA law (§6.2) from a synthesis' certified cover, builds the partition tree (§6.3) and emits
 /// the PWA image.
 pub fn learn_pwa(
-    problem: &crate::spec::Problem,
+    task: &Task,
     syn: &Synthesis,
     settings: &PwaSettings,
 ) -> Result<PwaController, PwaError> {
     let t0 = std::time::Instant::now();
-    let ctx = PwaContext::new(problem, syn, settings.clone())?;
+    let ctx = PwaContext::new(task, syn, settings.clone())?;
     let (laws, assignment) = learn_laws(&ctx);
     let learn_seconds = t0.elapsed().as_secs_f64();
-    build_pwa(problem, ctx, laws, assignment, learn_seconds)
+    build_pwa(task, ctx, laws, assignment, learn_seconds)
 }
 
 /// The second half of [`learn_pwa`]: the admissible laws of every ball, the tree (§6.3) and the image, for
 /// laws already learned.
 pub fn build_pwa(
-    problem: &crate::spec::Problem,
+    task: &Task,
     ctx: PwaContext,
     laws: Vec<LearnedLaw>,
     assignment: Vec<usize>,
@@ -575,8 +567,8 @@ pub fn build_pwa(
             )),
             e => e,
         })?;
-    builder.period = problem.plant.period;
-    if let crate::spec::InputSet::Box { lo, hi } = &problem.input {
+    builder.period = task.plant.period();
+    if let crate::spec::InputSet::Box { lo, hi } = &task.problem.input {
         builder.input_box = Some((lo.clone(), hi.clone()));
     }
     let image = builder.to_bytes()?;

@@ -28,7 +28,7 @@
 use super::{LearnedLaw, PwaContext, PwaError};
 use crate::emit::Child;
 use crate::emit::{CertifiedBall, PwaImageBuilder, PwaLaw, PwaLeaf, TreeNode};
-use crate::synth::round32;
+use crate::linalg::round32;
 use clarabel::algebra::CscMatrix;
 use clarabel::solver::{
     DefaultSettingsBuilder, DefaultSolver, IPSolver, SolverStatus, SupportedConeT,

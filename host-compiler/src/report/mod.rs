@@ -9,6 +9,8 @@ pub mod html;
 pub mod optimization;
 pub mod planar;
 pub mod plots;
+mod present;
 pub mod pwa;
 
 pub use html::{render_html, verdict, write_report, Verdict};
+pub use present::report_data;

@@ -8,6 +8,21 @@ use super::data::{Ellipse2, ReportData, Shape2};
 use super::format::{escape, num};
 use super::planar::{clip_to_rect, ellipse_points, ellipse_rect, shape_polygon, Rect};
 
+/// What a PWA synthesis produced and how it was checked (also written to `certificate.json`).
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct PwaSummary {
+    pub data_points: usize,
+    pub trajectories: usize,
+    pub eps_fit: f64,
+    pub stats: crate::pwa::PartitionStats,
+    pub learn_seconds: f64,
+    pub partition_seconds: f64,
+    pub image_bytes: usize,
+    pub feedforward_image_bytes: usize,
+    pub recheck: crate::verify::pwa::PwaRecheck,
+    pub monte_carlo: crate::verify::pwa::PwaMonteCarlo,
+}
+
 /// Plot-ready PWA data.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct PwaReport {
@@ -15,7 +30,7 @@ pub struct PwaReport {
     pub balls: Vec<(Ellipse2, usize)>,
     /// Closed-loop paths of the PWA image in the workspace plane.
     pub paths: Vec<Vec<[f64; 2]>>,
-    pub summary: crate::cli::synth_pwa::PwaSummary,
+    pub summary: PwaSummary,
 }
 
 /// Projects a P-ball onto coordinates (0, 1): the shadow of {x : (x − c)ᵀP(x − c) ≤ r²} is the ellipse with
@@ -33,10 +48,9 @@ fn shadow(Pinv: &faer::Mat<f64>, c: &[f64], r: f64) -> Ellipse2 {
 
 /// The PWA section's data from the learned controller, its image and the checks.
 pub fn pwa_report(
-    _problem: &crate::spec::Problem,
     pwa: &crate::pwa::PwaController,
     image: &shared_types::image::Image<'_>,
-    summary: &crate::cli::synth_pwa::PwaSummary,
+    summary: &PwaSummary,
 ) -> PwaReport {
     let n = image.n();
     let P = faer::Mat::from_fn(n, n, |i, j| image.P(0, i, j) as f64);

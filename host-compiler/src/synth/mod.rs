@@ -13,15 +13,14 @@
 //! collected in a fixed order, so the same spec and seed give a byte-identical image.
 
 pub mod alg4;
-mod present;
-mod sets;
 
-use crate::certify::{self, Certificate, ContinuousPart, Loop, LoopConstants};
+use crate::certify::{self, Certificate, Loop, LoopConstants};
 use crate::coverage::{CoverageEstimate, SampleBox};
 use crate::emit::{FallbackLaw, ImageBuilder, TrajectoryEntry};
-use crate::linalg::p_norm;
+use crate::linalg::round32;
 use crate::optimize::{maximize_delta, BundleSettings, OptStop, Optimized};
-use crate::spec::Problem;
+use crate::property::input_scale;
+use crate::task::Task;
 use crate::trajectory::generate::{generate, GenProblem, GenSettings};
 use crate::trajectory::Nominal;
 use crate::verify::{monte_carlo, Judge, VerifyReport};
@@ -33,9 +32,6 @@ use rayon::prelude::*;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::Instant;
-
-pub use present::report_data;
-pub use sets::input_bound;
 
 /// How the cover grows after its first trajectory.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, clap::ValueEnum)]
@@ -285,20 +281,9 @@ impl Bars {
     }
 }
 
-/// The sampled plant and its continuous origin.
-#[derive(Clone, Debug)]
-pub struct SampledPlant {
-    pub A: Mat<f64>,
-    pub B: Mat<f64>,
-    pub g: Vec<f64>,
-    pub continuous: Option<ContinuousPart>,
-    /// Exact ZOH over a sub-period h/substeps (continuous plants), for the verifier's inter-sample check.
-    pub sub: Option<(Mat<f64>, Mat<f64>, Vec<f64>, usize)>,
-}
-
 /// Everything a run produced.
 pub struct Synthesis {
-    pub plant: SampledPlant,
+    /// The shipped gain K̂ and the CAF metric P.
     pub K: Mat<f64>,
     pub P: Mat<f64>,
     /// The continuous-time (K, P) of LMI (3.8) for continuous plants (reported, not used by the image).
@@ -324,81 +309,16 @@ pub struct Synthesis {
 /// Errors that end a run.
 #[derive(Debug, thiserror::Error)]
 pub enum SynthError {
-    #[error("discretisation failed: {0}")]
-    Model(String),
     #[error("no CAF and feedback: {0}")]
-    Caf(String),
+    Caf(#[from] crate::caf::DesignError),
     #[error(transparent)]
     Certify(#[from] certify::CertifyError),
-    #[error("set conversion: {0}")]
-    Sets(String),
+    #[error("{name}: the recording does not fit n = {n}, m = {m}")]
+    Recording { name: String, n: usize, m: usize },
     #[error("image: {0}")]
     Emit(#[from] crate::emit::EmitError),
     #[error("no certified trajectory at all: {0}")]
     Nothing(String),
-}
-
-/// f32 rounding (the values the image stores), widened back exactly.
-pub fn round32(x: f64) -> f64 {
-    x as f32 as f64
-}
-
-/// The sampled plant of a spec (exact zero-order hold for continuous-time plants, [`crate::model::zoh`]).
-pub fn sampled_plant(problem: &Problem) -> Result<SampledPlant, SynthError> {
-    let model = crate::model::SampledPlant::from_spec(&problem.plant)
-        .map_err(|e| SynthError::Model(e.to_string()))?;
-    let d = model.discrete;
-    match model.continuous {
-        None => Ok(SampledPlant {
-            A: d.A,
-            B: d.B,
-            g: d.g,
-            continuous: None,
-            sub: None,
-        }),
-        Some(cp) => {
-            const SUBSTEPS: usize = 8;
-            let sub = crate::model::zoh(&cp, d.period / SUBSTEPS as f64)
-                .map_err(|e| SynthError::Model(e.to_string()))?;
-            Ok(SampledPlant {
-                A: d.A,
-                B: d.B,
-                g: d.g,
-                continuous: Some(ContinuousPart {
-                    Ac: cp.A,
-                    Bc: cp.B,
-                    c: cp.c,
-                    h: d.period,
-                }),
-                sub: Some((sub.A, sub.B, sub.g, SUBSTEPS)),
-            })
-        }
-    }
-}
-
-/// The verifier's view of a spec: its sampled plant (with the sub-sample plant), sets, input set and horizon.
-pub fn judge<'a>(
-    problem: &'a Problem,
-    plant: &'a SampledPlant,
-    goal: &'a dyn crate::geometry::Region,
-    unsafe_set: Option<&'a dyn crate::geometry::Region>,
-    input: &'a crate::trajectory::generate::InputBound,
-) -> Judge<'a> {
-    Judge {
-        A: plant.A.as_ref(),
-        B: plant.B.as_ref(),
-        g: &plant.g,
-        sub: plant
-            .sub
-            .as_ref()
-            .map(|(a, b, g, s)| (a.as_ref(), b.as_ref(), g.as_slice(), *s)),
-        goal,
-        unsafe_set,
-        input,
-        steps: problem.horizon_steps(),
-        init_lo: &problem.init.lo,
-        init_hi: &problem.init.hi,
-    }
 }
 
 fn bar(progress: bool, len: u64, msg: &str) -> ProgressBar {
@@ -415,120 +335,34 @@ fn bar(progress: bool, len: u64, msg: &str) -> ProgressBar {
 }
 
 /// Run the whole pipeline.
-pub fn synthesize(problem: &Problem, opts: &SynthOptions) -> Result<Synthesis, SynthError> {
+pub fn synthesize(task: &Task, opts: &SynthOptions) -> Result<Synthesis, SynthError> {
+    let problem = &task.problem;
     let mut timings = Vec::new();
-    let mut warnings = Vec::new();
     let t0 = Instant::now();
-    let n = problem.plant.n();
-    let m = problem.plant.m();
-    let plant = sampled_plant(problem)?;
-
-    // CAF and feedback for the sampled loop (LMIs (3.66)–(3.67) with the σ-margin of Remark 3.22).
-    let dp = crate::model::DiscretePlant::new(
-        plant.A.clone(),
-        plant.B.clone(),
-        plant.g.clone(),
-        problem.plant.period,
-    )
-    .map_err(|e| SynthError::Model(e.to_string()))?;
-    let caf_settings = crate::caf::CafSettings {
-        sigma: problem.synthesis.sigma_margin,
-        ..Default::default()
-    };
-    let caf = match crate::caf::synthesize_discrete(&dp, &caf_settings)
-        .map_err(|e| SynthError::Caf(e.to_string()))?
-    {
-        crate::caf::CafOutcome::Solved(c) => c,
-        other => return Err(SynthError::Caf(caf_outcome_message(&other))),
-    };
-    // The continuous-time CAF of (3.8), for reporting only: what the loop would certify with continuous
-    // feedback (Example 3.3 gives K = −0.1·[0 I] and P = I for the planar vehicle).
-    let continuous_caf = match &plant.continuous {
-        None => None,
-        Some(cp) => {
-            let c = crate::model::ContinuousPlant::new(cp.Ac.clone(), cp.Bc.clone(), cp.c.clone())
-                .map_err(|e| SynthError::Model(e.to_string()))?;
-            let st = crate::caf::CafSettings {
-                sigma: 0.0,
-                ..Default::default()
-            };
-            match crate::caf::synthesize_continuous(&c, &st) {
-                Ok(crate::caf::CafOutcome::Solved(caf)) => Some((caf.K, caf.P)),
-                Ok(other) => {
-                    warnings.push(format!(
-                        "continuous-time CAF (3.8), reported only: {}",
-                        caf_outcome_message(&other)
-                    ));
-                    None
-                }
-                Err(e) => {
-                    warnings.push(format!("continuous-time CAF (3.8), reported only: {e}"));
-                    None
-                }
-            }
-        }
-    };
-    // Exactly symmetric, so that its f32 image is too (the image format checks it).
-    let P = crate::linalg::sym(caf.P.as_ref());
-    let K = caf.K;
-    // What ships is the f32 gain; everything below is certified for it.
-    let Khat = Mat::from_fn(m, n, |i, j| round32(K[(i, j)]));
+    let (n, m) = (task.plant.n(), task.plant.m());
+    // CAF and feedback for the sampled loop (LMIs (3.66)–(3.67) with the σ-margin of Remark 3.22); what
+    // ships, and everything below is certified for, is the f32 gain K̂.
+    let design = crate::caf::design(task)?;
+    let mut warnings = design.warnings.clone();
+    let (Khat, P) = (&design.K, &design.P);
     timings.push(("CAF (SDP)".to_string(), t0.elapsed().as_secs_f64()));
 
-    let goal = problem
-        .goal_region()
-        .map_err(|e| SynthError::Sets(e.to_string()))?;
-    let unsafe_set = problem
-        .unsafe_region()
-        .map_err(|e| SynthError::Sets(e.to_string()))?;
-    let input = sets::input_bound(&problem.input);
-    let goal_piece = sets::convex_piece(&problem.goal, n).map_err(SynthError::Sets)?;
-    let unsafe_pieces: Vec<_> = problem
-        .unsafe_sets
-        .iter()
-        .map(|s| sets::convex_piece(s, n))
-        .collect::<Result<_, _>>()
-        .map_err(SynthError::Sets)?;
-    let lp = Loop {
-        A: plant.A.as_ref(),
-        B: plant.B.as_ref(),
-        g: &plant.g,
-        K: Khat.as_ref(),
-        P: P.as_ref(),
-        continuous: plant.continuous.as_ref(),
-        goal: goal.as_ref(),
-        unsafe_set: unsafe_set.as_deref(),
-        input: &input,
-    };
+    let lp = Loop::new(task, &design);
     let lc = LoopConstants::new(&lp)?;
-    let steps = problem.horizon_steps();
+    let steps = task.steps;
 
     // Trajectory generator: the tube conditions of Theorem 4.7 with the inter-sample and rounding margins.
-    let eps_guess = 1e-5 * sets::input_scale(&input);
-    let excursion = |x: &[f64], u: &[f64]| -> f64 {
-        match &plant.continuous {
-            None => 0.0,
-            Some(cp) => {
-                let ax = crate::linalg::mat_vec(cp.Ac.as_ref(), x);
-                let bu = crate::linalg::mat_vec(cp.Bc.as_ref(), u);
-                let f: Vec<f64> = (0..x.len()).map(|i| ax[i] + bu[i] + cp.c[i]).collect();
-                lc.phi * (p_norm(P.as_ref(), &f) + lc.beta * eps_guess)
-            }
-        }
-    };
     let gp = GenProblem {
-        A: plant.A.as_ref(),
-        B: plant.B.as_ref(),
-        g: &plant.g,
+        plant: &*task.plant,
         K: Khat.as_ref(),
         P: P.as_ref(),
-        goal: &goal_piece,
-        unsafe_sets: &unsafe_pieces,
-        input: &input,
+        property: &task.property,
+        convex: &task.convex,
         steps,
         gamma: lc.gamma,
-        input_margin: eps_guess,
-        excursion: &excursion,
+        phi: lc.phi,
+        beta: lc.beta,
+        input_margin: 1e-5 * input_scale(&task.property.input),
     };
     let gs = GenSettings::default();
     let shipped = |x0: &[f64], v: &[Vec<f64>]| -> (Nominal, Certificate) {
@@ -587,9 +421,11 @@ pub fn synthesize(problem: &Problem, opts: &SynthOptions) -> Result<Synthesis, S
     // Recorded trajectories first: the nominal of the shipped loop from the recorded x0 and v, certified as is.
     for (name, rec) in &opts.imports {
         if rec.x0.len() != n || rec.v.iter().any(|r| r.len() != m) {
-            return Err(SynthError::Sets(format!(
-                "{name}: the recording does not fit n = {n}, m = {m}"
-            )));
+            return Err(SynthError::Recording {
+                name: name.clone(),
+                n,
+                m,
+            });
         }
         let x0: Vec<f64> = rec.x0.iter().map(|&v| round32(v)).collect();
         let (nom, cert) = shipped(&x0, &rec.v);
@@ -632,7 +468,7 @@ pub fn synthesize(problem: &Problem, opts: &SynthOptions) -> Result<Synthesis, S
             });
     // Final, independent estimate on fresh samples through the f32 selection of the image.
     let estimate = |trajs: &[CoverTrajectory], round: u64| -> Result<Estimate, SynthError> {
-        let image = build_image(problem, &plant, &Khat, &P, trajs)?;
+        let image = build_image(task, Khat, P, trajs)?;
         let img = shared_types::image::decode(&image)
             .map_err(|e| SynthError::Nothing(format!("{e:?}")))?;
         let ctl = shared_types::eval::Controller::new(img);
@@ -1052,13 +888,7 @@ pub fn synthesize(problem: &Problem, opts: &SynthOptions) -> Result<Synthesis, S
     let t2 = Instant::now();
     let img =
         shared_types::image::decode(&image).map_err(|e| SynthError::Nothing(format!("{e:?}")))?;
-    let judge = judge(
-        problem,
-        &plant,
-        goal.as_ref(),
-        unsafe_set.as_deref(),
-        &input,
-    );
+    let judge = Judge::new(task);
     let verify = monte_carlo(
         &judge,
         &img,
@@ -1074,10 +904,9 @@ pub fn synthesize(problem: &Problem, opts: &SynthOptions) -> Result<Synthesis, S
         ));
     }
     Ok(Synthesis {
-        plant,
-        K: Khat,
-        P,
-        continuous_caf,
+        K: design.K.clone(),
+        P: design.P.clone(),
+        continuous_caf: design.continuous.clone(),
         constants: lc,
         trajectories: trajs,
         image,
@@ -1094,22 +923,6 @@ pub fn synthesize(problem: &Problem, opts: &SynthOptions) -> Result<Synthesis, S
     })
 }
 
-/// A control engineer's reading of a CAF synthesis that did not produce a certificate.
-fn caf_outcome_message(o: &crate::caf::CafOutcome) -> String {
-    use crate::caf::CafOutcome::*;
-    match o {
-        Solved(_) => "solved".into(),
-        NotStabilizable { mode } => format!("the sampled plant is not stabilizable: uncontrollable mode {mode:?}"),
-        MarginUnachievable { mode, max_sigma } => format!(
-            "the σ-margin cannot be met: uncontrollable mode {mode:?} allows at most σ = {max_sigma:.4} \
-             (lower [synthesis] sigma_margin)"
-        ),
-        Infeasible { stage, status } => format!("the LMIs are infeasible at stage {stage} ({status})"),
-        SolverFailed { stage, status } => format!("clarabel failed at stage {stage} ({status})"),
-        ValidationFailed { reason } => format!("the solver's answer failed the independent check: {reason}"),
-    }
-}
-
 fn median(it: impl Iterator<Item = f64>) -> Option<f64> {
     let mut v: Vec<f64> = it.collect();
     if v.is_empty() {
@@ -1122,15 +935,13 @@ fn median(it: impl Iterator<Item = f64>) -> Option<f64> {
 /// The feedforward image of a cover (Algorithm 2): the f32 gain and metric, each ball with its stored
 /// radius, and each reference table; terminal behaviour keeps the last law; fallback per the input set.
 pub fn build_image(
-    problem: &Problem,
-    plant: &SampledPlant,
+    task: &Task,
     Khat: &Mat<f64>,
     P: &Mat<f64>,
     trajs: &[CoverTrajectory],
 ) -> Result<Vec<u8>, SynthError> {
-    let (n, m) = (problem.plant.n(), problem.plant.m());
-    let _ = plant;
-    let mut b = ImageBuilder::new(n, m, problem.plant.period);
+    let plant = &*task.plant;
+    let mut b = ImageBuilder::new(plant.n(), plant.m(), plant.period());
     b.add_location(
         crate::linalg::to_row_major(Khat.as_ref()),
         crate::linalg::to_row_major(P.as_ref()),
@@ -1143,7 +954,7 @@ pub fn build_image(
             location: vec![0; t.nominal.v.len()],
         });
     }
-    if let crate::spec::InputSet::Box { lo, hi } = &problem.input {
+    if let crate::spec::InputSet::Box { lo, hi } = &task.problem.input {
         b.input_box = Some((lo.clone(), hi.clone()));
     }
     b.fallback = FallbackLaw::Zero;

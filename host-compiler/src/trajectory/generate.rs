@@ -18,35 +18,17 @@
 //! by the robustness library; this module only proposes trajectories.
 
 use super::{simulate, Nominal};
-use crate::linalg::{mat_vec, spectral_norm, sym_fn, PdRoots};
+use crate::linalg::{mat_vec, p_norm, spectral_norm, sym_fn, PdRoots};
+use crate::model::{DiscretePlant, Plant};
+use crate::property::{ConvexSets, ReachAvoid};
 use clarabel::algebra::CscMatrix;
 use clarabel::solver::{
     DefaultSettingsBuilder, DefaultSolver, IPSolver, SolverStatus, SupportedConeT,
     SupportedConeT::{NonnegativeConeT, SecondOrderConeT, ZeroConeT},
 };
-use faer::{Mat, MatRef};
+use faer::MatRef;
 
-/// A convex set in state coordinates (Goal, or one piece of Unsafe).
-#[derive(Clone, Debug)]
-pub enum ConvexPiece {
-    /// {x : (C x − c)ᵀ Q (C x − c) ≤ 1} with C p×n and Q p×p positive definite.
-    Ellipsoid {
-        C: Mat<f64>,
-        c: Vec<f64>,
-        Q: Mat<f64>,
-    },
-    /// {x : H x ≤ b}.
-    Polytope { H: Mat<f64>, b: Vec<f64> },
-}
-
-/// The input set.
-#[derive(Clone, Debug)]
-pub enum InputBound {
-    /// lo ≤ u ≤ hi componentwise.
-    Box { lo: Vec<f64>, hi: Vec<f64> },
-    /// ‖u − center‖₂ ≤ max.
-    Norm2 { center: Vec<f64>, max: f64 },
-}
+pub use crate::property::{ConvexPiece, InputBound};
 
 /// Settings of the generator, with documented defaults.
 #[derive(Clone, Debug)]
@@ -74,24 +56,39 @@ impl Default for GenSettings {
 
 /// What the generator needs of the task.
 pub struct GenProblem<'a> {
-    /// Discrete plant x⁺ = A x + B u + g.
-    pub A: MatRef<'a, f64>,
-    pub B: MatRef<'a, f64>,
-    pub g: &'a [f64],
+    /// The plant; the nominal is simulated with its sampled model x⁺ = A x + B u + g.
+    pub plant: &'a dyn Plant,
     /// Feedback and CAF metric.
     pub K: MatRef<'a, f64>,
     pub P: MatRef<'a, f64>,
-    pub goal: &'a ConvexPiece,
-    pub unsafe_sets: &'a [ConvexPiece],
-    pub input: &'a InputBound,
+    /// The input set.
+    pub property: &'a ReachAvoid,
+    /// Goal and Unsafe as convex pieces.
+    pub convex: &'a ConvexSets,
     /// Number of steps N; Goal is required at step N.
     pub steps: usize,
-    /// Inter-sample growth of the tube radius (1 for discrete-time plants).
+    /// Inter-sample growth of the tube radius γ and the constants φ, β of the inter-sample bound (1, 0, 0
+    /// for discrete-time plants; `certify::LoopConstants`).
     pub gamma: f64,
+    pub phi: f64,
+    pub beta: f64,
     /// Margin subtracted from the input bounds (f32 rounding of the evaluator).
     pub input_margin: f64,
-    /// Inter-sample excursion ρ(x̃(κ), ũ(κ)) of the nominal in the P-metric (0 for discrete-time plants).
-    pub excursion: &'a (dyn Fn(&[f64], &[f64]) -> f64 + Sync),
+}
+
+impl GenProblem<'_> {
+    fn model(&self) -> &DiscretePlant {
+        self.plant.error_dynamics(0)
+    }
+
+    /// Inter-sample excursion ρ(x̃(κ), ũ(κ)) = φ(‖f‖_P + β·margin) of the nominal in the P-metric, f the
+    /// vector field at the sample (0 for discrete-time plants).
+    fn excursion(&self, x: &[f64], u: &[f64]) -> f64 {
+        match self.plant.vector_field(0, x, u) {
+            None => 0.0,
+            Some(f) => self.phi * (p_norm(self.P, &f) + self.beta * self.input_margin),
+        }
+    }
 }
 
 /// A generated trajectory.
@@ -124,9 +121,10 @@ pub fn generate(
     x0: &[f64],
     settings: &GenSettings,
 ) -> Result<Generated, GenError> {
-    let n = prob.A.nrows();
-    let m = prob.B.ncols();
-    if x0.len() != n || prob.g.len() != n || prob.K.nrows() != m || prob.K.ncols() != n {
+    let model = prob.model();
+    let n = model.n();
+    let m = model.m();
+    if x0.len() != n || prob.K.nrows() != m || prob.K.ncols() != n {
         return Err(GenError::Dimension(format!(
             "n = {n}, m = {m}, x0 has {}",
             x0.len()
@@ -139,7 +137,7 @@ pub fn generate(
         let sol = solve_subproblem(prob, &roots, x0, lin.as_ref(), settings);
         match sol {
             Ok((v, delta)) => {
-                let nominal = simulate(prob.A, prob.B, prob.g, prob.K, x0, &v);
+                let nominal = simulate(model, prob.K, x0, &v);
                 let improved = best
                     .as_ref()
                     .map(|b| delta - b.delta_lin)
@@ -208,7 +206,8 @@ fn solve_subproblem(
     lin: Option<&Nominal>,
     settings: &GenSettings,
 ) -> Result<(Vec<Vec<f64>>, f64), String> {
-    let (A, B, K) = (prob.A, prob.B, prob.K);
+    let model = prob.model();
+    let (A, B, K) = (model.A.as_ref(), model.B.as_ref(), prob.K);
     let n = A.nrows();
     let m = B.ncols();
     let N = prob.steps;
@@ -238,7 +237,7 @@ fn solve_subproblem(
             for j in 0..m {
                 e.push((vi(k, j), -B[(i, j)]));
             }
-            rows.row(&e, prob.g[i]);
+            rows.row(&e, model.g[i]);
         }
     }
     let n_eq = rows.b.len();
@@ -257,8 +256,8 @@ fn solve_subproblem(
             } else {
                 nom.u[N - 1].clone()
             };
-            let rho = (prob.excursion)(xk, &uk);
-            for piece in prob.unsafe_sets {
+            let rho = prob.excursion(xk, &uk);
+            for piece in &prob.convex.unsafe_pieces {
                 let (nrm, off) = supporting_halfspace(piece, xk);
                 // Keep nᵀx ≥ off + ‖n‖_{P⁻¹}(γδ + ρ):  −nᵀx + γ‖n‖δ + s = −off − ‖n‖ρ.
                 let dn = roots.dual_norm(&nrm);
@@ -269,7 +268,7 @@ fn solve_subproblem(
         }
     }
     // Input box.
-    if let InputBound::Box { lo, hi } = prob.input {
+    if let InputBound::Box { lo, hi } = &prob.property.input {
         for k in 0..N {
             for i in 0..m {
                 let Ki: Vec<f64> = (0..n).map(|j| K[(i, j)]).collect();
@@ -286,7 +285,7 @@ fn solve_subproblem(
         }
     }
     // Polytope goal.
-    if let ConvexPiece::Polytope { H, b } = prob.goal {
+    if let ConvexPiece::Polytope { H, b } = &prob.convex.goal {
         for r in 0..H.nrows() {
             let h: Vec<f64> = (0..n).map(|j| H[(r, j)]).collect();
             let mut e: Vec<(usize, f64)> = (0..n).map(|j| (xi(N, j), h[j])).collect();
@@ -298,7 +297,7 @@ fn solve_subproblem(
     rows.cones.push(NonnegativeConeT(n_nn));
 
     // Second-order cones.
-    if let InputBound::Norm2 { center, max } = prob.input {
+    if let InputBound::Norm2 { center, max } = &prob.property.input {
         let sK = spectral_norm((K * &roots.inv_sqrt).as_ref());
         for k in 0..N {
             rows.row(&[(d, sK)], max - prob.input_margin);
@@ -310,7 +309,7 @@ fn solve_subproblem(
             rows.cones.push(SecondOrderConeT(m + 1));
         }
     }
-    if let ConvexPiece::Ellipsoid { C, c, Q } = prob.goal {
+    if let ConvexPiece::Ellipsoid { C, c, Q } = &prob.convex.goal {
         let Qh =
             sym_fn(Q.as_ref(), |l| l.max(0.0).sqrt()).ok_or("goal shape has no square root")?;
         let QhC = &Qh * C;
@@ -415,7 +414,50 @@ pub fn supporting_halfspace(piece: &ConvexPiece, x: &[f64]) -> (Vec<f64>, f64) {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::geometry::Ball;
     use crate::linalg::from_row_major;
+    use crate::model::LinearAffine;
+    use faer::Mat;
+
+    /// The generator's view of a task on the contracting 2-D plant x⁺ = 0.9 x + u with P = I, K = 0.
+    fn solve(
+        goal: ConvexPiece,
+        goal_at: [f64; 3],
+        unsafe_pieces: Vec<ConvexPiece>,
+        input: InputBound,
+        steps: usize,
+    ) -> Result<Generated, GenError> {
+        let A = from_row_major(2, 2, &[0.9, 0.0, 0.0, 0.9]);
+        let plant = LinearAffine::discrete(
+            DiscretePlant::new(A, Mat::identity(2, 2), vec![0.0, 0.0], 0.1).unwrap(),
+        );
+        let K = Mat::<f64>::zeros(2, 2);
+        let P = Mat::<f64>::identity(2, 2);
+        let property = ReachAvoid {
+            goal: Box::new(
+                Ball::new(goal_at[..2].to_vec(), vec![1.0, 0.0, 0.0, 1.0], goal_at[2]).unwrap(),
+            ),
+            unsafe_set: None,
+            input,
+        };
+        let convex = ConvexSets {
+            goal,
+            unsafe_pieces,
+        };
+        let prob = GenProblem {
+            plant: &plant,
+            K: K.as_ref(),
+            P: P.as_ref(),
+            property: &property,
+            convex: &convex,
+            steps,
+            gamma: 1.0,
+            phi: 0.0,
+            beta: 0.0,
+            input_margin: 0.0,
+        };
+        generate(&prob, &[0.0, 0.0], &GenSettings::default())
+    }
 
     fn disc(cx: f64, cy: f64, r: f64) -> ConvexPiece {
         ConvexPiece::Ellipsoid {
@@ -428,32 +470,18 @@ mod tests {
     /// A contracting 2-D plant with P = I: the tube conditions can be checked by hand.
     #[test]
     fn avoids_the_obstacle_reaches_goal_and_respects_the_bound() {
-        let A = from_row_major(2, 2, &[0.9, 0.0, 0.0, 0.9]);
-        let B = Mat::<f64>::identity(2, 2);
-        let K = Mat::<f64>::zeros(2, 2);
-        let P = Mat::<f64>::identity(2, 2);
-        let goal = disc(2.0, 0.0, 0.3);
-        let unsafe_sets = [disc(1.0, 0.05, 0.3)];
         let input = InputBound::Norm2 {
             center: vec![0.0, 0.0],
             max: 0.5,
         };
-        let zero = |_: &[f64], _: &[f64]| 0.0;
-        let prob = GenProblem {
-            A: A.as_ref(),
-            B: B.as_ref(),
-            g: &[0.0, 0.0],
-            K: K.as_ref(),
-            P: P.as_ref(),
-            goal: &goal,
-            unsafe_sets: &unsafe_sets,
-            input: &input,
-            steps: 30,
-            gamma: 1.0,
-            input_margin: 0.0,
-            excursion: &zero,
-        };
-        let out = generate(&prob, &[0.0, 0.0], &GenSettings::default()).unwrap();
+        let out = solve(
+            disc(2.0, 0.0, 0.3),
+            [2.0, 0.0, 0.3],
+            vec![disc(1.0, 0.05, 0.3)],
+            input,
+            30,
+        )
+        .unwrap();
         let d = out.delta_lin;
         assert!(d > 0.02, "delta {d}");
         let x = &out.nominal.x;
@@ -471,32 +499,12 @@ mod tests {
 
     #[test]
     fn an_unreachable_goal_is_reported() {
-        let A = from_row_major(2, 2, &[0.9, 0.0, 0.0, 0.9]);
-        let B = Mat::<f64>::identity(2, 2);
-        let K = Mat::<f64>::zeros(2, 2);
-        let P = Mat::<f64>::identity(2, 2);
-        let goal = disc(20.0, 0.0, 0.3);
         let input = InputBound::Box {
             lo: vec![-0.1, -0.1],
             hi: vec![0.1, 0.1],
         };
-        let zero = |_: &[f64], _: &[f64]| 0.0;
-        let prob = GenProblem {
-            A: A.as_ref(),
-            B: B.as_ref(),
-            g: &[0.0, 0.0],
-            K: K.as_ref(),
-            P: P.as_ref(),
-            goal: &goal,
-            unsafe_sets: &[],
-            input: &input,
-            steps: 10,
-            gamma: 1.0,
-            input_margin: 0.0,
-            excursion: &zero,
-        };
         assert!(matches!(
-            generate(&prob, &[0.0, 0.0], &GenSettings::default()),
+            solve(disc(20.0, 0.0, 0.3), [20.0, 0.0, 0.3], vec![], input, 10),
             Err(GenError::Infeasible { .. })
         ));
     }

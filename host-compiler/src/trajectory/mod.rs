@@ -5,6 +5,7 @@ pub mod csv;
 pub mod generate;
 pub mod hold;
 
+use crate::model::DiscretePlant;
 use faer::MatRef;
 
 /// A sampled nominal trajectory of the closed loop x(κ+1) = A x + B (K x + v(κ)) + g.
@@ -25,15 +26,10 @@ impl Nominal {
     }
 }
 
-/// Simulate the discrete closed loop from x0 with the reference inputs `v`.
-pub fn simulate(
-    A: MatRef<'_, f64>,
-    B: MatRef<'_, f64>,
-    g: &[f64],
-    K: MatRef<'_, f64>,
-    x0: &[f64],
-    v: &[Vec<f64>],
-) -> Nominal {
+/// Simulate the discrete closed loop x⁺ = A x + B (K x + v(κ)) + g of `model` from x0 with the reference
+/// inputs `v`.
+pub fn simulate(model: &DiscretePlant, K: MatRef<'_, f64>, x0: &[f64], v: &[Vec<f64>]) -> Nominal {
+    let (A, B, g) = (model.A.as_ref(), model.B.as_ref(), &model.g);
     let n = A.nrows();
     let m = B.ncols();
     let mut x = Vec::with_capacity(v.len() + 1);

@@ -15,30 +15,50 @@ pub mod pwa;
 
 use crate::geometry::Region;
 use crate::linalg::mat_vec;
-use crate::trajectory::generate::InputBound;
-use faer::MatRef;
+use crate::model::{DiscretePlant, Plant};
+use crate::property::{InputBound, ReachAvoid};
+use crate::spec::InitBox;
+use crate::task::Task;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 use shared_types::eval::Controller;
 use shared_types::image::Image;
 
-/// The plant and spec a run is judged against.
+/// The plant and spec a run is judged against: the task's plant, property, horizon and Init.
+#[derive(Clone, Copy)]
 pub struct Judge<'a> {
-    /// Discrete plant x⁺ = A x + B u + g.
-    pub A: MatRef<'a, f64>,
-    pub B: MatRef<'a, f64>,
-    pub g: &'a [f64],
-    /// Sub-sample plant over h/`substeps` (exact ZOH of the continuous plant), for the inter-sample check.
-    pub sub: Option<(MatRef<'a, f64>, MatRef<'a, f64>, &'a [f64], usize)>,
-    pub goal: &'a dyn Region,
-    pub unsafe_set: Option<&'a dyn Region>,
-    pub input: &'a InputBound,
+    pub plant: &'a dyn Plant,
+    pub property: &'a ReachAvoid,
     /// Steps in the horizon.
     pub steps: usize,
-    /// Init box (lo, hi), to draw initial states from.
-    pub init_lo: &'a [f64],
-    pub init_hi: &'a [f64],
+    /// Init, to draw initial states from.
+    pub init: &'a InitBox,
+}
+
+impl<'a> Judge<'a> {
+    /// The judge of a task.
+    pub fn new(task: &'a Task) -> Self {
+        Self {
+            plant: &*task.plant,
+            property: &task.property,
+            steps: task.steps,
+            init: task.init(),
+        }
+    }
+    /// The sampled model x⁺ = A x + B u + g.
+    pub fn model(&self) -> &'a DiscretePlant {
+        self.plant.error_dynamics(0)
+    }
+    pub fn goal(&self) -> &'a dyn Region {
+        self.property.goal.as_ref()
+    }
+    pub fn unsafe_set(&self) -> Option<&'a dyn Region> {
+        self.property.unsafe_region()
+    }
+    pub fn input(&self) -> &'a InputBound {
+        &self.property.input
+    }
 }
 
 /// How one run ended.
@@ -145,7 +165,7 @@ pub fn run(judge: &Judge<'_>, image: &Image<'_>, x0: &[f64], margins: bool) -> R
     let mut out = RunOutcome::new(x0);
     // Judged until the first sample in Goal (module doc); after it, only recorded.
     let check = |x: &[f64], out: &mut RunOutcome, sample: bool| {
-        if let Some(us) = judge.unsafe_set {
+        if let Some(us) = judge.unsafe_set() {
             let inside = us.contains(x);
             if out.goal_step.is_some() {
                 out.after_goal_unsafe |= inside;
@@ -159,14 +179,14 @@ pub fn run(judge: &Judge<'_>, image: &Image<'_>, x0: &[f64], margins: bool) -> R
     };
     check(&x, &mut out, true);
     for k in 0..=judge.steps {
-        if out.goal_step.is_none() && judge.goal.contains(&x) {
+        if out.goal_step.is_none() && judge.goal().contains(&x) {
             out.reached_goal = true;
             out.goal_step = Some(k);
         }
         if margins {
             out.goal_margin = out
                 .goal_margin
-                .max(judge.goal.signed_dist(&x, &metric).value);
+                .max(judge.goal().signed_dist(&x, &metric).value);
         }
         if k == judge.steps {
             break;
@@ -183,7 +203,7 @@ pub fn run(judge: &Judge<'_>, image: &Image<'_>, x0: &[f64], margins: bool) -> R
                 return out;
             }
         };
-        let s = input_slack(judge.input, &u);
+        let s = input_slack(judge.input(), &u);
         if out.goal_step.is_some() {
             out.after_goal_input_excursion |= s < 0.0;
         } else {
@@ -192,30 +212,13 @@ pub fn run(judge: &Judge<'_>, image: &Image<'_>, x0: &[f64], margins: bool) -> R
                 out.input_violation = true;
             }
         }
-        if let Some((As, Bs, gs, subs)) = judge.sub {
-            let mut xs = x.clone();
-            for _ in 0..subs.saturating_sub(1) {
-                xs = plant_step(As, Bs, gs, &xs, &u);
-                check(&xs, &mut out, false);
-            }
+        for xs in judge.plant.between_samples(0, &x, &u) {
+            check(&xs, &mut out, false);
         }
-        x = plant_step(judge.A, judge.B, judge.g, &x, &u);
+        x = judge.plant.step(0, &x, &u);
         check(&x, &mut out, true);
     }
     out
-}
-
-/// One period of the sampled plant: x⁺ = A x + B u + g.
-pub fn plant_step(
-    A: MatRef<'_, f64>,
-    B: MatRef<'_, f64>,
-    g: &[f64],
-    x: &[f64],
-    u: &[f64],
-) -> Vec<f64> {
-    let ax = mat_vec(A, x);
-    let bu = mat_vec(B, u);
-    (0..x.len()).map(|i| ax[i] + bu[i] + g[i]).collect()
 }
 
 /// Monte Carlo over the certified cover: `interior` initial states drawn uniformly in Init and accepted by
@@ -238,9 +241,10 @@ pub fn monte_carlo(
     while starts.len() < interior && draws < interior.saturating_mul(50) {
         draws += 1;
         let x: Vec<f64> = judge
-            .init_lo
+            .init
+            .lo
             .iter()
-            .zip(judge.init_hi)
+            .zip(&judge.init.hi)
             .map(|(&l, &h)| if h > l { rng.random_range(l..=h) } else { l })
             .collect();
         let xf: Vec<f32> = x.iter().map(|&v| v as f32).collect();

@@ -38,7 +38,7 @@
 //! * **Input** over every listed ball, and **Unsafe between samples** for continuous plants (the bound of
 //!   [`crate::certify`] item 2 with the law's gain).
 
-use super::{input_slack, plant_step, Judge, RunOutcome};
+use super::{input_slack, Judge, RunOutcome};
 use crate::certify::{evaluator_error_bound, input_distance, intersample_phi_beta};
 use crate::linalg::{mat_vec, p_norm, sym, sym_eigenvalues, PdRoots};
 use faer::Mat;
@@ -178,14 +178,13 @@ pub fn time_to_go_ranks(
     }
 }
 
-/// Recomputes the certificate of every partition of a PWA image (module doc). `judge` gives the sampled
-/// plant and sets; `continuous` the plant for the inter-sample check.
-pub fn recheck(
-    judge: &Judge<'_>,
-    continuous: Option<&crate::certify::ContinuousPart>,
-    image: &Image<'_>,
-) -> Result<PwaRecheck, String> {
+/// Recomputes the certificate of every partition of a PWA image (module doc). `judge` gives the plant
+/// (its sampled model, and its continuous model for the inter-sample check) and the sets.
+pub fn recheck(judge: &Judge<'_>, image: &Image<'_>) -> Result<PwaRecheck, String> {
     let (n, m) = (image.n(), image.m());
+    let model = judge.model();
+    let (A, B) = (model.A.as_ref(), model.B.as_ref());
+    let continuous = judge.plant.continuous(0);
     let P = sym(Mat::from_fn(n, n, |i, j| image.P(0, i, j) as f64).as_ref());
     let roots = PdRoots::new(P.as_ref()).ok_or("the image's P is not positive definite")?;
     let np = image.n_partitions();
@@ -222,13 +221,15 @@ pub fn recheck(
         })
         .unzip();
     let axis: Vec<f64> = (0..n).map(|j| roots.inv[(j, j)].max(0.0).sqrt()).collect();
-    let normB = roots.norm_into(judge.B);
+    let normB = roots.norm_into(B);
     // B⁺ for the nominal input between two centres.
-    let BtB = judge.B.transpose() * judge.B;
+    let BtB = B.transpose() * B;
     let BtB_inv = crate::linalg::sym_fn(sym(BtB.as_ref()).as_ref(), |l| 1.0 / l)
         .ok_or("BᵀB is singular: B has no full column rank")?;
-    let Bpinv = &BtB_inv * judge.B.transpose();
-    let (phi, beta) = continuous.map_or((0.0, 0.0), |cp| intersample_phi_beta(&roots, cp));
+    let Bpinv = &BtB_inv * B.transpose();
+    let (phi, beta) = continuous.map_or((0.0, 0.0), |cp| {
+        intersample_phi_beta(&roots, cp, judge.plant.period())
+    });
     // Per law: gain, offset, Ã_j, σ_j, ‖Ã_j‖_P, r̃_crit(ε = 1), γ_j.
     struct Law {
         K: Mat<f64>,
@@ -242,16 +243,16 @@ pub fn recheck(
         .map(|j| {
             let K = Mat::from_fn(m, n, |r, c| image.law_gain(j, r, c) as f64);
             let off: Vec<f64> = (0..m).map(|r| image.law_offset(j, r) as f64).collect();
-            let At = judge.A + judge.B * &K;
+            let At = A + B * &K;
             let M = &P - At.transpose() * &P * &At;
             let sigma = sym_eigenvalues(sym(M.as_ref()).as_ref())
                 .and_then(|e| e.first().copied())
                 .unwrap_or(f64::NAN);
-            let rc1 = crate::caf::r_crit(At.as_ref(), P.as_ref(), judge.B, 1.0)
+            let rc1 = crate::caf::r_crit(At.as_ref(), P.as_ref(), B, 1.0)
                 .map(|r| r.r_crit)
                 .unwrap_or(f64::INFINITY);
             let gamma = continuous.map_or(1.0, |cp| {
-                1.0 + phi * roots.induced_norm((&cp.Ac + &cp.Bc * &K).as_ref())
+                1.0 + phi * roots.induced_norm((&cp.A + &cp.B * &K).as_ref())
             });
             Law {
                 norm: roots.induced_norm(At.as_ref()),
@@ -302,11 +303,11 @@ pub fn recheck(
                 .zip(&L.off)
                 .map(|(a, o)| a + o)
                 .collect();
-            let free = plant_step(judge.A, judge.B, judge.g, c, &vec![0.0; m]);
+            let free = model.step(c, &vec![0.0; m]);
             // Image of the ball lies in Goal?
-            let cplus = plant_step(judge.A, judge.B, judge.g, c, &u);
+            let cplus = model.step(c, &u);
             let r_plus = L.norm * r + normB * eps_round;
-            let in_goal = judge.goal.signed_dist(&cplus, &metric).value > r_plus;
+            let in_goal = judge.goal().signed_dist(&cplus, &metric).value > r_plus;
             let (mut rcrit_ratio, mut reach_ratio) = (f64::INFINITY, f64::INFINITY);
             let mut succ = Vec::new();
             let mut best_valid = false;
@@ -323,7 +324,7 @@ pub fn recheck(
                     }
                     let target: Vec<f64> = (0..n).map(|i| cb[i] - free[i]).collect();
                     let ustar = mat_vec(Bpinv.as_ref(), &target);
-                    let bu = mat_vec(judge.B, &ustar);
+                    let bu = mat_vec(B, &ustar);
                     let res: Vec<f64> = (0..n).map(|i| bu[i] - target[i]).collect();
                     let fit = u
                         .iter()
@@ -348,17 +349,15 @@ pub fn recheck(
                     }
                 }
             }
-            let input_slack = input_distance(L.K.as_ref(), &roots, &u, judge.input, &round) - r;
-            let clearance = match (judge.unsafe_set, continuous) {
-                (None, _) => f64::INFINITY,
-                (Some(us), cp) => {
+            let input_slack = input_distance(L.K.as_ref(), &roots, &u, judge.input(), &round) - r;
+            let clearance = match judge.unsafe_set() {
+                None => f64::INFINITY,
+                Some(us) => {
                     let d = -us.signed_dist(c, &metric).value;
-                    let exc = cp.map_or(0.0, |cp| {
-                        let ax = mat_vec(cp.Ac.as_ref(), c);
-                        let bu = mat_vec(cp.Bc.as_ref(), &u);
-                        let f: Vec<f64> = (0..n).map(|i| ax[i] + bu[i] + cp.c[i]).collect();
-                        phi * p_norm(P.as_ref(), &f)
-                    });
+                    let exc = judge
+                        .plant
+                        .vector_field(0, c, &u)
+                        .map_or(0.0, |f| phi * p_norm(P.as_ref(), &f));
                     d - (L.gamma * r + exc + phi * beta * eps_round)
                 }
             };
@@ -512,10 +511,10 @@ pub fn run_pwa(judge: &Judge<'_>, image: &Image<'_>, x0: &[f64]) -> (RunOutcome,
     let mut path = vec![x.clone()];
     // The run stops at Goal; nothing after it is simulated, so the after-Goal fields stay false.
     let mut out = RunOutcome::new(x0);
-    let hit = |x: &[f64]| judge.unsafe_set.is_some_and(|us| us.contains(x));
+    let hit = |x: &[f64]| judge.unsafe_set().is_some_and(|us| us.contains(x));
     out.entered_unsafe |= hit(&x);
     for k in 0..=judge.steps {
-        if judge.goal.contains(&x) {
+        if judge.goal().contains(&x) {
             out.reached_goal = true;
             out.goal_step = Some(k);
             break;
@@ -535,17 +534,13 @@ pub fn run_pwa(judge: &Judge<'_>, image: &Image<'_>, x0: &[f64]) -> (RunOutcome,
                 break;
             }
         };
-        let s = input_slack(judge.input, &u);
+        let s = input_slack(judge.input(), &u);
         out.input_margin = out.input_margin.min(s);
         out.input_violation |= s < 0.0;
-        if let Some((As, Bs, gs, subs)) = judge.sub {
-            let mut xs = x.clone();
-            for _ in 0..subs.saturating_sub(1) {
-                xs = plant_step(As, Bs, gs, &xs, &u);
-                out.entered_unsafe |= hit(&xs);
-            }
+        for xs in judge.plant.between_samples(0, &x, &u) {
+            out.entered_unsafe |= hit(&xs);
         }
-        x = plant_step(judge.A, judge.B, judge.g, &x, &u);
+        x = judge.plant.step(0, &x, &u);
         out.entered_unsafe |= hit(&x);
         path.push(x.clone());
     }

@@ -127,8 +127,10 @@ fn pwa_step_max(spec: &str, tag: &str) -> Result<(u32, String), Box<dyn std::err
         progress: false,
         ..SynthOptions::default()
     };
-    let s = synthesize(&problem, &opts)?;
-    let pwa = learn_pwa(&problem, &s, &PwaSettings::default())?;
+    let task = host_compiler::task::Task::new(problem)?;
+    let problem = &task.problem;
+    let s = synthesize(&task, &opts)?;
+    let pwa = learn_pwa(&task, &s, &PwaSettings::default())?;
     let path = firmware::write_image(tag, &pwa.image)?;
     let elf = firmware::build(
         tag,
@@ -138,12 +140,7 @@ fn pwa_step_max(spec: &str, tag: &str) -> Result<(u32, String), Box<dyn std::err
         },
     )?;
     let image = decode(&pwa.image).map_err(qemu_tests::HilError::Image)?;
-    let plant = host_compiler::model::DiscretePlant::new(
-        s.plant.A.clone(),
-        s.plant.B.clone(),
-        s.plant.g.clone(),
-        problem.plant.period,
-    )?;
+    let plant = task.plant.error_dynamics(0);
     let n = image.n();
     let centre =
         |b: usize| -> Vec<f64> { (0..n).map(|i| image.ball_centre(b, i) as f64).collect() };
@@ -191,7 +188,7 @@ fn pwa_step_max(spec: &str, tag: &str) -> Result<(u32, String), Box<dyn std::err
     for x0 in &starts {
         let mut q = Qemu::launch(&elf, Duration::from_secs(120))?;
         let mut host = HostEvaluator::new(image);
-        let trace = closed_loop::run(&mut q, &plant, &mut host, x0, 0, problem.horizon_steps())?;
+        let trace = closed_loop::run(&mut q, plant, &mut host, x0, 0, task.steps)?;
         for st in [Status::Ok, Status::OutOfEnvelope] {
             max = max.max(trace.max_cost(st).unwrap_or(0));
         }

@@ -1,10 +1,32 @@
-//! Conversion of the spec's set descriptions into the forms the trajectory generator takes.
+//! The task's sets in the forms the pipeline computes with: convex pieces (Goal, the members of Unsafe)
+//! for the trajectory generator's convex subproblems, and the input set.
 
 use crate::linalg::from_row_major;
 use crate::spec::sets::{SetDesc, Shape};
 use crate::spec::InputSet;
-use crate::trajectory::generate::{ConvexPiece, InputBound};
 use faer::Mat;
+
+/// A convex set in state coordinates (Goal, or one piece of Unsafe).
+#[derive(Clone, Debug)]
+pub enum ConvexPiece {
+    /// {x : (C x − c)ᵀ Q (C x − c) ≤ 1} with C p×n and Q p×p positive definite.
+    Ellipsoid {
+        C: Mat<f64>,
+        c: Vec<f64>,
+        Q: Mat<f64>,
+    },
+    /// {x : H x ≤ b}.
+    Polytope { H: Mat<f64>, b: Vec<f64> },
+}
+
+/// The input set.
+#[derive(Clone, Debug)]
+pub enum InputBound {
+    /// lo ≤ u ≤ hi componentwise.
+    Box { lo: Vec<f64>, hi: Vec<f64> },
+    /// ‖u − center‖₂ ≤ max.
+    Norm2 { center: Vec<f64>, max: f64 },
+}
 
 /// A spec set as a convex piece in state coordinates: y = M x with M from the set's coordinates.
 pub fn convex_piece(s: &SetDesc, n: usize) -> Result<ConvexPiece, String> {

@@ -1,12 +1,12 @@
 //! From a synthesis run to the plot-ready [`ReportData`]: projections of sets, tubes and balls onto the
 //! plotting planes.
 
-use super::Synthesis;
+use super::data::{Ellipse2, ReportData, Shape2, TrajectoryReport, VerifySummary};
+use super::optimization::OptimizationReport;
 use crate::linalg::{spectral_norm, sym_fn, PdRoots};
-use crate::report::data::{Ellipse2, ReportData, Shape2, TrajectoryReport, VerifySummary};
-use crate::report::optimization::OptimizationReport;
 use crate::spec::sets::{Coords, SetDesc, Shape};
 use crate::spec::{InputSet, Problem};
+use crate::synth::Synthesis;
 use faer::Mat;
 
 /// The 2×2 matrix M with M Mᵀ = S (symmetric PSD), as an ellipse generator.
@@ -255,7 +255,7 @@ fn optimization_data(
     ipl: [usize; 2],
     tube: &dyn Fn(f64) -> [[f64; 2]; 2],
 ) -> OptimizationReport {
-    use crate::report::optimization::{CoverageFrame, OptRun, SeedRequest, TubeComparison};
+    use super::optimization::{CoverageFrame, OptRun, SeedRequest, TubeComparison};
     let runs = s
         .optimization
         .iter()

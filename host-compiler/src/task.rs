@@ -1,0 +1,63 @@
+//! The task (DESIGN §3): built once from a validated spec, then lent to every stage.
+//!
+//! A [`Task`] holds the plant as a [`Plant`] (its class chosen here, from the spec), the property with
+//! its sets in the forms the stages compute with, Init, the horizon in samples and the spec's settings.
+//! No stage builds any of these again.
+
+use crate::model::{LinearAffine, ModelError, Plant};
+use crate::property::{ConvexSets, PropertyError, ReachAvoid};
+use crate::spec::{InitBox, Problem, SynthesisSettings};
+
+/// One control task, ready for synthesis and verification.
+pub struct Task {
+    /// The validated spec it was built from (names, sets as written, settings).
+    pub problem: Problem,
+    pub plant: Box<dyn Plant>,
+    pub property: ReachAvoid,
+    /// Goal and Unsafe as convex pieces, for the trajectory generator.
+    pub convex: ConvexSets,
+    /// Samples in the horizon ([`Problem::horizon_steps`]).
+    pub steps: usize,
+}
+
+/// Why a validated spec does not make a task.
+#[derive(Debug, thiserror::Error)]
+pub enum TaskError {
+    #[error("plant: {0}")]
+    Model(#[from] ModelError),
+    #[error("sets: {0}")]
+    Property(#[from] PropertyError),
+}
+
+impl Task {
+    /// The task of a validated spec: the plant's class from the spec (linear affine, in continuous time
+    /// sampled by an exact zero-order hold, or in discrete time), and the reach-avoid property.
+    pub fn new(problem: Problem) -> Result<Self, TaskError> {
+        let plant: Box<dyn Plant> = Box::new(LinearAffine::from_spec(&problem.plant)?);
+        let property = ReachAvoid::from_problem(&problem)?;
+        let convex = ConvexSets::from_problem(&problem)?;
+        let steps = problem.horizon_steps();
+        Ok(Self {
+            problem,
+            plant,
+            property,
+            convex,
+            steps,
+        })
+    }
+
+    /// Init, a box in state coordinates.
+    pub fn init(&self) -> &InitBox {
+        &self.problem.init
+    }
+
+    /// The spec's `[synthesis]` settings.
+    pub fn settings(&self) -> &SynthesisSettings {
+        &self.problem.synthesis
+    }
+
+    /// The seed every random stream of a run derives from.
+    pub fn seed(&self) -> u64 {
+        self.problem.seed
+    }
+}
