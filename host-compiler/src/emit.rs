@@ -8,7 +8,8 @@
 //!
 //! [`ImageBuilder::to_bytes`] checks shapes and capacities, converts to f32 (refusing non-finite values and
 //! values beyond the f32 range, and rounding every `δ_i` *down* so that the stored ball never exceeds the
-//! certified one), then runs the same validation the firmware runs at decode. The effect of rounding `K`,
+//! certified one), splits each trajectory's rows into segments (maximal runs of one location, the image's
+//! segments section), then runs the same validation the firmware runs at decode. The effect of rounding `K`,
 //! `P`, `v` and the centres to f32 is for certification to bound (DESIGN §5), not for this module.
 //!
 //! [`PwaImageBuilder`] is its sibling for the PWA-feedback image of Ch. 6 (layout and rationale in

@@ -223,8 +223,8 @@ pub trait SectionWrite {
     /// Kind tag stored in the directory.
     fn kind(&self) -> u16;
     /// Exact number of bytes [`SectionWrite::write`] writes.
-    fn len(&self) -> Result<usize, ImageError>;
-    /// Writes the body into `out` (exactly `len()` bytes long); returns the bytes written.
+    fn encoded_len(&self) -> Result<usize, ImageError>;
+    /// Writes the body into `out` (exactly `encoded_len()` bytes long); returns the bytes written.
     fn write(&self, out: &mut [u8]) -> Result<usize, ImageError>;
 }
 
@@ -241,7 +241,7 @@ impl SectionWrite for RawSection<'_> {
     fn kind(&self) -> u16 {
         self.kind
     }
-    fn len(&self) -> Result<usize, ImageError> {
+    fn encoded_len(&self) -> Result<usize, ImageError> {
         Ok(self.body.len())
     }
     fn write(&self, out: &mut [u8]) -> Result<usize, ImageError> {
@@ -255,7 +255,9 @@ impl SectionWrite for RawSection<'_> {
 pub fn image_len(sections: &[&dyn SectionWrite]) -> Result<usize, ImageError> {
     let mut total = HEADER_LEN + sections.len() * DIR_ENTRY_LEN;
     for s in sections {
-        total = total.checked_add(s.len()?).ok_or(ImageError::Encode)?;
+        total = total
+            .checked_add(s.encoded_len()?)
+            .ok_or(ImageError::Encode)?;
     }
     Ok(total)
 }
@@ -264,7 +266,7 @@ pub fn image_len(sections: &[&dyn SectionWrite]) -> Result<usize, ImageError> {
 /// CRC filled in, and returns the bytes written. Checks nothing about the content: [`crate::image::encode`]
 /// calls it only for validated images; tools and tests call it to write anything else. Fails with
 /// [`ImageError::BufferTooSmall`] if `out` is too short, and with [`ImageError::Encode`] if a section
-/// writes other than its stated length or the counts do not fit their fields.
+/// writes other than its `encoded_len` or the counts do not fit their fields.
 pub fn write_image(
     out: &mut [u8],
     mode: u8,
@@ -282,7 +284,7 @@ pub fn write_image(
     };
     let mut offset = HEADER_LEN + sections.len() * DIR_ENTRY_LEN;
     for (i, s) in sections.iter().enumerate() {
-        let len = s.len()?;
+        let len = s.encoded_len()?;
         let e = HEADER_LEN + i * DIR_ENTRY_LEN;
         let entry = buf
             .get_mut(e..e + DIR_ENTRY_LEN)

@@ -292,7 +292,7 @@ impl<T: Serialize> SectionWrite for PostcardSection<T> {
     fn kind(&self) -> u16 {
         self.kind
     }
-    fn len(&self) -> Result<usize, ImageError> {
+    fn encoded_len(&self) -> Result<usize, ImageError> {
         postcard::serialize_with_flavor(&self.content, postcard::ser_flavors::Size::default())
             .map_err(|_| ImageError::Encode)
     }

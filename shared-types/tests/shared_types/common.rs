@@ -306,9 +306,12 @@ pub fn random_content(
     }
 }
 
+/// Sections of an image as `(kind, body)`, in directory order.
+pub type Sections = Vec<(u16, Vec<u8>)>;
+
 /// The directory entries of an image as `(kind, body)`, read naively from the header's section count and
 /// the entries' offsets and lengths (the bytes must be laid out validly).
-pub fn sections_of(bytes: &[u8]) -> Vec<(u16, Vec<u8>)> {
+pub fn sections_of(bytes: &[u8]) -> Sections {
     let count = u16::from_le_bytes([bytes[18], bytes[19]]) as usize;
     (0..count)
         .map(|i| {

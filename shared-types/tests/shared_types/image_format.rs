@@ -2,7 +2,9 @@
 //! validation rule checking that the decoder names what is wrong.
 #![allow(non_snake_case)]
 
-use crate::common::{fix_header, random_content, sections_of, with_sections, Content, FallbackC};
+use crate::common::{
+    fix_header, random_content, sections_of, with_sections, Content, FallbackC, Sections,
+};
 use proptest::prelude::*;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -617,7 +619,7 @@ fn directory_lists_the_feedforward_sections_back_to_back() {
 fn rejects_bad_directories() {
     let b = simple().to_bytes().unwrap();
     let secs = sections_of(&b);
-    let with = |f: &dyn Fn(&mut Vec<(u16, Vec<u8>)>)| {
+    let with = |f: &dyn Fn(&mut Sections)| {
         let mut s = secs.clone();
         f(&mut s);
         decode(&with_sections(&b, &s)).map(|_| ())
