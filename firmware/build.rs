@@ -13,7 +13,7 @@
 #![allow(non_snake_case)]
 
 use shared_types::capacity::{MAX_IMAGE_LEN, MAX_M};
-use shared_types::image::{self, Dims, Fallback, Header, Image, Mode, Payload, Terminal};
+use shared_types::image::{self, Dims, Fallback, Header, Image, Mode, Payload, Segment, Terminal};
 use std::path::{Path, PathBuf};
 
 fn main() {
@@ -88,19 +88,25 @@ fn f32_bytes(xs: &[f32]) -> Vec<u8> {
 fn default_image() -> Vec<u8> {
     let K = f32_bytes(&[-4.0, -3.8]);
     let P = f32_bytes(&[1.0, 0.0, 0.0, 1.0]);
-    let traj_end = 1u32.to_le_bytes();
+    let seg_end = 1u16.to_le_bytes();
     let centre = f32_bytes(&[0.0, 0.0]);
     let delta = f32_bytes(&[10.0]);
     let v = f32_bytes(&[0.0]);
-    let location = [0u8];
+    let segment = Segment {
+        location: 0,
+        first_row: 0,
+        len: 1,
+    }
+    .record()
+    .expect("segment fits its record");
     let payload = Payload {
         K: &K,
         P: &P,
-        traj_end: &traj_end,
+        seg_end: &seg_end,
         centre: &centre,
         delta: &delta,
+        segment: &segment,
         v: &v,
-        location: &location,
         fallback: Fallback::Zero,
         input_box: None,
         terminal: Terminal::HoldLast,

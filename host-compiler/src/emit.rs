@@ -8,7 +8,8 @@
 //!
 //! [`ImageBuilder::to_bytes`] checks shapes and capacities, converts to f32 (refusing non-finite values and
 //! values beyond the f32 range, and rounding every `δ_i` *down* so that the stored ball never exceeds the
-//! certified one), then runs the same validation the firmware runs at decode. The effect of rounding `K`,
+//! certified one), splits each trajectory's rows into segments (maximal runs of one location, the image's
+//! segments section), then runs the same validation the firmware runs at decode. The effect of rounding `K`,
 //! `P`, `v` and the centres to f32 is for certification to bound (DESIGN §5), not for this module.
 //!
 //! [`PwaImageBuilder`] is its sibling for the PWA-feedback image of Ch. 6 (layout and rationale in
@@ -28,7 +29,7 @@ use std::path::Path;
 
 use shared_types::capacity::{
     MAX_BALLS, MAX_BALL_REFS, MAX_LEAF_BALLS, MAX_LEAVES, MAX_LOCATIONS, MAX_M, MAX_N,
-    MAX_PARTITIONS, MAX_STEPS, MAX_TRAJECTORIES, MAX_TREE_DEPTH, MAX_TREE_NODES,
+    MAX_PARTITIONS, MAX_SEGMENTS, MAX_STEPS, MAX_TRAJECTORIES, MAX_TREE_DEPTH, MAX_TREE_NODES,
 };
 use shared_types::image::{
     self, Dims, Fallback, Image, ImageError, InputBox, Mode, Payload, PwaPayload,
@@ -355,12 +356,13 @@ impl ImageBuilder {
             P.extend(le_bytes(&format!("location {l}: P"), &law.P, n * n)?);
         }
 
-        let mut traj_end = Vec::new();
+        let mut seg_end = Vec::new();
         let mut centre = Vec::new();
         let mut delta = Vec::new();
         let mut v = Vec::new();
-        let mut location = Vec::new();
-        let mut end = 0u32;
+        let mut segment = Vec::new();
+        let mut n_segments = 0usize;
+        let mut row = 0usize;
         for (t, tr) in self.trajectories.iter().enumerate() {
             let len = tr.len();
             if len == 0 {
@@ -397,20 +399,36 @@ impl ImageBuilder {
                     });
                 }
             }
-            location.extend_from_slice(&tr.location);
-            end += len as u32; // ≤ MAX_STEPS, checked above
-            traj_end.extend_from_slice(&end.to_le_bytes());
+            // Segments: the maximal runs of one location of this trajectory's rows.
+            let mut s = 0;
+            while s < len {
+                let l = tr.location[s];
+                let run = tr.location[s..].iter().take_while(|&&x| x == l).count();
+                let record = image::Segment {
+                    location: l as usize,
+                    first_row: row + s,
+                    len: run,
+                }
+                .record()
+                .ok_or_else(|| invalid(format!("trajectory {t}: segment"), "does not fit"))?;
+                segment.extend_from_slice(&record);
+                n_segments += 1;
+                s += run;
+            }
+            capacity("number of segments", n_segments, 1, MAX_SEGMENTS)?;
+            row += len; // ≤ MAX_STEPS, checked above
+            seg_end.extend_from_slice(&(n_segments as u16).to_le_bytes());
         }
 
         let (fb, bx) = fallback_box_bytes(n, m, &self.fallback, &self.input_box)?;
         let payload = Payload {
             K: &K,
             P: &P,
-            traj_end: &traj_end,
+            seg_end: &seg_end,
             centre: &centre,
             delta: &delta,
+            segment: &segment,
             v: &v,
-            location: &location,
             fallback: fallback_of(&self.fallback, &fb),
             input_box: bx.as_ref().map(|(lo, hi)| InputBox { lo, hi }),
             terminal: self.terminal,

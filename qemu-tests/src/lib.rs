@@ -9,7 +9,7 @@
 //! * [`closed_loop`]: runs N steps against the plant and the host evaluator, comparing bit for bit;
 //! * [`images`]: the test controller images.
 //!
-//! The integration tests (`tests/hil*.rs`) need `qemu-system-arm` and the `thumbv7em-none-eabihf` target;
+//! The integration tests (`tests/hil/`) need `qemu-system-arm` and the `thumbv7em-none-eabihf` target;
 //! `cargo xtask test` installs both before it runs them, and without them each test fails saying what is
 //! missing.
 #![allow(non_snake_case)]

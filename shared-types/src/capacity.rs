@@ -23,6 +23,11 @@ pub const MAX_LOCATIONS: usize = 8;
 pub const MAX_TRAJECTORIES: usize = 256;
 /// Largest total number of rows of the feedforward table, summed over all trajectories.
 pub const MAX_STEPS: usize = 32768;
+/// Largest number of segments of the feedforward table (a segment is a run of rows of one trajectory in
+/// one location; a trajectory of a single-location plant is one segment).
+pub const MAX_SEGMENTS: usize = 4096;
+/// Largest number of entries of an image's section directory.
+pub const MAX_SECTIONS: usize = 16;
 
 /// Largest number of partitions (affine laws `u = K_j x + θ0_j`) of a PWA-feedback image.
 pub const MAX_PARTITIONS: usize = 256;
@@ -46,7 +51,7 @@ pub const MAX_LEAF_BALLS: usize = 64;
 pub const PWA_STEP_MAX_MULADDS: usize =
     MAX_TREE_DEPTH * MAX_N + MAX_LEAF_BALLS * (MAX_N * (MAX_N + 1) / 2 + MAX_N) + MAX_M * MAX_N;
 
-/// Size in bytes of the fixed image header that precedes the postcard payload.
+/// Size in bytes of the fixed image header that precedes the section directory.
 pub const HEADER_LEN: usize = 32;
 
 /// Bytes of the parts both modes share: `K` and `P` per location, the fallback law and the input box.
@@ -54,15 +59,16 @@ const COMMON_PAYLOAD_LEN: usize = 4
     * (MAX_LOCATIONS * MAX_M * MAX_N      // K per location
         + MAX_LOCATIONS * MAX_N * MAX_N   // P per location
         + MAX_M * MAX_N + MAX_N + MAX_M   // fallback linear law
-        + 2 * MAX_M); // input box
+        + 2 * MAX_M) // input box
+    + MAX_SECTIONS * (DIR_ENTRY_LEN + SECTION_FRAMING); // directory and per-section postcard framing
 
 /// Largest feedforward payload.
 const FEEDFORWARD_PAYLOAD_LEN: usize = COMMON_PAYLOAD_LEN
-    + 4 * (MAX_TRAJECTORIES               // trajectory ends (u32)
-        + MAX_TRAJECTORIES * MAX_N        // ball centres
+    + 4 * (MAX_TRAJECTORIES * MAX_N       // ball centres
         + MAX_TRAJECTORIES                // ball radii
         + MAX_STEPS * MAX_M)              // v table
-    + MAX_STEPS; // location per step (u8)
+    + 2 * MAX_TRAJECTORIES                // trajectory segment ends (u16)
+    + SEGMENT_RECORD_LEN * MAX_SEGMENTS; // segment records
 
 /// Largest PWA-feedback payload.
 const PWA_PAYLOAD_LEN: usize = COMMON_PAYLOAD_LEN
@@ -76,6 +82,14 @@ const PWA_PAYLOAD_LEN: usize = COMMON_PAYLOAD_LEN
         + MAX_BALLS)                                // ball partition (u16)
     + MAX_BALLS; // ball location (u8)
 
+/// Bytes of one directory entry (see [`crate::layout::DIR_ENTRY_LEN`]).
+const DIR_ENTRY_LEN: usize = crate::layout::DIR_ENTRY_LEN;
+/// Bytes of one segment record (see [`crate::layout::SEGMENT_RECORD_LEN`]).
+const SEGMENT_RECORD_LEN: usize = crate::layout::SEGMENT_RECORD_LEN;
+/// Allowance per section for postcard's length prefixes, counts and enum tags (at most 8 fields of at most
+/// 3 varint bytes each, plus tags).
+const SECTION_FRAMING: usize = 32;
+
 const fn max(a: usize, b: usize) -> usize {
     if a > b {
         a
@@ -84,10 +98,11 @@ const fn max(a: usize, b: usize) -> usize {
     }
 }
 
-/// Largest payload an image within the capacities can have, in bytes (the larger of the two modes). Used by
-/// the host to size buffers and by the firmware to size its image region. Computed from the field sizes
-/// plus a generous allowance for postcard's length prefixes, counts and enum tags.
-pub const MAX_PAYLOAD_LEN: usize = max(FEEDFORWARD_PAYLOAD_LEN, PWA_PAYLOAD_LEN) + 128;
+/// Largest payload (directory and sections) an image within the capacities can have, in bytes (the larger
+/// of the two modes). Used by the host to size buffers and by the firmware to size its image region.
+/// Computed from the field sizes plus an allowance per section for the directory entry and postcard's
+/// framing.
+pub const MAX_PAYLOAD_LEN: usize = max(FEEDFORWARD_PAYLOAD_LEN, PWA_PAYLOAD_LEN);
 
 /// Largest whole image (header and payload), in bytes.
 pub const MAX_IMAGE_LEN: usize = HEADER_LEN + MAX_PAYLOAD_LEN;

@@ -6,8 +6,10 @@
 //! 1. at κ = 0, among the trajectories whose ball `‖x − x̃_i(0)‖_P ≤ δ_i` (P of the trajectory's first
 //!    location) contains x, select the nearest in that metric (ties: the lowest index); none → the answer
 //!    is [`Status::OutOfEnvelope`], latched until [`Controller::reset`];
-//! 2. at every step, `u = K_ℓ x + v_i(κ)` where ℓ = ℓ_i(κ) is the row's nominal location (hybrid segments,
-//!    (4.41)–(4.42); a single-location image always uses K_0);
+//! 2. at every step, `u = K_ℓ x + v_i(κ)` where ℓ = ℓ_i(κ) is the location of the segment holding row κ
+//!    (hybrid runs, (4.41)–(4.42); a single-location image always uses K_0). The controller keeps a cursor
+//!    on the active segment and moves it forward when κ passes the segment's last row, so a step costs no
+//!    search over segments;
 //! 3. past the last row, the image's [`Terminal`] behaviour.
 //!
 //! PWA-feedback mode (Ch. 6, law (6.1)) is pure feedback: at every step, locate x (a bounded-depth tree
@@ -23,8 +25,9 @@
 #![allow(non_snake_case)]
 
 use crate::capacity::{MAX_M, MAX_N};
-use crate::image::{f32_span, floats, Fallback, Image, Mode, Terminal};
+use crate::image::{Fallback, Image, Mode, Terminal};
 use crate::pwa::Region;
+use crate::raw::{f32_span, floats};
 
 /// The firmware's answer every period besides `Ok(u)`. Shared by firmware and host (wire value = `u8`).
 #[repr(u8)]
@@ -123,6 +126,8 @@ pub struct Controller<'a> {
     image: Image<'a>,
     kappa: u32,
     active: Option<u16>,
+    /// Segment of the active trajectory holding row κ (the cursor of the module doc).
+    segment: u16,
     out_of_envelope: bool,
     last_u: Input,
 }
@@ -135,6 +140,7 @@ impl<'a> Controller<'a> {
             image,
             kappa: 0,
             active: None,
+            segment: 0,
             out_of_envelope: false,
             last_u: Input::zero(m),
         }
@@ -184,8 +190,8 @@ impl<'a> Controller<'a> {
             for ((ei, &xi), ci) in e.iter_mut().zip(x).zip(floats(centre)) {
                 *ei = xi - ci;
             }
-            let (start, _) = img.trajectory_rows(t);
-            let l = p.location.get(start).copied().unwrap_or(0) as usize;
+            let (s0, _) = img.trajectory_segments(t);
+            let l = img.segment(s0).map_or(0, |s| s.location);
             let P = f32_span(p.P, l * n * n, n * n);
             let mut d2 = 0.0f32;
             for (row, &ei) in P.chunks_exact(4 * n).zip(&e) {
@@ -210,12 +216,28 @@ impl<'a> Controller<'a> {
         self.image.locate(x)
     }
 
-    /// `u = K_ℓ x + v` for table row `row` ((3.5)–(3.6), location per (4.41)).
-    fn law(&self, row: usize, x: &[f32]) -> Input {
+    /// The location of table row `row` of trajectory `t`: moves the segment cursor forward (within the
+    /// trajectory's segments) until its segment holds `row`. Rows only grow between resets, so the cursor
+    /// moves at most once per step; the loop bound is the trajectory's segment count.
+    fn row_location(&mut self, t: usize, row: usize) -> usize {
+        let img = &self.image;
+        let (s0, count) = img.trajectory_segments(t);
+        let mut s = (self.segment as usize).clamp(s0, (s0 + count).saturating_sub(1));
+        for _ in 0..count {
+            match img.segment(s) {
+                Some(g) if row >= g.first_row.saturating_add(g.len) && s + 1 < s0 + count => s += 1,
+                _ => break,
+            }
+        }
+        self.segment = s as u16;
+        img.segment(s).map_or(0, |g| g.location)
+    }
+
+    /// `u = K_ℓ x + v` for table row `row` in location `l` ((3.5)–(3.6), location per (4.41)).
+    fn law(&self, row: usize, l: usize, x: &[f32]) -> Input {
         let img = &self.image;
         let p = img.payload();
         let (n, m) = (img.n().clamp(1, MAX_N), img.m().clamp(1, MAX_M));
-        let l = p.location.get(row).copied().unwrap_or(0) as usize;
         let K = f32_span(p.K, l * m * n, m * n);
         let v = f32_span(p.v, row * m, m);
         let mut out = Input::zero(m);
@@ -249,6 +271,7 @@ impl<'a> Controller<'a> {
             None => match self.select(x) {
                 Some(t) => {
                     self.active = Some(t);
+                    self.segment = self.image.trajectory_segments(t as usize).0 as u16;
                     t
                 }
                 None => {
@@ -259,13 +282,12 @@ impl<'a> Controller<'a> {
         };
         let (start, len) = self.image.trajectory_rows(t as usize);
         let k = self.kappa as usize;
-        let u = if k < len {
-            self.law(start + k, x)
+        let u = if k < len || self.image.terminal() == Terminal::HoldLast {
+            let row = start + k.min(len.saturating_sub(1));
+            let l = self.row_location(t as usize, row);
+            self.law(row, l, x)
         } else {
-            match self.image.terminal() {
-                Terminal::HoldLast => self.law(start + len.saturating_sub(1), x),
-                Terminal::Fallback => self.fallback(x, &self.last_u),
-            }
+            self.fallback(x, &self.last_u)
         };
         if !u.as_slice().iter().all(|v| v.is_finite()) {
             return Err(Status::OutOfEnvelope);

@@ -1,15 +1,23 @@
-//! Controller image format (versioned, CRC-checked, postcard payload) and the evaluator that both the host
-//! verifier and the firmware run. `no_std`, no allocation, never panics on bad data (DESIGN §4).
+//! Controller image format (versioned, CRC-checked, a header and a directory of typed postcard sections)
+//! and the evaluator that both the host verifier and the firmware run. `no_std`, no allocation, never
+//! panics on bad data (DESIGN §5).
 //!
 //! * [`capacity`]: compile-time capacities bounding every image and every runtime loop;
-//! * [`image`]: the byte layout, [`image::encode`] and the validating zero-copy [`image::decode`];
+//! * [`layout`]: the format's vocabulary (magic, version, [`layout::Mode`], [`layout::SectionKind`]);
+//! * [`error`]: the `Copy` error [`error::ImageError`] every check returns;
+//! * [`header`]: the fixed header, the CRC and the section directory (parsing and writing);
+//! * [`image`]: the content, [`image::encode`] and the validating zero-copy [`image::decode`];
 //! * [`pwa`]: the PWA-feedback tables (Ch. 6), their validation and bounded-depth point location;
 //! * [`eval`]: the f32 evaluator ([`eval::Controller`]), [`eval::Status`] and [`eval::Input`];
 //! * [`protocol`]: the UART protocol between plant and firmware.
 #![no_std]
 
 pub mod capacity;
+pub mod error;
 pub mod eval;
+pub mod header;
 pub mod image;
+pub mod layout;
 pub mod protocol;
 pub mod pwa;
+mod raw;

@@ -1,4 +1,5 @@
-//! PWA-feedback images (mode 2, Ch. 6): the tables, their validation and bounded-time point location.
+//! PWA-feedback images (mode 2, Ch. 6): the tables, their sections, their validation and bounded-time point
+//! location.
 //!
 //! # The law
 //! On the envelope F of (6.2) (the union of the certified balls `B_P(x̃_i(κ), δ_i)`), the input is the
@@ -118,6 +119,11 @@
 //! [`MAX_LEAF_BALLS`] ball tests (n subtractions and n multiply-adds each; the scan stops at the first ball
 //! containing x) and m·n multiply-adds for the law: see [`crate::capacity::PWA_STEP_MAX_MULADDS`].
 //!
+//! # Sections
+//! The tables are stored as three sections of the image ([`crate::image`]): the laws ([`PwaLaws`]), the
+//! tree with its leaves and ball references ([`PwaTree`]), and the balls with the per-location factors
+//! `R̂_ℓ` ([`PwaBalls`]). [`PwaTables`] is their union.
+//!
 //! # Validation (run by [`crate::image::decode`] and [`crate::image::Image::new_pwa`])
 //! * counts within capacity: nodes ≤ [`MAX_TREE_NODES`], 1 ≤ leaves ≤ [`MAX_LEAVES`],
 //!   1 ≤ balls ≤ [`MAX_BALLS`], stored depth ≤ [`MAX_TREE_DEPTH`], references ≤ [`MAX_BALL_REFS`];
@@ -139,10 +145,9 @@ use crate::capacity::{
     MAX_BALLS, MAX_BALL_REFS, MAX_LEAF_BALLS, MAX_LEAVES, MAX_LOCATIONS, MAX_M, MAX_N,
     MAX_PARTITIONS, MAX_TREE_DEPTH, MAX_TREE_NODES,
 };
-use crate::image::{
-    check_dim, check_finite, check_len, div, f32_at, rem, sat16, sat32, u16_le, Dim, Dims, Field,
-    Image, ImageError, Mode, Pos,
-};
+use crate::error::{Dim, Field, ImageError, Pos};
+use crate::layout::Dims;
+use crate::raw::{check_dim, check_finite, check_len, div, f32_at, rem, sat16, sat32, u16_le};
 
 /// Child codes from here up to `OUTSIDE − 1` name leaves: leaf `code − LEAF_BASE`.
 pub const LEAF_BASE: u16 = 0x8000;
@@ -185,8 +190,9 @@ impl Child {
 }
 
 /// The PWA tables of an image, as raw borrowed byte strings (`f32` and `u16` little-endian, matrices
-/// row-major). Counts are stored explicitly; field lengths are checked against them.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+/// row-major). Counts are stored explicitly; field lengths are checked against them. In the image they are
+/// three sections ([`PwaLaws`], [`PwaTree`], [`PwaBalls`]); this is their union, as the evaluator reads it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct PwaTables<'a> {
     /// Worst-case number of hyperplane tests from the root to a leaf (must equal the tree's).
     pub depth: u8,
@@ -221,6 +227,103 @@ pub struct PwaTables<'a> {
     pub ball_location: &'a [u8],
     /// Partition each ball is certified for (`u16`).
     pub ball_partition: &'a [u8],
+}
+
+/// The PWA laws section ([`crate::layout::SectionKind::PwaLaws`]), postcard-encoded.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct PwaLaws<'a> {
+    /// See [`PwaTables::gain`].
+    pub gain: &'a [u8],
+    /// See [`PwaTables::offset`].
+    pub offset: &'a [u8],
+}
+
+/// The PWA tree section ([`crate::layout::SectionKind::PwaTree`]), postcard-encoded: the node records and
+/// the leaves with their ball references.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct PwaTree<'a> {
+    /// See [`PwaTables::depth`].
+    pub depth: u8,
+    /// See [`PwaTables::n_nodes`].
+    pub n_nodes: u16,
+    /// See [`PwaTables::n_leaves`].
+    pub n_leaves: u16,
+    /// See [`PwaTables::node`].
+    pub node: &'a [u8],
+    /// See [`PwaTables::leaf_partition`].
+    pub leaf_partition: &'a [u8],
+    /// See [`PwaTables::leaf_end`].
+    pub leaf_end: &'a [u8],
+    /// See [`PwaTables::ball_ref`].
+    pub ball_ref: &'a [u8],
+}
+
+/// The PWA balls section ([`crate::layout::SectionKind::PwaBalls`]), postcard-encoded: the certified balls
+/// and the per-location factors of their whitened test.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct PwaBalls<'a> {
+    /// See [`PwaTables::n_balls`].
+    pub n_balls: u16,
+    /// See [`PwaTables::R`].
+    pub R: &'a [u8],
+    /// See [`PwaTables::ball_centre`].
+    pub ball_centre: &'a [u8],
+    /// See [`PwaTables::ball_test`].
+    pub ball_test: &'a [u8],
+    /// See [`PwaTables::ball_location`].
+    pub ball_location: &'a [u8],
+    /// See [`PwaTables::ball_partition`].
+    pub ball_partition: &'a [u8],
+}
+
+impl<'a> PwaTables<'a> {
+    /// The tables from their three sections.
+    pub fn from_sections(laws: PwaLaws<'a>, tree: PwaTree<'a>, balls: PwaBalls<'a>) -> Self {
+        PwaTables {
+            depth: tree.depth,
+            n_nodes: tree.n_nodes,
+            n_leaves: tree.n_leaves,
+            n_balls: balls.n_balls,
+            gain: laws.gain,
+            offset: laws.offset,
+            node: tree.node,
+            leaf_partition: tree.leaf_partition,
+            leaf_end: tree.leaf_end,
+            ball_ref: tree.ball_ref,
+            R: balls.R,
+            ball_centre: balls.ball_centre,
+            ball_test: balls.ball_test,
+            ball_location: balls.ball_location,
+            ball_partition: balls.ball_partition,
+        }
+    }
+
+    /// The three sections these tables are stored as.
+    pub fn sections(&self) -> (PwaLaws<'a>, PwaTree<'a>, PwaBalls<'a>) {
+        (
+            PwaLaws {
+                gain: self.gain,
+                offset: self.offset,
+            },
+            PwaTree {
+                depth: self.depth,
+                n_nodes: self.n_nodes,
+                n_leaves: self.n_leaves,
+                node: self.node,
+                leaf_partition: self.leaf_partition,
+                leaf_end: self.leaf_end,
+                ball_ref: self.ball_ref,
+            },
+            PwaBalls {
+                n_balls: self.n_balls,
+                R: self.R,
+                ball_centre: self.ball_centre,
+                ball_test: self.ball_test,
+                ball_location: self.ball_location,
+                ball_partition: self.ball_partition,
+            },
+        )
+    }
 }
 
 impl PwaTables<'static> {
@@ -469,18 +572,18 @@ pub(crate) fn validate_tables(dims: Dims, t: &PwaTables<'_>) -> Result<(), Image
 }
 
 /// Bytes of one tree node record: n + 1 f32 (`a`, `b`) and two `u16` child codes.
-pub(crate) const fn node_record_len(n: usize) -> usize {
+pub const fn node_record_len(n: usize) -> usize {
     4 * n + 8
 }
 
 /// Value `k` of node `i`'s record (`a_k` for k < n, `b` for k = n); 0.0 out of range.
-fn node_value(node: &[u8], n: usize, i: usize, k: usize) -> f32 {
+pub(crate) fn node_value(node: &[u8], n: usize, i: usize, k: usize) -> f32 {
     let rec = node_record_len(n) / 4;
     f32_at(node, i.saturating_mul(rec).saturating_add(k))
 }
 
 /// Child code of node `i` on `side` (0 left, 1 right); 0 out of range (never for a validated image).
-fn node_child(node: &[u8], n: usize, i: usize, side: usize) -> u16 {
+pub(crate) fn node_child(node: &[u8], n: usize, i: usize, side: usize) -> u16 {
     let rec = node_record_len(n) / 2;
     u16_le(
         node,
@@ -573,191 +676,26 @@ fn validate_tree(t: &PwaTables<'_>, n: usize, nn: usize, nl: usize) -> Result<()
     Ok(())
 }
 
-impl<'a> Image<'a> {
-    /// The PWA tables (empty for a feedforward image).
-    pub fn pwa(&self) -> &PwaTables<'a> {
-        &self.pwa
-    }
-    /// Number of partitions (0 for a feedforward image).
-    pub fn n_partitions(&self) -> usize {
-        self.dims.n_partitions
-    }
-    /// Worst-case number of hyperplane tests of one point location.
-    pub fn tree_depth(&self) -> usize {
-        self.pwa.depth as usize
-    }
-    /// Number of internal tree nodes.
-    pub fn n_nodes(&self) -> usize {
-        self.pwa.n_nodes as usize
-    }
-    /// Number of leaves.
-    pub fn n_leaves(&self) -> usize {
-        self.pwa.n_leaves as usize
-    }
-    /// Number of certified balls.
-    pub fn n_balls(&self) -> usize {
-        self.pwa.n_balls as usize
-    }
-    /// Number of ball references, summed over all leaves.
-    pub fn n_ball_refs(&self) -> usize {
-        self.pwa.ball_ref.len() / 2
-    }
-
-    /// `K_j[row, col]` (`K_j = K + θ_j`); 0.0 out of range.
-    pub fn law_gain(&self, partition: usize, row: usize, col: usize) -> f32 {
-        let (n, m) = (self.dims.n, self.dims.m);
-        if partition >= self.n_partitions() || row >= m || col >= n {
-            return 0.0;
-        }
-        f32_at(self.pwa.gain, (partition * m + row) * n + col)
-    }
-
-    /// `θ0_j[row]`; 0.0 out of range.
-    pub fn law_offset(&self, partition: usize, row: usize) -> f32 {
-        if partition >= self.n_partitions() || row >= self.dims.m {
-            return 0.0;
-        }
-        f32_at(self.pwa.offset, partition * self.dims.m + row)
-    }
-
-    /// Component `i` of the normal `a` of node `node`; 0.0 out of range.
-    pub fn node_normal(&self, node: usize, i: usize) -> f32 {
-        if node >= self.n_nodes() || i >= self.dims.n {
-            return 0.0;
-        }
-        node_value(self.pwa.node, self.dims.n, node, i)
-    }
-
-    /// Offset `b` of node `node`; 0.0 out of range.
-    pub fn node_offset(&self, node: usize) -> f32 {
-        if node >= self.n_nodes() {
-            return 0.0;
-        }
-        node_value(self.pwa.node, self.dims.n, node, self.dims.n)
-    }
-
-    /// Children (left: `aᵀx ≤ b`, right: otherwise) of node `node`; `None` out of range.
-    pub fn node_children(&self, node: usize) -> Option<(Child, Child)> {
-        if node >= self.n_nodes() {
-            return None;
-        }
-        Some((
-            Child::from_code(node_child(self.pwa.node, self.dims.n, node, 0)),
-            Child::from_code(node_child(self.pwa.node, self.dims.n, node, 1)),
-        ))
-    }
-
-    /// Partition of leaf `leaf`; 0 out of range.
-    pub fn leaf_partition(&self, leaf: usize) -> usize {
-        if leaf >= self.n_leaves() {
-            return 0;
-        }
-        u16_le(self.pwa.leaf_partition, leaf) as usize
-    }
-
-    /// First reference and number of references of leaf `leaf`; `(0, 0)` out of range.
-    pub fn leaf_refs(&self, leaf: usize) -> (usize, usize) {
-        if leaf >= self.n_leaves() {
-            return (0, 0);
-        }
-        let start = match leaf {
-            0 => 0,
-            _ => u16_le(self.pwa.leaf_end, leaf - 1) as usize,
-        };
-        let end = u16_le(self.pwa.leaf_end, leaf) as usize;
-        (start, end.saturating_sub(start))
-    }
-
-    /// Ball `k` of leaf `leaf` (its index in the ball table); `None` out of range.
-    pub fn leaf_ball(&self, leaf: usize, k: usize) -> Option<usize> {
-        let (start, len) = self.leaf_refs(leaf);
-        (k < len).then(|| u16_le(self.pwa.ball_ref, start + k) as usize)
-    }
-
-    /// Component `i` of the centre of ball `ball`; 0.0 out of range.
-    pub fn ball_centre(&self, ball: usize, i: usize) -> f32 {
-        if ball >= self.n_balls() || i >= self.dims.n {
-            return 0.0;
-        }
-        f32_at(self.pwa.ball_centre, ball * self.dims.n + i)
-    }
-
-    /// Component `i` of the whitened centre `ĉ_z = fl32(R̂ ĉ)` of ball `ball`; 0.0 out of range.
-    pub fn ball_centre_z(&self, ball: usize, i: usize) -> f32 {
-        if ball >= self.n_balls() || i >= self.dims.n {
-            return 0.0;
-        }
-        f32_at(self.pwa.ball_test, ball * (self.dims.n + 1) + i)
-    }
-
-    /// `R̂_ℓ[row, col]`, the factor of location ℓ's metric used by the ball test; 0.0 out of range.
-    pub fn factor(&self, location: usize, row: usize, col: usize) -> f32 {
-        let n = self.dims.n;
-        if self.mode != Mode::PwaFeedback
-            || location >= self.dims.n_locations
-            || row >= n
-            || col >= n
-        {
-            return 0.0;
-        }
-        f32_at(self.pwa.R, (location * n + row) * n + col)
-    }
-
-    /// Stored squared threshold ŝ of ball `ball`: the whitened test accepts x̂ iff the computed
-    /// `fl(‖fl(R̂x̂) − ĉ_z‖²) ≤ ŝ` (module doc), so accepted states have computed squared whitened
-    /// distance ≤ ŝ; 0.0 out of range.
-    pub fn ball_threshold(&self, ball: usize) -> f32 {
-        if ball >= self.n_balls() {
-            return 0.0;
-        }
-        let n = self.dims.n;
-        f32_at(self.pwa.ball_test, ball * (n + 1) + n)
-    }
-
-    /// Location (metric) of ball `ball`; 0 out of range.
-    pub fn ball_location(&self, ball: usize) -> usize {
-        self.pwa.ball_location.get(ball).copied().unwrap_or(0) as usize
-    }
-
-    /// Partition ball `ball` is certified for; 0 out of range.
-    pub fn ball_partition(&self, ball: usize) -> usize {
-        if ball >= self.n_balls() {
-            return 0;
-        }
-        u16_le(self.pwa.ball_partition, ball) as usize
-    }
-
-    /// Point location of `x` (length n, finite): the tree walk, then the envelope test against the
-    /// leaf's balls. `None` for a feedforward image or an unusable `x`. Pure.
-    pub fn locate(&self, x: &[f32]) -> Option<Region> {
-        if self.mode != Mode::PwaFeedback {
-            return None;
-        }
-        let n = self.dims.n.clamp(1, MAX_N);
-        if x.len() != n || !x.iter().all(|v| v.is_finite()) {
-            return None;
-        }
-        Some(self.locate_in(x, n))
-    }
-
-    /// [`Image::locate`] without the argument checks (`x.len() == n`, `1 ≤ n ≤ MAX_N`). Every loop is
-    /// bounded by a capacity; on a validated image the walk ends within `depth` tests. Dispatches to
-    /// [`Image::locate_n`] for the image's n, so that the n-length loops are unrolled at compile time (the
+impl PwaTables<'_> {
+    /// Point location of `x` in tables validated for `n` and `n_locations` (`x.len() == n`,
+    /// `1 ≤ n ≤ MAX_N`; the argument checks are [`crate::image::Image::locate`]'s). Every loop is
+    /// bounded by a capacity; on validated tables the walk ends within `depth` tests. Dispatches to
+    /// [`PwaTables::locate_n`] for the image's n, so that the n-length loops are unrolled at compile time (the
     /// arithmetic, and its order, is the same for every n).
-    pub(crate) fn locate_in(&self, x: &[f32], n: usize) -> Region {
+    pub(crate) fn locate_in(&self, n_locations: usize, x: &[f32], n: usize) -> Region {
         match n {
-            1 => self.locate_n::<1>(x),
-            2 => self.locate_n::<2>(x),
-            3 => self.locate_n::<3>(x),
-            4 => self.locate_n::<4>(x),
-            5 => self.locate_n::<5>(x),
-            6 => self.locate_n::<6>(x),
-            7 => self.locate_n::<7>(x),
-            8 => self.locate_n::<8>(x),
-            9 => self.locate_n::<9>(x),
-            10 => self.locate_n::<10>(x),
-            11 => self.locate_n::<11>(x),
-            12 => self.locate_n::<12>(x),
+            1 => self.locate_n::<1>(n_locations, x),
+            2 => self.locate_n::<2>(n_locations, x),
+            3 => self.locate_n::<3>(n_locations, x),
+            4 => self.locate_n::<4>(n_locations, x),
+            5 => self.locate_n::<5>(n_locations, x),
+            6 => self.locate_n::<6>(n_locations, x),
+            7 => self.locate_n::<7>(n_locations, x),
+            8 => self.locate_n::<8>(n_locations, x),
+            9 => self.locate_n::<9>(n_locations, x),
+            10 => self.locate_n::<10>(n_locations, x),
+            11 => self.locate_n::<11>(n_locations, x),
+            12 => self.locate_n::<12>(n_locations, x),
             // Unreachable for a validated image (1 ≤ n ≤ MAX_N); total anyway.
             _ => Region::OutsideTree,
         }
@@ -766,12 +704,12 @@ impl<'a> Image<'a> {
     /// Point location for state dimension `N` (module doc): the tree walk, then the whitened ball test of
     /// the leaf's balls in listing order. Reads are total (a short table reads as "outside"), which a
     /// validated image never meets.
-    fn locate_n<const N: usize>(&self, x: &[f32]) -> Region {
+    fn locate_n<const N: usize>(&self, n_locations: usize, x: &[f32]) -> Region {
         const { assert!(N <= MAX_N) };
         let Some(x) = load_x::<N>(x) else {
             return Region::OutsideTree;
         };
-        let t = &self.pwa;
+        let t = self;
         // The walk: at most MAX_TREE_DEPTH tests (validated: the tree's depth is at most that).
         let leaf = 'walk: {
             if t.n_nodes == 0 {
@@ -806,7 +744,7 @@ impl<'a> Image<'a> {
         let refs = t.ball_ref.get(2 * start..2 * end).unwrap_or(&[]);
         let refs = refs.get(..2 * MAX_LEAF_BALLS).unwrap_or(refs);
         // The location check is hoisted out of the ball loop for a single-location image.
-        let found = if self.dims.n_locations == 1 {
+        let found = if n_locations == 1 {
             scan_balls::<N, true>(t, refs, &x)
         } else {
             scan_balls::<N, false>(t, refs, &x)

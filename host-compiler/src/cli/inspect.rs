@@ -13,7 +13,9 @@ use std::fmt::Write as _;
 use std::io::Write as _;
 
 use serde::Serialize;
-use shared_types::image::{decode, Fallback, Header, Image, ImageError, Mode, Terminal, MAGIC};
+use shared_types::image::{
+    decode, directory, Fallback, Header, Image, ImageError, Mode, SectionKind, Terminal, MAGIC,
+};
 use shared_types::pwa::Child;
 
 /// Arguments of `inspect`.
@@ -83,7 +85,19 @@ pub fn render(bytes: &[u8], path: &str, json: bool) -> Result<String, InspectErr
         error,
         header: None,
     })?;
-    let report = Report::new(&img, &h, bytes.len());
+    let mut report = Report::new(&img, &h, bytes.len());
+    // decode succeeded, so the directory parses too.
+    if let Ok(dir) = directory(bytes) {
+        report.sections = (0..dir.len())
+            .filter_map(|i| dir.entry(i))
+            .map(|e| SectionJson {
+                kind: SectionKind::from_u16(e.kind).map_or("unknown", |k| k.name()),
+                tag: e.kind,
+                offset: e.offset,
+                len: e.len,
+            })
+            .collect();
+    }
     if json {
         Ok(serde_json::to_string_pretty(&report)
             .unwrap_or_else(|e| format!("{{\"error\": \"{e}\"}}")))
@@ -95,7 +109,7 @@ pub fn render(bytes: &[u8], path: &str, json: bool) -> Result<String, InspectErr
 fn header_line(h: &Header, size: usize) -> String {
     format!(
         "header: version {}, mode {}, n {}, m {}, locations {}, trajectories {}, partitions {}, period {} s, \
-         payload {} bytes, CRC {:#010x}; file {} bytes",
+         sections {}, payload {} bytes, CRC {:#010x}; file {} bytes",
         h.version,
         h.mode,
         h.dims.n,
@@ -104,6 +118,7 @@ fn header_line(h: &Header, size: usize) -> String {
         h.dims.n_trajectories,
         h.dims.n_partitions,
         h.period,
+        h.n_sections,
         h.payload_len,
         h.crc,
         size
@@ -122,9 +137,29 @@ struct HeaderJson {
     trajectories: usize,
     partitions: usize,
     period: f32,
+    sections: u16,
     payload_len: u32,
     crc: String,
     size: usize,
+}
+
+/// One entry of the section directory.
+#[derive(Serialize)]
+struct SectionJson {
+    kind: &'static str,
+    tag: u16,
+    offset: u32,
+    len: u32,
+}
+
+/// One segment of the feedforward table.
+#[derive(Serialize)]
+struct SegmentJson {
+    index: usize,
+    trajectory: usize,
+    location: usize,
+    first_row: usize,
+    steps: usize,
 }
 
 #[derive(Serialize)]
@@ -342,6 +377,10 @@ impl PwaJson {
 #[derive(Serialize)]
 struct Report {
     header: HeaderJson,
+    /// The section directory, in stored order.
+    sections: Vec<SectionJson>,
+    /// Feedforward segments (empty for a PWA image).
+    segments: Vec<SegmentJson>,
     total_steps: usize,
     /// Feedforward only.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -371,6 +410,7 @@ impl Report {
                 mode: match img.mode() {
                     Mode::Feedforward => "feedforward",
                     Mode::PwaFeedback => "pwa_feedback",
+                    _ => "unknown",
                 },
                 mode_value: img.mode() as u8,
                 n,
@@ -379,10 +419,27 @@ impl Report {
                 trajectories: img.n_trajectories(),
                 partitions: img.dims().n_partitions,
                 period: img.period(),
+                sections: h.n_sections,
                 payload_len: h.payload_len,
                 crc: format!("{:#010x}", h.crc),
                 size,
             },
+            sections: Vec::new(),
+            segments: (0..img.n_trajectories())
+                .flat_map(|t| {
+                    let (s0, count) = img.trajectory_segments(t);
+                    (s0..s0 + count).map(move |s| (t, s))
+                })
+                .filter_map(|(t, s)| {
+                    img.segment(s).map(|g| SegmentJson {
+                        index: s,
+                        trajectory: t,
+                        location: g.location,
+                        first_row: g.first_row,
+                        steps: g.len,
+                    })
+                })
+                .collect(),
             total_steps: img.total_steps(),
             terminal: (img.mode() == Mode::Feedforward).then_some(match img.terminal() {
                 Terminal::HoldLast => "hold_last",
@@ -445,7 +502,7 @@ fn summary(r: &Report, path: &str) -> String {
     let mut s = String::new();
     let _ = writeln!(
         s,
-        "{path}: valid controller image, {} bytes (header 32 + payload {}), format {} v{}, CRC {} ok",
+        "{path}: valid controller image, {} bytes (header 32 + directory and sections {}), format {} v{}, CRC {} ok",
         h.size, h.payload_len, h.magic, h.version, h.crc
     );
     let _ = writeln!(
@@ -453,6 +510,18 @@ fn summary(r: &Report, path: &str) -> String {
         "mode: {} ({}), sample period {} s",
         h.mode, h.mode_value, h.period
     );
+    let _ = writeln!(s, "sections ({}):", r.sections.len());
+    for e in &r.sections {
+        let _ = writeln!(
+            s,
+            "  {:<12} (kind {}) bytes {}..{} ({} bytes)",
+            e.kind,
+            e.tag,
+            e.offset,
+            e.offset as u64 + e.len as u64,
+            e.len
+        );
+    }
     if let Some(p) = &r.pwa {
         let _ = writeln!(
             s,
@@ -546,6 +615,16 @@ fn summary(r: &Report, path: &str) -> String {
             t.first_row,
             t.first_row + t.steps
         );
+        for g in r.segments.iter().filter(|g| g.trajectory == t.index) {
+            let _ = writeln!(
+                s,
+                "  segment {}: location {}, rows {}..{}",
+                g.index,
+                g.location,
+                g.first_row,
+                g.first_row + g.steps
+            );
+        }
         for (k, row) in t.v.iter().enumerate().take(SUMMARY_ROWS) {
             let _ = writeln!(s, "  v({k}) = {}  location {}", vec_str(row), t.location[k]);
         }

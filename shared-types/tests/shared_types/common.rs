@@ -6,7 +6,9 @@ use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 use shared_types::capacity::MAX_IMAGE_LEN;
 use shared_types::image::{
-    encode, Dims, Fallback, Image, ImageError, InputBox, Mode, Payload, PwaPayload, Terminal,
+    encode, write_image, Dims, Fallback, FallbackSection, Image, ImageError, InputBox,
+    LocationsSection, Mode, Payload, PostcardSection, PwaPayload, RawSection, SectionKind,
+    SectionWrite, Terminal,
 };
 
 #[derive(Clone, Debug, PartialEq)]
@@ -47,11 +49,11 @@ pub fn le(v: &[f32]) -> Vec<u8> {
 pub struct Owned {
     pub K: Vec<u8>,
     pub P: Vec<u8>,
-    pub traj_end: Vec<u8>,
+    pub seg_end: Vec<u8>,
     pub centre: Vec<u8>,
     pub delta: Vec<u8>,
+    pub segment: Vec<u8>,
     pub v: Vec<u8>,
-    pub location: Vec<u8>,
     pub fb: Option<(Vec<u8>, Vec<u8>, Vec<u8>)>,
     pub fb_kind: u8,
     pub bx: Option<(Vec<u8>, Vec<u8>)>,
@@ -63,11 +65,11 @@ impl Owned {
         Payload {
             K: &self.K,
             P: &self.P,
-            traj_end: &self.traj_end,
+            seg_end: &self.seg_end,
             centre: &self.centre,
             delta: &self.delta,
+            segment: &self.segment,
             v: &self.v,
-            location: &self.location,
             fallback: match (&self.fb, self.fb_kind) {
                 (Some((K, x, u)), _) => Fallback::Linear {
                     K,
@@ -94,21 +96,47 @@ impl Content {
         }
     }
 
-    pub fn owned(&self) -> Owned {
-        let mut ends = Vec::new();
-        let mut acc = 0u32;
-        for &l in &self.traj_len {
-            acc += l as u32;
-            ends.extend_from_slice(&acc.to_le_bytes());
+    /// The segments of the content: each trajectory's rows split into maximal runs of one location, as
+    /// `(first_row, len, location)`, with each trajectory's exclusive segment end. Rows past the end of
+    /// `location` count as location 0 (so that a short `location` still gives a table).
+    pub fn segments(&self) -> (Vec<u16>, Vec<(u32, u32, u8)>) {
+        let mut seg_end = Vec::new();
+        let mut segs: Vec<(u32, u32, u8)> = Vec::new();
+        let mut row = 0usize;
+        for &len in &self.traj_len {
+            let first_seg = segs.len();
+            for r in row..row + len {
+                let l = self.location.get(r).copied().unwrap_or(0);
+                let continues = segs.len() > first_seg;
+                match segs.last_mut() {
+                    Some(s) if continues && s.2 == l => s.1 += 1,
+                    _ => segs.push((r as u32, 1, l)),
+                }
+            }
+            row += len;
+            seg_end.push(segs.len() as u16);
         }
+        (seg_end, segs)
+    }
+
+    pub fn owned(&self) -> Owned {
+        let (seg_end, segs) = self.segments();
         Owned {
             K: le(&self.K),
             P: le(&self.P),
-            traj_end: ends,
+            seg_end: seg_end.iter().flat_map(|e| e.to_le_bytes()).collect(),
             centre: le(&self.centre),
             delta: le(&self.delta),
+            segment: segs
+                .iter()
+                .flat_map(|&(f, n, l)| {
+                    let mut r = f.to_le_bytes().to_vec();
+                    r.extend_from_slice(&n.to_le_bytes());
+                    r.push(l);
+                    r
+                })
+                .collect(),
             v: le(&self.v),
-            location: self.location.clone(),
             fb: match &self.fallback {
                 FallbackC::Linear { K, x_ref, u_ref } => Some((le(K), le(x_ref), le(u_ref))),
                 _ => None,
@@ -276,6 +304,39 @@ pub fn random_content(
             Terminal::Fallback
         },
     }
+}
+
+/// Sections of an image as `(kind, body)`, in directory order.
+pub type Sections = Vec<(u16, Vec<u8>)>;
+
+/// The directory entries of an image as `(kind, body)`, read naively from the header's section count and
+/// the entries' offsets and lengths (the bytes must be laid out validly).
+pub fn sections_of(bytes: &[u8]) -> Sections {
+    let count = u16::from_le_bytes([bytes[18], bytes[19]]) as usize;
+    (0..count)
+        .map(|i| {
+            let e = &bytes[32 + 12 * i..44 + 12 * i];
+            let kind = u16::from_le_bytes([e[0], e[1]]);
+            let off = u32::from_le_bytes(e[4..8].try_into().unwrap()) as usize;
+            let len = u32::from_le_bytes(e[8..12].try_into().unwrap()) as usize;
+            (kind, bytes[off..off + len].to_vec())
+        })
+        .collect()
+}
+
+/// An image with the header (mode, dimensions, period) of `like` and these sections, laid out validly by
+/// `write_image` (directory, offsets, payload length and CRC), whatever the sections hold.
+pub fn with_sections(like: &[u8], sections: &[(u16, Vec<u8>)]) -> Vec<u8> {
+    let h = shared_types::image::Header::parse(like).unwrap();
+    let raw: Vec<RawSection<'_>> = sections
+        .iter()
+        .map(|(kind, body)| RawSection { kind: *kind, body })
+        .collect();
+    let refs: Vec<&dyn SectionWrite> = raw.iter().map(|r| r as &dyn SectionWrite).collect();
+    let mut buf = vec![0u8; like.len() + 4096 + sections.iter().map(|s| s.1.len()).sum::<usize>()];
+    let len = write_image(&mut buf, h.mode, h.dims, h.period, &refs).unwrap();
+    buf.truncate(len);
+    buf
 }
 
 /// Patches the header's payload length and CRC to match the bytes.
@@ -589,29 +650,35 @@ impl PwaContent {
         Ok(buf)
     }
 
-    /// Header and postcard payload written directly, without validation (to feed invalid content to
-    /// `decode`), with correct length and CRC.
+    /// Header, directory and sections written directly by `write_image`, without validation (to feed
+    /// invalid content to `decode`), with correct length and CRC.
     pub fn raw_bytes(&self) -> Vec<u8> {
         let owned = self.owned();
+        let p = owned.payload();
+        let (laws, tree, balls) = p.tables.sections();
+        let locations =
+            PostcardSection::new(SectionKind::Locations, LocationsSection { K: p.K, P: p.P });
+        let fallback = PostcardSection::new(
+            SectionKind::Fallback,
+            FallbackSection {
+                fallback: p.fallback,
+                input_box: p.input_box,
+            },
+        );
+        let laws = PostcardSection::new(SectionKind::PwaLaws, laws);
+        let tree = PostcardSection::new(SectionKind::PwaTree, tree);
+        let balls = PostcardSection::new(SectionKind::PwaBalls, balls);
+        let sections: [&dyn SectionWrite; 5] = [&locations, &fallback, &laws, &tree, &balls];
         let mut buf = vec![0u8; MAX_IMAGE_LEN + 4096];
-        let plen = postcard::to_slice(&owned.payload(), &mut buf[32..])
-            .unwrap()
-            .len();
-        buf.truncate(32 + plen);
-        let d = self.dims();
-        buf[0..4].copy_from_slice(&shared_types::image::MAGIC);
-        buf[4..6].copy_from_slice(&shared_types::image::FORMAT_VERSION.to_le_bytes());
-        buf[6] = Mode::PwaFeedback as u8;
-        buf[7] = 0;
-        for (k, v) in [d.n, d.m, d.n_locations, d.n_trajectories, d.n_partitions]
-            .into_iter()
-            .enumerate()
-        {
-            buf[8 + 2 * k..10 + 2 * k].copy_from_slice(&(v as u16).to_le_bytes());
-        }
-        buf[18..20].copy_from_slice(&[0, 0]);
-        buf[20..24].copy_from_slice(&self.period.to_le_bytes());
-        fix_header(&mut buf);
+        let len = write_image(
+            &mut buf,
+            Mode::PwaFeedback as u8,
+            self.dims(),
+            self.period,
+            &sections,
+        )
+        .unwrap();
+        buf.truncate(len);
         buf
     }
 

@@ -2,9 +2,7 @@
 //! terminal behaviour, fallbacks, bad input; and an f64 reference comparison on random images.
 #![allow(non_snake_case, clippy::needless_range_loop)]
 
-mod common;
-
-use common::{random_content, Content, FallbackC};
+use crate::common::{random_content, Content, FallbackC};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use shared_types::eval::{rejected_image_input, Controller, Input, Status};

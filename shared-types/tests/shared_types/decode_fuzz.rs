@@ -1,14 +1,12 @@
-//! 100 000 random and mutated byte strings through the decoder: each gives an error or a valid image,
+//! 115 000 random and mutated byte strings through the decoder: each gives an error or a valid image,
 //! never a panic. The valid seeds are feedforward and PWA-feedback images in equal numbers. Mutations of
 //! valid images get their payload length and CRC recomputed most of the time, so validation past the CRC is
 //! exercised; images that still decode are run through the evaluator and must re-encode to exactly the same
 //! bytes (the format is canonical).
 
-mod common;
-
 use std::collections::BTreeMap;
 
-use common::{fix_header, random_content, random_pwa, PwaShape};
+use crate::common::{fix_header, random_content, random_pwa, sections_of, with_sections, PwaShape};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use shared_types::capacity::HEADER_LEN;
@@ -30,9 +28,21 @@ fn kind(e: &ImageError) -> &'static str {
         CrcMismatch { .. } => "CrcMismatch",
         DimOutOfRange { .. } => "DimOutOfRange",
         BadPeriod => "BadPeriod",
-        Malformed => "Malformed",
-        TrailingBytes => "TrailingBytes",
-        NotCanonical => "NotCanonical",
+        Malformed { .. } => "Malformed",
+        TrailingBytes { .. } => "TrailingBytes",
+        NotCanonical { .. } => "NotCanonical",
+        DirectoryTruncated { .. } => "DirectoryTruncated",
+        SectionFlags { .. } => "SectionFlags",
+        SectionPlacement { .. } => "SectionPlacement",
+        SectionOutOfRange { .. } => "SectionOutOfRange",
+        UnclaimedBytes { .. } => "UnclaimedBytes",
+        SectionOrder { .. } => "SectionOrder",
+        DuplicateSection { .. } => "DuplicateSection",
+        UnknownSection { .. } => "UnknownSection",
+        UnexpectedSection { .. } => "UnexpectedSection",
+        MissingSection { .. } => "MissingSection",
+        SegmentRows { .. } => "SegmentRows",
+        SegmentNotMaximal { .. } => "SegmentNotMaximal",
         FieldLength { .. } => "FieldLength",
         NonFinite { .. } => "NonFinite",
         NotSymmetric { .. } => "NotSymmetric",
@@ -60,6 +70,7 @@ fn kind(e: &ImageError) -> &'static str {
         FactorDiagonal { .. } => "FactorDiagonal",
         BufferTooSmall { .. } => "BufferTooSmall",
         Encode => "Encode",
+        _ => "Other",
     }
 }
 
@@ -106,7 +117,7 @@ fn exercise(bytes: &[u8], rng: &mut ChaCha8Rng, stats: &mut BTreeMap<&'static st
 }
 
 #[test]
-fn decoder_never_panics_on_100k_random_and_mutated_inputs() {
+fn decoder_never_panics_on_115k_random_and_mutated_inputs() {
     let mut rng = ChaCha8Rng::seed_from_u64(0xDEC0DE);
     let mut stats: BTreeMap<&'static str, usize> = BTreeMap::new();
     let shape = PwaShape {
@@ -203,7 +214,54 @@ fn decoder_never_panics_on_100k_random_and_mutated_inputs() {
         total += 1;
     }
 
-    assert_eq!(total, 100_000);
+    // 5. 15 000 edits of the section directory and of section lengths, laid out again validly, so that
+    //    the directory checks and the postcard parsing inside sections are both reached: a kind changed,
+    //    sections dropped, duplicated or swapped, an unknown kind added, or bytes deleted, inserted or
+    //    changed inside one section (its length and every later offset follow).
+    for _ in 0..15_000 {
+        let base = &valid[rng.random_range(0..valid.len())];
+        let mut secs = sections_of(base);
+        let i = rng.random_range(0..secs.len());
+        match rng.random_range(0..6) {
+            0 => secs[i].0 = rng.random_range(0..12),
+            1 => {
+                secs.remove(i);
+            }
+            2 => {
+                let j = rng.random_range(0..secs.len());
+                secs.swap(i, j);
+            }
+            3 => {
+                let d = secs[i].clone();
+                secs.insert(i, d);
+            }
+            4 => secs.push((rng.random_range(9..=u16::MAX), vec![rng.random(); 3])),
+            _ => {
+                let body = &mut secs[i].1;
+                let a = rng.random_range(0..=body.len());
+                let e = rng.random_range(a..=body.len().min(a + 12));
+                match rng.random_range(0..3) {
+                    0 => {
+                        body.drain(a..e);
+                    }
+                    1 => {
+                        let ins: Vec<u8> =
+                            (0..rng.random_range(1..6)).map(|_| rng.random()).collect();
+                        body.splice(a..a, ins);
+                    }
+                    _ => {
+                        for x in &mut body[a..e] {
+                            *x = rng.random();
+                        }
+                    }
+                }
+            }
+        }
+        exercise(&with_sections(base, &secs), &mut rng, &mut stats);
+        total += 1;
+    }
+
+    assert_eq!(total, 115_000);
     eprintln!("{stats:#?}");
     // The fuzzing must reach the checks past the CRC, not just bounce off the header.
     for k in [
@@ -233,6 +291,17 @@ fn decoder_never_panics_on_100k_random_and_mutated_inputs() {
         "UnreachableNode",
         "UnreferencedLeaf",
         "TreeDepthMismatch",
+        "NotCanonical",
+        "DirectoryTruncated",
+        "SectionPlacement",
+        "SectionOutOfRange",
+        "UnclaimedBytes",
+        "SectionOrder",
+        "DuplicateSection",
+        "UnknownSection",
+        "UnexpectedSection",
+        "MissingSection",
+        "SegmentRows",
     ] {
         assert!(
             stats.get(k).copied().unwrap_or(0) > 0,

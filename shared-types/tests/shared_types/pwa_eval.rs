@@ -4,9 +4,9 @@
 //! the ball test.
 #![allow(non_snake_case, clippy::needless_range_loop)]
 
-mod common;
-
-use common::{random_pwa, random_spd, two_partitions, FallbackC, PwaContent, PwaShape, L0, L1};
+use crate::common::{
+    random_pwa, random_spd, two_partitions, FallbackC, PwaContent, PwaShape, L0, L1,
+};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use shared_types::capacity::{MAX_N, MAX_TREE_DEPTH};

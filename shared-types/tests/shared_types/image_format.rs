@@ -2,15 +2,18 @@
 //! validation rule checking that the decoder names what is wrong.
 #![allow(non_snake_case)]
 
-mod common;
-
-use common::{fix_header, random_content, Content, FallbackC};
+use crate::common::{
+    fix_header, random_content, sections_of, with_sections, Content, FallbackC, Sections,
+};
 use proptest::prelude::*;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-use shared_types::capacity::{HEADER_LEN, MAX_IMAGE_LEN, MAX_N, MAX_STEPS, MAX_TRAJECTORIES};
+use shared_types::capacity::{
+    HEADER_LEN, MAX_IMAGE_LEN, MAX_N, MAX_SECTIONS, MAX_SEGMENTS, MAX_STEPS, MAX_TRAJECTORIES,
+};
 use shared_types::image::{
-    decode, encode, Dim, Field, Header, ImageError, Mode, Pos, Terminal, FORMAT_VERSION, MAGIC,
+    decode, directory, encode, Dim, Field, Header, ImageError, Mode, Pos, SectionKind, Segment,
+    Terminal, FORMAT_VERSION, MAGIC,
 };
 
 fn simple() -> Content {
@@ -91,20 +94,29 @@ fn largest_image_fits_max_image_len() {
     c.nl = nl;
     c.K = vec![0.5; nl * m * n];
     c.P = (0..nl)
-        .flat_map(|_| common::random_spd(&mut rng, n))
+        .flat_map(|_| crate::common::random_spd(&mut rng, n))
         .collect();
     c.traj_len = vec![MAX_STEPS / nt; nt];
     c.centre = vec![0.0; nt * n];
     c.delta = vec![1.0; nt];
     c.v = vec![1.0; MAX_STEPS * m];
-    c.location = (0..MAX_STEPS).map(|i| (i % nl) as u8).collect();
     c.fallback = FallbackC::Linear {
         K: vec![1.0; m * n],
         x_ref: vec![0.0; n],
         u_ref: vec![0.0; m],
     };
     c.input_box = Some((vec![-1.0; m], vec![1.0; m]));
+    // A location change every row is more segments than the capacity allows...
+    c.location = (0..MAX_STEPS).map(|i| (i % nl) as u8).collect();
+    assert!(matches!(
+        c.to_bytes(),
+        Err(ImageError::DimOutOfRange { dim: Dim::Segments, max, .. }) if max as usize == MAX_SEGMENTS
+    ));
+    // ... a change every MAX_STEPS / MAX_SEGMENTS rows fills it exactly.
+    let run = MAX_STEPS / MAX_SEGMENTS;
+    c.location = (0..MAX_STEPS).map(|i| ((i / run) % nl) as u8).collect();
     let bytes = c.to_bytes().unwrap();
+    assert_eq!(decode(&bytes).unwrap().n_segments(), MAX_SEGMENTS);
     assert!(
         bytes.len() <= MAX_IMAGE_LEN,
         "{} > {}",
@@ -252,9 +264,19 @@ fn rejects_short_input_and_bad_magic_version_reserved() {
     let mut b = bytes.clone();
     b[7] = 1;
     assert_eq!(decode(&b), Err(ImageError::ReservedNotZero));
+    // Bytes 18..20 hold the section count (they were reserved before format version 4).
     let mut b = bytes.clone();
     b[19] = 1;
-    assert_eq!(decode(&b), Err(ImageError::ReservedNotZero));
+    set_crc(&mut b);
+    assert_eq!(
+        decode(&b),
+        Err(ImageError::DimOutOfRange {
+            dim: Dim::Sections,
+            value: 261,
+            min: 1,
+            max: MAX_SECTIONS as u32
+        })
+    );
 }
 
 #[test]
@@ -292,10 +314,36 @@ fn rejects_payload_length_mismatch_and_trailing_bytes() {
         })
     );
     fix_header(&mut longer);
-    assert_eq!(decode(&longer), Err(ImageError::TrailingBytes));
+    assert_eq!(
+        decode(&longer),
+        Err(ImageError::UnclaimedBytes {
+            offset: b.len() as u32
+        })
+    );
     let mut shorter = b[..b.len() - 1].to_vec();
     fix_header(&mut shorter);
-    assert_eq!(decode(&shorter), Err(ImageError::Malformed));
+    assert_eq!(
+        decode(&shorter),
+        Err(ImageError::SectionOutOfRange { index: 4 })
+    );
+    // Inside a section: a byte more or less in the last section (the directory fixed up) is a trailing
+    // byte or a malformed section.
+    let mut secs = sections_of(&b);
+    secs[4].1.push(0);
+    assert_eq!(
+        decode(&with_sections(&b, &secs)),
+        Err(ImageError::TrailingBytes {
+            section: SectionKind::Steps
+        })
+    );
+    let mut secs = sections_of(&b);
+    secs[4].1.pop();
+    assert_eq!(
+        decode(&with_sections(&b, &secs)),
+        Err(ImageError::Malformed {
+            section: SectionKind::Steps
+        })
+    );
 }
 
 #[test]
@@ -314,19 +362,18 @@ fn rejects_unknown_modes_and_feedforward_content_under_the_pwa_mode() {
             max: 0
         })
     );
-    // With the header dimensions made PWA-like, the feedforward payload does not parse as a PWA payload.
+    // With the header dimensions made PWA-like, the feedforward sections do not belong in a PWA image.
     let mut pwa = b.clone();
     pwa[6] = 2;
     pwa[14..16].copy_from_slice(&0u16.to_le_bytes());
     pwa[16..18].copy_from_slice(&1u16.to_le_bytes());
     set_crc(&mut pwa);
-    assert!(
-        matches!(
-            decode(&pwa),
-            Err(ImageError::Malformed | ImageError::TrailingBytes | ImageError::FieldLength { .. })
-        ),
-        "{:?}",
-        decode(&pwa)
+    assert_eq!(
+        decode(&pwa),
+        Err(ImageError::UnexpectedSection {
+            kind: SectionKind::Trajectories,
+            mode: Mode::PwaFeedback
+        })
     );
     // Image::new builds feedforward images only.
     let c = simple();
@@ -522,13 +569,285 @@ fn rejects_too_many_rows() {
 
 #[test]
 fn rejects_overlong_varint_as_not_canonical() {
-    // The first payload field is K's byte string: length prefix 8 (one byte, 0x08). Re-encode the prefix
-    // as the overlong varint 0x88 0x00 and fix up the header: same content, non-canonical bytes.
+    // The first field of the locations section is K's byte string: length prefix 8 (one byte, 0x08).
+    // Re-encode the prefix as the overlong varint 0x88 0x00 and lay the sections out again: same content,
+    // non-canonical bytes.
     let b = simple().to_bytes().unwrap();
-    assert_eq!(b[HEADER_LEN], 8);
-    let mut x = b[..HEADER_LEN].to_vec();
-    x.extend_from_slice(&[0x88, 0x00]);
-    x.extend_from_slice(&b[HEADER_LEN + 1..]);
-    fix_header(&mut x);
-    assert_eq!(decode(&x), Err(ImageError::NotCanonical));
+    let mut secs = sections_of(&b);
+    assert_eq!(secs[0].0, SectionKind::Locations as u16);
+    assert_eq!(secs[0].1[0], 8);
+    secs[0].1.splice(0..1, [0x88, 0x00]);
+    let x = with_sections(&b, &secs);
+    assert_eq!(
+        decode(&x),
+        Err(ImageError::NotCanonical {
+            section: SectionKind::Locations
+        })
+    );
+    // The untouched layout decodes.
+    assert_eq!(with_sections(&b, &sections_of(&b)), b);
+}
+
+#[test]
+fn directory_lists_the_feedforward_sections_back_to_back() {
+    let b = simple().to_bytes().unwrap();
+    let h = Header::parse(&b).unwrap();
+    assert_eq!(h.n_sections, 5);
+    let dir = directory(&b).unwrap();
+    let mut next = HEADER_LEN + 12 * dir.len();
+    let kinds: Vec<u16> = (0..dir.len())
+        .map(|i| {
+            let e = dir.entry(i).unwrap();
+            assert_eq!((e.offset as usize, e.flags), (next, 0));
+            next += e.len as usize;
+            e.kind
+        })
+        .collect();
+    assert_eq!(next, b.len());
+    assert_eq!(
+        kinds,
+        Mode::Feedforward
+            .required_sections()
+            .iter()
+            .map(|&k| k as u16)
+            .collect::<Vec<_>>()
+    );
+    assert!(dir.entry(5).is_none());
+}
+
+#[test]
+fn rejects_bad_directories() {
+    let b = simple().to_bytes().unwrap();
+    let secs = sections_of(&b);
+    let with = |f: &dyn Fn(&mut Sections)| {
+        let mut s = secs.clone();
+        f(&mut s);
+        decode(&with_sections(&b, &s)).map(|_| ())
+    };
+    // A well-formed section of a kind this build does not know: refused, not skipped.
+    assert_eq!(
+        with(&|s| s.push((200, vec![1, 2, 3]))),
+        Err(ImageError::UnknownSection { kind: 200 })
+    );
+    assert_eq!(
+        with(&|s| s.insert(0, (0, vec![]))),
+        Err(ImageError::UnknownSection { kind: 0 })
+    );
+    // Twice the same kind, kinds out of order, a missing kind, a kind of the other mode.
+    assert_eq!(
+        with(&|s| {
+            let d = s[1].clone();
+            s.insert(1, d)
+        }),
+        Err(ImageError::DuplicateSection {
+            kind: SectionKind::Fallback
+        })
+    );
+    assert_eq!(
+        with(&|s| s.swap(0, 1)),
+        Err(ImageError::SectionOrder { index: 1, kind: 1 })
+    );
+    assert_eq!(
+        with(&|s| {
+            s.remove(3);
+        }),
+        Err(ImageError::MissingSection {
+            kind: SectionKind::Segments
+        })
+    );
+    assert_eq!(
+        with(&|s| s.push((SectionKind::PwaBalls as u16, vec![]))),
+        Err(ImageError::UnexpectedSection {
+            kind: SectionKind::PwaBalls,
+            mode: Mode::Feedforward
+        })
+    );
+    assert_eq!(
+        with(&|s| s.clear()),
+        Err(ImageError::DimOutOfRange {
+            dim: Dim::Sections,
+            value: 0,
+            min: 1,
+            max: MAX_SECTIONS as u32
+        })
+    );
+
+    // Entries patched in place (CRC fixed): flags, a gap, an overlap, a section past the end, a directory
+    // longer than the image.
+    let entry = |i: usize| HEADER_LEN + 12 * i;
+    let patch = |at: usize, v: &[u8]| {
+        let mut x = b.clone();
+        x[at..at + v.len()].copy_from_slice(v);
+        fix_header(&mut x);
+        decode(&x).map(|_| ())
+    };
+    assert_eq!(
+        patch(entry(2) + 2, &1u16.to_le_bytes()),
+        Err(ImageError::SectionFlags { index: 2 })
+    );
+    let off1 = u32::from_le_bytes(b[entry(1) + 4..entry(1) + 8].try_into().unwrap());
+    assert_eq!(
+        patch(entry(1) + 4, &(off1 + 1).to_le_bytes()),
+        Err(ImageError::SectionPlacement {
+            index: 1,
+            expected: off1,
+            found: off1 + 1
+        })
+    );
+    assert_eq!(
+        patch(entry(1) + 4, &(off1 - 1).to_le_bytes()),
+        Err(ImageError::SectionPlacement {
+            index: 1,
+            expected: off1,
+            found: off1 - 1
+        })
+    );
+    assert_eq!(
+        patch(entry(4) + 8, &u32::MAX.to_le_bytes()),
+        Err(ImageError::SectionOutOfRange { index: 4 })
+    );
+    let mut short = b[..HEADER_LEN + 24].to_vec();
+    fix_header(&mut short);
+    assert_eq!(
+        decode(&short),
+        Err(ImageError::DirectoryTruncated { sections: 5 })
+    );
+    // Every error names its section in words.
+    let msg = with(&|s| s.push((200, vec![]))).unwrap_err().to_string();
+    assert!(msg.contains("unknown section kind 200"), "{msg}");
+}
+
+/// A hybrid trajectory (locations 0, 1, 0) is three segments; the accessors read rows, locations and
+/// segments consistently, and the evaluator-facing row ranges are unchanged.
+#[test]
+fn segments_follow_the_locations_of_each_trajectory() {
+    let mut c = simple();
+    c.nl = 2;
+    c.K.extend_from_slice(&[7.0, 8.0]);
+    let P0 = c.P.clone();
+    c.P.extend_from_slice(&P0);
+    c.traj_len = vec![4, 1];
+    c.location = vec![0, 1, 1, 0, 1];
+    let b = c.to_bytes().unwrap();
+    let img = decode(&b).unwrap();
+    assert_eq!(img.n_segments(), 4);
+    assert_eq!(img.trajectory_segments(0), (0, 3));
+    assert_eq!(img.trajectory_segments(1), (3, 1));
+    assert_eq!(
+        img.segment(1),
+        Some(Segment {
+            location: 1,
+            first_row: 1,
+            len: 2
+        })
+    );
+    assert_eq!(img.segment(4), None);
+    assert_eq!(img.trajectory_rows(1), (4, 1));
+    assert_eq!(
+        (0..4).map(|s| img.location(0, s)).collect::<Vec<_>>(),
+        vec![0, 1, 1, 0]
+    );
+    assert_eq!(img.segment_of(0, 3), Some(2));
+    assert_eq!(img.segment_of(0, 4), None);
+    assert_eq!(Content::from_image(&img), c);
+}
+
+#[test]
+fn rejects_segments_inconsistent_with_the_table() {
+    let c = simple(); // trajectories of 3 and 2 rows, one segment each
+    let b = c.to_bytes().unwrap();
+    let secs = sections_of(&b);
+    assert_eq!(secs[3].0, SectionKind::Segments as u16);
+    // The segments section: postcard length prefix 18, then two 9-byte records.
+    assert_eq!(secs[3].1[0], 18);
+    let with_record = |s: usize, first: u32, len: u32, loc: u8| {
+        let mut secs = secs.clone();
+        let o = 1 + 9 * s;
+        secs[3].1[o..o + 4].copy_from_slice(&first.to_le_bytes());
+        secs[3].1[o + 4..o + 8].copy_from_slice(&len.to_le_bytes());
+        secs[3].1[o + 8] = loc;
+        decode(&with_sections(&b, &secs)).map(|_| ())
+    };
+    assert!(with_record(1, 3, 2, 0).is_ok());
+    // A gap or overlap between segments, an empty segment.
+    assert_eq!(
+        with_record(1, 4, 1, 0),
+        Err(ImageError::SegmentRows { segment: 1 })
+    );
+    assert_eq!(
+        with_record(1, 2, 3, 0),
+        Err(ImageError::SegmentRows { segment: 1 })
+    );
+    assert_eq!(
+        with_record(1, 3, 0, 0),
+        Err(ImageError::SegmentRows { segment: 1 })
+    );
+    // Segments covering more or fewer rows than the table holds.
+    assert_eq!(
+        with_record(1, 3, 3, 0),
+        Err(ImageError::FieldLength {
+            field: Field::V,
+            expected: 24,
+            found: 20
+        })
+    );
+    assert_eq!(
+        with_record(1, 3, 1, 0),
+        Err(ImageError::FieldLength {
+            field: Field::V,
+            expected: 16,
+            found: 20
+        })
+    );
+    assert_eq!(
+        with_record(1, 3, u32::MAX, 0),
+        Err(ImageError::DimOutOfRange {
+            dim: Dim::Steps,
+            value: u32::MAX,
+            min: 1,
+            max: MAX_STEPS as u32
+        })
+    );
+    assert_eq!(
+        with_record(1, 3, 2, 1),
+        Err(ImageError::LocationOutOfRange {
+            trajectory: 1,
+            step: 0,
+            value: 1
+        })
+    );
+
+    // A trajectory split into two segments of the same location is not canonical; more segments than the
+    // trajectories name is a length error.
+    let mut two = c.clone();
+    two.nl = 2;
+    two.K.extend_from_slice(&[7.0, 8.0]);
+    let P0 = two.P.clone();
+    two.P.extend_from_slice(&P0);
+    two.location = vec![0, 1, 0, 0, 0];
+    let o = two.owned();
+    let mut split = o.segment.clone();
+    split[9 + 8] = 0; // segment 1 (row 1) now in location 0, like segment 0
+    let p = shared_types::image::Payload {
+        segment: &split,
+        ..o.payload()
+    };
+    assert_eq!(
+        shared_types::image::Image::new(Mode::Feedforward, two.dims(), two.period, p),
+        Err(ImageError::SegmentNotMaximal { segment: 1 })
+    );
+    let mut extra = o.segment.clone();
+    extra.extend_from_slice(&[0; 9]);
+    let p = shared_types::image::Payload {
+        segment: &extra,
+        ..o.payload()
+    };
+    assert_eq!(
+        shared_types::image::Image::new(Mode::Feedforward, two.dims(), two.period, p),
+        Err(ImageError::FieldLength {
+            field: Field::Segment,
+            expected: 36,
+            found: 45
+        })
+    );
 }

@@ -4,10 +4,9 @@
 //! error expected.
 #![allow(non_snake_case)]
 
-mod common;
-
-use common::{
-    random_pwa, random_spd, tree_depth, two_partitions, FallbackC, PwaContent, PwaShape, L0, L1,
+use crate::common::{
+    random_pwa, random_spd, sections_of, tree_depth, two_partitions, with_sections, FallbackC,
+    PwaContent, PwaShape, L0, L1,
 };
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -15,7 +14,7 @@ use shared_types::capacity::{
     MAX_BALLS, MAX_BALL_REFS, MAX_IMAGE_LEN, MAX_LEAF_BALLS, MAX_LEAVES, MAX_M, MAX_N,
     MAX_PARTITIONS, MAX_TREE_DEPTH, MAX_TREE_NODES,
 };
-use shared_types::image::{decode, encode, Dim, Field, Header, ImageError, Mode, Pos};
+use shared_types::image::{decode, encode, Dim, Field, Header, ImageError, Mode, Pos, SectionKind};
 use shared_types::pwa::{Child, LEAF_BASE, OUTSIDE};
 
 #[test]
@@ -66,7 +65,7 @@ fn round_trip_fixed_content() {
 #[test]
 fn feedforward_images_have_empty_pwa_tables() {
     let mut rng = ChaCha8Rng::seed_from_u64(3);
-    let c = common::random_content(&mut rng, 3, 2, 2, 3);
+    let c = crate::common::random_content(&mut rng, 3, 2, 2, 3);
     let bytes = c.to_bytes().unwrap();
     let img = decode(&bytes).unwrap();
     assert_eq!(img.n_partitions(), 0);
@@ -574,15 +573,28 @@ fn accepts_content_next_to_the_rejections() {
 fn rejects_invalid_payload_bytes() {
     #[rustfmt::skip]
     let rows: Vec<Row<Vec<u8>>> = vec![
-        // The first payload field is K's byte string: length prefix 8 (0x08). Re-encode it as the
-        // overlong varint 0x88 0x00: same content, non-canonical bytes.
-        byte_row("payload: overlong varint 0x88 0x00 for K's length 8",
-            |b| { assert_eq!(b[32], 8); b.splice(32..33, [0x88, 0x00]); },
-            Is(ImageError::NotCanonical)),
-        byte_row("payload: a trailing zero byte", |b| b.push(0),
-            Is(ImageError::TrailingBytes)),
-        byte_row("payload: last byte cut off", |b| { b.pop(); },
-            Is(ImageError::Malformed)),
+        // The first field of the locations section is K's byte string: length prefix 8 (0x08).
+        // Re-encode it as the overlong varint 0x88 0x00: same content, non-canonical bytes.
+        byte_row("locations: overlong varint 0x88 0x00 for K's length 8",
+            |b| { let mut s = sections_of(b); assert_eq!(s[0].1[0], 8); s[0].1.splice(0..1, [0x88, 0x00]);
+                  *b = with_sections(b, &s); },
+            Is(ImageError::NotCanonical { section: SectionKind::Locations })),
+        byte_row("balls: a trailing zero byte", |b| { let mut s = sections_of(b); s[4].1.push(0);
+                  *b = with_sections(b, &s); },
+            Is(ImageError::TrailingBytes { section: SectionKind::PwaBalls })),
+        byte_row("tree: last byte cut off", |b| { let mut s = sections_of(b); s[3].1.pop();
+                  *b = with_sections(b, &s); },
+            Is(ImageError::Malformed { section: SectionKind::PwaTree })),
+        byte_row("directory: a feedforward section in a PWA image", |b| {
+                  let mut s = sections_of(b); s.insert(2, (SectionKind::Steps as u16, vec![0]));
+                  *b = with_sections(b, &s); },
+            Is(ImageError::UnexpectedSection { kind: SectionKind::Steps, mode: Mode::PwaFeedback })),
+        byte_row("directory: the tree section missing", |b| {
+                  let mut s = sections_of(b); s.remove(3); *b = with_sections(b, &s); },
+            Is(ImageError::MissingSection { kind: SectionKind::PwaTree })),
+        byte_row("directory: an unknown section kind", |b| {
+                  let mut s = sections_of(b); s.push((9, vec![])); *b = with_sections(b, &s); },
+            Is(ImageError::UnknownSection { kind: 9 })),
         byte_row("header: n = 3 (payload has n = 2)", |b| b[8..10].copy_from_slice(&3u16.to_le_bytes()),
             Is(ImageError::FieldLength { field: Field::K, expected: 12, found: 8 })),
         byte_row("header: 3 partitions (payload has 2)", |b| b[16..18].copy_from_slice(&3u16.to_le_bytes()),
@@ -592,7 +604,7 @@ fn rejects_invalid_payload_bytes() {
     run_rows(&rows, |r| {
         let mut b = good.clone();
         (r.mutate)(&mut b);
-        common::fix_header(&mut b);
+        crate::common::fix_header(&mut b);
         match decode(&b) {
             Ok(_) => Err("decode accepted the bytes".into()),
             Err(e) => check_error(r, e),

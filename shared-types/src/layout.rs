@@ -1,0 +1,181 @@
+//! The fixed vocabulary of the image layout: magic, format version, header field offsets, the controller
+//! [`Mode`], the header [`Dims`] and the [`SectionKind`] tags of the section directory. Plain constants and
+//! types with no behaviour beyond byte conversions, so that every other module (errors, header parsing,
+//! the PWA tables, the image) can name them without depending on each other. The layout itself is
+//! described in [`crate::image`].
+
+/// First four bytes of every image ("safe controller image").
+pub const MAGIC: [u8; 4] = *b"SFCI";
+
+/// Version of the layout described in [`crate::image`]. Decoding rejects every other version. Version 2
+/// added the whitened ball test of PWA images; version 3 stored PWA tree nodes and ball tests as one record
+/// each; version 4 replaced the single postcard payload by a directory of typed sections and the per-row
+/// location bytes of the feedforward table by segments.
+pub const FORMAT_VERSION: u16 = 4;
+
+/// Byte offset of the section count (`u16`) in the header.
+pub const SECTION_COUNT_OFFSET: usize = 18;
+/// Byte offset of the CRC in the header; the CRC covers the header bytes before it and everything after
+/// the header.
+pub const CRC_OFFSET: usize = 28;
+/// Bytes of one section directory entry: kind (`u16`), flags (`u16`, 0), offset (`u32`, from the start of
+/// the image), length (`u32`).
+pub const DIR_ENTRY_LEN: usize = 12;
+/// Bytes of one feedforward segment record: first row (`u32`), number of rows (`u32`), location (`u8`).
+pub const SEGMENT_RECORD_LEN: usize = 9;
+
+/// How the controller computes its input.
+#[repr(u8)]
+#[non_exhaustive]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Mode {
+    /// Algorithm 2: select a robust ball at κ = 0, then `u = K x + v_i(κ)`.
+    Feedforward = 1,
+    /// PWA feedback (Ch. 6): locate the partition j of x with a bounded-depth tree, check that x lies in
+    /// a certified ball of that leaf (the envelope F), then `u = K_j x + θ0_j` with `K_j = K + θ_j`.
+    PwaFeedback = 2,
+}
+
+impl Mode {
+    /// The mode with this byte value, if any.
+    pub const fn from_u8(b: u8) -> Option<Mode> {
+        match b {
+            1 => Some(Mode::Feedforward),
+            2 => Some(Mode::PwaFeedback),
+            _ => None,
+        }
+    }
+
+    /// The sections an image of this mode must carry, each exactly once (in kind order).
+    pub const fn required_sections(self) -> &'static [SectionKind] {
+        match self {
+            Mode::Feedforward => &[
+                SectionKind::Locations,
+                SectionKind::Fallback,
+                SectionKind::Trajectories,
+                SectionKind::Segments,
+                SectionKind::Steps,
+            ],
+            Mode::PwaFeedback => &[
+                SectionKind::Locations,
+                SectionKind::Fallback,
+                SectionKind::PwaLaws,
+                SectionKind::PwaTree,
+                SectionKind::PwaBalls,
+            ],
+        }
+    }
+
+    /// Whether a section of `kind` belongs in an image of this mode. Today every section a mode admits is
+    /// required; optional sections (guards and resets, model programs) will be admitted here.
+    pub fn admits(self, kind: SectionKind) -> bool {
+        self.required_sections().contains(&kind)
+    }
+}
+
+/// Dimensions of an image, as declared in its header.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Dims {
+    /// State dimension.
+    pub n: usize,
+    /// Input dimension.
+    pub m: usize,
+    /// Number of locations (≥ 1).
+    pub n_locations: usize,
+    /// Number of trajectories (0 in PWA mode).
+    pub n_trajectories: usize,
+    /// Number of partitions (0 in feedforward mode, ≥ 1 in PWA mode).
+    pub n_partitions: usize,
+}
+
+/// The type tag of a section in the directory. The numbering is part of the format: a tag is never reused
+/// for another meaning. Later issues add kinds (guards and resets, model programs for nonlinear plants,
+/// controller states) after the existing ones, without touching these.
+///
+/// A decoder meets a tag it does not know in an image written for a newer firmware. It rejects it
+/// ([`crate::image::ImageError::UnknownSection`]): the image's certificate may depend on that section (a
+/// guard, a model program), and a firmware that cannot evaluate it cannot run what was certified.
+#[repr(u16)]
+#[non_exhaustive]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum SectionKind {
+    /// `K_ℓ` and `P_ℓ` per location.
+    Locations = 1,
+    /// The fallback law and the optional input box.
+    Fallback = 2,
+    /// Feedforward trajectories: terminal behaviour; per trajectory its ball and its run of segments.
+    Trajectories = 3,
+    /// Feedforward segments: per segment the location and its run of rows of the step table.
+    Segments = 4,
+    /// The feedforward step table `v` (rows × m).
+    Steps = 5,
+    /// PWA laws: `K_j` and `θ0_j` per partition.
+    PwaLaws = 6,
+    /// PWA point-location tree: node records and leaves with their ball references.
+    PwaTree = 7,
+    /// PWA certified balls and the per-location factors `R̂_ℓ` of their whitened test.
+    PwaBalls = 8,
+}
+
+impl SectionKind {
+    /// Every kind this build knows, in tag order.
+    pub const ALL: [SectionKind; 8] = [
+        SectionKind::Locations,
+        SectionKind::Fallback,
+        SectionKind::Trajectories,
+        SectionKind::Segments,
+        SectionKind::Steps,
+        SectionKind::PwaLaws,
+        SectionKind::PwaTree,
+        SectionKind::PwaBalls,
+    ];
+
+    /// The kind with this tag, if this build knows it.
+    pub const fn from_u16(tag: u16) -> Option<SectionKind> {
+        match tag {
+            1 => Some(SectionKind::Locations),
+            2 => Some(SectionKind::Fallback),
+            3 => Some(SectionKind::Trajectories),
+            4 => Some(SectionKind::Segments),
+            5 => Some(SectionKind::Steps),
+            6 => Some(SectionKind::PwaLaws),
+            7 => Some(SectionKind::PwaTree),
+            8 => Some(SectionKind::PwaBalls),
+            _ => None,
+        }
+    }
+
+    /// Index into [`SectionKind::ALL`] (tag − 1).
+    pub const fn index(self) -> usize {
+        self as usize - 1
+    }
+
+    /// Short lowercase name, as `inspect` prints it.
+    pub const fn name(self) -> &'static str {
+        match self {
+            SectionKind::Locations => "locations",
+            SectionKind::Fallback => "fallback",
+            SectionKind::Trajectories => "trajectories",
+            SectionKind::Segments => "segments",
+            SectionKind::Steps => "steps",
+            SectionKind::PwaLaws => "pwa_laws",
+            SectionKind::PwaTree => "pwa_tree",
+            SectionKind::PwaBalls => "pwa_balls",
+        }
+    }
+}
+
+impl core::fmt::Display for SectionKind {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        write!(f, "{} section ({})", self.name(), *self as u16)
+    }
+}
+
+impl core::fmt::Display for Mode {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(match self {
+            Mode::Feedforward => "feedforward",
+            Mode::PwaFeedback => "PWA feedback",
+        })
+    }
+}
