@@ -88,6 +88,7 @@ fn check(example: &str) {
     if std::env::var_os("FIXTURES_UPDATE").is_some() {
         std::fs::write(&fixture, &o.stdout).unwrap();
     }
+    check_layout(example, &got);
     let want: Value = serde_json::from_slice(&std::fs::read(&fixture).unwrap()).unwrap();
     let mut diffs = Vec::new();
     differences("", &want, &got, &mut diffs);
@@ -104,6 +105,37 @@ fn check(example: &str) {
             .collect::<Vec<_>>()
             .join("\n")
     );
+}
+
+/// The format-v4 layout `inspect` reports: the section directory a mode requires, in tag order, and for a
+/// feedforward image of a one-location plant one segment per trajectory covering its rows.
+fn check_layout(example: &str, got: &Value) {
+    let kinds: Vec<&str> = got["sections"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| s["kind"].as_str().unwrap())
+        .collect();
+    let pwa = got.get("pwa").is_some();
+    let want: &[&str] = if pwa {
+        &["locations", "fallback", "pwa_laws", "pwa_tree", "pwa_balls"]
+    } else {
+        &["locations", "fallback", "trajectories", "segments", "steps"]
+    };
+    assert_eq!(kinds, want, "{example}: section directory");
+    let segments = got["segments"].as_array().unwrap();
+    let trajectories = got["trajectories"].as_array().unwrap();
+    assert_eq!(
+        segments.len(),
+        trajectories.len(),
+        "{example}: one segment per trajectory"
+    );
+    for (s, t) in segments.iter().zip(trajectories) {
+        assert_eq!(s["trajectory"], t["index"], "{example}");
+        assert_eq!(s["location"], 0, "{example}");
+        assert_eq!(s["first_row"], t["first_row"], "{example}");
+        assert_eq!(s["steps"], t["steps"], "{example}");
+    }
 }
 
 #[test]
