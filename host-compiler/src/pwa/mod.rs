@@ -172,14 +172,12 @@ impl PwaSettings {
 /// Why no PWA controller could be built.
 #[derive(Debug, thiserror::Error)]
 pub enum PwaError {
-    #[error("sets of the spec: {0}")]
-    Sets(String),
     #[error("no certified trajectory with a step before Goal: nothing to learn from")]
     NoData,
     #[error("the CAF metric P is not positive definite")]
     MetricNotPd,
     #[error("no critical radius for A + BK: {0}")]
-    RCrit(String),
+    RCrit(#[source] crate::caf::CafError),
     #[error(
         "ball of trajectory {traj} at step {kappa}: the f32 ball test certifies no radius within δ = {delta:e}"
     )]
@@ -188,10 +186,51 @@ pub enum PwaError {
         kappa: usize,
         delta: f64,
     },
-    #[error("the tree needs more than the image capacities allow: {0}")]
-    Capacity(String),
+    #[error(
+        "the tree needs more than the image capacities allow: {exceeded}{}",
+        learned.map_or(String::new(), |l| format!(" ({l})"))
+    )]
+    Capacity {
+        exceeded: CapacityExceeded,
+        /// What the tree was built from, when the learner adds it.
+        learned: Option<LearnedSummary>,
+    },
     #[error(transparent)]
     Emit(#[from] crate::emit::EmitError),
+}
+
+/// Which fixed capacity of the image (`shared_types::capacity`) the tree would exceed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum CapacityExceeded {
+    /// The tree needs a node beyond `max` (`MAX_TREE_NODES`).
+    #[error("more than {max} tree nodes")]
+    TreeNodes { max: usize },
+    /// `dropped` (leaf, ball) pairs did not fit the leaves' `max` balls each (`MAX_LEAF_BALLS`).
+    #[error(
+        "{dropped} (leaf, ball) pairs exceed MAX_LEAF_BALLS = {max}: part of F would be reported out of \
+         envelope, so the certificate would not hold"
+    )]
+    LeafBalls { dropped: usize, max: usize },
+}
+
+/// What a PWA tree was built from, for the capacity message.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LearnedSummary {
+    pub laws: usize,
+    pub data_points: usize,
+    pub learn_seconds: f64,
+    /// The fitting tolerance ε_fit.
+    pub eps_fit: f64,
+}
+
+impl std::fmt::Display for LearnedSummary {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} laws learned from {} data points in {:.1} s, ε_fit = {:.3e}",
+            self.laws, self.data_points, self.learn_seconds, self.eps_fit
+        )
+    }
 }
 
 /// One data point: the step κ of certified trajectory i, with its ball.
@@ -330,7 +369,7 @@ impl PwaContext {
         }
         let At = &model.A + &model.B * &syn.K;
         let rc1 = crate::caf::r_crit(At.as_ref(), syn.P.as_ref(), model.B.as_ref(), 1.0)
-            .map_err(|e| PwaError::RCrit(e.to_string()))?
+            .map_err(PwaError::RCrit)?
             .r_crit;
         let rho_min = points.iter().map(|p| p.rho).fold(f64::INFINITY, f64::min);
         let mut eps_round = 0.0f64;
@@ -559,12 +598,15 @@ pub fn build_pwa(
         .collect();
     let (mut builder, stats) =
         build_image(&ctx, &laws, &assignment, &admissible).map_err(|e| match e {
-            PwaError::Capacity(s) => PwaError::Capacity(format!(
-                "{s} ({} laws learned from {} data points in {learn_seconds:.1} s, ε_fit = {:.3e})",
-                laws.len(),
-                ctx.points.len(),
-                ctx.eps_fit
-            )),
+            PwaError::Capacity { exceeded, .. } => PwaError::Capacity {
+                exceeded,
+                learned: Some(LearnedSummary {
+                    laws: laws.len(),
+                    data_points: ctx.points.len(),
+                    learn_seconds,
+                    eps_fit: ctx.eps_fit,
+                }),
+            },
             e => e,
         })?;
     builder.period = task.plant.period();

@@ -21,6 +21,7 @@ use super::{simulate, Nominal};
 use crate::linalg::{mat_vec, p_norm, spectral_norm, sym_fn, PdRoots};
 use crate::model::{DiscretePlant, Plant};
 use crate::property::{ConvexSets, ReachAvoid};
+use crate::solver::SetupError;
 use clarabel::algebra::CscMatrix;
 use clarabel::solver::{
     DefaultSettingsBuilder, DefaultSolver, IPSolver, SolverStatus, SupportedConeT,
@@ -100,6 +101,23 @@ pub struct Generated {
     pub iterations: usize,
 }
 
+/// Why the sequential-convex iteration stopped without a trajectory: the outcome of its last subproblem.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum SubproblemStatus {
+    /// Clarabel ran and ended without a solution (infeasible, iteration limit, numerical trouble).
+    #[error("{0:?}")]
+    Solver(SolverStatus),
+    /// Clarabel refused to set the subproblem up.
+    #[error("{0}")]
+    Setup(#[from] SetupError),
+    /// The Goal ellipsoid's shape matrix Q has no real square root Q^{1/2} (its eigen-decomposition failed).
+    #[error("goal shape has no square root")]
+    GoalShape,
+    /// Only the first subproblem, which ignores Unsafe, was solved: no iterate is safe.
+    #[error("no iterate with Unsafe constraints")]
+    NoUnsafeIterate,
+}
+
 /// Why no trajectory was found.
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum GenError {
@@ -107,12 +125,23 @@ pub enum GenError {
     Infeasible {
         x0: Vec<f64>,
         steps: usize,
-        status: String,
+        status: SubproblemStatus,
     },
     #[error("the CAF matrix P is not positive definite")]
     BadMetric,
-    #[error("dimension mismatch: {0}")]
-    Dimension(String),
+    #[error(
+        "dimension mismatch: n = {n}, m = {m}, x0 has {x0}, K is {k_rows}×{k_cols} (expected {m}×{n})"
+    )]
+    Dimension {
+        /// States and inputs of the plant.
+        n: usize,
+        m: usize,
+        /// Entries of x0.
+        x0: usize,
+        /// Shape of the feedback gain K.
+        k_rows: usize,
+        k_cols: usize,
+    },
 }
 
 /// Generate a trajectory from `x0` that maximises the tube radius δ (see the module doc).
@@ -125,10 +154,13 @@ pub fn generate(
     let n = model.n();
     let m = model.m();
     if x0.len() != n || prob.K.nrows() != m || prob.K.ncols() != n {
-        return Err(GenError::Dimension(format!(
-            "n = {n}, m = {m}, x0 has {}",
-            x0.len()
-        )));
+        return Err(GenError::Dimension {
+            n,
+            m,
+            x0: x0.len(),
+            k_rows: prob.K.nrows(),
+            k_cols: prob.K.ncols(),
+        });
     }
     let roots = PdRoots::new(prob.P).ok_or(GenError::BadMetric)?;
     let mut best: Option<Generated> = None;
@@ -171,7 +203,7 @@ pub fn generate(
     best.ok_or_else(|| GenError::Infeasible {
         x0: x0.to_vec(),
         steps: prob.steps,
-        status: "no iterate with Unsafe constraints".into(),
+        status: SubproblemStatus::NoUnsafeIterate,
     })
 }
 
@@ -198,14 +230,14 @@ impl Rows {
     }
 }
 
-/// One SOCP: returns v(0..N) and δ, or the solver status.
+/// One SOCP: returns v(0..N) and δ, or why it has none.
 fn solve_subproblem(
     prob: &GenProblem<'_>,
     roots: &PdRoots,
     x0: &[f64],
     lin: Option<&Nominal>,
     settings: &GenSettings,
-) -> Result<(Vec<Vec<f64>>, f64), String> {
+) -> Result<(Vec<Vec<f64>>, f64), SubproblemStatus> {
     let model = prob.model();
     let (A, B, K) = (model.A.as_ref(), model.B.as_ref(), prob.K);
     let n = A.nrows();
@@ -310,8 +342,7 @@ fn solve_subproblem(
         }
     }
     if let ConvexPiece::Ellipsoid { C, c, Q } = &prob.convex.goal {
-        let Qh =
-            sym_fn(Q.as_ref(), |l| l.max(0.0).sqrt()).ok_or("goal shape has no square root")?;
+        let Qh = sym_fn(Q.as_ref(), |l| l.max(0.0).sqrt()).ok_or(SubproblemStatus::GoalShape)?;
         let QhC = &Qh * C;
         let sg = spectral_norm((&QhC * &roots.inv_sqrt).as_ref());
         let Qhc = mat_vec(Qh.as_ref(), c);
@@ -350,13 +381,13 @@ fn solve_subproblem(
         .verbose(false)
         .max_iter(200)
         .build()
-        .map_err(|e| format!("{e:?}"))?;
-    let mut solver =
-        DefaultSolver::new(&Pm, &q, &Am, &rows.b, &rows.cones, st).map_err(|e| format!("{e:?}"))?;
+        .expect("verbose and max_iter = 200 are in clarabel's valid range");
+    let mut solver = DefaultSolver::new(&Pm, &q, &Am, &rows.b, &rows.cones, st)
+        .map_err(|e| SubproblemStatus::Setup(e.into()))?;
     solver.solve();
     match solver.solution.status {
         SolverStatus::Solved | SolverStatus::AlmostSolved => {}
-        s => return Err(format!("{s:?}")),
+        s => return Err(SubproblemStatus::Solver(s)),
     }
     let z = &solver.solution.x;
     let v: Vec<Vec<f64>> = (0..N)
