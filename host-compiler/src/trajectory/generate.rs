@@ -21,6 +21,7 @@ use super::{simulate, Nominal};
 use crate::linalg::{mat_vec, p_norm, spectral_norm, sym_fn, PdRoots};
 use crate::model::{DiscretePlant, Plant};
 use crate::property::{ConvexSets, ReachAvoid};
+use crate::settings::{settings_builder, Check, SettingError};
 use crate::solver::SetupError;
 use clarabel::algebra::CscMatrix;
 use clarabel::solver::{
@@ -31,16 +32,17 @@ use faer::MatRef;
 
 pub use crate::property::{ConvexPiece, InputBound};
 
-/// Settings of the generator, with documented defaults.
+/// Settings of the generator, with documented defaults. Build with [`GenSettings::builder`] (validated) or
+/// take [`Default`].
 #[derive(Clone, Debug)]
 pub struct GenSettings {
-    /// Sequential-convex iterations at most (default 12).
+    /// Sequential-convex iterations at most. ≥ 1. Default 12.
     pub max_iter: usize,
-    /// Stop when δ improves by less than this, relative (default 1e-4).
+    /// Stop when δ improves by less than this, relative. Finite, ≥ 0. Default 1e-4.
     pub tol: f64,
-    /// Weight of Σ‖v(κ+1) − v(κ)‖² against δ, for smooth inputs (default 1e-4).
+    /// Weight of Σ‖v(κ+1) − v(κ)‖² against δ, for smooth inputs. Finite, ≥ 0. Default 1e-4.
     pub smooth_weight: f64,
-    /// Upper bound on δ in the subproblems, keeping them bounded (default 10).
+    /// Upper bound on δ in the subproblems, keeping them bounded. Finite, > 0. Default 10.
     pub delta_max: f64,
 }
 
@@ -54,6 +56,27 @@ impl Default for GenSettings {
         }
     }
 }
+
+impl GenSettings {
+    /// Checks the ranges documented on the fields; the first violation is returned.
+    pub fn validate(&self) -> Result<(), SettingError> {
+        let c = Check("GenSettings");
+        c.at_least_one("max_iter", self.max_iter)?;
+        c.non_negative("tol", self.tol)?;
+        c.non_negative("smooth_weight", self.smooth_weight)?;
+        c.positive("delta_max", self.delta_max)
+    }
+}
+
+settings_builder!(
+    GenSettings,
+    GenSettingsBuilder {
+        max_iter: usize,
+        tol: f64,
+        smooth_weight: f64,
+        delta_max: f64,
+    }
+);
 
 /// What the generator needs of the task.
 pub struct GenProblem<'a> {
@@ -526,6 +549,22 @@ mod tests {
         for uk in &out.nominal.u {
             assert!((uk[0] * uk[0] + uk[1] * uk[1]).sqrt() <= 0.5 + 1e-6);
         }
+    }
+
+    #[test]
+    fn the_builder_refuses_a_non_positive_delta_max() {
+        let e = GenSettings::builder().delta_max(0.0).build().unwrap_err();
+        assert_eq!(
+            (e.settings, e.field, e.value),
+            ("GenSettings", "delta_max", 0.0)
+        );
+        assert!(e.to_string().contains("GenSettings.delta_max = 0"), "{e}");
+        assert!(GenSettings::builder().max_iter(0).build().is_err());
+        let s = GenSettings::builder().max_iter(3).build().unwrap();
+        assert_eq!(
+            (s.max_iter, s.delta_max),
+            (3, GenSettings::default().delta_max)
+        );
     }
 
     #[test]
