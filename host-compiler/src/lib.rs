@@ -20,6 +20,8 @@ pub mod property;
 pub mod pwa;
 pub mod report;
 pub mod robustness;
+pub mod settings;
+pub mod solver;
 pub mod spec;
 pub mod synth;
 pub mod task;

@@ -180,5 +180,5 @@ pub enum CafError {
     #[error("r_crit is defined for the discrete-time loop only")]
     NotDiscrete,
     #[error("clarabel rejected the problem: {0}")]
-    Solver(String),
+    Solver(#[from] crate::solver::SetupError),
 }

@@ -11,6 +11,8 @@ use clarabel::algebra::CscMatrix;
 use clarabel::solver::{DefaultSettings, DefaultSolver, IPSolver, SolverStatus, SupportedConeT};
 use faer::Mat;
 
+use crate::solver::SetupError;
+
 /// The vectorisation clarabel's PSD triangle cone uses (see the module docs).
 pub(crate) fn svec(M: &Mat<f64>) -> Vec<f64> {
     let k = M.nrows();
@@ -120,7 +122,9 @@ impl Sdp {
         self.quad[v] += w;
     }
 
-    pub fn solve(self, settings: DefaultSettings<f64>) -> Result<SdpResult, String> {
+    /// Solves the program; clarabel's refusal to set it up is an error, anything after that (including
+    /// infeasibility) is the status in the result.
+    pub fn solve(self, settings: DefaultSettings<f64>) -> Result<SdpResult, SetupError> {
         let m = self.b.len();
         let A = CscMatrix::new_from_triplets(m, self.nvars, self.rows, self.cols, self.vals);
         let mut pi = vec![];
@@ -132,8 +136,7 @@ impl Sdp {
             }
         }
         let P = CscMatrix::new_from_triplets(self.nvars, self.nvars, pi.clone(), pi, pv);
-        let mut solver = DefaultSolver::new(&P, &self.q, &A, &self.b, &self.cones, settings)
-            .map_err(|e| format!("{e:?}"))?;
+        let mut solver = DefaultSolver::new(&P, &self.q, &A, &self.b, &self.cones, settings)?;
         solver.solve();
         Ok(SdpResult {
             status: solver.solution.status,

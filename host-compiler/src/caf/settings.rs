@@ -166,3 +166,30 @@ impl CafSettingsBuilder {
         Ok(self.s)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::CafSettings;
+    use crate::caf::CafError;
+
+    #[test]
+    fn the_builder_refuses_a_condition_cap_of_one() {
+        let e = CafSettings::builder()
+            .max_condition(1.0)
+            .build()
+            .unwrap_err();
+        assert_eq!(
+            e,
+            CafError::Settings {
+                field: "max_condition",
+                value: 1.0,
+                rule: "must be finite and > 1",
+            }
+        );
+        assert!(CafSettings::builder().max_iter(0).build().is_err());
+        assert_eq!(
+            CafSettings::builder().build().unwrap(),
+            CafSettings::default()
+        );
+    }
+}

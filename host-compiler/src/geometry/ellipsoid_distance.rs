@@ -25,6 +25,7 @@
 
 use super::linalg::{self, SymEig};
 use super::{GeometryError, Metric};
+use crate::settings::{settings_builder, Check, SettingError};
 
 /// Relative size (to max |eig Q|) under which Q·V₂ counts as zero, V₂ spanning the null space of R: then the
 /// null space of R lies in that of Q (P₂₂ = 0 and P₂₁ = 0 in (7.7)), and moving along it never reaches the
@@ -33,13 +34,15 @@ const NULL_CONTAINMENT_TOL: f64 = 1e-12;
 /// Relative gap under which eigenvalues of Λ are treated as equal to λmax (they join the multiplicity M).
 const EQUAL_EIG_TOL: f64 = 1e-14;
 
-/// Settings of the root iteration (Lemma 7.9). Build with `BoundaryDistanceSettings::default().tol(..)`.
+/// Settings of the root iteration (Lemma 7.9), with documented defaults. Build with
+/// [`BoundaryDistanceSettings::builder`] (validated) or take [`Default`];
+/// [`EllipsoidBoundaryDistance::with_settings`] checks them again.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct BoundaryDistanceSettings {
     /// Stop when |G(µ)| ≤ tol, i.e. the returned point satisfies the (scaled) constraint to `tol`.
-    /// Default 1e-14.
+    /// Finite, > 0. Default 1e-14.
     pub tol: f64,
-    /// Iteration cap (safeguard; the iteration converges quadratically). Default 100.
+    /// Iteration cap (safeguard; the iteration converges quadratically). ≥ 1. Default 100.
     pub max_iter: u32,
 }
 
@@ -63,16 +66,21 @@ impl BoundaryDistanceSettings {
         self.max_iter = max_iter;
         self
     }
-    fn validate(&self) -> Result<(), GeometryError> {
-        if !(self.tol.is_finite() && self.tol > 0.0) {
-            return Err(GeometryError::NotPositive {
-                what: "boundary-distance tolerance",
-                value: self.tol,
-            });
-        }
-        Ok(())
+    /// Checks the ranges documented on the fields; the first violation is returned.
+    pub fn validate(&self) -> Result<(), SettingError> {
+        let c = Check("BoundaryDistanceSettings");
+        c.positive("tol", self.tol)?;
+        c.at_least_one("max_iter", self.max_iter as usize)
     }
 }
+
+settings_builder!(
+    BoundaryDistanceSettings,
+    BoundaryDistanceSettingsBuilder {
+        tol: f64,
+        max_iter: u32,
+    }
+);
 
 /// Which case of the analysis produced the optimum.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -1017,6 +1025,32 @@ mod tests {
 
     fn settings() -> BoundaryDistanceSettings {
         BoundaryDistanceSettings::default()
+    }
+
+    #[test]
+    fn the_builder_and_the_constructor_refuse_a_zero_tolerance() {
+        let e = BoundaryDistanceSettings::builder()
+            .tol(0.0)
+            .build()
+            .unwrap_err();
+        assert_eq!(
+            (e.settings, e.field, e.value),
+            ("BoundaryDistanceSettings", "tol", 0.0)
+        );
+        let e = BoundaryDistanceSettings::builder()
+            .max_iter(0)
+            .build()
+            .unwrap_err();
+        assert_eq!(e.field, "max_iter");
+        let bad = settings().tol(f64::NAN);
+        let r = EllipsoidBoundaryDistance::with_settings(&[0.0], &[1.0], &[1.0], bad);
+        assert!(
+            matches!(
+                r,
+                Err(GeometryError::Settings(SettingError { field: "tol", .. }))
+            ),
+            "{r:?}"
+        );
     }
 
     #[test]

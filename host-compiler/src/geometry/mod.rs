@@ -63,6 +63,8 @@ pub enum GeometryError {
     ZeroMatrix { what: &'static str },
     #[error("{what}: must be positive and finite, got {value}")]
     NotPositive { what: &'static str, value: f64 },
+    #[error(transparent)]
+    Settings(#[from] crate::settings::SettingError),
     #[error("{what}: has rank {rank}, needs full row rank {expected}")]
     RankDeficient {
         what: &'static str,

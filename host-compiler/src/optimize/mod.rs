@@ -25,39 +25,43 @@ pub mod pieces;
 pub mod potential;
 
 use crate::certify::{Certificate, Loop, LoopConstants};
+use crate::settings::{settings_builder, Check, SettingError};
 use crate::trajectory::Nominal;
 use std::sync::atomic::AtomicBool;
 
-/// Settings of the bundle method for [`maximize_delta`], a builder with documented defaults.
+/// Settings of the bundle method for [`maximize_delta`], with documented defaults. Build with
+/// [`BundleSettings::builder`] (validated) or take [`Default`]; the setters on the struct itself
+/// (`BundleSettings::default().hold(20)`) are the same without the check.
 #[derive(Clone, Debug)]
 pub struct BundleSettings {
-    /// Outer iterations (serious + null steps) at most (default 200).
+    /// Outer iterations (serious + null steps) at most. ≥ 1. Default 200.
     pub max_iterations: usize,
-    /// Stop when the predicted increase of δ is below this (absolute, default 1e-7).
+    /// Stop when the predicted increase of δ is below this (absolute). Finite, ≥ 0. Default 1e-7.
     pub tolerance: f64,
-    /// Smallest proximal step parameter t (default 1e-8); below it the method stops with `NoProgress`.
+    /// Smallest proximal step parameter t; below it the method stops with `NoProgress`. Finite, > 0.
+    /// Default 1e-8.
     pub min_step: f64,
-    /// Largest proximal step parameter t (default 1e2).
+    /// Largest proximal step parameter t. Finite and ≥ `min_step`. Default 1e2.
     pub max_step: f64,
     /// Size of the first move, as the RMS change per input component; sets the first proximal parameter
-    /// t (default 1e-2).
+    /// t. Finite, > 0. Default 1e-2.
     pub initial_step: f64,
     /// Serious-step test: accept when the certified gain is at least this fraction of the predicted
-    /// gain (default 0.1).
+    /// gain. In (0, 1). Default 0.1.
     pub serious_fraction: f64,
-    /// Bundle size at most, before aggregation (default 30).
+    /// Bundle size at most, before aggregation. ≥ 1. Default 30.
     pub bundle_size: usize,
     /// Optimise the terminal step too (default true): cut the sequence at k* before the first run, and
     /// whenever the bundle method stops converged, try a tenth more steps (holding the last input, up to
     /// `steps_max`) and restart from it if it certifies better.
     pub terminal_time: bool,
     /// When the start is not certified (some piece of δ(0) is not positive), first repair it with the
-    /// potential descent of §5.2 (L-BFGS) to this δ, one iteration of the count (default 1e-3; 0 turns
-    /// the repair off). The min of many violated pieces gives the bundle method one sample at a time; the
+    /// potential descent of §5.2 (L-BFGS) to this δ, one iteration of the count. Finite, ≥ 0; 0 turns
+    /// the repair off. Default 1e-3. The min of many violated pieces gives the bundle method one sample at a time; the
     /// potentials' sum moves all of them at once.
     pub repair_delta: f64,
     /// Reference hold L ([`crate::trajectory::hold`]): v is kept constant over blocks of L samples (the
-    /// start is projected, every subgradient is projected). Default 1 (no blocks).
+    /// start is projected, every subgradient is projected). ≥ 1. Default 1 (no blocks).
     pub hold: usize,
 }
 
@@ -79,6 +83,25 @@ impl Default for BundleSettings {
 }
 
 impl BundleSettings {
+    /// Checks the ranges documented on the fields; the first violation is returned.
+    pub fn validate(&self) -> Result<(), SettingError> {
+        let c = Check("BundleSettings");
+        c.at_least_one("max_iterations", self.max_iterations)?;
+        c.non_negative("tolerance", self.tolerance)?;
+        c.positive("min_step", self.min_step)?;
+        c.rule(
+            "max_step",
+            self.max_step,
+            self.max_step.is_finite() && self.max_step >= self.min_step,
+            "must be finite and ≥ min_step",
+        )?;
+        c.positive("initial_step", self.initial_step)?;
+        c.open_unit("serious_fraction", self.serious_fraction)?;
+        c.at_least_one("bundle_size", self.bundle_size)?;
+        c.non_negative("repair_delta", self.repair_delta)?;
+        c.at_least_one("hold", self.hold)
+    }
+
     pub fn max_iterations(mut self, v: usize) -> Self {
         self.max_iterations = v;
         self
@@ -120,6 +143,22 @@ impl BundleSettings {
         self
     }
 }
+
+settings_builder!(
+    BundleSettings,
+    BundleSettingsBuilder {
+        max_iterations: usize,
+        tolerance: f64,
+        min_step: f64,
+        max_step: f64,
+        initial_step: f64,
+        serious_fraction: f64,
+        bundle_size: usize,
+        terminal_time: bool,
+        repair_delta: f64,
+        hold: usize,
+    }
+);
 
 /// Why [`maximize_delta`] stopped.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
@@ -214,4 +253,29 @@ pub fn maximize_delta(
     cancel: &AtomicBool,
 ) -> Optimized {
     bundle::maximize(lp, lc, x0, v0, steps_max, settings, cancel)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::BundleSettings;
+
+    #[test]
+    fn the_bundle_builder_refuses_a_serious_fraction_outside_the_unit_interval() {
+        let e = BundleSettings::builder()
+            .serious_fraction(1.5)
+            .build()
+            .unwrap_err();
+        assert_eq!((e.field, e.value), ("serious_fraction", 1.5));
+        assert_eq!(
+            e.to_string(),
+            "BundleSettings.serious_fraction = 1.5: must lie in (0, 1)"
+        );
+        let e = BundleSettings::builder()
+            .max_step(1e-9)
+            .build()
+            .unwrap_err();
+        assert_eq!(e.field, "max_step");
+        assert!(BundleSettings::builder().hold(0).build().is_err());
+        assert_eq!(BundleSettings::builder().hold(20).build().unwrap().hold, 20);
+    }
 }

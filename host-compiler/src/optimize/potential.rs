@@ -31,40 +31,44 @@
 use super::pieces::{adjoint, LocalGrad, Pieces};
 use super::{check_inputs, OptimizeError};
 use crate::certify::{self, Certificate, Loop, LoopConstants};
+use crate::settings::{settings_builder, Check, SettingError};
 use crate::trajectory::Nominal;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
 
-/// Settings of the potential-function descent, with documented defaults.
+/// Settings of the potential-function descent, with documented defaults. Build with
+/// [`PotentialSettings::builder`] (validated) or take [`Default`]; the setters on the struct itself
+/// (`PotentialSettings::default().delta(0.02)`) are the same without the check.
 #[derive(Clone, Debug)]
 pub struct PotentialSettings {
-    /// δ_d, the robustness the trajectory must keep (default 0.01).
+    /// δ_d, the robustness the trajectory must keep. Finite, > 0. Default 0.01.
     pub delta: f64,
-    /// α, weight of the Goal potential (default 1).
+    /// α, weight of the Goal potential. Finite, ≥ 0. Default 1.
     pub weight_goal: f64,
-    /// β, weight of the Input potential relative to Unsafe (default 1).
+    /// β, weight of the Input potential relative to Unsafe. Finite, ≥ 0. Default 1.
     pub weight_input: f64,
-    /// μ/δ_d, the margin that absorbs f32 rounding of v in the re-certification (default 1e-3).
+    /// μ/δ_d, the margin that absorbs f32 rounding of v in the re-certification. Finite, ≥ 0.
+    /// Default 1e-3.
     pub margin: f64,
-    /// Algorithm 3: factor α > 1 on the step after a decrease (default 2).
+    /// Algorithm 3: factor α on the step after a decrease. Finite, > 1. Default 2.
     pub grow: f64,
-    /// Algorithm 3: factor 0 < β < 1 on the step after an increase (default 0.5).
+    /// Algorithm 3: factor β on the step after an increase. In (0, 1). Default 0.5.
     pub shrink: f64,
-    /// Algorithm 3: first step λ (default 1).
+    /// Algorithm 3: first step λ. Finite, > 0. Default 1.
     pub initial_step: f64,
-    /// Algorithm 3: stop when λ falls below ε (default 1e-12).
+    /// Algorithm 3: stop when λ falls below ε. Finite, > 0. Default 1e-12.
     pub min_step: f64,
-    /// Iterations at most, per descent (default 2000).
+    /// Iterations at most, per descent. ≥ 1. Default 2000.
     pub max_iterations: usize,
-    /// L-BFGS memory (default 10).
+    /// L-BFGS memory. ≥ 1. Default 10.
     pub lbfgs_memory: usize,
-    /// Cost evaluations at most per descent (L-BFGS's line searches may take many per iteration;
-    /// default 20 000).
+    /// Cost evaluations at most per descent (L-BFGS's line searches may take many per iteration). ≥ 1.
+    /// Default 20 000.
     pub max_evaluations: usize,
-    /// Show a progress bar over the probes of [`time_optimal`] (default false).
+    /// Show a progress bar over the probes of [`time_optimal`]. Default false.
     pub progress: bool,
     /// Reference hold L ([`crate::trajectory::hold`]): the start is projected onto block-constant
-    /// sequences and so is every gradient, so the descent stays block-constant. Default 1.
+    /// sequences and so is every gradient, so the descent stays block-constant. ≥ 1. Default 1.
     pub hold: usize,
 }
 
@@ -89,6 +93,28 @@ impl Default for PotentialSettings {
 }
 
 impl PotentialSettings {
+    /// Checks the ranges documented on the fields; the first violation is returned.
+    pub fn validate(&self) -> Result<(), SettingError> {
+        let c = Check("PotentialSettings");
+        c.positive("delta", self.delta)?;
+        c.non_negative("weight_goal", self.weight_goal)?;
+        c.non_negative("weight_input", self.weight_input)?;
+        c.non_negative("margin", self.margin)?;
+        c.rule(
+            "grow",
+            self.grow,
+            self.grow.is_finite() && self.grow > 1.0,
+            "must be finite and > 1",
+        )?;
+        c.open_unit("shrink", self.shrink)?;
+        c.positive("initial_step", self.initial_step)?;
+        c.positive("min_step", self.min_step)?;
+        c.at_least_one("max_iterations", self.max_iterations)?;
+        c.at_least_one("lbfgs_memory", self.lbfgs_memory)?;
+        c.at_least_one("max_evaluations", self.max_evaluations)?;
+        c.at_least_one("hold", self.hold)
+    }
+
     pub fn delta(mut self, v: f64) -> Self {
         self.delta = v;
         self
@@ -142,6 +168,25 @@ impl PotentialSettings {
         self
     }
 }
+
+settings_builder!(
+    PotentialSettings,
+    PotentialSettingsBuilder {
+        delta: f64,
+        weight_goal: f64,
+        weight_input: f64,
+        margin: f64,
+        grow: f64,
+        shrink: f64,
+        initial_step: f64,
+        min_step: f64,
+        max_iterations: usize,
+        lbfgs_memory: usize,
+        max_evaluations: usize,
+        progress: bool,
+        hold: usize,
+    }
+);
 
 /// Which descent to run (default L-BFGS, the faster to zero cost; module doc).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
@@ -545,4 +590,30 @@ pub fn time_optimal(
         best: Some(best),
         probes,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::PotentialSettings;
+
+    #[test]
+    fn the_potential_builder_refuses_a_step_factor_that_does_not_grow() {
+        let e = PotentialSettings::builder().grow(1.0).build().unwrap_err();
+        assert_eq!(
+            (e.settings, e.field, e.value),
+            ("PotentialSettings", "grow", 1.0)
+        );
+        assert_eq!(e.rule, "must be finite and > 1");
+        let e = PotentialSettings::builder()
+            .delta(f64::NAN)
+            .build()
+            .unwrap_err();
+        assert_eq!(e.field, "delta");
+        assert!(PotentialSettings::builder()
+            .lbfgs_memory(0)
+            .build()
+            .is_err());
+        let s = PotentialSettings::builder().delta(0.02).build().unwrap();
+        assert_eq!((s.delta, s.max_iterations), (0.02, 2000));
+    }
 }

@@ -34,13 +34,12 @@ impl ConvexSets {
     pub fn from_problem(problem: &Problem) -> Result<Self, PropertyError> {
         let n = problem.plant.n();
         Ok(Self {
-            goal: convex_piece(&problem.goal, n).map_err(PropertyError::Piece)?,
+            goal: convex_piece(&problem.goal, n)?,
             unsafe_pieces: problem
                 .unsafe_sets
                 .iter()
                 .map(|s| convex_piece(s, n))
-                .collect::<Result<_, _>>()
-                .map_err(PropertyError::Piece)?,
+                .collect::<Result<_, _>>()?,
         })
     }
 }
@@ -50,8 +49,6 @@ impl ConvexSets {
 pub enum PropertyError {
     #[error(transparent)]
     Spec(#[from] SpecError),
-    #[error("{0}")]
-    Piece(String),
 }
 
 impl ReachAvoid {

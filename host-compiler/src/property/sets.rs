@@ -3,7 +3,7 @@
 
 use crate::linalg::from_row_major;
 use crate::spec::sets::{SetDesc, Shape};
-use crate::spec::InputSet;
+use crate::spec::{InputSet, SpecError};
 use faer::Mat;
 
 /// A convex set in state coordinates (Goal, or one piece of Unsafe).
@@ -28,10 +28,11 @@ pub enum InputBound {
     Norm2 { center: Vec<f64>, max: f64 },
 }
 
-/// A spec set as a convex piece in state coordinates: y = M x with M from the set's coordinates.
-pub fn convex_piece(s: &SetDesc, n: usize) -> Result<ConvexPiece, String> {
+/// A spec set as a convex piece in state coordinates: y = M x with M from the set's coordinates. The error
+/// is the set's coordinates not fitting an `n`-dimensional state ([`SetDesc::map_matrix`]).
+pub fn convex_piece(s: &SetDesc, n: usize) -> Result<ConvexPiece, SpecError> {
     let d = s.dim();
-    let M = match s.map_matrix(n).map_err(|e| e.to_string())? {
+    let M = match s.map_matrix(n)? {
         None => Mat::<f64>::identity(n, n),
         Some(M) => from_row_major(M.rows, M.cols, &M.data),
     };

@@ -71,6 +71,7 @@ use crate::certify::{evaluator_error_bound, input_distance};
 use crate::linalg::round32;
 use crate::linalg::{mat_vec, sym_eigenvalues, PdRoots};
 use crate::property::InputBound;
+use crate::settings::{settings_builder, Check, SettingError};
 use crate::synth::Synthesis;
 use crate::task::Task;
 use faer::Mat;
@@ -78,18 +79,22 @@ use faer::Mat;
 pub use learn::{learn_laws, LearnedLaw};
 pub use partition::{build_image, PartitionStats};
 
-/// Settings of the learning and partitioning, with documented defaults ([`PwaSettings::default`]).
+/// Settings of the learning and partitioning, with documented defaults ([`PwaSettings::default`]). Build
+/// with [`PwaSettings::builder`] (validated); the setters on the struct itself
+/// (`PwaSettings::default().thermal_cycles(0)`) are the same without the check.
 #[derive(Clone, Debug)]
 pub struct PwaSettings {
     /// The fitting tolerance is chosen so that a law with the design contraction has
-    /// r̃_crit(Ã_j, ε_fit + ε_f32) ≤ `rcrit_fraction` · min_i ρ_i (Example 6.4 uses one half). Default 0.5.
+    /// r̃_crit(Ã_j, ε_fit + ε_f32) ≤ `rcrit_fraction` · min_i ρ_i (Example 6.4 uses one half). Finite, > 0.
+    /// Default 0.5.
     pub rcrit_fraction: f64,
     /// Design contraction s of the fitted laws: the fit (an SDP) asks `‖A + BK_j‖_P ≤ √(1 − s)` ((6.6) with
     /// margin). Larger s allows a larger fitting tolerance (modification 1 of §6.2) at the price of larger
-    /// gains. `None`: the contraction of the CAF gain K itself, 1 − ‖A + BK‖²_P. Default `None`.
+    /// gains. `None`: the contraction of the CAF gain K itself, 1 − ‖A + BK‖²_P. `Some(s)`: s in (0, 1).
+    /// Default `None`.
     pub contraction: Option<f64>,
     /// Seeds tried per cluster (multi-start of the greedy search; the largest verified cluster wins).
-    /// Default 4.
+    /// ≥ 1. Default 4.
     pub seeds: usize,
     /// Consecutive rejected candidates after which a cluster stops growing. Default 12.
     pub max_failures: usize,
@@ -102,15 +107,16 @@ pub struct PwaSettings {
     /// budget already leaves out the proved gap of the f32 ball test (9·10⁻⁶ of ρ on the double integrator),
     /// and every law is verified against the exact condition. With the gap alone the double integrator at
     /// `rcrit_fraction = 0.02` learns laws whose clusters interleave, and its tree needs 7 369 ball
-    /// references (the image holds 4 096) instead of 2 260. Default 1e-4.
+    /// references (the image holds 4 096) instead of 2 260. In [0, 1). Default 1e-4.
     pub fit_reserve: f64,
-    /// Largest tree depth (hyperplane tests). Default `shared_types::capacity::MAX_TREE_DEPTH`.
+    /// Largest tree depth (hyperplane tests). In 1..=`shared_types::capacity::MAX_TREE_DEPTH`.
+    /// Default `shared_types::capacity::MAX_TREE_DEPTH`.
     pub max_depth: usize,
     /// Show a progress bar over the data points while learning. Default false.
     pub progress: bool,
     /// Target number of balls per leaf: a node with one verified law is still split while it holds more
     /// and a cut makes progress, since every ball of a leaf may be tested in one control step (the
-    /// out-of-envelope answer tests them all). Default 8.
+    /// out-of-envelope answer tests them all). ≥ 1. Default 8.
     pub leaf_balls: usize,
 }
 
@@ -131,6 +137,29 @@ impl Default for PwaSettings {
 }
 
 impl PwaSettings {
+    /// Checks the ranges documented on the fields; the first violation is returned.
+    pub fn validate(&self) -> Result<(), SettingError> {
+        let c = Check("PwaSettings");
+        c.positive("rcrit_fraction", self.rcrit_fraction)?;
+        if let Some(s) = self.contraction {
+            c.open_unit("contraction", s)?;
+        }
+        c.at_least_one("seeds", self.seeds)?;
+        c.rule(
+            "fit_reserve",
+            self.fit_reserve,
+            self.fit_reserve >= 0.0 && self.fit_reserve < 1.0,
+            "must lie in [0, 1)",
+        )?;
+        c.rule(
+            "max_depth",
+            self.max_depth as f64,
+            (1..=shared_types::capacity::MAX_TREE_DEPTH).contains(&self.max_depth),
+            "must lie in 1..=MAX_TREE_DEPTH",
+        )?;
+        c.at_least_one("leaf_balls", self.leaf_balls)
+    }
+
     pub fn rcrit_fraction(mut self, v: f64) -> Self {
         self.rcrit_fraction = v;
         self
@@ -169,17 +198,27 @@ impl PwaSettings {
     }
 }
 
+settings_builder!(PwaSettings, PwaSettingsBuilder {
+    rcrit_fraction: f64,
+    contraction: Option<f64>,
+    seeds: usize,
+    max_failures: usize,
+    thermal_cycles: usize,
+    fit_reserve: f64,
+    max_depth: usize,
+    progress: bool,
+    leaf_balls: usize,
+});
+
 /// Why no PWA controller could be built.
 #[derive(Debug, thiserror::Error)]
 pub enum PwaError {
-    #[error("sets of the spec: {0}")]
-    Sets(String),
     #[error("no certified trajectory with a step before Goal: nothing to learn from")]
     NoData,
     #[error("the CAF metric P is not positive definite")]
     MetricNotPd,
     #[error("no critical radius for A + BK: {0}")]
-    RCrit(String),
+    RCrit(#[source] crate::caf::CafError),
     #[error(
         "ball of trajectory {traj} at step {kappa}: the f32 ball test certifies no radius within δ = {delta:e}"
     )]
@@ -188,10 +227,51 @@ pub enum PwaError {
         kappa: usize,
         delta: f64,
     },
-    #[error("the tree needs more than the image capacities allow: {0}")]
-    Capacity(String),
+    #[error(
+        "the tree needs more than the image capacities allow: {exceeded}{}",
+        learned.map_or(String::new(), |l| format!(" ({l})"))
+    )]
+    Capacity {
+        exceeded: CapacityExceeded,
+        /// What the tree was built from, when the learner adds it.
+        learned: Option<LearnedSummary>,
+    },
     #[error(transparent)]
     Emit(#[from] crate::emit::EmitError),
+}
+
+/// Which fixed capacity of the image (`shared_types::capacity`) the tree would exceed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum CapacityExceeded {
+    /// The tree needs a node beyond `max` (`MAX_TREE_NODES`).
+    #[error("more than {max} tree nodes")]
+    TreeNodes { max: usize },
+    /// `dropped` (leaf, ball) pairs did not fit the leaves' `max` balls each (`MAX_LEAF_BALLS`).
+    #[error(
+        "{dropped} (leaf, ball) pairs exceed MAX_LEAF_BALLS = {max}: part of F would be reported out of \
+         envelope, so the certificate would not hold"
+    )]
+    LeafBalls { dropped: usize, max: usize },
+}
+
+/// What a PWA tree was built from, for the capacity message.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LearnedSummary {
+    pub laws: usize,
+    pub data_points: usize,
+    pub learn_seconds: f64,
+    /// The fitting tolerance ε_fit.
+    pub eps_fit: f64,
+}
+
+impl std::fmt::Display for LearnedSummary {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} laws learned from {} data points in {:.1} s, ε_fit = {:.3e}",
+            self.laws, self.data_points, self.learn_seconds, self.eps_fit
+        )
+    }
 }
 
 /// One data point: the step κ of certified trajectory i, with its ball.
@@ -330,7 +410,7 @@ impl PwaContext {
         }
         let At = &model.A + &model.B * &syn.K;
         let rc1 = crate::caf::r_crit(At.as_ref(), syn.P.as_ref(), model.B.as_ref(), 1.0)
-            .map_err(|e| PwaError::RCrit(e.to_string()))?
+            .map_err(PwaError::RCrit)?
             .r_crit;
         let rho_min = points.iter().map(|p| p.rho).fold(f64::INFINITY, f64::min);
         let mut eps_round = 0.0f64;
@@ -559,12 +639,15 @@ pub fn build_pwa(
         .collect();
     let (mut builder, stats) =
         build_image(&ctx, &laws, &assignment, &admissible).map_err(|e| match e {
-            PwaError::Capacity(s) => PwaError::Capacity(format!(
-                "{s} ({} laws learned from {} data points in {learn_seconds:.1} s, ε_fit = {:.3e})",
-                laws.len(),
-                ctx.points.len(),
-                ctx.eps_fit
-            )),
+            PwaError::Capacity { exceeded, .. } => PwaError::Capacity {
+                exceeded,
+                learned: Some(LearnedSummary {
+                    laws: laws.len(),
+                    data_points: ctx.points.len(),
+                    learn_seconds,
+                    eps_fit: ctx.eps_fit,
+                }),
+            },
             e => e,
         })?;
     builder.period = task.plant.period();
@@ -584,4 +667,28 @@ pub fn build_pwa(
         learn_seconds,
         partition_seconds,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::PwaSettings;
+
+    #[test]
+    fn the_pwa_builder_refuses_a_depth_beyond_the_image_capacity() {
+        let too_deep = shared_types::capacity::MAX_TREE_DEPTH + 1;
+        let e = PwaSettings::builder()
+            .max_depth(too_deep)
+            .build()
+            .unwrap_err();
+        assert_eq!((e.field, e.value), ("max_depth", too_deep as f64));
+        assert!(e.to_string().starts_with("PwaSettings.max_depth = "), "{e}");
+        let e = PwaSettings::builder()
+            .contraction(Some(1.0))
+            .build()
+            .unwrap_err();
+        assert_eq!(e.field, "contraction");
+        assert!(PwaSettings::builder().rcrit_fraction(0.0).build().is_err());
+        let s = PwaSettings::builder().thermal_cycles(0).build().unwrap();
+        assert_eq!((s.thermal_cycles, s.leaf_balls), (0, 8));
+    }
 }

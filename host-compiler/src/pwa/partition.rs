@@ -25,7 +25,7 @@
 //! [`super`] ("Reaching Goal within T"). Only `MAX_LEAF_BALLS` can leave balls out; they are counted in
 //! [`PartitionStats::dropped`] and the build fails rather than shrink F silently.
 
-use super::{LearnedLaw, PwaContext, PwaError};
+use super::{CapacityExceeded, LearnedLaw, PwaContext, PwaError};
 use crate::emit::Child;
 use crate::emit::{CertifiedBall, PwaImageBuilder, PwaLaw, PwaLeaf, TreeNode};
 use crate::linalg::round32;
@@ -350,10 +350,12 @@ impl Tree<'_> {
             }
         };
         if self.b.nodes.len() >= shared_types::capacity::MAX_TREE_NODES {
-            return Err(PwaError::Capacity(format!(
-                "more than {} tree nodes",
-                shared_types::capacity::MAX_TREE_NODES
-            )));
+            return Err(PwaError::Capacity {
+                exceeded: CapacityExceeded::TreeNodes {
+                    max: shared_types::capacity::MAX_TREE_NODES,
+                },
+                learned: None,
+            });
         }
         let idx = self.b.add_node(TreeNode {
             a,
@@ -400,11 +402,13 @@ pub fn build_image(
         return Err(PwaError::NoData);
     }
     if t.dropped > 0 {
-        return Err(PwaError::Capacity(format!(
-            "{} (leaf, ball) pairs exceed MAX_LEAF_BALLS = {MAX_LEAF_BALLS}: part of F would be reported out of \
-             envelope, so the certificate would not hold",
-            t.dropped
-        )));
+        return Err(PwaError::Capacity {
+            exceeded: CapacityExceeded::LeafBalls {
+                dropped: t.dropped,
+                max: MAX_LEAF_BALLS,
+            },
+            learned: None,
+        });
     }
     let depth = t.b.tree_depth()?;
     let stats = PartitionStats {

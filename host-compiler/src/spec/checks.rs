@@ -32,19 +32,34 @@ use clarabel::solver::{DefaultSettings, DefaultSolver, IPSolver, SolverStatus, S
 use super::sets::{SetDesc, Shape};
 use super::Matrix;
 
+/// Why a symmetric eigen-decomposition could not be computed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum EigenError {
+    #[error("{rows}×{cols} is not square")]
+    NotSquare { rows: usize, cols: usize },
+    #[error("non-finite entry")]
+    NonFinite,
+    /// faer's iteration did not converge.
+    #[error("the eigenvalue iteration did not converge")]
+    NoConvergence,
+}
+
 /// Eigenvalues of a symmetric matrix (lower triangle used), ascending.
-pub fn sym_eigenvalues(Q: &Matrix) -> Result<Vec<f64>, String> {
+pub fn sym_eigenvalues(Q: &Matrix) -> Result<Vec<f64>, EigenError> {
     Ok(sym_eigen(Q)?.0)
 }
 
 /// Eigen-decomposition of a symmetric matrix: (eigenvalues ascending, eigenvectors as the columns of a
 /// row-major matrix).
-pub fn sym_eigen(Q: &Matrix) -> Result<(Vec<f64>, Matrix), String> {
+pub fn sym_eigen(Q: &Matrix) -> Result<(Vec<f64>, Matrix), EigenError> {
     if Q.rows != Q.cols {
-        return Err(format!("{}×{} is not square", Q.rows, Q.cols));
+        return Err(EigenError::NotSquare {
+            rows: Q.rows,
+            cols: Q.cols,
+        });
     }
     if Q.data.iter().any(|v| !v.is_finite()) {
-        return Err("non-finite entry".into());
+        return Err(EigenError::NonFinite);
     }
     let n = Q.rows;
     if n == 0 {
@@ -53,7 +68,7 @@ pub fn sym_eigen(Q: &Matrix) -> Result<(Vec<f64>, Matrix), String> {
     let m = faer::Mat::from_fn(n, n, |i, j| 0.5 * (Q.get(i, j) + Q.get(j, i)));
     let e = m
         .self_adjoint_eigen(faer::Side::Lower)
-        .map_err(|e| format!("{e:?}"))?;
+        .map_err(|_| EigenError::NoConvergence)?;
     let s = e.S().column_vector();
     let u = e.U();
     let vals: Vec<f64> = (0..n).map(|i| s[i]).collect();

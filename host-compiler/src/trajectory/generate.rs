@@ -21,6 +21,8 @@ use super::{simulate, Nominal};
 use crate::linalg::{mat_vec, p_norm, spectral_norm, sym_fn, PdRoots};
 use crate::model::{DiscretePlant, Plant};
 use crate::property::{ConvexSets, ReachAvoid};
+use crate::settings::{settings_builder, Check, SettingError};
+use crate::solver::SetupError;
 use clarabel::algebra::CscMatrix;
 use clarabel::solver::{
     DefaultSettingsBuilder, DefaultSolver, IPSolver, SolverStatus, SupportedConeT,
@@ -30,16 +32,17 @@ use faer::MatRef;
 
 pub use crate::property::{ConvexPiece, InputBound};
 
-/// Settings of the generator, with documented defaults.
+/// Settings of the generator, with documented defaults. Build with [`GenSettings::builder`] (validated) or
+/// take [`Default`].
 #[derive(Clone, Debug)]
 pub struct GenSettings {
-    /// Sequential-convex iterations at most (default 12).
+    /// Sequential-convex iterations at most. ≥ 1. Default 12.
     pub max_iter: usize,
-    /// Stop when δ improves by less than this, relative (default 1e-4).
+    /// Stop when δ improves by less than this, relative. Finite, ≥ 0. Default 1e-4.
     pub tol: f64,
-    /// Weight of Σ‖v(κ+1) − v(κ)‖² against δ, for smooth inputs (default 1e-4).
+    /// Weight of Σ‖v(κ+1) − v(κ)‖² against δ, for smooth inputs. Finite, ≥ 0. Default 1e-4.
     pub smooth_weight: f64,
-    /// Upper bound on δ in the subproblems, keeping them bounded (default 10).
+    /// Upper bound on δ in the subproblems, keeping them bounded. Finite, > 0. Default 10.
     pub delta_max: f64,
 }
 
@@ -53,6 +56,27 @@ impl Default for GenSettings {
         }
     }
 }
+
+impl GenSettings {
+    /// Checks the ranges documented on the fields; the first violation is returned.
+    pub fn validate(&self) -> Result<(), SettingError> {
+        let c = Check("GenSettings");
+        c.at_least_one("max_iter", self.max_iter)?;
+        c.non_negative("tol", self.tol)?;
+        c.non_negative("smooth_weight", self.smooth_weight)?;
+        c.positive("delta_max", self.delta_max)
+    }
+}
+
+settings_builder!(
+    GenSettings,
+    GenSettingsBuilder {
+        max_iter: usize,
+        tol: f64,
+        smooth_weight: f64,
+        delta_max: f64,
+    }
+);
 
 /// What the generator needs of the task.
 pub struct GenProblem<'a> {
@@ -100,6 +124,23 @@ pub struct Generated {
     pub iterations: usize,
 }
 
+/// Why the sequential-convex iteration stopped without a trajectory: the outcome of its last subproblem.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum SubproblemStatus {
+    /// Clarabel ran and ended without a solution (infeasible, iteration limit, numerical trouble).
+    #[error("{0:?}")]
+    Solver(SolverStatus),
+    /// Clarabel refused to set the subproblem up.
+    #[error("{0}")]
+    Setup(#[from] SetupError),
+    /// The Goal ellipsoid's shape matrix Q has no real square root Q^{1/2} (its eigen-decomposition failed).
+    #[error("goal shape has no square root")]
+    GoalShape,
+    /// Only the first subproblem, which ignores Unsafe, was solved: no iterate is safe.
+    #[error("no iterate with Unsafe constraints")]
+    NoUnsafeIterate,
+}
+
 /// Why no trajectory was found.
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum GenError {
@@ -107,12 +148,23 @@ pub enum GenError {
     Infeasible {
         x0: Vec<f64>,
         steps: usize,
-        status: String,
+        status: SubproblemStatus,
     },
     #[error("the CAF matrix P is not positive definite")]
     BadMetric,
-    #[error("dimension mismatch: {0}")]
-    Dimension(String),
+    #[error(
+        "dimension mismatch: n = {n}, m = {m}, x0 has {x0}, K is {k_rows}×{k_cols} (expected {m}×{n})"
+    )]
+    Dimension {
+        /// States and inputs of the plant.
+        n: usize,
+        m: usize,
+        /// Entries of x0.
+        x0: usize,
+        /// Shape of the feedback gain K.
+        k_rows: usize,
+        k_cols: usize,
+    },
 }
 
 /// Generate a trajectory from `x0` that maximises the tube radius δ (see the module doc).
@@ -125,10 +177,13 @@ pub fn generate(
     let n = model.n();
     let m = model.m();
     if x0.len() != n || prob.K.nrows() != m || prob.K.ncols() != n {
-        return Err(GenError::Dimension(format!(
-            "n = {n}, m = {m}, x0 has {}",
-            x0.len()
-        )));
+        return Err(GenError::Dimension {
+            n,
+            m,
+            x0: x0.len(),
+            k_rows: prob.K.nrows(),
+            k_cols: prob.K.ncols(),
+        });
     }
     let roots = PdRoots::new(prob.P).ok_or(GenError::BadMetric)?;
     let mut best: Option<Generated> = None;
@@ -171,7 +226,7 @@ pub fn generate(
     best.ok_or_else(|| GenError::Infeasible {
         x0: x0.to_vec(),
         steps: prob.steps,
-        status: "no iterate with Unsafe constraints".into(),
+        status: SubproblemStatus::NoUnsafeIterate,
     })
 }
 
@@ -198,14 +253,14 @@ impl Rows {
     }
 }
 
-/// One SOCP: returns v(0..N) and δ, or the solver status.
+/// One SOCP: returns v(0..N) and δ, or why it has none.
 fn solve_subproblem(
     prob: &GenProblem<'_>,
     roots: &PdRoots,
     x0: &[f64],
     lin: Option<&Nominal>,
     settings: &GenSettings,
-) -> Result<(Vec<Vec<f64>>, f64), String> {
+) -> Result<(Vec<Vec<f64>>, f64), SubproblemStatus> {
     let model = prob.model();
     let (A, B, K) = (model.A.as_ref(), model.B.as_ref(), prob.K);
     let n = A.nrows();
@@ -310,8 +365,7 @@ fn solve_subproblem(
         }
     }
     if let ConvexPiece::Ellipsoid { C, c, Q } = &prob.convex.goal {
-        let Qh =
-            sym_fn(Q.as_ref(), |l| l.max(0.0).sqrt()).ok_or("goal shape has no square root")?;
+        let Qh = sym_fn(Q.as_ref(), |l| l.max(0.0).sqrt()).ok_or(SubproblemStatus::GoalShape)?;
         let QhC = &Qh * C;
         let sg = spectral_norm((&QhC * &roots.inv_sqrt).as_ref());
         let Qhc = mat_vec(Qh.as_ref(), c);
@@ -350,13 +404,13 @@ fn solve_subproblem(
         .verbose(false)
         .max_iter(200)
         .build()
-        .map_err(|e| format!("{e:?}"))?;
-    let mut solver =
-        DefaultSolver::new(&Pm, &q, &Am, &rows.b, &rows.cones, st).map_err(|e| format!("{e:?}"))?;
+        .expect("verbose and max_iter = 200 are in clarabel's valid range");
+    let mut solver = DefaultSolver::new(&Pm, &q, &Am, &rows.b, &rows.cones, st)
+        .map_err(|e| SubproblemStatus::Setup(e.into()))?;
     solver.solve();
     match solver.solution.status {
         SolverStatus::Solved | SolverStatus::AlmostSolved => {}
-        s => return Err(format!("{s:?}")),
+        s => return Err(SubproblemStatus::Solver(s)),
     }
     let z = &solver.solution.x;
     let v: Vec<Vec<f64>> = (0..N)
@@ -495,6 +549,22 @@ mod tests {
         for uk in &out.nominal.u {
             assert!((uk[0] * uk[0] + uk[1] * uk[1]).sqrt() <= 0.5 + 1e-6);
         }
+    }
+
+    #[test]
+    fn the_builder_refuses_a_non_positive_delta_max() {
+        let e = GenSettings::builder().delta_max(0.0).build().unwrap_err();
+        assert_eq!(
+            (e.settings, e.field, e.value),
+            ("GenSettings", "delta_max", 0.0)
+        );
+        assert!(e.to_string().contains("GenSettings.delta_max = 0"), "{e}");
+        assert!(GenSettings::builder().max_iter(0).build().is_err());
+        let s = GenSettings::builder().max_iter(3).build().unwrap();
+        assert_eq!(
+            (s.max_iter, s.delta_max),
+            (3, GenSettings::default().delta_max)
+        );
     }
 
     #[test]

@@ -91,7 +91,39 @@ pub struct Liveness {
     /// Steps in the spec's horizon.
     pub horizon: usize,
     /// Why no ranking within the horizon exists.
-    pub failure: Option<String>,
+    pub failure: Option<NoRanking>,
+}
+
+/// Why the stored balls have no time-to-go ranking within the horizon ([`time_to_go_ranks`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum NoRanking {
+    /// The ball's one-step image has neither of the two ways to make progress.
+    #[error(
+        "ball {ball}: its law's one-step image neither lies in Goal nor provably lands in a listed ball"
+    )]
+    NoSuccessor { ball: usize },
+    /// The least ranking exceeds `cap` (the horizon's steps less one) at this ball.
+    #[error(
+        "ball {ball}: no time-to-go ranking within {cap} steps: its successors and the order of \
+         the leaves that list it give no bound on the steps to Goal within the horizon"
+    )]
+    BeyondHorizon { ball: usize, cap: usize },
+}
+
+// The JSON output (`verify --json`, the report) keeps the sentence people read.
+impl serde::Serialize for NoRanking {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.collect_str(self)
+    }
+}
+
+/// Why an image cannot be rechecked at all (bad input, as opposed to a failed check).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum RecheckError {
+    #[error("the image's P is not positive definite")]
+    MetricNotPd,
+    #[error("BᵀB is singular: B has no full column rank")]
+    InputMatrixRankDeficient,
 }
 
 impl Liveness {
@@ -122,7 +154,7 @@ pub fn time_to_go_ranks(
     class: &[usize],
     leaves: &[Vec<usize>],
     cap: usize,
-) -> Result<Vec<usize>, String> {
+) -> Result<Vec<usize>, NoRanking> {
     let nb = goal.len();
     let mut listed = vec![false; nb];
     for &b in leaves.iter().flatten() {
@@ -136,9 +168,7 @@ pub fn time_to_go_ranks(
         .iter()
         .find(|&&b| !goal[b] && succ[b].iter().all(|&s| members[class[s]].is_empty()))
     {
-        return Err(format!(
-            "ball {b}: its law's one-step image neither lies in Goal nor provably lands in a listed ball"
-        ));
+        return Err(NoRanking::NoSuccessor { ball: b });
     }
     let mut tau = vec![0usize; nb];
     loop {
@@ -167,10 +197,7 @@ pub fn time_to_go_ranks(
             }
         }
         if let Some(&b) = listed_balls.iter().find(|&&b| tau[b] > cap) {
-            return Err(format!(
-                "ball {b}: no time-to-go ranking within {cap} steps: its successors and the order of \
-                 the leaves that list it give no bound on the steps to Goal within the horizon"
-            ));
+            return Err(NoRanking::BeyondHorizon { ball: b, cap });
         }
         if !changed {
             return Ok(tau);
@@ -180,13 +207,13 @@ pub fn time_to_go_ranks(
 
 /// Recomputes the certificate of every partition of a PWA image (module doc). `judge` gives the plant
 /// (its sampled model, and its continuous model for the inter-sample check) and the sets.
-pub fn recheck(judge: &Judge<'_>, image: &Image<'_>) -> Result<PwaRecheck, String> {
+pub fn recheck(judge: &Judge<'_>, image: &Image<'_>) -> Result<PwaRecheck, RecheckError> {
     let (n, m) = (image.n(), image.m());
     let model = judge.model();
     let (A, B) = (model.A.as_ref(), model.B.as_ref());
     let continuous = judge.plant.continuous(0);
     let P = sym(Mat::from_fn(n, n, |i, j| image.P(0, i, j) as f64).as_ref());
-    let roots = PdRoots::new(P.as_ref()).ok_or("the image's P is not positive definite")?;
+    let roots = PdRoots::new(P.as_ref()).ok_or(RecheckError::MetricNotPd)?;
     let np = image.n_partitions();
     let nb = image.n_balls();
     let metric = crate::geometry::Metric {
@@ -225,7 +252,7 @@ pub fn recheck(judge: &Judge<'_>, image: &Image<'_>) -> Result<PwaRecheck, Strin
     // B⁺ for the nominal input between two centres.
     let BtB = B.transpose() * B;
     let BtB_inv = crate::linalg::sym_fn(sym(BtB.as_ref()).as_ref(), |l| 1.0 / l)
-        .ok_or("BᵀB is singular: B has no full column rank")?;
+        .ok_or(RecheckError::InputMatrixRankDeficient)?;
     let Bpinv = &BtB_inv * B.transpose();
     let (phi, beta) = continuous.map_or((0.0, 0.0), |cp| {
         intersample_phi_beta(&roots, cp, judge.plant.period())
@@ -660,7 +687,7 @@ pub fn monte_carlo_pwa(
 
 #[cfg(test)]
 mod tests {
-    use super::time_to_go_ranks;
+    use super::{time_to_go_ranks, NoRanking};
 
     fn classes(n: usize) -> Vec<usize> {
         (0..n).collect()
@@ -697,7 +724,12 @@ mod tests {
         let leaves = vec![vec![0, 2], vec![1]];
         let err = time_to_go_ranks(&goal, &succ, &classes(3), &leaves, 50).unwrap_err();
         assert!(
-            err.contains("no time-to-go ranking within 50 steps"),
+            matches!(err, NoRanking::BeyondHorizon { cap: 50, .. }),
+            "{err:?}"
+        );
+        assert!(
+            err.to_string()
+                .contains("no time-to-go ranking within 50 steps"),
             "{err}"
         );
     }
@@ -724,6 +756,7 @@ mod tests {
             9,
         )
         .unwrap_err();
-        assert!(err.starts_with("ball 0:"), "{err}");
+        assert_eq!(err, NoRanking::NoSuccessor { ball: 0 });
+        assert!(err.to_string().starts_with("ball 0:"), "{err}");
     }
 }
