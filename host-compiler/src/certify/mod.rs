@@ -382,14 +382,9 @@ pub fn round_down_f32(x: f64) -> f32 {
     }
 }
 
-/// The first index whose value beats every earlier one under `better` (strict), and that value; (0, the
-/// neutral start) for no values: −∞ for a maximum, +∞ for a minimum.
-fn extremum(values: &[f64], better: impl Fn(f64, f64) -> bool) -> (usize, f64) {
-    let start = if better(0.0, f64::INFINITY) {
-        f64::INFINITY
-    } else {
-        f64::NEG_INFINITY
-    };
+/// The first index whose value beats `start` and every earlier value under `better` (strict), and that
+/// value; (0, `start`) when none does.
+fn extremum(values: &[f64], start: f64, better: impl Fn(f64, f64) -> bool) -> (usize, f64) {
     let mut best = (0, start);
     for (k, &d) in values.iter().enumerate() {
         if better(d, best.1) {
@@ -405,7 +400,7 @@ pub fn certify(lp: &Loop<'_>, lc: &LoopConstants, nom: &Nominal) -> Certificate 
     let pc = Pieces::new(lp, lc);
     let N = nom.steps();
     // 1. Goal (4.12)–(4.13): the sample of greatest depth (the earliest of equals).
-    let (k_star, delta_goal) = extremum(&pc.goal_values(nom), |d, best| d > best);
+    let (k_star, delta_goal) = extremum(&pc.goal_values(nom), f64::NEG_INFINITY, |d, b| d > b);
     // Rounding bound over the table, with the tube radius at its largest possible value δ_Goal.
     let r_max = delta_goal.max(0.0);
     let m = lp.K.nrows();
@@ -422,14 +417,18 @@ pub fn certify(lp: &Loop<'_>, lc: &LoopConstants, nom: &Nominal) -> Certificate 
     let eps_f32 = eps_components.iter().map(|e| e * e).sum::<f64>().sqrt();
     // 2. Unsafe (4.14) at samples and between them.
     let dist = pc.unsafe_distances(nom);
-    let (k_unsafe, delta_unsafe) = extremum(&dist, |d, best| d < best);
+    let (k_unsafe, delta_unsafe) = extremum(&dist, f64::INFINITY, |d, b| d < b);
     let (_, delta_unsafe_is) = extremum(
         &pc.unsafe_between_samples(nom, &dist, eps_f32),
-        |d, best| d < best,
+        f64::INFINITY,
+        |d, b| d < b,
     );
     // 3. Input (4.15) with the rounding margin.
-    let (k_input, delta_input) =
-        extremum(&pc.input_values(nom, &eps_components), |d, best| d < best);
+    let (k_input, delta_input) = extremum(
+        &pc.input_values(nom, &eps_components),
+        f64::INFINITY,
+        |d, b| d < b,
+    );
     let r_crit = lc.r_crit(eps_f32);
     let d47 = delta_goal.min(delta_unsafe_is).min(delta_input);
     // Theorem 3.21: any r in [r_crit, d47) works; the strict inequalities of Lemma 4.4 need r < d47.

@@ -53,6 +53,8 @@ pub struct Grown {
 /// Why the growth produced no cover.
 #[derive(Debug, thiserror::Error)]
 pub enum GrowError {
+    #[error(transparent)]
+    Settings(#[from] crate::settings::SettingError),
     #[error("{name}: the recording does not fit n = {n}, m = {m}")]
     Recording { name: String, n: usize, m: usize },
     #[error("image: {0}")]
@@ -171,6 +173,7 @@ pub fn grow(
             BundleSettings::default().max_iterations(problem.synthesis.max_iterations)
         })
         .hold(hold);
+    bundle.validate()?;
     let cancel: &AtomicBool = opts.cancel;
     let cancelled = || cancel.load(Ordering::Relaxed);
     // §5.3 on a start (x0, v): maximise the certified δ, then re-certify what the optimiser returns through

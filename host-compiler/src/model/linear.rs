@@ -59,9 +59,15 @@ fn check_AB(A: MatRef<'_, f64>, B: MatRef<'_, f64>) -> Result<(), ModelError> {
     check_finite("B", B)
 }
 
-fn mat_vec(M: MatRef<'_, f64>, x: &[f64]) -> Vec<f64> {
-    (0..M.nrows())
-        .map(|i| (0..M.ncols()).map(|j| M[(i, j)] * x[j]).sum())
+/// A x + B u + c in one pass (one allocation), summing each row of A x and of B u in column order and
+/// then adding them and c, the order every other evaluation of the plant uses.
+fn affine(A: MatRef<'_, f64>, B: MatRef<'_, f64>, c: &[f64], x: &[f64], u: &[f64]) -> Vec<f64> {
+    (0..A.nrows())
+        .map(|i| {
+            let ax: f64 = (0..A.ncols()).map(|j| A[(i, j)] * x[j]).sum();
+            let bu: f64 = (0..B.ncols()).map(|j| B[(i, j)] * u[j]).sum();
+            ax + bu + c[i]
+        })
         .collect()
 }
 
@@ -85,9 +91,7 @@ impl ContinuousPlant {
 
     /// The vector field A x + B u + c.
     pub fn f(&self, x: &[f64], u: &[f64]) -> Vec<f64> {
-        let ax = mat_vec(self.A.as_ref(), x);
-        let bu = mat_vec(self.B.as_ref(), u);
-        (0..self.n()).map(|i| ax[i] + bu[i] + self.c[i]).collect()
+        affine(self.A.as_ref(), self.B.as_ref(), &self.c, x, u)
     }
 
     /// One classical Runge–Kutta step of length `dt` with u held constant (a reference integrator for tests and
@@ -168,9 +172,7 @@ impl DiscretePlant {
 
     /// x⁺ = A x + B u + g.
     pub fn step(&self, x: &[f64], u: &[f64]) -> Vec<f64> {
-        let ax = mat_vec(self.A.as_ref(), x);
-        let bu = mat_vec(self.B.as_ref(), u);
-        (0..self.n()).map(|i| ax[i] + bu[i] + self.g[i]).collect()
+        affine(self.A.as_ref(), self.B.as_ref(), &self.g, x, u)
     }
 }
 
@@ -236,16 +238,15 @@ impl Plant for LinearAffine {
     fn step(&self, _loc: Location, x: &[f64], u: &[f64]) -> Vec<f64> {
         self.discrete.step(x, u)
     }
-    fn between_samples(&self, _loc: Location, x: &[f64], u: &[f64]) -> Vec<Vec<f64>> {
+    fn between_samples(&self, _loc: Location, x: &[f64], u: &[f64], visit: &mut dyn FnMut(&[f64])) {
         let Some(sub) = &self.sub else {
-            return Vec::new();
+            return;
         };
-        let mut xs = x.to_vec();
-        (1..Self::SUBSTEPS)
-            .map(|_| {
-                xs = sub.step(&xs, u);
-                xs.clone()
-            })
-            .collect()
+        let mut xs = sub.step(x, u);
+        visit(&xs);
+        for _ in 2..Self::SUBSTEPS {
+            xs = sub.step(&xs, u);
+            visit(&xs);
+        }
     }
 }

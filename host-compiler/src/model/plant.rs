@@ -50,7 +50,8 @@ pub trait Plant: Send + Sync + std::fmt::Debug {
     fn vector_field(&self, loc: Location, x: &[f64], u: &[f64]) -> Option<Vec<f64>> {
         self.continuous(loc).map(|c| c.f(x, u))
     }
-    /// States strictly inside the period after `x` with `u` held, at equally spaced instants, for the
-    /// verifier's check between samples (empty for a discrete-time plant).
-    fn between_samples(&self, loc: Location, x: &[f64], u: &[f64]) -> Vec<Vec<f64>>;
+    /// Visits the states strictly inside the period after `x` with `u` held, at equally spaced instants
+    /// in time order, for the verifier's check between samples (none for a discrete-time plant). A visitor
+    /// rather than a list: the verifier calls this every step of every Monte Carlo run.
+    fn between_samples(&self, loc: Location, x: &[f64], u: &[f64], visit: &mut dyn FnMut(&[f64]));
 }

@@ -202,6 +202,8 @@ pub enum OptimizeError {
     NotFinite,
     #[error("the desired robustness δ = {0} is not a positive finite number")]
     BadDelta(f64),
+    #[error(transparent)]
+    Settings(#[from] SettingError),
 }
 
 /// Check that x0 and v fit the loop (dimensions, finiteness, at least one step).
@@ -233,6 +235,7 @@ pub fn try_maximize_delta(
     cancel: &AtomicBool,
 ) -> Result<Optimized, OptimizeError> {
     check_inputs(lp, x0, v0)?;
+    settings.validate()?;
     Ok(bundle::maximize(
         lp, lc, x0, v0, steps_max, settings, cancel,
     ))

@@ -213,6 +213,8 @@ settings_builder!(PwaSettings, PwaSettingsBuilder {
 /// Why no PWA controller could be built.
 #[derive(Debug, thiserror::Error)]
 pub enum PwaError {
+    #[error(transparent)]
+    Settings(#[from] SettingError),
     #[error("no certified trajectory with a step before Goal: nothing to learn from")]
     NoData,
     #[error("the CAF metric P is not positive definite")]
@@ -346,6 +348,7 @@ impl PwaContext {
     /// with r_crit(A + BK, ε_fit√m + ε̄) ≤ `rcrit_fraction` · min_i ρ_i, using that r_crit (3.87) is linear
     /// in the disturbance bound.
     pub fn new(task: &Task, syn: &Synthesis, settings: PwaSettings) -> Result<Self, PwaError> {
+        settings.validate()?;
         let (n, m) = (syn.K.ncols(), syn.K.nrows());
         let roots = PdRoots::new(syn.P.as_ref()).ok_or(PwaError::MetricNotPd)?;
         let axis: Vec<f64> = (0..n).map(|j| roots.inv[(j, j)].max(0.0).sqrt()).collect();

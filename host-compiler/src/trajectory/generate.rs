@@ -144,6 +144,8 @@ pub enum SubproblemStatus {
 /// Why no trajectory was found.
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum GenError {
+    #[error(transparent)]
+    Settings(#[from] SettingError),
     #[error("no trajectory from x0 = {x0:?} reaches Goal in {steps} steps within the input bounds (solver: {status})")]
     Infeasible {
         x0: Vec<f64>,
@@ -173,6 +175,7 @@ pub fn generate(
     x0: &[f64],
     settings: &GenSettings,
 ) -> Result<Generated, GenError> {
+    settings.validate()?;
     let model = prob.model();
     let n = model.n();
     let m = model.m();

@@ -212,9 +212,9 @@ pub fn run(judge: &Judge<'_>, image: &Image<'_>, x0: &[f64], margins: bool) -> R
                 out.input_violation = true;
             }
         }
-        for xs in judge.plant.between_samples(0, &x, &u) {
-            check(&xs, &mut out, false);
-        }
+        judge
+            .plant
+            .between_samples(0, &x, &u, &mut |xs| check(xs, &mut out, false));
         x = judge.plant.step(0, &x, &u);
         check(&x, &mut out, true);
     }

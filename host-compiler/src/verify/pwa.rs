@@ -564,9 +564,9 @@ pub fn run_pwa(judge: &Judge<'_>, image: &Image<'_>, x0: &[f64]) -> (RunOutcome,
         let s = input_slack(judge.input(), &u);
         out.input_margin = out.input_margin.min(s);
         out.input_violation |= s < 0.0;
-        for xs in judge.plant.between_samples(0, &x, &u) {
-            out.entered_unsafe |= hit(&xs);
-        }
+        judge
+            .plant
+            .between_samples(0, &x, &u, &mut |xs| out.entered_unsafe |= hit(xs));
         x = judge.plant.step(0, &x, &u);
         out.entered_unsafe |= hit(&x);
         path.push(x.clone());

@@ -1,7 +1,7 @@
 //! LAPACK drivers (double precision) against references: Jacobi eigenvalues, reconstruction identities,
 //! orthogonality, residuals; plus workspace queries, every job/range/uplo variant and the info codes.
 
-mod common;
+use crate::common;
 use common::*;
 use lapack_faer::*;
 

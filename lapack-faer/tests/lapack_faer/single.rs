@@ -1,7 +1,7 @@
 //! Single-precision symbols: each `s*` routine against the f64 reference computation on the same data
 //! (clarabel instantiates both precisions, so both must link and compute correctly).
 
-mod common;
+use crate::common;
 use common::*;
 use lapack_faer::*;
 

@@ -2,7 +2,7 @@
 //! against these symbols and solves a problem with a known optimum: min tr(C X) s.t. tr X = 1, X ⪰ 0 has the
 //! value λ_min(C).
 
-mod common;
+use crate::common;
 use clarabel::algebra::*;
 use clarabel::solver::*;
 use common::*;

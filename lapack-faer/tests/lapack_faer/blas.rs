@@ -1,7 +1,7 @@
 //! BLAS routines (double precision) against triple-loop references: every trans/uplo variant, padded
 //! leading dimensions, negative increments, the `beta = 0` / `alpha = 0` conventions, untouched storage.
 
-mod common;
+use crate::common;
 use common::*;
 use lapack_faer::*;
 
