@@ -190,8 +190,14 @@ impl<'a> Controller<'a> {
             for ((ei, &xi), ci) in e.iter_mut().zip(x).zip(floats(centre)) {
                 *ei = xi - ci;
             }
-            let (s0, _) = img.trajectory_segments(t);
-            let l = img.segment(s0).map_or(0, |s| s.location);
+            // A one-location image has location 0 everywhere (decode checks every segment's location):
+            // no segment lookup in this loop over all balls.
+            let l = if img.n_locations() == 1 {
+                0
+            } else {
+                let (s0, _) = img.trajectory_segments(t);
+                img.segment(s0).map_or(0, |s| s.location)
+            };
             let P = f32_span(p.P, l * n * n, n * n);
             let mut d2 = 0.0f32;
             for (row, &ei) in P.chunks_exact(4 * n).zip(&e) {
@@ -221,6 +227,9 @@ impl<'a> Controller<'a> {
     /// moves at most once per step; the loop bound is the trajectory's segment count.
     fn row_location(&mut self, t: usize, row: usize) -> usize {
         let img = &self.image;
+        if img.n_locations() == 1 {
+            return 0;
+        }
         let (s0, count) = img.trajectory_segments(t);
         let mut s = (self.segment as usize).clamp(s0, (s0 + count).saturating_sub(1));
         for _ in 0..count {
