@@ -55,9 +55,4 @@ impl Task {
     pub fn settings(&self) -> &SynthesisSettings {
         &self.problem.synthesis
     }
-
-    /// The seed every random stream of a run derives from.
-    pub fn seed(&self) -> u64 {
-        self.problem.seed
-    }
 }

@@ -102,9 +102,6 @@ impl<'a> Loop<'a> {
     pub fn B(&self) -> MatRef<'a, f64> {
         self.model().B.as_ref()
     }
-    pub fn g(&self) -> &'a [f64] {
-        &self.model().g
-    }
     pub fn goal(&self) -> &'a dyn Region {
         self.property.goal.as_ref()
     }
