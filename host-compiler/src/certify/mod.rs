@@ -37,10 +37,11 @@ pub use pwa_ball::{
 };
 
 use crate::caf::Design;
-use crate::geometry::Region;
+use crate::geometry::{Metric, Region, Witness};
 use crate::linalg::{sym_eigenvalues, PdRoots};
 use crate::model::{ContinuousPlant, DiscretePlant, Plant};
 use crate::property::{InputBound, ReachAvoid};
+use crate::robustness::safety::{self, InputSets, SafetySet, SampledTrajectory};
 use crate::spec::Problem;
 use crate::task::Task;
 use crate::trajectory::Nominal;
@@ -379,55 +380,75 @@ pub fn round_down_f32(x: f64) -> f32 {
     }
 }
 
-/// The first index whose value beats `start` and every earlier value under `better` (strict), and that
-/// value; (0, `start`) when none does.
-fn extremum(values: &[f64], start: f64, better: impl Fn(f64, f64) -> bool) -> (usize, f64) {
-    let mut best = (0, start);
-    for (k, &d) in values.iter().enumerate() {
-        if better(d, best.1) {
-            best = (k, d);
-        }
-    }
-    best
-}
-
 /// Certify one nominal trajectory (simulated with the shipped K̂, v̂) for the loop: the critical samples
-/// of Theorem 4.7's pieces ([`Pieces`]), the f32 rounding bound, r_crit and the stored radius.
+/// of Theorem 4.7's pieces ([`Pieces`], scanned by [`crate::robustness::safety`]'s shared scans over the
+/// whole table), the f32 rounding bound, r_crit and the stored radius. A nominal that is not finite, or
+/// a NaN distance, certifies nothing (δ = 0, the parts NaN).
 pub fn certify(lp: &Loop<'_>, lc: &LoopConstants, nom: &Nominal) -> Certificate {
     let pc = Pieces::new(lp, lc);
-    let N = nom.steps();
-    // 1. Goal (4.12)–(4.13): the sample of greatest depth (the earliest of equals).
-    let (k_star, delta_goal) = extremum(&pc.goal_values(nom), f64::NEG_INFINITY, |d, b| d > b);
-    // Rounding bound over the table, with the tube radius at its largest possible value δ_Goal.
-    let r_max = delta_goal.max(0.0);
     let m = lp.K.nrows();
-    let mut eps_components = vec![0.0f64; m];
-    for k in 0..N {
-        let X = tube_abs(&nom.x[k], r_max, &lc.axis);
-        for (e, b) in eps_components
-            .iter_mut()
-            .zip(evaluator_error_bound(lp.K, &nom.v[k], &X))
-        {
-            *e = e.max(b);
+    let N = nom.steps();
+    let n = lp.P.nrows();
+    let times: Vec<f64> = (0..nom.x.len()).map(|k| k as f64).collect();
+    let states: Vec<f64> = nom.x.iter().flatten().copied().collect();
+    let parts = SampledTrajectory::new(&times, &states, n).and_then(|traj| {
+        let metric = pc.metric();
+        // 1. Goal (4.12)–(4.13): the sample of greatest depth (the earliest of equals).
+        let goal = safety::goal_part(&traj, SafetySet::Region(lp.goal()), metric, traj.len())?;
+        // Rounding bound over the table, with the tube radius at its largest possible value δ_Goal.
+        let r_max = goal.value.max(0.0);
+        let mut eps_components = vec![0.0f64; m];
+        for k in 0..N {
+            let X = tube_abs(&nom.x[k], r_max, &lc.axis);
+            for (e, b) in eps_components
+                .iter_mut()
+                .zip(evaluator_error_bound(lp.K, &nom.v[k], &X))
+            {
+                *e = e.max(b);
+            }
         }
-    }
-    let eps_f32 = eps_components.iter().map(|e| e * e).sum::<f64>().sqrt();
-    // 2. Unsafe (4.14) at samples and between them.
-    let dist = pc.unsafe_distances(nom);
-    let (k_unsafe, delta_unsafe) = extremum(&dist, f64::INFINITY, |d, b| d < b);
-    let (_, delta_unsafe_is) = extremum(
-        &pc.unsafe_between_samples(nom, &dist, eps_f32),
-        f64::INFINITY,
-        |d, b| d < b,
-    );
-    // 3. Input (4.15) with the rounding margin.
-    let (k_input, delta_input) = extremum(
-        &pc.input_values(nom, &eps_components),
-        f64::INFINITY,
-        |d, b| d < b,
-    );
+        let eps_f32 = eps_components.iter().map(|e| e * e).sum::<f64>().sqrt();
+        // 2. Unsafe (4.14) at samples and between them, over the whole table (stronger than 0..=κ*).
+        let margin = |k: usize, d: f64| pc.unsafe_margin(nom, k, d, eps_f32);
+        let unsafe_ = safety::unsafe_part(
+            &traj,
+            lp.unsafe_set().map(SafetySet::Region),
+            metric,
+            traj.len(),
+            Some(&margin),
+        )?;
+        // 3. Input (4.15) with the rounding margin, at every step that applies an input.
+        let input = LoopInput {
+            pc: &pc,
+            nom,
+            eps: &eps_components,
+        };
+        let input = safety::input_part(&traj, &input, metric, N)?;
+        Ok((goal, unsafe_, input, eps_components, eps_f32))
+    });
+    let Ok((goal, unsafe_, input, eps_components, eps_f32)) = parts else {
+        return Certificate {
+            delta_goal: f64::NAN,
+            k_star: 0,
+            delta_unsafe: f64::NAN,
+            k_unsafe: 0,
+            delta_input: f64::NAN,
+            k_input: 0,
+            delta_unsafe_intersample: f64::NAN,
+            eps_components: vec![f64::NAN; m],
+            eps_f32: f64::NAN,
+            r_crit: f64::NAN,
+            delta: 0.0,
+            delta_stored: 0.0,
+        };
+    };
+    let delta_unsafe_is = unsafe_
+        .margined
+        .as_ref()
+        .map_or(unsafe_.at_samples.value, |c| c.value);
+    let (k_input, delta_input) = input.map_or((0, f64::INFINITY), |c| (c.index, c.value));
     let r_crit = lc.r_crit(eps_f32);
-    let d47 = delta_goal.min(delta_unsafe_is).min(delta_input);
+    let d47 = goal.value.min(delta_unsafe_is).min(delta_input);
     // Theorem 3.21: any r in [r_crit, d47) works; the strict inequalities of Lemma 4.4 need r < d47.
     let delta = if d47 > 0.0 && r_crit < d47 {
         d47 * (1.0 - 1e-9)
@@ -436,10 +457,10 @@ pub fn certify(lp: &Loop<'_>, lc: &LoopConstants, nom: &Nominal) -> Certificate 
     };
     let delta_stored = selection_radius(lp.P, &nom.x[0], delta);
     Certificate {
-        delta_goal,
-        k_star,
-        delta_unsafe,
-        k_unsafe,
+        delta_goal: goal.value,
+        k_star: goal.index,
+        delta_unsafe: unsafe_.at_samples.value,
+        k_unsafe: unsafe_.at_samples.index,
         delta_input,
         k_input,
         delta_unsafe_intersample: delta_unsafe_is,
@@ -448,6 +469,29 @@ pub fn certify(lp: &Loop<'_>, lc: &LoopConstants, nom: &Nominal) -> Certificate 
         r_crit,
         delta,
         delta_stored,
+    }
+}
+
+/// The Input piece as the shared scan queries it: the closed-form P-distance of [`input_distance`] at
+/// the nominal input of each step (it has no witness point; certification needs none).
+struct LoopInput<'p, 'a, 'b> {
+    pc: &'p Pieces<'a, 'b>,
+    nom: &'p Nominal,
+    eps: &'p [f64],
+}
+
+impl InputSets for LoopInput<'_, '_, '_> {
+    fn samples(&self) -> Option<usize> {
+        Some(self.nom.steps())
+    }
+    fn signed_dist(&self, kappa: usize, x: &[f64], metric: &Metric) -> Witness {
+        Witness {
+            value: self.signed_value(kappa, x, metric),
+            point: Vec::new(),
+        }
+    }
+    fn signed_value(&self, kappa: usize, _x: &[f64], _metric: &Metric) -> f64 {
+        self.pc.input_value(self.nom, kappa, self.eps)
     }
 }
 

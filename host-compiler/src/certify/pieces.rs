@@ -8,6 +8,10 @@
 //!   inter-sample excursion and the rounding disturbance, (dist − φ‖f‖_P − φβε̄)/γ ([`super`] doc, item 2).
 //! * **Input** (4.15): the P-distance to inputs outside the input set shrunk by the rounding bound.
 //!
+//! Certification takes the extrema of these terms through the shared scans of Theorem 4.7
+//! ([`crate::robustness::safety`]); the optimiser takes every sample near the extremum (its subgradient
+//! selection (5.29)) and the gradients there.
+//!
 //! Signed distances come with their witness point y* (the nearest point of the boundary); by the envelope
 //! theorem ∇ₓ ‖x − y*‖_P = P(x − y*)/‖x − y*‖_P, with the sign of the signed distance. These are the
 //! gradients at the critical points of (5.27)–(5.28).
@@ -126,14 +130,20 @@ impl<'a, 'b> Pieces<'a, 'b> {
         }
         d.iter()
             .enumerate()
-            .map(|(k, &d)| match self.excursion(nom, k) {
-                Some(f) => {
-                    let rho = self.lc.phi * p_norm(self.lp.P, &f);
-                    (d - rho - self.lc.phi * self.lc.beta * eps_f32) / self.lc.gamma
-                }
-                None => d,
-            })
+            .map(|(k, &d)| self.unsafe_margin(nom, k, d, eps_f32))
             .collect()
+    }
+
+    /// The Unsafe piece at sample k from its distance d at the sample: (d − φ‖f‖_P − φβε̄)/γ between
+    /// samples, d at the last sample and for discrete-time plants.
+    pub fn unsafe_margin(&self, nom: &Nominal, k: usize, d: f64, eps_f32: f64) -> f64 {
+        match self.excursion(nom, k) {
+            Some(f) => {
+                let rho = self.lc.phi * p_norm(self.lp.P, &f);
+                (d - rho - self.lc.phi * self.lc.beta * eps_f32) / self.lc.gamma
+            }
+            None => d,
+        }
     }
 
     /// Unsafe piece at every sample (+∞ without Unsafe).
@@ -189,8 +199,18 @@ impl<'a, 'b> Pieces<'a, 'b> {
     /// Input piece at every step κ < N (with the componentwise rounding bound `eps`).
     pub fn input_values(&self, nom: &Nominal, eps: &[f64]) -> Vec<f64> {
         (0..nom.steps())
-            .map(|k| input_distance(self.lp.K, &self.lc.roots, &nom.u[k], self.lp.input(), eps))
+            .map(|k| self.input_value(nom, k, eps))
             .collect()
+    }
+
+    /// Input piece at step k < N.
+    pub fn input_value(&self, nom: &Nominal, k: usize, eps: &[f64]) -> f64 {
+        input_distance(self.lp.K, &self.lc.roots, &nom.u[k], self.lp.input(), eps)
+    }
+
+    /// The CAF metric the pieces are measured in.
+    pub fn metric(&self) -> &Metric {
+        &self.metric
     }
 
     /// Input piece and its gradient at step k: through ũ = K̂x̃ + v, ∂/∂x = K̂ᵀ∂/∂ũ and ∂/∂v = ∂/∂ũ.

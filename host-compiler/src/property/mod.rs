@@ -3,11 +3,14 @@
 //! Today's property is reach-avoid (Problem 2.26): reach Goal within the horizon, never enter Unsafe
 //! before, apply only inputs in the input set. Its robustness for one nominal trajectory is Theorem 4.7,
 //! evaluated for the sampled f32 loop by [`crate::certify`] and, piece by piece with gradients, by the
-//! optimiser. An MTL task (Problem 2.28, the semantics in [`crate::robustness::mtl`]) will be a second
-//! property beside [`ReachAvoid`].
+//! optimiser. An MTL task (Problem 2.28, the semantics in [`crate::robustness::mtl`]) is the second
+//! property, [`Temporal`]; both score sampled traces through the one interface [`Property`]
+//! ([`semantics`]).
 
+pub mod semantics;
 mod sets;
 
+pub use semantics::{Property, SemanticsError, Temporal};
 pub use sets::{convex_piece, input_bound, input_scale, ConvexPiece, InputBound};
 
 use crate::geometry::Region;
@@ -20,6 +23,8 @@ pub struct ReachAvoid {
     /// The union of the Unsafe sets; `None` when the spec has none.
     pub unsafe_set: Option<Box<dyn Region>>,
     pub input: InputBound,
+    /// T: Goal must be reached within [0, T] seconds.
+    pub horizon: f64,
 }
 
 /// Goal and the members of Unsafe as convex pieces: the form the trajectory generator's convex
@@ -49,6 +54,8 @@ impl ConvexSets {
 pub enum PropertyError {
     #[error(transparent)]
     Spec(#[from] SpecError),
+    #[error(transparent)]
+    Semantics(#[from] SemanticsError),
 }
 
 impl ReachAvoid {
@@ -58,6 +65,7 @@ impl ReachAvoid {
             goal: problem.goal_region()?,
             unsafe_set: problem.unsafe_region()?,
             input: input_bound(&problem.input),
+            horizon: problem.horizon,
         })
     }
 

@@ -533,42 +533,65 @@ impl SafetyRobustness {
     }
 }
 
-/// Validate the spec against the trajectory and return the number of samples with t ≤ T.
-fn check(traj: &SampledTrajectory, spec: &SafetySpec) -> Result<usize, SafetyError> {
-    let n = traj.n();
-    if spec.goal.dim() != n {
-        return Err(SafetyError::DimensionMismatch {
-            what: "Goal",
-            found: spec.goal.dim(),
-            n,
-        });
-    }
-    if spec.unsafe_set.dim() != n {
-        return Err(SafetyError::DimensionMismatch {
-            what: "Unsafe",
-            found: spec.unsafe_set.dim(),
-            n,
-        });
-    }
-    if spec.metric.n != n {
+/// The metric against the trajectory's dimension.
+fn check_metric(n: usize, metric: &Metric) -> Result<(), SafetyError> {
+    if metric.n != n {
         return Err(SafetyError::DimensionMismatch {
             what: "metric",
-            found: spec.metric.n,
+            found: metric.n,
             n,
         });
     }
-    if spec.metric.R.len() != n * n {
+    if metric.R.len() != n * n {
         return Err(SafetyError::MetricShape {
-            found: spec.metric.R.len(),
+            found: metric.R.len(),
             expected: n * n,
         });
     }
-    if let Some(pos) = spec.metric.R.iter().position(|v| !v.is_finite()) {
+    if let Some(pos) = metric.R.iter().position(|v| !v.is_finite()) {
         return Err(SafetyError::MetricNonFinite {
             row: pos / n,
             col: pos % n,
         });
     }
+    Ok(())
+}
+
+fn check_set(n: usize, set: &SafetySet, what: &'static str) -> Result<(), SafetyError> {
+    if set.dim() != n {
+        return Err(SafetyError::DimensionMismatch {
+            what,
+            found: set.dim(),
+            n,
+        });
+    }
+    Ok(())
+}
+
+fn check_input(n: usize, input: &dyn InputSets, needed: usize) -> Result<(), SafetyError> {
+    if let Some(d) = input.dim() {
+        if d != n {
+            return Err(SafetyError::DimensionMismatch {
+                what: "input set",
+                found: d,
+                n,
+            });
+        }
+    }
+    if let Some(available) = input.samples() {
+        if available < needed {
+            return Err(SafetyError::InputTooShort { needed, available });
+        }
+    }
+    Ok(())
+}
+
+/// Validate the spec against the trajectory and return the number of samples with t ≤ T.
+fn check(traj: &SampledTrajectory, spec: &SafetySpec) -> Result<usize, SafetyError> {
+    let n = traj.n();
+    check_set(n, &spec.goal, GOAL)?;
+    check_set(n, &spec.unsafe_set, UNSAFE)?;
+    check_metric(n, spec.metric)?;
     if spec.T.is_nan() {
         return Err(SafetyError::HorizonNaN { T: spec.T });
     }
@@ -580,23 +603,7 @@ fn check(traj: &SampledTrajectory, spec: &SafetySpec) -> Result<usize, SafetyErr
         });
     }
     if let Some(input) = spec.input {
-        if let Some(d) = input.dim() {
-            if d != n {
-                return Err(SafetyError::DimensionMismatch {
-                    what: "input set",
-                    found: d,
-                    n,
-                });
-            }
-        }
-        if let Some(available) = input.samples() {
-            if available < count {
-                return Err(SafetyError::InputTooShort {
-                    needed: count,
-                    available,
-                });
-            }
-        }
+        check_input(n, input, count)?;
     }
     Ok(count)
 }
@@ -613,120 +620,51 @@ const GOAL: &str = "Goal";
 const UNSAFE: &str = "Unsafe";
 const INPUT: &str = "the admissible-input set";
 
-/// The per-call state: prepared sets and the signed values of (4.13)–(4.15) at one sample.
-struct Passes<'a, 't> {
+/// One set's signed distances along one trajectory: the set prepared for the metric once, then queried
+/// per sample (value only, cheap bounds, or with the witness at a critical sample).
+struct SetScan<'a, 't> {
     traj: &'t SampledTrajectory<'t>,
     metric: &'a Metric,
-    goal: Prepared<'a>,
-    unsafe_set: Prepared<'a>,
+    set: Prepared<'a>,
+    what: &'static str,
 }
 
-impl<'a, 't> Passes<'a, 't> {
-    fn new(traj: &'t SampledTrajectory<'t>, spec: &SafetySpec<'a>) -> Result<Self, SafetyError> {
+impl<'a, 't> SetScan<'a, 't> {
+    fn new(
+        traj: &'t SampledTrajectory<'t>,
+        set: SafetySet<'a>,
+        metric: &'a Metric,
+        what: &'static str,
+    ) -> Result<Self, SafetyError> {
         Ok(Self {
             traj,
-            metric: spec.metric,
-            goal: Prepared::new(spec.goal, spec.metric, GOAL)?,
-            unsafe_set: Prepared::new(spec.unsafe_set, spec.metric, UNSAFE)?,
+            metric,
+            set: Prepared::new(set, metric, what)?,
+            what,
         })
     }
-    /// Dist(x̃(κ), Goal).
+    /// Dist(x̃(κ), S).
     #[inline]
-    fn goal(&mut self, k: usize) -> Result<f64, SafetyError> {
-        not_nan(self.goal.value(self.traj.state(k), self.metric), GOAL, k)
-    }
-    /// −Dist(x̃(κ), Unsafe): the distance outside Unsafe, −depth inside.
-    #[inline]
-    fn unsafe_(&mut self, k: usize) -> Result<f64, SafetyError> {
+    fn dist(&mut self, k: usize) -> Result<f64, SafetyError> {
         not_nan(
-            -self.unsafe_set.value(self.traj.state(k), self.metric),
-            UNSAFE,
+            self.set.value(self.traj.state(k), self.metric),
+            self.what,
             k,
         )
     }
-    /// Bounds on Dist(x̃(κ), Goal), when available.
+    /// Bounds on Dist(x̃(κ), S), when the set has them.
     #[inline]
-    fn goal_bounds(&self, k: usize) -> Option<(f64, f64)> {
-        self.goal.bounds(self.traj.state(k))
+    fn bounds(&self, k: usize) -> Option<(f64, f64)> {
+        self.set.bounds(self.traj.state(k))
     }
-    /// Bounds on Dist(x̃(κ), Unsafe), when available.
-    #[inline]
-    fn unsafe_bounds(&self, k: usize) -> Option<(f64, f64)> {
-        self.unsafe_set.bounds(self.traj.state(k))
-    }
-    /// Dist(x̃(κ), A_κ).
-    #[inline]
-    fn input(&self, inp: &dyn InputSets, k: usize) -> Result<f64, SafetyError> {
-        not_nan(
-            inp.signed_value(k, self.traj.state(k), self.metric),
-            INPUT,
-            k,
-        )
-    }
-    fn critical(&self, value: f64, index: usize, w: Witness) -> Critical {
-        Critical {
-            value,
-            index,
-            time: self.traj.times()[index],
-            point: w.point,
-        }
-    }
-    fn goal_critical(&self, value: f64, k: usize) -> Critical {
-        self.critical(value, k, self.goal.witness(self.traj.state(k), self.metric))
-    }
-    fn unsafe_critical(&self, value: f64, k: usize) -> Critical {
-        self.critical(
+    /// The part's value at κ with the witness of Dist(x̃(κ), S).
+    fn critical(&self, value: f64, k: usize) -> Critical {
+        critical(
+            self.traj,
             value,
             k,
-            self.unsafe_set.witness(self.traj.state(k), self.metric),
+            self.set.witness(self.traj.state(k), self.metric),
         )
-    }
-    fn input_critical(&self, inp: &dyn InputSets, value: f64, k: usize) -> Critical {
-        self.critical(
-            value,
-            k,
-            inp.signed_dist(k, self.traj.state(k), self.metric),
-        )
-    }
-}
-
-/// First index of the minimum over 0..=upto, and the minimum.
-fn prefix_min(
-    upto: usize,
-    mut f: impl FnMut(usize) -> Result<f64, SafetyError>,
-) -> Result<(usize, f64), SafetyError> {
-    let mut best = (0, f(0)?);
-    for k in 1..=upto {
-        let v = f(k)?;
-        if v < best.1 {
-            best = (k, v);
-        }
-    }
-    Ok(best)
-}
-
-/// Goal or Unsafe, for the passes that only need Dist(·, S).
-#[derive(Clone, Copy)]
-enum Which {
-    Goal,
-    Unsafe,
-}
-
-impl Passes<'_, '_> {
-    /// Dist(x̃(κ), S) for S = Goal or Unsafe.
-    #[inline]
-    fn dist(&mut self, which: Which, k: usize) -> Result<f64, SafetyError> {
-        match which {
-            Which::Goal => self.goal(k),
-            Which::Unsafe => self.unsafe_(k).map(|u| -u),
-        }
-    }
-    #[inline]
-    fn dist_bounds(&self, which: Which, k: usize) -> Option<(f64, f64)> {
-        match which {
-            Which::Goal => self.goal_bounds(k),
-            Which::Unsafe => self.unsafe_bounds(k),
-        }
     }
 
     /// Dist(x̃(j)) + ‖x̃(κ) − x̃(j)‖_R (widened for rounding) ≥ Dist(x̃(κ)) for the anchor (j, Dist(x̃(j))).
@@ -736,15 +674,15 @@ impl Passes<'_, '_> {
         vj + d * (1.0 + 1e-9) + 1e-9 * (1.0 + vj.abs())
     }
 
-    /// First index of the maximum of Dist(x̃(κ), S) over κ ∈ 0..end, and the maximum. When the set has
-    /// bounds (lo, hi) bracketing the value, a first pass takes the sample with the largest lo as the
-    /// incumbent, and the scan then solves only samples whose hi reaches the incumbent's value; every
-    /// skipped sample is provably below the maximum, so the result equals the full scan's.
-    fn first_argmax(&mut self, which: Which, end: usize) -> Result<(usize, f64), SafetyError> {
-        if end <= 1 || self.dist_bounds(which, 0).is_none() {
-            let mut best = (0, self.dist(which, 0)?);
+    /// First index of the maximum of Dist(x̃(κ), S) over κ ∈ 0..end (end ≥ 1), and the maximum. When
+    /// the set has bounds (lo, hi) bracketing the value, a first pass takes the sample with the largest
+    /// lo as the incumbent, and the scan then solves only samples whose hi reaches the incumbent's value;
+    /// every skipped sample is provably below the maximum, so the result equals the full scan's.
+    fn first_argmax(&mut self, end: usize) -> Result<(usize, f64), SafetyError> {
+        if end <= 1 || self.bounds(0).is_none() {
+            let mut best = (0, self.dist(0)?);
             for k in 1..end {
-                let v = self.dist(which, k)?;
+                let v = self.dist(k)?;
                 if v > best.1 {
                     best = (k, v);
                 }
@@ -755,16 +693,14 @@ impl Passes<'_, '_> {
         let mut hi = Vec::with_capacity(end);
         let (mut k0, mut lo0) = (0, f64::NEG_INFINITY);
         for k in 0..end {
-            let (lo, h) = self
-                .dist_bounds(which, k)
-                .unwrap_or((f64::NEG_INFINITY, f64::INFINITY));
+            let (lo, h) = self.bounds(k).unwrap_or((f64::NEG_INFINITY, f64::INFINITY));
             if lo > lo0 {
                 lo0 = lo;
                 k0 = k;
             }
             hi.push(h);
         }
-        let v0 = self.dist(which, k0)?;
+        let v0 = self.dist(k0)?;
         // Pass 2: solve only where the value may reach the threshold max(v0, best so far). Besides the
         // set's bound, the signed distance is 1-Lipschitz in ‖·‖_R (the segment between a point inside
         // and one outside crosses the boundary), so the last solved sample j gives
@@ -778,7 +714,7 @@ impl Passes<'_, '_> {
             } else if h < threshold || self.lipschitz_bound(anchor, k) < threshold {
                 continue;
             } else {
-                let v = self.dist(which, k)?;
+                let v = self.dist(k)?;
                 anchor = (k, v);
                 v
             };
@@ -788,6 +724,143 @@ impl Passes<'_, '_> {
         }
         Ok(best.unwrap_or((k0, v0)))
     }
+}
+
+fn critical(traj: &SampledTrajectory, value: f64, index: usize, w: Witness) -> Critical {
+    Critical {
+        value,
+        index,
+        time: traj.times()[index],
+        point: w.point,
+    }
+}
+
+/// First index of the minimum over 0..end (end ≥ 1), and the minimum.
+fn prefix_min(
+    end: usize,
+    mut f: impl FnMut(usize) -> Result<f64, SafetyError>,
+) -> Result<(usize, f64), SafetyError> {
+    let mut best = (0, f(0)?);
+    for k in 1..end {
+        let v = f(k)?;
+        if v < best.1 {
+            best = (k, v);
+        }
+    }
+    Ok(best)
+}
+
+/// Dist(x̃(κ), A_κ) through an [`InputSets`].
+#[inline]
+fn input_value(
+    traj: &SampledTrajectory,
+    inp: &dyn InputSets,
+    metric: &Metric,
+    k: usize,
+) -> Result<f64, SafetyError> {
+    not_nan(inp.signed_value(k, traj.state(k), metric), INPUT, k)
+}
+
+fn input_critical(
+    traj: &SampledTrajectory,
+    inp: &dyn InputSets,
+    metric: &Metric,
+    value: f64,
+    k: usize,
+) -> Critical {
+    critical(traj, value, k, inp.signed_dist(k, traj.state(k), metric))
+}
+
+/// The Goal part (4.12)–(4.13) over the samples 0..end: the first maximiser κ* of Dist(x̃(κ), Goal) and
+/// its value, with the witness. One of the three scans of Theorem 4.7 that every caller shares:
+/// [`safety_robustness`] and the certifier of the sampled f32 loop (`crate::certify`).
+pub fn goal_part(
+    traj: &SampledTrajectory,
+    goal: SafetySet,
+    metric: &Metric,
+    end: usize,
+) -> Result<Critical, SafetyError> {
+    check_set(traj.n(), &goal, GOAL)?;
+    check_metric(traj.n(), metric)?;
+    let end = end.clamp(1, traj.len());
+    let mut s = SetScan::new(traj, goal, metric, GOAL)?;
+    let (k, v) = s.first_argmax(end)?;
+    Ok(s.critical(v, k))
+}
+
+/// The Unsafe part (4.14) over the samples 0..end: the minimum of −Dist(x̃(κ), Unsafe) (the distance
+/// outside Unsafe, minus the depth inside), first minimiser, with the witness; +∞ at κ = 0 when there is
+/// no Unsafe set.
+///
+/// `margin`, when given, is a per-sample reduction (κ, d) ↦ d′ applied to that distance (certification
+/// adds the inter-sample excursion and the rounding of the input there); the result then also carries
+/// min over κ of d′ (the first minimiser and its value). Without it, ellipsoidal sets are scanned with
+/// the pruning of [`goal_part`]; with it every sample is evaluated.
+pub fn unsafe_part(
+    traj: &SampledTrajectory,
+    unsafe_set: Option<SafetySet>,
+    metric: &Metric,
+    end: usize,
+    margin: Option<&dyn Fn(usize, f64) -> f64>,
+) -> Result<UnsafePart, SafetyError> {
+    check_metric(traj.n(), metric)?;
+    let end = end.clamp(1, traj.len());
+    let Some(set) = unsafe_set else {
+        let none = Critical {
+            value: f64::INFINITY,
+            index: 0,
+            time: traj.times()[0],
+            point: Vec::new(),
+        };
+        return Ok(UnsafePart {
+            margined: margin.map(|_| none.clone()),
+            at_samples: none,
+        });
+    };
+    check_set(traj.n(), &set, UNSAFE)?;
+    let mut s = SetScan::new(traj, set, metric, UNSAFE)?;
+    let Some(margin) = margin else {
+        // The minimum of −Dist is the first maximiser of Dist.
+        let (k, d) = s.first_argmax(end)?;
+        return Ok(UnsafePart {
+            at_samples: s.critical(-d, k),
+            margined: None,
+        });
+    };
+    let dist: Vec<f64> = (0..end)
+        .map(|k| s.dist(k).map(|d| -d))
+        .collect::<Result<_, _>>()?;
+    let (k, d) = prefix_min(end, |k| Ok(dist[k]))?;
+    let (km, dm) = prefix_min(end, |k| not_nan(margin(k, dist[k]), UNSAFE, k))?;
+    Ok(UnsafePart {
+        at_samples: s.critical(d, k),
+        margined: Some(s.critical(dm, km)),
+    })
+}
+
+/// The Unsafe part at the samples and, when a margin was given, after it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct UnsafePart {
+    pub at_samples: Critical,
+    pub margined: Option<Critical>,
+}
+
+/// The Input part (4.15) over the samples 0..end: the minimum of Dist(x̃(κ), A_κ), first minimiser, with
+/// the input sets' witness; `None` when end = 0 (no sample carries an input).
+pub fn input_part(
+    traj: &SampledTrajectory,
+    input: &dyn InputSets,
+    metric: &Metric,
+    end: usize,
+) -> Result<Option<Critical>, SafetyError> {
+    check_metric(traj.n(), metric)?;
+    let end = end.min(traj.len());
+    check_input(traj.n(), input, end)?;
+    if end == 0 {
+        return Ok(None);
+    }
+    let (k, v) = prefix_min(end, |k| input_value(traj, input, metric, k))?;
+    Ok(Some(input_critical(traj, input, metric, v, k)))
 }
 
 fn assemble(
@@ -821,33 +894,23 @@ fn assemble(
 /// Theorem 4.7: δ₀ with t* = argmax of the Goal depth over samples with t_κ ≤ T, (4.11)–(4.15).
 ///
 /// Runs in O(N) signed-distance evaluations: one pass for Goal up to T, one for Unsafe and Input up to
-/// κ*, plus one witness query per part. See the module doc for the signed convention and the tie rule.
+/// κ*, plus one witness query per part ([`goal_part`], [`unsafe_part`], [`input_part`]). See the module
+/// doc for the signed convention and the tie rule.
 pub fn safety_robustness(
     traj: &SampledTrajectory,
     spec: &SafetySpec,
 ) -> Result<SafetyRobustness, SafetyError> {
     let count = check(traj, spec)?;
-    let mut p = Passes::new(traj, spec)?;
     // (4.12)–(4.13): first maximiser of the signed Goal distance.
-    let (kstar, gbest) = p.first_argmax(Which::Goal, count)?;
-    // (4.14): minimum over the closed prefix 0..=κ* of −Dist(·, Unsafe), i.e. the first maximiser of
-    // Dist(·, Unsafe).
-    let (ku, du) = p.first_argmax(Which::Unsafe, kstar + 1)?;
-    let u = -du;
-    // (4.15).
+    let goal = goal_part(traj, spec.goal, spec.metric, count)?;
+    // (4.14)–(4.15): over the closed prefix 0..=κ*.
+    let end = goal.index + 1;
+    let unsafe_set = unsafe_part(traj, Some(spec.unsafe_set), spec.metric, end, None)?.at_samples;
     let input = match spec.input {
-        Some(inp) => {
-            let (ki, v) = prefix_min(kstar, |k| p.input(inp, k))?;
-            Some(p.input_critical(inp, v, ki))
-        }
+        Some(inp) => input_part(traj, inp, spec.metric, end)?,
         None => None,
     };
-    Ok(assemble(
-        p.goal_critical(gbest, kstar),
-        p.unsafe_critical(u, ku),
-        input,
-        count,
-    ))
+    Ok(assemble(goal, unsafe_set, input, count))
 }
 
 /// Variant of Theorem 4.7 that picks t* to maximise min(Dist(x̃(t*), Goal), the Unsafe and Input minima
@@ -860,23 +923,24 @@ pub fn safety_robustness_joint(
     spec: &SafetySpec,
 ) -> Result<SafetyRobustness, SafetyError> {
     let count = check(traj, spec)?;
-    let mut p = Passes::new(traj, spec)?;
+    let mut g = SetScan::new(traj, spec.goal, spec.metric, GOAL)?;
+    let mut u = SetScan::new(traj, spec.unsafe_set, spec.metric, UNSAFE)?;
     let (mut mu, mut ku) = (f64::INFINITY, 0); // running min of the Unsafe part
     let (mut mi, mut ki) = (f64::INFINITY, 0); // running min of the Input part
     let mut best = (f64::NEG_INFINITY, 0, 0, 0, f64::NEG_INFINITY); // (score, κ*, κ_U, κ_I, Goal value)
     let mut best_parts = (f64::INFINITY, f64::INFINITY);
     for k in 0..count {
-        // u = −Dist(·, Unsafe) ≥ −hi: skip the solve when it cannot lower the running minimum.
-        let skip_u = k > 0 && p.unsafe_bounds(k).is_some_and(|b| -b.1 >= mu);
+        // −Dist(·, Unsafe) ≥ −hi: skip the solve when it cannot lower the running minimum.
+        let skip_u = k > 0 && u.bounds(k).is_some_and(|b| -b.1 >= mu);
         if !skip_u {
-            let u = p.unsafe_(k)?;
-            if u < mu || k == 0 {
-                mu = u;
+            let v = -u.dist(k)?;
+            if v < mu || k == 0 {
+                mu = v;
                 ku = k;
             }
         }
         if let Some(inp) = spec.input {
-            let v = p.input(inp, k)?;
+            let v = input_value(traj, inp, spec.metric, k)?;
             if v < mi || k == 0 {
                 mi = v;
                 ki = k;
@@ -887,22 +951,22 @@ pub fn safety_robustness_joint(
             // The prefix minimum never increases, so no later sample can beat `best`.
             break;
         }
-        if k > 0 && p.goal_bounds(k).is_some_and(|b| b.1.min(prefix) <= best.0) {
+        if k > 0 && g.bounds(k).is_some_and(|b| b.1.min(prefix) <= best.0) {
             continue; // the score min(Goal, prefix) cannot exceed `best`
         }
-        let g = p.goal(k)?;
-        let score = g.min(prefix);
+        let gv = g.dist(k)?;
+        let score = gv.min(prefix);
         if score > best.0 || k == 0 {
-            best = (score, k, ku, ki, g);
+            best = (score, k, ku, ki, gv);
             best_parts = (mu, mi);
         }
     }
-    let (_, kstar, ku, ki, g) = best;
-    let goal = p.goal_critical(g, kstar);
-    let unsafe_set = p.unsafe_critical(best_parts.0, ku);
+    let (_, kstar, ku, ki, gv) = best;
+    let goal = g.critical(gv, kstar);
+    let unsafe_set = u.critical(best_parts.0, ku);
     let input = spec
         .input
-        .map(|inp| p.input_critical(inp, best_parts.1, ki));
+        .map(|inp| input_critical(traj, inp, spec.metric, best_parts.1, ki));
     Ok(assemble(goal, unsafe_set, input, count))
 }
 

@@ -496,6 +496,7 @@ mod tests {
             ),
             unsafe_set: None,
             input,
+            horizon: steps as f64 * 0.1,
         };
         let convex = ConvexSets {
             goal,

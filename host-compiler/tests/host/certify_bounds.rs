@@ -200,6 +200,7 @@ fn inter_sample_excursion_is_bounded() {
             center: vec![0.0, 0.0],
             max: 1e9,
         },
+        horizon: 1.0,
     };
     let At = &d.A + &d.B * &K;
     let sigma = host_compiler::linalg::sym_eigenvalues((&P - At.transpose() * &P * &At).as_ref())

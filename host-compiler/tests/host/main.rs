@@ -27,6 +27,7 @@ mod mtl_errors;
 mod mtl_props;
 mod mtl_semantics;
 mod optimize_delta;
+mod property_semantics;
 mod optimize_gradient;
 mod optimize_potential;
 mod pwa_example_6_4_period;

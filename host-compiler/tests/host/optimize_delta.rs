@@ -307,3 +307,23 @@ fn a_held_reference_stays_held_and_is_still_improved() {
     );
     assert_shipped(&ol, &lc, &x0, &o);
 }
+
+/// A nominal that leaves the finite numbers (an infinite reference input) certifies nothing: the shared scans
+/// refuse it and the certificate says δ = 0 with NaN parts, rather than skipping the bad samples.
+#[test]
+fn a_non_finite_nominal_certifies_nothing() {
+    let (ol, lc) = planar();
+    let lp = ol.lp();
+    let x0 = ol.task.init().lo.clone();
+    let mut v = vec![vec![0.0, 0.0]; ol.task.steps];
+    v[0] = vec![f64::INFINITY, f64::INFINITY];
+    let nom = lp.simulate(&x0, &v);
+    assert!(nom.x.iter().flatten().any(|x| !x.is_finite()), "the nominal must overflow");
+    let c = host_compiler::certify::certify(&lp, &lc, &nom);
+    assert!(!c.is_certified());
+    assert_eq!((c.delta, c.delta_stored), (0.0, 0.0));
+    assert!(c.delta_goal.is_nan() && c.delta_unsafe.is_nan());
+    // The same loop certifies a finite one (the refusal is about the nominal, not the loop).
+    let (_, ok) = shipped(&lp, &lc, &x0, &vec![vec![0.0, 0.0]; ol.task.steps]);
+    assert!(ok.delta_goal.is_finite());
+}

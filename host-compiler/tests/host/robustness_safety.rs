@@ -6,8 +6,8 @@
 
 use host_compiler::geometry::{Ball, Ellipsoid, Metric, Region, Witness};
 use host_compiler::robustness::{
-    safety_robustness, safety_robustness_joint, Binding, FnInput, InputSets, SafetyError,
-    SafetySet, SafetySpec, SampledTrajectory,
+    goal_part, input_part, safety_robustness, safety_robustness_joint, unsafe_part, Binding,
+    FnInput, InputSets, SafetyError, SafetySet, SafetySpec, SampledTrajectory,
 };
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -677,6 +677,66 @@ fn prepared_ellipsoid_path_matches_generic_region_path() {
                     <= 1e-9 * (1.0 + a.unsafe_set.value.abs()),
                 "case {case}"
             );
+        }
+    }
+}
+
+/// The three scans certification shares ([`goal_part`], [`unsafe_part`] with a per-sample margin,
+/// [`input_part`]) against direct scans of the same values: first extremum, its value, every range end,
+/// no Unsafe set (+∞), and no input sample (`None`).
+#[test]
+fn shared_scans_match_direct_scans_over_any_range() {
+    let mut rng = ChaCha8Rng::seed_from_u64(0x5ca7_0001);
+    for case in 0..300 {
+        let I = instance(&mut rng);
+        let traj = SampledTrajectory::new(&I.t, &I.x, I.n).unwrap();
+        let len = I.t.len();
+        let end = rng.random_range(1..=len);
+        let st = |k: usize| &I.x[k * I.n..(k + 1) * I.n];
+        let first = |vals: &[f64], better: &dyn Fn(f64, f64) -> bool| {
+            let mut b = (0, vals[0]);
+            for (k, &v) in vals.iter().enumerate().skip(1) {
+                if better(v, b.1) {
+                    b = (k, v);
+                }
+            }
+            b
+        };
+        let g: Vec<f64> = (0..end).map(|k| I.goal.signed_dist(st(k), &I.m).value).collect();
+        let goal = goal_part(&traj, SafetySet::Region(&I.goal), &I.m, end).unwrap();
+        let (kg, vg) = first(&g, &|a, b| a > b);
+        assert_eq!((goal.index, goal.value), (kg, vg), "case {case}: Goal");
+
+        let u: Vec<f64> = (0..end)
+            .map(|k| -I.unsafe_set.signed_dist(st(k), &I.m).value)
+            .collect();
+        let margin = |k: usize, d: f64| (d - 0.01 * k as f64) / 1.5;
+        let um: Vec<f64> = u.iter().enumerate().map(|(k, &d)| margin(k, d)).collect();
+        let up = unsafe_part(&traj, Some(SafetySet::Region(&I.unsafe_set)), &I.m, end, Some(&margin))
+            .unwrap();
+        let (ku, vu) = first(&u, &|a, b| a < b);
+        let (kum, vum) = first(&um, &|a, b| a < b);
+        assert_eq!((up.at_samples.index, up.at_samples.value), (ku, vu), "case {case}: Unsafe");
+        let m = up.margined.expect("a margin was given");
+        assert_eq!((m.index, m.value), (kum, vum), "case {case}: Unsafe after the margin");
+        let plain = unsafe_part(&traj, Some(SafetySet::Region(&I.unsafe_set)), &I.m, end, None).unwrap();
+        assert_eq!(plain.at_samples, up.at_samples, "case {case}: with and without the margin");
+        assert!(plain.margined.is_none());
+
+        let none = unsafe_part(&traj, None, &I.m, end, Some(&margin)).unwrap();
+        assert_eq!(none.at_samples.value, f64::INFINITY);
+        assert_eq!(none.margined.map(|c| c.value), Some(f64::INFINITY));
+
+        let iend = rng.random_range(0..=end);
+        let ip = input_part(&traj, &I.inputs as &dyn InputSets, &I.m, iend).unwrap();
+        if iend == 0 {
+            assert!(ip.is_none(), "case {case}: no input sample, no Input part");
+        } else {
+            let v: Vec<f64> = (0..iend)
+                .map(|k| I.inputs[k].signed_dist(st(k), &I.m).value)
+                .collect();
+            let ip = ip.expect("input samples were given");
+            assert_eq!((ip.index, ip.value), first(&v, &|a, b| a < b), "case {case}: Input");
         }
     }
 }

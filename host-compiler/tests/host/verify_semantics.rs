@@ -40,6 +40,7 @@ fn judge_run(goal_centre: f64) -> host_compiler::verify::RunOutcome {
             lo: vec![-1.5],
             hi: vec![1.5],
         },
+        horizon: 0.6,
     };
     let init = InitBox {
         lo: vec![0.0],
