@@ -35,7 +35,7 @@ const STARTS: [[f64; 4]; 5] = [
 fn descent_rows(ol: &OwnedLoop, lc: &LoopConstants, rows: &mut Vec<Row>) {
     let lp = ol.lp();
     let v = vec![vec![1.0, -1.0]; ol.task.steps];
-    let s = PotentialSettings::default().delta(0.04);
+    let s = PotentialSettings::builder().delta(0.04).build().unwrap();
     let per = |method: DescentMethod| -> (Vec<f64>, Vec<f64>, Vec<f64>) {
         let (mut ev, mut it, mut secs) = (vec![], vec![], vec![]);
         for x0 in &STARTS.map(|x| x.map(|a| a as f32 as f64)) {
@@ -98,7 +98,7 @@ fn time_optimal_rows(ol: &OwnedLoop, lc: &LoopConstants, rows: &mut Vec<Row>) {
         lc,
         &x0,
         &v,
-        &PotentialSettings::default().delta(0.05),
+        &PotentialSettings::builder().delta(0.05).build().unwrap(),
         DescentMethod::Algorithm3,
     )
     .expect("valid input");
@@ -108,10 +108,12 @@ fn time_optimal_rows(ol: &OwnedLoop, lc: &LoopConstants, rows: &mut Vec<Row>) {
         (DescentMethod::Algorithm3, "time_optimal_planar_steps", 300),
         (DescentMethod::Lbfgs, "time_optimal_planar_steps_lbfgs", 300),
     ] {
-        let s = PotentialSettings::default()
+        let s = PotentialSettings::builder()
             .delta(kept)
             .max_iterations(iters)
-            .max_evaluations(3000);
+            .max_evaluations(3000)
+            .build()
+            .unwrap();
         let t = Instant::now();
         let to = time_optimal(&lp, lc, &x0, &seed.v, &s, method).expect("valid input");
         let secs = t.elapsed().as_secs_f64();
@@ -150,7 +152,7 @@ fn bundle_rows(ol: &OwnedLoop, lc: &LoopConstants, rows: &mut Vec<Row>) {
             lc,
             x0,
             &v,
-            &PotentialSettings::default().delta(0.02),
+            &PotentialSettings::builder().delta(0.02).build().unwrap(),
             DescentMethod::Algorithm3,
         )
         .expect("valid input");

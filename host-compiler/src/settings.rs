@@ -113,6 +113,10 @@ macro_rules! settings_builder {
             pub fn builder() -> $builder {
                 $builder::default()
             }
+            /// A builder starting from these settings (to change some fields and check them again).
+            pub fn to_builder(self) -> $builder {
+                $builder { s: self }
+            }
         }
     };
 }

@@ -16,7 +16,11 @@ use miette::{IntoDiagnostic, WrapErr};
 /// Learns, checks and writes the PWA controller (module doc). Fails when any check fails.
 pub fn run(a: &SynthArgs, task: &Task, s: &Synthesis) -> miette::Result<()> {
     let problem = &task.problem;
-    let pwa = learn_pwa(task, s, &PwaSettings::default().progress(!a.quiet))
+    let settings = PwaSettings::builder()
+        .progress(!a.quiet)
+        .build()
+        .into_diagnostic()?;
+    let pwa = learn_pwa(task, s, &settings)
         .map_err(|e| miette::miette!("PWA learning: {e}"))?;
     let img = shared_types::image::decode(&pwa.image)
         .map_err(|e| miette::miette!("the emitted PWA image is rejected: {e:?}"))?;

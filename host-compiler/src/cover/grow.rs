@@ -166,14 +166,12 @@ pub fn grow(
             certificate,
         })
     };
-    let bundle = opts
-        .optimizer
-        .cloned()
-        .unwrap_or_else(|| {
-            BundleSettings::default().max_iterations(problem.synthesis.max_iterations)
-        })
-        .hold(hold);
-    bundle.validate()?;
+    let bundle = match opts.optimizer {
+        Some(b) => b.clone().to_builder(),
+        None => BundleSettings::builder().max_iterations(problem.synthesis.max_iterations),
+    }
+    .hold(hold)
+    .build()?;
     let cancel: &AtomicBool = opts.cancel;
     let cancelled = || cancel.load(Ordering::Relaxed);
     // §5.3 on a start (x0, v): maximise the certified δ, then re-certify what the optimiser returns through

@@ -56,16 +56,6 @@ impl Default for BoundaryDistanceSettings {
 }
 
 impl BoundaryDistanceSettings {
-    /// Set the tolerance on |G|.
-    pub fn tol(mut self, tol: f64) -> Self {
-        self.tol = tol;
-        self
-    }
-    /// Set the iteration cap.
-    pub fn max_iter(mut self, max_iter: u32) -> Self {
-        self.max_iter = max_iter;
-        self
-    }
     /// Checks the ranges documented on the fields; the first violation is returned.
     pub fn validate(&self) -> Result<(), SettingError> {
         let c = Check("BoundaryDistanceSettings");
@@ -1042,7 +1032,10 @@ mod tests {
             .build()
             .unwrap_err();
         assert_eq!(e.field, "max_iter");
-        let bad = settings().tol(f64::NAN);
+        let bad = BoundaryDistanceSettings {
+            tol: f64::NAN,
+            ..settings()
+        };
         let r = EllipsoidBoundaryDistance::with_settings(&[0.0], &[1.0], &[1.0], bad);
         assert!(
             matches!(

@@ -318,12 +318,16 @@ pub(super) fn maximize(
     let mut iterations = 0usize;
     // Repair an uncertified start with the potentials of §5.2 (one iteration of the count).
     if !best.cert.is_certified() && s.repair_delta > 0.0 && s.max_iterations > 0 {
-        let ps = PotentialSettings::default()
+        let ps = PotentialSettings::builder()
             .delta(s.repair_delta)
             .max_iterations(500)
             .max_evaluations(2000)
-            .hold(s.hold);
-        if let Ok(d) = descend(lp, lc, x0, &best.v, &ps, DescentMethod::Lbfgs) {
+            .hold(s.hold)
+            .build();
+        let repaired = ps
+            .ok()
+            .and_then(|ps| descend(lp, lc, x0, &best.v, &ps, DescentMethod::Lbfgs).ok());
+        if let Some(d) = repaired {
             let cand = evaluate(lp, lc, x0, d.v, s.hold);
             if better(&cand, &best) {
                 best = cand;

@@ -30,8 +30,8 @@ use crate::trajectory::Nominal;
 use std::sync::atomic::AtomicBool;
 
 /// Settings of the bundle method for [`maximize_delta`], with documented defaults. Build with
-/// [`BundleSettings::builder`] (validated) or take [`Default`]; the setters on the struct itself
-/// (`BundleSettings::default().hold(20)`) are the same without the check.
+/// [`BundleSettings::builder`] (validated; `to_builder` starts from existing settings) or take
+/// [`Default`]. Every entry point checks them again.
 #[derive(Clone, Debug)]
 pub struct BundleSettings {
     /// Outer iterations (serious + null steps) at most. ≥ 1. Default 200.
@@ -102,46 +102,6 @@ impl BundleSettings {
         c.at_least_one("hold", self.hold)
     }
 
-    pub fn max_iterations(mut self, v: usize) -> Self {
-        self.max_iterations = v;
-        self
-    }
-    pub fn tolerance(mut self, v: f64) -> Self {
-        self.tolerance = v;
-        self
-    }
-    pub fn min_step(mut self, v: f64) -> Self {
-        self.min_step = v;
-        self
-    }
-    pub fn max_step(mut self, v: f64) -> Self {
-        self.max_step = v;
-        self
-    }
-    pub fn initial_step(mut self, v: f64) -> Self {
-        self.initial_step = v;
-        self
-    }
-    pub fn serious_fraction(mut self, v: f64) -> Self {
-        self.serious_fraction = v;
-        self
-    }
-    pub fn bundle_size(mut self, v: usize) -> Self {
-        self.bundle_size = v;
-        self
-    }
-    pub fn terminal_time(mut self, v: bool) -> Self {
-        self.terminal_time = v;
-        self
-    }
-    pub fn repair_delta(mut self, v: f64) -> Self {
-        self.repair_delta = v;
-        self
-    }
-    pub fn hold(mut self, v: usize) -> Self {
-        self.hold = v;
-        self
-    }
 }
 
 settings_builder!(

@@ -37,8 +37,8 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
 
 /// Settings of the potential-function descent, with documented defaults. Build with
-/// [`PotentialSettings::builder`] (validated) or take [`Default`]; the setters on the struct itself
-/// (`PotentialSettings::default().delta(0.02)`) are the same without the check.
+/// [`PotentialSettings::builder`] (validated; `to_builder` starts from existing settings) or take
+/// [`Default`]. Every entry point checks them again.
 #[derive(Clone, Debug)]
 pub struct PotentialSettings {
     /// δ_d, the robustness the trajectory must keep. Finite, > 0. Default 0.01.
@@ -115,58 +115,6 @@ impl PotentialSettings {
         c.at_least_one("hold", self.hold)
     }
 
-    pub fn delta(mut self, v: f64) -> Self {
-        self.delta = v;
-        self
-    }
-    pub fn weight_goal(mut self, v: f64) -> Self {
-        self.weight_goal = v;
-        self
-    }
-    pub fn weight_input(mut self, v: f64) -> Self {
-        self.weight_input = v;
-        self
-    }
-    pub fn margin(mut self, v: f64) -> Self {
-        self.margin = v;
-        self
-    }
-    pub fn grow(mut self, v: f64) -> Self {
-        self.grow = v;
-        self
-    }
-    pub fn shrink(mut self, v: f64) -> Self {
-        self.shrink = v;
-        self
-    }
-    pub fn initial_step(mut self, v: f64) -> Self {
-        self.initial_step = v;
-        self
-    }
-    pub fn min_step(mut self, v: f64) -> Self {
-        self.min_step = v;
-        self
-    }
-    pub fn max_iterations(mut self, v: usize) -> Self {
-        self.max_iterations = v;
-        self
-    }
-    pub fn lbfgs_memory(mut self, v: usize) -> Self {
-        self.lbfgs_memory = v;
-        self
-    }
-    pub fn max_evaluations(mut self, v: usize) -> Self {
-        self.max_evaluations = v;
-        self
-    }
-    pub fn hold(mut self, v: usize) -> Self {
-        self.hold = v;
-        self
-    }
-    pub fn progress(mut self, v: bool) -> Self {
-        self.progress = v;
-        self
-    }
 }
 
 settings_builder!(
@@ -474,6 +422,7 @@ pub fn descend(
     if !(s.delta > 0.0 && s.delta.is_finite()) {
         return Err(OptimizeError::BadDelta(s.delta));
     }
+    s.validate()?;
     Ok(descend_checked(lp, lc, x0, v0, s, method))
 }
 
@@ -540,6 +489,7 @@ pub fn time_optimal(
     if !(s.delta > 0.0 && s.delta.is_finite()) {
         return Err(OptimizeError::BadDelta(s.delta));
     }
+    s.validate()?;
     let (_, c) = certify::shipped(lp, lc, x0, v_seed);
     let hi0 = c.k_star.max(1).min(v_seed.len());
     // One probe at k*, then ⌈log₂ k*⌉ bisection probes at most.

@@ -80,8 +80,8 @@ pub use learn::{learn_laws, LearnedLaw};
 pub use partition::{build_image, PartitionStats};
 
 /// Settings of the learning and partitioning, with documented defaults ([`PwaSettings::default`]). Build
-/// with [`PwaSettings::builder`] (validated); the setters on the struct itself
-/// (`PwaSettings::default().thermal_cycles(0)`) are the same without the check.
+/// with [`PwaSettings::builder`] (validated; `to_builder` starts from existing settings). Every entry point
+/// checks them again.
 #[derive(Clone, Debug)]
 pub struct PwaSettings {
     /// The fitting tolerance is chosen so that a law with the design contraction has
@@ -160,42 +160,6 @@ impl PwaSettings {
         c.at_least_one("leaf_balls", self.leaf_balls)
     }
 
-    pub fn rcrit_fraction(mut self, v: f64) -> Self {
-        self.rcrit_fraction = v;
-        self
-    }
-    pub fn contraction(mut self, v: Option<f64>) -> Self {
-        self.contraction = v;
-        self
-    }
-    pub fn seeds(mut self, v: usize) -> Self {
-        self.seeds = v;
-        self
-    }
-    pub fn max_failures(mut self, v: usize) -> Self {
-        self.max_failures = v;
-        self
-    }
-    pub fn thermal_cycles(mut self, v: usize) -> Self {
-        self.thermal_cycles = v;
-        self
-    }
-    pub fn fit_reserve(mut self, v: f64) -> Self {
-        self.fit_reserve = v;
-        self
-    }
-    pub fn max_depth(mut self, v: usize) -> Self {
-        self.max_depth = v;
-        self
-    }
-    pub fn leaf_balls(mut self, v: usize) -> Self {
-        self.leaf_balls = v;
-        self
-    }
-    pub fn progress(mut self, v: bool) -> Self {
-        self.progress = v;
-        self
-    }
 }
 
 settings_builder!(PwaSettings, PwaSettingsBuilder {

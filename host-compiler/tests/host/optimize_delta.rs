@@ -26,7 +26,7 @@ fn example(name: &str) -> (OwnedLoop, LoopConstants) {
 fn seed(ol: &OwnedLoop, lc: &LoopConstants, x0: &[f64]) -> (Vec<Vec<f64>>, f64) {
     let lp = ol.lp();
     let v = vec![vec![1.0, -1.0]; ol.task.steps];
-    let s = PotentialSettings::default().delta(0.02);
+    let s = PotentialSettings::builder().delta(0.02).build().unwrap();
     let d = descend(&lp, lc, x0, &v, &s, DescentMethod::Algorithm3).expect("valid input");
     assert!(d.reached, "seed descent: cost {:.3e}", d.cost);
     let (_, c) = shipped(&lp, lc, x0, &d.v);
@@ -139,7 +139,7 @@ fn stopped_early_the_answer_is_certified_and_no_worse() {
         &x0,
         &v,
         ol.task.steps,
-        &BundleSettings::default().max_iterations(3),
+        &BundleSettings::builder().max_iterations(3).build().unwrap(),
         &cancel,
     );
     assert_eq!(o.stop, OptStop::IterationLimit);
@@ -156,7 +156,7 @@ fn bundle_on_the_double_integrator_box_sets() {
     let lp = ol.lp();
     let x0 = f32x([0.1, 0.0]);
     let v = vec![vec![0.0]; ol.task.steps];
-    let s = PotentialSettings::default().delta(0.005);
+    let s = PotentialSettings::builder().delta(0.005).build().unwrap();
     let d = descend(&lp, &lc, &x0, &v, &s, DescentMethod::Lbfgs).expect("valid input");
     assert!(d.reached);
     let d0 = d.certificate.delta;
@@ -242,7 +242,7 @@ fn an_uncertified_start_is_repaired_then_maximised() {
         &x0,
         &v,
         ol.task.steps,
-        &BundleSettings::default().repair_delta(0.0),
+        &BundleSettings::builder().repair_delta(0.0).build().unwrap(),
         &cancel,
     );
     assert!(o2.certificate.delta < o.certificate.delta);
@@ -280,7 +280,7 @@ fn a_held_reference_stays_held_and_is_still_improved() {
     let cancel = AtomicBool::new(false);
     let x0 = f32x([0.0, 0.0, 0.0, 1.0]);
     let v = vec![vec![1.0, -1.0]; ol.task.steps];
-    let s = PotentialSettings::default().delta(0.02).hold(20);
+    let s = PotentialSettings::builder().delta(0.02).hold(20).build().unwrap();
     let d = descend(&lp, &lc, &x0, &v, &s, DescentMethod::Lbfgs).expect("valid input");
     assert!(d.reached, "held descent: cost {:.3e}", d.cost);
     assert!(host_compiler::trajectory::hold::is_held(&d.v, 20));
@@ -291,7 +291,7 @@ fn a_held_reference_stays_held_and_is_still_improved() {
         &x0,
         &d.v,
         ol.task.steps,
-        &BundleSettings::default().hold(20),
+        &BundleSettings::builder().hold(20).build().unwrap(),
         &cancel,
     );
     println!(

@@ -31,7 +31,7 @@ fn both_descents_repair_an_infeasible_seed_to_the_desired_delta() {
     let (_, c0) = shipped(&lp, &lc, &x0, &v);
     assert!(!c0.is_certified(), "the seed must start infeasible");
     for method in [DescentMethod::Algorithm3, DescentMethod::Lbfgs] {
-        let s = PotentialSettings::default().delta(0.04);
+        let s = PotentialSettings::builder().delta(0.04).build().unwrap();
         let d = descend(&lp, &lc, &x0, &v, &s, method).expect("valid input");
         println!(
             "{method:?}: cost {:.2e} in {} iterations, {} evaluations, {:.3}s; δ {:.5}",
@@ -52,7 +52,7 @@ fn a_short_horizon_cannot_reach_zero_cost() {
     let lp = ol.lp();
     let x0 = f32x([0.0, 0.0, 0.0, 1.0]);
     let v = vec![vec![1.0, -1.0]; 50];
-    let s = PotentialSettings::default().delta(0.02).max_iterations(200);
+    let s = PotentialSettings::builder().delta(0.02).max_iterations(200).build().unwrap();
     let d = descend(&lp, &lc, &x0, &v, &s, DescentMethod::Algorithm3).expect("valid input");
     assert!(!d.zero_cost && !d.reached);
     assert!(d.cost > 0.0);
@@ -69,13 +69,13 @@ fn time_optimal_bisection_shortens_the_terminal_time_at_the_kept_delta() {
         &lc,
         &x0,
         &v,
-        &PotentialSettings::default().delta(0.05),
+        &PotentialSettings::builder().delta(0.05).build().unwrap(),
         DescentMethod::Algorithm3,
     )
     .expect("valid input");
     assert!(seed.reached);
     let kept = seed.certificate.delta;
-    let s = PotentialSettings::default().delta(kept).max_iterations(300);
+    let s = PotentialSettings::builder().delta(kept).max_iterations(300).build().unwrap();
     let to =
         time_optimal(&lp, &lc, &x0, &seed.v, &s, DescentMethod::Algorithm3).expect("valid input");
     println!(
@@ -114,7 +114,10 @@ fn bad_input_is_refused_with_a_clear_error() {
         &lc,
         &x0,
         &v,
-        &s.clone().delta(-1.0),
+        &PotentialSettings {
+            delta: -1.0,
+            ..s.clone()
+        },
         DescentMethod::Algorithm3,
     )
     .unwrap_err();

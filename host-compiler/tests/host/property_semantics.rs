@@ -3,6 +3,8 @@
 //! monitor) are two independent implementations, and on the until embedding of Remark 2.29 they must
 //! agree exactly, on random traces, with and without Unsafe.
 
+#![allow(non_snake_case)]
+
 use host_compiler::geometry::Ball;
 use host_compiler::property::{InputBound, Property, PropertyError, ReachAvoid, Temporal};
 use host_compiler::robustness::mtl::{Formula, NamedSet, Trace};

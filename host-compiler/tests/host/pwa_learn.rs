@@ -164,7 +164,7 @@ fn tight_tolerance_gives_several_partitions_and_the_same_guarantees() {
     let pwa = learn_pwa(
         &f.task,
         &f.syn,
-        &PwaSettings::default().rcrit_fraction(0.02),
+        &PwaSettings::builder().rcrit_fraction(0.02).build().unwrap(),
     )
     .unwrap();
     eprintln!(
