@@ -54,8 +54,6 @@ impl ConvexSets {
 pub enum PropertyError {
     #[error(transparent)]
     Spec(#[from] SpecError),
-    #[error(transparent)]
-    Semantics(#[from] SemanticsError),
 }
 
 impl ReachAvoid {

@@ -12,7 +12,7 @@
 //! is the margin by which the trace satisfies the property. The two agree on the embedding formula (a
 //! test holds them to it), which is what lets MTL synthesis reuse the reach-avoid machinery.
 
-use super::{PropertyError, ReachAvoid};
+use super::ReachAvoid;
 use crate::geometry::{Metric, Region, Witness};
 use crate::robustness::mtl::{Formula, Monitor, MtlError, NamedSet, Trace};
 use crate::robustness::safety::{
@@ -23,7 +23,7 @@ use crate::robustness::safety::{
 pub trait Property {
     /// The robustness of the trace at its first sample: > 0 when the property holds with that margin,
     /// < 0 when it fails by that margin.
-    fn trace_robustness(&self, trace: &Trace) -> Result<f64, PropertyError>;
+    fn trace_robustness(&self, trace: &Trace) -> Result<f64, SemanticsError>;
 }
 
 /// Why a trace could not be scored.
@@ -62,17 +62,17 @@ impl Region for Nowhere {
 }
 
 impl Property for ReachAvoid {
-    fn trace_robustness(&self, trace: &Trace) -> Result<f64, PropertyError> {
+    fn trace_robustness(&self, trace: &Trace) -> Result<f64, SemanticsError> {
         let n = self.goal.dim();
         let found = trace.names().len();
         if found != n {
-            return Err(SemanticsError::Signals { found, n }.into());
+            return Err(SemanticsError::Signals { found, n });
         }
         let cols = trace.columns();
         let states: Vec<f64> = (0..trace.len())
             .flat_map(|k| cols.iter().map(move |c| c[k]))
             .collect();
-        let traj = SampledTrajectory::new(trace.times(), &states, n).map_err(SemanticsError::from)?;
+        let traj = SampledTrajectory::new(trace.times(), &states, n)?;
         let nowhere = Nowhere(n);
         let metric = Metric::euclidean(n);
         let spec = SafetySpec {
@@ -83,7 +83,7 @@ impl Property for ReachAvoid {
             T: trace.times()[0] + self.horizon,
         };
         Ok(safety_robustness_joint(&traj, &spec)
-            .map_err(SemanticsError::from)?
+            ?
             .delta)
     }
 }
@@ -102,11 +102,11 @@ impl Temporal {
 }
 
 impl Property for Temporal {
-    fn trace_robustness(&self, trace: &Trace) -> Result<f64, PropertyError> {
+    fn trace_robustness(&self, trace: &Trace) -> Result<f64, SemanticsError> {
         let rho = self
             .monitor(trace)
             .and_then(|m| m.robustness(trace))
-            .map_err(SemanticsError::from)?;
+            ?;
         Ok(rho[0])
     }
 }
