@@ -5,9 +5,13 @@
 //! inter-sample excursion bound ([`InterSampleBound`]) the certification uses to account for what the
 //! continuous plant does between samples.
 //!
+//! Hybrid automata over linear affine locations, with their exact simulation across events, are in
+//! [`hybrid`].
+//!
 //! Matrices are faer `Mat<f64>`, vectors `Vec<f64>` / `&[f64]`.
 
 mod expm;
+pub mod hybrid;
 mod intersample;
 mod linear;
 mod plant;

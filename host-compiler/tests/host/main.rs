@@ -26,6 +26,7 @@ mod mtl_cli;
 mod mtl_errors;
 mod mtl_props;
 mod mtl_semantics;
+mod model_hybrid;
 mod optimize_delta;
 mod property_semantics;
 mod optimize_gradient;
