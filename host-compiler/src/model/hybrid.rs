@@ -200,7 +200,7 @@ fn check_polytope(p: &Polytope, n: usize, what: &str) -> Result<(), HybridError>
             });
         }
         let norm = a.iter().map(|v| v * v).sum::<f64>();
-        if !(norm > 0.0 && norm.is_finite()) || !p.b[row].is_finite() {
+        if !(norm > 0.0 && norm.is_finite() && p.b[row].is_finite()) {
             return Err(HybridError::BadRow {
                 what: what.into(),
                 row,
