@@ -39,7 +39,7 @@ pub use pwa_ball::{
 use crate::caf::Design;
 use crate::geometry::{Metric, Region, Witness};
 use crate::linalg::{sym_eigenvalues, PdRoots};
-use crate::model::{ContinuousPlant, DiscretePlant, Plant};
+use crate::model::{ContinuousPlant, DiscretePlant, Location, Plant};
 use crate::property::{InputBound, ReachAvoid};
 use crate::robustness::safety::{self, InputSets, SafetySet, SampledTrajectory};
 use crate::spec::Problem;
@@ -72,30 +72,54 @@ pub fn hyperplane_reach(roots: &PdRoots, axis: &[f64], a: &[f64], c: &[f64], r: 
     roots.dual_norm(a) * r + round
 }
 
-/// The loop being certified: the task's plant and property under the shipped gain K̂ and the CAF metric P.
+/// The loop being certified: one location of the task's plant under the shipped gain K̂ and the CAF metric
+/// P, with the sets its nominal is judged against. For a plant with one location and a reach-avoid task
+/// the sets are the task's; a segment of a hybrid run (§4.2) has its own target (the safe transition
+/// into the next segment) and the task's Unsafe and input set.
 #[derive(Clone, Copy)]
 pub struct Loop<'a> {
     pub plant: &'a dyn Plant,
+    /// The location whose error dynamics the loop runs in.
+    pub loc: Location,
     /// The gain as shipped (f32 values widened exactly to f64).
     pub K: MatRef<'a, f64>,
     /// The CAF metric.
     pub P: MatRef<'a, f64>,
-    pub property: &'a ReachAvoid,
+    /// Where the nominal must be at its critical sample (Goal, or the segment's safe transition).
+    pub goal: &'a dyn Region,
+    pub unsafe_set: Option<&'a dyn Region>,
+    pub input: &'a InputBound,
 }
 
 impl<'a> Loop<'a> {
     /// The loop of a task with its designed CAF.
     pub fn new(task: &'a Task, design: &'a Design) -> Self {
+        Self::reach_avoid(&*task.plant, 0, design, &task.property)
+    }
+    /// The loop of location `loc` of `plant` with a designed CAF and a reach-avoid property's sets.
+    pub fn reach_avoid(
+        plant: &'a dyn Plant,
+        loc: Location,
+        design: &'a Design,
+        property: &'a ReachAvoid,
+    ) -> Self {
         Self {
-            plant: &*task.plant,
+            plant,
+            loc,
             K: design.K.as_ref(),
             P: design.P.as_ref(),
-            property: &task.property,
+            goal: property.goal.as_ref(),
+            unsafe_set: property.unsafe_region(),
+            input: &property.input,
         }
     }
     /// The sampled model x⁺ = A x + B u + g the CAF lives in.
     pub fn model(&self) -> &'a DiscretePlant {
-        self.plant.error_dynamics(0)
+        self.plant.error_dynamics(self.loc)
+    }
+    /// The continuous model of the loop's location, if the plant is in continuous time.
+    pub fn continuous(&self) -> Option<&'a ContinuousPlant> {
+        self.plant.continuous(self.loc)
     }
     pub fn A(&self) -> MatRef<'a, f64> {
         self.model().A.as_ref()
@@ -104,13 +128,13 @@ impl<'a> Loop<'a> {
         self.model().B.as_ref()
     }
     pub fn goal(&self) -> &'a dyn Region {
-        self.property.goal.as_ref()
+        self.goal
     }
     pub fn unsafe_set(&self) -> Option<&'a dyn Region> {
-        self.property.unsafe_region()
+        self.unsafe_set
     }
     pub fn input(&self) -> &'a InputBound {
-        &self.property.input
+        self.input
     }
     /// The nominal of this loop from `x0` under the reference sequence `v`.
     pub fn simulate(&self, x0: &[f64], v: &[Vec<f64>]) -> Nominal {
@@ -207,7 +231,7 @@ impl LoopConstants {
         if !(sigma_min > 0.0) {
             return Err(CertifyError::NotContracting(sigma_min));
         }
-        let (phi, gamma, beta) = match lp.plant.continuous(0) {
+        let (phi, gamma, beta) = match lp.continuous() {
             None => (0.0, 1.0, 0.0),
             Some(cp) => {
                 let (phi, beta) = intersample_phi_beta(&roots, cp, lp.plant.period());

@@ -108,7 +108,7 @@ impl<'a, 'b> Pieces<'a, 'b> {
         if k >= nom.steps() {
             return None;
         }
-        self.lp.plant.vector_field(0, &nom.x[k], &nom.u[k])
+        self.lp.plant.vector_field(self.lp.loc, &nom.x[k], &nom.u[k])
     }
 
     /// The distance from Unsafe (−signed distance) at every sample (+∞ without Unsafe).
@@ -171,7 +171,7 @@ impl<'a, 'b> Pieces<'a, 'b> {
         let Some(f) = self.excursion(nom, k) else {
             return (d, LocalGrad { k, gx, gv });
         };
-        let Some(cp) = self.lp.plant.continuous(0) else {
+        let Some(cp) = self.lp.continuous() else {
             return (d, LocalGrad { k, gx, gv });
         };
         let fn_ = p_norm(self.lp.P, &f);

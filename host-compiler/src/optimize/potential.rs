@@ -179,7 +179,7 @@ impl<'a, 'b> Potential<'a, 'b> {
         s: &PotentialSettings,
     ) -> Self {
         let mu = s.margin * s.delta.abs() + 1e-12;
-        let h = lp.plant.continuous(0).map_or(1.0, |_| lp.plant.period());
+        let h = lp.continuous().map_or(1.0, |_| lp.plant.period());
         let alpha = s.weight_goal;
         let beta = s.weight_input;
         Self {

@@ -207,9 +207,12 @@ fn inter_sample_excursion_is_bounded() {
         .unwrap()[0];
     let lp = Loop {
         plant: &sampled,
+        loc: 0,
         K: K.as_ref(),
         P: P.as_ref(),
-        property: &property,
+        goal: property.goal.as_ref(),
+        unsafe_set: property.unsafe_region(),
+        input: &property.input,
     };
     if sigma <= 0.0 {
         // Not contracting in this random metric: then the constants must refuse the loop.
