@@ -27,9 +27,11 @@
 //!    per-ball stored squared threshold, [`pwa_ball_threshold`] (from the radius [`pwa_ball_radius`], in
 //!    [`pwa_ball`]).
 
+pub mod forced;
 pub mod pieces;
 pub mod pwa_ball;
 
+pub use forced::{certify_forced, ForcedCertificate, ForcedError, ForcedSegment};
 pub use pieces::Pieces;
 pub use pwa_ball::{
     cholesky_upper, metric_factor_f32, pwa_accept_radius, pwa_ball_complete_radius,
@@ -404,11 +406,26 @@ pub fn round_down_f32(x: f64) -> f32 {
     }
 }
 
+/// Where the nominal's target (the loop's `goal`) is judged.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum GoalAt {
+    /// At the sample of greatest depth, κ* of (4.12): the task ends when Goal is reached.
+    Best,
+    /// At the last sample of the table: a forced switch (§4.2.1) happens when the segment's table ends.
+    Last,
+}
+
+/// Certify one nominal trajectory (simulated with the shipped K̂, v̂) for the loop, with the target
+/// judged at its best sample ([`certify_at`] with [`GoalAt::Best`]).
+pub fn certify(lp: &Loop<'_>, lc: &LoopConstants, nom: &Nominal) -> Certificate {
+    certify_at(lp, lc, nom, GoalAt::Best)
+}
+
 /// Certify one nominal trajectory (simulated with the shipped K̂, v̂) for the loop: the critical samples
 /// of Theorem 4.7's pieces ([`Pieces`], scanned by [`crate::robustness::safety`]'s shared scans over the
-/// whole table), the f32 rounding bound, r_crit and the stored radius. A nominal that is not finite, or
-/// a NaN distance, certifies nothing (δ = 0, the parts NaN).
-pub fn certify(lp: &Loop<'_>, lc: &LoopConstants, nom: &Nominal) -> Certificate {
+/// whole table; the target at the sample `at` says), the f32 rounding bound, r_crit and the stored radius.
+/// A nominal that is not finite, or a NaN distance, certifies nothing (δ = 0, the parts NaN).
+pub fn certify_at(lp: &Loop<'_>, lc: &LoopConstants, nom: &Nominal, at: GoalAt) -> Certificate {
     let pc = Pieces::new(lp, lc);
     let m = lp.K.nrows();
     let N = nom.steps();
@@ -417,8 +434,13 @@ pub fn certify(lp: &Loop<'_>, lc: &LoopConstants, nom: &Nominal) -> Certificate 
     let states: Vec<f64> = nom.x.iter().flatten().copied().collect();
     let parts = SampledTrajectory::new(&times, &states, n).and_then(|traj| {
         let metric = pc.metric();
-        // 1. Goal (4.12)–(4.13): the sample of greatest depth (the earliest of equals).
-        let goal = safety::goal_part(&traj, SafetySet::Region(lp.goal()), metric, traj.len())?;
+        // 1. Goal (4.12)–(4.13): the sample of greatest depth (the earliest of equals), or the last one.
+        let goal = match at {
+            GoalAt::Best => {
+                safety::goal_part(&traj, SafetySet::Region(lp.goal()), metric, traj.len())?
+            }
+            GoalAt::Last => safety::goal_at(&traj, SafetySet::Region(lp.goal()), metric, N)?,
+        };
         // Rounding bound over the table, with the tube radius at its largest possible value δ_Goal.
         let r_max = goal.value.max(0.0);
         let mut eps_components = vec![0.0f64; m];

@@ -112,6 +112,81 @@ impl Region for Union {
     }
 }
 
+/// The intersection ∩Sᵢ of regions of one dimension (a hybrid segment's safe transition: a guard and the
+/// reset preimage of the next ball, Notation 4.13).
+/// - depth(x, ∩Sᵢ) = minᵢ depth(x, Sᵢ) (exact: ℝⁿ \ ∩Sᵢ = ∪(ℝⁿ \ Sᵢ), and the distance to a union is the
+///   least distance to a member), with that member's witness.
+/// - dist(x, ∩Sᵢ) is reported as maxᵢ dist(x, Sᵢ), a lower bound (each Sᵢ contains the intersection): the
+///   sound direction for a set to be avoided; a set to be reached is only ever credited with its depth.
+pub struct Intersection {
+    n: usize,
+    members: Vec<Box<dyn Region>>,
+}
+
+impl Intersection {
+    /// At least one member, all of the same dimension.
+    pub fn new(members: Vec<Box<dyn Region>>) -> Result<Self, GeometryError> {
+        let Some(first) = members.first() else {
+            return Err(GeometryError::EmptyUnion);
+        };
+        let n = first.dim();
+        for (index, m) in members.iter().enumerate() {
+            if m.dim() != n {
+                return Err(GeometryError::MemberDimension {
+                    what: "intersection",
+                    index,
+                    expected: n,
+                    got: m.dim(),
+                });
+            }
+        }
+        Ok(Self { n, members })
+    }
+}
+
+impl Region for Intersection {
+    fn dim(&self) -> usize {
+        self.n
+    }
+    fn contains(&self, x: &[f64]) -> bool {
+        self.members.iter().all(|m| m.contains(x))
+    }
+    fn dist(&self, x: &[f64], metric: &Metric) -> Witness {
+        Witness::or_invalid(self.try_dist(x, metric))
+    }
+    fn depth(&self, x: &[f64], metric: &Metric) -> Witness {
+        Witness::or_invalid(self.try_depth(x, metric))
+    }
+    fn try_dist(&self, x: &[f64], metric: &Metric) -> Result<Witness, GeometryError> {
+        check_query(self.n, x, metric)?;
+        let mut best: Option<Witness> = None;
+        for m in &self.members {
+            let w = m.try_dist(x, metric)?;
+            if best.as_ref().is_none_or(|b| w.value > b.value) {
+                best = Some(w);
+            }
+        }
+        best.ok_or(GeometryError::EmptyUnion)
+    }
+    fn try_depth(&self, x: &[f64], metric: &Metric) -> Result<Witness, GeometryError> {
+        check_query(self.n, x, metric)?;
+        if !self.contains(x) {
+            return Ok(Witness {
+                value: 0.0,
+                point: x.to_vec(),
+            });
+        }
+        let mut best: Option<Witness> = None;
+        for m in &self.members {
+            let w = m.try_depth(x, metric)?;
+            if best.as_ref().is_none_or(|b| w.value < b.value) {
+                best = Some(w);
+            }
+        }
+        best.ok_or(GeometryError::EmptyUnion)
+    }
+}
+
 /// The complement ℝⁿ \ S. Distances are those of its closure: dist(x, ℝⁿ \ S) = depth(x, S) and
 /// depth(x, ℝⁿ \ S) = dist(x, S) (Def 2.16), with membership decided by `!S.contains(x)` (so points of ∂S are
 /// outside the complement, at distance 0).

@@ -13,7 +13,8 @@
 //!   per-point path (Remark 7.11);
 //! - [`ellipsoid`]: [`Ellipsoid`] and CAF [`Ball`] regions built on it;
 //! - [`polytope`]: [`Polytope`] {x : Ax ≤ b}, distance by the QP (7.1), depth by facets;
-//! - [`combinators`]: [`Union`], [`Complement`], [`InOutput`] (sets given in output coordinates y = Cx).
+//! - [`combinators`]: [`Union`], [`Intersection`], [`Complement`], [`InOutput`] (sets given in output
+//!   coordinates y = Cx).
 
 pub mod combinators;
 pub mod ellipsoid;
@@ -23,7 +24,7 @@ pub mod polytope;
 mod cache;
 pub(crate) mod linalg;
 
-pub use combinators::{Complement, InOutput, Union};
+pub use combinators::{Complement, InOutput, Intersection, Union};
 pub use ellipsoid::{Ball, Ellipsoid};
 pub use ellipsoid_distance::{
     BoundaryDistanceSettings, BoundarySolution, BoundaryWorkspace, EllipsoidBoundaryDistance,
@@ -79,7 +80,7 @@ pub enum GeometryError {
     NoConstraints,
     #[error("polytope: the set {{x : Ax ≤ b}} is empty")]
     EmptyPolytope,
-    #[error("union: needs at least one member")]
+    #[error("a union or an intersection needs at least one member")]
     EmptyUnion,
     #[error("{what}: member {index} lives in ℝ^{got}, expected ℝ^{expected}")]
     MemberDimension {

@@ -16,13 +16,18 @@
 //! L·tolerance can go unseen, and nothing larger can. The reset is applied at the event and the flow
 //! continues in the new location with the same input for the rest of the period.
 //!
+//! As a [`Plant`], each location is its own linear affine plant sampled by an exact ZOH (the error
+//! dynamics its CAF is designed for, §3.2 (3.69)); [`Plant::step`] is the flow of one location without
+//! events, which is what a forced-switching run does between the controller's switches. The flow across
+//! internal events is [`Hybrid::flow`].
+//!
 //! An edge is *armed* once φ > 0 has been seen in the current location (at its entry point or a later
 //! probe): right after a reset onto the boundary of a guard back (x₁ = 0 in Example 3.19), the state
 //! sits on that guard and must leave it before it can enter it again. At most
 //! [`Hybrid::MAX_EVENTS_PER_PERIOD`] events are taken in one period; more is reported as Zeno
 //! behaviour, not simulated.
 
-use super::{check_len, ContinuousPlant, Location, ModelError};
+use super::{check_len, ContinuousPlant, DiscretePlant, LinearAffine, Location, ModelError, Plant};
 use faer::Mat;
 
 /// A polytope {x : a_jᵀx ≤ b_j, j = 1..k} over the state (a guard or an invariant).
@@ -111,6 +116,8 @@ pub struct Hybrid {
     period: f64,
     /// ‖A_ℓ‖_F per location (the growth rate of ‖ẋ‖ along the flow).
     growth: Vec<f64>,
+    /// Each location sampled with the period (exact ZOH).
+    sampled: Vec<LinearAffine>,
 }
 
 /// Why an automaton is malformed.
@@ -261,11 +268,16 @@ impl Hybrid {
             check_len("reset r", &edge.reset.r, n0)?;
         }
         let growth = modes.iter().map(|m| m.flow.A.norm_l2()).collect();
+        let sampled = modes
+            .iter()
+            .map(|m| LinearAffine::sampled(m.flow.clone(), period))
+            .collect::<Result<_, _>>()?;
         Ok(Self {
             modes,
             edges,
             period,
             growth,
+            sampled,
         })
     }
 
@@ -396,5 +408,33 @@ impl Hybrid {
             break;
         }
         Ok(HybridStep { loc, x, events })
+    }
+}
+
+impl Plant for Hybrid {
+    fn n(&self) -> usize {
+        self.sampled[0].n()
+    }
+    fn m(&self) -> usize {
+        self.sampled[0].m()
+    }
+    fn period(&self) -> f64 {
+        self.period
+    }
+    fn locations(&self) -> usize {
+        self.modes.len()
+    }
+    fn error_dynamics(&self, loc: Location) -> &DiscretePlant {
+        &self.sampled[loc].discrete
+    }
+    fn continuous(&self, loc: Location) -> Option<&ContinuousPlant> {
+        Some(&self.modes[loc].flow)
+    }
+    /// The flow of location `loc` alone (module doc).
+    fn step(&self, loc: Location, x: &[f64], u: &[f64]) -> Vec<f64> {
+        self.sampled[loc].step(0, x, u)
+    }
+    fn between_samples(&self, loc: Location, x: &[f64], u: &[f64], visit: &mut dyn FnMut(&[f64])) {
+        self.sampled[loc].between_samples(0, x, u, visit)
     }
 }

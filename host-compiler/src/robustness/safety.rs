@@ -788,6 +788,22 @@ pub fn goal_part(
     Ok(s.critical(v, k))
 }
 
+/// The Goal part at one given sample κ (a forced switch happens there, §4.2.1): Dist(x̃(κ), Goal) with
+/// the witness.
+pub fn goal_at(
+    traj: &SampledTrajectory,
+    goal: SafetySet,
+    metric: &Metric,
+    k: usize,
+) -> Result<Critical, SafetyError> {
+    check_set(traj.n(), &goal, GOAL)?;
+    check_metric(traj.n(), metric)?;
+    let k = k.min(traj.len() - 1);
+    let mut s = SetScan::new(traj, goal, metric, GOAL)?;
+    let v = s.dist(k)?;
+    Ok(s.critical(v, k))
+}
+
 /// The Unsafe part (4.14) over the samples 0..end: the minimum of −Dist(x̃(κ), Unsafe) (the distance
 /// outside Unsafe, minus the depth inside), first minimiser, with the witness; +∞ at κ = 0 when there is
 /// no Unsafe set.

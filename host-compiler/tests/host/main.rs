@@ -14,6 +14,7 @@ mod caf_example33;
 mod caf_props;
 mod caf_status;
 mod certify_bounds;
+mod certify_forced;
 mod cli_synth;
 mod emit_image;
 mod emit_pwa;

@@ -1,0 +1,246 @@
+//! Forced switching (§4.2.1, Def 4.15, Theorem 4.17): the certificate of a nominal run made of segments,
+//! each in one location of a hybrid plant, joined by edges the controller takes when a segment's table
+//! ends.
+//!
+//! Segment i runs in location ℓᵢ with its own shipped gain K̂ᵢ and metric Pᵢ. At its last sample Nᵢ the
+//! controller takes edge eᵢ (guard Gᵢ, reset x ↦ Rᵢx + rᵢ), and segment i+1 starts from the reset of the
+//! nominal state, x̃ᵢ₊₁(0) = Rᵢx̃ᵢ(Nᵢ) + rᵢ. The recursion runs backwards (Thm 4.17):
+//!
+//! * the last segment is certified against Goal, as a run of one location ([`super::certify`]);
+//! * segment i < last is certified against its **safe transition**
+//!   Sᵢ = Gᵢ ∩ {x : ‖Rᵢx + rᵢ − x̃ᵢ₊₁(0)‖_{Pᵢ₊₁} ≤ δᵢ₊₁} (OutputGuard ∩ OutputReset†(Bᵢ₊₁), Notation
+//!   4.13), judged at the switching sample Nᵢ ([`super::GoalAt::Last`]). Its depth is δ_Guard, the
+//!   depth of a point inside the reset preimage of the next ball: §7.2's inside problem for the
+//!   ellipsoid {x : (x − c′)ᵀRᵀPᵢ₊₁R(x − c′) ≤ δᵢ₊₁²}, c′ = R⁻¹(x̃ᵢ₊₁(0) − r), and the depth in the guard's
+//!   polytope; the depth in an intersection is the least of the two
+//!   ([`crate::geometry::Intersection`]).
+//!
+//! Why this certifies the run: a state within δᵢ of x̃ᵢ(0) stays within δᵢ of the nominal in Pᵢ over the
+//! segment (the single-location certificate, f32 rounding and all), so at Nᵢ it is δᵢ-close to x̃ᵢ(Nᵢ),
+//! which is δᵢ-deep in Sᵢ: the state is in the guard, and its reset lies in the ball certified for
+//! segment i+1. Unsafe and the input set are checked over every segment's whole table. The switching
+//! times of perturbed runs equal the nominal's (the controller switches by its table), so no event time
+//! is uncertain. With identity resets and guards that are the whole space (Example 4.20) the depth is
+//! δᵢ₊₁/√λmax(Pᵢ⁻¹Pᵢ₊₁), the largest Pᵢ-ball inside the Pᵢ₊₁-ball; a test holds the recursion to it.
+
+use super::{certify_at, Certificate, GoalAt, Loop, LoopConstants};
+use crate::geometry::{Ellipsoid, GeometryError, Intersection, Polytope, Region};
+use crate::model::hybrid::{Edge, EdgeKind};
+use crate::trajectory::Nominal;
+use faer::linalg::solvers::Solve;
+use faer::Mat;
+
+/// One segment of a forced-switching run.
+#[derive(Clone, Copy)]
+pub struct ForcedSegment<'a> {
+    /// The segment's loop: its location, shipped gain and metric, Unsafe and the input set. Its `goal` is
+    /// the task's Goal, which only the last segment is judged against.
+    pub lp: Loop<'a>,
+    pub lc: &'a LoopConstants,
+    pub nominal: &'a Nominal,
+    /// The edge the controller takes at the segment's last sample; `None` for the last segment.
+    pub switch: Option<&'a Edge>,
+}
+
+/// The certificates of a forced-switching run, one per segment, first segment first. The run is
+/// certified from the ball of radius `segments[0].delta` (stored as `segments[0].delta_stored`) around
+/// the first segment's start.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ForcedCertificate {
+    pub segments: Vec<Certificate>,
+}
+
+impl ForcedCertificate {
+    /// The certified radius of the ball of initial states.
+    pub fn delta(&self) -> f64 {
+        self.segments.first().map_or(0.0, |c| c.delta)
+    }
+    pub fn is_certified(&self) -> bool {
+        self.segments.first().is_some_and(|c| c.is_certified())
+    }
+}
+
+/// Why a run of segments is not a forced-switching run this module can certify.
+#[derive(Debug, thiserror::Error)]
+pub enum ForcedError {
+    #[error("a forced-switching run needs at least one segment")]
+    Empty,
+    #[error("segment {segment} has no edge to the next segment")]
+    MissingSwitch { segment: usize },
+    #[error("the last segment ({segment}) has an edge after it")]
+    SwitchAfterLast { segment: usize },
+    #[error("segment {segment}'s edge is internal: only forced edges are taken by the controller (§4.2.1)")]
+    NotForced { segment: usize },
+    #[error(
+        "segment {segment} runs in location {loc}, but its edge goes from location {from} to {to} \
+         and the next segment runs in location {next}"
+    )]
+    Locations {
+        segment: usize,
+        loc: usize,
+        from: usize,
+        to: usize,
+        next: usize,
+    },
+    #[error("segment {segment}'s nominal is empty")]
+    EmptyNominal { segment: usize },
+    #[error(
+        "segment {segment} starts {gap:.3e} away from the reset of segment {prev}'s last state: the nominal \
+         run is not continuous across the switch"
+    )]
+    Discontinuous { segment: usize, prev: usize, gap: f64 },
+    #[error("segment {segment}'s reset matrix is singular: its preimage of a ball is not an ellipsoid")]
+    SingularReset { segment: usize },
+    #[error("segment {segment}'s safe transition: {source}")]
+    Geometry {
+        segment: usize,
+        #[source]
+        source: GeometryError,
+    },
+}
+
+fn flat(m: &Mat<f64>) -> Vec<f64> {
+    let mut v = Vec::with_capacity(m.nrows() * m.ncols());
+    for i in 0..m.nrows() {
+        for j in 0..m.ncols() {
+            v.push(m[(i, j)]);
+        }
+    }
+    v
+}
+
+/// The safe transition of `edge` into the ball B_P(c, δ) (module doc).
+fn safe_transition(
+    segment: usize,
+    edge: &Edge,
+    P: faer::MatRef<'_, f64>,
+    c: &[f64],
+    delta: f64,
+) -> Result<Intersection, ForcedError> {
+    let n = c.len();
+    let geo = |source| ForcedError::Geometry { segment, source };
+    let R = &edge.reset.R;
+    // c′ = R⁻¹(c − r), checked by its residual (R invertible to working precision).
+    let rhs = Mat::from_fn(n, 1, |i, _| c[i] - edge.reset.r[i]);
+    let cp = R.full_piv_lu().solve(&rhs);
+    let resid = (R * &cp - &rhs).norm_l2();
+    let scale = 1.0 + rhs.norm_l2();
+    let cp: Vec<f64> = (0..n).map(|i| cp[(i, 0)]).collect();
+    if !(resid <= 1e-9 * scale) || cp.iter().any(|v| !v.is_finite()) {
+        return Err(ForcedError::SingularReset { segment });
+    }
+    let Q = R.transpose() * P * R * (1.0 / (delta * delta));
+    let ball = Ellipsoid::new(cp, flat(&crate::linalg::sym(Q.as_ref()))).map_err(geo)?;
+    let a: Vec<f64> = edge.guard.a.iter().flatten().copied().collect();
+    let guard = Polytope::new(n, a, edge.guard.b.clone()).map_err(geo)?;
+    Intersection::new(vec![Box::new(guard), Box::new(ball)]).map_err(geo)
+}
+
+/// An empty set in ℝⁿ to certify against when the next segment certifies nothing.
+struct Nothing(usize);
+
+impl Region for Nothing {
+    fn dim(&self) -> usize {
+        self.0
+    }
+    fn contains(&self, _: &[f64]) -> bool {
+        false
+    }
+    fn dist(&self, _: &[f64], _: &crate::geometry::Metric) -> crate::geometry::Witness {
+        crate::geometry::Witness {
+            value: f64::INFINITY,
+            point: Vec::new(),
+        }
+    }
+    fn depth(&self, _: &[f64], _: &crate::geometry::Metric) -> crate::geometry::Witness {
+        crate::geometry::Witness {
+            value: 0.0,
+            point: Vec::new(),
+        }
+    }
+}
+
+/// Theorem 4.17 for a run of segments (module doc): checks that the run is a forced-switching run
+/// (edges forced, locations chained, the nominal continuous across each reset), then certifies the
+/// segments backwards.
+pub fn certify_forced(segments: &[ForcedSegment<'_>]) -> Result<ForcedCertificate, ForcedError> {
+    let last = segments.len().checked_sub(1).ok_or(ForcedError::Empty)?;
+    for (i, s) in segments.iter().enumerate() {
+        if s.nominal.x.is_empty() {
+            return Err(ForcedError::EmptyNominal { segment: i });
+        }
+        match (s.switch, i == last) {
+            (Some(_), true) => return Err(ForcedError::SwitchAfterLast { segment: i }),
+            (None, false) => return Err(ForcedError::MissingSwitch { segment: i }),
+            (None, true) => {}
+            (Some(e), false) => {
+                if e.kind != EdgeKind::Forced {
+                    return Err(ForcedError::NotForced { segment: i });
+                }
+                let next = &segments[i + 1];
+                if e.from != s.lp.loc || e.to != next.lp.loc {
+                    return Err(ForcedError::Locations {
+                        segment: i,
+                        loc: s.lp.loc,
+                        from: e.from,
+                        to: e.to,
+                        next: next.lp.loc,
+                    });
+                }
+                let end = s.nominal.x.last().expect("checked non-empty");
+                let start = next.nominal.x.first().ok_or(ForcedError::EmptyNominal {
+                    segment: i + 1,
+                })?;
+                let gap = e
+                    .reset
+                    .apply(end)
+                    .iter()
+                    .zip(start)
+                    .map(|(a, b)| (a - b) * (a - b))
+                    .sum::<f64>()
+                    .sqrt();
+                let scale = 1.0 + start.iter().map(|v| v * v).sum::<f64>().sqrt();
+                if !(gap <= 1e-9 * scale) {
+                    return Err(ForcedError::Discontinuous {
+                        segment: i + 1,
+                        prev: i,
+                        gap,
+                    });
+                }
+            }
+        }
+    }
+    let mut certs: Vec<Certificate> = Vec::with_capacity(segments.len());
+    let last_cert = certify_at(
+        &segments[last].lp,
+        segments[last].lc,
+        segments[last].nominal,
+        GoalAt::Best,
+    );
+    certs.push(last_cert);
+    for i in (0..last).rev() {
+        let s = &segments[i];
+        let next = &segments[i + 1];
+        let next_delta = certs.last().expect("one per later segment").delta;
+        let edge = s.switch.expect("checked above");
+        let n = s.lp.P.nrows();
+        let target: Box<dyn Region> = if next_delta > 0.0 {
+            Box::new(safe_transition(
+                i,
+                edge,
+                next.lp.P,
+                &next.nominal.x[0],
+                next_delta,
+            )?)
+        } else {
+            Box::new(Nothing(n))
+        };
+        let lp = Loop {
+            goal: target.as_ref(),
+            ..s.lp
+        };
+        certs.push(certify_at(&lp, s.lc, s.nominal, GoalAt::Last));
+    }
+    certs.reverse();
+    Ok(ForcedCertificate { segments: certs })
+}
