@@ -5,6 +5,7 @@
 
 use super::{synthesize_continuous, synthesize_discrete, CafError, CafOutcome, CafSettings};
 use crate::linalg::round32;
+use crate::model::{Location, Plant};
 use crate::task::Task;
 use faer::Mat;
 
@@ -30,22 +31,34 @@ pub enum DesignError {
     Outcome(Box<CafOutcome>),
 }
 
-/// Designs the CAF and the shipped gain of the task's plant (module doc).
+/// Designs the CAF and the shipped gain of the task's plant (module doc): of its one location.
 pub fn design(task: &Task) -> Result<Design, DesignError> {
-    let plant = &*task.plant;
+    design_location(&*task.plant, 0, task.settings().sigma_margin)
+}
+
+/// The CAF of every location of a plant (§3.2: a CAF ψ_ℓ and gain per location, the feedback (3.69)),
+/// or the first location that has none, with the reason.
+pub fn design_locations(plant: &dyn Plant, sigma: f64) -> Result<Vec<Design>, (Location, DesignError)> {
+    (0..plant.locations())
+        .map(|loc| design_location(plant, loc, sigma).map_err(|e| (loc, e)))
+        .collect()
+}
+
+/// The CAF and shipped gain of location `loc` of a plant, with the σ-margin `sigma` (module doc).
+pub fn design_location(plant: &dyn Plant, loc: Location, sigma: f64) -> Result<Design, DesignError> {
     let (n, m) = (plant.n(), plant.m());
     let settings = CafSettings {
-        sigma: task.settings().sigma_margin,
+        sigma,
         ..Default::default()
     };
-    let caf = match synthesize_discrete(plant.error_dynamics(0), &settings)? {
+    let caf = match synthesize_discrete(plant.error_dynamics(loc), &settings)? {
         CafOutcome::Solved(c) => c,
         other => return Err(DesignError::Outcome(Box::new(other))),
     };
     let mut warnings = Vec::new();
     // What the loop would certify with continuous feedback (Example 3.3 gives K = −0.1·[0 I] and P = I for
     // the planar vehicle).
-    let continuous = plant.continuous(0).and_then(|c| {
+    let continuous = plant.continuous(loc).and_then(|c| {
         let st = CafSettings {
             sigma: 0.0,
             ..Default::default()

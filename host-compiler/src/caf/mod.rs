@@ -54,7 +54,7 @@ mod settings;
 mod synth;
 mod validate;
 
-pub use design::{design, outcome_message, Design, DesignError};
+pub use design::{design, design_location, design_locations, outcome_message, Design, DesignError};
 pub use pbh::{uncontrollable_modes, UncontrollableMode};
 pub use rcrit::{r_crit, RCrit};
 pub use settings::{CafSettings, CafSettingsBuilder, Formulation};

@@ -6,13 +6,12 @@
 #![allow(non_snake_case)]
 
 use faer::Mat;
-use host_compiler::caf::{synthesize_discrete, CafOutcome, CafSettings, Design};
+use host_compiler::caf::{design_locations, CafSettings, Design};
 use host_compiler::certify::{
     certify_forced, ForcedCertificate, ForcedError, ForcedSegment, Loop, LoopConstants,
 };
 use host_compiler::geometry::Ball;
 
-use host_compiler::linalg::round32;
 use host_compiler::model::hybrid::{Edge, EdgeKind, Hybrid, Mode, Polytope, Reset};
 use host_compiler::model::{ContinuousPlant, Plant};
 use host_compiler::property::{InputBound, ReachAvoid};
@@ -67,21 +66,6 @@ fn whole_space() -> Polytope {
     }
 }
 
-fn design(hy: &Hybrid, loc: usize) -> Design {
-    let CafOutcome::Solved(c) =
-        synthesize_discrete(hy.error_dynamics(loc), &CafSettings::default()).unwrap()
-    else {
-        panic!("location {loc} has no CAF");
-    };
-    let (m, n) = (c.K.nrows(), c.K.ncols());
-    Design {
-        K: Mat::from_fn(m, n, |i, j| round32(c.K[(i, j)])),
-        P: host_compiler::linalg::sym(c.P.as_ref()),
-        continuous: None,
-        warnings: Vec::new(),
-    }
-}
-
 /// The run's nominal segments (zero reference input: each location's closed loop from x0 = (−5, 1, 2),
 /// Example 4.25's start) and the task, Goal a unit ball around where the second segment ends.
 struct Run {
@@ -93,7 +77,10 @@ struct Run {
 
 fn run(guard: Polytope) -> Run {
     let hy = plant(guard, EdgeKind::Forced);
-    let designs = [design(&hy, 0), design(&hy, 1)];
+    let designs: [Design; 2] = design_locations(&hy, CafSettings::default().sigma)
+        .expect("both locations have a CAF")
+        .try_into()
+        .unwrap();
     let x0 = vec![-5.0, 1.0, 2.0];
     let n0 = host_compiler::trajectory::simulate(
         hy.error_dynamics(0),
