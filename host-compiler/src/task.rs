@@ -4,6 +4,7 @@
 //! its sets in the forms the stages compute with, Init, the horizon in samples and the spec's settings.
 //! No stage builds any of these again.
 
+use crate::model::hybrid::{Hybrid, HybridError};
 use crate::model::{LinearAffine, ModelError, Plant};
 use crate::property::{ConvexSets, PropertyError, ReachAvoid};
 use crate::spec::{InitBox, Problem, SynthesisSettings};
@@ -27,12 +28,30 @@ pub enum TaskError {
     Model(#[from] ModelError),
     #[error("sets: {0}")]
     Property(#[from] PropertyError),
+    #[error("plant: {0}")]
+    Hybrid(#[from] HybridError),
+    /// The spec's hybrid automaton is valid, but synthesis, verification and simulation of hybrid tasks
+    /// are not built yet (the certificate of forced switching is, `certify::forced`).
+    #[error(
+        "the plant is a hybrid automaton ({locations} locations, {edges} edges); it is valid, but \
+         synthesis, verification and simulation do not take hybrid plants yet"
+    )]
+    HybridNotSupported { locations: usize, edges: usize },
 }
 
 impl Task {
     /// The task of a validated spec: the plant's class from the spec (linear affine, in continuous time
     /// sampled by an exact zero-order hold, or in discrete time), and the reach-avoid property.
     pub fn new(problem: Problem) -> Result<Self, TaskError> {
+        if let Some(h) = &problem.hybrid {
+            // Built (so that every check of the automaton runs), then refused: the pipeline's stages
+            // still run location 0 only.
+            let hy = Hybrid::from_spec(h, problem.plant.period)?;
+            return Err(TaskError::HybridNotSupported {
+                locations: hy.modes().len(),
+                edges: hy.edges().len(),
+            });
+        }
         let plant: Box<dyn Plant> = Box::new(LinearAffine::from_spec(&problem.plant)?);
         let property = ReachAvoid::from_problem(&problem)?;
         let convex = ConvexSets::from_problem(&problem)?;

@@ -438,3 +438,45 @@ impl Plant for Hybrid {
         self.sampled[loc].between_samples(0, x, u, visit)
     }
 }
+
+impl Hybrid {
+    /// The automaton of a validated spec (`spec::hybrid`), sampled with `period`.
+    pub fn from_spec(h: &crate::spec::HybridDesc, period: f64) -> Result<Self, HybridError> {
+        use crate::spec::EdgeKindDesc;
+        let polytope = |p: &crate::spec::PolytopeDesc| Polytope {
+            a: (0..p.A.rows)
+                .map(|i| (0..p.A.cols).map(|j| p.A.get(i, j)).collect())
+                .collect(),
+            b: p.b.clone(),
+        };
+        let modes = h
+            .locations
+            .iter()
+            .map(|l| {
+                Ok(Mode {
+                    name: l.name.clone(),
+                    flow: ContinuousPlant::new(l.A.to_faer(), l.B.to_faer(), l.c.clone())?,
+                    invariant: l.invariant.as_ref().map(polytope),
+                })
+            })
+            .collect::<Result<Vec<_>, ModelError>>()?;
+        let edges = h
+            .edges
+            .iter()
+            .map(|e| Edge {
+                from: e.from,
+                to: e.to,
+                guard: polytope(&e.guard),
+                reset: Reset {
+                    R: e.R.to_faer(),
+                    r: e.r.clone(),
+                },
+                kind: match e.kind {
+                    EdgeKindDesc::Internal => EdgeKind::Internal,
+                    EdgeKindDesc::Forced => EdgeKind::Forced,
+                },
+            })
+            .collect();
+        Self::new(modes, edges, period)
+    }
+}

@@ -35,12 +35,14 @@
 
 pub mod checks;
 pub mod error;
+pub mod hybrid;
 mod raw;
 pub mod sets;
 pub mod settings;
 mod validate;
 
 pub use error::{ErrorKind, SpecError};
+pub use hybrid::{EdgeDesc, EdgeKindDesc, HybridDesc, LocationDesc, PolytopeDesc};
 pub use sets::{load_named_sets, parse_named_sets, Coords, SetDesc, Shape};
 pub use settings::{ControllerMode, SettingsError, SynthesisSettings, SynthesisSettingsBuilder};
 
@@ -207,6 +209,8 @@ pub struct Problem {
     pub mtl: Option<String>,
     /// `[sets.<name>]` in file order.
     pub sets: Vec<(String, SetDesc)>,
+    /// The hybrid automaton, when `[plant]` has locations; `plant` is then its initial location's model.
+    pub hybrid: Option<HybridDesc>,
 }
 
 impl Problem {

@@ -78,8 +78,9 @@ pub(crate) enum RawTime {
 #[serde(deny_unknown_fields)]
 pub(crate) struct RawPlant {
     pub time: Spanned<RawTime>,
-    pub A: RawMat,
-    pub B: RawMat,
+    /// Required for a plant with one location; a hybrid plant gives them per location.
+    pub A: Option<RawMat>,
+    pub B: Option<RawMat>,
     /// Continuous-time affine term.
     pub c: Option<RawVec>,
     /// Discrete-time affine term.
@@ -87,6 +88,12 @@ pub(crate) struct RawPlant {
     pub period: Spanned<f64>,
     /// Output map.
     pub C: Option<RawMat>,
+    /// A hybrid automaton ([`super::hybrid`]): the location Init is in, the locations and the edges.
+    pub initial: Option<Spanned<String>>,
+    #[serde(default)]
+    pub location: Vec<Spanned<super::hybrid::RawLocation>>,
+    #[serde(default)]
+    pub edge: Vec<Spanned<super::hybrid::RawEdge>>,
 }
 
 /// A set table: `[goal]`, `[init]`, `[[unsafe]]`, `[sets.<name>]`. Which keys are required depends on

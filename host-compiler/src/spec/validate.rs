@@ -7,6 +7,7 @@ use std::ops::Range;
 use toml::Spanned;
 
 use super::checks::{self, GoalVerdict, Meet};
+use super::hybrid;
 use super::error::{ErrorKind, SpecError};
 use super::raw::{RawF, RawInput, RawMat, RawSpec, RawSynthesis, RawTime, RawVec};
 use super::sets::{named_sets, set_from_raw, SetCtx};
@@ -252,15 +253,63 @@ fn positive(x: &Spanned<f64>, name: &str, kind: ErrorKind, extra: &str) -> Resul
 
 /// Parse the TOML and validate everything.
 pub(crate) fn problem(src: &str) -> Result<Problem, SpecError> {
-    let mut raw: RawSpec = toml::from_str(src).map_err(|e| SpecError::from_toml(&e))?;
+    let raw: RawSpec = toml::from_str(src).map_err(|e| SpecError::from_toml(&e))?;
 
     // ---- plant ----
     let p = raw.plant.get_ref();
+    let (plant, hybrid) = if hybrid::is_hybrid(p) {
+        let period = positive(&p.period, "plant.period", ErrorKind::Period, "")?;
+        let (plant, h) = hybrid::plant(&raw.plant, period)?;
+        (plant, Some(h))
+    } else {
+        (single_plant(&raw.plant)?, None)
+    };
+    let period = plant.period;
+    let n_state = plant.n();
+
+    // ---- horizon, seed ----
+    let horizon = positive(&raw.horizon, "horizon", ErrorKind::Horizon, "")?;
+    if horizon < period * (1.0 - 1e-12) {
+        return Err(SpecError::new(
+            ErrorKind::Horizon,
+            format!("horizon {horizon} s is shorter than one sample period ({period} s)"),
+        )
+        .at(raw.horizon.span(), "shorter than plant.period")
+        .at(p.period.span(), "the period"));
+    }
+    let seed = *raw.seed.get_ref();
+    let seed = u64::try_from(seed).map_err(|_| {
+        SpecError::new(
+            ErrorKind::Seed,
+            format!("seed {seed} is out of range; it must be an integer in [0, 2⁶⁴ − 1]"),
+        )
+        .at(raw.seed.span(), "out of range")
+    })?;
+
+    // ---- init ----
+    let init = init_box(&raw, n_state)?;
+    if let Some(h) = &hybrid {
+        hybrid::check_init(h, &init, &raw.plant, raw.init.span())?;
+    }
+    problem_sets(raw, plant, hybrid, horizon, seed, init)
+}
+
+/// A `[plant]` with one location: A and B required.
+fn single_plant(raw: &Spanned<super::raw::RawPlant>) -> Result<Plant, SpecError> {
+    let p = raw.get_ref();
+    let missing = |k: &str| {
+        SpecError::new(ErrorKind::MissingField, format!("plant: `{k}` is missing"))
+            .at(raw.span(), format!("`{k}` missing in this table"))
+            .help("a plant with one location gives A and B; a hybrid plant gives [[plant.location]] tables")
+    };
+    let (Some(pa), Some(pb)) = (&p.A, &p.B) else {
+        return Err(missing(if p.A.is_none() { "A" } else { "B" }));
+    };
     let mut n = Dim::free();
-    let A = matrix_cols(&p.A, "plant.A", &mut n, Cols::Square)?;
+    let A = matrix_cols(pa, "plant.A", &mut n, Cols::Square)?;
     n.why = format!("plant.A is {0}×{0}", A.rows);
     let mut m = Dim::free();
-    let B = matrix_cols(&p.B, "plant.B", &mut n, Cols::Of(&mut m))?;
+    let B = matrix_cols(pb, "plant.B", &mut n, Cols::Of(&mut m))?;
     let time = match p.time.get_ref() {
         RawTime::Continuous => TimeDomain::Continuous,
         RawTime::Discrete => TimeDomain::Discrete,
@@ -293,38 +342,27 @@ pub(crate) fn problem(src: &str) -> Result<Problem, SpecError> {
         Some(c) => matrix_cols(c, "plant.C", &mut Dim::free(), Cols::Of(&mut n))?,
         None => Matrix::identity(A.rows),
     };
-    let plant = Plant {
+    Ok(Plant {
         time,
         A,
         B,
         offset,
         period,
         C,
-    };
+    })
+}
+
+/// The sets, input, settings and cross-set checks of a spec whose plant, horizon, seed and Init are
+/// validated.
+fn problem_sets(
+    mut raw: RawSpec,
+    plant: Plant,
+    hybrid: Option<hybrid::HybridDesc>,
+    horizon: f64,
+    seed: u64,
+    init: InitBox,
+) -> Result<Problem, SpecError> {
     let n_state = plant.n();
-
-    // ---- horizon, seed ----
-    let horizon = positive(&raw.horizon, "horizon", ErrorKind::Horizon, "")?;
-    if horizon < period * (1.0 - 1e-12) {
-        return Err(SpecError::new(
-            ErrorKind::Horizon,
-            format!("horizon {horizon} s is shorter than one sample period ({period} s)"),
-        )
-        .at(raw.horizon.span(), "shorter than plant.period")
-        .at(p.period.span(), "the period"));
-    }
-    let seed = *raw.seed.get_ref();
-    let seed = u64::try_from(seed).map_err(|_| {
-        SpecError::new(
-            ErrorKind::Seed,
-            format!("seed {seed} is out of range; it must be an integer in [0, 2⁶⁴ − 1]"),
-        )
-        .at(raw.seed.span(), "out of range")
-    })?;
-
-    // ---- init ----
-    let init = init_box(&raw, n_state)?;
-
     // ---- goal, unsafe, named sets ----
     let goal_ctx = SetCtx {
         what: "goal".into(),
@@ -417,6 +455,7 @@ pub(crate) fn problem(src: &str) -> Result<Problem, SpecError> {
         synthesis,
         mtl,
         sets,
+        hybrid,
     })
 }
 

@@ -40,6 +40,7 @@ mod report_html;
 mod robustness_safety;
 mod spec_errors;
 mod spec_examples;
+mod spec_hybrid;
 mod spec_parse;
 mod synth_algorithm4;
 mod synth_end_to_end;

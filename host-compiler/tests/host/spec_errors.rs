@@ -44,7 +44,7 @@ fn edit(from: &str, to: &str) -> String {
 }
 
 /// 1-based (line, col) of the first occurrence of `needle` at or after the first occurrence of `anchor`.
-fn pos(src: &str, anchor: &str, needle: &str) -> (usize, usize) {
+pub(crate) fn pos(src: &str, anchor: &str, needle: &str) -> (usize, usize) {
     let a = src
         .find(anchor)
         .unwrap_or_else(|| panic!("test bug: anchor `{anchor}` not found"));
@@ -56,7 +56,7 @@ fn pos(src: &str, anchor: &str, needle: &str) -> (usize, usize) {
     (line, src[line_start..off].chars().count() + 1)
 }
 
-fn render(e: &SpecError) -> String {
+pub(crate) fn render(e: &SpecError) -> String {
     let mut out = String::new();
     miette::GraphicalReportHandler::new_themed(miette::GraphicalTheme::unicode_nocolor())
         .with_width(400)
@@ -68,7 +68,7 @@ fn render(e: &SpecError) -> String {
 /// Parse `src`, expect an error of `kind` whose primary label starts at `needle` (first occurrence after
 /// `anchor`), and return the error for further checks.
 #[track_caller]
-fn expect(src: &str, kind: ErrorKind, anchor: &str, needle: &str) -> SpecError {
+pub(crate) fn expect(src: &str, kind: ErrorKind, anchor: &str, needle: &str) -> SpecError {
     let e = match spec::parse(src, "spec.toml") {
         Ok(_) => panic!("spec was accepted, expected {kind:?}\n{src}"),
         Err(e) => e,
