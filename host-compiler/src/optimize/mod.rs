@@ -34,7 +34,8 @@ use std::sync::atomic::AtomicBool;
 /// [`Default`]. Every entry point checks them again.
 #[derive(Clone, Debug)]
 pub struct BundleSettings {
-    /// Outer iterations (serious + null steps) at most. ≥ 1. Default 200.
+    /// Outer iterations (serious + null steps) at most. Default 200. 0 turns §5.3's iterations (and the
+    /// repair) off: the start is returned re-certified, cut at k* when `terminal_time` is set.
     pub max_iterations: usize,
     /// Stop when the predicted increase of δ is below this (absolute). Finite, ≥ 0. Default 1e-7.
     pub tolerance: f64,
@@ -86,7 +87,6 @@ impl BundleSettings {
     /// Checks the ranges documented on the fields; the first violation is returned.
     pub fn validate(&self) -> Result<(), SettingError> {
         let c = Check("BundleSettings");
-        c.at_least_one("max_iterations", self.max_iterations)?;
         c.non_negative("tolerance", self.tolerance)?;
         c.positive("min_step", self.min_step)?;
         c.rule(

@@ -5,7 +5,7 @@
 use host_compiler::certify::OwnedLoop;
 use host_compiler::certify::{shipped, LoopConstants};
 use host_compiler::optimize::potential::{descend, DescentMethod, PotentialSettings};
-use host_compiler::optimize::{maximize_delta, BundleSettings, OptStop, Optimized};
+use host_compiler::optimize::{maximize_delta, try_maximize_delta, BundleSettings, OptStop, Optimized};
 use std::sync::atomic::AtomicBool;
 
 fn planar() -> (OwnedLoop, LoopConstants) {
@@ -326,4 +326,26 @@ fn a_non_finite_nominal_certifies_nothing() {
     // The same loop certifies a finite one (the refusal is about the nominal, not the loop).
     let (_, ok) = shipped(&lp, &lc, &x0, &vec![vec![0.0, 0.0]; ol.task.steps]);
     assert!(ok.delta_goal.is_finite());
+}
+
+/// `max_iterations = 0` without the terminal-time cut turns §5.3 off (what the bench row
+/// `trajectories_without_optimisation_ratio` compares against): the start comes back unchanged and
+/// re-certified.
+#[test]
+fn no_iterations_return_the_start() {
+    let (ol, lc) = planar();
+    let lp = ol.lp();
+    let x0 = [0.0, 0.0, 0.0, 1.0];
+    let (v, delta) = seed(&ol, &lc, &x0);
+    let off = BundleSettings {
+        max_iterations: 0,
+        terminal_time: false,
+        ..BundleSettings::default()
+    };
+    let cancel = AtomicBool::new(false);
+    let o = try_maximize_delta(&lp, &lc, &x0, &v, ol.task.steps, &off, &cancel).unwrap();
+    assert_eq!(o.iterations, 0);
+    assert_eq!(o.certificate.delta, delta);
+    let v32: Vec<Vec<f64>> = v.iter().map(|r| r.iter().map(|&a| a as f32 as f64).collect()).collect();
+    assert_eq!(o.nominal.v, v32);
 }
