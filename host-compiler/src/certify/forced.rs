@@ -16,7 +16,8 @@
 //!   ([`crate::geometry::Intersection`]).
 //!
 //! Why this certifies the run: a state within δᵢ of x̃ᵢ(0) stays within δᵢ of the nominal in Pᵢ over the
-//! segment (the single-location certificate, f32 rounding and all), so at Nᵢ it is δᵢ-close to x̃ᵢ(Nᵢ),
+//! segment (the single-location certificate, f32 rounding and all; a location's invariant is kept by
+//! treating its outside as Unsafe), so at Nᵢ it is δᵢ-close to x̃ᵢ(Nᵢ),
 //! which is δᵢ-deep in Sᵢ: the state is in the guard, and its reset lies in the ball certified for
 //! segment i+1. Unsafe and the input set are checked over every segment's whole table. The switching
 //! times of perturbed runs equal the nominal's (the controller switches by its table), so no event time
@@ -24,7 +25,9 @@
 //! δᵢ₊₁/√λmax(Pᵢ⁻¹Pᵢ₊₁), the largest Pᵢ-ball inside the Pᵢ₊₁-ball; a test holds the recursion to it.
 
 use super::{certify_at, Certificate, GoalAt, Loop, LoopConstants};
-use crate::geometry::{Ellipsoid, GeometryError, Intersection, Polytope, Region};
+use crate::geometry::{
+    Complement, Ellipsoid, Empty, GeometryError, Intersection, Metric, Polytope, Region, Witness,
+};
 use crate::model::hybrid::{Edge, EdgeKind};
 use crate::trajectory::Nominal;
 use faer::linalg::solvers::Solve;
@@ -40,6 +43,9 @@ pub struct ForcedSegment<'a> {
     pub nominal: &'a Nominal,
     /// The edge the controller takes at the segment's last sample; `None` for the last segment.
     pub switch: Option<&'a Edge>,
+    /// The location's invariant, if it has one: the segment's tube must stay inside it, so leaving it
+    /// counts as entering Unsafe.
+    pub invariant: Option<&'a crate::model::hybrid::Polytope>,
 }
 
 /// The certificates of a forced-switching run, one per segment, first segment first. The run is
@@ -109,6 +115,42 @@ fn flat(m: &Mat<f64>) -> Vec<f64> {
     v
 }
 
+/// Unsafe ∪ (ℝⁿ \\ invariant), over borrowed sets: the distance is the least of the two (exact); the
+/// depth is the larger of the two depths (a lower bound, as for [`crate::geometry::Union`]).
+struct UnsafeOrOutside<'a> {
+    unsafe_set: Option<&'a dyn Region>,
+    outside: Complement,
+}
+
+impl Region for UnsafeOrOutside<'_> {
+    fn dim(&self) -> usize {
+        self.outside.dim()
+    }
+    fn contains(&self, x: &[f64]) -> bool {
+        self.outside.contains(x) || self.unsafe_set.is_some_and(|u| u.contains(x))
+    }
+    fn dist(&self, x: &[f64], metric: &Metric) -> Witness {
+        let o = self.outside.dist(x, metric);
+        match self.unsafe_set.map(|u| u.dist(x, metric)) {
+            Some(u) if u.value < o.value => u,
+            _ => o,
+        }
+    }
+    fn depth(&self, x: &[f64], metric: &Metric) -> Witness {
+        let o = self.outside.depth(x, metric);
+        match self.unsafe_set.map(|u| u.depth(x, metric)) {
+            Some(u) if u.value > o.value => u,
+            _ => o,
+        }
+    }
+}
+
+/// The polytope of a guard or invariant as a geometry region.
+fn region(p: &crate::model::hybrid::Polytope, n: usize) -> Result<Polytope, GeometryError> {
+    let a: Vec<f64> = p.a.iter().flatten().copied().collect();
+    Polytope::new(n, a, p.b.clone())
+}
+
 /// The safe transition of `edge` into the ball B_P(c, δ) (module doc).
 fn safe_transition(
     segment: usize,
@@ -131,33 +173,8 @@ fn safe_transition(
     }
     let Q = R.transpose() * P * R * (1.0 / (delta * delta));
     let ball = Ellipsoid::new(cp, flat(&crate::linalg::sym(Q.as_ref()))).map_err(geo)?;
-    let a: Vec<f64> = edge.guard.a.iter().flatten().copied().collect();
-    let guard = Polytope::new(n, a, edge.guard.b.clone()).map_err(geo)?;
+    let guard = region(&edge.guard, n).map_err(geo)?;
     Intersection::new(vec![Box::new(guard), Box::new(ball)]).map_err(geo)
-}
-
-/// An empty set in ℝⁿ to certify against when the next segment certifies nothing.
-struct Nothing(usize);
-
-impl Region for Nothing {
-    fn dim(&self) -> usize {
-        self.0
-    }
-    fn contains(&self, _: &[f64]) -> bool {
-        false
-    }
-    fn dist(&self, _: &[f64], _: &crate::geometry::Metric) -> crate::geometry::Witness {
-        crate::geometry::Witness {
-            value: f64::INFINITY,
-            point: Vec::new(),
-        }
-    }
-    fn depth(&self, _: &[f64], _: &crate::geometry::Metric) -> crate::geometry::Witness {
-        crate::geometry::Witness {
-            value: 0.0,
-            point: Vec::new(),
-        }
-    }
 }
 
 /// Theorem 4.17 for a run of segments (module doc): checks that the run is a forced-switching run
@@ -210,9 +227,40 @@ pub fn certify_forced(segments: &[ForcedSegment<'_>]) -> Result<ForcedCertificat
             }
         }
     }
+    // Each segment's Unsafe, with the outside of its location's invariant added.
+    let guarded: Vec<Option<UnsafeOrOutside>> = segments
+        .iter()
+        .enumerate()
+        .map(|(i, s)| {
+            s.invariant
+                .map(|inv| {
+                    let n = s.lp.P.nrows();
+                    let inside = region(inv, n).map_err(|source| ForcedError::Geometry {
+                        segment: i,
+                        source,
+                    })?;
+                    let outside = Complement::new(Box::new(inside))
+                        .map_err(|source| ForcedError::Geometry { segment: i, source })?;
+                    Ok(UnsafeOrOutside {
+                        unsafe_set: s.lp.unsafe_set,
+                        outside,
+                    })
+                })
+                .transpose()
+        })
+        .collect::<Result<_, ForcedError>>()?;
+    let lp_of = |i: usize| -> Loop<'_> {
+        match &guarded[i] {
+            Some(g) => Loop {
+                unsafe_set: Some(g as &dyn Region),
+                ..segments[i].lp
+            },
+            None => segments[i].lp,
+        }
+    };
     let mut certs: Vec<Certificate> = Vec::with_capacity(segments.len());
     let last_cert = certify_at(
-        &segments[last].lp,
+        &lp_of(last),
         segments[last].lc,
         segments[last].nominal,
         GoalAt::Best,
@@ -233,11 +281,11 @@ pub fn certify_forced(segments: &[ForcedSegment<'_>]) -> Result<ForcedCertificat
                 next_delta,
             )?)
         } else {
-            Box::new(Nothing(n))
+            Box::new(Empty(n))
         };
         let lp = Loop {
             goal: target.as_ref(),
-            ..s.lp
+            ..lp_of(i)
         };
         certs.push(certify_at(&lp, s.lc, s.nominal, GoalAt::Last));
     }

@@ -20,20 +20,7 @@ pub struct Union {
 impl Union {
     /// At least one member, all of the same dimension.
     pub fn new(members: Vec<Box<dyn Region>>) -> Result<Self, GeometryError> {
-        let Some(first) = members.first() else {
-            return Err(GeometryError::EmptyUnion);
-        };
-        let n = first.dim();
-        for (index, m) in members.iter().enumerate() {
-            if m.dim() != n {
-                return Err(GeometryError::MemberDimension {
-                    what: "union",
-                    index,
-                    expected: n,
-                    got: m.dim(),
-                });
-            }
-        }
+        let n = common_dim(&members, "union")?;
         Ok(Self { n, members })
     }
 
@@ -112,6 +99,50 @@ impl Region for Union {
     }
 }
 
+/// The dimension every member shares (at least one member).
+fn common_dim(members: &[Box<dyn Region>], what: &'static str) -> Result<usize, GeometryError> {
+    let Some(first) = members.first() else {
+        return Err(GeometryError::EmptyUnion);
+    };
+    let n = first.dim();
+    for (index, m) in members.iter().enumerate() {
+        if m.dim() != n {
+            return Err(GeometryError::MemberDimension {
+                what,
+                index,
+                expected: n,
+                got: m.dim(),
+            });
+        }
+    }
+    Ok(n)
+}
+
+/// The empty set in ℝⁿ: every point lies outside it, infinitely far (a task without Unsafe; the target
+/// of a segment whose successor certifies nothing).
+pub struct Empty(pub usize);
+
+impl Region for Empty {
+    fn dim(&self) -> usize {
+        self.0
+    }
+    fn contains(&self, _: &[f64]) -> bool {
+        false
+    }
+    fn dist(&self, _: &[f64], _: &Metric) -> Witness {
+        Witness {
+            value: f64::INFINITY,
+            point: Vec::new(),
+        }
+    }
+    fn depth(&self, _: &[f64], _: &Metric) -> Witness {
+        Witness {
+            value: 0.0,
+            point: Vec::new(),
+        }
+    }
+}
+
 /// The intersection ∩Sᵢ of regions of one dimension (a hybrid segment's safe transition: a guard and the
 /// reset preimage of the next ball, Notation 4.13).
 /// - depth(x, ∩Sᵢ) = minᵢ depth(x, Sᵢ) (exact: ℝⁿ \ ∩Sᵢ = ∪(ℝⁿ \ Sᵢ), and the distance to a union is the
@@ -126,20 +157,7 @@ pub struct Intersection {
 impl Intersection {
     /// At least one member, all of the same dimension.
     pub fn new(members: Vec<Box<dyn Region>>) -> Result<Self, GeometryError> {
-        let Some(first) = members.first() else {
-            return Err(GeometryError::EmptyUnion);
-        };
-        let n = first.dim();
-        for (index, m) in members.iter().enumerate() {
-            if m.dim() != n {
-                return Err(GeometryError::MemberDimension {
-                    what: "intersection",
-                    index,
-                    expected: n,
-                    got: m.dim(),
-                });
-            }
-        }
+        let n = common_dim(&members, "intersection")?;
         Ok(Self { n, members })
     }
 }

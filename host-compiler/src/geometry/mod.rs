@@ -13,8 +13,8 @@
 //!   per-point path (Remark 7.11);
 //! - [`ellipsoid`]: [`Ellipsoid`] and CAF [`Ball`] regions built on it;
 //! - [`polytope`]: [`Polytope`] {x : Ax ≤ b}, distance by the QP (7.1), depth by facets;
-//! - [`combinators`]: [`Union`], [`Intersection`], [`Complement`], [`InOutput`] (sets given in output
-//!   coordinates y = Cx).
+//! - [`combinators`]: [`Union`], [`Intersection`], [`Complement`], [`Empty`], [`InOutput`] (sets given
+//!   in output coordinates y = Cx).
 
 pub mod combinators;
 pub mod ellipsoid;
@@ -24,7 +24,7 @@ pub mod polytope;
 mod cache;
 pub(crate) mod linalg;
 
-pub use combinators::{Complement, InOutput, Intersection, Union};
+pub use combinators::{Complement, Empty, InOutput, Intersection, Union};
 pub use ellipsoid::{Ball, Ellipsoid};
 pub use ellipsoid_distance::{
     BoundaryDistanceSettings, BoundarySolution, BoundaryWorkspace, EllipsoidBoundaryDistance,

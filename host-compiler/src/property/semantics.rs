@@ -13,7 +13,7 @@
 //! test holds them to it), which is what lets MTL synthesis reuse the reach-avoid machinery.
 
 use super::ReachAvoid;
-use crate::geometry::{Metric, Region, Witness};
+use crate::geometry::{Empty, Metric};
 use crate::robustness::mtl::{Formula, Monitor, MtlError, NamedSet, Trace};
 use crate::robustness::safety::{
     safety_robustness_joint, SafetyError, SafetySet, SafetySpec, SampledTrajectory,
@@ -37,30 +37,6 @@ pub enum SemanticsError {
     Mtl(#[from] MtlError),
 }
 
-/// The empty set in ℝⁿ (a task without Unsafe): every point is infinitely far outside it.
-struct Nowhere(usize);
-
-impl Region for Nowhere {
-    fn dim(&self) -> usize {
-        self.0
-    }
-    fn contains(&self, _: &[f64]) -> bool {
-        false
-    }
-    fn dist(&self, _: &[f64], _: &Metric) -> Witness {
-        Witness {
-            value: f64::INFINITY,
-            point: Vec::new(),
-        }
-    }
-    fn depth(&self, _: &[f64], _: &Metric) -> Witness {
-        Witness {
-            value: 0.0,
-            point: Vec::new(),
-        }
-    }
-}
-
 impl Property for ReachAvoid {
     fn trace_robustness(&self, trace: &Trace) -> Result<f64, SemanticsError> {
         let n = self.goal.dim();
@@ -73,7 +49,7 @@ impl Property for ReachAvoid {
             .flat_map(|k| cols.iter().map(move |c| c[k]))
             .collect();
         let traj = SampledTrajectory::new(trace.times(), &states, n)?;
-        let nowhere = Nowhere(n);
+        let nowhere = Empty(n);
         let metric = Metric::euclidean(n);
         let spec = SafetySpec {
             goal: SafetySet::Region(self.goal.as_ref()),

@@ -6,7 +6,6 @@
 use faer::Mat;
 use host_compiler::certify::{evaluator_error_bound, selection_radius, Loop, LoopConstants};
 use host_compiler::emit::{ImageBuilder, TrajectoryEntry};
-use host_compiler::geometry::{Metric, Region, Witness};
 use host_compiler::linalg::{mat_vec, p_norm};
 use host_compiler::model::LinearAffine;
 use host_compiler::property::{InputBound, ReachAvoid};
@@ -144,29 +143,6 @@ fn f32_selection_accepts_only_states_in_the_certified_ball() {
     );
 }
 
-/// A region with nothing in it: the inter-sample test only needs the loop constants.
-struct Nowhere(usize);
-impl Region for Nowhere {
-    fn dim(&self) -> usize {
-        self.0
-    }
-    fn contains(&self, _: &[f64]) -> bool {
-        false
-    }
-    fn dist(&self, x: &[f64], _: &Metric) -> Witness {
-        Witness {
-            value: f64::INFINITY,
-            point: x.to_vec(),
-        }
-    }
-    fn depth(&self, x: &[f64], _: &Metric) -> Witness {
-        Witness {
-            value: 0.0,
-            point: x.to_vec(),
-        }
-    }
-}
-
 #[test]
 fn inter_sample_excursion_is_bounded() {
     // The planar vehicle of Example 3.3 with a stabilising sampled gain.
@@ -194,7 +170,7 @@ fn inter_sample_excursion_is_bounded() {
     let P = random_pd(4, 5.0, &mut ChaCha8Rng::seed_from_u64(3));
     let sampled = LinearAffine::sampled(plant.clone(), h).unwrap();
     let property = ReachAvoid {
-        goal: Box::new(Nowhere(4)),
+        goal: Box::new(host_compiler::geometry::Empty(4)),
         unsafe_set: None,
         input: InputBound::Norm2 {
             center: vec![0.0, 0.0],

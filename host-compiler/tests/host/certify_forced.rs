@@ -12,8 +12,9 @@ use host_compiler::certify::{
 };
 use host_compiler::geometry::Ball;
 
-use host_compiler::model::hybrid::{Edge, EdgeKind, Hybrid, Mode, Polytope, Reset};
-use host_compiler::model::{ContinuousPlant, Plant};
+use crate::model_hybrid::example_3_19_modes;
+use host_compiler::model::hybrid::{Edge, EdgeKind, Hybrid, Polytope, Reset};
+use host_compiler::model::Plant;
 use host_compiler::property::{InputBound, ReachAvoid};
 use host_compiler::trajectory::Nominal;
 use rand::SeedableRng;
@@ -23,40 +24,15 @@ const H: f64 = 0.05;
 const N0: usize = 40;
 const N1: usize = 80;
 
-fn mat(rows: &[&[f64]]) -> Mat<f64> {
-    Mat::from_fn(rows.len(), rows[0].len(), |i, j| rows[i][j])
-}
-
 fn plant(guard: Polytope, kind: EdgeKind) -> Hybrid {
-    let s1 = ContinuousPlant::new(
-        mat(&[&[-1.2, 2.1, -0.3], &[-8.4, -3.8, -0.6], &[-0.6, 4.3, -2.9]]),
-        mat(&[&[1.0], &[2.0], &[3.0]]),
-        vec![0.0; 3],
-    )
-    .unwrap();
-    let s2 = ContinuousPlant::new(
-        mat(&[&[-0.7, 2.9, -0.6], &[0.2, -0.4, 3.6], &[0.1, 0.3, -4.2]]),
-        mat(&[&[3.0], &[2.0], &[1.0]]),
-        vec![6.0, 2.0, 0.0],
-    )
-    .unwrap();
-    let mode = |name: &str, flow| Mode {
-        name: name.into(),
-        flow,
-        invariant: None,
+    let edge = Edge {
+        from: 0,
+        to: 1,
+        guard,
+        reset: Reset::identity(3),
+        kind,
     };
-    Hybrid::new(
-        vec![mode("one", s1), mode("two", s2)],
-        vec![Edge {
-            from: 0,
-            to: 1,
-            guard,
-            reset: Reset::identity(3),
-            kind,
-        }],
-        H,
-    )
-    .unwrap()
+    Hybrid::new(example_3_19_modes(), vec![edge], H).unwrap()
 }
 
 fn whole_space() -> Polytope {
@@ -124,12 +100,14 @@ fn certify(r: &Run) -> ForcedCertificate {
             lc: &lcs[0],
             nominal: &r.noms[0],
             switch: Some(&r.hy.edges()[0]),
+            invariant: None,
         },
         ForcedSegment {
             lp: lps[1],
             lc: &lcs[1],
             nominal: &r.noms[1],
             switch: None,
+            invariant: None,
         },
     ];
     certify_forced(&segs).unwrap()
@@ -280,12 +258,14 @@ fn runs_that_are_not_forced_switching_runs_are_refused() {
                 lc: &lcs[0],
                 nominal: &r.noms[0],
                 switch: e0,
+                invariant: None,
             },
             ForcedSegment {
                 lp: lps[1],
                 lc: &lcs[1],
                 nominal: n1,
                 switch: e1,
+                invariant: None,
             },
         ])
     };
@@ -310,4 +290,45 @@ fn runs_that_are_not_forced_switching_runs_are_refused() {
     assert!(matches!(e, ForcedError::Discontinuous { segment: 1, prev: 0, .. }), "{e:?}");
     assert!(e.to_string().contains("not continuous across the switch"), "{e}");
     assert!(matches!(certify_forced(&[]), Err(ForcedError::Empty)));
+}
+
+/// A location's invariant is kept like Unsafe: with the first location's invariant 0.02 beyond the
+/// largest x1 its nominal reaches, the Unsafe part at the samples is that margin in the first metric.
+#[test]
+fn a_location_invariant_is_kept_like_unsafe() {
+    let r = run(whole_space());
+    let top = r.noms[0].x.iter().map(|x| x[0]).fold(f64::NEG_INFINITY, f64::max);
+    let inv = Polytope {
+        a: vec![vec![1.0, 0.0, 0.0]],
+        b: vec![top + 0.02],
+    };
+    let lps = [0, 1].map(|l| Loop::reach_avoid(&r.hy, l, &r.designs[l], &r.task));
+    let lcs = lps.each_ref().map(|lp| LoopConstants::new(lp).unwrap());
+    let segs = |invariant| {
+        [
+            ForcedSegment {
+                lp: lps[0],
+                lc: &lcs[0],
+                nominal: &r.noms[0],
+                switch: Some(&r.hy.edges()[0]),
+                invariant,
+            },
+            ForcedSegment {
+                lp: lps[1],
+                lc: &lcs[1],
+                nominal: &r.noms[1],
+                switch: None,
+                invariant: None,
+            },
+        ]
+    };
+    let free = certify_forced(&segs(None)).unwrap();
+    let kept = certify_forced(&segs(Some(&inv))).unwrap();
+    let Pinv = host_compiler::linalg::sym_fn(r.designs[0].P.as_ref(), |l| 1.0 / l).unwrap();
+    let margin = 0.02 / Pinv[(0, 0)].sqrt();
+    let got = kept.segments[0].delta_unsafe;
+    assert!((got - margin).abs() <= 1e-9 * margin, "{got} vs {margin}");
+    assert!(free.segments[0].delta_unsafe > margin);
+    assert!(kept.segments[0].delta <= free.segments[0].delta);
+    assert!(kept.is_certified());
 }

@@ -10,19 +10,19 @@ use host_compiler::model::hybrid::{
 };
 use host_compiler::model::ContinuousPlant;
 
-fn mat(rows: &[&[f64]]) -> Mat<f64> {
+pub(crate) fn mat(rows: &[&[f64]]) -> Mat<f64> {
     Mat::from_fn(rows.len(), rows[0].len(), |i, j| rows[i][j])
 }
 
-fn half(a: &[f64], b: f64) -> Polytope {
+pub(crate) fn half(a: &[f64], b: f64) -> Polytope {
     Polytope {
         a: vec![a.to_vec()],
         b: vec![b],
     }
 }
 
-/// Example 3.19: two locations of ℝ³ across the plane x1 = 0, identity resets.
-fn example_3_19(h: f64) -> Hybrid {
+/// Example 3.19's two locations of ℝ³ (flows and invariants).
+pub(crate) fn example_3_19_modes() -> Vec<Mode> {
     let s1 = ContinuousPlant::new(
         mat(&[&[-1.2, 2.1, -0.3], &[-8.4, -3.8, -0.6], &[-0.6, 4.3, -2.9]]),
         mat(&[&[1.0], &[2.0], &[3.0]]),
@@ -35,7 +35,7 @@ fn example_3_19(h: f64) -> Hybrid {
         vec![6.0, 2.0, 0.0],
     )
     .unwrap();
-    let modes = vec![
+    vec![
         Mode {
             name: "left".into(),
             flow: s1,
@@ -46,7 +46,11 @@ fn example_3_19(h: f64) -> Hybrid {
             flow: s2,
             invariant: Some(half(&[-1.0, 0.0, 0.0], 0.0)),
         },
-    ];
+    ]
+}
+
+/// Example 3.19: two locations of ℝ³ across the plane x1 = 0, identity resets.
+fn example_3_19(h: f64) -> Hybrid {
     let edges = vec![
         Edge {
             from: 0,
@@ -63,7 +67,7 @@ fn example_3_19(h: f64) -> Hybrid {
             kind: EdgeKind::Internal,
         },
     ];
-    Hybrid::new(modes, edges, h).unwrap()
+    Hybrid::new(example_3_19_modes(), edges, h).unwrap()
 }
 
 #[test]
