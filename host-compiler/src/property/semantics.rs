@@ -14,7 +14,7 @@
 
 use super::ReachAvoid;
 use crate::geometry::{Empty, Metric};
-use crate::robustness::mtl::{Formula, Monitor, MtlError, NamedSet, Trace};
+use crate::robustness::mtl::{Formula, MtlError, NamedSet, Trace};
 use crate::robustness::safety::{
     safety_robustness_joint, SafetyError, SafetySet, SafetySpec, SampledTrajectory,
 };
@@ -33,8 +33,9 @@ pub enum SemanticsError {
     Signals { found: usize, n: usize },
     #[error(transparent)]
     Safety(#[from] SafetyError),
+    /// Boxed: a formula error carries its source text.
     #[error(transparent)]
-    Mtl(#[from] MtlError),
+    Mtl(Box<MtlError>),
 }
 
 impl Property for ReachAvoid {
@@ -70,19 +71,13 @@ pub struct Temporal {
     pub sets: Vec<NamedSet>,
 }
 
-impl Temporal {
-    /// The formula bound to the trace's signals and these sets.
-    fn monitor(&self, trace: &Trace) -> Result<Monitor<'_>, MtlError> {
-        Ok(self.formula.bind(trace.names(), &self.sets)?)
-    }
-}
-
 impl Property for Temporal {
     fn trace_robustness(&self, trace: &Trace) -> Result<f64, SemanticsError> {
-        let rho = self
-            .monitor(trace)
-            .and_then(|m| m.robustness(trace))
-            ?;
-        Ok(rho[0])
+        let boxed = |e: MtlError| SemanticsError::Mtl(Box::new(e));
+        let monitor = self
+            .formula
+            .bind(trace.names(), &self.sets)
+            .map_err(|e| boxed(e.into()))?;
+        Ok(monitor.robustness(trace).map_err(boxed)?[0])
     }
 }
