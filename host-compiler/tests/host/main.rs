@@ -23,6 +23,7 @@ mod geometry_polytope;
 mod geometry_regions;
 mod model_zoh;
 mod mtl_cli;
+mod mtl_depth;
 mod mtl_errors;
 mod mtl_props;
 mod mtl_semantics;
