@@ -21,6 +21,7 @@ mod geometry_common;
 mod geometry_ellipsoid;
 mod geometry_polytope;
 mod geometry_regions;
+mod messages;
 mod model_zoh;
 mod mtl_cli;
 mod mtl_depth;

@@ -134,8 +134,8 @@ const RESERVED: [&str; 7] = ["F", "G", "U", "R", "true", "false", "inf"];
 
 fn describe(t: &Tok, text: &str) -> String {
     match t {
-        Tok::Ident(s) => format!("`{s}`"),
-        Tok::Num(_) => format!("number `{text}`"),
+        Tok::Ident(s) => format!("`{}`", crate::text::excerpt(s)),
+        Tok::Num(_) => format!("number `{}`", crate::text::excerpt(text)),
         Tok::Eof => "end of formula".into(),
         _ => format!("`{text}`"),
     }
@@ -195,23 +195,25 @@ fn lex(src: &str) -> Result<Vec<Token>, FormulaError> {
             }
             let text = &src[i..j];
             let v: f64 = text.parse().map_err(|_| {
+                let quoted = crate::text::excerpt(text);
                 FormulaError::new(
                     src,
                     Span::new(i, j),
                     FormulaErrorKind::Syntax {
                         expected: "a number".into(),
-                        found: format!("`{text}`"),
+                        found: format!("`{quoted}`"),
                     },
-                    format!("expected a number, found `{text}`"),
+                    format!("expected a number, found `{quoted}`"),
                     "not a number".into(),
                 )
             })?;
             if !v.is_finite() {
+                let quoted = crate::text::excerpt(text);
                 return Err(FormulaError::new(
                     src,
                     Span::new(i, j),
                     FormulaErrorKind::BadNumber,
-                    format!("number `{text}` is out of range"),
+                    format!("number `{quoted}` is out of range"),
                     "out of the f64 range".into(),
                 ));
             }
