@@ -44,6 +44,11 @@ pub use error::{ErrorKind, SpecError};
 pub use sets::{load_named_sets, parse_named_sets, Coords, SetDesc, Shape};
 pub use settings::{ControllerMode, SettingsError, SynthesisSettings, SynthesisSettingsBuilder};
 
+/// The largest magnitude of any number in a spec. Far beyond any physical task in sensible units, and
+/// small enough that the widths of boxes, distances and their squares (and the f32 values an image
+/// stores) are finite: an Init box spanning ±1e308 is refused here rather than overflowing later.
+pub const MAX_MAGNITUDE: f64 = 1e12;
+
 /// A dense real matrix, row-major.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Matrix {

@@ -11,7 +11,7 @@ use super::error::{ErrorKind, SpecError};
 use super::raw::{RawF, RawInput, RawMat, RawSpec, RawSynthesis, RawTime, RawVec};
 use super::sets::{named_sets, set_from_raw, SetCtx};
 use super::settings::{ControllerMode, SynthesisSettings};
-use super::{InitBox, InputSet, Matrix, Plant, Problem, TimeDomain};
+use super::{InitBox, InputSet, Matrix, Plant, Problem, TimeDomain, MAX_MAGNITUDE};
 
 /// An expected dimension and why it is expected (for messages). `n: None` = not fixed yet; the first
 /// vector or matrix that uses it fixes it.
@@ -154,18 +154,33 @@ pub(crate) fn matrix(
     matrix_cols(raw, name, rows, Cols::Of(cols))
 }
 
-/// A finite number.
+/// A finite number of magnitude at most [`MAX_MAGNITUDE`]. Every number of a spec passes here (or
+/// through [`bounded`]), so no sum, difference or product of a few of them overflows downstream.
 pub(crate) fn finite(x: &RawF, name: &str) -> Result<f64, SpecError> {
-    let v = *x.get_ref();
-    if v.is_finite() {
-        Ok(v)
-    } else {
-        Err(SpecError::new(
+    bounded(*x.get_ref(), x.span(), name)
+}
+
+/// [`finite`] for a value and its span.
+pub(crate) fn bounded(v: f64, span: Range<usize>, name: &str) -> Result<f64, SpecError> {
+    if !v.is_finite() {
+        return Err(SpecError::new(
             ErrorKind::NonFinite,
             format!("{name} is {v}; numbers in a spec must be finite"),
         )
-        .at(x.span(), "not finite"))
+        .at(span, "not finite"));
     }
+    if v.abs() > MAX_MAGNITUDE {
+        return Err(SpecError::new(
+            ErrorKind::OutOfRange,
+            format!(
+                "{name} is {v:e}; numbers in a spec must lie within ±{MAX_MAGNITUDE:e} (widths, \
+                 distances and their squares must stay finite)"
+            ),
+        )
+        .at(span, format!("beyond ±{MAX_MAGNITUDE:e}"))
+        .help("rescale the state or input units"));
+    }
+    Ok(v)
 }
 
 /// lo ≤ hi componentwise (same lengths already checked).

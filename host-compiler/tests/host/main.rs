@@ -37,6 +37,7 @@ mod refactor_fixtures;
 mod report_clip;
 mod report_html;
 mod robustness_safety;
+mod spec_bounds;
 mod spec_errors;
 mod spec_examples;
 mod spec_parse;
