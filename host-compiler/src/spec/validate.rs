@@ -366,6 +366,7 @@ pub(crate) fn problem(src: &str) -> Result<Problem, SpecError> {
 
     // ---- input ----
     let input = input_set(raw.input.get_ref(), raw.input.span(), plant.m())?;
+    let fallback_input = fallback_input(raw.input.get_ref(), &input, plant.m())?;
 
     // ---- synthesis, mtl ----
     let synthesis = match &raw.synthesis {
@@ -427,6 +428,7 @@ pub(crate) fn problem(src: &str) -> Result<Problem, SpecError> {
         goal,
         unsafe_sets,
         input,
+        fallback_input,
         horizon,
         seed,
         synthesis,
@@ -549,6 +551,39 @@ fn input_set(r: &RawInput, span: Range<usize>, m: usize) -> Result<InputSet, Spe
         )
         .at(r.kind.span(), "unknown kind")),
     }
+}
+
+/// `input.fallback`, which must lie in the input set, or the set's point nearest 0; as the image
+/// stores it ([`InputSet::storable`]).
+fn fallback_input(r: &RawInput, input: &InputSet, m: usize) -> Result<Vec<f64>, SpecError> {
+    let u = match &r.fallback {
+        None => input.nearest_to_zero(),
+        Some(raw) => {
+            let mut d = Dim {
+                n: Some(m),
+                why: format!("plant.B has {m} columns"),
+            };
+            let u = vector(raw, "input.fallback", &mut d)?;
+            if !input.contains(&u) {
+                return Err(SpecError::new(
+                    ErrorKind::BadValue,
+                    format!(
+                        "input.fallback = {} lies outside the input set; the firmware applies it \
+                         whenever the image gives no input, so it must be admissible",
+                        fmt_vec(&u)
+                    ),
+                )
+                .at(raw.span(), "outside the input set")
+                .help(format!(
+                    "choose a point of the input set, e.g. {} (its point nearest 0, the default when \
+                     the key is omitted)",
+                    fmt_vec(&input.nearest_to_zero())
+                )));
+            }
+            u
+        }
+    };
+    Ok(input.storable(&u))
 }
 
 fn synthesis(r: &RawSynthesis) -> Result<SynthesisSettings, SpecError> {

@@ -18,6 +18,7 @@ mod cli_exit;
 mod cli_synth;
 mod emit_image;
 mod emit_pwa;
+mod fallback_input;
 mod geometry_common;
 mod geometry_ellipsoid;
 mod geometry_polytope;
