@@ -152,6 +152,20 @@ pub enum FallbackLaw {
         /// m values.
         u_ref: Vec<f64>,
     },
+    /// A constant input (m values), e.g. the spec's fallback input when 0 is not admissible.
+    Constant(Vec<f64>),
+}
+
+impl FallbackLaw {
+    /// The law that applies the constant input `u`: [`FallbackLaw::Zero`] when `u` is 0 (the form
+    /// images had before a spec could choose the fallback), else [`FallbackLaw::Constant`].
+    pub fn constant(u: &[f64]) -> Self {
+        if u.iter().all(|&v| v == 0.0) {
+            FallbackLaw::Zero
+        } else {
+            FallbackLaw::Constant(u.to_vec())
+        }
+    }
 }
 
 /// Owned content of a feedforward image. Defaults from [`ImageBuilder::new`]: no locations, no
@@ -605,6 +619,9 @@ fn fallback_box_bytes(
             le_bytes("fallback x_ref", x_ref, n)?,
             le_bytes("fallback u_ref", u_ref, m)?,
         )),
+        FallbackLaw::Constant(u) => {
+            Some((Vec::new(), Vec::new(), le_bytes("fallback input", u, m)?))
+        }
         _ => None,
     };
     let bx = match input_box {
@@ -629,6 +646,7 @@ fn fallback_box_bytes(
 
 fn fallback_of<'a>(law: &FallbackLaw, fb: &'a FallbackBytes) -> Fallback<'a> {
     match (law, fb) {
+        (FallbackLaw::Constant(_), Some((_, _, u))) => Fallback::Constant { u },
         (_, Some((K, x_ref, u_ref))) => Fallback::Linear { K, x_ref, u_ref },
         (FallbackLaw::Hold, _) => Fallback::Hold,
         _ => Fallback::Zero,
@@ -640,6 +658,9 @@ fn fallback_from_image(img: &Image<'_>) -> FallbackLaw {
     match img.fallback() {
         Fallback::Hold => FallbackLaw::Hold,
         Fallback::Zero => FallbackLaw::Zero,
+        Fallback::Constant { .. } => {
+            FallbackLaw::Constant((0..m).map(|j| img.fallback_input(j) as f64).collect())
+        }
         Fallback::Linear { .. } => FallbackLaw::Linear {
             K: (0..m * n)
                 .map(|i| img.fallback_K(i / n, i % n) as f64)

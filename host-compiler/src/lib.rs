@@ -25,5 +25,6 @@ pub mod solver;
 pub mod spec;
 pub mod synth;
 pub mod task;
+pub mod text;
 pub mod trajectory;
 pub mod verify;

@@ -1,3 +1,3 @@
-fn main() -> miette::Result<()> {
+fn main() -> std::process::ExitCode {
     host_compiler::cli::main()
 }

@@ -63,6 +63,8 @@ pub enum Field {
     FallbackXRef,
     /// Fallback `u_ref`.
     FallbackURef,
+    /// Constant fallback input `u`.
+    FallbackInput,
     /// Input box lower bounds.
     BoxLo,
     /// Input box upper bounds.
@@ -308,6 +310,11 @@ pub enum ImageError {
         /// The component.
         input: u16,
     },
+    /// The constant fallback input lies outside the stored input box in some component.
+    FallbackOutsideBox {
+        /// The component.
+        input: u16,
+    },
     /// A tree node's child names a node index at or past the node count.
     ChildOutOfRange {
         /// The parent node.
@@ -459,6 +466,7 @@ impl fmt::Display for Field {
             Field::FallbackK => "fallback K",
             Field::FallbackXRef => "fallback x_ref",
             Field::FallbackURef => "fallback u_ref",
+            Field::FallbackInput => "fallback input",
             Field::BoxLo => "input box lower bounds",
             Field::BoxHi => "input box upper bounds",
             Field::LawGain => "law gain K_j",
@@ -588,6 +596,10 @@ impl fmt::Display for ImageError {
                 "trajectory {trajectory} step {step}: location {value} is out of range"
             ),
             EmptyInputBox { input } => write!(f, "input box component {input}: lower bound above upper"),
+            FallbackOutsideBox { input } => write!(
+                f,
+                "fallback input component {input}: outside the input box"
+            ),
             ChildOutOfRange { node, child } => write!(
                 f,
                 "tree node {node}: child node {child} is out of range"

@@ -345,6 +345,7 @@ impl<'a> Controller<'a> {
     /// The image's fallback input for state `x`, given the last applied input:
     /// * `Hold`: `last_u` (its first m values; missing or non-finite components become 0);
     /// * `Zero`: zero;
+    /// * `Constant`: the stored input, whatever the state;
     /// * `Linear`: `K_fb (x − x_ref) + u_ref`, saturated to the input box if stored. If `x` has the wrong
     ///   length or a non-finite component, or the result is not finite, zero instead.
     pub fn fallback(&self, x: &[f32], last_u: &Input) -> Input {
@@ -353,6 +354,11 @@ impl<'a> Controller<'a> {
         let mut out = Input::zero(m);
         match img.fallback() {
             Fallback::Zero => {}
+            Fallback::Constant { u } => {
+                for (o, v) in out.u.iter_mut().zip(floats(u)) {
+                    *o = v;
+                }
+            }
             Fallback::Hold => {
                 for (o, &l) in out.u.iter_mut().zip(last_u.as_slice()).take(m) {
                     *o = if l.is_finite() { l } else { 0.0 };

@@ -56,7 +56,8 @@
 //!   a maximal run of one location within its trajectory, so a trajectory of a single-location plant is one
 //!   segment and a hybrid run ((4.41)–(4.42)) has one segment per visited location;
 //! * the step table: row κ of trajectory i holds `v_i(κ) = ũ_i(κ) − K_ℓ x̃_i(κ)` (m values);
-//! * the fallback law, an optional input box, and the terminal behaviour past the end of a trajectory.
+//! * the fallback law (hold, zero, linear, or a constant input inside the input box), an optional input
+//!   box, and the terminal behaviour past the end of a trajectory.
 //!
 //! # PWA-feedback content (Ch. 6, the law (6.1) on the envelope F of (6.2))
 //! * per location ℓ: `K_ℓ` and `P_ℓ` as above (`P_ℓ` is the metric of the certified balls; `K_ℓ` is the CAF
@@ -76,7 +77,8 @@
 //! known and belonging to the mode, every required kind present); each section canonical postcard filling
 //! its section exactly. [`decode`], [`Image::new`] and [`Image::new_pwa`] then check the content: every
 //! field's byte length, every float finite, `P` symmetric and positive definite, `δ ≥ 0`, trajectory
-//! segment ends strictly increasing with at most [`MAX_SEGMENTS`] segments, segments tiling the step table
+//! segment ends strictly increasing with at most [`MAX_SEGMENTS`] segments, a constant fallback input inside
+//! the input box, segments tiling the step table
 //! (non-empty, each starting where the previous ends, total rows within [`MAX_STEPS`] and equal to the
 //! table's), segment locations in range and maximal within their trajectory, and the input box non-empty;
 //! for PWA images also everything listed in [`crate::pwa`] (tree well-formed and within depth, indices in
@@ -126,6 +128,12 @@ pub enum Fallback<'a> {
         x_ref: &'a [u8],
         /// `u_ref`, m values.
         u_ref: &'a [u8],
+    },
+    /// A constant input, whatever the state (for a spec whose input set excludes 0: the host stores a
+    /// point of the input set). Validated finite and inside the input box when one is stored.
+    Constant {
+        /// `u`, m values.
+        u: &'a [u8],
     },
 }
 
@@ -530,6 +538,10 @@ fn validate_fallback_box(
         check_len(Field::FallbackURef, u_ref, 4 * m)?;
         check_finite(Field::FallbackURef, u_ref, |i| Pos(sat16(i), 0, 0))?;
     }
+    if let Fallback::Constant { u } = fallback {
+        check_len(Field::FallbackInput, u, 4 * m)?;
+        check_finite(Field::FallbackInput, u, |i| Pos(sat16(i), 0, 0))?;
+    }
 
     // Input box.
     if let Some(b) = input_box {
@@ -540,6 +552,14 @@ fn validate_fallback_box(
         for j in 0..m {
             if f32_at(b.lo, j) > f32_at(b.hi, j) {
                 return Err(ImageError::EmptyInputBox { input: sat16(j) });
+            }
+        }
+        if let Fallback::Constant { u } = fallback {
+            for j in 0..m {
+                let v = f32_at(u, j);
+                if !(f32_at(b.lo, j) <= v && v <= f32_at(b.hi, j)) {
+                    return Err(ImageError::FallbackOutsideBox { input: sat16(j) });
+                }
             }
         }
     }
@@ -791,6 +811,14 @@ impl<'a> Image<'a> {
     pub fn fallback_x_ref(&self, i: usize) -> f32 {
         match self.payload.fallback {
             Fallback::Linear { x_ref, .. } if i < self.dims.n => f32_at(x_ref, i),
+            _ => 0.0,
+        }
+    }
+
+    /// Constant fallback input `u[j]`; 0.0 if the fallback is not constant or out of range.
+    pub fn fallback_input(&self, j: usize) -> f32 {
+        match self.payload.fallback {
+            Fallback::Constant { u } if j < self.dims.m => f32_at(u, j),
             _ => 0.0,
         }
     }

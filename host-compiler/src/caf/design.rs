@@ -92,10 +92,10 @@ pub fn outcome_message(o: &CafOutcome) -> String {
     match o {
         Solved(_) => "solved".into(),
         NotStabilizable { mode } => {
-            format!("the sampled plant is not stabilizable: uncontrollable mode {mode:?}")
+            format!("the sampled plant is not stabilizable: {mode}")
         }
         MarginUnachievable { mode, max_sigma } => format!(
-            "the σ-margin cannot be met: uncontrollable mode {mode:?} allows at most σ = {max_sigma:.4} \
+            "the σ-margin cannot be met: {mode}; it allows at most σ = {max_sigma:.4} \
              (lower [synthesis] sigma_margin)"
         ),
         Infeasible { stage, status } => {

@@ -19,6 +19,36 @@ pub struct UncontrollableMode {
     pub residual: f64,
 }
 
+/// A complex number for people: `a`, or `a ± bi` when its imaginary part is not negligible.
+fn complex(z: c64) -> String {
+    if z.im.abs() <= 1e-12 * z.re.abs().max(1.0) {
+        format!("{:.6}", z.re)
+    } else {
+        format!(
+            "{:.6} {} {:.6}i",
+            z.re,
+            if z.im < 0.0 { '-' } else { '+' },
+            z.im.abs()
+        )
+    }
+}
+
+/// For people: the eigenvalue and its left eigenvector, and what that means for the spec.
+impl std::fmt::Display for UncontrollableMode {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let w: Vec<String> = self.left_eigenvector.iter().map(|&z| complex(z)).collect();
+        write!(
+            f,
+            "the mode with eigenvalue λ = {} (|λ| = {:.6}) of the sampled A has left eigenvector \
+             w = ({}) with w*B ≈ 0 (residual {:.1e}): no input reaches it (check plant.A and plant.B)",
+            complex(self.eigenvalue),
+            self.eigenvalue.norm(),
+            w.join(", "),
+            self.residual
+        )
+    }
+}
+
 /// Every eigenvalue λ of A for which `σ_min([λI − A, B]) ≤ tol · max(1, ‖[A B]‖_F)`, with its certificate.
 /// Eigenvalues closer than that tolerance to one already reported are not repeated.
 pub fn uncontrollable_modes(

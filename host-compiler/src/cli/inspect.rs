@@ -190,6 +190,9 @@ enum FallbackJson {
         x_ref: Vec<f32>,
         u_ref: Vec<f32>,
     },
+    Constant {
+        u: Vec<f32>,
+    },
 }
 
 #[derive(Serialize)]
@@ -448,6 +451,9 @@ impl Report {
             fallback: match img.fallback() {
                 Fallback::Hold => FallbackJson::Hold,
                 Fallback::Zero => FallbackJson::Zero,
+                Fallback::Constant { .. } => FallbackJson::Constant {
+                    u: (0..m).map(|j| img.fallback_input(j)).collect(),
+                },
                 Fallback::Linear { .. } => FallbackJson::Linear {
                     K: matrix(m, n, |r, c| img.fallback_K(r, c)),
                     x_ref: (0..n).map(|i| img.fallback_x_ref(i)).collect(),
@@ -561,6 +567,9 @@ fn summary(r: &Report, path: &str) -> String {
         }
         FallbackJson::Zero => {
             let _ = writeln!(s, "fallback: zero input");
+        }
+        FallbackJson::Constant { u } => {
+            let _ = writeln!(s, "fallback: the constant input u = {}", vec_str(u));
         }
         FallbackJson::Linear { K, x_ref, u_ref } => {
             let _ = writeln!(

@@ -1,6 +1,7 @@
 //! Command-line interface: argument parsing and dispatch. Each subcommand lives in its own file.
 
 use clap::{Parser, Subcommand};
+use miette::{IntoDiagnostic, WrapErr};
 use std::path::PathBuf;
 
 pub mod inspect;
@@ -24,7 +25,13 @@ pub mod verify;
     host-compiler inspect out/planar-vehicle/controller.img --json\n\n\
     `synth` covers Init with certified balls around nominal trajectories, writes the image the firmware \
     runs, a report (report.html) and the certificate data; everything it calls certified is re-checked by \
-    closed-loop simulation through the firmware's own f32 evaluator."
+    closed-loop simulation through the firmware's own f32 evaluator.\n\n\
+    Exit status:\n  \
+    0    success (synth: the coverage target is met and the verification passed)\n  \
+    1    a check failed: a violation, a certificate the image bytes do not prove, or nothing certified\n  \
+    2    bad input: a spec, image, trace, recording or flag that is invalid, unreadable or does not match\n  \
+    3    synth only: certified and verified, but short of the coverage target (the image covers less)\n  \
+    130  synth interrupted by Ctrl-C (the image holds what was certified so far)"
 )]
 pub struct Cli {
     #[command(subcommand)]
@@ -52,16 +59,94 @@ pub enum Command {
     Mtl(mtl::MtlArgs),
 }
 
-/// Entry point of the binary.
-pub fn main() -> miette::Result<()> {
+/// How a command ended: the process's exit status (listed in `--help`). Clap's own usage errors exit
+/// with 2 too, so every kind of bad input has one code.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Exit {
+    /// 0: done; for `synth`, the coverage target is met and the verification passed.
+    Success,
+    /// 1: a check failed: a violation, a certificate the image bytes do not prove, or nothing certified.
+    Failed,
+    /// 2: bad input: a spec, image, trace, recording or flag that is invalid, unreadable or does not
+    /// match the others.
+    BadInput,
+    /// 3: `synth` certified and verified an image, but its cover is short of the coverage target.
+    ShortOfTarget,
+    /// 130: `synth` was interrupted (Ctrl-C); the image holds what was certified so far.
+    Interrupted,
+}
+
+impl Exit {
+    /// The process exit status.
+    pub fn code(self) -> u8 {
+        match self {
+            Exit::Success => 0,
+            Exit::Failed => 1,
+            Exit::BadInput => 2,
+            Exit::ShortOfTarget => 3,
+            Exit::Interrupted => 130,
+        }
+    }
+}
+
+/// A command that did not succeed: the report to print and the exit status.
+#[derive(Debug)]
+pub struct Failure {
+    pub exit: Exit,
+    pub report: miette::Report,
+}
+
+impl Failure {
+    /// Bad input ([`Exit::BadInput`]).
+    pub fn bad_input(report: impl Into<miette::Report>) -> Self {
+        Self {
+            exit: Exit::BadInput,
+            report: report.into(),
+        }
+    }
+}
+
+/// An error without a class is a failed check ([`Exit::Failed`]); bad input says so with
+/// [`BadInput::bad_input`].
+impl From<miette::Report> for Failure {
+    fn from(report: miette::Report) -> Self {
+        Self {
+            exit: Exit::Failed,
+            report,
+        }
+    }
+}
+
+/// The outcome of a subcommand: how it ended (a success or a short-of-target result), or a failure.
+pub type Outcome = Result<Exit, Failure>;
+
+/// Marks an error as bad input.
+pub trait BadInput<T> {
+    fn bad_input(self) -> Result<T, Failure>;
+}
+
+impl<T, E: Into<miette::Report>> BadInput<T> for Result<T, E> {
+    fn bad_input(self) -> Result<T, Failure> {
+        self.map_err(Failure::bad_input)
+    }
+}
+
+/// Entry point of the binary: runs the subcommand, prints its error (if any) and returns its status.
+pub fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
-    match cli.command {
-        Command::Inspect(a) => inspect::run(&a),
-        Command::Mtl(a) => mtl::run(&a),
+    let outcome = match cli.command {
+        // Every error of these two is about their input (the image; the trace, sets or formula).
+        Command::Inspect(a) => inspect::run(&a).map(|()| Exit::Success).bad_input(),
+        Command::Mtl(a) => mtl::run(&a).map(|()| Exit::Success).bad_input(),
         Command::Synth(a) => synth::run(&a),
         Command::Verify(a) => verify::run(&a),
         Command::Simulate(a) => simulate::run(&a),
-    }
+    };
+    let exit = outcome.unwrap_or_else(|f| {
+        eprintln!("Error: {:?}", f.report);
+        f.exit
+    });
+    std::process::ExitCode::from(exit.code())
 }
 
 /// Arguments of `synth`.
@@ -87,4 +172,30 @@ pub struct SynthArgs {
     /// Hide progress bars.
     #[arg(long)]
     pub quiet: bool,
+}
+
+/// The bytes of an image file; an unreadable file is bad input naming the file.
+pub(crate) fn read_image(path: &std::path::Path) -> Result<Vec<u8>, Failure> {
+    std::fs::read(path)
+        .into_diagnostic()
+        .wrap_err_with(|| format!("cannot read the image {}", path.display()))
+        .bad_input()
+}
+
+/// The decoded image; a rejected one is bad input naming the file and the decoder's reason.
+pub(crate) fn decode_image<'a>(
+    bytes: &'a [u8],
+    path: &std::path::Path,
+) -> Result<shared_types::image::Image<'a>, Failure> {
+    shared_types::image::decode(bytes)
+        .map_err(|e| miette::miette!("{}: the image is rejected: {e}", path.display()))
+        .bad_input()
+}
+
+/// The task of a validated spec; a spec that makes no task (its plant cannot be sampled, a set cannot be
+/// built) is bad input.
+pub(crate) fn task_of(problem: crate::spec::Problem) -> Result<crate::task::Task, Failure> {
+    crate::task::Task::new(problem)
+        .map_err(|e| miette::miette!("{e}"))
+        .bad_input()
 }

@@ -1,7 +1,8 @@
 //! `host-compiler simulate SPEC IMAGE --x0 …`: one closed-loop run through the shared f32 evaluator,
 //! written as CSV (t, x…, u…, status).
 
-use crate::task::Task;
+use super::{decode_image, read_image, task_of, BadInput, Exit, Failure, Outcome};
+use crate::verify::check_matches;
 use miette::IntoDiagnostic;
 use shared_types::eval::Controller;
 use std::io::Write;
@@ -30,25 +31,37 @@ pub struct SimulateArgs {
     pub out: Option<PathBuf>,
 }
 
-pub fn run(a: &SimulateArgs) -> miette::Result<()> {
-    let problem = crate::spec::load(&a.spec)?;
-    let bytes = std::fs::read(&a.image).into_diagnostic()?;
-    let img = shared_types::image::decode(&bytes)
-        .map_err(|e| miette::miette!("{}: the image is rejected: {e:?}", a.image.display()))?;
+pub fn run(a: &SimulateArgs) -> Outcome {
+    let problem = crate::spec::load(&a.spec).bad_input()?;
+    let bytes = read_image(&a.image)?;
+    let img = decode_image(&bytes, &a.image)?;
+    check_matches(&problem, &img)
+        .map_err(|e| {
+            miette::miette!(
+                "{} does not belong to {}: {e}",
+                a.image.display(),
+                a.spec.display()
+            )
+        })
+        .bad_input()?;
     let n = problem.plant.n();
-    if a.x0.len() != n || img.n() != n {
-        return Err(miette::miette!(
-            "--x0 has {} values; the spec has n = {n} and the image n = {}",
-            a.x0.len(),
-            img.n()
-        ));
+    if a.x0.len() != n {
+        return Err(Failure::bad_input(miette::miette!(
+            "--x0 has {} values; the spec has n = {n}",
+            a.x0.len()
+        )));
     }
-    let task = Task::new(problem).map_err(|e| miette::miette!("{e}"))?;
+    let task = task_of(problem)?;
     let problem = &task.problem;
     let steps = a.steps.unwrap_or(problem.horizon_steps());
     let mut ctl = Controller::new(img);
     let mut out: Box<dyn Write> = match &a.out {
-        Some(p) => Box::new(std::fs::File::create(p).into_diagnostic()?),
+        Some(p) => Box::new(
+            std::fs::File::create(p)
+                .into_diagnostic()
+                .map_err(|e| e.wrap_err(format!("cannot create {}", p.display())))
+                .bad_input()?,
+        ),
         None => Box::new(std::io::stdout().lock()),
     };
     let m = problem.plant.m();
@@ -76,5 +89,5 @@ pub fn run(a: &SimulateArgs) -> miette::Result<()> {
         writeln!(out, "{}", row.join(",")).into_diagnostic()?;
         x = task.plant.step(0, &x, &uf);
     }
-    Ok(())
+    Ok(Exit::Success)
 }

@@ -1,21 +1,45 @@
 //! `host-compiler synth SPEC --out DIR`: the whole pipeline, writing the image, the report and the
 //! certificate data.
+//!
+//! # What is in `--out` afterwards
+//! The directory is created (and shown writable) before any work, and the files this command writes are
+//! removed from it first, so no file there can be mistaken for this run's result. The image is written
+//! to a temporary file in the same directory and renamed into place only once it is verified: a run that
+//! fails leaves no `controller.img` at all, and one that is killed leaves at most a temporary file.
+//!
+//! # Exit status ([`super::Exit`])
+//! 0 when Init is covered to the target at the requested confidence and the verification found no
+//! violation; 3 when the image is certified and verified but its cover is short of the target; 1 when
+//! the verification found violations or nothing could be certified; 2 for bad input; 130 when
+//! interrupted.
 
-use super::SynthArgs;
+use super::{task_of, BadInput, Exit, Failure, Outcome, SynthArgs};
+use crate::report::format::{self as fmt, Round};
 use crate::report::report_data;
-use crate::synth::{synthesize, StopReason, SynthOptions};
-use crate::task::Task;
+use crate::synth::{synthesize, StopReason, SynthError, SynthOptions};
 use miette::{IntoDiagnostic, WrapErr};
+use std::path::Path;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
-pub fn run(a: &SynthArgs) -> miette::Result<()> {
-    let problem = crate::spec::load(&a.spec)?;
+/// The files `synth` writes into `--out` (removed at the start of every run).
+const OUTPUTS: &[&str] = &[
+    "controller.img",
+    "feedforward.img",
+    "certificate.json",
+    "report.html",
+];
+
+pub fn run(a: &SynthArgs) -> Outcome {
+    // First of all, even before the spec is read: whatever happens next, no earlier result is left.
+    prepare_out(&a.out)?;
+    let problem = crate::spec::load(&a.spec).bad_input()?;
     let (n, m, h) = (problem.plant.n(), problem.plant.m(), problem.plant.period);
     let mut imports = Vec::new();
     for p in &a.imports {
         let rec = crate::trajectory::csv::load_recording(p, n, m, h)
-            .map_err(|e| miette::miette!("{e}"))?;
+            .map_err(|e| miette::miette!("{e}"))
+            .bad_input()?;
         imports.push((p.display().to_string(), rec));
     }
     // Ctrl-C: the first stops the growth loop cleanly (what is certified so far is verified, written
@@ -48,19 +72,18 @@ pub fn run(a: &SynthArgs) -> miette::Result<()> {
         }),
         ..SynthOptions::default()
     };
-    let task = Task::new(problem).map_err(|e| miette::miette!("{e}"))?;
+    let task = task_of(problem)?;
     let problem = &task.problem;
-    let s = synthesize(&task, &opts).map_err(|e| miette::miette!("{e}"))?;
-    std::fs::create_dir_all(&a.out)
-        .into_diagnostic()
-        .wrap_err_with(|| format!("creating {}", a.out.display()))?;
+    let s = synthesize(&task, &opts).map_err(synth_failure)?;
     if problem.synthesis.mode == crate::spec::ControllerMode::Pwa {
         return crate::cli::synth_pwa::run(a, &task, &s);
     }
     let img_path = a.out.join("controller.img");
-    std::fs::write(&img_path, &s.image)
-        .into_diagnostic()
-        .wrap_err("writing the image")?;
+    // An image the verification refutes is not written (the report says why).
+    let certified = s.verify.violations == 0;
+    if certified {
+        write_atomic(&img_path, &s.image)?;
+    }
     let data = report_data(
         problem,
         &a.spec.display().to_string(),
@@ -105,11 +128,11 @@ pub fn run(a: &SynthArgs) -> miette::Result<()> {
     println!("trajectories      {}", s.trajectories.len());
     println!("delta range       {dmin:.4} .. {dmax:.4} (CAF metric)");
     println!(
-        "coverage          {:.5} (lower bound {:.5}, upper {:.5} at {:.0}% confidence, {} samples)",
+        "coverage          {:.5} (lower bound {}, upper {} at {} confidence, {} samples)",
         s.coverage.mean,
-        s.coverage.lower,
-        s.coverage.upper,
-        100.0 * s.coverage.confidence,
+        fmt::directed(s.coverage.lower, 5, Round::Down, 1.0),
+        fmt::directed(s.coverage.upper, 5, Round::Up, 0.0),
+        fmt::pct_down(s.coverage.confidence),
         s.coverage.samples
     );
     println!("stop              {}", s.stop);
@@ -132,11 +155,15 @@ pub fn run(a: &SynthArgs) -> miette::Result<()> {
             s.verify.after_goal_input_excursions, s.verify.after_goal_unsafe
         );
     }
-    println!(
-        "image             {} ({} bytes)",
-        img_path.display(),
-        s.image.len()
-    );
+    if certified {
+        println!(
+            "image             {} ({} bytes)",
+            img_path.display(),
+            s.image.len()
+        );
+    } else {
+        println!("image             not written: the verification refutes it");
+    }
     println!("report            {}", report.display());
     for (k, v) in &s.timings {
         println!("time {k:<20} {v:.3} s");
@@ -151,19 +178,107 @@ pub fn run(a: &SynthArgs) -> miette::Result<()> {
     }
     if s.verify.violations > 0 {
         return Err(miette::miette!(
-            "verification found {} violations",
+            "verification found {} violations: the image is NOT certified and was not written",
             s.verify.violations
-        ));
+        )
+        .into());
     }
     if let StopReason::Interrupted { trajectories } = s.stop {
-        return Err(miette::miette!(
-            "interrupted: {} holds the {trajectories} trajectories certified so far (verified, {} violations); \
-             the run did not finish",
-            img_path.display(),
-            s.verify.violations
-        ));
+        return Err(Failure {
+            exit: Exit::Interrupted,
+            report: miette::miette!(
+                "interrupted: {} holds the {trajectories} trajectories certified so far (verified, {} violations); \
+                 the run did not finish",
+                img_path.display(),
+                s.verify.violations
+            ),
+        });
+    }
+    Ok(short_of_target(&s, problem.synthesis.coverage_target))
+}
+
+/// [`Exit::Success`] when the cover met the coverage target, else [`Exit::ShortOfTarget`] with a line on
+/// standard error saying by how much and why the growth stopped.
+pub(crate) fn short_of_target(s: &crate::synth::Synthesis, target: f64) -> Exit {
+    if s.stop == StopReason::Covered {
+        return Exit::Success;
+    }
+    eprintln!(
+        "coverage target NOT met: the coverage of Init is at least {} at {} confidence, short of the \
+         target {target} ({}); the image is certified for its cover only (exit status 3)",
+        fmt::directed(s.coverage.lower, 5, Round::Down, 1.0),
+        fmt::pct_down(s.coverage.confidence),
+        s.stop
+    );
+    Exit::ShortOfTarget
+}
+
+/// Creates `--out`, shows it writable, and removes the files this command writes (module doc), before
+/// any work: a directory that cannot hold the result is bad input.
+fn prepare_out(out: &Path) -> Result<(), Failure> {
+    std::fs::create_dir_all(out)
+        .into_diagnostic()
+        .wrap_err_with(|| format!("cannot create the output directory {}", out.display()))
+        .bad_input()?;
+    let probe = out.join(format!(".host-compiler-probe-{}", std::process::id()));
+    std::fs::write(&probe, b"")
+        .into_diagnostic()
+        .wrap_err_with(|| format!("the output directory {} is not writable", out.display()))
+        .bad_input()?;
+    let _ = std::fs::remove_file(&probe);
+    for f in OUTPUTS {
+        let p = out.join(f);
+        match std::fs::remove_file(&p) {
+            Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
+                return Err(Failure::bad_input(miette::miette!(
+                    "cannot remove the previous {}: {e}",
+                    p.display()
+                )))
+            }
+            _ => {}
+        }
     }
     Ok(())
+}
+
+/// Writes `bytes` to a temporary file beside `path` and renames it into place: `path` is either absent
+/// or complete.
+pub(crate) fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), Failure> {
+    let name = path
+        .file_name()
+        .map_or_else(|| "image".to_string(), |n| n.to_string_lossy().into_owned());
+    let tmp = path.with_file_name(format!(".{name}.tmp-{}", std::process::id()));
+    let written = std::fs::write(&tmp, bytes).and_then(|()| std::fs::rename(&tmp, path));
+    if let Err(e) = written {
+        let _ = std::fs::remove_file(&tmp);
+        return Err(miette::miette!("cannot write {}: {e}", path.display()).into());
+    }
+    Ok(())
+}
+
+/// A synthesis that ended without an image: bad input when the spec is the cause (a plant no feedback
+/// stabilises, a recording that does not fit, an image beyond the capacities), else a failure.
+fn synth_failure(e: SynthError) -> Failure {
+    use crate::caf::{CafOutcome, DesignError};
+    use crate::cover::GrowError;
+    let exit = match &e {
+        SynthError::Caf(DesignError::Input(_)) => Exit::BadInput,
+        SynthError::Caf(DesignError::Outcome(o))
+            if matches!(
+                **o,
+                CafOutcome::NotStabilizable { .. } | CafOutcome::MarginUnachievable { .. }
+            ) =>
+        {
+            Exit::BadInput
+        }
+        SynthError::Cover(GrowError::Recording { .. } | GrowError::Emit(_)) => Exit::BadInput,
+        SynthError::Cover(GrowError::InterruptedEmpty) => Exit::Interrupted,
+        _ => Exit::Failed,
+    };
+    Failure {
+        exit,
+        report: miette::miette!("{e}"),
+    }
 }
 
 /// Median of δ after ÷ δ before over the Algorithm 4 seeds (those started on a ball's boundary).

@@ -3,7 +3,8 @@
 //! `controller.img` (the PWA image), `feedforward.img` (the cover it was learned from, the size baseline),
 //! `report.html` with its PWA section and `certificate.json`.
 
-use super::SynthArgs;
+use super::synth::{short_of_target, write_atomic};
+use super::{Exit, Outcome, SynthArgs};
 use crate::pwa::{learn_pwa, PwaSettings};
 use crate::report::pwa::PwaSummary;
 use crate::report::report_data;
@@ -14,7 +15,7 @@ use crate::verify::Judge;
 use miette::{IntoDiagnostic, WrapErr};
 
 /// Learns, checks and writes the PWA controller (module doc). Fails when any check fails.
-pub fn run(a: &SynthArgs, task: &Task, s: &Synthesis) -> miette::Result<()> {
+pub fn run(a: &SynthArgs, task: &Task, s: &Synthesis) -> Outcome {
     let problem = &task.problem;
     let settings = PwaSettings::builder()
         .progress(!a.quiet)
@@ -39,7 +40,8 @@ pub fn run(a: &SynthArgs, task: &Task, s: &Synthesis) -> miette::Result<()> {
         a.verify_runs,
         problem.seed ^ 0x7e51f1,
         64,
-    );
+    )
+    .into_diagnostic()?;
     let summary = PwaSummary {
         data_points: pwa.ctx.points.len(),
         trajectories: init_centres.len(),
@@ -53,12 +55,16 @@ pub fn run(a: &SynthArgs, task: &Task, s: &Synthesis) -> miette::Result<()> {
         monte_carlo: mc,
     };
     let img_path = a.out.join("controller.img");
-    std::fs::write(&img_path, &pwa.image)
-        .into_diagnostic()
-        .wrap_err("writing the image")?;
-    std::fs::write(a.out.join("feedforward.img"), &s.image)
-        .into_diagnostic()
-        .wrap_err("writing the feedforward image")?;
+    // Only a certified image is written (`synth` module doc); the report says why one is not.
+    let certified = summary.recheck.failures == 0
+        && summary.monte_carlo.violations == 0
+        && summary.stats.dropped == 0;
+    if certified {
+        write_atomic(&img_path, &pwa.image)?;
+    }
+    if s.verify.violations == 0 {
+        write_atomic(&a.out.join("feedforward.img"), &s.image)?;
+    }
     let mut data = report_data(
         problem,
         &a.spec.display().to_string(),
@@ -132,20 +138,32 @@ pub fn run(a: &SynthArgs, task: &Task, s: &Synthesis) -> miette::Result<()> {
         println!("violation from x0 = {:?}: {v:?}", v.x0);
     }
     println!("report            {}", report.display());
-    if summary.recheck.failures > 0 || mc.violations > 0 || st.dropped > 0 {
+    if !certified {
         return Err(miette::miette!(
-            "the PWA image is NOT certified: {} recheck failures, {} violations, {} dropped balls",
+            "the PWA image is NOT certified and was not written: {} recheck failures, {} violations, \
+             {} dropped balls",
             summary.recheck.failures,
             mc.violations,
             st.dropped
-        ));
+        )
+        .into());
     }
     if mc.runs < a.verify_runs {
         return Err(miette::miette!(
             "only {} of {} initial states could be drawn in F",
             mc.runs,
             a.verify_runs
-        ));
+        )
+        .into());
     }
-    Ok(())
+    if let crate::synth::StopReason::Interrupted { trajectories } = s.stop {
+        return Err(super::Failure {
+            exit: Exit::Interrupted,
+            report: miette::miette!(
+                "interrupted: the PWA law was learned from the {trajectories} trajectories certified so far; \
+                 the run did not finish"
+            ),
+        });
+    }
+    Ok(short_of_target(s, problem.synthesis.coverage_target))
 }

@@ -1,8 +1,9 @@
-//! `host-compiler verify SPEC IMAGE`: closed-loop Monte Carlo of an image against its spec through the
-//! shared f32 evaluator.
+//! `host-compiler verify SPEC IMAGE`: an image against its spec: refused unless its dimensions and sample
+//! period are the spec's, its certificate re-proved from the bytes ([`crate::verify::feedforward`],
+//! [`crate::verify::pwa`]), then closed-loop Monte Carlo through the shared f32 evaluator.
 
-use crate::task::Task;
-use crate::verify::{monte_carlo, Judge};
+use super::{decode_image, read_image, task_of, BadInput, Exit, Failure, Outcome};
+use crate::verify::{check_matches, monte_carlo, Judge};
 use miette::IntoDiagnostic;
 use std::path::PathBuf;
 
@@ -27,43 +28,74 @@ pub struct VerifyArgs {
     pub json: bool,
 }
 
-pub fn run(a: &VerifyArgs) -> miette::Result<()> {
-    let problem = crate::spec::load(&a.spec)?;
-    let bytes = std::fs::read(&a.image).into_diagnostic()?;
-    let img = shared_types::image::decode(&bytes)
-        .map_err(|e| miette::miette!("{}: the image is rejected: {e:?}", a.image.display()))?;
-    if img.n() != problem.plant.n() || img.m() != problem.plant.m() {
-        return Err(miette::miette!(
-            "the image is for n = {}, m = {} but the spec has n = {}, m = {}",
-            img.n(),
-            img.m(),
-            problem.plant.n(),
-            problem.plant.m()
-        ));
+pub fn run(a: &VerifyArgs) -> Outcome {
+    let problem = crate::spec::load(&a.spec).bad_input()?;
+    let bytes = read_image(&a.image)?;
+    let img = decode_image(&bytes, &a.image)?;
+    check_matches(&problem, &img)
+        .map_err(|e| {
+            miette::miette!(
+                "{} does not belong to {}: {e}",
+                a.image.display(),
+                a.spec.display()
+            )
+        })
+        .bad_input()?;
+    let pwa = img.mode() == shared_types::image::Mode::PwaFeedback;
+    // Nothing would be simulated: the Monte Carlo part would pass vacuously.
+    if a.runs == 0 && (pwa || a.per_ball == 0) {
+        return Err(Failure::bad_input(miette::miette!(
+            "--runs 0{}: no closed-loop run would be checked; ask for at least one run",
+            if pwa { "" } else { " --per-ball 0" }
+        )));
     }
-    let task = Task::new(problem).map_err(|e| miette::miette!("{e}"))?;
+    let task = task_of(problem)?;
     let problem = &task.problem;
     let judge = Judge::new(&task);
-    if img.mode() == shared_types::image::Mode::PwaFeedback {
+    if pwa {
         return run_pwa(a, &judge, &img);
     }
+    let rc = crate::verify::feedforward::recheck(&judge, &img)
+        .map_err(|e| miette::miette!("{}: {e}", a.image.display()))?;
     let r = monte_carlo(
         &judge,
         &img,
         a.runs,
         a.per_ball,
         a.seed.unwrap_or(problem.seed ^ 0x7e51f1),
-    );
+    )
+    .into_diagnostic()?;
     if a.json {
-        println!("{}", serde_json::to_string_pretty(&r).into_diagnostic()?);
+        let j = serde_json::json!({ "recheck": rc, "monte_carlo": r });
+        println!("{}", serde_json::to_string_pretty(&j).into_diagnostic()?);
     } else {
+        println!(
+            "radii re-proved from the bytes: {} trajectories, {} failing (worst stored/certified {:.9}, \
+             tolerance 1 + {:.1e}; σ_min {:.4e})",
+            rc.trajectories.len(),
+            rc.failures,
+            rc.worst_ratio,
+            rc.tolerance,
+            rc.sigma_min
+        );
+        for c in &rc.trajectories {
+            if let Some(why) = c.failure(rc.horizon) {
+                println!("certificate failure: {why}");
+            }
+        }
         println!(
             "runs {} interior + {} boundary ({} boundary points not accepted by the f32 selection)",
             r.interior_runs, r.boundary_runs, r.boundary_rejected
         );
         println!(
-            "worst margins: goal depth {:.4e}, unsafe distance {:.4e}, input slack {:.4e}",
-            r.worst_goal_margin, r.worst_unsafe_margin, r.worst_input_margin
+            "worst margins: goal depth {}, unsafe distance {}, input slack {}",
+            margin(r.worst_goal_margin),
+            if judge.unsafe_set().is_none() {
+                "none (no Unsafe set)".to_string()
+            } else {
+                margin(r.worst_unsafe_margin)
+            },
+            margin(r.worst_input_margin)
         );
         for v in &r.first_violations {
             println!("violation from x0 = {:?}: {v:?}", v.x0);
@@ -74,30 +106,52 @@ pub fn run(a: &VerifyArgs) -> miette::Result<()> {
         );
         println!("violations {}", r.violations);
     }
+    if rc.failures > 0 {
+        let first = rc
+            .trajectories
+            .iter()
+            .find_map(|c| c.failure(rc.horizon))
+            .unwrap_or_default();
+        return Err(miette::miette!(
+            "{}: {} of {} stored radii are not certified by the image's own bytes; first: {first}",
+            a.image.display(),
+            rc.failures,
+            rc.trajectories.len()
+        )
+        .into());
+    }
     if r.violations > 0 {
-        return Err(miette::miette!("{} violations", r.violations));
+        return Err(miette::miette!("{} violations", r.violations).into());
     }
     if r.interior_runs < a.runs {
         return Err(miette::miette!(
             "only {} of {} initial states could be drawn in the certified cover",
             r.interior_runs,
             a.runs
-        ));
+        )
+        .into());
     }
-    Ok(())
+    Ok(Exit::Success)
+}
+
+/// A worst margin for people: its value, or that no run recorded one (never `inf` as if it were a
+/// result).
+fn margin(v: f64) -> String {
+    if v.is_finite() {
+        format!("{v:.4e}")
+    } else {
+        "none recorded (no run reached this check)".to_string()
+    }
 }
 
 /// PWA images (Ch. 6): the independent certificate recheck and closed-loop Monte Carlo from F
 /// ([`crate::verify::pwa`]); runs terminate upon entering Goal (Theorem 6.5).
-fn run_pwa(
-    a: &VerifyArgs,
-    judge: &Judge<'_>,
-    img: &shared_types::image::Image<'_>,
-) -> miette::Result<()> {
+fn run_pwa(a: &VerifyArgs, judge: &Judge<'_>, img: &shared_types::image::Image<'_>) -> Outcome {
     let rc = crate::verify::pwa::recheck(judge, img).map_err(|e| miette::miette!(e))?;
     // The image does not mark which balls start a trajectory: all runs start anywhere in F.
     let mc =
-        crate::verify::pwa::monte_carlo_pwa(judge, img, &[], a.runs, a.seed.unwrap_or(0x7e51f1), 0);
+        crate::verify::pwa::monte_carlo_pwa(judge, img, &[], a.runs, a.seed.unwrap_or(0x7e51f1), 0)
+            .into_diagnostic()?;
     if a.json {
         let j = serde_json::json!({ "recheck": rc, "monte_carlo": mc });
         println!("{}", serde_json::to_string_pretty(&j).into_diagnostic()?);
@@ -127,14 +181,16 @@ fn run_pwa(
             "{} certificate failures, {} violations",
             rc.failures,
             mc.violations
-        ));
+        )
+        .into());
     }
     if mc.runs < a.runs {
         return Err(miette::miette!(
             "only {} of {} initial states could be drawn in F",
             mc.runs,
             a.runs
-        ));
+        )
+        .into());
     }
-    Ok(())
+    Ok(Exit::Success)
 }

@@ -283,7 +283,8 @@ impl Cover {
 }
 
 /// The feedforward image of a cover (Algorithm 2): the f32 gain and metric, each ball with its stored
-/// radius, and each reference table; terminal behaviour keeps the last law; fallback per the input set.
+/// radius, and each reference table; terminal behaviour keeps the last law; the fallback applies the
+/// spec's fallback input (a point of the input set).
 pub fn feedforward_image(
     task: &Task,
     Khat: &Mat<f64>,
@@ -307,6 +308,6 @@ pub fn feedforward_image(
     if let crate::spec::InputSet::Box { lo, hi } = &task.problem.input {
         b.input_box = Some((lo.clone(), hi.clone()));
     }
-    b.fallback = FallbackLaw::Zero;
+    b.fallback = FallbackLaw::constant(&task.problem.fallback_input);
     b.to_bytes()
 }

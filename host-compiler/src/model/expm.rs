@@ -142,7 +142,9 @@ pub fn expm(M: MatRef<'_, f64>) -> Result<Mat<f64>, ModelError> {
     let norm = norm1(a.as_ref());
     for (m, theta) in THETA {
         if norm <= theta {
-            return Ok(pade(&a, m));
+            let r = pade(&a, m);
+            check_finite("e^M", r.as_ref()).map_err(|_| ModelError::ExpOverflow { norm })?;
+            return Ok(r);
         }
     }
     let s = if norm > THETA_13 {
@@ -156,5 +158,6 @@ pub fn expm(M: MatRef<'_, f64>) -> Result<Mat<f64>, ModelError> {
     for _ in 0..s {
         r = &r * &r;
     }
+    check_finite("e^M", r.as_ref()).map_err(|_| ModelError::ExpOverflow { norm })?;
     Ok(r)
 }

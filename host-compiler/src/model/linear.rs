@@ -140,7 +140,10 @@ pub fn zoh(plant: &ContinuousPlant, h: f64) -> Result<DiscretePlant, ModelError>
             plant.c[i] * h
         }
     });
-    let e = expm(aug.as_ref())?;
+    let e = expm(aug.as_ref()).map_err(|e| match e {
+        ModelError::ExpOverflow { norm } => ModelError::SampledOverflow { period: h, norm },
+        other => other,
+    })?;
     Ok(DiscretePlant {
         A: Mat::from_fn(n, n, |i, j| e[(i, j)]),
         B: Mat::from_fn(n, m, |i, j| e[(i, n + j)]),

@@ -39,6 +39,15 @@ pub enum ModelError {
     /// The sample period must be finite and > 0.
     #[error("sample period must be finite and > 0, got {0}")]
     Period(f64),
+    /// e^M of finite M overflows f64.
+    #[error("e^M overflows f64 (‖M‖₁ = {norm:.3e})")]
+    ExpOverflow { norm: f64 },
+    /// The exact zero-order hold of a continuous plant overflows f64: e^{A h} is too large.
+    #[error(
+        "exp(A·h) overflows f64 for the sample period h = {period} s (‖[A B c]·h‖₁ = {norm:.3e}): the \
+         sampled plant cannot be represented; shorten plant.period or rescale plant.A"
+    )]
+    SampledOverflow { period: f64, norm: f64 },
 }
 
 pub(crate) fn check_finite(what: &'static str, m: faer::MatRef<'_, f64>) -> Result<(), ModelError> {

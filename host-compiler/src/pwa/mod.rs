@@ -621,6 +621,7 @@ pub fn build_pwa(
     if let crate::spec::InputSet::Box { lo, hi } = &task.problem.input {
         builder.input_box = Some((lo.clone(), hi.clone()));
     }
+    builder.fallback = crate::emit::FallbackLaw::constant(&task.problem.fallback_input);
     let image = builder.to_bytes()?;
     let partition_seconds = t1.elapsed().as_secs_f64();
     Ok(PwaController {

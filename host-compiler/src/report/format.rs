@@ -55,11 +55,83 @@ pub fn pct(frac: f64) -> String {
     let p = 100.0 * frac;
     // Do not round 99.996 % up to 100 % — the difference matters for a coverage claim.
     let s = if p != 100.0 && p > 99.99 && p < 100.0 {
-        format!("{:.4}", p)
+        directed(p, 4, Round::Down, 100.0)
     } else {
         sig(p, 4)
     };
     format!("{} %", trim_zeros(&s))
+}
+
+/// Which way a shown number may be rounded: toward the weaker claim. A lower bound or a confidence
+/// shown larger than computed would claim what the run did not show, so it is rounded [`Round::Down`];
+/// an upper bound is rounded [`Round::Up`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Round {
+    Down,
+    Up,
+}
+
+/// `x` with at least `decimals` decimals, rounded in direction `dir`, and with more decimals where
+/// needed so that a value below `limit` never shows as `limit` (e.g. a confidence 1 − 10⁻¹² is
+/// `0.999999999999`, not `1`). At most 17 decimals; trailing zeros trimmed.
+pub fn directed(x: f64, decimals: usize, dir: Round, limit: f64) -> String {
+    if !x.is_finite() {
+        return num(x);
+    }
+    let gap = match dir {
+        Round::Down => limit - x,
+        Round::Up => x - limit,
+    };
+    let mut d = decimals;
+    if gap > 0.0 && gap.is_finite() {
+        // 10^-d ≤ gap: the rounded value cannot reach `limit`.
+        d = d.max((-gap.log10()).ceil().max(0.0) as usize);
+    }
+    let d = d.min(17);
+    let scale = 10f64.powi(d as i32);
+    // x·10^d within 10⁻¹² (relative) of an integer is that integer: binary rounding of x itself (0.99 is
+    // stored a hair below 0.99) must not take a decimal down a digit.
+    let y = x * scale;
+    let r = if (y - y.round()).abs() <= 1e-12 * y.abs() {
+        y.round()
+    } else {
+        match dir {
+            Round::Down => y.floor(),
+            Round::Up => y.ceil(),
+        }
+    } / scale;
+    let crossed = match dir {
+        Round::Down => x < limit && r >= limit,
+        Round::Up => x > limit && r <= limit,
+    };
+    if crossed {
+        // Beyond f64's decimal resolution: the shortest text that reads back as x itself.
+        return format!("{x:?}");
+    }
+    trim_zeros(&format!("{r:.d$}")).to_string()
+}
+
+/// A fraction as a percentage with two decimals (more where needed), rounded toward the weaker claim
+/// ([`directed`]); `100 %` only for exactly 1 (when rounding down).
+pub fn pct_directed(frac: f64, dir: Round) -> String {
+    if !frac.is_finite() {
+        return num(frac);
+    }
+    let limit = match dir {
+        Round::Down => 100.0,
+        Round::Up => 0.0,
+    };
+    format!("{} %", directed(100.0 * frac, 2, dir, limit))
+}
+
+/// A lower bound or a confidence in [0, 1] as a percentage, rounded down ([`pct_directed`]).
+pub fn pct_down(frac: f64) -> String {
+    pct_directed(frac, Round::Down)
+}
+
+/// An upper bound in [0, 1] as a percentage, rounded up ([`pct_directed`]).
+pub fn pct_up(frac: f64) -> String {
+    pct_directed(frac, Round::Up)
 }
 
 /// A count with thin-space digit groups: `10 000` (U+202F narrow no-break space).

@@ -5,7 +5,7 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use super::data::{ReportData, VerifySummary};
-use super::format::{bytes, count, escape, num, pct, seconds, vector};
+use super::format::{bytes, count, escape, num, pct, pct_down, pct_up, seconds, vector};
 use super::plots::{
     css_color, init_plane_svg, input_measure, input_svg, shape_summary, sorted_trajectories,
     trajectory_color, tubes_per_trajectory, workspace_svg, BALL_COLOR, FEW_TRAJECTORIES,
@@ -29,8 +29,8 @@ pub fn verdict(data: &ReportData) -> Verdict {
     let coverage_ok = c.lower >= data.coverage_target;
     let coverage_text = format!(
         "Init coverage ≥ {} at {} confidence, which {} the target {}",
-        pct(c.lower),
-        pct(c.confidence),
+        pct_down(c.lower),
+        pct_down(c.confidence),
         if coverage_ok { "meets" } else { "is below" },
         pct(data.coverage_target)
     );
@@ -175,8 +175,8 @@ fn header(h: &mut String, data: &ReportData) {
                 format!(
                     "{} of Init at {} confidence (judged on the lower bound, {})",
                     pct(data.coverage_target),
-                    pct(data.coverage.confidence),
-                    pct(data.coverage.lower)
+                    pct_down(data.coverage.confidence),
+                    pct_down(data.coverage.lower)
                 ),
             ),
             ("Trajectories", data.trajectories.len().to_string()),
@@ -363,10 +363,10 @@ fn coverage_table(h: &mut String, data: &ReportData) {
         count(c.samples),
         count(c.covered),
         pct(c.mean),
-        pct(c.lower),
+        pct_down(c.lower),
         pct(data.coverage_target),
-        pct(c.upper),
-        pct(c.confidence),
+        pct_up(c.upper),
+        pct_down(c.confidence),
         count(data.balls.len())
     );
     h.push_str(

@@ -27,6 +27,8 @@ pub enum ErrorKind {
     Dimension,
     /// A number is `inf` or `nan`.
     NonFinite,
+    /// A finite number beyond the largest magnitude a spec may use ([`super::MAX_MAGNITUDE`]).
+    OutOfRange,
     /// A box has `lo > hi` in some coordinate.
     InvertedBox,
     /// An ellipsoid's shape matrix is not symmetric.
@@ -59,6 +61,7 @@ impl ErrorKind {
             ErrorKind::BadValue => "spec::bad_value",
             ErrorKind::Dimension => "spec::dimension",
             ErrorKind::NonFinite => "spec::non_finite",
+            ErrorKind::OutOfRange => "spec::out_of_range",
             ErrorKind::InvertedBox => "spec::inverted_box",
             ErrorKind::NotSymmetric => "spec::not_symmetric",
             ErrorKind::NotPsd => "spec::not_psd",

@@ -24,7 +24,9 @@
 //!
 //! [goal]                           # any set (see `spec::sets` for the set syntax)
 //! [[unsafe]]                       # zero or more sets; Unsafe is their union
-//! [input]                          # kind = "box" (lo, hi) or kind = "ball" (radius, optional center)
+//! [input]                          # kind = "box" (lo, hi) or kind = "ball" (radius, optional center);
+//!                                  # fallback = [...]: optional, the input applied out of the envelope
+//!                                  # (default: the input set's point nearest 0)
 //! [synthesis]                      # optional, see `SynthesisSettings`
 //! [mtl]                            # optional: formula = "..." (stored, not interpreted here)
 //! [sets.<name>]                    # optional named sets an MTL formula may refer to
@@ -45,6 +47,11 @@ pub use error::{ErrorKind, SpecError};
 pub use hybrid::{EdgeDesc, EdgeKindDesc, HybridDesc, LocationDesc, PolytopeDesc};
 pub use sets::{load_named_sets, parse_named_sets, Coords, SetDesc, Shape};
 pub use settings::{ControllerMode, SettingsError, SynthesisSettings, SynthesisSettingsBuilder};
+
+/// The largest magnitude of any number in a spec. Far beyond any physical task in sensible units, and
+/// small enough that the widths of boxes, distances and their squares (and the f32 values an image
+/// stores) are finite: an Init box spanning ±1e308 is refused here rather than overflowing later.
+pub const MAX_MAGNITUDE: f64 = 1e12;
 
 /// A dense real matrix, row-major.
 #[derive(Clone, Debug, PartialEq)]
@@ -173,6 +180,56 @@ impl InputSet {
     }
 }
 
+impl InputSet {
+    /// A point inside the set: the box's centre, or the ball's.
+    fn centre(&self) -> Vec<f64> {
+        match self {
+            InputSet::Box { lo, hi } => lo.iter().zip(hi).map(|(l, h)| 0.5 * (l + h)).collect(),
+            InputSet::Ball { center, .. } => center.clone(),
+        }
+    }
+
+    /// The point of the set nearest 0: 0 itself when the set contains it; else 0 clamped
+    /// componentwise (box) or projected onto the ball, `center + (0 − center)·radius/‖center‖`.
+    pub fn nearest_to_zero(&self) -> Vec<f64> {
+        match self {
+            InputSet::Box { lo, hi } => lo
+                .iter()
+                .zip(hi)
+                .map(|(&l, &h)| 0.0f64.max(l).min(h))
+                .collect(),
+            InputSet::Ball { center, radius } => {
+                let norm = center.iter().map(|c| c * c).sum::<f64>().sqrt();
+                if norm <= *radius {
+                    vec![0.0; center.len()]
+                } else {
+                    let t = 1.0 - radius / norm;
+                    center.iter().map(|c| c * t).collect()
+                }
+            }
+        }
+    }
+
+    /// `u` (a point of the set) as the f32 values an image stores, still in the set: rounded to the
+    /// nearest f32 if that lies in the set, else moved toward the set's centre by 10⁻⁶, 10⁻⁵, … of the
+    /// way first (rounding can leave a box's face or a ball's sphere by a hair). Returns the f32 values
+    /// widened to f64; a point already f32 and inside (such as 0) is returned unchanged.
+    pub fn storable(&self, u: &[f64]) -> Vec<f64> {
+        let c = self.centre();
+        let round = |t: f64| -> Vec<f64> {
+            u.iter()
+                .zip(&c)
+                .map(|(&a, &ci)| (a + t * (ci - a)) as f32 as f64)
+                .collect()
+        };
+        [0.0, 1e-6, 1e-5, 1e-4, 1e-3, 1e-2, 1e-1, 1.0]
+            .into_iter()
+            .map(round)
+            .find(|v| self.contains(v))
+            .unwrap_or_else(|| round(1.0))
+    }
+}
+
 /// The initial set: a box in state coordinates. `lo[i] == hi[i]` pins coordinate i.
 #[derive(Clone, Debug, PartialEq)]
 pub struct InitBox {
@@ -201,6 +258,10 @@ pub struct Problem {
     /// Unsafe = the union of these sets (possibly none).
     pub unsafe_sets: Vec<SetDesc>,
     pub input: InputSet,
+    /// The input the firmware applies whenever the image gives none (out of the certified envelope, a
+    /// bad frame): `input.fallback` from the spec, or the input set's point nearest 0; a point of the
+    /// input set, already rounded to the f32 the image stores ([`InputSet::storable`]).
+    pub fallback_input: Vec<f64>,
     /// T in seconds: Goal must be reached within [0, T].
     pub horizon: f64,
     pub seed: u64,

@@ -121,6 +121,8 @@ pub(crate) struct RawInput {
     pub hi: Option<RawVec>,
     pub center: Option<RawVec>,
     pub radius: Option<RawF>,
+    /// The fallback input (m values), optional.
+    pub fallback: Option<RawVec>,
 }
 
 /// `[synthesis]`: every key optional.

@@ -25,7 +25,7 @@ use toml::Spanned;
 use super::checks::box_rows;
 use super::error::{ErrorKind, SpecError};
 use super::raw::{RawSet, RawSetsFile};
-use super::validate::{check_box, matrix, vector, Dim};
+use super::validate::{bounded, check_box, matrix, vector, Dim};
 use super::Matrix;
 use crate::geometry::{Ball, Ellipsoid, GeometryError, InOutput, Polytope, Region};
 
@@ -362,14 +362,7 @@ pub(crate) fn set_from_raw(raw: &Spanned<RawSet>, ctx: &SetCtx<'_>) -> Result<Se
 }
 
 fn radius(rad: &Spanned<f64>, what: &str) -> Result<f64, SpecError> {
-    let v = *rad.get_ref();
-    if !v.is_finite() {
-        return Err(SpecError::new(
-            ErrorKind::NonFinite,
-            format!("{what}.radius is {v}; it must be finite"),
-        )
-        .at(rad.span(), "not finite"));
-    }
+    let v = bounded(*rad.get_ref(), rad.span(), &format!("{what}.radius"))?;
     if v < 0.0 {
         return Err(SpecError::new(
             ErrorKind::BadValue,

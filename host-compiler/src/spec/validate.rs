@@ -12,7 +12,7 @@ use super::error::{ErrorKind, SpecError};
 use super::raw::{RawF, RawInput, RawMat, RawSpec, RawSynthesis, RawTime, RawVec};
 use super::sets::{named_sets, set_from_raw, SetCtx};
 use super::settings::{ControllerMode, SynthesisSettings};
-use super::{InitBox, InputSet, Matrix, Plant, Problem, TimeDomain};
+use super::{InitBox, InputSet, Matrix, Plant, Problem, TimeDomain, MAX_MAGNITUDE};
 
 /// An expected dimension and why it is expected (for messages). `n: None` = not fixed yet; the first
 /// vector or matrix that uses it fixes it.
@@ -155,18 +155,33 @@ pub(crate) fn matrix(
     matrix_cols(raw, name, rows, Cols::Of(cols))
 }
 
-/// A finite number.
+/// A finite number of magnitude at most [`MAX_MAGNITUDE`]. Every number of a spec passes here (or
+/// through [`bounded`]), so no sum, difference or product of a few of them overflows downstream.
 pub(crate) fn finite(x: &RawF, name: &str) -> Result<f64, SpecError> {
-    let v = *x.get_ref();
-    if v.is_finite() {
-        Ok(v)
-    } else {
-        Err(SpecError::new(
+    bounded(*x.get_ref(), x.span(), name)
+}
+
+/// [`finite`] for a value and its span.
+pub(crate) fn bounded(v: f64, span: Range<usize>, name: &str) -> Result<f64, SpecError> {
+    if !v.is_finite() {
+        return Err(SpecError::new(
             ErrorKind::NonFinite,
             format!("{name} is {v}; numbers in a spec must be finite"),
         )
-        .at(x.span(), "not finite"))
+        .at(span, "not finite"));
     }
+    if v.abs() > MAX_MAGNITUDE {
+        return Err(SpecError::new(
+            ErrorKind::OutOfRange,
+            format!(
+                "{name} is {v:e}; numbers in a spec must lie within ±{MAX_MAGNITUDE:e} (widths, \
+                 distances and their squares must stay finite)"
+            ),
+        )
+        .at(span, format!("beyond ±{MAX_MAGNITUDE:e}"))
+        .help("rescale the state or input units"));
+    }
+    Ok(v)
 }
 
 /// lo ≤ hi componentwise (same lengths already checked).
@@ -389,6 +404,7 @@ fn problem_sets(
 
     // ---- input ----
     let input = input_set(raw.input.get_ref(), raw.input.span(), plant.m())?;
+    let fallback_input = fallback_input(raw.input.get_ref(), &input, plant.m())?;
 
     // ---- synthesis, mtl ----
     let synthesis = match &raw.synthesis {
@@ -450,6 +466,7 @@ fn problem_sets(
         goal,
         unsafe_sets,
         input,
+        fallback_input,
         horizon,
         seed,
         synthesis,
@@ -573,6 +590,39 @@ fn input_set(r: &RawInput, span: Range<usize>, m: usize) -> Result<InputSet, Spe
         )
         .at(r.kind.span(), "unknown kind")),
     }
+}
+
+/// `input.fallback`, which must lie in the input set, or the set's point nearest 0; as the image
+/// stores it ([`InputSet::storable`]).
+fn fallback_input(r: &RawInput, input: &InputSet, m: usize) -> Result<Vec<f64>, SpecError> {
+    let u = match &r.fallback {
+        None => input.nearest_to_zero(),
+        Some(raw) => {
+            let mut d = Dim {
+                n: Some(m),
+                why: format!("plant.B has {m} columns"),
+            };
+            let u = vector(raw, "input.fallback", &mut d)?;
+            if !input.contains(&u) {
+                return Err(SpecError::new(
+                    ErrorKind::BadValue,
+                    format!(
+                        "input.fallback = {} lies outside the input set; the firmware applies it \
+                         whenever the image gives no input, so it must be admissible",
+                        fmt_vec(&u)
+                    ),
+                )
+                .at(raw.span(), "outside the input set")
+                .help(format!(
+                    "choose a point of the input set, e.g. {} (its point nearest 0, the default when \
+                     the key is omitted)",
+                    fmt_vec(&input.nearest_to_zero())
+                )));
+            }
+            u
+        }
+    };
+    Ok(input.storable(&u))
 }
 
 fn synthesis(r: &RawSynthesis) -> Result<SynthesisSettings, SpecError> {

@@ -108,6 +108,8 @@ pub enum SynthError {
     Cover(#[from] GrowError),
     #[error("the emitted image is rejected by the decoder: {0:?}")]
     ImageRejected(shared_types::image::ImageError),
+    #[error(transparent)]
+    Verify(#[from] crate::verify::MetricError),
 }
 
 /// Run the whole pipeline.
@@ -171,7 +173,7 @@ pub fn synthesize(task: &Task, opts: &SynthOptions) -> Result<Synthesis, SynthEr
         opts.verify_interior,
         opts.verify_per_ball,
         problem.seed ^ 0x7e51f1,
-    );
+    )?;
     timings.push(("verification".to_string(), t2.elapsed().as_secs_f64()));
     if verify.violations > 0 {
         warnings.push(format!(

@@ -101,7 +101,7 @@ pub fn parse_inputs(
                     path: path.into(),
                     line: lineno,
                     col,
-                    field: f.trim().to_string(),
+                    field: crate::text::excerpt(f.trim()),
                 })?;
             vals.push(v);
             col += f.len() + 1;

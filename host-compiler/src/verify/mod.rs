@@ -1,4 +1,5 @@
-//! Independent re-check of a controller image: closed-loop Monte Carlo through the shared-types evaluator
+//! Independent re-check of a controller image: the certificate re-proved from the bytes
+//! ([`feedforward::recheck`], [`pwa::recheck`]) and closed-loop Monte Carlo through the shared-types evaluator
 //! in f32, on the exact discretised plant, from initial states drawn in the certified cover and on the
 //! boundary of every ball. Every run must reach Goal within the horizon, never enter Unsafe (also checked
 //! at sub-sample instants for continuous-time plants) and apply only inputs inside the input set.
@@ -11,6 +12,7 @@
 //! Goal (inputs outside the set, entering Unsafe) is counted and reported separately, not as a violation:
 //! a trajectory whose table the optimiser cut at k* (§5.3) certifies nothing after it.
 
+pub mod feedforward;
 pub mod pwa;
 
 use crate::geometry::Region;
@@ -24,6 +26,59 @@ use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 use shared_types::eval::Controller;
 use shared_types::image::Image;
+
+/// The image's metric P (decoded, so finite and positive definite in f32) has no f64
+/// eigendecomposition: the boundaries of its balls cannot be sampled.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("the image's metric P has no eigendecomposition: its balls cannot be sampled")]
+pub struct MetricError;
+
+/// P^{-1/2} of the image's metric (location 0), for drawing states in and on its balls.
+pub(crate) fn inverse_sqrt_metric(image: &Image<'_>) -> Result<faer::Mat<f64>, MetricError> {
+    let n = image.n();
+    let P = crate::linalg::sym(faer::Mat::from_fn(n, n, |i, j| image.P(0, i, j) as f64).as_ref());
+    crate::linalg::sym_fn(P.as_ref(), |l| 1.0 / l.max(1e-300).sqrt()).ok_or(MetricError)
+}
+
+/// Why an image does not belong to a spec: it was made for another plant or sample period, so nothing
+/// it was certified for says anything about this spec.
+#[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
+pub enum Mismatch {
+    #[error("the image is for n = {image} states but the spec's plant has n = {spec} (plant.A)")]
+    States { image: usize, spec: usize },
+    #[error("the image is for m = {image} inputs but the spec's plant has m = {spec} (plant.B)")]
+    Inputs { image: usize, spec: usize },
+    #[error(
+        "the image's sample period is {image} s but the spec's plant.period is {spec} s \
+         (the image was certified for another sampled loop)"
+    )]
+    Period { image: f32, spec: f64 },
+}
+
+/// Refuses an image whose dimensions (n, m) or sample period differ from the spec's. The period is
+/// compared as the f32 the image stores: exactly the value `emit` writes for the spec's period.
+pub fn check_matches(problem: &crate::spec::Problem, image: &Image<'_>) -> Result<(), Mismatch> {
+    let p = &problem.plant;
+    if image.n() != p.n() {
+        return Err(Mismatch::States {
+            image: image.n(),
+            spec: p.n(),
+        });
+    }
+    if image.m() != p.m() {
+        return Err(Mismatch::Inputs {
+            image: image.m(),
+            spec: p.m(),
+        });
+    }
+    if image.period() != p.period as f32 {
+        return Err(Mismatch::Period {
+            image: image.period(),
+            spec: p.period,
+        });
+    }
+    Ok(())
+}
 
 /// The plant and spec a run is judged against: the task's plant, property, horizon and Init.
 #[derive(Clone, Copy)]
@@ -231,12 +286,14 @@ pub fn monte_carlo(
     interior: usize,
     per_ball: usize,
     seed: u64,
-) -> VerifyReport {
+) -> Result<VerifyReport, MetricError> {
     let n = image.n();
+    let Pis = inverse_sqrt_metric(image)?;
     let ctl = Controller::new(*image);
     // Interior: rejection sampling against the evaluator's own selection.
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let mut starts: Vec<Vec<f64>> = Vec::with_capacity(interior);
+    // Grown as needed: `interior` comes from a flag and may be far more than memory holds.
+    let mut starts: Vec<Vec<f64>> = Vec::new();
     let mut draws = 0usize;
     while starts.len() < interior && draws < interior.saturating_mul(50) {
         draws += 1;
@@ -256,9 +313,6 @@ pub fn monte_carlo(
     // Boundary: x = c + δ·P^{-1/2}w/‖w‖ for random directions w.
     let mut boundary: Vec<Vec<f64>> = Vec::new();
     for t in 0..image.n_trajectories() {
-        let P = faer::Mat::from_fn(n, n, |i, j| image.P(0, i, j) as f64);
-        let Pis = crate::linalg::sym_fn(P.as_ref(), |l| 1.0 / l.max(1e-300).sqrt())
-            .expect("P decodes as symmetric");
         let c: Vec<f64> = (0..n).map(|i| image.centre(t, i) as f64).collect();
         // A hair inside the stored radius, so that the f32 selection accepts nearly all of them.
         let d = image.delta(t) as f64 * (1.0 - 1e-6);
@@ -294,7 +348,7 @@ pub fn monte_carlo(
         wu = wu.min(o.unsafe_margin);
         wi = wi.min(o.input_margin);
     }
-    VerifyReport {
+    Ok(VerifyReport {
         interior_runs,
         boundary_runs,
         boundary_rejected,
@@ -308,5 +362,5 @@ pub fn monte_carlo(
             .filter(|o| o.after_goal_input_excursion)
             .count(),
         after_goal_unsafe: outcomes.iter().filter(|o| o.after_goal_unsafe).count(),
-    }
+    })
 }

@@ -614,12 +614,10 @@ pub fn monte_carlo_pwa(
     runs: usize,
     seed: u64,
     keep_paths: usize,
-) -> PwaMonteCarlo {
+) -> Result<PwaMonteCarlo, super::MetricError> {
     let n = image.n();
     let nb = image.n_balls();
-    let P = sym(Mat::from_fn(n, n, |i, j| image.P(0, i, j) as f64).as_ref());
-    let Pis = crate::linalg::sym_fn(P.as_ref(), |l| 1.0 / l.max(1e-300).sqrt())
-        .expect("P decodes as symmetric");
+    let Pis = super::inverse_sqrt_metric(image)?;
     let centre =
         |b: usize| -> Vec<f64> { (0..n).map(|i| image.ball_centre(b, i) as f64).collect() };
     let init_balls: Vec<usize> = (0..nb)
@@ -632,11 +630,13 @@ pub fn monte_carlo_pwa(
         .collect();
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let ctl = Controller::new(*image);
-    let mut starts = Vec::with_capacity(runs);
+    // Grown as needed: `runs` comes from a flag and may be far more than memory holds.
+    let mut starts = Vec::new();
     let mut rejected = 0;
     let mut init_runs = 0;
     let mut draws = 0usize;
-    while starts.len() < runs && draws < runs.saturating_mul(10) {
+    // An image without balls has nothing to draw from (every run would be "not drawn").
+    while nb > 0 && starts.len() < runs && draws < runs.saturating_mul(10) {
         draws += 1;
         let from_init = starts.len() < runs / 2 && !init_balls.is_empty();
         let b = if from_init {
@@ -674,7 +674,7 @@ pub fn monte_carlo_pwa(
         .filter(|o| o.violated() || o.rejected)
         .collect();
     let max_steps = outcomes.iter().map(|o| o.2).max().unwrap_or(0);
-    PwaMonteCarlo {
+    Ok(PwaMonteCarlo {
         runs: starts.len(),
         init_runs,
         rejected,
@@ -682,7 +682,7 @@ pub fn monte_carlo_pwa(
         first_violations: bad.into_iter().take(10).cloned().collect(),
         max_steps,
         sample_paths: outcomes.into_iter().take(keep_paths).map(|o| o.1).collect(),
-    }
+    })
 }
 
 #[cfg(test)]

@@ -277,7 +277,7 @@ fn the_image_alone_rechecks_and_monte_carlo_from_f_finds_no_violation() {
         .iter()
         .map(|t| t.nominal.x[0].clone())
         .collect();
-    let mc = host_compiler::verify::pwa::monte_carlo_pwa(&judge, &img, &x0s, 2_000, 7, 0);
+    let mc = host_compiler::verify::pwa::monte_carlo_pwa(&judge, &img, &x0s, 2_000, 7, 0).unwrap();
     assert_eq!(mc.runs, 2_000);
     assert!(mc.init_runs >= 1_000);
     assert_eq!(mc.violations, 0, "{:?}", mc.first_violations);

@@ -56,6 +56,16 @@ fn differences(path: &str, want: &Value, got: &Value, out: &mut Vec<String>) {
     }
 }
 
+/// Exit status of `synth` on an example: 0, or 3 for an example whose cover is short of its coverage
+/// target by design (certified and verified, but the task's target is not met: issue 18).
+fn expected_exit(example: &str) -> i32 {
+    if example == "planar-vehicle-pwa" {
+        3
+    } else {
+        0
+    }
+}
+
 fn check(example: &str) {
     let spec = root().join("examples").join(format!("{example}.toml"));
     let out = std::env::temp_dir().join(format!("hc-fixture-{example}-{}", std::process::id()));
@@ -68,9 +78,10 @@ fn check(example: &str) {
         .output()
         .unwrap();
     let stdout = String::from_utf8_lossy(&o.stdout);
-    assert!(
-        o.status.success(),
-        "synth {example} failed: {stdout}\n{}",
+    assert_eq!(
+        o.status.code(),
+        Some(expected_exit(example)),
+        "synth {example}: {stdout}\n{}",
         String::from_utf8_lossy(&o.stderr)
     );
     assert!(stdout.contains(" 0 violations"), "{example}: {stdout}");

@@ -20,6 +20,8 @@ pub enum FallbackC {
         x_ref: Vec<f32>,
         u_ref: Vec<f32>,
     },
+    /// A constant input (m values).
+    Constant(Vec<f32>),
 }
 
 /// Image content with owned f32 arrays (row-major), as a test would write it down.
@@ -71,6 +73,7 @@ impl Owned {
             segment: &self.segment,
             v: &self.v,
             fallback: match (&self.fb, self.fb_kind) {
+                (Some((_, _, u)), 3) => Fallback::Constant { u },
                 (Some((K, x, u)), _) => Fallback::Linear {
                     K,
                     x_ref: x,
@@ -139,12 +142,14 @@ impl Content {
             v: le(&self.v),
             fb: match &self.fallback {
                 FallbackC::Linear { K, x_ref, u_ref } => Some((le(K), le(x_ref), le(u_ref))),
+                FallbackC::Constant(u) => Some((vec![], vec![], le(u))),
                 _ => None,
             },
             fb_kind: match self.fallback {
                 FallbackC::Hold => 0,
                 FallbackC::Zero => 1,
                 FallbackC::Linear { .. } => 2,
+                FallbackC::Constant(_) => 3,
             },
             bx: self.input_box.as_ref().map(|(lo, hi)| (le(lo), le(hi))),
             terminal: self.terminal,
@@ -179,6 +184,9 @@ impl Content {
             fallback: match img.fallback() {
                 Fallback::Hold => FallbackC::Hold,
                 Fallback::Zero => FallbackC::Zero,
+                Fallback::Constant { .. } => {
+                    FallbackC::Constant((0..m).map(|j| img.fallback_input(j)).collect())
+                }
                 Fallback::Linear { .. } => FallbackC::Linear {
                     K: (0..m)
                         .flat_map(|r| (0..n).map(move |c| (r, c)))
@@ -444,6 +452,7 @@ impl OwnedPwa {
                 ball_partition: &self.ball_partition,
             },
             fallback: match (&self.fb, self.fb_kind) {
+                (Some((_, _, u)), 3) => Fallback::Constant { u },
                 (Some((K, x, u)), _) => Fallback::Linear {
                     K,
                     x_ref: x,
@@ -573,12 +582,14 @@ impl PwaContent {
             ball_partition: le16(&self.ball_partition),
             fb: match &self.fallback {
                 FallbackC::Linear { K, x_ref, u_ref } => Some((le(K), le(x_ref), le(u_ref))),
+                FallbackC::Constant(u) => Some((vec![], vec![], le(u))),
                 _ => None,
             },
             fb_kind: match self.fallback {
                 FallbackC::Hold => 0,
                 FallbackC::Zero => 1,
                 FallbackC::Linear { .. } => 2,
+                FallbackC::Constant(_) => 3,
             },
             bx: self.input_box.as_ref().map(|(lo, hi)| (le(lo), le(hi))),
             depth: self.depth,
@@ -757,6 +768,9 @@ impl PwaContent {
             fallback: match img.fallback() {
                 Fallback::Hold => FallbackC::Hold,
                 Fallback::Zero => FallbackC::Zero,
+                Fallback::Constant { .. } => {
+                    FallbackC::Constant((0..m).map(|j| img.fallback_input(j)).collect())
+                }
                 Fallback::Linear { .. } => FallbackC::Linear {
                     K: (0..m)
                         .flat_map(|r| (0..n).map(move |c| (r, c)))

@@ -851,3 +851,32 @@ fn rejects_segments_inconsistent_with_the_table() {
         })
     );
 }
+
+/// A constant fallback input (issue 18: the input set may exclude 0) round-trips, is validated finite, of
+/// length m and inside the stored input box, and the evaluator applies it whatever the state.
+#[test]
+fn constant_fallback_round_trips_is_validated_and_applied() {
+    let mut c = simple();
+    c.fallback = FallbackC::Constant(vec![0.75]);
+    let bytes = c.to_bytes().unwrap();
+    let img = decode(&bytes).unwrap();
+    assert_eq!(Content::from_image(&img), c);
+    let ctl = shared_types::eval::Controller::new(img);
+    let last = shared_types::eval::Input::zero(1);
+    for x in [[9.0f32, 9.0], [f32::NAN, 0.0]] {
+        assert_eq!(ctl.fallback(&x, &last).as_slice(), &[0.75]);
+    }
+    // Outside the box, not finite: refused.
+    c.fallback = FallbackC::Constant(vec![1.5]);
+    assert_eq!(err_of(&c), ImageError::FallbackOutsideBox { input: 0 });
+    c.fallback = FallbackC::Constant(vec![f32::INFINITY]);
+    assert!(
+        matches!(err_of(&c), ImageError::NonFinite { .. }),
+        "{:?}",
+        err_of(&c)
+    );
+    // Without a box any finite constant is stored.
+    c.input_box = None;
+    c.fallback = FallbackC::Constant(vec![1.5]);
+    assert!(c.to_bytes().is_ok());
+}

@@ -85,8 +85,10 @@ pub enum Expr {
     /// Atomic proposition aᵀx ≤ b on named signals.
     Linear(LinearPredicate),
     Not(Box<Expr>),
-    And(Box<Expr>, Box<Expr>),
-    Or(Box<Expr>, Box<Expr>),
+    /// φ₁ ∧ … ∧ φₖ (k ≥ 2): a chain `a & b & c` is one n-ary node, so a long chain is flat, not deep.
+    And(Vec<Expr>),
+    /// φ₁ ∨ … ∨ φₖ (k ≥ 2), flat like [`Expr::And`].
+    Or(Vec<Expr>),
     Implies(Box<Expr>, Box<Expr>),
     /// F_I φ = ⊤ U_I φ.
     Eventually(Interval, Box<Expr>),
@@ -117,6 +119,18 @@ impl fmt::Display for LinearPredicate {
     }
 }
 
+/// `(a op b op …)`.
+fn chain(f: &mut fmt::Formatter<'_>, v: &[Expr], op: &str) -> fmt::Result {
+    write!(f, "(")?;
+    for (i, e) in v.iter().enumerate() {
+        if i > 0 {
+            write!(f, "{op}")?;
+        }
+        write!(f, "{e}")?;
+    }
+    write!(f, ")")
+}
+
 /// Prints a fully parenthesised formula that parses back to the same tree (up to spans and the order
 /// of linear terms, which is kept).
 impl fmt::Display for Expr {
@@ -127,8 +141,8 @@ impl fmt::Display for Expr {
             Expr::Set { name, .. } => write!(f, "{name}"),
             Expr::Linear(p) => write!(f, "({p})"),
             Expr::Not(e) => write!(f, "!{e}"),
-            Expr::And(l, r) => write!(f, "({l} & {r})"),
-            Expr::Or(l, r) => write!(f, "({l} | {r})"),
+            Expr::And(v) => chain(f, v, " & "),
+            Expr::Or(v) => chain(f, v, " | "),
             Expr::Implies(l, r) => write!(f, "({l} -> {r})"),
             Expr::Eventually(i, e) => write!(f, "F{i} {e}"),
             Expr::Always(i, e) => write!(f, "G{i} {e}"),

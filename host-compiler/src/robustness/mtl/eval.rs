@@ -42,8 +42,10 @@ pub(crate) enum Node {
         cols: Vec<usize>,
     },
     Not(Box<Node>),
-    And(Box<Node>, Box<Node>),
-    Or(Box<Node>, Box<Node>),
+    /// min over the terms (≥ 1 of them), flat like [`Expr::And`].
+    And(Vec<Node>),
+    /// max over the terms (≥ 1 of them).
+    Or(Vec<Node>),
     Eventually(Interval, Box<Node>),
     Always(Interval, Box<Node>),
     Until(Interval, Box<Node>, Box<Node>),
@@ -182,12 +184,12 @@ impl<'s> Monitor<'s> {
                 Node::Set { set: idx, cols }
             }
             Expr::Not(x) => Node::Not(b(self.node(x, src, sets)?)),
-            Expr::And(l, r) => Node::And(b(self.node(l, src, sets)?), b(self.node(r, src, sets)?)),
-            Expr::Or(l, r) => Node::Or(b(self.node(l, src, sets)?), b(self.node(r, src, sets)?)),
-            Expr::Implies(l, r) => Node::Or(
-                b(Node::Not(b(self.node(l, src, sets)?))),
-                b(self.node(r, src, sets)?),
-            ),
+            Expr::And(v) => Node::And(self.nodes(v, src, sets)?),
+            Expr::Or(v) => Node::Or(self.nodes(v, src, sets)?),
+            Expr::Implies(l, r) => Node::Or(vec![
+                Node::Not(b(self.node(l, src, sets)?)),
+                self.node(r, src, sets)?,
+            ]),
             Expr::Eventually(i, x) => Node::Eventually(*i, b(self.node(x, src, sets)?)),
             Expr::Always(i, x) => Node::Always(*i, b(self.node(x, src, sets)?)),
             Expr::Until(i, l, r) => {
@@ -197,6 +199,15 @@ impl<'s> Monitor<'s> {
                 Node::Release(*i, b(self.node(l, src, sets)?), b(self.node(r, src, sets)?))
             }
         })
+    }
+
+    fn nodes(
+        &mut self,
+        v: &[Expr],
+        src: &str,
+        sets: &'s [NamedSet],
+    ) -> Result<Vec<Node>, FormulaError> {
+        v.iter().map(|e| self.node(e, src, sets)).collect()
     }
 
     pub(crate) fn check_trace(&self, trace: &Trace) -> Result<(), MtlError> {
@@ -226,18 +237,14 @@ impl<'s> Monitor<'s> {
                 v.iter_mut().for_each(|r| *r = -*r);
                 v
             }
-            Node::And(l, r) => {
-                let mut v = self.eval(l, t, cols)?;
-                let w = self.eval(r, t, cols)?;
-                v.iter_mut().zip(&w).for_each(|(a, b)| *a = a.min(*b));
-                v
-            }
-            Node::Or(l, r) => {
-                let mut v = self.eval(l, t, cols)?;
-                let w = self.eval(r, t, cols)?;
-                v.iter_mut().zip(&w).for_each(|(a, b)| *a = a.max(*b));
-                v
-            }
+            Node::And(terms) => fold(terms, f64::INFINITY, f64::min, |x| self.eval(x, t, cols), t)?,
+            Node::Or(terms) => fold(
+                terms,
+                f64::NEG_INFINITY,
+                f64::max,
+                |x| self.eval(x, t, cols),
+                t,
+            )?,
             Node::Eventually(i, x) => sliding_max(&self.eval(x, t, cols)?, t, i.a, i.b),
             Node::Always(i, x) => sliding_min(&self.eval(x, t, cols)?, t, i.a, i.b),
             Node::Until(i, l, r) => until(t, &self.eval(l, t, cols)?, &self.eval(r, t, cols)?, *i),
@@ -297,6 +304,23 @@ impl<'s> Monitor<'s> {
             _ => unreachable!("atom() is only called on atoms"),
         })
     }
+}
+
+/// The pointwise `op` of the terms' signals (`start` for none): one loop over an n-ary node, so a long
+/// chain costs no recursion depth.
+pub(crate) fn fold(
+    terms: &[Node],
+    start: f64,
+    op: fn(f64, f64) -> f64,
+    mut eval: impl FnMut(&Node) -> Result<Vec<f64>, MtlError>,
+    t: &[f64],
+) -> Result<Vec<f64>, MtlError> {
+    let mut v = vec![start; t.len()];
+    for x in terms {
+        let w = eval(x)?;
+        v.iter_mut().zip(&w).for_each(|(a, b)| *a = op(*a, *b));
+    }
+    Ok(v)
 }
 
 /// `[t, signal 0, signal 1, …]`, the column layout [`Node`] indices refer to.

@@ -17,6 +17,8 @@
 //! interval  := "[" NUMBER "," ( NUMBER | "inf" ) "]"        with 0 ≤ a ≤ b
 //! ```
 //!
+//! Nesting is limited to [`MAX_DEPTH`] levels; `&` and `|` chains of any length are flat n-ary nodes.
+//!
 //! An operator written without an interval ranges over [0, inf]. `F G U R true false inf` are reserved
 //! words. An identifier followed by `* + - <= >= < >` starts a linear predicate, any other identifier
 //! names a set. Strict and non-strict comparisons have the same robustness (the boundary is a null
@@ -39,6 +41,8 @@ pub enum FormulaErrorKind {
     BadNumber,
     /// A linear predicate whose signal coefficients are all zero.
     DegeneratePredicate,
+    /// Nesting deeper than `limit` levels ([`MAX_DEPTH`]).
+    TooDeep { limit: usize },
     /// A name that is neither a signal of the trace (for predicates) nor a known set.
     UnknownName { name: String },
     /// A named set whose coordinates do not match the trace or whose dimension is wrong.
@@ -130,8 +134,8 @@ const RESERVED: [&str; 7] = ["F", "G", "U", "R", "true", "false", "inf"];
 
 fn describe(t: &Tok, text: &str) -> String {
     match t {
-        Tok::Ident(s) => format!("`{s}`"),
-        Tok::Num(_) => format!("number `{text}`"),
+        Tok::Ident(s) => format!("`{}`", crate::text::excerpt(s)),
+        Tok::Num(_) => format!("number `{}`", crate::text::excerpt(text)),
         Tok::Eof => "end of formula".into(),
         _ => format!("`{text}`"),
     }
@@ -191,23 +195,25 @@ fn lex(src: &str) -> Result<Vec<Token>, FormulaError> {
             }
             let text = &src[i..j];
             let v: f64 = text.parse().map_err(|_| {
+                let quoted = crate::text::excerpt(text);
                 FormulaError::new(
                     src,
                     Span::new(i, j),
                     FormulaErrorKind::Syntax {
                         expected: "a number".into(),
-                        found: format!("`{text}`"),
+                        found: format!("`{quoted}`"),
                     },
-                    format!("expected a number, found `{text}`"),
+                    format!("expected a number, found `{quoted}`"),
                     "not a number".into(),
                 )
             })?;
             if !v.is_finite() {
+                let quoted = crate::text::excerpt(text);
                 return Err(FormulaError::new(
                     src,
                     Span::new(i, j),
                     FormulaErrorKind::BadNumber,
-                    format!("number `{text}` is out of range"),
+                    format!("number `{quoted}` is out of range"),
                     "out of the f64 range".into(),
                 ));
             }
@@ -262,7 +268,16 @@ struct Parser<'s> {
     src: &'s str,
     toks: Vec<Token>,
     pos: usize,
+    /// Current nesting level ([`MAX_DEPTH`]).
+    depth: usize,
 }
+
+/// The deepest nesting a formula may have. Each parenthesis, prefix operator (`!`, `F`, `G`) and
+/// right-associative operator (`->`, `U`, `R`) opens a level; chains of `&` and `|` are flat and open
+/// none. Deeper input is a [`FormulaErrorKind::TooDeep`] error at the token that would exceed it, so
+/// neither the parser nor the evaluator, the printer or `Drop` (all recursive over the tree, whose
+/// depth this bounds) can overflow the stack.
+pub const MAX_DEPTH: usize = 100;
 
 const FORMULA_START: &str =
     "a formula (`true`, `false`, `!`, `F`, `G`, `(`, a set name or a linear predicate)";
@@ -305,6 +320,25 @@ impl<'s> Parser<'s> {
             format!("expected {what}"),
         )
     }
+    /// Opens one nesting level at the current token (the one that opens it), or refuses past
+    /// [`MAX_DEPTH`].
+    fn descend(&mut self) -> Result<(), FormulaError> {
+        self.depth += 1;
+        if self.depth <= MAX_DEPTH {
+            return Ok(());
+        }
+        Err(FormulaError::new(
+            self.src,
+            self.span(),
+            FormulaErrorKind::TooDeep { limit: MAX_DEPTH },
+            format!(
+                "the formula nests deeper than {MAX_DEPTH} levels here (each `(`, `!`, `F`, `G`, \
+                 `->`, `U` and `R` opens one)"
+            ),
+            format!("level {} of at most {MAX_DEPTH}", self.depth),
+        )
+        .with_help("flatten the formula: chains of `&` and `|` do not nest, `!!φ` is `φ`"))
+    }
     fn eat(&mut self, t: &Tok, what: &str) -> Result<Span, FormulaError> {
         if self.peek() == t {
             Ok(self.bump())
@@ -316,29 +350,39 @@ impl<'s> Parser<'s> {
     fn formula(&mut self) -> Result<Expr, FormulaError> {
         let lhs = self.or()?;
         if *self.peek() == Tok::Arrow {
+            self.descend()?;
             self.bump();
             let rhs = self.formula()?;
+            self.depth -= 1;
             return Ok(Expr::Implies(Box::new(lhs), Box::new(rhs)));
         }
         Ok(lhs)
     }
+    /// `a | b | …` as one flat [`Expr::Or`] (a loop, not recursion: a chain of any length is shallow).
     fn or(&mut self) -> Result<Expr, FormulaError> {
-        let mut lhs = self.and()?;
+        let first = self.and()?;
+        if *self.peek() != Tok::Pipe {
+            return Ok(first);
+        }
+        let mut terms = vec![first];
         while *self.peek() == Tok::Pipe {
             self.bump();
-            let rhs = self.and()?;
-            lhs = Expr::Or(Box::new(lhs), Box::new(rhs));
+            terms.push(self.and()?);
         }
-        Ok(lhs)
+        Ok(Expr::Or(terms))
     }
+    /// `a & b & …` as one flat [`Expr::And`].
     fn and(&mut self) -> Result<Expr, FormulaError> {
-        let mut lhs = self.until()?;
+        let first = self.until()?;
+        if *self.peek() != Tok::Amp {
+            return Ok(first);
+        }
+        let mut terms = vec![first];
         while *self.peek() == Tok::Amp {
             self.bump();
-            let rhs = self.until()?;
-            lhs = Expr::And(Box::new(lhs), Box::new(rhs));
+            terms.push(self.until()?);
         }
-        Ok(lhs)
+        Ok(Expr::And(terms))
     }
     fn until(&mut self) -> Result<Expr, FormulaError> {
         let lhs = self.unary()?;
@@ -349,9 +393,11 @@ impl<'s> Parser<'s> {
         } else {
             return Ok(lhs);
         };
+        self.descend()?;
         self.bump();
         let i = self.opt_interval()?;
         let rhs = self.until()?;
+        self.depth -= 1;
         Ok(if release {
             Expr::Release(i, Box::new(lhs), Box::new(rhs))
         } else {
@@ -360,14 +406,19 @@ impl<'s> Parser<'s> {
     }
     fn unary(&mut self) -> Result<Expr, FormulaError> {
         if *self.peek() == Tok::Bang {
+            self.descend()?;
             self.bump();
-            return Ok(Expr::Not(Box::new(self.unary()?)));
+            let e = self.unary()?;
+            self.depth -= 1;
+            return Ok(Expr::Not(Box::new(e)));
         }
         for (kw, always) in [("F", false), ("G", true)] {
             if self.is_kw(kw) {
+                self.descend()?;
                 self.bump();
                 let i = self.opt_interval()?;
                 let e = Box::new(self.unary()?);
+                self.depth -= 1;
                 return Ok(if always {
                     Expr::Always(i, e)
                 } else {
@@ -380,8 +431,10 @@ impl<'s> Parser<'s> {
     fn primary(&mut self) -> Result<Expr, FormulaError> {
         match self.peek().clone() {
             Tok::LParen => {
+                self.descend()?;
                 self.bump();
                 let e = self.formula()?;
+                self.depth -= 1;
                 self.eat(&Tok::RParen, "`)`")?;
                 Ok(e)
             }
@@ -584,7 +637,12 @@ impl<'s> Parser<'s> {
 /// Parse a formula (grammar in the module doc).
 pub fn parse(src: &str) -> Result<Expr, FormulaError> {
     let toks = lex(src)?;
-    let mut p = Parser { src, toks, pos: 0 };
+    let mut p = Parser {
+        src,
+        toks,
+        pos: 0,
+        depth: 0,
+    };
     let e = p.formula()?;
     if *p.peek() != Tok::Eof {
         return Err(p.expected("an operator (`&`, `|`, `->`, `U`, `R`) or the end of the formula"));

@@ -8,7 +8,7 @@
 // Formula errors carry their source text for miette; they are built once per failed parse.
 #![allow(clippy::result_large_err)]
 
-use super::eval::{columns, Monitor, Node};
+use super::eval::{columns, fold, Monitor, Node};
 use super::trace::Trace;
 use super::MtlError;
 
@@ -53,14 +53,20 @@ fn eval(
     Ok(match node {
         Node::Const(_) | Node::Linear { .. } | Node::Set { .. } => m.atom(node, n, cols)?,
         Node::Not(x) => eval(m, x, t, cols, scan)?.into_iter().map(|r| -r).collect(),
-        Node::And(l, r) => {
-            let (a, b) = (eval(m, l, t, cols, scan)?, eval(m, r, t, cols, scan)?);
-            a.iter().zip(&b).map(|(x, y)| x.min(*y)).collect()
-        }
-        Node::Or(l, r) => {
-            let (a, b) = (eval(m, l, t, cols, scan)?, eval(m, r, t, cols, scan)?);
-            a.iter().zip(&b).map(|(x, y)| x.max(*y)).collect()
-        }
+        Node::And(terms) => fold(
+            terms,
+            f64::INFINITY,
+            f64::min,
+            |x| eval(m, x, t, cols, scan),
+            t,
+        )?,
+        Node::Or(terms) => fold(
+            terms,
+            f64::NEG_INFINITY,
+            f64::max,
+            |x| eval(m, x, t, cols, scan),
+            t,
+        )?,
         Node::Eventually(i, x) => {
             let v = eval(m, x, t, cols, scan)?;
             (0..n)

@@ -6,6 +6,7 @@
 //! Every field must be a finite number. Errors name the 1-based line, the 1-based field number and
 //! the 1-based character column where the field starts.
 
+use crate::text::excerpt;
 use std::path::Path;
 
 /// An error reading or building a trace.
@@ -132,9 +133,13 @@ impl Trace {
                 ));
             }
         }
-        for (i, (name, col)) in names.iter().zip(&columns).enumerate() {
-            if name.is_empty() || name == "t" || names[..i].contains(name) {
-                return bad(format!("signal name `{name}` is empty, `t`, or repeated"));
+        let mut seen = std::collections::HashSet::new();
+        for (name, col) in names.iter().zip(&columns) {
+            if name.is_empty() || name == "t" || !seen.insert(name) {
+                return bad(format!(
+                    "signal name `{}` is empty, `t`, or repeated",
+                    excerpt(name)
+                ));
             }
             if col.len() != times.len() {
                 return bad(format!(
@@ -181,19 +186,24 @@ impl Trace {
             return Err(herr(
                 1,
                 c0,
-                format!("the first column must be named `t` (time), found `{first}`"),
+                format!(
+                    "the first column must be named `t` (time), found `{}`",
+                    excerpt(first)
+                ),
             ));
         }
         let mut names: Vec<String> = Vec::new();
+        // Seen names, for the duplicate check in linear time (a header may have a million columns).
+        let mut seen = std::collections::HashSet::new();
         for (i, &(cc, name)) in hfields.iter().enumerate().skip(1) {
             if name.is_empty() {
                 return Err(herr(i + 1, cc, "empty signal name".into()));
             }
-            if name == "t" || names.iter().any(|n| n == name) {
+            if name == "t" || !seen.insert(name) {
                 return Err(herr(
                     i + 1,
                     cc,
-                    format!("signal name `{name}` appears twice"),
+                    format!("signal name `{}` appears twice", excerpt(name)),
                 ));
             }
             names.push(name.to_string());
@@ -210,11 +220,13 @@ impl Trace {
                 let missing = if fields.len() < width {
                     format!(
                         "; missing {}",
-                        all[fields.len()..]
-                            .iter()
-                            .map(|n| format!("`{n}`"))
-                            .collect::<Vec<_>>()
-                            .join(", ")
+                        excerpt(
+                            &all[fields.len()..]
+                                .iter()
+                                .map(|n| format!("`{n}`"))
+                                .collect::<Vec<_>>()
+                                .join(", ")
+                        )
                     )
                 } else {
                     format!("; {} extra", fields.len() - width)
@@ -224,7 +236,7 @@ impl Trace {
                     line,
                     found: fields.len(),
                     expected: width,
-                    names: all.join(", "),
+                    names: excerpt(&all.join(", ")),
                     missing,
                 });
             }
@@ -234,8 +246,8 @@ impl Trace {
                     line,
                     column: i + 1,
                     char_column: cc,
-                    name: all[i].to_string(),
-                    field: f.to_string(),
+                    name: excerpt(all[i]),
+                    field: excerpt(f),
                 })?;
                 if !v.is_finite() {
                     return Err(TraceError::NonFinite {
@@ -243,8 +255,8 @@ impl Trace {
                         line,
                         column: i + 1,
                         char_column: cc,
-                        name: all[i].to_string(),
-                        field: f.to_string(),
+                        name: excerpt(all[i]),
+                        field: excerpt(f),
                     });
                 }
                 if i == 0 {
@@ -318,12 +330,13 @@ impl Trace {
 /// starts.
 fn split(row: &str) -> Vec<(usize, &str)> {
     let mut out = Vec::new();
-    let mut start = 0usize;
+    // Characters before the current piece, counted as we go (linear in the row's length).
+    let mut before = 0usize;
     for piece in row.split(',') {
-        let lead = piece.len() - piece.trim_start().len();
-        let col = row[..start + lead].chars().count() + 1;
-        out.push((col, piece.trim()));
-        start += piece.len() + 1;
+        let trimmed = piece.trim_start();
+        let lead = piece[..piece.len() - trimmed.len()].chars().count();
+        out.push((before + lead + 1, piece.trim()));
+        before += piece.chars().count() + 1;
     }
     out
 }
