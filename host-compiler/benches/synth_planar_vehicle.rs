@@ -2,7 +2,8 @@
 //! certifies and the trajectory count, with the default generator (Algorithm 4 with §5.3's δ
 //! maximisation) against the earlier one (Algorithm 1 with the SCP generator, no optimisation) measured in
 //! the same run as the baseline; how close §5.3 brings Algorithm 4's seeds to the ceiling Goal sets on δ
-//! (its depth in the CAF metric); and the trajectories the same synthesis needs without §5.3.
+//! (its depth in the CAF metric); the trajectories the same synthesis needs without §5.3; and the
+//! falsifier's least run robustness on the image, with its runs per second.
 //!
 //! One run is a whole pipeline of seconds, so this is timed directly rather than sampled by criterion;
 //! the runs are deterministic (seeded), so the figures other than time repeat exactly.
@@ -130,6 +131,22 @@ fn main() {
         ..BundleSettings::default()
     };
     let (plain, _) = run_with(&problem, Generator::Algorithm4, Some(off));
+    // The falsifier on the image Algorithm 4 made (issue #18), with its default budget.
+    let img = shared_types::image::decode(&after.image).expect("the image decodes");
+    let settings = host_compiler::verify::attack::AttackSettings::default();
+    let judge = host_compiler::verify::Judge::new(&task);
+    let at = host_compiler::verify::attack::attack(&judge, &img, &settings).expect("attack runs");
+    println!(
+        "attack: {} runs ({} starts × ≤ {} runs per ball, {} balls) in {:.2} s; least robustness {:.5e}; violations {}",
+        at.evaluations,
+        settings.starts_per_ball,
+        settings.evaluations_per_start,
+        img.n_trajectories(),
+        at.seconds,
+        at.worst_robustness,
+        at.violations
+    );
+    assert_eq!(at.violations, 0, "the falsifier found a violation: {:?}", at.first_violations);
     let count = |s: &Synthesis| s.trajectories.len() as f64;
     write_rows(
         "synth_planar_vehicle",
@@ -173,6 +190,19 @@ fn main() {
                     "δ after ÷ Goal's depth in the CAF metric ({ceiling:.5}), median of {} seeds (target ≥ 0.99)",
                     seeds.len()
                 ),
+            ),
+            Row::new(
+                "attack_worst_margin_planar_vehicle",
+                at.worst_robustness,
+                &format!(
+                    "least run robustness found (target > 0), {} runs, {} starts × ≤ {} per ball",
+                    at.evaluations, settings.starts_per_ball, settings.evaluations_per_start
+                ),
+            ),
+            Row::new(
+                "attack_evals_per_s",
+                at.evaluations as f64 / at.seconds,
+                "closed-loop runs/s",
             ),
             // ratio: value itself (> 1: §5.3 saves trajectories).
             Row::with_baseline(

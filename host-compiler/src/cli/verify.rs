@@ -26,6 +26,14 @@ pub struct VerifyArgs {
     /// Print the result as JSON.
     #[arg(long)]
     pub json: bool,
+    /// Also run the falsifier (feedforward images): multi-start Nelder–Mead over each ball, its shell and
+    /// its f32 neighbourhood for the start whose run has the least robustness
+    /// ([`crate::verify::attack`]); any violation it finds fails the verification.
+    #[arg(long)]
+    pub attack: bool,
+    /// Closed-loop runs per Nelder–Mead start of the falsifier (two starts per ball).
+    #[arg(long, default_value_t = 120, requires = "attack")]
+    pub attack_evals: usize,
 }
 
 pub fn run(a: &VerifyArgs) -> Outcome {
@@ -65,8 +73,19 @@ pub fn run(a: &VerifyArgs) -> Outcome {
         a.seed.unwrap_or(problem.seed ^ 0x7e51f1),
     )
     .into_diagnostic()?;
+    let attack = if a.attack {
+        let settings = crate::verify::attack::AttackSettings::builder()
+            .evaluations_per_start(a.attack_evals)
+            .seed(a.seed.unwrap_or(problem.seed ^ 0xa77ac))
+            .build()
+            .map_err(crate::verify::attack::AttackError::from)
+            .bad_input()?;
+        Some(crate::verify::attack::attack(&judge, &img, &settings).bad_input()?)
+    } else {
+        None
+    };
     if a.json {
-        let j = serde_json::json!({ "recheck": rc, "monte_carlo": r });
+        let j = serde_json::json!({ "recheck": rc, "monte_carlo": r, "attack": attack });
         println!("{}", serde_json::to_string_pretty(&j).into_diagnostic()?);
     } else {
         println!(
@@ -105,6 +124,20 @@ pub fn run(a: &VerifyArgs) -> Outcome {
             r.after_goal_input_excursions, r.after_goal_unsafe
         );
         println!("violations {}", r.violations);
+        if let Some(at) = &attack {
+            println!(
+                "attack: {} runs in {:.2} s ({:.0} runs/s); least robustness {} from x0 = {:?}; violations {}",
+                at.evaluations,
+                at.seconds,
+                at.evaluations as f64 / at.seconds.max(1e-9),
+                margin(at.worst_robustness),
+                at.worst_start,
+                at.violations
+            );
+            for v in &at.first_violations {
+                println!("attack violation from x0 = {:?}: {v:?}", v.x0);
+            }
+        }
     }
     if rc.failures > 0 {
         let first = rc
@@ -122,6 +155,9 @@ pub fn run(a: &VerifyArgs) -> Outcome {
     }
     if r.violations > 0 {
         return Err(miette::miette!("{} violations", r.violations).into());
+    }
+    if let Some(at) = attack.filter(|at| at.violations > 0) {
+        return Err(miette::miette!("the falsifier found {} violating runs", at.violations).into());
     }
     if r.interior_runs < a.runs {
         return Err(miette::miette!(

@@ -12,6 +12,7 @@
 //! Goal (inputs outside the set, entering Unsafe) is counted and reported separately, not as a violation:
 //! a trajectory whose table the optimiser cut at k* (§5.3) certifies nothing after it.
 
+pub mod attack;
 pub mod feedforward;
 pub mod pwa;
 
@@ -214,6 +215,17 @@ pub fn input_slack(input: &InputBound, u: &[f64]) -> f64 {
 /// Run the closed loop from `x0` with the image's evaluator. Violations are decided by set membership at every
 /// sample and sub-sample; with `margins` the signed distances at the samples are recorded too (costlier).
 pub fn run(judge: &Judge<'_>, image: &Image<'_>, x0: &[f64], margins: bool) -> RunOutcome {
+    run_visiting(judge, image, x0, margins, &mut |_| {})
+}
+
+/// [`run`], showing `visit` the state at every sample the run reaches (x0 first), in order.
+pub fn run_visiting(
+    judge: &Judge<'_>,
+    image: &Image<'_>,
+    x0: &[f64],
+    margins: bool,
+    visit: &mut dyn FnMut(&[f64]),
+) -> RunOutcome {
     let metric = crate::geometry::Metric::euclidean(x0.len());
     let mut ctl = Controller::new(*image);
     let mut x = x0.to_vec();
@@ -234,6 +246,7 @@ pub fn run(judge: &Judge<'_>, image: &Image<'_>, x0: &[f64], margins: bool) -> R
     };
     check(&x, &mut out, true);
     for k in 0..=judge.steps {
+        visit(&x);
         if out.goal_step.is_none() && judge.goal().contains(&x) {
             out.reached_goal = true;
             out.goal_step = Some(k);

@@ -49,5 +49,6 @@ mod spec_hybrid;
 mod spec_parse;
 mod synth_algorithm4;
 mod synth_end_to_end;
+mod verify_attack;
 mod verify_refuses;
 mod verify_semantics;

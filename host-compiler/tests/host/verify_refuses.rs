@@ -15,7 +15,7 @@ fn bin() -> Command {
     Command::new(env!("CARGO_BIN_EXE_host-compiler"))
 }
 
-fn spec() -> &'static str {
+pub(crate) fn spec() -> &'static str {
     concat!(
         env!("CARGO_MANIFEST_DIR"),
         "/../examples/double-integrator.toml"
@@ -29,7 +29,7 @@ fn dir() -> PathBuf {
 }
 
 /// The double-integrator image, synthesised once for the module.
-fn image() -> &'static [u8] {
+pub(crate) fn image() -> &'static [u8] {
     static IMAGE: OnceLock<Vec<u8>> = OnceLock::new();
     IMAGE.get_or_init(|| {
         let task = Task::new(host_compiler::spec::load(spec()).unwrap()).unwrap();
@@ -44,7 +44,7 @@ fn image() -> &'static [u8] {
 }
 
 /// Writes `bytes` with its CRC recomputed (as an attacker would) under `name`.
-fn write_patched(name: &str, mut bytes: Vec<u8>) -> PathBuf {
+pub(crate) fn write_patched(name: &str, mut bytes: Vec<u8>) -> PathBuf {
     let crc = compute_crc(&bytes).unwrap();
     bytes[28..32].copy_from_slice(&crc.to_le_bytes());
     decode(&bytes).expect("the patched image still decodes");
@@ -54,7 +54,7 @@ fn write_patched(name: &str, mut bytes: Vec<u8>) -> PathBuf {
 }
 
 /// `verify` with `flags`, or a short Monte Carlo when none are given.
-fn verify(img: &Path, flags: &[&str]) -> Output {
+pub(crate) fn verify(img: &Path, flags: &[&str]) -> Output {
     let flags = if flags.is_empty() {
         &["--runs", "200", "--per-ball", "4"][..]
     } else {
@@ -69,7 +69,7 @@ fn verify(img: &Path, flags: &[&str]) -> Output {
 }
 
 /// Standard output and error as one line of words (miette wraps and frames long messages).
-fn text(o: &Output) -> String {
+pub(crate) fn text(o: &Output) -> String {
     let all = format!(
         "{}\n{}",
         String::from_utf8_lossy(&o.stdout),

@@ -1,0 +1,79 @@
+//! The falsifier (`verify::attack`, `verify --attack`): on a certified image it finds no violation and
+//! reports a positive least robustness; on an image whose balls were enlarged past what was certified
+//! (CRC recomputed, so only the search can tell) it finds runs that fail.
+
+use crate::verify_refuses::{image, spec, text, verify, write_patched};
+use host_compiler::task::Task;
+use host_compiler::verify::attack::{attack, AttackError, AttackSettings};
+use host_compiler::verify::Judge;
+use shared_types::image::decode;
+
+fn task() -> Task {
+    Task::new(host_compiler::spec::load(spec()).unwrap()).unwrap()
+}
+
+#[test]
+fn a_certified_image_survives_the_attack() {
+    let task = task();
+    let judge = Judge::new(&task);
+    let img = decode(image()).unwrap();
+    let s = AttackSettings::default();
+    let r = attack(&judge, &img, &s).unwrap();
+    assert_eq!(r.violations, 0, "{:?}", r.first_violations);
+    assert!(r.worst_robustness > 0.0, "{}", r.worst_robustness);
+    assert!(r.worst_robustness.is_finite());
+    // Every ball was searched from both starts: at least the initial simplices.
+    let n = img.n();
+    assert!(r.evaluations >= img.n_trajectories() * s.starts_per_ball * (n + 1), "{}", r.evaluations);
+    // Deterministic for a seed.
+    let again = attack(&judge, &img, &s).unwrap();
+    assert_eq!((again.evaluations, again.worst_robustness), (r.evaluations, r.worst_robustness));
+}
+
+#[test]
+fn balls_enlarged_past_their_certificate_are_caught() {
+    let bytes = image().to_vec();
+    let img = decode(&bytes).unwrap();
+    let base = img.payload().delta.as_ptr() as usize - bytes.as_ptr() as usize;
+    let mut patched = bytes.clone();
+    for t in 0..img.n_trajectories() {
+        let at = base + 4 * t;
+        let d = f32::from_le_bytes(bytes[at..at + 4].try_into().unwrap());
+        patched[at..at + 4].copy_from_slice(&(20.0 * d).to_le_bytes());
+    }
+    let p = write_patched("radius-x20-attack.img", patched);
+    let patched = std::fs::read(&p).unwrap();
+    let img = decode(&patched).unwrap();
+    let task = task();
+    let r = attack(&Judge::new(&task), &img, &AttackSettings::default()).unwrap();
+    assert!(
+        r.violations > 0 && r.worst_robustness < 0.0,
+        "violations {}, least robustness {}",
+        r.violations,
+        r.worst_robustness
+    );
+    assert!(!r.first_violations.is_empty());
+    assert!(r.first_violations.iter().all(|v| v.violated()));
+}
+
+#[test]
+fn the_budget_must_fit_the_dimension() {
+    let task = task();
+    let img = decode(image()).unwrap();
+    let s = AttackSettings::builder().evaluations_per_start(3).build().unwrap();
+    match attack(&Judge::new(&task), &img, &s) {
+        Err(AttackError::Budget { got: 3, n, need }) => assert_eq!(need, n + 2),
+        other => panic!("{other:?}"),
+    }
+    assert!(AttackSettings::builder().starts_per_ball(0).build().is_err());
+}
+
+#[test]
+fn verify_attack_reports_the_search() {
+    let p = write_patched("untouched-attack.img", image().to_vec());
+    let o = verify(&p, &["--runs", "50", "--per-ball", "2", "--attack", "--attack-evals", "40"]);
+    let out = text(&o);
+    assert_eq!(o.status.code(), Some(0), "{out}");
+    assert!(out.contains("attack: "), "{out}");
+    assert!(out.contains("violations 0"), "{out}");
+}
