@@ -80,7 +80,8 @@ pub fn run(a: &SynthArgs) -> Outcome {
     }
     let img_path = a.out.join("controller.img");
     // An image the verification refutes is not written (the report says why).
-    let certified = s.verify.violations == 0;
+    let attack_violations = s.attack.as_ref().map_or(0, |a| a.violations);
+    let certified = s.verify.violations == 0 && attack_violations == 0;
     if certified {
         write_atomic(&img_path, &s.image)?;
     }
@@ -149,6 +150,12 @@ pub fn run(a: &SynthArgs) -> Outcome {
         s.verify.boundary_runs - s.verify.boundary_rejected,
         s.verify.violations
     );
+    if let Some(at) = &s.attack {
+        println!(
+            "falsifier         {} runs, least run robustness {:.4e}, {} violations",
+            at.evaluations, at.worst_robustness, at.violations
+        );
+    }
     if s.verify.after_goal_input_excursions + s.verify.after_goal_unsafe > 0 {
         println!(
             "after Goal        {} runs left the input set, {} entered Unsafe under the terminal law (not judged: the task ends in Goal)",
@@ -176,9 +183,10 @@ pub fn run(a: &SynthArgs) -> Outcome {
     for w in &s.warnings {
         eprintln!("warning: {w}");
     }
-    if s.verify.violations > 0 {
+    if s.verify.violations > 0 || attack_violations > 0 {
         return Err(miette::miette!(
-            "verification found {} violations: the image is NOT certified and was not written",
+            "verification found {} violations (Monte Carlo) and {attack_violations} (falsifier): the image \
+             is NOT certified and was not written",
             s.verify.violations
         )
         .into());

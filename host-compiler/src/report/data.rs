@@ -67,6 +67,8 @@ pub struct VerifySummary {
     /// judged; shown so that nobody mistakes the terminal law for a certified one).
     pub after_goal_input_excursions: usize,
     pub after_goal_unsafe: usize,
+    /// The falsifier, when it ran: its runs, the least run robustness it found, its violations.
+    pub attack: Option<(usize, f64, usize)>,
 }
 
 /// Everything `report.html` shows.

@@ -36,12 +36,16 @@ pub fn verdict(data: &ReportData) -> Verdict {
     );
     let (verification_ok, verify_text) = match &data.verify {
         Some(v) => (
-            v.violations == 0 && v.runs > 0,
+            v.violations == 0 && v.runs > 0 && v.attack.is_none_or(|a| a.2 == 0),
             format!(
-                "verification {} runs, {} violation{}",
+                "verification {} runs, {} violation{}{}",
                 count(v.runs),
                 count(v.violations),
-                if v.violations == 1 { "" } else { "s" }
+                if v.violations == 1 { "" } else { "s" },
+                match v.attack {
+                    Some((_, _, 0)) | None => String::new(),
+                    Some((_, _, bad)) => format!(", the falsifier found {}", count(bad)),
+                }
             ),
         ),
         None => (false, "verification not run".to_string()),
@@ -474,6 +478,18 @@ fn verification(h: &mut String, v: Option<&VerifySummary>) {
                     ("Worst Goal margin", margin(v.worst_goal_margin)),
                     ("Worst Unsafe margin", margin(v.worst_unsafe_margin)),
                     ("Worst input margin", margin(v.worst_input_margin)),
+                    (
+                        "Falsifier",
+                        match v.attack {
+                            Some((runs, worst, bad)) => format!(
+                                "{} runs (Nelder–Mead over each ball), least run robustness {}, {} violations",
+                                count(runs),
+                                margin(worst),
+                                count(bad)
+                            ),
+                            None => "not run".to_string(),
+                        },
+                    ),
                     (
                         "After Goal (not judged)",
                         format!(

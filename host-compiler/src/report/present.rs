@@ -239,6 +239,10 @@ pub fn report_data(
             worst_input_margin: s.verify.worst_input_margin,
             after_goal_input_excursions: s.verify.after_goal_input_excursions,
             after_goal_unsafe: s.verify.after_goal_unsafe,
+            attack: s
+                .attack
+                .as_ref()
+                .map(|a| (a.evaluations, a.worst_robustness, a.violations)),
         }),
         timings: s.timings.clone(),
         warnings,

@@ -17,6 +17,7 @@ use crate::certify::{self, Loop, LoopConstants};
 use crate::cover::{grow, Cover, CoverageEstimate, GrowError, GrowOptions};
 use crate::optimize::BundleSettings;
 use crate::task::Task;
+use crate::verify::attack::{attack, AttackError, AttackReport, AttackSettings};
 use crate::verify::{monte_carlo, Judge, VerifyReport};
 use faer::Mat;
 use std::sync::atomic::AtomicBool;
@@ -53,6 +54,9 @@ pub struct SynthOptions {
     pub cancel: Arc<AtomicBool>,
     /// Called after each accepted trajectory (default none).
     pub on_accept: Option<AcceptHook>,
+    /// The falsifier run on the feedforward image after the Monte Carlo (default: one start of at most 40
+    /// runs per ball, seeded by the spec's seed); `None` skips it.
+    pub attack: Option<AttackSettings>,
 }
 
 impl Default for SynthOptions {
@@ -68,6 +72,11 @@ impl Default for SynthOptions {
             optimizer: None,
             cancel: Arc::new(AtomicBool::new(false)),
             on_accept: None,
+            attack: Some(AttackSettings {
+                starts_per_ball: 1,
+                evaluations_per_start: 40,
+                seed: 0,
+            }),
         }
     }
 }
@@ -93,6 +102,8 @@ pub struct Synthesis {
     /// Working samples drawn (the denominator of the snapshots).
     pub working_samples: usize,
     pub verify: VerifyReport,
+    /// What the falsifier found on the image (when [`SynthOptions::attack`] asked for it).
+    pub attack: Option<AttackReport>,
     pub timings: Vec<(String, f64)>,
     pub warnings: Vec<String>,
 }
@@ -110,6 +121,8 @@ pub enum SynthError {
     ImageRejected(shared_types::image::ImageError),
     #[error(transparent)]
     Verify(#[from] crate::verify::MetricError),
+    #[error(transparent)]
+    Attack(#[from] AttackError),
 }
 
 /// Run the whole pipeline.
@@ -181,6 +194,25 @@ pub fn synthesize(task: &Task, opts: &SynthOptions) -> Result<Synthesis, SynthEr
             verify.violations
         ));
     }
+    let attack = match &opts.attack {
+        Some(a) => {
+            let t3 = Instant::now();
+            let settings = AttackSettings {
+                seed: a.seed ^ problem.seed,
+                ..a.clone()
+            };
+            let r = attack(&judge, &img, &settings)?;
+            timings.push(("falsifier".to_string(), t3.elapsed().as_secs_f64()));
+            if r.violations > 0 {
+                warnings.push(format!(
+                    "the falsifier found {} violating runs: the image is NOT certified",
+                    r.violations
+                ));
+            }
+            Some(r)
+        }
+        None => None,
+    };
     Ok(Synthesis {
         K: design.K.clone(),
         P: design.P.clone(),
@@ -196,6 +228,7 @@ pub fn synthesize(task: &Task, opts: &SynthOptions) -> Result<Synthesis, SynthEr
         snapshots,
         working_samples: opts.working_samples,
         verify,
+        attack,
         timings,
         warnings,
     })

@@ -151,6 +151,7 @@ fn sample() -> ReportData {
             worst_input_margin: 0.004,
             after_goal_input_excursions: 3,
             after_goal_unsafe: 0,
+            attack: Some((600, 0.0123, 0)),
         }),
         optimization: None,
         timings: vec![
@@ -274,6 +275,16 @@ fn verdict_is_green_only_when_the_lower_bound_meets_the_target_and_verification_
         v.text
     );
     assert!(render_html(&data).contains("class=\"verdict ok\""));
+
+    // The falsifier's row is shown; a violation it found turns the verdict red.
+    assert!(render_html(&data).contains("600 runs (Nelder–Mead over each ball)"));
+    let mut caught = data.clone();
+    if let Some(v) = caught.verify.as_mut() {
+        v.attack = Some((600, -0.02, 3));
+    }
+    let v = verdict(&caught);
+    assert!(!v.ok && !v.verification_ok, "{}", v.text);
+    assert!(v.text.contains("the falsifier found 3"), "{}", v.text);
 
     // Lower bound exactly at the target: met.
     let mut at = data.clone();
