@@ -13,7 +13,9 @@
 //! so on [s₀, s₀ + Δ] ‖ẋ‖ ≤ e^{‖A‖_F Δ}‖ẋ(s₀)‖ =: L. Hence min φ ≥ (φ(s₀) + φ(s₀+Δ) − LΔ)/2 on the
 //! interval: when that is positive the interval holds no event, otherwise it is halved. The first entry
 //! is located to [`Hybrid::EVENT_TOLERANCE`]·h; a tangency that dips into a guard by less than
-//! L·tolerance can go unseen, and nothing larger can. The reset is applied at the event and the flow
+//! L·tolerance can go unseen, and nothing larger can. A flow that slides along a guard closer than the
+//! tolerance resolves would need ever more halvings: after [`Hybrid::MAX_PROBES_PER_PERIOD`] evaluations
+//! in one period the step is refused as undecided. The reset is applied at the event and the flow
 //! continues in the new location with the same input for the rest of the period.
 //!
 //! As a [`Plant`], each location is its own linear affine plant sampled by an exact ZOH (the error
@@ -168,6 +170,13 @@ pub enum FlowError {
     Zeno { loc: Location, max: usize },
     #[error("the flow left the finite numbers in location {0}")]
     NonFinite(Location),
+    /// The flow runs so close to a guard for so long that deciding whether it enters would take more
+    /// than [`Hybrid::MAX_PROBES_PER_PERIOD`] exact-flow evaluations.
+    #[error(
+        "in location {loc} the flow grazes a guard too closely to decide within {max} evaluations of the \
+         exact flow in one period"
+    )]
+    Undecided { loc: Location, max: usize },
 }
 
 /// An event the flow took inside a period.
@@ -224,6 +233,9 @@ impl Hybrid {
     pub const MAX_EVENTS_PER_PERIOD: usize = 16;
     /// Probes per period (each probe interval is then halved only where an event may lie).
     const PROBES: usize = 8;
+    /// Exact-flow evaluations the event search may spend in one period (a flow that slides along a guard
+    /// at a distance near the tolerance would otherwise halve without end).
+    pub const MAX_PROBES_PER_PERIOD: usize = 20_000;
 
     /// A checked automaton: every location of the same n and m, edges between existing locations,
     /// guards and invariants with rows of length n, resets n×n.
@@ -316,6 +328,7 @@ impl Hybrid {
         (s0, x0, p0): (f64, &[f64], f64),
         (s1, x1, p1): (f64, &[f64], f64),
         tol: f64,
+        budget: &mut usize,
     ) -> Result<Option<(f64, Vec<f64>)>, FlowError> {
         if p0 <= 0.0 {
             return Ok(Some((s0, x0.to_vec())));
@@ -332,13 +345,22 @@ impl Hybrid {
             // than L·tol (module doc).
             return Ok((p1 <= 0.0).then(|| (s1, x1.to_vec())));
         }
+        if *budget == 0 {
+            return Err(FlowError::Undecided {
+                loc,
+                max: Self::MAX_PROBES_PER_PERIOD,
+            });
+        }
+        *budget -= 1;
         let sm = s0 + dt / 2.0;
         let xm = self.advance(loc, x0, u, sm - s0)?;
         let pm = guard.margin(&xm);
-        if let Some(hit) = self.first_entry(loc, u, guard, (s0, x0, p0), (sm, &xm, pm), tol)? {
+        if let Some(hit) =
+            self.first_entry(loc, u, guard, (s0, x0, p0), (sm, &xm, pm), tol, budget)?
+        {
             return Ok(Some(hit));
         }
-        self.first_entry(loc, u, guard, (sm, &xm, pm), (s1, x1, p1), tol)
+        self.first_entry(loc, u, guard, (sm, &xm, pm), (s1, x1, p1), tol, budget)
     }
 
     /// One sample period from (`loc`, `x`) with `u` held: the exact flow, every internal edge taken at the
@@ -351,6 +373,7 @@ impl Hybrid {
         let tol = Self::EVENT_TOLERANCE * h;
         let (mut loc, mut x, mut t) = (loc, x.to_vec(), 0.0f64);
         let mut events = Vec::new();
+        let mut budget = Self::MAX_PROBES_PER_PERIOD;
         'segment: loop {
             let internal: Vec<usize> = (0..self.edges.len())
                 .filter(|&e| self.edges[e].from == loc && self.edges[e].kind == EdgeKind::Internal)
@@ -374,7 +397,7 @@ impl Hybrid {
                         continue;
                     }
                     if let Some((s, xe)) =
-                        self.first_entry(loc, u, g, (s0, &x0, p0), (s1, &x1, p1), tol)?
+                        self.first_entry(loc, u, g, (s0, &x0, p0), (s1, &x1, p1), tol, &mut budget)?
                     {
                         if hit.as_ref().is_none_or(|(sh, _, _)| s < *sh) {
                             hit = Some((s, xe, e));

@@ -243,3 +243,39 @@ fn a_malformed_automaton_is_refused_with_the_reason() {
         FlowError::UnknownLocation(7)
     );
 }
+
+#[test]
+fn a_flow_sliding_along_a_guard_is_undecided_not_a_hang() {
+    // ẋ = (0, 1) at x1 = −10⁻¹³: parallel to the guard {x1 ≥ 0}, closer to it than the tolerance can
+    // separate from an entry over a whole period.
+    let slide = ContinuousPlant::new(Mat::zeros(2, 2), mat(&[&[0.0], &[0.0]]), vec![0.0, 1.0]).unwrap();
+    let mode = |name: &str| Mode {
+        name: name.into(),
+        flow: slide.clone(),
+        invariant: None,
+    };
+    let hy = Hybrid::new(
+        vec![mode("a"), mode("b")],
+        vec![Edge {
+            from: 0,
+            to: 1,
+            guard: half(&[-1.0, 0.0], 0.0),
+            reset: Reset::identity(2),
+            kind: EdgeKind::Internal,
+        }],
+        1.0,
+    )
+    .unwrap();
+    let e = hy.flow(0, &[-1e-13, 0.0], &[0.0]).unwrap_err();
+    assert_eq!(
+        e,
+        FlowError::Undecided {
+            loc: 0,
+            max: Hybrid::MAX_PROBES_PER_PERIOD
+        }
+    );
+    // A millimetre away the same flow is decided at once: no event.
+    let step = hy.flow(0, &[-1e-3, 0.0], &[0.0]).unwrap();
+    assert!(step.events.is_empty());
+    assert_eq!(step.loc, 0);
+}
