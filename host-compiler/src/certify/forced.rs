@@ -31,6 +31,7 @@ use crate::geometry::{
 use crate::model::hybrid::{Edge, EdgeKind};
 use crate::trajectory::Nominal;
 use faer::linalg::solvers::Solve;
+use crate::linalg::to_row_major;
 use faer::Mat;
 
 /// One segment of a forced-switching run.
@@ -105,16 +106,6 @@ pub enum ForcedError {
     },
 }
 
-fn flat(m: &Mat<f64>) -> Vec<f64> {
-    let mut v = Vec::with_capacity(m.nrows() * m.ncols());
-    for i in 0..m.nrows() {
-        for j in 0..m.ncols() {
-            v.push(m[(i, j)]);
-        }
-    }
-    v
-}
-
 /// Unsafe ∪ (ℝⁿ \\ invariant), over borrowed sets: the distance is the least of the two (exact); the
 /// depth is the larger of the two depths (a lower bound, as for [`crate::geometry::Union`]).
 struct UnsafeOrOutside<'a> {
@@ -172,7 +163,7 @@ fn safe_transition(
         return Err(ForcedError::SingularReset { segment });
     }
     let Q = R.transpose() * P * R * (1.0 / (delta * delta));
-    let ball = Ellipsoid::new(cp, flat(&crate::linalg::sym(Q.as_ref()))).map_err(geo)?;
+    let ball = Ellipsoid::new(cp, to_row_major(crate::linalg::sym(Q.as_ref()).as_ref())).map_err(geo)?;
     let guard = region(&edge.guard, n).map_err(geo)?;
     Intersection::new(vec![Box::new(guard), Box::new(ball)]).map_err(geo)
 }

@@ -188,8 +188,7 @@ pub fn attack(
             need: n + 2,
         });
     }
-    let pis = super::inverse_sqrt_metric(image)?;
-    let pis: Vec<f64> = (0..n * n).map(|k| pis[(k / n, k % n)]).collect();
+    let pis = crate::linalg::to_row_major(super::inverse_sqrt_metric(image)?.as_ref());
     let names: Vec<String> = (1..=n).map(|i| format!("x{i}")).collect();
     let t0 = Instant::now();
     let per_ball: Vec<Seen> = (0..image.n_trajectories())
