@@ -175,8 +175,7 @@ impl<'a, 'b> Pieces<'a, 'b> {
             return (d, LocalGrad { k, gx, gv });
         };
         let fn_ = p_norm(self.lp.P, &f);
-        let rho = self.lc.phi * fn_;
-        let val = (d - rho - self.lc.phi * self.lc.beta * eps_f32) / self.lc.gamma;
+        let val = self.unsafe_margin(nom, k, d, eps_f32);
         if fn_ > 0.0 {
             // ∇_f ‖f‖_P = P f/‖f‖_P; f = A_c x + B_c (K̂x + v).
             let pf: Vec<f64> = mat_vec(self.lp.P, &f).iter().map(|v| v / fn_).collect();
