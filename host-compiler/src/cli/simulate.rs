@@ -1,5 +1,7 @@
 //! `host-compiler simulate SPEC IMAGE --x0 …`: one closed-loop run through the shared f32 evaluator,
-//! written as CSV (t, x…, u…, status).
+//! written as CSV (t, x…, u…, status), and a verdict on standard error: when Goal was first reached,
+//! the least distance to Unsafe before it, the steps out of the certified envelope, the inputs outside
+//! the input set, and the run's reach-avoid robustness ([`crate::property::Property`], Euclidean).
 
 use super::{decode_image, read_image, task_of, BadInput, Exit, Failure, Outcome};
 use crate::verify::check_matches;
@@ -73,14 +75,23 @@ pub fn run(a: &SimulateArgs) -> Outcome {
     writeln!(out, "{}", head.join(",")).into_diagnostic()?;
     let mut x = a.x0.clone();
     let mut last = shared_types::eval::Input::zero(m);
+    let mut states: Vec<Vec<f64>> = Vec::with_capacity(steps + 1);
+    let (mut outside, mut bad_inputs) = (0usize, 0usize);
     for k in 0..=steps {
+        states.push(x.clone());
         let xf: Vec<f32> = x.iter().map(|&v| v as f32).collect();
         let (u, status) = match ctl.step(&xf) {
             Ok(u) => (u, "ok".to_string()),
-            Err(s) => (ctl.fallback(&xf, &last), format!("{s}")),
+            Err(s) => {
+                outside += 1;
+                (ctl.fallback(&xf, &last), format!("{s}"))
+            }
         };
         last = u;
         let uf: Vec<f64> = u.as_slice().iter().map(|&v| v as f64).collect();
+        if crate::verify::input_slack(&task.property.input, &uf) < 0.0 {
+            bad_inputs += 1;
+        }
         let row: Vec<String> = std::iter::once(format!("{}", k as f64 * problem.plant.period))
             .chain(x.iter().map(|v| format!("{v}")))
             .chain(uf.iter().map(|v| format!("{v}")))
@@ -89,5 +100,48 @@ pub fn run(a: &SimulateArgs) -> Outcome {
         writeln!(out, "{}", row.join(",")).into_diagnostic()?;
         x = task.plant.step(0, &x, &uf);
     }
+    out.flush().into_diagnostic()?;
+    eprintln!("{}", verdict(&task, &states, outside, bad_inputs));
     Ok(Exit::Success)
+}
+
+/// The run's verdict, for people (module doc). Distances are Euclidean.
+fn verdict(task: &crate::task::Task, states: &[Vec<f64>], outside: usize, bad_inputs: usize) -> String {
+    use crate::property::Property;
+    let h = task.plant.period();
+    let prop = &task.property;
+    let metric = crate::geometry::Metric::euclidean(task.plant.n());
+    let goal_step = states
+        .iter()
+        .take(task.steps + 1)
+        .position(|x| prop.goal.contains(x));
+    let judged = goal_step.map_or(states.len(), |k| k + 1);
+    let goal = match goal_step {
+        Some(k) => format!("Goal reached at step {k} (t = {:.4} s)", k as f64 * h),
+        None => format!("Goal not reached within T = {} s", prop.horizon),
+    };
+    let unsafe_ = match prop.unsafe_region() {
+        None => "no Unsafe set".to_string(),
+        Some(us) => {
+            let (k, d) = states[..judged]
+                .iter()
+                .enumerate()
+                .map(|(k, x)| (k, -us.signed_dist(x, &metric).value))
+                .fold((0, f64::INFINITY), |b, c| if c.1 < b.1 { c } else { b });
+            format!("least distance to Unsafe {d:.4e} at step {k}{}", if d < 0.0 { " (INSIDE)" } else { "" })
+        }
+    };
+    let names: Vec<String> = (1..=task.plant.n()).map(|i| format!("x{i}")).collect();
+    let times: Vec<f64> = (0..states.len()).map(|k| k as f64 * h).collect();
+    let columns: Vec<Vec<f64>> = (0..task.plant.n())
+        .map(|i| states.iter().map(|x| x[i]).collect())
+        .collect();
+    let rho = crate::robustness::mtl::Trace::new(times, names, columns)
+        .ok()
+        .and_then(|t| prop.trace_robustness(&t).ok());
+    format!(
+        "verdict: {goal}; {unsafe_}; {outside} steps out of the certified envelope (fallback applied); \
+         {bad_inputs} inputs outside the input set; reach-avoid robustness of the samples {}",
+        rho.map_or("not defined (the run left the finite numbers)".to_string(), |r| format!("{r:.4e}"))
+    )
 }

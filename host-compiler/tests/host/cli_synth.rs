@@ -81,6 +81,28 @@ fn synth_then_verify_simulate_and_inspect() {
         "never reached the goal: {csv}"
     );
     assert!(lines[1..].iter().all(|l| l.ends_with(",ok")), "{csv}");
+    // The verdict on standard error agrees with the CSV: Goal reached at the first row inside the goal
+    // box, nothing out of the envelope, a positive robustness.
+    let err = String::from_utf8_lossy(&o.stderr);
+    let first_in_goal = lines[1..]
+        .iter()
+        .position(|l| {
+            l.split(',')
+                .nth(1)
+                .and_then(|v| v.parse::<f64>().ok())
+                .is_some_and(|v| (0.95..=1.05).contains(&v))
+        })
+        .unwrap();
+    assert!(err.contains(&format!("Goal reached at step {first_in_goal} ")), "{err}");
+    assert!(err.contains(" 0 steps out of the certified envelope"), "{err}");
+    let rho: f64 = err
+        .rsplit("robustness of the samples ")
+        .next()
+        .unwrap()
+        .trim()
+        .parse()
+        .unwrap();
+    assert!(rho > 0.0, "{err}");
 
     // An initial state outside every ball: the evaluator says so and the fallback is applied.
     let o = bin()
@@ -94,6 +116,9 @@ fn synth_then_verify_simulate_and_inspect() {
         csv.lines().nth(1).unwrap().ends_with("out-of-envelope") || csv.contains("envelope"),
         "{csv}"
     );
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("3 steps out of the certified envelope"), "{err}");
+    assert!(err.contains("Goal not reached"), "{err}");
 
     let o = bin()
         .args(["inspect", "--json"])
