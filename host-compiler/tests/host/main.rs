@@ -16,6 +16,7 @@ mod caf_status;
 mod certify_bounds;
 mod certify_forced;
 mod cli_exit;
+mod cli_limits;
 mod cli_synth;
 mod emit_image;
 mod emit_pwa;
