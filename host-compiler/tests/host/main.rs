@@ -33,6 +33,7 @@ mod mtl_depth;
 mod mtl_errors;
 mod mtl_props;
 mod mtl_semantics;
+mod no_trajectory;
 mod optimize_delta;
 mod optimize_gradient;
 mod optimize_potential;
