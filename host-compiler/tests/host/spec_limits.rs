@@ -169,3 +169,32 @@ fn a_polytope_with_too_many_rows_is_refused_at_its_matrix() {
         .as_ref()
         .map_or_else(|e| e.kind() != ErrorKind::Capacity, |_| true));
 }
+
+#[test]
+fn a_hybrid_plant_beyond_the_image_capacities_is_refused() {
+    let src = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../examples/hybrid-internal-4-25.toml"
+    ))
+    .unwrap();
+    let left = "[[plant.location]]\nname = \"left\"";
+    assert!(src.contains(left), "test bug: the example changed");
+    // Nine locations (the image holds 8): refused at the ninth.
+    let extra: String = (0..7)
+        .map(|i| format!("[[plant.location]]\nname = \"extra{i}\"\nA = [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]\nB = [[1.0], [0.0], [0.0]]\n\n"))
+        .collect();
+    let nine = src.replacen(left, &format!("{extra}{left}"), 1);
+    let e = spec::parse(&nine, "spec.toml").expect_err("must be refused");
+    assert_eq!(e.kind(), ErrorKind::Capacity, "{}", e.message());
+    assert!(e.message().contains("9 locations"), "{}", e.message());
+    let ninth = nine.match_indices("[[plant.location]]").nth(8).unwrap().0;
+    assert_eq!(e.line_col(), Some(pos(&nine, &nine[ninth..], 0)));
+    // A location of 13 states: refused at its A, before its entries or B are read.
+    let a = "A = [\n  [-1.2,  2.1, -0.3],\n  [-8.4, -3.8, -0.6],\n  [-0.6,  4.3, -2.9],\n]";
+    assert!(src.contains(a), "test bug: the example changed");
+    let big = src.replacen(a, &format!("A = {}", matrix(13, 13)), 1);
+    let e = spec::parse(&big, "spec.toml").expect_err("must be refused");
+    assert_eq!(e.kind(), ErrorKind::Capacity, "{}", e.message());
+    assert!(e.message().contains("n = 13"), "{}", e.message());
+    assert_eq!(e.line_col(), Some(pos(&big, "A = [[0.0", 4)));
+}
