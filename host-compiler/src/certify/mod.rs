@@ -291,6 +291,68 @@ impl Certificate {
     pub fn is_certified(&self) -> bool {
         self.delta > 0.0 && self.delta_stored > 0.0
     }
+
+    /// min(δ_Goal, δ_Unsafe between samples, δ_Input): the radius Theorem 4.7 allows before r_crit;
+    /// NaN when a part could not be computed.
+    pub fn parts_min(&self) -> f64 {
+        let p = [self.delta_goal, self.delta_unsafe_intersample, self.delta_input];
+        if p.iter().any(|v| v.is_nan()) {
+            return f64::NAN;
+        }
+        p.into_iter().fold(f64::INFINITY, f64::min)
+    }
+
+    /// The part that limits δ: the smallest of δ_Goal, δ_Unsafe (between samples) and δ_Input, or
+    /// r_crit when those are positive but r_crit is not below their minimum (ties: Goal, Unsafe, Input).
+    pub fn binding(&self) -> Binding {
+        let d = self.parts_min();
+        if d.is_nan() {
+            return Binding::NotComputed;
+        }
+        if d > 0.0 && (self.r_crit >= d || self.r_crit.is_nan()) {
+            return Binding::RCrit {
+                r_crit: self.r_crit,
+                parts_min: d,
+            };
+        }
+        if self.delta_goal == d {
+            Binding::Goal(d)
+        } else if self.delta_unsafe_intersample == d {
+            Binding::Unsafe(d)
+        } else {
+            Binding::Input(d)
+        }
+    }
+}
+
+/// The part of a [`Certificate`] that limits its δ ([`Certificate::binding`]), with its value.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Binding {
+    /// δ_Goal (4.13): the ball reaches Goal within the table (T) only if it is > 0.
+    Goal(f64),
+    /// δ_Unsafe (4.14) after the inter-sample and rounding margins.
+    Unsafe(f64),
+    /// δ_Input (4.15) with the rounding margin.
+    Input(f64),
+    /// The three parts are positive, but the critical radius r_crit (3.83) is not below their minimum.
+    RCrit { r_crit: f64, parts_min: f64 },
+    /// A part could not be computed (a non-finite distance on the nominal).
+    NotComputed,
+}
+
+impl std::fmt::Display for Binding {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Binding::Goal(v) => write!(f, "δ_Goal = {v:.3e}"),
+            Binding::Unsafe(v) => write!(f, "δ_Unsafe = {v:.3e} (between samples)"),
+            Binding::Input(v) => write!(f, "δ_Input = {v:.3e}"),
+            Binding::RCrit { r_crit, parts_min } => write!(
+                f,
+                "r_crit = {r_crit:.3e}, not below min(δ_Goal, δ_Unsafe, δ_Input) = {parts_min:.3e}"
+            ),
+            Binding::NotComputed => write!(f, "a δ part that could not be computed (non-finite)"),
+        }
+    }
 }
 
 /// Largest absolute state components over the tube of radius r around x̃(κ).

@@ -157,12 +157,13 @@ pub struct SynthArgs {
     /// Output directory: controller.img, report.html and certificate.json are written there.
     #[arg(long, default_value = "out")]
     pub out: PathBuf,
-    /// Monte Carlo runs from the certified cover in the final verification.
-    #[arg(long, default_value_t = 10_000)]
-    pub verify_runs: usize,
+    /// Monte Carlo runs from the certified cover in the final verification; at most 1000000
+    /// (`verify::MAX_RUNS`).
+    #[arg(long, default_value_t = 10_000, value_parser = clap::value_parser!(u64).range(..=crate::verify::MAX_RUNS))]
+    pub verify_runs: u64,
     /// A recorded trajectory to certify and use before any is generated (repeatable): CSV with a comment
     /// line `# x0 = …` giving the initial state, a header `t,v1,…,vm` and one row of reference inputs per
-    /// sample period.
+    /// sample period; at most as many rows as the spec's horizon has samples.
     #[arg(long = "import", value_name = "FILE.csv")]
     pub imports: Vec<PathBuf>,
     /// How trajectories after the first are made: `algorithm4` (§5.4: grow from the boundary of the

@@ -10,6 +10,9 @@ use shared_types::eval::Controller;
 use std::io::Write;
 use std::path::PathBuf;
 
+/// Largest `--steps`: the run is written row by row, but each step is simulated and printed.
+pub const MAX_STEPS: u64 = 1_000_000;
+
 /// Arguments of `simulate`.
 #[derive(clap::Args, Debug)]
 pub struct SimulateArgs {
@@ -25,9 +28,9 @@ pub struct SimulateArgs {
         required = true
     )]
     pub x0: Vec<f64>,
-    /// Number of steps (default: the spec's horizon).
-    #[arg(long)]
-    pub steps: Option<usize>,
+    /// Number of steps (default: the spec's horizon); at most 1000000 ([`MAX_STEPS`]).
+    #[arg(long, value_parser = clap::value_parser!(u64).range(..=MAX_STEPS))]
+    pub steps: Option<u64>,
     /// Write the CSV here instead of standard output.
     #[arg(long)]
     pub out: Option<PathBuf>,
@@ -55,7 +58,8 @@ pub fn run(a: &SimulateArgs) -> Outcome {
     }
     let task = task_of(problem)?;
     let problem = &task.problem;
-    let steps = a.steps.unwrap_or(problem.horizon_steps());
+    // Within MAX_STEPS (clap checked), so the conversion is exact.
+    let steps = a.steps.map_or(problem.horizon_steps(), |s| s as usize);
     let mut ctl = Controller::new(img);
     let mut out: Box<dyn Write> = match &a.out {
         Some(p) => Box::new(

@@ -35,9 +35,11 @@ pub fn run(a: &SynthArgs) -> Outcome {
     prepare_out(&a.out)?;
     let problem = crate::spec::load(&a.spec).bad_input()?;
     let (n, m, h) = (problem.plant.n(), problem.plant.m(), problem.plant.period);
+    // A recording is at most the horizon long (which `spec::limits` keeps within the table capacity).
+    let max_rows = problem.horizon_steps();
     let mut imports = Vec::new();
     for p in &a.imports {
-        let rec = crate::trajectory::csv::load_recording(p, n, m, h)
+        let rec = crate::trajectory::csv::load_recording(p, n, m, h, max_rows)
             .map_err(|e| miette::miette!("{e}"))
             .bad_input()?;
         imports.push((p.display().to_string(), rec));
@@ -62,7 +64,7 @@ pub fn run(a: &SynthArgs) -> Outcome {
     // Without a terminal the bars are hidden; log each certified trajectory instead.
     let log = !a.quiet && !std::io::IsTerminal::is_terminal(&std::io::stderr());
     let opts = SynthOptions {
-        verify_interior: a.verify_runs,
+        verify_interior: a.verify_runs as usize, // ≤ verify::MAX_RUNS (clap)
         progress: !a.quiet,
         imports,
         generator: a.generator,

@@ -21,8 +21,7 @@ pub fn run(a: &SynthArgs, task: &Task, s: &Synthesis) -> Outcome {
         .progress(!a.quiet)
         .build()
         .into_diagnostic()?;
-    let pwa = learn_pwa(task, s, &settings)
-        .map_err(|e| miette::miette!("PWA learning: {e}"))?;
+    let pwa = learn_pwa(task, s, &settings).map_err(|e| miette::miette!("PWA learning: {e}"))?;
     let img = shared_types::image::decode(&pwa.image)
         .map_err(|e| miette::miette!("the emitted PWA image is rejected: {e:?}"))?;
     let judge = Judge::new(task);
@@ -37,7 +36,7 @@ pub fn run(a: &SynthArgs, task: &Task, s: &Synthesis) -> Outcome {
         &judge,
         &img,
         &init_centres,
-        a.verify_runs,
+        a.verify_runs as usize,
         problem.seed ^ 0x7e51f1,
         64,
     )
@@ -148,7 +147,7 @@ pub fn run(a: &SynthArgs, task: &Task, s: &Synthesis) -> Outcome {
         )
         .into());
     }
-    if mc.runs < a.verify_runs {
+    if (mc.runs as u64) < a.verify_runs {
         return Err(miette::miette!(
             "only {} of {} initial states could be drawn in F",
             mc.runs,

@@ -14,12 +14,13 @@ pub struct VerifyArgs {
     pub spec: PathBuf,
     /// Controller image.
     pub image: PathBuf,
-    /// Initial states drawn uniformly in the certified cover (the part of Init the image accepts).
-    #[arg(long, default_value_t = 10_000)]
-    pub runs: usize,
-    /// Initial states on the boundary of each ball.
-    #[arg(long, default_value_t = 32)]
-    pub per_ball: usize,
+    /// Initial states drawn uniformly in the certified cover (the part of Init the image accepts); at
+    /// most 1000000 (`verify::MAX_RUNS`: each start is held in memory).
+    #[arg(long, default_value_t = 10_000, value_parser = clap::value_parser!(u64).range(..=crate::verify::MAX_RUNS))]
+    pub runs: u64,
+    /// Initial states on the boundary of each ball; at most 4096 (`verify::MAX_PER_BALL`).
+    #[arg(long, default_value_t = 32, value_parser = clap::value_parser!(u64).range(..=crate::verify::MAX_PER_BALL))]
+    pub per_ball: u64,
     /// Seed of the Monte Carlo draw (default: the spec's seed).
     #[arg(long)]
     pub seed: Option<u64>,
@@ -31,12 +32,15 @@ pub struct VerifyArgs {
     /// ([`crate::verify::attack`]); any violation it finds fails the verification.
     #[arg(long)]
     pub attack: bool,
-    /// Closed-loop runs per Nelder–Mead start of the falsifier (two starts per ball).
-    #[arg(long, default_value_t = 120, requires = "attack")]
-    pub attack_evals: usize,
+    /// Closed-loop runs per Nelder–Mead start of the falsifier (two starts per ball); at least n + 2, at
+    /// most 100000.
+    #[arg(long, default_value_t = 120, requires = "attack", value_parser = clap::value_parser!(u64).range(3..=100_000))]
+    pub attack_evals: u64,
 }
 
 pub fn run(a: &VerifyArgs) -> Outcome {
+    // Within `verify::MAX_RUNS` and `MAX_PER_BALL` (clap checked), so the conversions are exact.
+    let (runs, per_ball) = (a.runs as usize, a.per_ball as usize);
     let problem = crate::spec::load(&a.spec).bad_input()?;
     let bytes = read_image(&a.image)?;
     let img = decode_image(&bytes, &a.image)?;
@@ -51,7 +55,7 @@ pub fn run(a: &VerifyArgs) -> Outcome {
         .bad_input()?;
     let pwa = img.mode() == shared_types::image::Mode::PwaFeedback;
     // Nothing would be simulated: the Monte Carlo part would pass vacuously.
-    if a.runs == 0 && (pwa || a.per_ball == 0) {
+    if runs == 0 && (pwa || per_ball == 0) {
         return Err(Failure::bad_input(miette::miette!(
             "--runs 0{}: no closed-loop run would be checked; ask for at least one run",
             if pwa { "" } else { " --per-ball 0" }
@@ -61,21 +65,21 @@ pub fn run(a: &VerifyArgs) -> Outcome {
     let problem = &task.problem;
     let judge = Judge::new(&task);
     if pwa {
-        return run_pwa(a, &judge, &img);
+        return run_pwa(a, runs, &judge, &img);
     }
     let rc = crate::verify::feedforward::recheck(&judge, &img)
         .map_err(|e| miette::miette!("{}: {e}", a.image.display()))?;
     let r = monte_carlo(
         &judge,
         &img,
-        a.runs,
-        a.per_ball,
+        runs,
+        per_ball,
         a.seed.unwrap_or(problem.seed ^ 0x7e51f1),
     )
     .into_diagnostic()?;
     let attack = if a.attack {
         let settings = crate::verify::attack::AttackSettings::builder()
-            .evaluations_per_start(a.attack_evals)
+            .evaluations_per_start(a.attack_evals as usize)
             .seed(a.seed.unwrap_or(problem.seed ^ 0xa77ac))
             .build()
             .map_err(crate::verify::attack::AttackError::from)
@@ -159,11 +163,11 @@ pub fn run(a: &VerifyArgs) -> Outcome {
     if let Some(at) = attack.filter(|at| at.violations > 0) {
         return Err(miette::miette!("the falsifier found {} violating runs", at.violations).into());
     }
-    if r.interior_runs < a.runs {
+    if r.interior_runs < runs {
         return Err(miette::miette!(
             "only {} of {} initial states could be drawn in the certified cover",
             r.interior_runs,
-            a.runs
+            runs
         )
         .into());
     }
@@ -182,11 +186,16 @@ fn margin(v: f64) -> String {
 
 /// PWA images (Ch. 6): the independent certificate recheck and closed-loop Monte Carlo from F
 /// ([`crate::verify::pwa`]); runs terminate upon entering Goal (Theorem 6.5).
-fn run_pwa(a: &VerifyArgs, judge: &Judge<'_>, img: &shared_types::image::Image<'_>) -> Outcome {
+fn run_pwa(
+    a: &VerifyArgs,
+    runs: usize,
+    judge: &Judge<'_>,
+    img: &shared_types::image::Image<'_>,
+) -> Outcome {
     let rc = crate::verify::pwa::recheck(judge, img).map_err(|e| miette::miette!(e))?;
     // The image does not mark which balls start a trajectory: all runs start anywhere in F.
     let mc =
-        crate::verify::pwa::monte_carlo_pwa(judge, img, &[], a.runs, a.seed.unwrap_or(0x7e51f1), 0)
+        crate::verify::pwa::monte_carlo_pwa(judge, img, &[], runs, a.seed.unwrap_or(0x7e51f1), 0)
             .into_diagnostic()?;
     if a.json {
         let j = serde_json::json!({ "recheck": rc, "monte_carlo": mc });
@@ -220,11 +229,11 @@ fn run_pwa(a: &VerifyArgs, judge: &Judge<'_>, img: &shared_types::image::Image<'
         )
         .into());
     }
-    if mc.runs < a.runs {
+    if mc.runs < runs {
         return Err(miette::miette!(
             "only {} of {} initial states could be drawn in F",
             mc.runs,
-            a.runs
+            runs
         )
         .into());
     }

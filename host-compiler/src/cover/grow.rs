@@ -18,7 +18,7 @@ use crate::optimize::{maximize_delta, BundleSettings};
 use crate::property::input_scale;
 use crate::task::Task;
 use crate::trajectory::csv::Recording;
-use crate::trajectory::generate::{generate, GenProblem, GenSettings};
+use crate::trajectory::generate::{generate, GenError, GenProblem, GenSettings};
 use crate::trajectory::Nominal;
 use indicatif::{ProgressBar, ProgressStyle};
 use rand::SeedableRng;
@@ -64,11 +64,129 @@ pub enum GrowError {
     #[error("no certified trajectory at all: interrupted before any trajectory was certified")]
     InterruptedEmpty,
     #[error(
-        "no certified trajectory at all: {failed} seeds from Init gave no certifiable trajectory"
+        "no certified trajectory at all: {failed} seeds from Init gave no certifiable trajectory; {attempts}"
     )]
-    NoSeed { failed: usize },
-    #[error("no certified trajectory at all: no trajectory could be certified")]
-    NothingCertified,
+    NoSeed {
+        failed: usize,
+        attempts: Box<Attempts>,
+    },
+    #[error("no certified trajectory at all: no trajectory could be certified; {attempts}")]
+    NothingCertified { attempts: Box<Attempts> },
+}
+
+/// What the attempts that certified nothing ended with, for the "no certified trajectory" errors: the
+/// certificate of the best attempt (largest min(δ_Goal, δ_Unsafe, δ_Input)) and its binding part, whether
+/// any trajectory tried reached Goal within T (δ_Goal > 0), and the generator's refusals.
+#[derive(Debug, Default)]
+pub struct Attempts {
+    /// The horizon T in seconds (for the message).
+    pub horizon: f64,
+    /// Trajectories certified and refused (before and after §5.3 count separately; where the generator
+    /// found none, the loop without a reference, v ≡ 0, from that seed).
+    pub certified: usize,
+    /// The best of them.
+    pub best: Option<Certificate>,
+    /// The largest δ_Goal over them (−∞ when there is none).
+    pub best_goal: f64,
+    /// Seeds from which the generator found no trajectory to certify, and its first reason.
+    pub not_generated: usize,
+    pub first_refusal: Option<GenError>,
+}
+
+impl Attempts {
+    fn new(horizon: f64) -> Self {
+        Self {
+            horizon,
+            best_goal: f64::NEG_INFINITY,
+            ..Self::default()
+        }
+    }
+
+    /// A refused certificate.
+    fn certificate(&mut self, c: &Certificate) {
+        self.certified += 1;
+        if c.delta_goal > self.best_goal {
+            self.best_goal = c.delta_goal;
+        }
+        let score = |c: &Certificate| {
+            let d = c.parts_min();
+            if d.is_nan() {
+                f64::NEG_INFINITY
+            } else {
+                d
+            }
+        };
+        if self.best.as_ref().is_none_or(|b| score(c) > score(b)) {
+            self.best = Some(c.clone());
+        }
+    }
+
+    /// A seed the generator found no trajectory from.
+    fn refusal(&mut self, e: GenError) {
+        self.not_generated += 1;
+        if self.first_refusal.is_none() {
+            self.first_refusal = Some(e);
+        }
+    }
+
+    /// Whether some trajectory tried reached Goal within T with a positive margin (δ_Goal > 0).
+    pub fn goal_reached(&self) -> bool {
+        self.best_goal > 0.0
+    }
+}
+
+impl std::fmt::Display for Attempts {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let t = self.horizon;
+        match &self.best {
+            Some(best) => {
+                write!(
+                    f,
+                    "the best of {} trajectories tried is bound by {} (δ_Goal {:.3e}, δ_Unsafe {:.3e} \
+                     between samples, δ_Input {:.3e}, r_crit {:.3e}); ",
+                    self.certified,
+                    best.binding(),
+                    best.delta_goal,
+                    best.delta_unsafe_intersample,
+                    best.delta_input,
+                    best.r_crit
+                )?;
+                if self.goal_reached() {
+                    write!(
+                        f,
+                        "Goal was reached within T = {t} s by some trajectory tried (largest δ_Goal \
+                         {:.3e} > 0)",
+                        self.best_goal
+                    )?;
+                } else {
+                    write!(
+                        f,
+                        "Goal was not reached within T = {t} s from any sample tried (largest δ_Goal \
+                         {:.3e} ≤ 0)",
+                        self.best_goal
+                    )?;
+                }
+                if let Some(e) = &self.first_refusal {
+                    write!(
+                        f,
+                        "; from {} seeds the generator found no trajectory (first: {e}), and the loop \
+                         without a reference (v = 0) was certified from them instead",
+                        self.not_generated
+                    )?;
+                }
+                Ok(())
+            }
+            None => match &self.first_refusal {
+                Some(e) => write!(
+                    f,
+                    "from every seed ({}) the generator found no trajectory to certify, so Goal was not \
+                     reached within T = {t} s from any sample tried (first: {e})",
+                    self.not_generated
+                ),
+                None => write!(f, "no trajectory was tried"),
+            },
+        }
+    }
 }
 
 /// A coverage estimate through the image's f32 selection: the estimate, the uncovered fresh samples, the image.
@@ -152,19 +270,24 @@ pub fn grow(
     // Generated references are held over blocks of `reference_hold` samples (move blocking); recorded
     // ones are used as recorded. Algorithm 4's seeds reuse a held reference, and §5.3 keeps it held.
     let hold = problem.synthesis.reference_hold;
-    let generated = |x0: &[f64]| -> Option<Vec<Vec<f64>>> {
-        let mut v = generate(&gp, x0, &gs).ok()?.nominal.v;
+    let generated = |x0: &[f64]| -> Result<Vec<Vec<f64>>, GenError> {
+        let mut v = generate(&gp, x0, &gs)?.nominal.v;
         crate::trajectory::hold::project(&mut v, hold);
-        Some(v)
+        Ok(v)
     };
-    let make = |x0: &[f64]| -> Option<CoverTrajectory> {
-        let v = generated(x0)?;
+    // A generated, certified trajectory, or why not (the refused certificate, or the generator's reason).
+    let make = |x0: &[f64]| -> Result<CoverTrajectory, Result<Certificate, GenError>> {
+        let v = generated(x0).map_err(Err)?;
         let (nominal, certificate) = shipped(x0, &v);
-        accept(&certificate).then(|| CoverTrajectory {
-            source: "generated".into(),
-            nominal,
-            certificate,
-        })
+        if accept(&certificate) {
+            Ok(CoverTrajectory {
+                source: "generated".into(),
+                nominal,
+                certificate,
+            })
+        } else {
+            Err(Ok(certificate))
+        }
     };
     let bundle = match opts.optimizer {
         Some(b) => b.clone().to_builder(),
@@ -183,9 +306,12 @@ pub fn grow(
         (before, after, opt)
     };
     // A new seed trajectory from the SCP generator, then §5.3 (Algorithm 4's start and its fallback).
+    // Where the generator finds nothing: the certificate of the loop without a reference (v ≡ 0), so that
+    // a "no trajectory" error still says which δ part fails and how far Goal is.
+    let unforced = |x0: &[f64]| shipped(x0, &vec![vec![0.0; m]; steps]).1;
     let seed_scp = |x0: &[f64]| {
         let v = generated(x0)?;
-        Some(optimise(x0, &v))
+        Ok::<_, GenError>(optimise(x0, &v))
     };
 
     let init = SampleBox {
@@ -194,6 +320,7 @@ pub fn grow(
     };
     let mut work_rng = ChaCha8Rng::seed_from_u64(problem.seed);
     let mut work = init.samples(opts.working_samples, &mut work_rng);
+    let mut attempts = Attempts::new(problem.horizon);
     // Recorded trajectories first: the nominal of the shipped loop from the recorded x0 and v, certified as is.
     for (name, rec) in opts.imports {
         if rec.x0.len() != n || rec.v.iter().any(|r| r.len() != m) {
@@ -215,6 +342,7 @@ pub fn grow(
                 None,
             );
         } else {
+            attempts.certificate(&cert);
             warnings.push(format!(
                 "{name}: not used, its certified robustness is not positive (δ_Goal {:.3e}, δ_Unsafe {:.3e}, δ_Input {:.3e}, r_crit {:.3e})",
                 cert.delta_goal, cert.delta_unsafe_intersample, cert.delta_input, cert.r_crit
@@ -318,7 +446,7 @@ pub fn grow(
             bars.set_round(round, "new seed trajectory (SCP)");
             let made = seed_scp(&x0);
             let mut ok = false;
-            if let Some((before, (nominal, certificate), opt)) = made {
+            if let Ok((before, (nominal, certificate), opt)) = made {
                 ok = accept(&certificate)
                     && !outside(
                         std::slice::from_ref(&CoverTrajectory {
@@ -423,7 +551,7 @@ pub fn grow(
             let mut got = false;
             for (s, r) in seeds.iter().zip(made) {
                 match r {
-                    Some((before, (nominal, certificate), opt)) if !got && accept(&certificate) => {
+                    Ok((before, (nominal, certificate), opt)) if !got && accept(&certificate) => {
                         cover.record(
                             OptStart::new(round, None, s, before, opt),
                             CoverTrajectory {
@@ -436,8 +564,18 @@ pub fn grow(
                         );
                         got = true;
                     }
-                    Some(_) if got => {}
-                    _ => {
+                    Ok(_) if got => {}
+                    r => {
+                        match r {
+                            Ok(((_, before), (_, after), _)) => {
+                                attempts.certificate(&before);
+                                attempts.certificate(&after);
+                            }
+                            Err(e) => {
+                                attempts.refusal(e);
+                                attempts.certificate(&unforced(s));
+                            }
+                        }
                         failed += 1;
                         work.retain(|x| alg4::dist(P.as_ref(), x, s) > 0.0125);
                     }
@@ -445,7 +583,10 @@ pub fn grow(
             }
             if !got && work.is_empty() {
                 bars.clear();
-                return Err(GrowError::NoSeed { failed });
+                return Err(GrowError::NoSeed {
+                    failed,
+                    attempts: Box::new(attempts),
+                });
             }
             cover.snapshot(round, &work, &discarded);
             continue;
@@ -583,16 +724,22 @@ pub fn grow(
                     seeds.push(s);
                 }
                 bars.set_round(round, "generating (SCP, Algorithm 1)");
-                let made: Vec<Option<CoverTrajectory>> =
-                    seeds.par_iter().map(|s| make(s)).collect();
+                let made: Vec<_> = seeds.par_iter().map(|s| make(s)).collect();
                 let mut progress = false;
                 for (s, t) in seeds.iter().zip(made) {
                     match t {
-                        Some(t) => {
+                        Ok(t) => {
                             cover.push(t, Some(&on_accept));
                             progress = true;
                         }
-                        None => {
+                        Err(why) => {
+                            match why {
+                                Ok(c) => attempts.certificate(&c),
+                                Err(e) => {
+                                    attempts.refusal(e);
+                                    attempts.certificate(&unforced(s));
+                                }
+                            }
                             failed += 1;
                             // Drop the seed and its close neighbours from the working set so the loop moves
                             // on; the final fresh sample will find any hole this leaves.
@@ -602,7 +749,10 @@ pub fn grow(
                 }
                 if !progress && work.is_empty() && cover.trajectories.is_empty() {
                     bars.clear();
-                    return Err(GrowError::NoSeed { failed });
+                    return Err(GrowError::NoSeed {
+                        failed,
+                        attempts: Box::new(attempts),
+                    });
                 }
             }
         }
@@ -610,7 +760,9 @@ pub fn grow(
     };
     bars.clear();
     if cover.trajectories.is_empty() {
-        return Err(GrowError::NothingCertified);
+        return Err(GrowError::NothingCertified {
+            attempts: Box::new(attempts),
+        });
     }
     Ok(Grown {
         cover,

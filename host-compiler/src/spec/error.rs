@@ -47,6 +47,9 @@ pub enum ErrorKind {
     Seed,
     /// A `[synthesis]` setting is out of its documented range.
     Setting,
+    /// A size the spec implies (dimension, samples in the horizon, table rows, polytope rows, coverage
+    /// samples) exceeds the image's capacity or the work budget (`spec::limits`).
+    Capacity,
 }
 
 impl ErrorKind {
@@ -71,6 +74,7 @@ impl ErrorKind {
             ErrorKind::Period => "spec::period",
             ErrorKind::Seed => "spec::seed",
             ErrorKind::Setting => "spec::setting",
+            ErrorKind::Capacity => "spec::capacity",
         }
     }
 }

@@ -31,8 +31,11 @@ use serde::Deserialize;
 use toml::Spanned;
 
 use super::error::{ErrorKind, SpecError};
+use super::limits::MAX_LOCATIONS;
 use super::raw::{RawMat, RawPlant, RawTime, RawVec};
-use super::validate::{matrix_cols, vector, Cols, Dim};
+use super::validate::{
+    capacity, input_dim, matrix_cols, polytope_rows, state_dim, vector, Cols, Dim,
+};
 use super::{InitBox, Matrix, Plant, TimeDomain};
 
 /// `[[plant.location]]`.
@@ -122,17 +125,14 @@ pub(crate) fn is_hybrid(p: &RawPlant) -> bool {
     !p.location.is_empty() || !p.edge.is_empty() || p.initial.is_some()
 }
 
-fn polytope(
-    raw: &Spanned<RawPolytope>,
-    what: &str,
-    n: usize,
-) -> Result<PolytopeDesc, SpecError> {
+fn polytope(raw: &Spanned<RawPolytope>, what: &str, n: usize) -> Result<PolytopeDesc, SpecError> {
     let r = raw.get_ref();
     let mut rows = Dim::free();
     let mut cols = Dim {
         n: Some(n),
         why: format!("the state has n = {n}"),
     };
+    polytope_rows(&r.A, &format!("{what}.A"))?;
     let A = matrix_cols(&r.A, &format!("{what}.A"), &mut rows, Cols::Of(&mut cols))?;
     rows.why = format!("{what}.A has {} rows", A.rows);
     let b = vector(&r.b, &format!("{what}.b"), &mut rows)?;
@@ -209,6 +209,17 @@ pub(crate) fn plant(
         )
         .at(raw.span(), "no [[plant.location]] in this plant"));
     }
+    if p.location.len() > MAX_LOCATIONS {
+        return Err(capacity(
+            format!(
+                "the plant has {} locations; an image holds at most {MAX_LOCATIONS}",
+                p.location.len()
+            ),
+            p.location[MAX_LOCATIONS].span(),
+            format!("location {} of at most {MAX_LOCATIONS}", MAX_LOCATIONS + 1),
+            "merge locations with the same dynamics",
+        ));
+    }
     let mut n = Dim::free();
     let mut m = Dim::free();
     let mut names: Vec<String> = Vec::new();
@@ -217,25 +228,32 @@ pub(crate) fn plant(
         let l = l.get_ref();
         let name = l.name.get_ref();
         if name.trim().is_empty() {
-            return Err(
-                SpecError::new(ErrorKind::BadValue, format!("location {} has an empty name", i + 1))
-                    .at(l.name.span(), "empty name"),
-            );
+            return Err(SpecError::new(
+                ErrorKind::BadValue,
+                format!("location {} has an empty name", i + 1),
+            )
+            .at(l.name.span(), "empty name"));
         }
         if let Some(j) = names.iter().position(|x| x == name) {
             return Err(SpecError::new(
                 ErrorKind::BadValue,
-                format!("location name \"{name}\" is used twice (locations {} and {})", j + 1, i + 1),
+                format!(
+                    "location name \"{name}\" is used twice (locations {} and {})",
+                    j + 1,
+                    i + 1
+                ),
             )
             .at(l.name.span(), "repeated name")
             .at(p.location[j].get_ref().name.span(), "first used here"));
         }
         let key = format!("plant.location[{i}]");
+        state_dim(&l.A, &format!("{key}.A"))?;
         let A = matrix_cols(&l.A, &format!("{key}.A"), &mut n, Cols::Square)?;
         if i == 0 {
             n.why = format!("{key}.A is {0}×{0}", A.rows);
         }
         let B = matrix_cols(&l.B, &format!("{key}.B"), &mut n, Cols::Of(&mut m))?;
+        input_dim(&B, &l.B, &format!("{key}.B"))?;
         let c = match &l.c {
             Some(v) => vector(v, &format!("{key}.c"), &mut n)?,
             None => vec![0.0; A.rows],
@@ -291,7 +309,12 @@ pub(crate) fn plant(
                     n: Some(n),
                     why: format!("a reset maps the state (n = {n}) to the state"),
                 };
-                let R = matrix_cols(&rs.R, &format!("{key}.reset.R"), &mut dim.clone(), Cols::Of(&mut dim))?;
+                let R = matrix_cols(
+                    &rs.R,
+                    &format!("{key}.reset.R"),
+                    &mut dim.clone(),
+                    Cols::Of(&mut dim),
+                )?;
                 let rr = match &rs.r {
                     Some(v) => vector(v, &format!("{key}.reset.r"), &mut dim)?,
                     None => vec![0.0; n],

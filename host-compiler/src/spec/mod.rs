@@ -34,10 +34,17 @@
 //!
 //! All matrices in the validated types are dense, row-major `Vec<f64>` in a [`Matrix`]
 //! (`Matrix::to_faer` converts). Validation stops at the first error.
+//!
+//! # Limits
+//! Every size a spec implies is bounded before any work ([`limits`], which has the table): n ≤ 12,
+//! m ≤ 6, at most 8 locations, at most 32 768 samples in the horizon and 32 768 table rows for the whole
+//! trajectory budget (samples × `max_trajectories`, `max_trajectories` ≤ 256), at most 64 rows per
+//! polytope, and coverage samples (from `coverage_tolerance` and `confidence`) within 512 MiB.
 
 pub mod checks;
 pub mod error;
 pub mod hybrid;
+pub mod limits;
 mod raw;
 pub mod sets;
 pub mod settings;
@@ -278,13 +285,7 @@ impl Problem {
     /// Number of sample periods that fit in the horizon: ⌊T / period⌋, rounding up when T / period is within
     /// 1e-9 (relative) of the next integer, so T = 5, period = 0.01 gives 500 steps.
     pub fn horizon_steps(&self) -> usize {
-        let r = self.horizon / self.plant.period;
-        let up = r.ceil();
-        if up - r <= 1e-9 * up.max(1.0) {
-            up as usize
-        } else {
-            r.floor() as usize
-        }
+        limits::steps_in(self.horizon, self.plant.period)
     }
 }
 

@@ -25,7 +25,7 @@ use toml::Spanned;
 use super::checks::box_rows;
 use super::error::{ErrorKind, SpecError};
 use super::raw::{RawSet, RawSetsFile};
-use super::validate::{bounded, check_box, matrix, vector, Dim};
+use super::validate::{bounded, check_box, matrix, polytope_rows, vector, Dim};
 use super::Matrix;
 use crate::geometry::{Ball, Ellipsoid, GeometryError, InOutput, Polytope, Region};
 
@@ -327,6 +327,7 @@ pub(crate) fn set_from_raw(raw: &Spanned<RawSet>, ctx: &SetCtx<'_>) -> Result<Se
                 n: None,
                 why: format!("{what}.b has one entry per row of A"),
             };
+            polytope_rows(a_raw, &format!("{what}.A"))?;
             let A = matrix(a_raw, &format!("{what}.A"), &mut rows, &mut dim)?;
             let b = vector(b_raw, &format!("{what}.b"), &mut rows)?;
             if A.data.iter().all(|v| *v == 0.0) {

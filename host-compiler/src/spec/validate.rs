@@ -7,8 +7,9 @@ use std::ops::Range;
 use toml::Spanned;
 
 use super::checks::{self, GoalVerdict, Meet};
-use super::hybrid;
 use super::error::{ErrorKind, SpecError};
+use super::hybrid;
+use super::limits::{self, MAX_M, MAX_N, MAX_STEPS, MAX_TRAJECTORIES};
 use super::raw::{RawF, RawInput, RawMat, RawSpec, RawSynthesis, RawTime, RawVec};
 use super::sets::{named_sets, set_from_raw, SetCtx};
 use super::settings::{ControllerMode, SynthesisSettings};
@@ -155,6 +156,68 @@ pub(crate) fn matrix(
     matrix_cols(raw, name, rows, Cols::Of(cols))
 }
 
+/// A size beyond a limit of [`limits`]: a [`ErrorKind::Capacity`] error at `span`.
+pub(crate) fn capacity(
+    message: String,
+    span: Range<usize>,
+    label: impl Into<String>,
+    help: impl Into<String>,
+) -> SpecError {
+    SpecError::new(ErrorKind::Capacity, message)
+        .at(span, label)
+        .help(help)
+}
+
+/// The state dimension of `A` (its row count, checked before its entries are read) within
+/// [`MAX_N`].
+pub(crate) fn state_dim(raw: &RawMat, name: &str) -> Result<(), SpecError> {
+    let n = raw.get_ref().len();
+    if n > MAX_N {
+        return Err(capacity(
+            format!("{name} has {n} rows: the state dimension n = {n} exceeds the image's capacity n ≤ {MAX_N}"),
+            raw.span(),
+            format!("n = {n} > {MAX_N}"),
+            "the firmware evaluates at most 12 states; reduce the model (e.g. a balanced truncation)",
+        ));
+    }
+    Ok(())
+}
+
+/// The input dimension of `B` within [`MAX_M`].
+pub(crate) fn input_dim(B: &Matrix, raw: &RawMat, name: &str) -> Result<(), SpecError> {
+    if B.cols > MAX_M {
+        return Err(capacity(
+            format!(
+                "{name} has {} columns: the input dimension m = {} exceeds the image's capacity m ≤ {MAX_M}",
+                B.cols, B.cols
+            ),
+            raw.span(),
+            format!("m = {} > {MAX_M}", B.cols),
+            "the firmware applies at most 6 inputs",
+        ));
+    }
+    Ok(())
+}
+
+/// The rows of a polytope's `A` (counted before its entries are read) within
+/// [`limits::MAX_POLYTOPE_ROWS`].
+pub(crate) fn polytope_rows(raw: &RawMat, name: &str) -> Result<(), SpecError> {
+    let k = raw.get_ref().len();
+    if k > limits::MAX_POLYTOPE_ROWS {
+        return Err(capacity(
+            format!(
+                "{name} has {k} rows: a polytope may have at most {} (every distance to it is a \
+                 quadratic program over its rows, solved at every sample of every candidate trajectory)",
+                limits::MAX_POLYTOPE_ROWS
+            ),
+            raw.span(),
+            format!("{k} rows > {}", limits::MAX_POLYTOPE_ROWS),
+            "remove redundant rows, or describe the set by a box or an ellipsoid",
+        ));
+    }
+    Ok(())
+}
+
 /// A finite number of magnitude at most [`MAX_MAGNITUDE`]. Every number of a spec passes here (or
 /// through [`bounded`]), so no sum, difference or product of a few of them overflows downstream.
 pub(crate) fn finite(x: &RawF, name: &str) -> Result<f64, SpecError> {
@@ -292,6 +355,23 @@ pub(crate) fn problem(src: &str) -> Result<Problem, SpecError> {
         .at(raw.horizon.span(), "shorter than plant.period")
         .at(p.period.span(), "the period"));
     }
+    let steps = limits::steps_in(horizon, period);
+    if steps > MAX_STEPS {
+        return Err(capacity(
+            format!(
+                "horizon {horizon} s at plant.period {period} s is {} samples; a trajectory's table may \
+                 have at most {MAX_STEPS} rows (the image's capacity), one per sample",
+                if steps == usize::MAX { "more than 2⁶⁴".to_string() } else { steps.to_string() }
+            ),
+            raw.horizon.span(),
+            format!("more than {MAX_STEPS} periods"),
+            format!(
+                "shorten the horizon to at most {} s or lengthen the period",
+                MAX_STEPS as f64 * period
+            ),
+        )
+        .at(p.period.span(), "the period"));
+    }
     let seed = *raw.seed.get_ref();
     let seed = u64::try_from(seed).map_err(|_| {
         SpecError::new(
@@ -321,10 +401,12 @@ fn single_plant(raw: &Spanned<super::raw::RawPlant>) -> Result<Plant, SpecError>
         return Err(missing(if p.A.is_none() { "A" } else { "B" }));
     };
     let mut n = Dim::free();
+    state_dim(pa, "plant.A")?;
     let A = matrix_cols(pa, "plant.A", &mut n, Cols::Square)?;
     n.why = format!("plant.A is {0}×{0}", A.rows);
     let mut m = Dim::free();
     let B = matrix_cols(pb, "plant.B", &mut n, Cols::Of(&mut m))?;
+    input_dim(&B, pb, "plant.B")?;
     let time = match p.time.get_ref() {
         RawTime::Continuous => TimeDomain::Continuous,
         RawTime::Discrete => TimeDomain::Discrete,
@@ -408,9 +490,39 @@ fn problem_sets(
 
     // ---- synthesis, mtl ----
     let synthesis = match &raw.synthesis {
-        Some(s) => synthesis(s.get_ref())?,
+        Some(s) => synthesis(s.get_ref(), n_state)?,
         None => SynthesisSettings::default(),
     };
+    // ---- sizes: the whole budget's table within the image ----
+    let steps = limits::steps_in(horizon, plant.period);
+    let rows = steps.saturating_mul(synthesis.max_trajectories);
+    if rows > MAX_STEPS {
+        let max_traj = raw
+            .synthesis
+            .as_ref()
+            .and_then(|s| s.get_ref().max_trajectories.as_ref().map(|v| v.span()));
+        let mut e = capacity(
+            format!(
+                "{} trajectories of {steps} samples (horizon {horizon} s at period {} s) make a table of \
+                 {rows} rows; the image holds at most {MAX_STEPS} rows",
+                synthesis.max_trajectories, plant.period
+            ),
+            max_traj.clone().unwrap_or_else(|| raw.horizon.span()),
+            if max_traj.is_some() {
+                format!("{rows} rows with this budget")
+            } else {
+                format!("{rows} rows with the default max_trajectories = {}", synthesis.max_trajectories)
+            },
+            format!(
+                "set synthesis.max_trajectories to at most {}, or shorten the horizon",
+                MAX_STEPS / steps.max(1)
+            ),
+        );
+        if max_traj.is_some() {
+            e = e.at(raw.horizon.span(), format!("{steps} samples"));
+        }
+        return Err(e);
+    }
     let mtl = match &raw.mtl {
         Some(t) => {
             let f = t.get_ref().formula.get_ref();
@@ -625,7 +737,7 @@ fn fallback_input(r: &RawInput, input: &InputSet, m: usize) -> Result<Vec<f64>, 
     Ok(input.storable(&u))
 }
 
-fn synthesis(r: &RawSynthesis) -> Result<SynthesisSettings, SpecError> {
+fn synthesis(r: &RawSynthesis, n_state: usize) -> Result<SynthesisSettings, SpecError> {
     let mut s = SynthesisSettings::default();
     let mut spans: Vec<(&'static str, Range<usize>)> = Vec::new();
     if let Some(v) = &r.mode {
@@ -700,6 +812,43 @@ fn synthesis(r: &RawSynthesis) -> Result<SynthesisSettings, SpecError> {
             }
         }
         return Err(err);
+    }
+    let span_of = |field: &str| {
+        spans
+            .iter()
+            .find(|(f, _)| *f == field)
+            .map(|(_, s)| s.clone())
+    };
+    if s.max_trajectories > MAX_TRAJECTORIES {
+        return Err(capacity(
+            format!(
+                "synthesis.max_trajectories = {}: an image holds at most {MAX_TRAJECTORIES} trajectories",
+                s.max_trajectories
+            ),
+            span_of("max_trajectories").unwrap_or_default(),
+            format!("more than {MAX_TRAJECTORIES}"),
+            format!("at most {MAX_TRAJECTORIES}"),
+        ));
+    }
+    let samples = s.coverage_samples();
+    let bytes = limits::sample_bytes(samples, n_state);
+    if bytes > limits::MAX_SAMPLE_BYTES {
+        let span = span_of("coverage_tolerance")
+            .or_else(|| span_of("confidence"))
+            .unwrap_or_default();
+        return Err(capacity(
+            format!(
+                "synthesis.coverage_tolerance = {} at confidence {} needs {samples} samples of Init to \
+                 estimate the coverage, about {} for n = {n_state}; the budget is {}",
+                s.coverage_tolerance,
+                s.confidence,
+                limits::human_bytes(bytes),
+                limits::human_bytes(limits::MAX_SAMPLE_BYTES)
+            ),
+            span,
+            format!("needs {samples} samples"),
+            "the samples grow as 1/tolerance²: a tolerance of 0.01 needs about 92 000 at 0.99 confidence",
+        ));
     }
     Ok(s)
 }

@@ -3,8 +3,20 @@
 //! Format: a header `t,v1,…,vm` (or `k,…`), then one row per sample period with the reference input v(κ)
 //! of the closed loop u = K x + v. Times must increase by the plant's sample period. A recording also names
 //! its initial state in a comment line `# x0 = a, b, …` before the header.
+//!
+//! # Bounds
+//! The caller gives the most rows it can use (for an import, the samples in the spec's horizon, at most
+//! the image's table capacity): a longer recording is refused at its first extra row, and a file larger
+//! than [`MAX_FIELD_BYTES`] per field of that many rows is refused before it is read.
 
 use std::path::Path;
+
+/// Bytes allowed per field (of the header and of at most `max_rows` rows) when a file is read, plus
+/// [`SLACK_BYTES`] for comments: a file larger than that cannot hold a valid recording of that many rows
+/// written sensibly, and is refused before it is read.
+pub const MAX_FIELD_BYTES: u64 = 64;
+/// Bytes allowed beyond the fields (comments, the `# x0` line, blank lines).
+pub const SLACK_BYTES: u64 = 1 << 20;
 
 /// Errors with the line and column of the offending field.
 #[derive(Debug, thiserror::Error, PartialEq)]
@@ -44,6 +56,25 @@ pub enum CsvError {
     },
     #[error("{path}: no samples after the header")]
     NoRows { path: String },
+    #[error(
+        "{path}:{line}: more than {max} rows of inputs; the horizon has {max} samples (horizon / period), \
+         and a recording cannot be longer"
+    )]
+    TooLong {
+        path: String,
+        line: usize,
+        max: usize,
+    },
+    #[error(
+        "{path}: {bytes} bytes is more than a recording of at most {max_rows} rows can take ({limit} bytes); \
+         not read"
+    )]
+    TooLarge {
+        path: String,
+        bytes: u64,
+        max_rows: usize,
+        limit: u64,
+    },
     #[error("{path}:{line}: the initial state line `# x0 = …` {reason}")]
     X0 {
         path: String,
@@ -52,12 +83,14 @@ pub enum CsvError {
     },
 }
 
-/// Parse a recorded input sequence from CSV text. `period` is the plant's sample period; `m` its input count.
+/// Parse a recorded input sequence from CSV text. `period` is the plant's sample period; `m` its input
+/// count; `max_rows` the most rows accepted ([`CsvError::TooLong`] beyond).
 pub fn parse_inputs(
     text: &str,
     path: &str,
     m: usize,
     period: f64,
+    max_rows: usize,
 ) -> Result<Vec<Vec<f64>>, CsvError> {
     let mut lines = text
         .lines()
@@ -78,6 +111,13 @@ pub fn parse_inputs(
     let mut prev_t: Option<f64> = None;
     for (i, line) in lines {
         let lineno = i + 1;
+        if out.len() >= max_rows {
+            return Err(CsvError::TooLong {
+                path: path.into(),
+                line: lineno,
+                max: max_rows,
+            });
+        }
         let fields: Vec<&str> = line.split(',').collect();
         if fields.len() != m + 1 {
             let col = line.len().min(line.rfind(',').map(|p| p + 2).unwrap_or(1));
@@ -141,6 +181,7 @@ pub fn parse_recording(
     n: usize,
     m: usize,
     period: f64,
+    max_rows: usize,
 ) -> Result<Recording, CsvError> {
     let mut x0 = None;
     for (i, line) in text.lines().enumerate() {
@@ -182,28 +223,57 @@ pub fn parse_recording(
     })?;
     Ok(Recording {
         x0,
-        v: parse_inputs(text, path, m, period)?,
+        v: parse_inputs(text, path, m, period, max_rows)?,
     })
 }
 
-/// Read and parse a recording.
-pub fn load_recording(path: &Path, n: usize, m: usize, period: f64) -> Result<Recording, CsvError> {
+/// Read and parse a recording of at most `max_rows` rows.
+pub fn load_recording(
+    path: &Path,
+    n: usize,
+    m: usize,
+    period: f64,
+    max_rows: usize,
+) -> Result<Recording, CsvError> {
     let p = path.display().to_string();
-    let text = std::fs::read_to_string(path).map_err(|e| CsvError::Io {
-        path: p.clone(),
-        reason: e.to_string(),
-    })?;
-    parse_recording(&text, &p, n, m, period)
+    let text = read_bounded(path, &p, m.max(n), max_rows)?;
+    parse_recording(&text, &p, n, m, period, max_rows)
 }
 
-/// Read and parse a recorded input sequence.
-pub fn load_inputs(path: &Path, m: usize, period: f64) -> Result<Vec<Vec<f64>>, CsvError> {
+/// Read and parse a recorded input sequence of at most `max_rows` rows.
+pub fn load_inputs(
+    path: &Path,
+    m: usize,
+    period: f64,
+    max_rows: usize,
+) -> Result<Vec<Vec<f64>>, CsvError> {
     let p = path.display().to_string();
-    let text = std::fs::read_to_string(path).map_err(|e| CsvError::Io {
-        path: p.clone(),
+    let text = read_bounded(path, &p, m, max_rows)?;
+    parse_inputs(&text, &p, m, period, max_rows)
+}
+
+/// The file's text, refused unread when it is larger than `max_rows` rows (and a header) of `fields + 1`
+/// fields can be ([`MAX_FIELD_BYTES`], [`SLACK_BYTES`]).
+fn read_bounded(path: &Path, p: &str, fields: usize, max_rows: usize) -> Result<String, CsvError> {
+    let io = |e: std::io::Error| CsvError::Io {
+        path: p.into(),
         reason: e.to_string(),
-    })?;
-    parse_inputs(&text, &p, m, period)
+    };
+    let bytes = std::fs::metadata(path).map_err(io)?.len();
+    let limit = (max_rows as u64)
+        .saturating_add(1)
+        .saturating_mul(fields as u64 + 1)
+        .saturating_mul(MAX_FIELD_BYTES)
+        .saturating_add(SLACK_BYTES);
+    if bytes > limit {
+        return Err(CsvError::TooLarge {
+            path: p.into(),
+            bytes,
+            max_rows,
+            limit,
+        });
+    }
+    std::fs::read_to_string(path).map_err(io)
 }
 
 #[cfg(test)]
@@ -212,19 +282,27 @@ mod tests {
 
     #[test]
     fn reads_a_sequence() {
-        let v = parse_inputs("t,v1,v2\n0,1,2\n0.1,3,4\n", "a.csv", 2, 0.1).unwrap();
+        let v = parse_inputs("t,v1,v2\n0,1,2\n0.1,3,4\n", "a.csv", 2, 0.1, usize::MAX).unwrap();
         assert_eq!(v, vec![vec![1.0, 2.0], vec![3.0, 4.0]]);
     }
 
     #[test]
     fn reads_a_recording_with_its_initial_state() {
-        let r =
-            parse_recording("# x0 = 0.1, -0.2\nt,v1\n0,1\n0.5,2\n", "r.csv", 2, 1, 0.5).unwrap();
+        let r = parse_recording(
+            "# x0 = 0.1, -0.2\nt,v1\n0,1\n0.5,2\n",
+            "r.csv",
+            2,
+            1,
+            0.5,
+            usize::MAX,
+        )
+        .unwrap();
         assert_eq!(r.x0, vec![0.1, -0.2]);
         assert_eq!(r.v, vec![vec![1.0], vec![2.0]]);
-        let e = parse_recording("t,v1\n0,1\n", "r.csv", 2, 1, 0.5).unwrap_err();
+        let e = parse_recording("t,v1\n0,1\n", "r.csv", 2, 1, 0.5, usize::MAX).unwrap_err();
         assert!(matches!(e, CsvError::X0 { .. }));
-        let e = parse_recording("# x0 = 1\nt,v1\n0,1\n", "r.csv", 2, 1, 0.5).unwrap_err();
+        let e =
+            parse_recording("# x0 = 1\nt,v1\n0,1\n", "r.csv", 2, 1, 0.5, usize::MAX).unwrap_err();
         assert!(
             e.to_string().contains("must give 2 finite values, found 1"),
             "{e}"
@@ -233,7 +311,7 @@ mod tests {
 
     #[test]
     fn errors_say_where() {
-        let e = parse_inputs("t,v1,v2\n0,1,2\n0.1,x,4\n", "a.csv", 2, 0.1).unwrap_err();
+        let e = parse_inputs("t,v1,v2\n0,1,2\n0.1,x,4\n", "a.csv", 2, 0.1, usize::MAX).unwrap_err();
         assert_eq!(
             e,
             CsvError::NotNumber {
@@ -243,7 +321,7 @@ mod tests {
                 field: "x".into()
             }
         );
-        let e = parse_inputs("t,v1\n0,1\n", "a.csv", 2, 0.1).unwrap_err();
+        let e = parse_inputs("t,v1\n0,1\n", "a.csv", 2, 0.1, usize::MAX).unwrap_err();
         assert!(matches!(
             e,
             CsvError::Columns {
@@ -252,9 +330,9 @@ mod tests {
                 ..
             }
         ));
-        let e = parse_inputs("t,v1,v2\n0,1,2\n0.3,1,2\n", "a.csv", 2, 0.1).unwrap_err();
+        let e = parse_inputs("t,v1,v2\n0,1,2\n0.3,1,2\n", "a.csv", 2, 0.1, usize::MAX).unwrap_err();
         assert!(matches!(e, CsvError::Time { line: 3, .. }));
-        let e = parse_inputs("t,v1,v2\n0,1\n", "a.csv", 2, 0.1).unwrap_err();
+        let e = parse_inputs("t,v1,v2\n0,1\n", "a.csv", 2, 0.1, usize::MAX).unwrap_err();
         assert!(matches!(
             e,
             CsvError::RowLength {
@@ -264,14 +342,24 @@ mod tests {
             }
         ));
         assert!(matches!(
-            parse_inputs("", "a.csv", 2, 0.1),
+            parse_inputs("", "a.csv", 2, 0.1, usize::MAX),
             Err(CsvError::Empty { .. })
         ));
         assert!(matches!(
-            parse_inputs("t,v1,v2\n", "a.csv", 2, 0.1),
+            parse_inputs("t,v1,v2\n", "a.csv", 2, 0.1, usize::MAX),
             Err(CsvError::NoRows { .. })
         ));
-        let e = parse_inputs("t,v1,v2\n0,1,inf\n", "a.csv", 2, 0.1).unwrap_err();
+        let e = parse_inputs("t,v1,v2\n0,1,inf\n", "a.csv", 2, 0.1, usize::MAX).unwrap_err();
         assert!(matches!(e, CsvError::NotNumber { col: 5, .. }));
+        // One row more than the horizon: refused at that row.
+        let e = parse_inputs("t,v1\n0,1\n0.1,2\n0.2,3\n", "a.csv", 1, 0.1, 2).unwrap_err();
+        assert_eq!(
+            e,
+            CsvError::TooLong {
+                path: "a.csv".into(),
+                line: 4,
+                max: 2
+            }
+        );
     }
 }

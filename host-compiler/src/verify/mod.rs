@@ -16,6 +16,15 @@ pub mod attack;
 pub mod feedforward;
 pub mod pwa;
 
+/// Largest number of Monte Carlo runs from the cover one check may ask for (`verify --runs`,
+/// `synth --verify-runs`): every start is held in memory (8n + 24 bytes) and simulated over the horizon,
+/// so 10⁶ runs take at most about 120 MB and minutes, not the 24 GB a 10⁹ request would.
+pub const MAX_RUNS: u64 = 1_000_000;
+
+/// Largest number of runs from the boundary of each ball (`verify --per-ball`): with at most 256 balls
+/// (`shared_types::capacity::MAX_TRAJECTORIES`), at most 1 048 576 boundary runs.
+pub const MAX_PER_BALL: u64 = 4_096;
+
 use crate::geometry::Region;
 use crate::linalg::mat_vec;
 use crate::model::{DiscretePlant, Plant};

@@ -68,13 +68,13 @@ fn recorded_trajectories_are_certified_or_refused() {
     for (k, v) in t0.nominal.v.iter().enumerate() {
         csv.push_str(&format!("{},{}\n", k as f64 * p.plant.period, v[0]));
     }
-    let good = parse_recording(&csv, "good.csv", 2, 1, p.plant.period).unwrap();
+    let good = parse_recording(&csv, "good.csv", 2, 1, p.plant.period, p.horizon_steps()).unwrap();
     // A recording that pushes at full force the whole time: it leaves through the velocity limit.
     let mut bad_csv = "# x0 = 0, 0\nt,v1\n".to_string();
     for k in 0..p.horizon_steps() {
         bad_csv.push_str(&format!("{},{}\n", k as f64 * p.plant.period, 1.0));
     }
-    let bad = parse_recording(&bad_csv, "bad.csv", 2, 1, p.plant.period).unwrap();
+    let bad = parse_recording(&bad_csv, "bad.csv", 2, 1, p.plant.period, p.horizon_steps()).unwrap();
     let opts = SynthOptions {
         imports: vec![("good.csv".into(), good), ("bad.csv".into(), bad)],
         ..quick()

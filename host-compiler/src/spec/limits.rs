@@ -1,0 +1,60 @@
+//! The sizes a spec may imply, checked during validation, before any synthesis work starts (issue 18,
+//! "bounded before work"). A spec that implies more than the image can hold, or more work than the
+//! memory budget allows, is refused with a [`super::ErrorKind::Capacity`] diagnostic at the key that
+//! implies it.
+//!
+//! | size | limit | from |
+//! |---|---|---|
+//! | state dimension n (rows of `plant.A`) | [`MAX_N`] = 12 | image capacity |
+//! | input dimension m (columns of `plant.B`) | [`MAX_M`] = 6 | image capacity |
+//! | locations of a hybrid plant | [`MAX_LOCATIONS`] = 8 | image capacity |
+//! | samples in the horizon, ⌊`horizon` / `plant.period`⌋ (one trajectory's table rows) | [`MAX_STEPS`] = 32 768 | image capacity |
+//! | table rows of a full budget, samples × `synthesis.max_trajectories` | [`MAX_STEPS`] = 32 768 | image capacity |
+//! | `synthesis.max_trajectories` | [`MAX_TRAJECTORIES`] = 256 | image capacity |
+//! | rows of one polytope (`A` of a `kind = "polytope"` set, an invariant or a guard) | [`MAX_POLYTOPE_ROWS`] = 64 | work per distance |
+//! | coverage samples implied by `synthesis.coverage_tolerance` and `confidence` | [`MAX_SAMPLE_BYTES`] = 512 MiB of states | memory |
+//!
+//! Flags are bounded where they are parsed (`verify --runs`, `--per-ball`: see `crate::verify`), and an
+//! imported recording by the horizon ([`crate::trajectory::csv`]).
+
+pub use shared_types::capacity::{MAX_LOCATIONS, MAX_M, MAX_N, MAX_STEPS, MAX_TRAJECTORIES};
+
+/// Largest number of rows (inequalities) of one polytope in a spec. Every signed distance to a polytope
+/// is a small quadratic program over its rows, evaluated at every sample of every candidate trajectory;
+/// 64 rows describe any box up to n = 32 and any practical task set, and keep that work bounded.
+pub const MAX_POLYTOPE_ROWS: usize = 64;
+
+/// Memory budget, in bytes, of the uniform samples of Init the coverage estimate draws
+/// ([`super::SynthesisSettings::coverage_samples`]), estimated by [`sample_bytes`].
+pub const MAX_SAMPLE_BYTES: u64 = 512 << 20;
+
+/// Estimated bytes of `samples` states of dimension `n` held as vectors (the entries and each vector's
+/// header), saturating.
+pub fn sample_bytes(samples: usize, n: usize) -> u64 {
+    let per = 8 * n as u64 + 24;
+    (samples as u64).saturating_mul(per)
+}
+
+/// Samples in a horizon `horizon` of sample period `period`: ⌊T / period⌋, rounding up when T / period
+/// is within 1e-9 (relative) of the next integer; saturates at `usize::MAX`.
+pub fn steps_in(horizon: f64, period: f64) -> usize {
+    let r = horizon / period;
+    let up = r.ceil();
+    if up - r <= 1e-9 * up.max(1.0) {
+        up as usize
+    } else {
+        r.floor() as usize
+    }
+}
+
+/// A byte count for people: `1.5 GB`, `20 MB`, `3 kB`.
+pub fn human_bytes(b: u64) -> String {
+    let b = b as f64;
+    if b >= 1e9 {
+        format!("{:.1} GB", b / 1e9)
+    } else if b >= 1e6 {
+        format!("{:.0} MB", b / 1e6)
+    } else {
+        format!("{:.0} kB", b / 1e3)
+    }
+}
