@@ -8,35 +8,7 @@ use host_compiler::spec::{self, ErrorKind, InputSet};
 use shared_types::eval::Controller;
 use shared_types::image::{decode, Fallback, ImageError};
 
-const BASE: &str = r#"seed = 3
-horizon = 2.0
-
-[plant]
-time = "continuous"
-A = [[0.0, 1.0], [0.0, 0.0]]
-B = [[0.0], [1.0]]
-period = 0.1
-
-[init]
-kind = "box"
-lo = [-0.1, 0.0]
-hi = [0.1, 0.0]
-
-[goal]
-kind = "ball"
-center = [1.0, 0.0]
-radius = 0.2
-
-[input]
-kind = "box"
-lo = [-1.0]
-hi = [1.0]
-"#;
-
-fn edit(from: &str, to: &str) -> String {
-    assert!(BASE.contains(from), "test bug: `{from}` not in BASE");
-    BASE.replacen(from, to, 1)
-}
+use crate::spec_bounds::{edit, BASE};
 
 /// 1-based (line, column) of the first `needle` in `src`.
 fn pos(src: &str, needle: &str) -> (usize, usize) {

@@ -6,35 +6,7 @@ use host_compiler::robustness::mtl::Trace;
 use host_compiler::spec;
 use host_compiler::task::Task;
 
-const BASE: &str = r#"seed = 3
-horizon = 2.0
-
-[plant]
-time = "continuous"
-A = [[0.0, 1.0], [0.0, 0.0]]
-B = [[0.0], [1.0]]
-period = 0.1
-
-[init]
-kind = "box"
-lo = [-0.1, 0.0]
-hi = [0.1, 0.0]
-
-[goal]
-kind = "ball"
-center = [1.0, 0.0]
-radius = 0.2
-
-[input]
-kind = "box"
-lo = [-1.0]
-hi = [1.0]
-"#;
-
-fn edit(from: &str, to: &str) -> String {
-    assert!(BASE.contains(from), "test bug: `{from}` not in BASE");
-    BASE.replacen(from, to, 1)
-}
+use crate::spec_bounds::edit;
 
 #[test]
 fn plants_that_cannot_be_sampled_or_reached_are_readable_messages() {

@@ -4,7 +4,7 @@
 
 use host_compiler::spec::{self, ErrorKind, MAX_MAGNITUDE};
 
-const BASE: &str = r#"seed = 3
+pub(crate) const BASE: &str = r#"seed = 3
 horizon = 2.0
 
 [plant]
@@ -29,7 +29,8 @@ lo = [-1.0]
 hi = [1.0]
 "#;
 
-fn edit(from: &str, to: &str) -> String {
+/// `BASE` with the first `from` (which must exist) replaced by `to`.
+pub(crate) fn edit(from: &str, to: &str) -> String {
     assert!(BASE.contains(from), "test bug: `{from}` not in BASE");
     BASE.replacen(from, to, 1)
 }
