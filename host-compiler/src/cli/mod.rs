@@ -193,6 +193,25 @@ pub(crate) fn decode_image<'a>(
         .bad_input()
 }
 
+/// The image's dimensions and sample period against the spec's (`verify::check_matches`); a mismatch is
+/// bad input naming both files.
+pub(crate) fn image_matches_spec(
+    problem: &crate::spec::Problem,
+    img: &shared_types::image::Image<'_>,
+    image: &std::path::Path,
+    spec: &std::path::Path,
+) -> Result<(), Failure> {
+    crate::verify::check_matches(problem, img)
+        .map_err(|e| {
+            miette::miette!(
+                "{} does not belong to {}: {e}",
+                image.display(),
+                spec.display()
+            )
+        })
+        .bad_input()
+}
+
 /// The task of a validated spec; a spec that makes no task (its plant cannot be sampled, a set cannot be
 /// built) is bad input.
 pub(crate) fn task_of(problem: crate::spec::Problem) -> Result<crate::task::Task, Failure> {

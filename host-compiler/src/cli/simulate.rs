@@ -3,8 +3,9 @@
 //! the least distance to Unsafe before it, the steps out of the certified envelope, the inputs outside
 //! the input set, and the run's reach-avoid robustness ([`crate::property::Property`], Euclidean).
 
-use super::{decode_image, read_image, task_of, BadInput, Exit, Failure, Outcome};
-use crate::verify::check_matches;
+use super::{
+    decode_image, image_matches_spec, read_image, task_of, BadInput, Exit, Failure, Outcome,
+};
 use miette::IntoDiagnostic;
 use shared_types::eval::Controller;
 use std::io::Write;
@@ -40,15 +41,7 @@ pub fn run(a: &SimulateArgs) -> Outcome {
     let problem = crate::spec::load(&a.spec).bad_input()?;
     let bytes = read_image(&a.image)?;
     let img = decode_image(&bytes, &a.image)?;
-    check_matches(&problem, &img)
-        .map_err(|e| {
-            miette::miette!(
-                "{} does not belong to {}: {e}",
-                a.image.display(),
-                a.spec.display()
-            )
-        })
-        .bad_input()?;
+    image_matches_spec(&problem, &img, &a.image, &a.spec)?;
     let n = problem.plant.n();
     if a.x0.len() != n {
         return Err(Failure::bad_input(miette::miette!(

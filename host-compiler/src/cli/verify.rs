@@ -2,8 +2,10 @@
 //! period are the spec's, its certificate re-proved from the bytes ([`crate::verify::feedforward`],
 //! [`crate::verify::pwa`]), then closed-loop Monte Carlo through the shared f32 evaluator.
 
-use super::{decode_image, read_image, task_of, BadInput, Exit, Failure, Outcome};
-use crate::verify::{check_matches, monte_carlo, Judge};
+use super::{
+    decode_image, image_matches_spec, read_image, task_of, BadInput, Exit, Failure, Outcome,
+};
+use crate::verify::{monte_carlo, Judge};
 use miette::IntoDiagnostic;
 use std::path::PathBuf;
 
@@ -44,15 +46,7 @@ pub fn run(a: &VerifyArgs) -> Outcome {
     let problem = crate::spec::load(&a.spec).bad_input()?;
     let bytes = read_image(&a.image)?;
     let img = decode_image(&bytes, &a.image)?;
-    check_matches(&problem, &img)
-        .map_err(|e| {
-            miette::miette!(
-                "{} does not belong to {}: {e}",
-                a.image.display(),
-                a.spec.display()
-            )
-        })
-        .bad_input()?;
+    image_matches_spec(&problem, &img, &a.image, &a.spec)?;
     let pwa = img.mode() == shared_types::image::Mode::PwaFeedback;
     // Nothing would be simulated: the Monte Carlo part would pass vacuously.
     if runs == 0 && (pwa || per_ball == 0) {
