@@ -120,7 +120,7 @@ pub enum SynthError {
     #[error("the emitted image is rejected by the decoder: {0:?}")]
     ImageRejected(shared_types::image::ImageError),
     #[error(transparent)]
-    Verify(#[from] crate::verify::MetricError),
+    Verify(#[from] crate::verify::MonteCarloError),
     #[error(transparent)]
     Attack(#[from] AttackError),
 }

@@ -43,6 +43,32 @@ use shared_types::image::Image;
 #[error("the image's metric P has no eigendecomposition: its balls cannot be sampled")]
 pub struct MetricError;
 
+/// Why a Monte Carlo campaign did not run.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum MonteCarloError {
+    #[error(transparent)]
+    Metric(#[from] MetricError),
+    /// More runs than [`MAX_RUNS`] or [`MAX_PER_BALL`] allow (checked before any is drawn).
+    #[error("{what} = {got} runs; at most {max}")]
+    TooManyRuns {
+        what: &'static str,
+        got: usize,
+        max: u64,
+    },
+}
+
+/// `count` against `max`, before any run is drawn.
+fn check_runs(what: &'static str, count: usize, max: u64) -> Result<(), MonteCarloError> {
+    if count as u64 > max {
+        return Err(MonteCarloError::TooManyRuns {
+            what,
+            got: count,
+            max,
+        });
+    }
+    Ok(())
+}
+
 /// P^{-1/2} of the image's metric (location 0), for drawing states in and on its balls.
 pub(crate) fn inverse_sqrt_metric(image: &Image<'_>) -> Result<faer::Mat<f64>, MetricError> {
     let n = image.n();
@@ -308,7 +334,9 @@ pub fn monte_carlo(
     interior: usize,
     per_ball: usize,
     seed: u64,
-) -> Result<VerifyReport, MetricError> {
+) -> Result<VerifyReport, MonteCarloError> {
+    check_runs("interior", interior, MAX_RUNS)?;
+    check_runs("per_ball", per_ball, MAX_PER_BALL)?;
     let n = image.n();
     let Pis = inverse_sqrt_metric(image)?;
     let ctl = Controller::new(*image);

@@ -614,7 +614,8 @@ pub fn monte_carlo_pwa(
     runs: usize,
     seed: u64,
     keep_paths: usize,
-) -> Result<PwaMonteCarlo, super::MetricError> {
+) -> Result<PwaMonteCarlo, super::MonteCarloError> {
+    super::check_runs("runs", runs, super::MAX_RUNS)?;
     let n = image.n();
     let nb = image.n_balls();
     let Pis = super::inverse_sqrt_metric(image)?;

@@ -77,3 +77,25 @@ fn verify_attack_reports_the_search() {
     assert!(out.contains("attack: "), "{out}");
     assert!(out.contains("violations 0"), "{out}");
 }
+
+/// The library's Monte Carlo refuses a count beyond its documented maximum before drawing anything
+/// (the CLI's flags are bounded the same way).
+#[test]
+fn monte_carlo_counts_are_bounded_in_the_library_too() {
+    use host_compiler::verify::{monte_carlo, MonteCarloError, MAX_PER_BALL, MAX_RUNS};
+    let task = task();
+    let judge = Judge::new(&task);
+    let img = decode(image()).unwrap();
+    let too_many = MAX_RUNS as usize + 1;
+    match monte_carlo(&judge, &img, too_many, 0, 1) {
+        Err(MonteCarloError::TooManyRuns { what: "interior", got, max }) => {
+            assert_eq!((got, max), (too_many, MAX_RUNS))
+        }
+        other => panic!("{other:?}"),
+    }
+    assert!(matches!(
+        monte_carlo(&judge, &img, 1, MAX_PER_BALL as usize + 1, 1),
+        Err(MonteCarloError::TooManyRuns { what: "per_ball", .. })
+    ));
+    assert!(monte_carlo(&judge, &img, 10, 1, 1).is_ok());
+}
