@@ -81,6 +81,10 @@ fn synth_then_verify_simulate_and_inspect() {
         "never reached the goal: {csv}"
     );
     assert!(lines[1..].iter().all(|l| l.ends_with(",ok")), "{csv}");
+    // The CSV is a trace `mtl` reads as it is: the status column is skipped.
+    let trace = host_compiler::robustness::mtl::Trace::from_csv_str(&csv, "simulate").unwrap();
+    assert_eq!(trace.len(), 41);
+    assert_eq!(trace.names(), ["x1", "x2", "u1"]);
     // The verdict on standard error agrees with the CSV: Goal reached at the first row inside the goal
     // box, nothing out of the envelope, a positive robustness.
     let err = String::from_utf8_lossy(&o.stderr);

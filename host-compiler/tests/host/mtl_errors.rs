@@ -266,3 +266,22 @@ fn trace_constructor_validates() {
     .is_err());
     assert!(Trace::new(vec![0.0], vec!["a".into()], vec![vec![f64::NAN]]).is_err());
 }
+
+/// One CSV dialect for traces, recordings and `simulate`'s output: a byte-order mark, comment lines
+/// (such as a recording's `# x0` line) and a `status` column are accepted; every other field must still
+/// be a number, named at its own column.
+#[test]
+fn traces_accept_a_bom_comments_and_a_status_column() {
+    let t = Trace::from_csv_str(
+        "\u{feff}# x0 = 0, 1\nt,x1,status,x2\n# a comment\n0,0,ok,1\n0.1,0.5,out-of-envelope,2\n",
+        "sim.csv",
+    )
+    .unwrap();
+    assert_eq!(t.names(), ["x1", "x2"]);
+    assert_eq!(t.len(), 2);
+    assert_eq!(t.columns()[1], vec![1.0, 2.0]);
+    let e = Trace::from_csv_str("t,x1,status,x2\n0,0,ok,one\n", "sim.csv").unwrap_err();
+    let msg = e.to_string();
+    assert!(msg.contains("sim.csv:2:"), "{msg}");
+    assert!(msg.contains("x2"), "{msg}");
+}

@@ -2,9 +2,11 @@
 //!
 //! A trace is a strictly increasing list of sample times t_k with one value per named signal at each
 //! sample. The CSV form has a header `t,<signal names>` and one row per sample; fields are separated by
-//! commas and trimmed of surrounding whitespace; blank lines are skipped; quoting is not supported.
-//! Every field must be a finite number. Errors name the 1-based line, the 1-based field number and
-//! the 1-based character column where the field starts.
+//! commas and trimmed of surrounding whitespace; blank lines and comment lines (`#` first, such as the
+//! `# x0` line of a recording) are skipped; a leading byte-order mark is ignored; quoting is not
+//! supported. A column named `status` (what `simulate` writes) is not a signal: its fields are skipped.
+//! Every other field must be a finite number. Errors name the 1-based line, the 1-based field number
+//! and the 1-based character column where the field starts.
 
 use crate::text::excerpt;
 use std::path::Path;
@@ -165,11 +167,12 @@ impl Trace {
     /// Parse CSV text (format in the module doc). `origin` names the source in error messages.
     pub fn from_csv_str(text: &str, origin: &str) -> Result<Self, TraceError> {
         let origin_s = origin.to_string();
+        let text = text.strip_prefix('\u{feff}').unwrap_or(text);
         let mut lines = text
             .lines()
             .enumerate()
             .map(|(i, l)| (i + 1, l))
-            .filter(|(_, l)| !l.trim().is_empty());
+            .filter(|(_, l)| !l.trim().is_empty() && !l.trim_start().starts_with('#'));
         let (hline, header) = lines.next().ok_or_else(|| TraceError::Empty {
             origin: origin_s.clone(),
         })?;
@@ -193,9 +196,15 @@ impl Trace {
             ));
         }
         let mut names: Vec<String> = Vec::new();
+        // The field of `simulate`'s status column, if the header has one (skipped in every row).
+        let mut status: Option<usize> = None;
         // Seen names, for the duplicate check in linear time (a header may have a million columns).
         let mut seen = std::collections::HashSet::new();
         for (i, &(cc, name)) in hfields.iter().enumerate().skip(1) {
+            if name == "status" && status.is_none() {
+                status = Some(i);
+                continue;
+            }
             if name.is_empty() {
                 return Err(herr(i + 1, cc, "empty signal name".into()));
             }
@@ -208,9 +217,12 @@ impl Trace {
             }
             names.push(name.to_string());
         }
-        let all: Vec<&str> = std::iter::once("t")
+        let mut all: Vec<&str> = std::iter::once("t")
             .chain(names.iter().map(|s| s.as_str()))
             .collect();
+        if let Some(i) = status {
+            all.insert(i, "status");
+        }
         let width = all.len();
         let mut times = Vec::new();
         let mut columns: Vec<Vec<f64>> = vec![Vec::new(); names.len()];
@@ -241,6 +253,11 @@ impl Trace {
                 });
             }
             for (i, &(cc, f)) in fields.iter().enumerate() {
+                if Some(i) == status {
+                    continue;
+                }
+                // The signal this field belongs to: fields after the status column shift by one.
+                let signal = if status.is_some_and(|s| i > s) { i - 1 } else { i };
                 let v: f64 = f.parse().map_err(|_| TraceError::NotNumeric {
                     origin: origin_s.clone(),
                     line,
@@ -273,7 +290,7 @@ impl Trace {
                     }
                     times.push(v);
                 } else {
-                    columns[i - 1].push(v);
+                    columns[signal - 1].push(v);
                 }
             }
         }
