@@ -84,8 +84,12 @@ fn main() {
         let task = Task::new(p).expect("the 0.01 s task");
         let s = synthesize(&task, &opts).expect("the 0.01 s cover is synthesized");
         // Greedy search only: the thermal relaxation would take minutes on ~2 000 points.
-        let ctx = PwaContext::new(&task, &s, PwaSettings::builder().thermal_cycles(0).build().unwrap())
-            .expect("PWA context");
+        let ctx = PwaContext::new(
+            &task,
+            &s,
+            PwaSettings::builder().thermal_cycles(0).build().unwrap(),
+        )
+        .expect("PWA context");
         let rho = ctx
             .points
             .iter()

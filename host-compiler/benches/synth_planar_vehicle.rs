@@ -146,7 +146,11 @@ fn main() {
         at.worst_robustness,
         at.violations
     );
-    assert_eq!(at.violations, 0, "the falsifier found a violation: {:?}", at.first_violations);
+    assert_eq!(
+        at.violations, 0,
+        "the falsifier found a violation: {:?}",
+        at.first_violations
+    );
     let count = |s: &Synthesis| s.trajectories.len() as f64;
     write_rows(
         "synth_planar_vehicle",

@@ -38,14 +38,21 @@ pub fn design(task: &Task) -> Result<Design, DesignError> {
 
 /// The CAF of every location of a plant (§3.2: a CAF ψ_ℓ and gain per location, the feedback (3.69)),
 /// or the first location that has none, with the reason.
-pub fn design_locations(plant: &dyn Plant, sigma: f64) -> Result<Vec<Design>, (Location, DesignError)> {
+pub fn design_locations(
+    plant: &dyn Plant,
+    sigma: f64,
+) -> Result<Vec<Design>, (Location, DesignError)> {
     (0..plant.locations())
         .map(|loc| design_location(plant, loc, sigma).map_err(|e| (loc, e)))
         .collect()
 }
 
 /// The CAF and shipped gain of location `loc` of a plant, with the σ-margin `sigma` (module doc).
-pub fn design_location(plant: &dyn Plant, loc: Location, sigma: f64) -> Result<Design, DesignError> {
+pub fn design_location(
+    plant: &dyn Plant,
+    loc: Location,
+    sigma: f64,
+) -> Result<Design, DesignError> {
     let (n, m) = (plant.n(), plant.m());
     let settings = CafSettings {
         sigma,

@@ -28,10 +28,10 @@ use super::{certify_at, Certificate, GoalAt, Loop, LoopConstants};
 use crate::geometry::{
     Complement, Ellipsoid, Empty, GeometryError, Intersection, Metric, Polytope, Region, Witness,
 };
+use crate::linalg::to_row_major;
 use crate::model::hybrid::{Edge, EdgeKind};
 use crate::trajectory::Nominal;
 use faer::linalg::solvers::Solve;
-use crate::linalg::to_row_major;
 use faer::Mat;
 
 /// One segment of a forced-switching run.
@@ -95,8 +95,14 @@ pub enum ForcedError {
         "segment {segment} starts {gap:.3e} away from the reset of segment {prev}'s last state: the nominal \
          run is not continuous across the switch"
     )]
-    Discontinuous { segment: usize, prev: usize, gap: f64 },
-    #[error("segment {segment}'s reset matrix is singular: its preimage of a ball is not an ellipsoid")]
+    Discontinuous {
+        segment: usize,
+        prev: usize,
+        gap: f64,
+    },
+    #[error(
+        "segment {segment}'s reset matrix is singular: its preimage of a ball is not an ellipsoid"
+    )]
     SingularReset { segment: usize },
     #[error("segment {segment}'s safe transition: {source}")]
     Geometry {
@@ -163,7 +169,8 @@ fn safe_transition(
         return Err(ForcedError::SingularReset { segment });
     }
     let Q = R.transpose() * P * R * (1.0 / (delta * delta));
-    let ball = Ellipsoid::new(cp, to_row_major(crate::linalg::sym(Q.as_ref()).as_ref())).map_err(geo)?;
+    let ball =
+        Ellipsoid::new(cp, to_row_major(crate::linalg::sym(Q.as_ref()).as_ref())).map_err(geo)?;
     let guard = region(&edge.guard, n).map_err(geo)?;
     Intersection::new(vec![Box::new(guard), Box::new(ball)]).map_err(geo)
 }
@@ -196,9 +203,11 @@ pub fn certify_forced(segments: &[ForcedSegment<'_>]) -> Result<ForcedCertificat
                     });
                 }
                 let end = s.nominal.x.last().expect("checked non-empty");
-                let start = next.nominal.x.first().ok_or(ForcedError::EmptyNominal {
-                    segment: i + 1,
-                })?;
+                let start = next
+                    .nominal
+                    .x
+                    .first()
+                    .ok_or(ForcedError::EmptyNominal { segment: i + 1 })?;
                 let gap = e
                     .reset
                     .apply(end)
@@ -226,10 +235,8 @@ pub fn certify_forced(segments: &[ForcedSegment<'_>]) -> Result<ForcedCertificat
             s.invariant
                 .map(|inv| {
                     let n = s.lp.P.nrows();
-                    let inside = region(inv, n).map_err(|source| ForcedError::Geometry {
-                        segment: i,
-                        source,
-                    })?;
+                    let inside = region(inv, n)
+                        .map_err(|source| ForcedError::Geometry { segment: i, source })?;
                     let outside = Complement::new(Box::new(inside))
                         .map_err(|source| ForcedError::Geometry { segment: i, source })?;
                     Ok(UnsafeOrOutside {

@@ -295,7 +295,11 @@ impl Certificate {
     /// min(δ_Goal, δ_Unsafe between samples, δ_Input): the radius Theorem 4.7 allows before r_crit;
     /// NaN when a part could not be computed.
     pub fn parts_min(&self) -> f64 {
-        let p = [self.delta_goal, self.delta_unsafe_intersample, self.delta_input];
+        let p = [
+            self.delta_goal,
+            self.delta_unsafe_intersample,
+            self.delta_input,
+        ];
         if p.iter().any(|v| v.is_nan()) {
             return f64::NAN;
         }

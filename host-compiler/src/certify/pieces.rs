@@ -108,7 +108,9 @@ impl<'a, 'b> Pieces<'a, 'b> {
         if k >= nom.steps() {
             return None;
         }
-        self.lp.plant.vector_field(self.lp.loc, &nom.x[k], &nom.u[k])
+        self.lp
+            .plant
+            .vector_field(self.lp.loc, &nom.x[k], &nom.u[k])
     }
 
     /// The distance from Unsafe (−signed distance) at every sample (+∞ without Unsafe).

@@ -103,7 +103,12 @@ pub fn run(a: &SimulateArgs) -> Outcome {
 }
 
 /// The run's verdict, for people (module doc). Distances are Euclidean.
-fn verdict(task: &crate::task::Task, states: &[Vec<f64>], outside: usize, bad_inputs: usize) -> String {
+fn verdict(
+    task: &crate::task::Task,
+    states: &[Vec<f64>],
+    outside: usize,
+    bad_inputs: usize,
+) -> String {
     use crate::property::Property;
     let h = task.plant.period();
     let prop = &task.property;
@@ -125,7 +130,10 @@ fn verdict(task: &crate::task::Task, states: &[Vec<f64>], outside: usize, bad_in
                 .enumerate()
                 .map(|(k, x)| (k, -us.signed_dist(x, &metric).value))
                 .fold((0, f64::INFINITY), |b, c| if c.1 < b.1 { c } else { b });
-            format!("least distance to Unsafe {d:.4e} at step {k}{}", if d < 0.0 { " (INSIDE)" } else { "" })
+            format!(
+                "least distance to Unsafe {d:.4e} at step {k}{}",
+                if d < 0.0 { " (INSIDE)" } else { "" }
+            )
         }
     };
     let names: Vec<String> = (1..=task.plant.n()).map(|i| format!("x{i}")).collect();

@@ -154,7 +154,11 @@ pub enum HybridError {
     #[error("{what}: row {row} is zero or not finite")]
     BadRow { what: String, row: usize },
     #[error("{what}: {rows} rows but {bs} right-hand sides")]
-    RhsLength { what: String, rows: usize, bs: usize },
+    RhsLength {
+        what: String,
+        rows: usize,
+        bs: usize,
+    },
     #[error("edge {edge}: the reset must be n×n with an offset of length n (n = {n})")]
     ResetShape { edge: usize, n: usize },
 }
@@ -385,7 +389,11 @@ impl Hybrid {
             let probe = (h - t) / Self::PROBES as f64;
             let (mut s0, mut x0) = (t, x.clone());
             for i in 1..=Self::PROBES {
-                let s1 = if i == Self::PROBES { h } else { t + i as f64 * probe };
+                let s1 = if i == Self::PROBES {
+                    h
+                } else {
+                    t + i as f64 * probe
+                };
                 let x1 = self.advance(loc, &x0, u, s1 - s0)?;
                 // The earliest entry over the armed edges in [s0, s1] (ties: the first edge listed).
                 let mut hit: Option<(f64, Vec<f64>, usize)> = None;

@@ -101,7 +101,6 @@ impl BundleSettings {
         c.non_negative("repair_delta", self.repair_delta)?;
         c.at_least_one("hold", self.hold)
     }
-
 }
 
 settings_builder!(

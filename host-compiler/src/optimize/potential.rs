@@ -114,7 +114,6 @@ impl PotentialSettings {
         c.at_least_one("max_evaluations", self.max_evaluations)?;
         c.at_least_one("hold", self.hold)
     }
-
 }
 
 settings_builder!(

@@ -59,9 +59,7 @@ impl Property for ReachAvoid {
             metric: &metric,
             T: trace.times()[0] + self.horizon,
         };
-        Ok(safety_robustness_joint(&traj, &spec)
-            ?
-            .delta)
+        Ok(safety_robustness_joint(&traj, &spec)?.delta)
     }
 }
 

@@ -159,7 +159,6 @@ impl PwaSettings {
         )?;
         c.at_least_one("leaf_balls", self.leaf_balls)
     }
-
 }
 
 settings_builder!(PwaSettings, PwaSettingsBuilder {

@@ -19,7 +19,7 @@ pub mod mtl;
 pub mod safety;
 
 pub use safety::{
-    goal_at, goal_part, input_part, safety_robustness, safety_robustness_joint, unsafe_part, Binding, Critical,
-    FnInput, InputSets, SafetyError, SafetyRobustness, SafetySet, SafetySpec, SampledTrajectory,
-    UnsafePart,
+    goal_at, goal_part, input_part, safety_robustness, safety_robustness_joint, unsafe_part,
+    Binding, Critical, FnInput, InputSets, SafetyError, SafetyRobustness, SafetySet, SafetySpec,
+    SampledTrajectory, UnsafePart,
 };

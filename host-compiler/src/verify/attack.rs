@@ -91,7 +91,9 @@ pub enum AttackError {
     Settings(#[from] SettingError),
     #[error(transparent)]
     Metric(#[from] super::MetricError),
-    #[error("AttackSettings.evaluations_per_start = {got}: this image has n = {n}, so at least {need}")]
+    #[error(
+        "AttackSettings.evaluations_per_start = {got}: this image has n = {n}, so at least {need}"
+    )]
     Budget { got: usize, n: usize, need: usize },
 }
 
@@ -122,7 +124,11 @@ impl Search<'_> {
     fn start(&self, w: &[f64]) -> Vec<f64> {
         let n = w.len();
         let norm = w.iter().map(|v| v * v).sum::<f64>().sqrt();
-        let s = if norm > 1.0 { self.reach / norm } else { self.reach };
+        let s = if norm > 1.0 {
+            self.reach / norm
+        } else {
+            self.reach
+        };
         (0..n)
             .map(|i| self.centre[i] + s * (0..n).map(|j| self.pis[i * n + j] * w[j]).sum::<f64>())
             .collect()
@@ -203,7 +209,8 @@ pub fn attack(
                 names: names.clone(),
                 seen: RefCell::new(Seen::default()),
             };
-            let mut rng = ChaCha8Rng::seed_from_u64(settings.seed ^ (t as u64).wrapping_mul(0x9e37_79b9));
+            let mut rng =
+                ChaCha8Rng::seed_from_u64(settings.seed ^ (t as u64).wrapping_mul(0x9e37_79b9));
             for _ in 0..settings.starts_per_ball {
                 let w0: Vec<f64> = (0..n).map(|_| rng.random_range(-0.9..0.9)).collect();
                 let simplex: Vec<Vec<f64>> = std::iter::once(w0.clone())

@@ -75,7 +75,12 @@ fn run(guard: Polytope) -> Run {
     let task = ReachAvoid {
         goal: Box::new(Ball::new(goal_c, vec![1., 0., 0., 0., 1., 0., 0., 0., 1.], 1.0).unwrap()),
         unsafe_set: Some(Box::new(
-            Ball::new(vec![-5.0, -4.0, 2.0], vec![1., 0., 0., 0., 1., 0., 0., 0., 1.], 1.0).unwrap(),
+            Ball::new(
+                vec![-5.0, -4.0, 2.0],
+                vec![1., 0., 0., 0., 1., 0., 0., 0., 1.],
+                1.0,
+            )
+            .unwrap(),
         )),
         input: InputBound::Box {
             lo: vec![-60.0],
@@ -173,7 +178,13 @@ fn switch_holds(r: &Run, c: &ForcedCertificate, guard: &Polytope) -> (f64, f64) 
 fn runs_pass(r: &Run, c: &ForcedCertificate, guard: &Polytope) {
     let d1 = c.segments[1].delta;
     let kstar = c.segments[1].k_star;
-    for x0 in sphere(&r.designs[0].P, &r.noms[0].x[0], 0.999 * c.segments[0].delta, 300, 17) {
+    for x0 in sphere(
+        &r.designs[0].P,
+        &r.noms[0].x[0],
+        0.999 * c.segments[0].delta,
+        300,
+        17,
+    ) {
         let mut x = x0;
         for (seg, nom) in r.noms.iter().enumerate() {
             let K = &r.designs[seg].K;
@@ -208,9 +219,15 @@ fn identity_resets_give_the_largest_ball_inside_the_next_one() {
         (got - expected).abs() <= 1e-7 * expected,
         "δ_Guard {got} vs δ₁/√λmax(P₀⁻¹P₁) = {expected}"
     );
-    assert_eq!(c.segments[0].k_star, N0, "a forced switch is judged at the segment's end");
+    assert_eq!(
+        c.segments[0].k_star, N0,
+        "a forced switch is judged at the segment's end"
+    );
     let (worst, _) = switch_holds(&r, &c, &whole_space());
-    assert!(worst > 0.9, "the samples do not approach the second ball's boundary ({worst})");
+    assert!(
+        worst > 0.9,
+        "the samples do not approach the second ball's boundary ({worst})"
+    );
     runs_pass(&r, &c, &whole_space());
 }
 
@@ -228,14 +245,22 @@ fn a_guard_close_to_the_switching_state_binds() {
     assert!(c.is_certified(), "{c:?}");
     let Pinv = host_compiler::linalg::sym_fn(r.designs[0].P.as_ref(), |l| 1.0 / l).unwrap();
     let guard_depth = 0.01 / Pinv[(0, 0)].sqrt();
-    let ball_depth =
-        c.segments[1].delta / lambda_max_rel(&r.designs[0].P, &r.designs[1].P).sqrt();
+    let ball_depth = c.segments[1].delta / lambda_max_rel(&r.designs[0].P, &r.designs[1].P).sqrt();
     let expected = guard_depth.min(ball_depth);
-    assert!(guard_depth < ball_depth, "the guard should bind: {guard_depth} vs {ball_depth}");
+    assert!(
+        guard_depth < ball_depth,
+        "the guard should bind: {guard_depth} vs {ball_depth}"
+    );
     let got = c.segments[0].delta_goal;
-    assert!((got - expected).abs() <= 1e-9 * expected, "{got} vs {expected}");
+    assert!(
+        (got - expected).abs() <= 1e-9 * expected,
+        "{got} vs {expected}"
+    );
     let (_, slack) = switch_holds(&r, &c, &guard);
-    assert!(slack < 0.1 * 0.01, "the samples do not approach the guard ({slack})");
+    assert!(
+        slack < 0.1 * 0.01,
+        "the samples do not approach the guard ({slack})"
+    );
     runs_pass(&r, &c, &guard);
 }
 
@@ -251,7 +276,10 @@ fn runs_that_are_not_forced_switching_runs_are_refused() {
     (backwards.from, backwards.to) = (1, 0);
     let mut shifted = r.noms[1].clone();
     shifted.x[0][2] += 1e-3;
-    let make = |e0: Option<&Edge>, e1: Option<&Edge>, n1: &Nominal| -> Result<ForcedCertificate, ForcedError> {
+    let make = |e0: Option<&Edge>,
+                e1: Option<&Edge>,
+                n1: &Nominal|
+     -> Result<ForcedCertificate, ForcedError> {
         certify_forced(&[
             ForcedSegment {
                 lp: lps[0],
@@ -287,8 +315,21 @@ fn runs_that_are_not_forced_switching_runs_are_refused() {
         Err(ForcedError::SwitchAfterLast { segment: 1 })
     ));
     let e = make(Some(&edge), None, &shifted).unwrap_err();
-    assert!(matches!(e, ForcedError::Discontinuous { segment: 1, prev: 0, .. }), "{e:?}");
-    assert!(e.to_string().contains("not continuous across the switch"), "{e}");
+    assert!(
+        matches!(
+            e,
+            ForcedError::Discontinuous {
+                segment: 1,
+                prev: 0,
+                ..
+            }
+        ),
+        "{e:?}"
+    );
+    assert!(
+        e.to_string().contains("not continuous across the switch"),
+        "{e}"
+    );
     assert!(matches!(certify_forced(&[]), Err(ForcedError::Empty)));
 }
 
@@ -297,7 +338,11 @@ fn runs_that_are_not_forced_switching_runs_are_refused() {
 #[test]
 fn a_location_invariant_is_kept_like_unsafe() {
     let r = run(whole_space());
-    let top = r.noms[0].x.iter().map(|x| x[0]).fold(f64::NEG_INFINITY, f64::max);
+    let top = r.noms[0]
+        .x
+        .iter()
+        .map(|x| x[0])
+        .fold(f64::NEG_INFINITY, f64::max);
     let inv = Polytope {
         a: vec![vec![1.0, 0.0, 0.0]],
         b: vec![top + 0.02],

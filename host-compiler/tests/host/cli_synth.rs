@@ -97,8 +97,14 @@ fn synth_then_verify_simulate_and_inspect() {
                 .is_some_and(|v| (0.95..=1.05).contains(&v))
         })
         .unwrap();
-    assert!(err.contains(&format!("Goal reached at step {first_in_goal} ")), "{err}");
-    assert!(err.contains(" 0 steps out of the certified envelope"), "{err}");
+    assert!(
+        err.contains(&format!("Goal reached at step {first_in_goal} ")),
+        "{err}"
+    );
+    assert!(
+        err.contains(" 0 steps out of the certified envelope"),
+        "{err}"
+    );
     let rho: f64 = err
         .rsplit("robustness of the samples ")
         .next()
@@ -121,7 +127,10 @@ fn synth_then_verify_simulate_and_inspect() {
         "{csv}"
     );
     let err = String::from_utf8_lossy(&o.stderr);
-    assert!(err.contains("3 steps out of the certified envelope"), "{err}");
+    assert!(
+        err.contains("3 steps out of the certified envelope"),
+        "{err}"
+    );
     assert!(err.contains("Goal not reached"), "{err}");
 
     let o = bin()

@@ -96,8 +96,17 @@ fn the_crossing_of_example_3_19_is_found_on_the_exact_flow() {
             lo = mid;
         }
     }
-    assert!((ev.time - hi).abs() < 1e-11, "event at {} vs {}", ev.time, hi);
-    assert!(ev.before[0].abs() < 1e-9, "x1 at the event: {}", ev.before[0]);
+    assert!(
+        (ev.time - hi).abs() < 1e-11,
+        "event at {} vs {}",
+        ev.time,
+        hi
+    );
+    assert!(
+        ev.before[0].abs() < 1e-9,
+        "x1 at the event: {}",
+        ev.before[0]
+    );
     // After it, location 2's flow for the rest of the period.
     let s2 = &hy.modes()[1].flow;
     let end = s2.zoh(h - hi).unwrap().step(&at(hi), &u);
@@ -139,12 +148,19 @@ fn a_guard_entered_and_left_between_probes_is_not_missed() {
     .unwrap();
     for k in 1..=8 {
         let s = k as f64 * 3.0 / 8.0;
-        assert!(s.sin() < 0.9999, "probe {k} lies in the guard; the test would not test");
+        assert!(
+            s.sin() < 0.9999,
+            "probe {k} lies in the guard; the test would not test"
+        );
     }
     let step = hy.flow(0, &[0.0, 1.0], &[0.0]).unwrap();
     assert_eq!(step.events.len(), 1, "{step:?}");
     let expected = 0.9999f64.asin();
-    assert!((step.events[0].time - expected).abs() < 1e-9, "{:?}", step.events);
+    assert!(
+        (step.events[0].time - expected).abs() < 1e-9,
+        "{:?}",
+        step.events
+    );
     assert_eq!(step.loc, 1);
 }
 
@@ -188,7 +204,11 @@ fn zeno_behaviour_is_an_error_not_a_hang() {
         let t = 0.01 + 0.015 * i as f64;
         assert!((ev.time - t).abs() < 1e-9, "{ev:?}");
     }
-    assert!((step.x[0] - (-0.5 + 100.0 * (0.05 - 0.04))).abs() < 1e-9, "{:?}", step.x);
+    assert!(
+        (step.x[0] - (-0.5 + 100.0 * (0.05 - 0.04))).abs() < 1e-9,
+        "{:?}",
+        step.x
+    );
 }
 
 #[test]
@@ -200,7 +220,10 @@ fn a_forced_edge_is_never_taken_by_the_flow() {
     let step = hy.flow(0, &[-0.05, 1.0, 0.0], &[0.5]).unwrap();
     assert!(step.events.is_empty());
     assert_eq!(step.loc, 0);
-    assert!(step.x[0] > 0.0, "the flow crossed the plane without switching");
+    assert!(
+        step.x[0] > 0.0,
+        "the flow crossed the plane without switching"
+    );
 }
 
 #[test]
@@ -220,14 +243,18 @@ fn a_malformed_automaton_is_refused_with_the_reason() {
     let mut edges = hy.edges().to_vec();
     edges[0].guard = half(&[1.0, 0.0], 0.0);
     let e = Hybrid::new(hy.modes().to_vec(), edges, 0.1).unwrap_err();
-    assert!(e.to_string().contains("guard of edge 0: row 0 has 2 entries, the state has n = 3"), "{e}");
+    assert!(
+        e.to_string()
+            .contains("guard of edge 0: row 0 has 2 entries, the state has n = 3"),
+        "{e}"
+    );
     let mut edges = hy.edges().to_vec();
     edges[0].guard = half(&[0.0, 0.0, 0.0], 0.0);
     let e = Hybrid::new(hy.modes().to_vec(), edges, 0.1).unwrap_err();
     assert!(matches!(e, HybridError::BadRow { row: 0, .. }), "{e:?}");
     let mut modes = hy.modes().to_vec();
-    modes[1].flow = ContinuousPlant::new(Mat::identity(2, 2), mat(&[&[1.0], &[0.0]]), vec![0.0; 2])
-        .unwrap();
+    modes[1].flow =
+        ContinuousPlant::new(Mat::identity(2, 2), mat(&[&[1.0], &[0.0]]), vec![0.0; 2]).unwrap();
     let e = Hybrid::new(modes, hy.edges().to_vec(), 0.1).unwrap_err();
     assert!(e.to_string().contains("location `right` has n = 2"), "{e}");
     assert_eq!(
@@ -248,7 +275,8 @@ fn a_malformed_automaton_is_refused_with_the_reason() {
 fn a_flow_sliding_along_a_guard_is_undecided_not_a_hang() {
     // ẋ = (0, 1) at x1 = −10⁻¹³: parallel to the guard {x1 ≥ 0}, closer to it than the tolerance can
     // separate from an entry over a whole period.
-    let slide = ContinuousPlant::new(Mat::zeros(2, 2), mat(&[&[0.0], &[0.0]]), vec![0.0, 1.0]).unwrap();
+    let slide =
+        ContinuousPlant::new(Mat::zeros(2, 2), mat(&[&[0.0], &[0.0]]), vec![0.0, 1.0]).unwrap();
     let mode = |name: &str| Mode {
         name: name.into(),
         flow: slide.clone(),

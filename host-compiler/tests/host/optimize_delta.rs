@@ -5,7 +5,9 @@
 use host_compiler::certify::OwnedLoop;
 use host_compiler::certify::{shipped, LoopConstants};
 use host_compiler::optimize::potential::{descend, DescentMethod, PotentialSettings};
-use host_compiler::optimize::{maximize_delta, try_maximize_delta, BundleSettings, OptStop, Optimized};
+use host_compiler::optimize::{
+    maximize_delta, try_maximize_delta, BundleSettings, OptStop, Optimized,
+};
 use std::sync::atomic::AtomicBool;
 
 fn planar() -> (OwnedLoop, LoopConstants) {
@@ -280,7 +282,11 @@ fn a_held_reference_stays_held_and_is_still_improved() {
     let cancel = AtomicBool::new(false);
     let x0 = f32x([0.0, 0.0, 0.0, 1.0]);
     let v = vec![vec![1.0, -1.0]; ol.task.steps];
-    let s = PotentialSettings::builder().delta(0.02).hold(20).build().unwrap();
+    let s = PotentialSettings::builder()
+        .delta(0.02)
+        .hold(20)
+        .build()
+        .unwrap();
     let d = descend(&lp, &lc, &x0, &v, &s, DescentMethod::Lbfgs).expect("valid input");
     assert!(d.reached, "held descent: cost {:.3e}", d.cost);
     assert!(host_compiler::trajectory::hold::is_held(&d.v, 20));
@@ -318,7 +324,10 @@ fn a_non_finite_nominal_certifies_nothing() {
     let mut v = vec![vec![0.0, 0.0]; ol.task.steps];
     v[0] = vec![f64::INFINITY, f64::INFINITY];
     let nom = lp.simulate(&x0, &v);
-    assert!(nom.x.iter().flatten().any(|x| !x.is_finite()), "the nominal must overflow");
+    assert!(
+        nom.x.iter().flatten().any(|x| !x.is_finite()),
+        "the nominal must overflow"
+    );
     let c = host_compiler::certify::certify(&lp, &lc, &nom);
     assert!(!c.is_certified());
     assert_eq!((c.delta, c.delta_stored), (0.0, 0.0));
@@ -346,6 +355,9 @@ fn no_iterations_return_the_start() {
     let o = try_maximize_delta(&lp, &lc, &x0, &v, ol.task.steps, &off, &cancel).unwrap();
     assert_eq!(o.iterations, 0);
     assert_eq!(o.certificate.delta, delta);
-    let v32: Vec<Vec<f64>> = v.iter().map(|r| r.iter().map(|&a| a as f32 as f64).collect()).collect();
+    let v32: Vec<Vec<f64>> = v
+        .iter()
+        .map(|r| r.iter().map(|&a| a as f32 as f64).collect())
+        .collect();
     assert_eq!(o.nominal.v, v32);
 }

@@ -95,7 +95,10 @@ fn potential_gradient_matches_finite_differences() {
     for case in 0..8 {
         let v = random_v(&mut rng, steps, [1.0, -1.0], 0.8);
         let (_, c) = shipped(&lp, &lc, &x0, &v);
-        let s = PotentialSettings::builder().delta(0.05 + 0.01 * case as f64).build().unwrap();
+        let s = PotentialSettings::builder()
+            .delta(0.05 + 0.01 * case as f64)
+            .build()
+            .unwrap();
         let pot = Potential::new(&lp, &lc, &x0, steps, &c, &s);
         let (J, g) = pot.eval(&v, true);
         let g = g.unwrap();

@@ -52,7 +52,11 @@ fn a_short_horizon_cannot_reach_zero_cost() {
     let lp = ol.lp();
     let x0 = f32x([0.0, 0.0, 0.0, 1.0]);
     let v = vec![vec![1.0, -1.0]; 50];
-    let s = PotentialSettings::builder().delta(0.02).max_iterations(200).build().unwrap();
+    let s = PotentialSettings::builder()
+        .delta(0.02)
+        .max_iterations(200)
+        .build()
+        .unwrap();
     let d = descend(&lp, &lc, &x0, &v, &s, DescentMethod::Algorithm3).expect("valid input");
     assert!(!d.zero_cost && !d.reached);
     assert!(d.cost > 0.0);
@@ -75,7 +79,11 @@ fn time_optimal_bisection_shortens_the_terminal_time_at_the_kept_delta() {
     .expect("valid input");
     assert!(seed.reached);
     let kept = seed.certificate.delta;
-    let s = PotentialSettings::builder().delta(kept).max_iterations(300).build().unwrap();
+    let s = PotentialSettings::builder()
+        .delta(kept)
+        .max_iterations(300)
+        .build()
+        .unwrap();
     let to =
         time_optimal(&lp, &lc, &x0, &seed.v, &s, DescentMethod::Algorithm3).expect("valid input");
     println!(

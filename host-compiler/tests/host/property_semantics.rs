@@ -89,6 +89,13 @@ fn a_trace_over_the_wrong_signals_is_refused() {
     };
     let trace = Trace::new(vec![0.0, 0.1], vec!["x1".into()], vec![vec![0.0, 0.1]]).unwrap();
     let e = ra.trace_robustness(&trace).unwrap_err();
-    assert!(matches!(e, SemanticsError::Signals { found: 1, n: 2 }), "{e:?}");
-    assert!(e.to_string().contains("1 signals but the property is over 2 states"), "{e}");
+    assert!(
+        matches!(e, SemanticsError::Signals { found: 1, n: 2 }),
+        "{e:?}"
+    );
+    assert!(
+        e.to_string()
+            .contains("1 signals but the property is over 2 states"),
+        "{e}"
+    );
 }

@@ -702,7 +702,9 @@ fn shared_scans_match_direct_scans_over_any_range() {
             }
             b
         };
-        let g: Vec<f64> = (0..end).map(|k| I.goal.signed_dist(st(k), &I.m).value).collect();
+        let g: Vec<f64> = (0..end)
+            .map(|k| I.goal.signed_dist(st(k), &I.m).value)
+            .collect();
         let goal = goal_part(&traj, SafetySet::Region(&I.goal), &I.m, end).unwrap();
         let (kg, vg) = first(&g, &|a, b| a > b);
         assert_eq!((goal.index, goal.value), (kg, vg), "case {case}: Goal");
@@ -712,15 +714,39 @@ fn shared_scans_match_direct_scans_over_any_range() {
             .collect();
         let margin = |k: usize, d: f64| (d - 0.01 * k as f64) / 1.5;
         let um: Vec<f64> = u.iter().enumerate().map(|(k, &d)| margin(k, d)).collect();
-        let up = unsafe_part(&traj, Some(SafetySet::Region(&I.unsafe_set)), &I.m, end, Some(&margin))
-            .unwrap();
+        let up = unsafe_part(
+            &traj,
+            Some(SafetySet::Region(&I.unsafe_set)),
+            &I.m,
+            end,
+            Some(&margin),
+        )
+        .unwrap();
         let (ku, vu) = first(&u, &|a, b| a < b);
         let (kum, vum) = first(&um, &|a, b| a < b);
-        assert_eq!((up.at_samples.index, up.at_samples.value), (ku, vu), "case {case}: Unsafe");
+        assert_eq!(
+            (up.at_samples.index, up.at_samples.value),
+            (ku, vu),
+            "case {case}: Unsafe"
+        );
         let m = up.margined.expect("a margin was given");
-        assert_eq!((m.index, m.value), (kum, vum), "case {case}: Unsafe after the margin");
-        let plain = unsafe_part(&traj, Some(SafetySet::Region(&I.unsafe_set)), &I.m, end, None).unwrap();
-        assert_eq!(plain.at_samples, up.at_samples, "case {case}: with and without the margin");
+        assert_eq!(
+            (m.index, m.value),
+            (kum, vum),
+            "case {case}: Unsafe after the margin"
+        );
+        let plain = unsafe_part(
+            &traj,
+            Some(SafetySet::Region(&I.unsafe_set)),
+            &I.m,
+            end,
+            None,
+        )
+        .unwrap();
+        assert_eq!(
+            plain.at_samples, up.at_samples,
+            "case {case}: with and without the margin"
+        );
         assert!(plain.margined.is_none());
 
         let none = unsafe_part(&traj, None, &I.m, end, Some(&margin)).unwrap();
@@ -736,7 +762,11 @@ fn shared_scans_match_direct_scans_over_any_range() {
                 .map(|k| I.inputs[k].signed_dist(st(k), &I.m).value)
                 .collect();
             let ip = ip.expect("input samples were given");
-            assert_eq!((ip.index, ip.value), first(&v, &|a, b| a < b), "case {case}: Input");
+            assert_eq!(
+                (ip.index, ip.value),
+                first(&v, &|a, b| a < b),
+                "case {case}: Input"
+            );
         }
     }
 }

@@ -60,10 +60,16 @@ fn a_hybrid_plant_reads_as_written() {
     let p = spec::parse(BASE, "spec.toml").expect("BASE must parse");
     let h = p.hybrid.as_ref().expect("a hybrid plant");
     assert_eq!(h.locations.len(), 2);
-    assert_eq!((h.locations[0].name.as_str(), h.locations[1].name.as_str()), ("left", "right"));
+    assert_eq!(
+        (h.locations[0].name.as_str(), h.locations[1].name.as_str()),
+        ("left", "right")
+    );
     assert_eq!(h.locations[1].c, vec![0.0, 0.5]);
     assert_eq!(h.initial, 0);
-    assert_eq!((h.edges[0].from, h.edges[0].to, h.edges[0].kind), (0, 1, EdgeKindDesc::Internal));
+    assert_eq!(
+        (h.edges[0].from, h.edges[0].to, h.edges[0].kind),
+        (0, 1, EdgeKindDesc::Internal)
+    );
     assert_eq!(h.edges[0].R.get(1, 1), 0.5);
     // The problem's plant is the initial location's model.
     assert_eq!((p.plant.n(), p.plant.m(), p.plant.period), (2, 1, 0.1));
@@ -73,7 +79,10 @@ fn a_hybrid_plant_reads_as_written() {
 
 #[test]
 fn example_4_25_builds_an_automaton_whose_flow_crosses_the_plane() {
-    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../examples/hybrid-internal-4-25.toml");
+    let path = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../examples/hybrid-internal-4-25.toml"
+    );
     let p = spec::load(path).unwrap_or_else(|e| panic!("{}", e.headline()));
     let h = p.hybrid.as_ref().unwrap();
     assert_eq!(h.locations.len(), 2);
@@ -85,7 +94,10 @@ fn example_4_25_builds_an_automaton_whose_flow_crosses_the_plane() {
     assert_eq!(step.events.len(), 1);
     // The pipeline refuses it, naming what it is, instead of running location 0 alone.
     match Task::new(p) {
-        Err(TaskError::HybridNotSupported { locations: 2, edges: 2 }) => {}
+        Err(TaskError::HybridNotSupported {
+            locations: 2,
+            edges: 2,
+        }) => {}
         Err(e) => panic!("wrong refusal: {e}"),
         Ok(_) => panic!("a hybrid task must be refused until the pipeline takes it"),
     }
@@ -95,7 +107,11 @@ fn example_4_25_builds_an_automaton_whose_flow_crosses_the_plane() {
 fn an_edge_to_an_unknown_location() {
     let src = edit("to = \"right\"", "to = \"middle\"");
     let e = expect(&src, ErrorKind::BadValue, "to = ", "\"middle\"");
-    assert!(e.message().contains("\"left\", \"right\""), "{}", e.message());
+    assert!(
+        e.message().contains("\"left\", \"right\""),
+        "{}",
+        e.message()
+    );
 }
 
 #[test]
@@ -113,9 +129,16 @@ fn a_missing_initial_location() {
 
 #[test]
 fn a_guard_of_the_wrong_dimension() {
-    let src = edit("guard = { A = [[-1.0, 0.0]]", "guard = { A = [[-1.0, 0.0, 0.0]]");
+    let src = edit(
+        "guard = { A = [[-1.0, 0.0]]",
+        "guard = { A = [[-1.0, 0.0, 0.0]]",
+    );
     let e = expect(&src, ErrorKind::Dimension, "guard", "[-1.0, 0.0, 0.0]");
-    assert!(e.message().contains("plant.edge[0].guard.A"), "{}", e.message());
+    assert!(
+        e.message().contains("plant.edge[0].guard.A"),
+        "{}",
+        e.message()
+    );
 }
 
 #[test]
@@ -136,7 +159,12 @@ fn a_reset_that_is_not_an_affine_map_of_the_state() {
 #[test]
 fn an_invariant_that_excludes_init() {
     let src = edit("hi = [-0.5, 0.0]", "hi = [0.5, 0.0]");
-    let e = expect(&src, ErrorKind::BadValue, "[[plant.location]]", "{ A = [[1.0, 0.0]]");
+    let e = expect(
+        &src,
+        ErrorKind::BadValue,
+        "[[plant.location]]",
+        "{ A = [[1.0, 0.0]]",
+    );
     assert!(e.message().contains("\"left\""), "{}", e.message());
     assert!(e.message().contains("0.5"), "{}", e.message());
 }
@@ -147,7 +175,12 @@ fn locations_of_different_dimensions() {
         "A = [[0.0, 1.0], [0.0, -1.0]]",
         "A = [[0.0, 1.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, 0.0]]",
     );
-    expect(&src, ErrorKind::Dimension, "name = \"right\"", "[[0.0, 1.0, 0.0]");
+    expect(
+        &src,
+        ErrorKind::Dimension,
+        "name = \"right\"",
+        "[[0.0, 1.0, 0.0]",
+    );
 }
 
 #[test]
@@ -165,9 +198,16 @@ fn an_edge_kind_that_is_neither() {
 
 #[test]
 fn plant_matrices_given_twice() {
-    let src = edit("period = 0.1\n", "period = 0.1\nA = [[0.0, 1.0], [0.0, 0.0]]\n");
+    let src = edit(
+        "period = 0.1\n",
+        "period = 0.1\nA = [[0.0, 1.0], [0.0, 0.0]]\n",
+    );
     let e = expect(&src, ErrorKind::BadValue, "[plant]", "[[0.0, 1.0]");
-    assert!(e.message().contains("[[plant.location]]"), "{}", e.message());
+    assert!(
+        e.message().contains("[[plant.location]]"),
+        "{}",
+        e.message()
+    );
 }
 
 #[test]

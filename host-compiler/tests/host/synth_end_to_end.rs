@@ -74,7 +74,8 @@ fn recorded_trajectories_are_certified_or_refused() {
     for k in 0..p.horizon_steps() {
         bad_csv.push_str(&format!("{},{}\n", k as f64 * p.plant.period, 1.0));
     }
-    let bad = parse_recording(&bad_csv, "bad.csv", 2, 1, p.plant.period, p.horizon_steps()).unwrap();
+    let bad =
+        parse_recording(&bad_csv, "bad.csv", 2, 1, p.plant.period, p.horizon_steps()).unwrap();
     let opts = SynthOptions {
         imports: vec![("good.csv".into(), good), ("bad.csv".into(), bad)],
         ..quick()

@@ -24,10 +24,17 @@ fn a_certified_image_survives_the_attack() {
     assert!(r.worst_robustness.is_finite());
     // Every ball was searched from both starts: at least the initial simplices.
     let n = img.n();
-    assert!(r.evaluations >= img.n_trajectories() * s.starts_per_ball * (n + 1), "{}", r.evaluations);
+    assert!(
+        r.evaluations >= img.n_trajectories() * s.starts_per_ball * (n + 1),
+        "{}",
+        r.evaluations
+    );
     // Deterministic for a seed.
     let again = attack(&judge, &img, &s).unwrap();
-    assert_eq!((again.evaluations, again.worst_robustness), (r.evaluations, r.worst_robustness));
+    assert_eq!(
+        (again.evaluations, again.worst_robustness),
+        (r.evaluations, r.worst_robustness)
+    );
 }
 
 #[test]
@@ -60,18 +67,35 @@ fn balls_enlarged_past_their_certificate_are_caught() {
 fn the_budget_must_fit_the_dimension() {
     let task = task();
     let img = decode(image()).unwrap();
-    let s = AttackSettings::builder().evaluations_per_start(3).build().unwrap();
+    let s = AttackSettings::builder()
+        .evaluations_per_start(3)
+        .build()
+        .unwrap();
     match attack(&Judge::new(&task), &img, &s) {
         Err(AttackError::Budget { got: 3, n, need }) => assert_eq!(need, n + 2),
         other => panic!("{other:?}"),
     }
-    assert!(AttackSettings::builder().starts_per_ball(0).build().is_err());
+    assert!(AttackSettings::builder()
+        .starts_per_ball(0)
+        .build()
+        .is_err());
 }
 
 #[test]
 fn verify_attack_reports_the_search() {
     let p = write_patched("untouched-attack.img", image().to_vec());
-    let o = verify(&p, &["--runs", "50", "--per-ball", "2", "--attack", "--attack-evals", "40"]);
+    let o = verify(
+        &p,
+        &[
+            "--runs",
+            "50",
+            "--per-ball",
+            "2",
+            "--attack",
+            "--attack-evals",
+            "40",
+        ],
+    );
     let out = text(&o);
     assert_eq!(o.status.code(), Some(0), "{out}");
     assert!(out.contains("attack: "), "{out}");
@@ -88,14 +112,21 @@ fn monte_carlo_counts_are_bounded_in_the_library_too() {
     let img = decode(image()).unwrap();
     let too_many = MAX_RUNS as usize + 1;
     match monte_carlo(&judge, &img, too_many, 0, 1) {
-        Err(MonteCarloError::TooManyRuns { what: "interior", got, max }) => {
+        Err(MonteCarloError::TooManyRuns {
+            what: "interior",
+            got,
+            max,
+        }) => {
             assert_eq!((got, max), (too_many, MAX_RUNS))
         }
         other => panic!("{other:?}"),
     }
     assert!(matches!(
         monte_carlo(&judge, &img, 1, MAX_PER_BALL as usize + 1, 1),
-        Err(MonteCarloError::TooManyRuns { what: "per_ball", .. })
+        Err(MonteCarloError::TooManyRuns {
+            what: "per_ball",
+            ..
+        })
     ));
     assert!(monte_carlo(&judge, &img, 10, 1, 1).is_ok());
 }

@@ -257,7 +257,11 @@ impl Trace {
                     continue;
                 }
                 // The signal this field belongs to: fields after the status column shift by one.
-                let signal = if status.is_some_and(|s| i > s) { i - 1 } else { i };
+                let signal = if status.is_some_and(|s| i > s) {
+                    i - 1
+                } else {
+                    i
+                };
                 let v: f64 = f.parse().map_err(|_| TraceError::NotNumeric {
                     origin: origin_s.clone(),
                     line,
