@@ -8,23 +8,7 @@ use host_compiler::spec::{self, ErrorKind, InputSet};
 use shared_types::eval::Controller;
 use shared_types::image::{decode, Fallback, ImageError};
 
-use crate::spec_bounds::{edit, BASE};
-
-/// 1-based (line, column) of the first `needle` in `src`.
-fn pos(src: &str, needle: &str) -> (usize, usize) {
-    let off = src.find(needle).expect("test bug: needle not found");
-    let line = src[..off].matches('\n').count() + 1;
-    let start = src[..off].rfind('\n').map_or(0, |i| i + 1);
-    (line, src[start..off].chars().count() + 1)
-}
-
-#[track_caller]
-fn refused(src: &str, kind: ErrorKind, needle: &str) -> String {
-    let e = spec::parse(src, "spec.toml").expect_err("must be refused");
-    assert_eq!(e.kind(), kind, "{}", e.message());
-    assert_eq!(e.line_col(), Some(pos(src, needle)), "{}", e.message());
-    e.message().to_string()
-}
+use crate::spec_bounds::{edit, refused, BASE};
 
 #[test]
 fn the_fallback_input_defaults_to_the_input_sets_point_nearest_zero() {

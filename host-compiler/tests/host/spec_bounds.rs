@@ -2,6 +2,7 @@
 //! Init was sampled, its width overflowing to ∞) are diagnostics at their line and column, whatever key
 //! they are under.
 
+use crate::spec_errors::pos;
 use host_compiler::spec::{self, ErrorKind, MAX_MAGNITUDE};
 
 pub(crate) const BASE: &str = r#"seed = 3
@@ -35,19 +36,17 @@ pub(crate) fn edit(from: &str, to: &str) -> String {
     BASE.replacen(from, to, 1)
 }
 
-/// 1-based (line, column) of the first `needle` in `src`.
-fn pos(src: &str, needle: &str) -> (usize, usize) {
-    let off = src.find(needle).expect("test bug: needle not found");
-    let line = src[..off].matches('\n').count() + 1;
-    let start = src[..off].rfind('\n').map_or(0, |i| i + 1);
-    (line, src[start..off].chars().count() + 1)
-}
-
+/// Refused with `kind`, the diagnostic at the first `needle` of `src`; returns the message.
 #[track_caller]
-fn refused(src: &str, kind: ErrorKind, needle: &str) -> String {
+pub(crate) fn refused(src: &str, kind: ErrorKind, needle: &str) -> String {
     let e = spec::parse(src, "spec.toml").expect_err("must be refused");
     assert_eq!(e.kind(), kind, "{}", e.message());
-    assert_eq!(e.line_col(), Some(pos(src, needle)), "{}", e.message());
+    assert_eq!(
+        e.line_col(),
+        Some(pos(src, needle, needle)),
+        "{}",
+        e.message()
+    );
     e.message().to_string()
 }
 

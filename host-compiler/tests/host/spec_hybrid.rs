@@ -218,29 +218,8 @@ fn discrete_time_locations_are_refused() {
 
 #[test]
 fn a_plant_with_one_location_still_needs_a_and_b() {
-    let single = r#"seed = 3
-horizon = 2.0
-
-[plant]
-time = "continuous"
-B = [[0.0], [1.0]]
-period = 0.1
-
-[init]
-kind = "box"
-lo = [-0.1, 0.0]
-hi = [0.1, 0.0]
-
-[goal]
-kind = "ball"
-center = [1.0, 0.0]
-radius = 0.2
-
-[input]
-kind = "box"
-lo = [-1.0]
-hi = [1.0]
-"#;
-    let e = expect(single, ErrorKind::MissingField, "[plant]", "[plant]");
+    // The spec-limit tests' base spec without its `A`.
+    let single = crate::spec_bounds::edit("A = [[0.0, 1.0], [0.0, 0.0]]\n", "");
+    let e = expect(&single, ErrorKind::MissingField, "[plant]", "[plant]");
     assert!(e.message().contains("`A`"), "{}", e.message());
 }
