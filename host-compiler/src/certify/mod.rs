@@ -28,6 +28,7 @@
 //!    [`pwa_ball`]).
 
 pub mod forced;
+pub mod internal;
 pub mod pieces;
 pub mod pwa_ball;
 
@@ -473,12 +474,16 @@ pub fn round_down_f32(x: f64) -> f32 {
 }
 
 /// Where the nominal's target (the loop's `goal`) is judged.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub enum GoalAt {
     /// At the sample of greatest depth, κ* of (4.12): the task ends when Goal is reached.
     Best,
     /// At the last sample of the table: a forced switch (§4.2.1) happens when the segment's table ends.
     Last,
+    /// Nowhere: the segment ends where the plant switches by itself (§4.2.2, [`internal`]), and the
+    /// caller bounds the radius by the given value instead (the rounding bound is taken at that radius;
+    /// the Goal part reads it, at the last sample).
+    Free(f64),
 }
 
 /// Certify one nominal trajectory (simulated with the shipped K̂, v̂) for the loop, with the target
@@ -506,6 +511,12 @@ pub fn certify_at(lp: &Loop<'_>, lc: &LoopConstants, nom: &Nominal, at: GoalAt) 
                 safety::goal_part(&traj, SafetySet::Region(lp.goal()), metric, traj.len())?
             }
             GoalAt::Last => safety::goal_at(&traj, SafetySet::Region(lp.goal()), metric, N)?,
+            GoalAt::Free(r_max) => safety::Critical {
+                value: r_max,
+                index: N,
+                time: N as f64,
+                point: Vec::new(),
+            },
         };
         // Rounding bound over the table, with the tube radius at its largest possible value δ_Goal.
         let r_max = goal.value.max(0.0);

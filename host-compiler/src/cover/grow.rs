@@ -251,6 +251,7 @@ pub fn grow(
     let mut cover = Cover::new(P.clone());
     // Trajectory generator: the tube conditions of Theorem 4.7 with the inter-sample and rounding margins.
     let gp = GenProblem {
+        loc: 0,
         plant: &*task.plant,
         K: K.as_ref(),
         P: P.as_ref(),

@@ -13,6 +13,8 @@
 //! Everything random is drawn from ChaCha streams seeded by the spec's seed, and parallel work is
 //! collected in a fixed order, so the same spec and seed give a byte-identical image.
 
+pub mod hybrid;
+
 use crate::certify::{self, Loop, LoopConstants};
 use crate::cover::{grow, Cover, CoverageEstimate, GrowError, GrowOptions};
 use crate::optimize::BundleSettings;

@@ -80,8 +80,9 @@ settings_builder!(
 
 /// What the generator needs of the task.
 pub struct GenProblem<'a> {
-    /// The plant; the nominal is simulated with its sampled model x⁺ = A x + B u + g.
+    /// The plant; the nominal is simulated with the sampled model x⁺ = A x + B u + g of location `loc`.
     pub plant: &'a dyn Plant,
+    pub loc: crate::model::Location,
     /// Feedback and CAF metric.
     pub K: MatRef<'a, f64>,
     pub P: MatRef<'a, f64>,
@@ -102,13 +103,13 @@ pub struct GenProblem<'a> {
 
 impl GenProblem<'_> {
     fn model(&self) -> &DiscretePlant {
-        self.plant.error_dynamics(0)
+        self.plant.error_dynamics(self.loc)
     }
 
     /// Inter-sample excursion ρ(x̃(κ), ũ(κ)) = φ(‖f‖_P + β·margin) of the nominal in the P-metric, f the
     /// vector field at the sample (0 for discrete-time plants).
     fn excursion(&self, x: &[f64], u: &[f64]) -> f64 {
-        match self.plant.vector_field(0, x, u) {
+        match self.plant.vector_field(self.loc, x, u) {
             None => 0.0,
             Some(f) => self.phi * (p_norm(self.P, &f) + self.beta * self.input_margin),
         }
@@ -503,6 +504,7 @@ mod tests {
             unsafe_pieces,
         };
         let prob = GenProblem {
+            loc: 0,
             plant: &plant,
             K: K.as_ref(),
             P: P.as_ref(),

@@ -15,6 +15,7 @@ mod caf_props;
 mod caf_status;
 mod certify_bounds;
 mod certify_forced;
+mod certify_internal;
 mod cli_exit;
 mod cli_limits;
 mod cli_synth;

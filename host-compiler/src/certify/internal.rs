@@ -1,0 +1,955 @@
+//! General switching in the sampled loop (§4.2.2: Assumption 4.21, Def 4.22, Lemma 4.23, Theorem 4.24):
+//! the certificate of a nominal run whose segments are joined by *internal* edges, taken by the plant when
+//! its flow enters a guard between two samples, and re-synchronised by the controller (4.41)–(4.42) at
+//! the first sample where it sees the state inside the guard.
+//!
+//! **What runs.** Segment i runs in location ℓᵢ with its gain Kᵢ and table vᵢ, row κ − κᵢ at sample κ,
+//! where κᵢ is the sample at which the controller entered the segment. Its exit is the half-space guard
+//! G = {x : âᵀx ≤ b̂} (‖â‖ = 1) of edge ℓᵢ → ℓᵢ₊₁, with the identity reset. At every sample of segment i
+//! the evaluator computes g = fl(Σⱼ âⱼx̂ⱼ − b̂) in f32 and moves to segment i+1, row 0, when g ≤ −θ. The
+//! stored threshold θ is twice the largest rounding error of g over the states the certificate allows
+//! (`guard_eval_bound`), so a state outside G is never taken for switched ("no early detection"), and one
+//! deeper than θ_eff = θ + that error always is.
+//!
+//! **The certificate, backwards** (segment N is judged against Goal, as one location, [`super::certify`]).
+//! For segment i < N with radius r, every quantity below is an affine bound in r, so the largest r is found
+//! by bisection on their conjunction (each is monotone in r):
+//! 1. *Before the switch* the run is an ordinary run of location ℓᵢ: within r of x̃ᵢ(κ) in Pᵢ at the
+//!    samples, within Rκ = γr + ρκ + φβε̄ between them ([`super`]'s inter-sample bound). Unsafe and the
+//!    input set are checked over the kept rows (Theorem 4.7's Unsafe and Input parts), with the run's other
+//!    guards and the faces of ℓᵢ's invariant not implied by "outside G" counted as Unsafe.
+//! 2. *Sample 0* lies outside G by more than θ_eff: the edge is armed and nothing is detected at once.
+//! 3. *All switch by κ_f*: κ_f is the first sample whose ball lies in G at depth θ_eff; a run still in ℓᵢ
+//!    there would have crossed the plane of G continuously, so every run has switched (and been
+//!    detected) by κ_f. The table keeps rows 0..κ_f.
+//! 4. *Each event interval* κ < κ_f whose inter-sample ball (radius Rκ) meets G: the run crosses the
+//!    plane at a point p of that ball, and flows in ℓᵢ₊₁ for τ ∈ [0, h] with the input of row κ before
+//!    its next sample. p lies in the plane's slab |g| ≤ θ_eff and in the ball, so within
+//!    sqrt(Rκ² − d²) + 2θ_eff/‖â‖_{Pᵢ⁻¹} (in Pᵢ) of p̂, the Pᵢ-projection of x̃ᵢ(κ) onto the plane (d:
+//!    the centre's Pᵢ-distance to the slab; parallel and normal parts are Pᵢ-orthogonal). The landing
+//!    x(τ) = Φ′(τ)p + Γ′(τ)(B′u + c′), u = ũ(κ) + Kᵢe + ε, is then within
+//!    ‖Φ′(τ)p̂ + Γ′(τ)(B′ũ + c′) − x̃ᵢ₊₁(0)‖_{P′} + ‖Φ′(τ)‖_{Pᵢ→P′}(that radius) + ‖Γ′B′Kᵢ‖_{Pᵢ→P′}r +
+//!    ‖P′^{1/2}Γ′B′‖ε̄ of the next segment's start; on a grid of τ with spacing Δτ, plus LΔτ/2 with
+//!    L = e^{μ′⁺h} sup‖fᵢ₊₁‖_{P′} (the speed of the flow after the switch), this must be below δᵢ₊₁
+//!    (Lemma 4.23's safe transition, with the event time unknown within the period: the "hole").
+//!    After the switch the states stay in the P′-ball of radius ρ_post = ‖I‖_{Pᵢ→P′}Rκ + φ′ sup‖fᵢ₊₁‖_{P′}
+//!    around x̃ᵢ(κ): it must clear the next location's Unsafe, and the flow must go into G at a rate
+//!    âᵀfᵢ₊₁ ≤ −ν (*transversality*), so the run neither returns across the plane (the edge back,
+//!    armed once it leaves G) nor stays undetected for more than one sample.
+//! 5. *Late detection*: a run that switched in the last s_late = θ_eff/ν of a period may be seen at the
+//!    next sample within θ_eff of the plane and not yet taken for switched; the controller then applies
+//!    row κ+1 of segment i for one more period, which is interval κ+1 with s = 0 (item 4 covers it). Its
+//!    state differs from the location-ℓᵢ run by at most η = L·s_late (in Pᵢ), so items 1–4 are checked at
+//!    r + η.
+//!
+//! Entering segment i+1 (any segment with an entry edge), the tube must stay on G's side: at samples
+//! 0..W the flow crosses into G (transversality as in item 4, over segment i+1's own balls), after W its
+//! inter-sample balls lie inside G. This keeps the edge back (guard ℝⁿ \ G's closure, armed as soon as
+//! the state leaves the plane) from firing and the invariant face that equals G satisfied.
+//!
+//! Accumulated time: runs enter segment i+1 at different samples; the run takes at most Σᵢ κ_f(i) + κ*
+//! samples, which must fit the horizon.
+//!
+//! Restrictions, refused with a reason: guards of taken edges are half-spaces and their resets are the
+//! identity (the controller detects the switch by the guard on the measured state).
+
+use super::{certify_at, Certificate, GoalAt, Loop, LoopConstants};
+use crate::geometry::{GeometryError, Metric, Polytope as Halfspaces, Region, Witness};
+use crate::linalg::{mat_t_vec, mat_vec, p_norm, spectral_norm, sym_eigenvalues, to_row_major};
+use crate::model::hybrid::{Edge, EdgeKind, Hybrid, Polytope};
+use crate::model::{ContinuousPlant, Location, Plant};
+use crate::trajectory::Nominal;
+use faer::{Mat, MatRef};
+
+/// Points of the grid of flow times after a switch, per period (spacing h/(GRID − 1)).
+pub const GRID: usize = 33;
+/// s_late as a fraction of the period (item 5): the required transversality rate is θ_eff / s_late.
+pub const LATE_FRACTION: f64 = 0.01;
+
+/// One segment of a run with internal switching.
+#[derive(Clone, Copy)]
+pub struct InternalSegment<'a> {
+    /// The segment's loop: location, shipped gain, metric, the task's Unsafe and input set; its goal is
+    /// the task's Goal (only the last segment is judged against it).
+    pub lp: Loop<'a>,
+    pub lc: &'a LoopConstants,
+    /// The nominal: for a segment with an exit, continued past the guard in its own location (the extended
+    /// segment of §4.2.2) far enough that the tube lies inside the guard.
+    pub nominal: &'a Nominal,
+}
+
+/// The f32 guard test a segment exits by (module doc).
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct GuardExit {
+    /// â, normalised, as stored.
+    pub a: Vec<f32>,
+    pub b: f32,
+    /// The detection threshold θ (switched when fl(âᵀx̂ − b̂) ≤ −θ).
+    pub theta: f32,
+}
+
+/// The certificate of one segment.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct SegmentCertificate {
+    /// Theorem 4.7's parts over the kept rows (for a segment with an exit the Goal part is the bisection's
+    /// upper end, not a depth).
+    pub base: Certificate,
+    /// The certified radius of the segment's ball around x̃ᵢ(0) (0 if none).
+    pub delta: f64,
+    /// Rows of the table the image keeps (κ_f for a segment with an exit, the table for the last).
+    pub rows: usize,
+    /// The samples the segment can last: κ_f, or κ* for the last segment.
+    pub samples: usize,
+    pub exit: Option<GuardExit>,
+    /// Event intervals (first, last) at the certified radius.
+    pub events: Option<(usize, usize)>,
+    /// η of item 5.
+    pub eta: f64,
+    /// What limits δ (for messages and the report).
+    pub binding: &'static str,
+}
+
+/// The certificate of a run with internal switching, first segment first.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct InternalCertificate {
+    pub segments: Vec<SegmentCertificate>,
+    /// The radius to store for the first segment's ball (selection in f32).
+    pub delta_stored: f32,
+}
+
+impl InternalCertificate {
+    pub fn delta(&self) -> f64 {
+        self.segments.first().map_or(0.0, |s| s.delta)
+    }
+    pub fn is_certified(&self) -> bool {
+        self.delta() > 0.0 && self.delta_stored > 0.0
+    }
+    /// The most samples a run takes (Σ κ_f + κ*).
+    pub fn samples(&self) -> usize {
+        self.segments.iter().map(|s| s.samples).sum()
+    }
+}
+
+/// Why a run is not one this module certifies.
+#[derive(Debug, thiserror::Error)]
+pub enum InternalError {
+    #[error("a run needs at least one segment")]
+    Empty,
+    #[error("{segments} segments need {need} edges between them, got {got}")]
+    Edges {
+        segments: usize,
+        need: usize,
+        got: usize,
+    },
+    #[error("segment {segment}: edge {edge} does not exist")]
+    UnknownEdge { segment: usize, edge: usize },
+    #[error("segment {segment}: edge {edge} is forced; this certificate is for internal switching (§4.2.2)")]
+    NotInternal { segment: usize, edge: usize },
+    #[error("segment {segment} runs in location {loc}, but edge {edge} goes {from} → {to} and the next segment runs in {next}")]
+    Locations {
+        segment: usize,
+        edge: usize,
+        loc: usize,
+        from: usize,
+        to: usize,
+        next: usize,
+    },
+    #[error("segment {segment}: edge {edge}'s guard has {rows} rows; the controller detects a switch by one half-space")]
+    GuardNotHalfspace {
+        segment: usize,
+        edge: usize,
+        rows: usize,
+    },
+    #[error("segment {segment}: edge {edge}'s reset is not the identity; the controller detects a switch by the guard on the measured state")]
+    ResetNotIdentity { segment: usize, edge: usize },
+    #[error("segment {segment}'s nominal is empty or not finite")]
+    BadNominal { segment: usize },
+    #[error("segment {segment}: {source}")]
+    Geometry {
+        segment: usize,
+        #[source]
+        source: GeometryError,
+    },
+}
+
+/// Unsafe with extra half-space regions (guards that must not fire, invariant faces that may not be left):
+/// the distance is the least, the depth the largest (a lower bound, as for a union).
+struct UnsafeWith<'a> {
+    n: usize,
+    unsafe_set: Option<&'a dyn Region>,
+    extra: Vec<Halfspaces>,
+}
+
+impl Region for UnsafeWith<'_> {
+    fn dim(&self) -> usize {
+        self.n
+    }
+    fn contains(&self, x: &[f64]) -> bool {
+        self.unsafe_set.is_some_and(|u| u.contains(x)) || self.extra.iter().any(|p| p.contains(x))
+    }
+    fn dist(&self, x: &[f64], metric: &Metric) -> Witness {
+        let mut best = self.unsafe_set.map(|u| u.dist(x, metric));
+        for p in &self.extra {
+            let w = p.dist(x, metric);
+            if best.as_ref().is_none_or(|b| w.value < b.value) {
+                best = Some(w);
+            }
+        }
+        best.unwrap_or(Witness {
+            value: f64::INFINITY,
+            point: Vec::new(),
+        })
+    }
+    fn depth(&self, x: &[f64], metric: &Metric) -> Witness {
+        let mut best = self.unsafe_set.map(|u| u.depth(x, metric));
+        for p in &self.extra {
+            let w = p.depth(x, metric);
+            if best.as_ref().is_none_or(|b| w.value > b.value) {
+                best = Some(w);
+            }
+        }
+        best.unwrap_or(Witness {
+            value: f64::NEG_INFINITY,
+            point: Vec::new(),
+        })
+    }
+}
+
+/// A half-space a·x ≤ b, normalised (‖a‖ = 1).
+#[derive(Clone, Debug)]
+struct Half {
+    a: Vec<f64>,
+    b: f64,
+}
+
+impl Half {
+    fn of(p: &Polytope, row: usize) -> Option<Half> {
+        let a = p.a.get(row)?;
+        let na = a.iter().map(|v| v * v).sum::<f64>().sqrt();
+        (na > 0.0).then(|| Half {
+            a: a.iter().map(|v| v / na).collect(),
+            b: p.b[row] / na,
+        })
+    }
+    /// a·x − b: negative inside.
+    fn g(&self, x: &[f64]) -> f64 {
+        dot(&self.a, x) - self.b
+    }
+    fn same(&self, o: &Half) -> bool {
+        self.a.iter().zip(&o.a).all(|(p, q)| (p - q).abs() <= 1e-12)
+            && (self.b - o.b).abs() <= 1e-12 * (1.0 + self.b.abs())
+    }
+    fn negated(&self) -> Half {
+        Half {
+            a: self.a.iter().map(|v| -v).collect(),
+            b: -self.b,
+        }
+    }
+    fn region(&self) -> Result<Halfspaces, GeometryError> {
+        Halfspaces::new(self.a.len(), self.a.clone(), vec![self.b])
+    }
+}
+
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(p, q)| p * q).sum()
+}
+
+/// ‖P_to^{1/2} M P_from^{-1/2}‖₂.
+fn cross(to: &crate::linalg::PdRoots, M: MatRef<'_, f64>, from: &crate::linalg::PdRoots) -> f64 {
+    spectral_norm((&to.sqrt * M * &from.inv_sqrt).as_ref())
+}
+
+/// The logarithmic norm of A in the P-metric, λmax(sym(P^{1/2}AP^{-1/2})).
+fn log_norm(roots: &crate::linalg::PdRoots, A: MatRef<'_, f64>) -> f64 {
+    let As = &roots.sqrt * A * &roots.inv_sqrt;
+    let S = crate::linalg::sym(As.as_ref());
+    sym_eigenvalues(S.as_ref())
+        .and_then(|e| e.last().copied())
+        .unwrap_or(f64::INFINITY)
+}
+
+/// The largest error of the evaluator's f32 guard value fl(Σⱼ âⱼx̂ⱼ − b̂) against âᵀx − b (exact â, b, x)
+/// for |xⱼ| ≤ Xⱼ: storing â and b̂ (u each), quantising x (u), and n products and n sums (γ_{n+1}),
+/// Higham §3.1, with a factor 2 for the products of these small terms.
+fn guard_eval_bound(a: &[f64], b: f64, X: &[f64]) -> f64 {
+    let n = a.len();
+    let s: f64 = a.iter().zip(X).map(|(p, q)| p.abs() * q).sum::<f64>() + b.abs();
+    2.0 * (3.0 * super::U32 + super::gamma_k(n + 1)) * s + 1e-40
+}
+
+/// f(x, u) = A x + B u + c.
+fn field(cp: &ContinuousPlant, x: &[f64], u: &[f64]) -> Vec<f64> {
+    cp.f(x, u)
+}
+
+/// Per-location constants the bounds use.
+struct Loc<'a> {
+    cp: &'a ContinuousPlant,
+    K: MatRef<'a, f64>,
+    lc: &'a LoopConstants,
+}
+
+impl Loc<'_> {
+    /// Rκ = γ r + ρκ + φβε̄ (the inter-sample ball around x̃(κ)).
+    fn inter(&self, r: f64, rho: f64, eps: f64) -> f64 {
+        self.lc.gamma * r + rho + self.lc.phi * self.lc.beta * eps
+    }
+}
+
+/// The grid of times τ ∈ [0, h] a run flows in the next location before its first sample there:
+/// Φ′(τ), Γ′(τ)B′, Γ′(τ)c′ and the norms the landing bound takes of them.
+struct Grid {
+    Phi: Vec<Mat<f64>>,
+    GB: Vec<Mat<f64>>,
+    Gc: Vec<Vec<f64>>,
+    /// ‖Φ′(τ)‖_{Pᵢ→P′}, ‖Γ′(τ)B′Kᵢ‖_{Pᵢ→P′}, ‖P′^{1/2}Γ′(τ)B′‖.
+    norm_Phi: Vec<f64>,
+    norm_GBK: Vec<f64>,
+    norm_GB: Vec<f64>,
+}
+
+fn flow_parts(cp: &ContinuousPlant, s: f64) -> (Mat<f64>, Mat<f64>, Vec<f64>) {
+    let n = cp.n();
+    if s <= 0.0 {
+        return (Mat::identity(n, n), Mat::zeros(n, cp.m()), vec![0.0; n]);
+    }
+    match cp.zoh(s) {
+        Ok(d) => (d.A, d.B, d.g),
+        Err(_) => (
+            Mat::from_fn(n, n, |_, _| f64::NAN),
+            Mat::from_fn(n, cp.m(), |_, _| f64::NAN),
+            vec![f64::NAN; n],
+        ),
+    }
+}
+
+impl Grid {
+    fn new(pre: &Loc<'_>, post: &Loc<'_>, h: f64) -> Self {
+        let mut g = Grid {
+            Phi: Vec::new(),
+            GB: Vec::new(),
+            Gc: Vec::new(),
+            norm_Phi: Vec::new(),
+            norm_GBK: Vec::new(),
+            norm_GB: Vec::new(),
+        };
+        for j in 0..GRID {
+            let tau = h * j as f64 / (GRID - 1) as f64;
+            let (Phi, GB, Gc) = flow_parts(post.cp, tau);
+            let GBK = &GB * pre.K;
+            g.norm_Phi
+                .push(cross(&post.lc.roots, Phi.as_ref(), &pre.lc.roots));
+            g.norm_GBK
+                .push(cross(&post.lc.roots, GBK.as_ref(), &pre.lc.roots));
+            g.norm_GB.push(post.lc.roots.norm_into(GB.as_ref()));
+            g.Phi.push(Phi);
+            g.GB.push(GB);
+            g.Gc.push(Gc);
+        }
+        g
+    }
+}
+
+/// Per-sample data of a segment with an exit, independent of r.
+struct ExitSamples {
+    /// g(x̃(κ)) = âᵀx̃ − b̂.
+    g: Vec<f64>,
+    /// ρκ = φ‖f(x̃(κ), ũ(κ))‖_P.
+    rho: Vec<f64>,
+    /// ‖fᵢ(x̃, ũ)‖_{P′}, ‖fᵢ₊₁(x̃, ũ)‖_{P′}, âᵀfᵢ₊₁(x̃, ũ).
+    f_pre: Vec<f64>,
+    f_post: Vec<f64>,
+    trans: Vec<f64>,
+    /// Signed P′-distance from x̃(κ) to the next location's Unsafe (with its extras).
+    unsafe_next: Vec<f64>,
+    /// ‖M(s)x̃ + N(s)ṽ + m(s) − x̃ᵢ₊₁(0)‖_{P′} per grid point.
+    land: Vec<Vec<f64>>,
+}
+
+/// r-independent constants of a segment with an exit.
+struct ExitConstants {
+    dn: f64,
+    theta_eff: f64,
+    nu_min: f64,
+    s_late: f64,
+    /// Coefficients: ‖·‖_{Pᵢ→P′} of I, Aᵢ, BᵢKᵢ, A′, B′Kᵢ; ‖P′^{1/2}Bᵢ‖, ‖P′^{1/2}B′‖; e^{μ′⁺h}.
+    c_id: f64,
+    c_A: f64,
+    c_BK: f64,
+    c_A2: f64,
+    c_BK2: f64,
+    c_B: f64,
+    c_B2: f64,
+    grow: f64,
+    /// Dual norms for transversality: ‖A′ᵀâ‖_{P′⁻¹}, ‖(B′Kᵢ)ᵀâ‖_{Pᵢ⁻¹}, ‖B′ᵀâ‖₂.
+    t_A2: f64,
+    t_BK2: f64,
+    t_B2: f64,
+    /// ‖P′^{1/2}Pᵢ^{-1/2}‖ back: ‖I‖_{P′→Pᵢ}.
+    c_back: f64,
+    phi2: f64,
+    eps: f64,
+    delta_next: f64,
+    dt: f64,
+}
+
+/// Outcome of checking a radius.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Verdict {
+    Ok {
+        kappa_f: usize,
+        first: Option<usize>,
+        last: Option<usize>,
+    },
+    Fail(&'static str),
+}
+
+fn check_exit(
+    r: f64,
+    loc: &Loc<'_>,
+    c: &ExitConstants,
+    d: &ExitSamples,
+    grid: &Grid,
+    eta: f64,
+) -> Verdict {
+    let re = r + eta;
+    let rows = d.g.len() - 1;
+    // 2. Sample 0 outside G by more than θ_eff.
+    if !(d.g[0] - c.dn * re > c.theta_eff) {
+        return Verdict::Fail("the first sample's ball reaches the guard");
+    }
+    // 3. κ_f.
+    let Some(kappa_f) = (1..=rows).find(|&k| d.g[k] + c.dn * re <= -c.theta_eff) else {
+        return Verdict::Fail("the extended segment's tube never lies inside the guard");
+    };
+    let (mut first, mut last) = (None, None);
+    for k in 0..kappa_f {
+        let R = loc.inter(re, d.rho[k], c.eps);
+        if d.g[k] - c.dn * R > 0.0 {
+            continue;
+        }
+        first.get_or_insert(k);
+        last = Some(k);
+        let F_post = d.f_post[k] + c.c_A2 * R + c.c_BK2 * re + c.c_B2 * c.eps;
+        let rho_post = c.c_id * R + c.phi2 * F_post;
+        if !(d.unsafe_next[k] > rho_post) {
+            return Verdict::Fail("Unsafe after a switch");
+        }
+        let t = d.trans[k] + c.t_A2 * rho_post + c.t_BK2 * re + c.t_B2 * c.eps;
+        if !(t <= -c.nu_min) {
+            return Verdict::Fail("transversality after a switch");
+        }
+        // The crossing point lies in the slab |g| ≤ θ_eff and in the interval's ball: within
+        // sqrt(R² − d²) + 2θ_eff/‖â‖ of p̂ (P-orthogonal parts), d the ball centre's distance to the slab.
+        let d_slab = ((d.g[k].abs() - c.theta_eff).max(0.0)) / c.dn;
+        let rad_p = (R * R - d_slab * d_slab).max(0.0).sqrt() + 2.0 * c.theta_eff / c.dn;
+        let L = c.grow * F_post;
+        for j in 0..d.land[k].len() {
+            let reach = d.land[k][j]
+                + grid.norm_Phi[j] * rad_p
+                + grid.norm_GBK[j] * re
+                + grid.norm_GB[j] * c.eps
+                + L * c.dt / 2.0;
+            if !(reach < c.delta_next) {
+                return Verdict::Fail("the landing misses the next segment's ball");
+            }
+        }
+    }
+    Verdict::Ok {
+        kappa_f,
+        first,
+        last,
+    }
+}
+
+/// Entry window (module doc): with radius r, ∃W: transversality into G at samples ≤ W, inter-sample balls
+/// inside G after W (up to `end`).
+fn check_entry(r: f64, loc: &Loc<'_>, entry: &Half, nom: &Nominal, end: usize, eps: f64) -> bool {
+    let roots = &loc.lc.roots;
+    let dn = roots.dual_norm(&entry.a);
+    let tA = roots.dual_norm(&mat_t_vec(loc.cp.A.as_ref(), &entry.a));
+    let BK = &loc.cp.B * loc.K;
+    let tBK = roots.dual_norm(&mat_t_vec(BK.as_ref(), &entry.a));
+    let tB = mat_t_vec(loc.cp.B.as_ref(), &entry.a)
+        .iter()
+        .map(|v| v * v)
+        .sum::<f64>()
+        .sqrt();
+    let radius = |k: usize| -> f64 {
+        if k < nom.steps() {
+            let f = field(loc.cp, &nom.x[k], &nom.u[k]);
+            loc.inter(r, loc.lc.phi * p_norm(loc.lc.P.as_ref(), &f), eps)
+        } else {
+            r
+        }
+    };
+    // deep[k]: the ball of sample k (with its interval) inside G.
+    let deep: Vec<bool> = (0..=end)
+        .map(|k| entry.g(&nom.x[k]) + dn * radius(k) < 0.0)
+        .collect();
+    let mut all_deep_after = vec![true; end + 2];
+    for k in (0..=end).rev() {
+        all_deep_after[k] = deep[k] && all_deep_after[k + 1];
+    }
+    for w in 0..=end {
+        // Transversality at sample w (its interval), then all deep after w.
+        if w < nom.steps() {
+            let f = field(loc.cp, &nom.x[w], &nom.u[w]);
+            let t = dot(&entry.a, &f) + tA * radius(w) + tBK * r + tB * eps;
+            if !(t < 0.0) {
+                return false;
+            }
+        } else {
+            return all_deep_after[w];
+        }
+        if all_deep_after[w + 1] {
+            return true;
+        }
+    }
+    true
+}
+
+/// Largest r in (lo, hi] with `ok(r)` (ok monotone: true below some point), by bisection; 0 if none.
+fn bisect(hi: f64, ok: impl Fn(f64) -> bool) -> f64 {
+    if !(hi > 0.0) {
+        return 0.0;
+    }
+    if ok(hi) {
+        return hi;
+    }
+    let (mut lo, mut hi) = (0.0f64, hi);
+    for _ in 0..60 {
+        let mid = 0.5 * (lo + hi);
+        if ok(mid) {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    lo
+}
+
+fn truncate(nom: &Nominal, rows: usize) -> Nominal {
+    let rows = rows.min(nom.steps());
+    Nominal {
+        x: nom.x[..=rows].to_vec(),
+        v: nom.v[..rows].to_vec(),
+        u: nom.u[..rows].to_vec(),
+    }
+}
+
+/// Theorem 4.24 for the sampled f32 loop (module doc). `edges[i]` is the index in `plant.edges()` of the
+/// internal edge that ends segment i; `steps` is the horizon in samples.
+pub fn certify_internal(
+    plant: &Hybrid,
+    segments: &[InternalSegment<'_>],
+    edges: &[usize],
+    steps: usize,
+) -> Result<InternalCertificate, InternalError> {
+    let last = segments.len().checked_sub(1).ok_or(InternalError::Empty)?;
+    if edges.len() != last {
+        return Err(InternalError::Edges {
+            segments: segments.len(),
+            need: last,
+            got: edges.len(),
+        });
+    }
+    let n = plant.n();
+    let h = plant.period();
+    // Validate the run and collect each segment's exit and entry half-spaces.
+    let mut exits: Vec<Option<Half>> = vec![None; segments.len()];
+    for (i, s) in segments.iter().enumerate() {
+        let nom = s.nominal;
+        if nom.x.is_empty() || nom.x.iter().flatten().any(|v| !v.is_finite()) || nom.steps() == 0 {
+            return Err(InternalError::BadNominal { segment: i });
+        }
+        if i == last {
+            continue;
+        }
+        let e = edges[i];
+        let edge: &Edge = plant.edges().get(e).ok_or(InternalError::UnknownEdge {
+            segment: i,
+            edge: e,
+        })?;
+        if edge.kind != EdgeKind::Internal {
+            return Err(InternalError::NotInternal {
+                segment: i,
+                edge: e,
+            });
+        }
+        let next = segments[i + 1].lp.loc;
+        if edge.from != s.lp.loc || edge.to != next {
+            return Err(InternalError::Locations {
+                segment: i,
+                edge: e,
+                loc: s.lp.loc,
+                from: edge.from,
+                to: edge.to,
+                next,
+            });
+        }
+        if edge.guard.a.len() != 1 {
+            return Err(InternalError::GuardNotHalfspace {
+                segment: i,
+                edge: e,
+                rows: edge.guard.a.len(),
+            });
+        }
+        let id = (0..n)
+            .all(|p| (0..n).all(|q| edge.reset.R[(p, q)] == if p == q { 1.0 } else { 0.0 }))
+            && edge.reset.r.iter().all(|&v| v == 0.0);
+        if !id {
+            return Err(InternalError::ResetNotIdentity {
+                segment: i,
+                edge: e,
+            });
+        }
+        exits[i] = Half::of(&edge.guard, 0);
+        if exits[i].is_none() {
+            return Err(InternalError::GuardNotHalfspace {
+                segment: i,
+                edge: e,
+                rows: 0,
+            });
+        }
+    }
+    let entries: Vec<Option<Half>> = (0..segments.len())
+        .map(|i| if i == 0 { None } else { exits[i - 1].clone() })
+        .collect();
+    // Each segment's Unsafe: the task's, plus the internal guards of its location that the run must not
+    // take (all but its exit and the edge back across its entry plane, which the entry window keeps away),
+    // plus the faces of its invariant implied neither by "outside its exit" nor by "inside its entry".
+    let mut guarded: Vec<UnsafeWith> = Vec::with_capacity(segments.len());
+    for (i, s) in segments.iter().enumerate() {
+        let geo = |source| InternalError::Geometry { segment: i, source };
+        let mut extra = Vec::new();
+        for (e, edge) in plant.edges().iter().enumerate() {
+            if edge.from != s.lp.loc || edge.kind != EdgeKind::Internal {
+                continue;
+            }
+            if i < last && e == edges[i] {
+                continue;
+            }
+            if let (Some(entry), Some(h0)) = (&entries[i], Half::of(&edge.guard, 0)) {
+                if edge.guard.a.len() == 1 && h0.same(&entry.negated()) {
+                    continue;
+                }
+            }
+            let a: Vec<f64> = edge.guard.a.iter().flatten().copied().collect();
+            extra.push(Halfspaces::new(n, a, edge.guard.b.clone()).map_err(geo)?);
+        }
+        if let Some(inv) = &plant.modes()[s.lp.loc].invariant {
+            for row in 0..inv.a.len() {
+                let Some(face) = Half::of(inv, row) else {
+                    continue;
+                };
+                let implied_exit = exits[i].as_ref().is_some_and(|x| face.same(&x.negated()));
+                let implied_entry = entries[i].as_ref().is_some_and(|x| face.same(x));
+                if !(implied_exit || implied_entry) {
+                    extra.push(face.negated().region().map_err(geo)?);
+                }
+            }
+        }
+        guarded.push(UnsafeWith {
+            n,
+            unsafe_set: s.lp.unsafe_set,
+            extra,
+        });
+    }
+    let lp_of = |i: usize| -> Loop<'_> {
+        Loop {
+            unsafe_set: Some(&guarded[i] as &dyn Region),
+            ..segments[i].lp
+        }
+    };
+    let loc_of = |i: usize| Loc {
+        cp: &plant.modes()[segments[i].lp.loc].flow,
+        K: segments[i].lp.K,
+        lc: segments[i].lc,
+    };
+
+    let mut certs: Vec<SegmentCertificate> = Vec::with_capacity(segments.len());
+    // The last segment: Goal, then the entry window.
+    {
+        let s = &segments[last];
+        let base = certify_at(&lp_of(last), s.lc, s.nominal, GoalAt::Best);
+        let mut delta = base.delta;
+        let mut binding = "Theorem 4.7 (Goal, Unsafe, Input)";
+        if let (Some(entry), true) = (&entries[last], delta > 0.0) {
+            let loc = loc_of(last);
+            let end = base.k_star.min(s.nominal.steps());
+            let eps = base.eps_f32;
+            let r = bisect(delta, |r| check_entry(r, &loc, entry, s.nominal, end, eps));
+            if r < delta {
+                binding = "the entry window (the run must stay across the plane it entered by)";
+                delta = if r > base.r_crit {
+                    r * (1.0 - 1e-9)
+                } else {
+                    0.0
+                };
+            }
+        }
+        certs.push(SegmentCertificate {
+            rows: s.nominal.steps(),
+            samples: base.k_star,
+            exit: None,
+            events: None,
+            eta: 0.0,
+            binding,
+            delta,
+            base,
+        });
+    }
+    for i in (0..last).rev() {
+        let s = &segments[i];
+        let next = &segments[i + 1];
+        let next_cert = certs.last().expect("one per later segment");
+        let delta_next = next_cert.delta;
+        let exit = exits[i].clone().expect("checked above");
+        let (pre, post) = (loc_of(i), loc_of(i + 1));
+        let nom = s.nominal;
+        let rows = nom.steps();
+        let empty = |binding: &'static str, base: Certificate| SegmentCertificate {
+            base,
+            delta: 0.0,
+            rows,
+            samples: rows,
+            exit: None,
+            events: None,
+            eta: 0.0,
+            binding,
+        };
+        let roots = &pre.lc.roots;
+        let dn = roots.dual_norm(&exit.a);
+        let gs: Vec<f64> = nom.x.iter().map(|x| exit.g(x)).collect();
+        // The bisection's upper end: a Pᵢ-ball inside the next ball's P′-ball, and deep enough somewhere.
+        let c_id = cross(&post.lc.roots, Mat::<f64>::identity(n, n).as_ref(), roots);
+        let c_back = cross(roots, Mat::<f64>::identity(n, n).as_ref(), &post.lc.roots);
+        let deepest = gs.iter().fold(f64::INFINITY, |a, &b| a.min(b));
+        let r_max = (delta_next / c_id).min(-deepest / dn);
+        if !(delta_next > 0.0) || !(r_max > 0.0) {
+            let base = certify_at(&lp_of(i), s.lc, nom, GoalAt::Free(0.0));
+            certs.push(empty(
+                if delta_next > 0.0 {
+                    "the extended segment never crosses the guard"
+                } else {
+                    "the next segment certifies nothing"
+                },
+                base,
+            ));
+            continue;
+        }
+        // κ_f at r_max bounds every κ_f below it: keep rows up to there for Theorem 4.7's parts.
+        let base_full = certify_at(&lp_of(i), s.lc, nom, GoalAt::Free(r_max));
+        let eps = base_full.eps_f32;
+        // The rounding of the guard value, over the states the bounds allow (generously).
+        let spread = (pre.inter(r_max, 0.0, eps) + 1.0) * 10.0;
+        let X: Vec<f64> = (0..n)
+            .map(|j| {
+                let m = nom.x.iter().fold(0.0f64, |a, x| a.max(x[j].abs()));
+                let axis = pre.lc.axis[j].max(post.lc.axis[j]);
+                m + spread * axis + 1.0
+            })
+            .collect();
+        let bound_g = guard_eval_bound(&exit.a, exit.b, &X);
+        let theta = super::round_down_f32(2.0 * bound_g);
+        let theta = if (theta as f64) < 2.0 * bound_g {
+            f32::from_bits(theta.to_bits() + 1)
+        } else {
+            theta
+        };
+        let theta_eff = theta as f64 + bound_g;
+        let s_late = LATE_FRACTION * h;
+        let mu2 = log_norm(&post.lc.roots, post.cp.A.as_ref());
+        let BK1 = &pre.cp.B * pre.K;
+        let BK2 = &post.cp.B * pre.K;
+        let c = ExitConstants {
+            dn,
+            theta_eff,
+            nu_min: theta_eff / s_late,
+            s_late,
+            c_id,
+            c_A: cross(&post.lc.roots, pre.cp.A.as_ref(), roots),
+            c_BK: cross(&post.lc.roots, BK1.as_ref(), roots),
+            c_A2: cross(&post.lc.roots, post.cp.A.as_ref(), roots),
+            c_BK2: cross(&post.lc.roots, BK2.as_ref(), roots),
+            c_B: post.lc.roots.norm_into(pre.cp.B.as_ref()),
+            c_B2: post.lc.roots.norm_into(post.cp.B.as_ref()),
+            grow: (mu2.max(0.0) * h).exp(),
+            t_A2: post
+                .lc
+                .roots
+                .dual_norm(&mat_t_vec(post.cp.A.as_ref(), &exit.a)),
+            t_BK2: roots.dual_norm(&mat_t_vec(BK2.as_ref(), &exit.a)),
+            t_B2: mat_t_vec(post.cp.B.as_ref(), &exit.a)
+                .iter()
+                .map(|v| v * v)
+                .sum::<f64>()
+                .sqrt(),
+            c_back,
+            phi2: post.lc.phi,
+            eps,
+            delta_next,
+            dt: h / (GRID - 1) as f64,
+        };
+        let grid = Grid::new(&pre, &post, h);
+        let metric2 = Metric {
+            n,
+            R: to_row_major(post.lc.P.as_ref()),
+        };
+        let target = &next.nominal.x[0];
+        let next_unsafe = lp_of(i + 1).unsafe_set;
+        let samples = ExitSamples {
+            g: gs.clone(),
+            rho: (0..=rows)
+                .map(|k| {
+                    if k < rows {
+                        pre.lc.phi * p_norm(pre.lc.P.as_ref(), &field(pre.cp, &nom.x[k], &nom.u[k]))
+                    } else {
+                        0.0
+                    }
+                })
+                .collect(),
+            f_pre: (0..=rows)
+                .map(|k| {
+                    let u = nom.u.get(k).or(nom.u.last()).expect("rows ≥ 1");
+                    p_norm(post.lc.P.as_ref(), &field(pre.cp, &nom.x[k], u))
+                })
+                .collect(),
+            f_post: (0..=rows)
+                .map(|k| {
+                    let u = nom.u.get(k).or(nom.u.last()).expect("rows ≥ 1");
+                    p_norm(post.lc.P.as_ref(), &field(post.cp, &nom.x[k], u))
+                })
+                .collect(),
+            trans: (0..=rows)
+                .map(|k| {
+                    let u = nom.u.get(k).or(nom.u.last()).expect("rows ≥ 1");
+                    dot(&exit.a, &field(post.cp, &nom.x[k], u))
+                })
+                .collect(),
+            unsafe_next: (0..=rows)
+                .map(|k| match next_unsafe {
+                    Some(us) => -us.signed_dist(&nom.x[k], &metric2).value,
+                    None => f64::INFINITY,
+                })
+                .collect(),
+            land: (0..=rows)
+                .map(|k| {
+                    let u = nom.u.get(k).or(nom.u.last()).expect("rows ≥ 1");
+                    // p̂: the Pᵢ-projection of x̃(κ) onto the plane of G.
+                    let pinv_a = mat_vec(roots.inv.as_ref(), &exit.a);
+                    let t = gs[k] / (dn * dn);
+                    let p: Vec<f64> = (0..n).map(|q| nom.x[k][q] - t * pinv_a[q]).collect();
+                    (0..GRID)
+                        .map(|j| {
+                            let fx = mat_vec(grid.Phi[j].as_ref(), &p);
+                            let fu = mat_vec(grid.GB[j].as_ref(), u);
+                            let e: Vec<f64> = (0..n)
+                                .map(|q| fx[q] + fu[q] + grid.Gc[j][q] - target[q])
+                                .collect();
+                            p_norm(post.lc.P.as_ref(), &e)
+                        })
+                        .collect()
+                })
+                .collect(),
+        };
+        // η (item 5) at the largest radius: L grows with r.
+        let L_max = (0..rows)
+            .map(|k| {
+                let R = pre.inter(r_max, samples.rho[k], eps);
+                let F_pre = samples.f_pre[k] + c.c_A * R + c.c_BK * r_max + c.c_B * eps;
+                let F_post = samples.f_post[k] + c.c_A2 * R + c.c_BK2 * r_max + c.c_B2 * eps;
+                c.grow * (F_pre + F_post)
+            })
+            .fold(0.0f64, f64::max);
+        let eta = L_max * c.s_late * c.c_back;
+        // Theorem 4.7's parts over the rows kept at r_max.
+        let kf_max = (1..=rows)
+            .find(|&k| gs[k] + dn * (r_max + eta) <= -theta_eff)
+            .unwrap_or(rows);
+        let kept = truncate(nom, kf_max);
+        let base = certify_at(&lp_of(i), s.lc, &kept, GoalAt::Free(r_max));
+        let parts = base.delta_unsafe_intersample.min(base.delta_input);
+        let hi = (r_max.min(parts) - eta).max(0.0);
+        let entry_ok = |r: f64| match &entries[i] {
+            Some(entry) => check_entry(r, &pre, entry, &kept, kept.steps(), eps),
+            None => true,
+        };
+        let ok = |r: f64| {
+            matches!(
+                check_exit(r, &pre, &c, &samples, &grid, eta),
+                Verdict::Ok { .. }
+            ) && entry_ok(r)
+        };
+        let r = bisect(hi, ok);
+        let delta = if r > base.r_crit && r > 0.0 {
+            r * (1.0 - 1e-9)
+        } else {
+            0.0
+        };
+        let binding = if delta == 0.0 {
+            match check_exit(base.r_crit.max(1e-12), &pre, &c, &samples, &grid, eta) {
+                Verdict::Fail(why) => why,
+                Verdict::Ok { .. } if !entry_ok(base.r_crit.max(1e-12)) => {
+                    "the entry window (the run must stay across the plane it entered by)"
+                }
+                _ => "Theorem 4.7 (Unsafe, Input) or r_crit",
+            }
+        } else if r >= hi * (1.0 - 1e-12) {
+            if hi + eta >= r_max {
+                "the next segment's ball"
+            } else {
+                "Theorem 4.7 (Unsafe, Input)"
+            }
+        } else {
+            match check_exit(hi, &pre, &c, &samples, &grid, eta) {
+                Verdict::Fail(why) => why,
+                _ => "the entry window (the run must stay across the plane it entered by)",
+            }
+        };
+        let (kappa_f, events) = match check_exit(delta, &pre, &c, &samples, &grid, eta) {
+            Verdict::Ok {
+                kappa_f,
+                first,
+                last,
+            } => (kappa_f, first.zip(last)),
+            Verdict::Fail(_) => (rows, None),
+        };
+        let a32: Vec<f32> = exit.a.iter().map(|&v| v as f32).collect();
+        certs.push(SegmentCertificate {
+            base,
+            delta,
+            rows: kappa_f,
+            samples: kappa_f,
+            exit: Some(GuardExit {
+                a: a32,
+                b: exit.b as f32,
+                theta,
+            }),
+            events,
+            eta,
+            binding,
+        });
+    }
+    certs.reverse();
+    let total: usize = certs.iter().map(|s| s.samples).sum();
+    if total > steps {
+        if let Some(first) = certs.first_mut() {
+            first.delta = 0.0;
+            first.binding =
+                "the horizon: the slowest run's segments take more samples than T allows";
+        }
+    }
+    let d0 = certs[0].delta;
+    let delta_stored = super::selection_radius(segments[0].lp.P, &segments[0].nominal.x[0], d0);
+    Ok(InternalCertificate {
+        segments: certs,
+        delta_stored,
+    })
+}
+
+/// The location a segment runs in (for callers that build runs).
+pub fn location_of(seg: &InternalSegment<'_>) -> Location {
+    seg.lp.loc
+}

@@ -1,0 +1,360 @@
+//! Synthesis for hybrid plants with internal switching (§4.2.2, Examples 4.25, 5.5, 5.6): the task, the
+//! location path, nominal runs (one extended segment per location, Def 4.22), their certificate
+//! ([`crate::certify::internal`]) and the cover of Init by their balls (Algorithm 1 with the generator
+//! from uncovered samples).
+//!
+//! **A nominal run.** The path is the shortest chain of internal edges from the initial location to a
+//! location whose invariant holds Goal's centre. Each segment but the last is generated in its location
+//! with the SCP generator ([`crate::trajectory::generate`]) towards "the guard, [`GUARD_DEPTH`] deep"
+//! (the half-space shifted into the guard), which continues the segment past the plane far enough that
+//! its tube lies inside the guard (the extended segment). The nominal hybrid run itself, flowing exactly
+//! across the event ([`Hybrid::flow`]), gives the next segment's start: the first sample after its own
+//! switch. The last segment is generated from there to Goal. Segment lengths are searched over a few
+//! durations; the run with the largest certified δ is kept.
+
+use crate::caf::{design_locations, Design};
+use crate::certify::internal::{certify_internal, InternalCertificate, InternalSegment};
+use crate::certify::{Loop, LoopConstants};
+use crate::model::hybrid::{EdgeKind, Hybrid, HybridError};
+use crate::model::Location;
+use crate::property::{input_scale, ConvexPiece, ConvexSets, PropertyError, ReachAvoid};
+use crate::spec::Problem;
+use crate::trajectory::generate::{generate, GenProblem, GenSettings};
+use crate::trajectory::Nominal;
+use faer::Mat;
+
+/// How far past a guard's plane (Euclidean) a non-last segment's generated nominal must end.
+pub const GUARD_DEPTH: f64 = 0.2;
+/// Segment durations tried, as fractions of the horizon T.
+pub const DURATIONS: [f64; 4] = [0.1, 0.2, 0.35, 0.5];
+
+/// A hybrid task, built once from a validated spec: the automaton, the reach-avoid property, a CAF and
+/// shipped gain per location.
+pub struct HybridTask {
+    pub problem: Problem,
+    pub plant: Hybrid,
+    pub property: ReachAvoid,
+    pub convex: ConvexSets,
+    pub steps: usize,
+    pub designs: Vec<Design>,
+    pub constants: Vec<LoopConstants>,
+    /// The initial location.
+    pub initial: Location,
+    /// The location path and the edges between them.
+    pub path: Vec<Location>,
+    pub edges: Vec<usize>,
+}
+
+/// Why a hybrid task could not be built or a run planned.
+#[derive(Debug, thiserror::Error)]
+pub enum HybridSynthError {
+    #[error("the spec has no hybrid automaton")]
+    NotHybrid,
+    #[error("plant: {0}")]
+    Model(#[from] HybridError),
+    #[error("sets: {0}")]
+    Property(#[from] PropertyError),
+    #[error("location {loc} ({name}) has no CAF and feedback: {reason}")]
+    Caf {
+        loc: Location,
+        name: String,
+        reason: String,
+    },
+    #[error("location {loc}: {reason}")]
+    Certify { loc: Location, reason: String },
+    #[error("no chain of internal edges leads from the initial location {from} to a location whose invariant holds Goal's centre")]
+    NoPath { from: String },
+    #[error("{0}")]
+    Run(String),
+}
+
+impl HybridTask {
+    pub fn new(problem: Problem) -> Result<Self, HybridSynthError> {
+        let desc = problem.hybrid.as_ref().ok_or(HybridSynthError::NotHybrid)?;
+        let plant = Hybrid::from_spec(desc, problem.plant.period)?;
+        let initial = desc.initial;
+        let property = ReachAvoid::from_problem(&problem)?;
+        let convex = ConvexSets::from_problem(&problem)?;
+        let steps = problem.horizon_steps();
+        let designs =
+            design_locations(&plant, problem.synthesis.sigma_margin).map_err(|(loc, e)| {
+                HybridSynthError::Caf {
+                    loc,
+                    name: plant.modes()[loc].name.clone(),
+                    reason: e.to_string(),
+                }
+            })?;
+        let mut constants = Vec::with_capacity(designs.len());
+        for (loc, d) in designs.iter().enumerate() {
+            let lp = Loop::reach_avoid(&plant, loc, d, &property);
+            constants.push(
+                LoopConstants::new(&lp).map_err(|e| HybridSynthError::Certify {
+                    loc,
+                    reason: e.to_string(),
+                })?,
+            );
+        }
+        let (path, edges) =
+            location_path(&plant, initial, goal_centre(&convex)).ok_or_else(|| {
+                HybridSynthError::NoPath {
+                    from: plant.modes()[initial].name.clone(),
+                }
+            })?;
+        Ok(Self {
+            problem,
+            plant,
+            property,
+            convex,
+            steps,
+            designs,
+            constants,
+            initial,
+            path,
+            edges,
+        })
+    }
+
+    /// The loop of location `loc` with the task's sets.
+    pub fn lp(&self, loc: Location) -> Loop<'_> {
+        Loop::reach_avoid(&self.plant, loc, &self.designs[loc], &self.property)
+    }
+}
+
+/// A point of Goal (its centre, or the Chebyshev-like centre of a box given as a polytope).
+fn goal_centre(convex: &ConvexSets) -> Option<Vec<f64>> {
+    match &convex.goal {
+        ConvexPiece::Ellipsoid { C, c, .. } if C.nrows() == C.ncols() => Some(c.clone()),
+        _ => None,
+    }
+}
+
+/// Shortest chain of internal edges from `from` to a location whose invariant holds `goal` (breadth
+/// first, edges in spec order; without a point of Goal, the initial location itself).
+fn location_path(
+    plant: &Hybrid,
+    from: Location,
+    goal: Option<Vec<f64>>,
+) -> Option<(Vec<Location>, Vec<usize>)> {
+    let holds = |loc: Location| match (&goal, &plant.modes()[loc].invariant) {
+        (Some(g), Some(inv)) => inv.contains(g),
+        _ => true,
+    };
+    let k = plant.modes().len();
+    let mut prev: Vec<Option<(Location, usize)>> = vec![None; k];
+    let mut seen = vec![false; k];
+    let mut queue = std::collections::VecDeque::from([from]);
+    seen[from] = true;
+    while let Some(l) = queue.pop_front() {
+        if holds(l) {
+            let (mut path, mut edges) = (vec![l], vec![]);
+            let mut cur = l;
+            while let Some((p, e)) = prev[cur] {
+                path.push(p);
+                edges.push(e);
+                cur = p;
+            }
+            path.reverse();
+            edges.reverse();
+            return Some((path, edges));
+        }
+        for (e, edge) in plant.edges().iter().enumerate() {
+            if edge.from == l && edge.kind == EdgeKind::Internal && !seen[edge.to] {
+                seen[edge.to] = true;
+                prev[edge.to] = Some((l, e));
+                queue.push_back(edge.to);
+            }
+        }
+    }
+    None
+}
+
+/// A planned, certified nominal run.
+#[derive(Clone, Debug)]
+pub struct HybridRun {
+    /// One nominal per segment (the location path's), the reference tables as shipped (f32 values).
+    pub nominals: Vec<Nominal>,
+    pub certificate: InternalCertificate,
+}
+
+impl HybridRun {
+    pub fn delta(&self) -> f64 {
+        self.certificate.delta()
+    }
+}
+
+/// The nominal of location `loc`'s loop from `x0` under `v` rounded to f32 (what ships).
+pub fn shipped_nominal(task: &HybridTask, loc: Location, x0: &[f64], v: &[Vec<f64>]) -> Nominal {
+    let v32: Vec<Vec<f64>> = v
+        .iter()
+        .map(|r| r.iter().map(|&a| a as f32 as f64).collect())
+        .collect();
+    task.lp(loc).simulate(x0, &v32)
+}
+
+/// Certify a run of nominals along the task's path.
+pub fn certify_run(task: &HybridTask, nominals: &[Nominal]) -> Result<InternalCertificate, String> {
+    let segs: Vec<InternalSegment> = task
+        .path
+        .iter()
+        .zip(nominals)
+        .map(|(&loc, nom)| InternalSegment {
+            lp: task.lp(loc),
+            lc: &task.constants[loc],
+            nominal: nom,
+        })
+        .collect();
+    certify_internal(&task.plant, &segs, &task.edges, task.steps).map_err(|e| e.to_string())
+}
+
+/// Where the next segment starts: the centre of the states at which runs near the nominal are first
+/// sampled after their switch across `edge`. The nominal hybrid run (flowing segment `nom`'s inputs
+/// exactly) switches in some period κₑ; runs near it switch in κₑ or κₑ + 1 at any time s of the period,
+/// and land at x(h; s) = flow of the next location over h − s after the flow of this one over s. The
+/// start is the mean of those landings over a grid of s (the certificate's landing ball is then as
+/// central as the nominal allows). `None` if the nominal never switches within the segment.
+fn landing(task: &HybridTask, loc: Location, nom: &Nominal, edge: usize) -> Option<Vec<f64>> {
+    let mut x = nom.x[0].clone();
+    let mut ke = None;
+    for (k, u) in nom.u.iter().enumerate() {
+        let step = task.plant.flow(loc, &x, u).ok()?;
+        if let Some(ev) = step.events.first() {
+            if ev.edge != edge {
+                return None;
+            }
+            ke = Some(k);
+            break;
+        }
+        x = step.x;
+    }
+    let ke = ke?;
+    let h = task.plant.period();
+    let (pre, post) = (
+        &task.plant.modes()[loc].flow,
+        &task.plant.modes()[task.plant.edges()[edge].to].flow,
+    );
+    let n = x.len();
+    let mut sum = vec![0.0; n];
+    let mut count = 0usize;
+    for k in ke..(ke + 2).min(nom.u.len()) {
+        for j in 0..=8 {
+            let s = h * j as f64 / 8.0;
+            let xs = if s > 0.0 {
+                pre.zoh(s).ok()?.step(&nom.x[k], &nom.u[k])
+            } else {
+                nom.x[k].clone()
+            };
+            let xh = if s < h {
+                post.zoh(h - s).ok()?.step(&xs, &nom.u[k])
+            } else {
+                xs
+            };
+            for (a, b) in sum.iter_mut().zip(&xh) {
+                *a += b;
+            }
+            count += 1;
+        }
+    }
+    Some(sum.into_iter().map(|v| v / count as f64).collect())
+}
+
+/// Generator problem for location `loc` with Goal replaced by `goal` and `steps` samples.
+fn gen_problem<'a>(
+    task: &'a HybridTask,
+    loc: Location,
+    convex: &'a ConvexSets,
+    steps: usize,
+) -> GenProblem<'a> {
+    let lc = &task.constants[loc];
+    GenProblem {
+        loc,
+        plant: &task.plant,
+        K: task.designs[loc].K.as_ref(),
+        P: task.designs[loc].P.as_ref(),
+        property: &task.property,
+        convex,
+        steps,
+        gamma: lc.gamma,
+        phi: lc.phi,
+        beta: lc.beta,
+        input_margin: 1e-5 * input_scale(&task.property.input),
+    }
+}
+
+/// Plan and certify a run from `x0` (module doc); the best over the durations tried, or why none.
+pub fn plan_run(task: &HybridTask, x0: &[f64]) -> Result<HybridRun, String> {
+    let gs = GenSettings::default();
+    let h = task.plant.period();
+    let horizon = task.problem.horizon;
+    let steps_of = |f: f64| ((f * horizon / h).round() as usize).clamp(2, task.steps);
+    let mut best: Option<HybridRun> = None;
+    let mut why = String::from("no duration tried");
+    // Segments but the last: towards the guard, each duration; then the last segment from the landing.
+    for &f0 in &DURATIONS {
+        let mut nominals: Vec<Nominal> = Vec::new();
+        let mut x = x0.to_vec();
+        let mut ok = true;
+        for (i, &loc) in task.path.iter().enumerate() {
+            let last = i + 1 == task.path.len();
+            let (convex, steps) = if last {
+                (None, steps_of(horizon_left(task, &nominals, h, horizon)))
+            } else {
+                let edge = &task.plant.edges()[task.edges[i]];
+                let (a, b) = (&edge.guard.a, &edge.guard.b);
+                let rows = a.len();
+                let H = Mat::from_fn(rows, a[0].len(), |r, c| a[r][c]);
+                let deep: Vec<f64> = (0..rows)
+                    .map(|r| {
+                        let na = a[r].iter().map(|v| v * v).sum::<f64>().sqrt();
+                        b[r] - GUARD_DEPTH * na
+                    })
+                    .collect();
+                (
+                    Some(ConvexSets {
+                        goal: ConvexPiece::Polytope { H, b: deep },
+                        unsafe_pieces: task.convex.unsafe_pieces.clone(),
+                    }),
+                    steps_of(f0),
+                )
+            };
+            let conv = convex.as_ref().unwrap_or(&task.convex);
+            let gp = gen_problem(task, loc, conv, steps);
+            let v = match generate(&gp, &x, &gs) {
+                Ok(g) => g.nominal.v,
+                Err(e) => {
+                    why = format!("segment {i} ({}): {e}", task.plant.modes()[loc].name);
+                    ok = false;
+                    break;
+                }
+            };
+            let nom = shipped_nominal(task, loc, &x, &v);
+            if !last {
+                match landing(task, loc, &nom, task.edges[i]) {
+                    Some(l) => x = l,
+                    None => {
+                        why = format!("segment {i}: the generated nominal does not switch");
+                        ok = false;
+                        break;
+                    }
+                }
+            }
+            nominals.push(nom);
+        }
+        if !ok {
+            continue;
+        }
+        let cert = certify_run(task, &nominals)?;
+        if best.as_ref().is_none_or(|b| cert.delta() > b.delta()) {
+            best = Some(HybridRun {
+                nominals,
+                certificate: cert,
+            });
+        }
+    }
+    best.ok_or(why)
+}
+
+/// Seconds left for the last segment after the earlier ones (their generated lengths).
+fn horizon_left(_task: &HybridTask, earlier: &[Nominal], h: f64, horizon: f64) -> f64 {
+    let used: usize = earlier.iter().map(|n| n.steps()).sum();
+    ((horizon - used as f64 * h) / horizon).clamp(0.05, 1.0)
+}
