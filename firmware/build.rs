@@ -110,6 +110,7 @@ fn default_image() -> Vec<u8> {
         fallback: Fallback::Zero,
         input_box: None,
         terminal: Terminal::HoldLast,
+        exits: &[],
     };
     let dims = Dims {
         n: 2,

@@ -32,7 +32,8 @@ use shared_types::capacity::{
     MAX_PARTITIONS, MAX_SEGMENTS, MAX_STEPS, MAX_TRAJECTORIES, MAX_TREE_DEPTH, MAX_TREE_NODES,
 };
 use shared_types::image::{
-    self, Dims, Fallback, Image, ImageError, InputBox, Mode, Payload, PwaPayload,
+    self, Dims, Fallback, Image, ImageError, InputBox, Mode, Payload, PwaPayload, EXIT_GUARD,
+    EXIT_TABLE,
 };
 use shared_types::pwa::PwaTables;
 
@@ -188,6 +189,16 @@ pub struct ImageBuilder {
     pub input_box: Option<(Vec<f64>, Vec<f64>)>,
     /// Behaviour past the end of a trajectory.
     pub terminal: Terminal,
+    /// How each segment ends, per trajectory (its segments are the maximal runs of one location of its
+    /// rows); empty: every segment ends with its table, and the image has no exits section.
+    pub exits: Vec<Vec<SegmentExit>>,
+}
+
+/// How a segment ends ([`shared_types::image::Exit`]), owned, with the f32 values stored.
+#[derive(Clone, Debug, PartialEq)]
+pub enum SegmentExit {
+    Table,
+    Guard { a: Vec<f32>, b: f32, theta: f32 },
 }
 
 /// f64 → f32, refusing non-finite values and values beyond the f32 range (rounding to nearest).
@@ -259,6 +270,7 @@ impl ImageBuilder {
             fallback: FallbackLaw::Zero,
             input_box: None,
             terminal: Terminal::HoldLast,
+            exits: Vec::new(),
         }
     }
 
@@ -376,8 +388,10 @@ impl ImageBuilder {
         let mut v = Vec::new();
         let mut segment = Vec::new();
         let mut n_segments = 0usize;
+        let mut exits = Vec::new();
         let mut row = 0usize;
         for (t, tr) in self.trajectories.iter().enumerate() {
+            let seg_before = n_segments;
             let len = tr.len();
             if len == 0 {
                 return Err(EmitError::Invalid {
@@ -430,6 +444,38 @@ impl ImageBuilder {
                 s += run;
             }
             capacity("number of segments", n_segments, 1, MAX_SEGMENTS)?;
+            if !self.exits.is_empty() {
+                let ex = self.exits.get(t).map(Vec::as_slice).unwrap_or(&[]);
+                let here = n_segments - seg_before;
+                if ex.len() != here {
+                    return Err(EmitError::Shape {
+                        what: format!("trajectory {t}: segment exits"),
+                        expected: here,
+                        found: ex.len(),
+                    });
+                }
+                for e in ex {
+                    match e {
+                        SegmentExit::Table => {
+                            exits.extend_from_slice(&EXIT_TABLE.to_le_bytes());
+                            exits.extend(std::iter::repeat_n(0u8, 4 * (n + 2)));
+                        }
+                        SegmentExit::Guard { a, b, theta } => {
+                            if a.len() != n {
+                                return Err(EmitError::Shape {
+                                    what: format!("trajectory {t}: guard normal"),
+                                    expected: n,
+                                    found: a.len(),
+                                });
+                            }
+                            exits.extend_from_slice(&EXIT_GUARD.to_le_bytes());
+                            for v in a.iter().chain([b, theta]) {
+                                exits.extend_from_slice(&v.to_le_bytes());
+                            }
+                        }
+                    }
+                }
+            }
             row += len; // ≤ MAX_STEPS, checked above
             seg_end.extend_from_slice(&(n_segments as u16).to_le_bytes());
         }
@@ -446,6 +492,7 @@ impl ImageBuilder {
             fallback: fallback_of(&self.fallback, &fb),
             input_box: bx.as_ref().map(|(lo, hi)| InputBox { lo, hi }),
             terminal: self.terminal,
+            exits: &exits,
         };
         let dims = Dims {
             n,
@@ -495,6 +542,27 @@ impl ImageBuilder {
             fallback: fallback_from_image(img),
             input_box: input_box_from_image(img),
             terminal: img.terminal(),
+            exits: if img.has_exits() {
+                (0..img.n_trajectories())
+                    .map(|t| {
+                        let (s0, count) = img.trajectory_segments(t);
+                        (s0..s0 + count)
+                            .map(|s| match img.exit(s) {
+                                image::Exit::Table => SegmentExit::Table,
+                                image::Exit::Guard { a, b, theta } => SegmentExit::Guard {
+                                    a: a.chunks_exact(4)
+                                        .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+                                        .collect(),
+                                    b,
+                                    theta,
+                                },
+                            })
+                            .collect()
+                    })
+                    .collect()
+            } else {
+                Vec::new()
+            },
         }
     }
 }

@@ -99,6 +99,8 @@ pub enum Field {
     BallCentreZ,
     /// Squared ball thresholds ŝ (within the test records).
     BallThreshold,
+    /// Segment-exit records (kind, â, b̂, θ).
+    Exit,
 }
 
 /// Position of a bad value. Its meaning depends on the field: `K`, `P`: (location, row, col); `Centre`:
@@ -252,6 +254,12 @@ pub enum ImageError {
     /// A segment continues the previous segment of the same trajectory in the same location (segments are
     /// maximal runs of one location, so that one content has one encoding).
     SegmentNotMaximal {
+        /// The segment.
+        segment: u16,
+    },
+    /// A segment-exit record has an unknown kind, a negative threshold, or a guard exit on the last
+    /// segment of its trajectory (which has no next segment to move to).
+    BadExit {
         /// The segment.
         segment: u16,
     },
@@ -485,6 +493,7 @@ impl fmt::Display for Field {
             Field::BallCentreZ => "whitened ball centres",
             Field::BallThreshold => "ball thresholds",
             Field::Segment => "segment records",
+            Field::Exit => "segment exits",
         })
     }
 }
@@ -558,6 +567,11 @@ impl fmt::Display for ImageError {
             SegmentNotMaximal { segment } => write!(
                 f,
                 "segment {segment}: continues the previous segment of its trajectory in the same location"
+            ),
+            BadExit { segment } => write!(
+                f,
+                "segment {segment}: exit of unknown kind, with a negative threshold, or a guard exit on \
+                 the last segment of its trajectory"
             ),
             FieldLength { field, expected, found } => {
                 write!(f, "{field}: expected {expected} bytes, found {found}")

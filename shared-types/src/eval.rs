@@ -25,7 +25,7 @@
 #![allow(non_snake_case)]
 
 use crate::capacity::{MAX_M, MAX_N};
-use crate::image::{Fallback, Image, Mode, Terminal};
+use crate::image::{Exit, Fallback, Image, Mode, Terminal};
 use crate::pwa::Region;
 use crate::raw::{f32_span, floats};
 
@@ -128,6 +128,8 @@ pub struct Controller<'a> {
     active: Option<u16>,
     /// Segment of the active trajectory holding row κ (the cursor of the module doc).
     segment: u16,
+    /// κ at which the active segment began (images with segment exits).
+    seg_kappa: u32,
     out_of_envelope: bool,
     last_u: Input,
 }
@@ -141,6 +143,7 @@ impl<'a> Controller<'a> {
             kappa: 0,
             active: None,
             segment: 0,
+            seg_kappa: 0,
             out_of_envelope: false,
             last_u: Input::zero(m),
         }
@@ -289,12 +292,82 @@ impl<'a> Controller<'a> {
                 }
             },
         };
+        if self.image.has_exits() {
+            return self.step_exits(t as usize, x);
+        }
         let (start, len) = self.image.trajectory_rows(t as usize);
         let k = self.kappa as usize;
         let u = if k < len || self.image.terminal() == Terminal::HoldLast {
             let row = start + k.min(len.saturating_sub(1));
             let l = self.row_location(t as usize, row);
             self.law(row, l, x)
+        } else {
+            self.fallback(x, &self.last_u)
+        };
+        if !u.as_slice().iter().all(|v| v.is_finite()) {
+            return Err(Status::OutOfEnvelope);
+        }
+        self.kappa = self.kappa.saturating_add(1);
+        self.last_u = u;
+        Ok(u)
+    }
+
+    /// A feedforward step of an image with segment exits (internal switching, (4.41)–(4.42)): the cursor
+    /// moves to the next segment of the trajectory when the active one has a guard exit and
+    /// fl(Σⱼ âⱼx̂ⱼ − b̂) ≤ −θ (the next segment then starts at this sample, row 0), or when a table exit's
+    /// rows are used up; the row is the segment's first row plus the samples since the segment began. A
+    /// guard segment whose rows run out before its guard is seen leaves the certified envelope (latched);
+    /// past the last segment's rows, the terminal behaviour. At most one move per segment of the
+    /// trajectory per step.
+    #[inline(never)]
+    fn step_exits(&mut self, t: usize, x: &[f32]) -> Result<Input, Status> {
+        let img = self.image;
+        let n = img.n().clamp(1, MAX_N);
+        let (s0, count) = img.trajectory_segments(t);
+        let last = (s0 + count).saturating_sub(1);
+        let mut s = (self.segment as usize).clamp(s0, last);
+        for _ in 0..count {
+            let Some(g) = img.segment(s) else { break };
+            let local = self.kappa.saturating_sub(self.seg_kappa) as usize;
+            if s >= last {
+                break;
+            }
+            match img.exit(s) {
+                Exit::Guard { a, b, theta } => {
+                    let mut acc = 0.0f32;
+                    for (ai, &xi) in floats(a).zip(x).take(n) {
+                        acc += ai * xi;
+                    }
+                    if acc - b <= -theta {
+                        s += 1;
+                        self.seg_kappa = self.kappa;
+                        continue;
+                    }
+                }
+                Exit::Table => {
+                    if local >= g.len {
+                        s += 1;
+                        self.seg_kappa = self.seg_kappa.saturating_add(g.len as u32);
+                        continue;
+                    }
+                }
+            }
+            break;
+        }
+        self.segment = s as u16;
+        let Some(g) = img.segment(s) else {
+            self.out_of_envelope = true;
+            return Err(Status::OutOfEnvelope);
+        };
+        let local = self.kappa.saturating_sub(self.seg_kappa) as usize;
+        let u = if local < g.len {
+            self.law(g.first_row + local, g.location, x)
+        } else if s < last {
+            // A guard exit not seen within its rows: outside what was certified.
+            self.out_of_envelope = true;
+            return Err(Status::OutOfEnvelope);
+        } else if img.terminal() == Terminal::HoldLast {
+            self.law(g.first_row + g.len.saturating_sub(1), g.location, x)
         } else {
             self.fallback(x, &self.last_u)
         };

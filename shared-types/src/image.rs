@@ -96,7 +96,10 @@ pub use crate::error::{Dim, Field, ImageError, Pos};
 pub use crate::header::{
     compute_crc, image_len, write_image, DirEntry, Directory, Header, RawSection, SectionWrite,
 };
-pub use crate::layout::{Dims, Mode, SectionKind, FORMAT_VERSION, MAGIC, SEGMENT_RECORD_LEN};
+pub use crate::layout::{
+    exit_record_len, Dims, Mode, SectionKind, EXIT_GUARD, EXIT_TABLE, FORMAT_VERSION, MAGIC,
+    SEGMENT_RECORD_LEN,
+};
 use crate::pwa::{node_child, node_value, Child, PwaBalls, PwaLaws, PwaTables, PwaTree, Region};
 use crate::raw::{
     check_dim, check_finite, check_len, div, f32_at, f32_span, floats, positive_definite, rem,
@@ -172,6 +175,9 @@ pub struct Payload<'a> {
     pub input_box: Option<InputBox<'a>>,
     /// Behaviour past the end of a trajectory.
     pub terminal: Terminal,
+    /// Segment exits ([`crate::layout::exit_record_len`] bytes per segment), or empty: every segment then
+    /// ends with its table. Stored as the optional `SegmentExits` section.
+    pub exits: &'a [u8],
 }
 
 /// The content of a PWA-feedback image (mode 2), as raw borrowed byte strings. Build one and pass it to
@@ -267,6 +273,30 @@ pub struct TrajectoriesSection<'a> {
 pub struct SegmentsSection<'a> {
     /// Segment records.
     pub segment: &'a [u8],
+}
+
+/// The optional `SegmentExits` section (see [`Payload::exits`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct SegmentExitsSection<'a> {
+    /// Exit records.
+    pub exit: &'a [u8],
+}
+
+/// How a segment ends, as [`Image::exit`] reads it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Exit<'a> {
+    /// With its table: the next segment starts when the row passes the segment's last.
+    Table,
+    /// When fl(Σⱼ âⱼx̂ⱼ − b̂) ≤ −θ at a sample (`a` is n little-endian `f32`): the next segment starts at
+    /// that sample, row 0.
+    Guard {
+        /// â.
+        a: &'a [u8],
+        /// b̂.
+        b: f32,
+        /// θ ≥ 0.
+        theta: f32,
+    },
 }
 
 /// The `Steps` section: the step table `v` (see [`Payload::v`]).
@@ -431,6 +461,33 @@ fn validate(mode: Mode, dims: Dims, period: f32, p: &Payload<'_>) -> Result<(), 
             }
         }
         s0 = s1;
+    }
+
+    // Segment exits (optional): kinds known, floats finite (zero for a table exit), θ ≥ 0, no guard exit
+    // on a trajectory's last segment.
+    if !p.exits.is_empty() {
+        let rec = crate::layout::exit_record_len(n);
+        check_len(Field::Exit, p.exits, rec * n_seg)?;
+        let mut s0 = 0usize;
+        for t in 0..nt {
+            let s1 = u16_le(p.seg_end, t) as usize;
+            for s in s0..s1 {
+                let kind = u32_at_byte(p.exits, s * rec);
+                let vals = f32_span(p.exits, s * (n + 3) + 1, n + 2);
+                let finite = floats(vals).all(|v| v.is_finite());
+                let theta = f32_at(vals, n + 1);
+                let ok = match kind {
+                    // Zeros only, so that one content has one encoding.
+                    crate::layout::EXIT_TABLE => floats(vals).all(|v| v.to_bits() == 0),
+                    crate::layout::EXIT_GUARD => finite && theta >= 0.0 && s + 1 < s1,
+                    _ => false,
+                };
+                if !ok {
+                    return Err(ImageError::BadExit { segment: sat16(s) });
+                }
+            }
+            s0 = s1;
+        }
     }
 
     // Balls B_P(x̃_i(0), δ_i).
@@ -623,6 +680,7 @@ impl<'a> Image<'a> {
                 fallback: payload.fallback,
                 input_box: payload.input_box,
                 terminal: Terminal::HoldLast,
+                exits: &[],
             },
             pwa: payload.tables,
         })
@@ -734,6 +792,29 @@ impl<'a> Image<'a> {
     /// Segment `s` (location and rows of the step table); `None` out of range.
     pub fn segment(&self, s: usize) -> Option<Segment> {
         (s < self.n_segments()).then(|| segment_at(self.payload.segment, s))
+    }
+
+    /// Whether the image stores segment exits (some segment may end at a guard).
+    pub fn has_exits(&self) -> bool {
+        !self.payload.exits.is_empty()
+    }
+
+    /// How segment `s` ends ([`Exit::Table`] without exits or out of range).
+    pub fn exit(&self, s: usize) -> Exit<'a> {
+        let n = self.n().clamp(1, MAX_N);
+        let rec = crate::layout::exit_record_len(n);
+        if s >= self.n_segments() || self.payload.exits.len() < (s + 1) * rec {
+            return Exit::Table;
+        }
+        if u32_at_byte(self.payload.exits, s * rec) != crate::layout::EXIT_GUARD {
+            return Exit::Table;
+        }
+        let vals = f32_span(self.payload.exits, s * (n + 3) + 1, n + 2);
+        Exit::Guard {
+            a: f32_span(vals, 0, n),
+            b: f32_at(vals, n),
+            theta: f32_at(vals, n + 1),
+        }
     }
 
     /// First segment and number of segments of a trajectory; `(0, 0)` out of range.
@@ -872,7 +953,22 @@ impl<'a> Image<'a> {
                     SegmentsSection { segment: p.segment },
                 );
                 let steps = PostcardSection::new(SectionKind::Steps, StepsSection { v: p.v });
-                f(&[&locations, &fallback, &trajectories, &segments, &steps])
+                if p.exits.is_empty() {
+                    f(&[&locations, &fallback, &trajectories, &segments, &steps])
+                } else {
+                    let exits = PostcardSection::new(
+                        SectionKind::SegmentExits,
+                        SegmentExitsSection { exit: p.exits },
+                    );
+                    f(&[
+                        &locations,
+                        &fallback,
+                        &trajectories,
+                        &segments,
+                        &steps,
+                        &exits,
+                    ])
+                }
             }
             Mode::PwaFeedback => {
                 let (laws, tree, balls) = self.pwa.sections();
@@ -918,6 +1014,10 @@ pub fn decode(bytes: &[u8]) -> Result<Image<'_>, ImageError> {
             let tr: TrajectoriesSection<'_> = parse_section(&dir, SectionKind::Trajectories)?;
             let seg: SegmentsSection<'_> = parse_section(&dir, SectionKind::Segments)?;
             let steps: StepsSection<'_> = parse_section(&dir, SectionKind::Steps)?;
+            let exits: SegmentExitsSection<'_> = match dir.section(SectionKind::SegmentExits) {
+                Some(_) => parse_section(&dir, SectionKind::SegmentExits)?,
+                None => SegmentExitsSection { exit: &[] },
+            };
             let payload = Payload {
                 K: locations.K,
                 P: locations.P,
@@ -929,6 +1029,7 @@ pub fn decode(bytes: &[u8]) -> Result<Image<'_>, ImageError> {
                 fallback: fallback.fallback,
                 input_box: fallback.input_box,
                 terminal: tr.terminal,
+                exits: exits.exit,
             };
             Image::new(mode, d, h.period, payload)
         }

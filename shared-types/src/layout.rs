@@ -24,6 +24,16 @@ pub const DIR_ENTRY_LEN: usize = 12;
 /// Bytes of one feedforward segment record: first row (`u32`), number of rows (`u32`), location (`u8`).
 pub const SEGMENT_RECORD_LEN: usize = 9;
 
+/// Bytes of one segment-exit record for state dimension n: the kind (`u32`: [`EXIT_TABLE`] or
+/// [`EXIT_GUARD`]), then n + 2 `f32` values â, b̂, θ (zero for a table exit).
+pub const fn exit_record_len(n: usize) -> usize {
+    4 * (n + 3)
+}
+/// A segment that ends with its table (forced switching by time, or the run's last segment).
+pub const EXIT_TABLE: u32 = 0;
+/// A segment that ends when fl(Σⱼ âⱼx̂ⱼ − b̂) ≤ −θ at a sample: the controller moves to the next segment, row 0.
+pub const EXIT_GUARD: u32 = 1;
+
 /// How the controller computes its input.
 #[repr(u8)]
 #[non_exhaustive]
@@ -66,10 +76,11 @@ impl Mode {
         }
     }
 
-    /// Whether a section of `kind` belongs in an image of this mode. Today every section a mode admits is
-    /// required; optional sections (guards and resets, model programs) will be admitted here.
+    /// Whether a section of `kind` belongs in an image of this mode: the required ones, and the optional
+    /// segment exits of a feedforward image.
     pub fn admits(self, kind: SectionKind) -> bool {
         self.required_sections().contains(&kind)
+            || (self == Mode::Feedforward && kind == SectionKind::SegmentExits)
     }
 }
 
@@ -115,11 +126,14 @@ pub enum SectionKind {
     PwaTree = 7,
     /// PWA certified balls and the per-location factors `R̂_ℓ` of their whitened test.
     PwaBalls = 8,
+    /// Feedforward segment exits (optional): per segment, whether it ends with its table or when the
+    /// measured state enters a guard half-space (internal switching, (4.41)–(4.42)).
+    SegmentExits = 9,
 }
 
 impl SectionKind {
     /// Every kind this build knows, in tag order.
-    pub const ALL: [SectionKind; 8] = [
+    pub const ALL: [SectionKind; 9] = [
         SectionKind::Locations,
         SectionKind::Fallback,
         SectionKind::Trajectories,
@@ -128,6 +142,7 @@ impl SectionKind {
         SectionKind::PwaLaws,
         SectionKind::PwaTree,
         SectionKind::PwaBalls,
+        SectionKind::SegmentExits,
     ];
 
     /// The kind with this tag, if this build knows it.
@@ -141,6 +156,7 @@ impl SectionKind {
             6 => Some(SectionKind::PwaLaws),
             7 => Some(SectionKind::PwaTree),
             8 => Some(SectionKind::PwaBalls),
+            9 => Some(SectionKind::SegmentExits),
             _ => None,
         }
     }
@@ -161,6 +177,7 @@ impl SectionKind {
             SectionKind::PwaLaws => "pwa_laws",
             SectionKind::PwaTree => "pwa_tree",
             SectionKind::PwaBalls => "pwa_balls",
+            SectionKind::SegmentExits => "segment_exits",
         }
     }
 }

@@ -358,3 +358,89 @@ fn horizon_left(_task: &HybridTask, earlier: &[Nominal], h: f64, horizon: f64) -
     let used: usize = earlier.iter().map(|n| n.steps()).sum();
     ((horizon - used as f64 * h) / horizon).clamp(0.05, 1.0)
 }
+
+/// The feedforward image of certified runs: per location its gain and metric; per run its first ball
+/// (radius as stored for f32 selection) and its segments, each keeping the rows its certificate covers,
+/// with a guard exit on every segment but the last ([`crate::certify::internal::GuardExit`]).
+pub fn image(task: &HybridTask, runs: &[HybridRun]) -> Result<Vec<u8>, crate::emit::EmitError> {
+    use crate::emit::{ImageBuilder, SegmentExit, TrajectoryEntry};
+    use crate::linalg::to_row_major;
+    let (n, m) = (
+        task.plant.modes()[0].flow.n(),
+        task.plant.modes()[0].flow.m(),
+    );
+    let mut b = ImageBuilder::new(n, m, task.plant.period());
+    for d in &task.designs {
+        b.add_location(to_row_major(d.K.as_ref()), to_row_major(d.P.as_ref()));
+    }
+    for run in runs {
+        let (mut v, mut location, mut exits) = (Vec::new(), Vec::new(), Vec::new());
+        for (i, (nom, seg)) in run
+            .nominals
+            .iter()
+            .zip(&run.certificate.segments)
+            .enumerate()
+        {
+            let rows = seg.rows.min(nom.steps());
+            for row in &nom.v[..rows] {
+                v.extend_from_slice(row);
+            }
+            location.extend(std::iter::repeat_n(task.path[i] as u8, rows));
+            exits.push(match &seg.exit {
+                Some(g) => SegmentExit::Guard {
+                    a: g.a.clone(),
+                    b: g.b,
+                    theta: g.theta,
+                },
+                None => SegmentExit::Table,
+            });
+        }
+        b.trajectories.push(TrajectoryEntry {
+            x0: run.nominals[0].x[0].clone(),
+            delta: run.certificate.delta_stored as f64,
+            v,
+            location,
+        });
+        b.exits.push(exits);
+    }
+    b.to_bytes()
+}
+
+/// Starts for a Monte Carlo of a run's first ball B_P(x̃(0), δ): `interior` uniform in the ball and
+/// `boundary` on its boundary sphere (in the metric), seeded.
+pub fn ball_starts(
+    task: &HybridTask,
+    run: &HybridRun,
+    interior: usize,
+    boundary: usize,
+    seed: u64,
+) -> Vec<Vec<f64>> {
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let loc = task.path[0];
+    let roots = &task.constants[loc].roots;
+    let c = &run.nominals[0].x[0];
+    let n = c.len();
+    let delta = run.certificate.delta_stored as f64;
+    let mut out = Vec::with_capacity(interior + boundary);
+    for i in 0..interior + boundary {
+        let w: Vec<f64> = (0..n)
+            .map(|_| {
+                // Box–Muller normal.
+                let (a, b): (f64, f64) = (rng.random::<f64>().max(1e-300), rng.random());
+                (-2.0 * a.ln()).sqrt() * (std::f64::consts::TAU * b).cos()
+            })
+            .collect();
+        let norm = w.iter().map(|v| v * v).sum::<f64>().sqrt().max(1e-300);
+        let radius = if i < interior {
+            delta * rng.random::<f64>().powf(1.0 / n as f64)
+        } else {
+            // Just inside: the boundary itself is where the f32 selection test may go either way.
+            delta * (1.0 - 1e-6)
+        };
+        let dir: Vec<f64> = w.iter().map(|v| v / norm * radius).collect();
+        let e = crate::linalg::mat_vec(roots.inv_sqrt.as_ref(), &dir);
+        out.push((0..n).map(|j| c[j] + e[j]).collect());
+    }
+    out
+}

@@ -14,6 +14,7 @@
 
 pub mod attack;
 pub mod feedforward;
+pub mod hybrid;
 pub mod pwa;
 
 /// Largest number of Monte Carlo runs from the cover one check may ask for (`verify --runs`,

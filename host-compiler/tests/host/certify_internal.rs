@@ -1,6 +1,7 @@
 //! General switching (Theorem 4.24 for the sampled loop, `certify::internal`) on Example 4.25.
 
-use host_compiler::synth::hybrid::{plan_run, HybridTask};
+use host_compiler::synth::hybrid::{ball_starts, image, plan_run, HybridTask};
+use host_compiler::verify::hybrid::monte_carlo_hybrid;
 
 fn task(period: f64) -> HybridTask {
     let src = std::fs::read_to_string(concat!(
@@ -26,4 +27,14 @@ fn example_4_25_run_is_certified() {
         );
     }
     assert!(run.delta() > 0.0);
+    // The image of this run, run by the shared evaluator against the exact hybrid flow from the ball's
+    // interior and boundary: every run switches once and meets the task.
+    let bytes = image(&t, std::slice::from_ref(&run)).unwrap();
+    let starts = ball_starts(&t, &run, 40, 40, 7);
+    let rep =
+        monte_carlo_hybrid(&t.plant, &t.property, t.initial, t.steps, &bytes, &starts).unwrap();
+    eprintln!("{rep:?}");
+    assert_eq!(rep.violations, 0, "{:?}", rep.first_violation);
+    assert_eq!(rep.switched, rep.runs);
+    assert_eq!(rep.max_events, 1);
 }

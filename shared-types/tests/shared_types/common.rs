@@ -84,6 +84,7 @@ impl Owned {
             },
             input_box: self.bx.as_ref().map(|(lo, hi)| InputBox { lo, hi }),
             terminal: self.terminal,
+            exits: &[],
         }
     }
 }

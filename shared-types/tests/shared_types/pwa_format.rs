@@ -593,8 +593,11 @@ fn rejects_invalid_payload_bytes() {
                   let mut s = sections_of(b); s.remove(3); *b = with_sections(b, &s); },
             Is(ImageError::MissingSection { kind: SectionKind::PwaTree })),
         byte_row("directory: an unknown section kind", |b| {
-                  let mut s = sections_of(b); s.push((9, vec![])); *b = with_sections(b, &s); },
-            Is(ImageError::UnknownSection { kind: 9 })),
+                  let mut s = sections_of(b); s.push((10, vec![])); *b = with_sections(b, &s); },
+            Is(ImageError::UnknownSection { kind: 10 })),
+        byte_row("directory: segment exits (feedforward only)", |b| {
+                  let mut s = sections_of(b); s.push((9, vec![0])); *b = with_sections(b, &s); },
+            Is(ImageError::UnexpectedSection { kind: SectionKind::SegmentExits, mode: Mode::PwaFeedback })),
         byte_row("header: n = 3 (payload has n = 2)", |b| b[8..10].copy_from_slice(&3u16.to_le_bytes()),
             Is(ImageError::FieldLength { field: Field::K, expected: 12, found: 8 })),
         byte_row("header: 3 partitions (payload has 2)", |b| b[16..18].copy_from_slice(&3u16.to_le_bytes()),
