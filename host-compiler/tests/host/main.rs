@@ -26,6 +26,7 @@ mod geometry_common;
 mod geometry_ellipsoid;
 mod geometry_polytope;
 mod geometry_regions;
+mod image_exits;
 mod messages;
 mod model_hybrid;
 mod model_zoh;
