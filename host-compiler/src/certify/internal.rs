@@ -690,7 +690,8 @@ pub fn certify_internal(
             }
         }
         certs.push(SegmentCertificate {
-            rows: s.nominal.steps(),
+            // The table up to Goal (κ*): past it the task is over and the terminal behaviour applies.
+            rows: (base.k_star + 1).min(s.nominal.steps()),
             samples: base.k_star,
             exit: None,
             events: None,

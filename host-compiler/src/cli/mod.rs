@@ -8,7 +8,8 @@ pub mod inspect;
 pub mod mtl;
 pub mod simulate;
 pub mod synth;
-pub mod synth_pwa;
+pub mod synth_hybrid;
+mod synth_pwa;
 pub mod verify;
 
 /// Synthesise controllers that are provably safe for one task, and the fixed-size image a

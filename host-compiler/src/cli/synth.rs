@@ -34,6 +34,9 @@ pub fn run(a: &SynthArgs) -> Outcome {
     // First of all, even before the spec is read: whatever happens next, no earlier result is left.
     prepare_out(&a.out)?;
     let problem = crate::spec::load(&a.spec).bad_input()?;
+    if problem.hybrid.is_some() {
+        return crate::cli::synth_hybrid::run(a, problem);
+    }
     let (n, m, h) = (problem.plant.n(), problem.plant.m(), problem.plant.period);
     // A recording is at most the horizon long (which `spec::limits` keeps within the table capacity).
     let max_rows = problem.horizon_steps();

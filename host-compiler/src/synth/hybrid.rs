@@ -5,7 +5,7 @@
 //!
 //! **A nominal run.** The path is the shortest chain of internal edges from the initial location to a
 //! location whose invariant holds Goal's centre. Each segment but the last is generated in its location
-//! with the SCP generator ([`crate::trajectory::generate`]) towards "the guard, [`GUARD_DEPTH`] deep"
+//! with the SCP generator ([`crate::trajectory::generate`]) towards "the guard, d deep" (d from [`GUARD_DEPTHS`])
 //! (the half-space shifted into the guard), which continues the segment past the plane far enough that
 //! its tube lies inside the guard (the extended segment). The nominal hybrid run itself, flowing exactly
 //! across the event ([`Hybrid::flow`]), gives the next segment's start: the first sample after its own
@@ -23,8 +23,10 @@ use crate::trajectory::generate::{generate, GenProblem, GenSettings};
 use crate::trajectory::Nominal;
 use faer::Mat;
 
-/// How far past a guard's plane (Euclidean) a non-last segment's generated nominal must end.
-pub const GUARD_DEPTH: f64 = 0.2;
+/// How far past a guard's plane (Euclidean) a non-last segment's generated nominal must end: each is
+/// tried (a deeper target makes the nominal cross the plane more steeply, so that the tube's crossing
+/// points spread less; a location may not reach the deeper ones).
+pub const GUARD_DEPTHS: [f64; 3] = [0.2, 0.45, 0.7];
 /// Segment durations tried, as fractions of the horizon T.
 pub const DURATIONS: [f64; 4] = [0.1, 0.2, 0.35, 0.5];
 
@@ -289,7 +291,10 @@ pub fn plan_run(task: &HybridTask, x0: &[f64]) -> Result<HybridRun, String> {
     let mut best: Option<HybridRun> = None;
     let mut why = String::from("no duration tried");
     // Segments but the last: towards the guard, each duration; then the last segment from the landing.
-    for &f0 in &DURATIONS {
+    for (&f0, &depth) in DURATIONS
+        .iter()
+        .flat_map(|f| GUARD_DEPTHS.iter().map(move |d| (f, d)))
+    {
         let mut nominals: Vec<Nominal> = Vec::new();
         let mut x = x0.to_vec();
         let mut ok = true;
@@ -305,7 +310,7 @@ pub fn plan_run(task: &HybridTask, x0: &[f64]) -> Result<HybridRun, String> {
                 let deep: Vec<f64> = (0..rows)
                     .map(|r| {
                         let na = a[r].iter().map(|v| v * v).sum::<f64>().sqrt();
-                        b[r] - GUARD_DEPTH * na
+                        b[r] - depth * na
                     })
                     .collect();
                 (
@@ -443,4 +448,233 @@ pub fn ball_starts(
         out.push((0..n).map(|j| c[j] + e[j]).collect());
     }
     out
+}
+
+/// Options of a hybrid synthesis run that are not part of the task (defaults per field).
+#[derive(Clone)]
+pub struct HybridOptions {
+    /// Uniform samples of Init from which seeds are chosen (default 2 000).
+    pub working_samples: usize,
+    /// Monte Carlo runs from the cover's interior (default 1 000) and from each ball's boundary
+    /// (default 8).
+    pub verify_interior: usize,
+    pub verify_per_ball: usize,
+    /// Seeds planned per round, in parallel (default 4; fixed, so the image does not depend on the thread
+    /// count).
+    pub batch: usize,
+    /// Set to stop the growth cleanly (Ctrl-C).
+    pub cancel: std::sync::Arc<std::sync::atomic::AtomicBool>,
+    /// Called with the count after each accepted run.
+    pub on_accept: Option<std::sync::Arc<dyn Fn(usize, f64) + Send + Sync>>,
+}
+
+impl Default for HybridOptions {
+    fn default() -> Self {
+        Self {
+            working_samples: 2000,
+            verify_interior: 1000,
+            verify_per_ball: 8,
+            batch: 4,
+            cancel: Default::default(),
+            on_accept: None,
+        }
+    }
+}
+
+/// What a hybrid synthesis produced.
+pub struct HybridSynthesis {
+    pub runs: Vec<HybridRun>,
+    /// Seeds planned, and those that certified nothing (with the reason).
+    pub seeds_tried: usize,
+    pub refused: Vec<(Vec<f64>, String)>,
+    pub coverage: crate::cover::CoverageEstimate,
+    pub image: Vec<u8>,
+    pub verify: crate::verify::hybrid::HybridReport,
+    /// Why the growth stopped.
+    pub stop: String,
+    pub seconds: f64,
+}
+
+/// Whether `x` is in the first ball of some run (the metric of the initial location, the stored radius).
+fn covered(task: &HybridTask, runs: &[HybridRun], x: &[f64]) -> bool {
+    let P = &task.designs[task.path[0]].P;
+    runs.iter().any(|r| {
+        let c = &r.nominals[0].x[0];
+        let e: Vec<f64> = x.iter().zip(c).map(|(a, b)| a - b).collect();
+        let d = r.certificate.delta_stored as f64;
+        crate::linalg::p_norm(P.as_ref(), &e) <= d
+    })
+}
+
+/// Algorithm 1 over hybrid runs: plan from Init's centre, then from uncovered samples of Init (a batch
+/// per round, planned in parallel, accepted in sample order), until the working samples are covered to
+/// the target, the budget (`max_trajectories`, the table's rows) is spent, no uncovered sample is left
+/// untried, or `cancel` is set; then the coverage estimate (§2.5.2), the image and its Monte Carlo.
+pub fn synthesize_hybrid(
+    task: &HybridTask,
+    opts: &HybridOptions,
+) -> Result<HybridSynthesis, String> {
+    use rand::SeedableRng;
+    use rayon::prelude::*;
+    use std::sync::atomic::Ordering;
+    let t0 = std::time::Instant::now();
+    let s = &task.problem.synthesis;
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(task.problem.seed);
+    let init = crate::cover::estimate::SampleBox {
+        lo: task.problem.init.lo.clone(),
+        hi: task.problem.init.hi.clone(),
+    };
+    let working = init.samples(opts.working_samples.max(1), &mut rng);
+    let centre: Vec<f64> = init
+        .lo
+        .iter()
+        .zip(&init.hi)
+        .map(|(l, h)| 0.5 * (l + h))
+        .collect();
+    let mut runs: Vec<HybridRun> = Vec::new();
+    let mut refused: Vec<(Vec<f64>, String)> = Vec::new();
+    let mut tried = vec![false; working.len()];
+    let mut seeds_tried = 0usize;
+    let mut rows_used = 0usize;
+    let target = s.coverage_target + s.coverage_tolerance;
+    let stop;
+    let mut first = true;
+    loop {
+        if opts.cancel.load(Ordering::Relaxed) {
+            stop = "interrupted".to_string();
+            break;
+        }
+        let frac = working.iter().filter(|x| covered(task, &runs, x)).count() as f64
+            / working.len() as f64;
+        if frac >= target.min(1.0) {
+            stop = format!("the working samples are covered ({:.1} %)", 100.0 * frac);
+            break;
+        }
+        if runs.len() >= s.max_trajectories {
+            stop = format!("the budget of {} trajectories is spent", s.max_trajectories);
+            break;
+        }
+        let seeds: Vec<Vec<f64>> = if first {
+            first = false;
+            vec![centre.clone()]
+        } else {
+            let mut out = Vec::new();
+            for (i, x) in working.iter().enumerate() {
+                if out.len() == opts.batch.max(1) {
+                    break;
+                }
+                if !tried[i] && !covered(task, &runs, x) {
+                    tried[i] = true;
+                    out.push(x.clone());
+                }
+            }
+            out
+        };
+        if seeds.is_empty() {
+            stop =
+                "every uncovered working sample was tried: a new seed trajectory is needed".into();
+            break;
+        }
+        seeds_tried += seeds.len();
+        let planned: Vec<Result<HybridRun, String>> =
+            seeds.par_iter().map(|x| plan_run(task, x)).collect();
+        for (x, r) in seeds.into_iter().zip(planned) {
+            match r {
+                Ok(run)
+                    if run.delta() >= s.min_robustness.max(f64::MIN_POSITIVE)
+                        && run.certificate.is_certified() =>
+                {
+                    let rows: usize = run.certificate.segments.iter().map(|c| c.rows).sum();
+                    if runs.len() >= s.max_trajectories
+                        || rows_used + rows > shared_types::capacity::MAX_STEPS
+                    {
+                        continue;
+                    }
+                    rows_used += rows;
+                    runs.push(run);
+                    if let Some(f) = &opts.on_accept {
+                        f(runs.len(), runs.last().map_or(0.0, |r| r.delta()));
+                    }
+                }
+                Ok(run) => refused.push((
+                    x,
+                    format!(
+                        "δ = {:.3e} ({})",
+                        run.delta(),
+                        run.certificate
+                            .segments
+                            .iter()
+                            .map(|c| c.binding)
+                            .collect::<Vec<_>>()
+                            .join("; ")
+                    ),
+                )),
+                Err(e) => refused.push((x, e)),
+            }
+        }
+    }
+    if runs.is_empty() {
+        return Err(format!(
+            "no run was certified ({} seeds tried; first reason: {})",
+            seeds_tried,
+            refused.first().map_or("none", |r| r.1.as_str())
+        ));
+    }
+    // Coverage (§2.5.2) from fresh samples.
+    let n_cov = s.coverage_samples();
+    let coverage = crate::cover::estimate::estimate(&init, n_cov, s.confidence, &mut rng, |x| {
+        covered(task, &runs, x)
+    });
+    let image = image(task, &runs).map_err(|e| format!("image: {e}"))?;
+    // Monte Carlo: covered samples of Init, and the boundary of every ball.
+    let mut starts = Vec::new();
+    let mut draws = 0usize;
+    while starts.len() < opts.verify_interior && draws < 100 * opts.verify_interior.max(1) {
+        draws += 1;
+        let x = init.sample(&mut rng);
+        if covered(task, &runs, &x) {
+            starts.push(x);
+        }
+    }
+    for (i, run) in runs.iter().enumerate() {
+        let b = ball_starts(
+            task,
+            run,
+            0,
+            opts.verify_per_ball,
+            task.problem.seed ^ (i as u64 + 1),
+        );
+        starts.extend(b);
+    }
+    let chunks: Vec<&[Vec<f64>]> = starts.chunks(64).collect();
+    let reports: Vec<Result<crate::verify::hybrid::HybridReport, String>> = chunks
+        .par_iter()
+        .map(|c| {
+            crate::verify::hybrid::monte_carlo_hybrid(
+                &task.plant,
+                &task.property,
+                task.initial,
+                task.steps,
+                &image,
+                c,
+            )
+        })
+        .collect();
+    let mut verify = crate::verify::hybrid::HybridReport {
+        min_unsafe_distance: f64::INFINITY,
+        ..Default::default()
+    };
+    for r in reports {
+        verify.merge(r?);
+    }
+    Ok(HybridSynthesis {
+        runs,
+        seeds_tried,
+        refused,
+        coverage,
+        image,
+        verify,
+        stop,
+        seconds: t0.elapsed().as_secs_f64(),
+    })
 }

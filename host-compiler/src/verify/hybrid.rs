@@ -32,6 +32,21 @@ pub struct HybridReport {
     pub min_unsafe_distance: f64,
 }
 
+impl HybridReport {
+    /// Adds another batch's counts (the first violation kept in batch order).
+    pub fn merge(&mut self, o: HybridReport) {
+        self.runs += o.runs;
+        self.violations += o.violations;
+        if self.first_violation.is_none() {
+            self.first_violation = o.first_violation;
+        }
+        self.switched += o.switched;
+        self.max_events = self.max_events.max(o.max_events);
+        self.max_goal_step = self.max_goal_step.max(o.max_goal_step);
+        self.min_unsafe_distance = self.min_unsafe_distance.min(o.min_unsafe_distance);
+    }
+}
+
 fn input_ok(input: &InputBound, u: &[f32]) -> bool {
     match input {
         InputBound::Box { lo, hi } => u

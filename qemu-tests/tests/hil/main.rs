@@ -3,5 +3,6 @@
 //! (`cargo xtask test` installs both); without them each test fails and says so.
 
 mod board;
+mod hybrid;
 mod planar_vehicle;
 mod pwa;

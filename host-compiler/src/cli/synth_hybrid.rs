@@ -1,0 +1,146 @@
+//! `synth` for a hybrid plant (`[[plant.location]]` in the spec): runs across internal edges, certified by
+//! `certify::internal`, grown over Init ([`crate::synth::hybrid::synthesize_hybrid`]), verified by Monte
+//! Carlo against the exact hybrid flow through the shared evaluator. Writes `controller.img` (only when
+//! the verification passed) and `certificate.json`; exit status as for `synth` ([`super::Exit`]).
+
+use super::synth::write_atomic;
+use super::{BadInput, Exit, Failure, Outcome, SynthArgs};
+use crate::synth::hybrid::{synthesize_hybrid, HybridOptions, HybridTask};
+use miette::IntoDiagnostic;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+
+pub fn run(a: &SynthArgs, problem: crate::spec::Problem) -> Outcome {
+    if !a.imports.is_empty() {
+        return Err(Failure::bad_input(miette::miette!(
+            "--import is not taken for hybrid plants yet: a recording has no segments (issue #12)"
+        )));
+    }
+    let task = HybridTask::new(problem)
+        .map_err(|e| miette::miette!("{e}"))
+        .bad_input()?;
+    let cancel = Arc::new(AtomicBool::new(false));
+    {
+        let cancel = cancel.clone();
+        if let Err(e) = ctrlc::set_handler(move || {
+            if cancel.swap(true, Ordering::SeqCst) {
+                std::process::exit(130);
+            }
+            eprintln!(
+                "\ninterrupt: finishing with the runs certified so far (Ctrl-C again to abort)"
+            );
+        }) {
+            eprintln!("warning: Ctrl-C handler not installed: {e}");
+        }
+    }
+    let names: Vec<&str> = task
+        .path
+        .iter()
+        .map(|&l| task.plant.modes()[l].name.as_str())
+        .collect();
+    if !a.quiet {
+        eprintln!(
+            "hybrid plant: {} locations, {} edges; runs go {}",
+            task.plant.modes().len(),
+            task.plant.edges().len(),
+            names.join(" → ")
+        );
+    }
+    let quiet = a.quiet;
+    let opts = HybridOptions {
+        verify_interior: (a.verify_runs as usize).min(100_000),
+        cancel: cancel.clone(),
+        on_accept: (!quiet).then(|| {
+            Arc::new(|count: usize, delta: f64| eprintln!("certified run {count} (δ = {delta:.4})"))
+                as Arc<dyn Fn(usize, f64) + Send + Sync>
+        }),
+        ..HybridOptions::default()
+    };
+    let s = synthesize_hybrid(&task, &opts).map_err(|e| Failure {
+        exit: Exit::Failed,
+        report: miette::miette!("{e}"),
+    })?;
+    let img_path = a.out.join("controller.img");
+    let verified = s.verify.violations == 0;
+    if verified {
+        write_atomic(&img_path, &s.image)?;
+    }
+    let cert = serde_json::json!({
+        "spec": a.spec.display().to_string(),
+        "seed": task.problem.seed,
+        "plant": "hybrid",
+        "path": names,
+        "edges": task.edges,
+        "stop": s.stop,
+        "coverage": s.coverage,
+        "verify": s.verify,
+        "seeds_tried": s.seeds_tried,
+        "refused": s.refused.iter().map(|(x, why)| serde_json::json!({"seed": x, "why": why})).collect::<Vec<_>>(),
+        "locations": task.designs.iter().map(|d| serde_json::json!({
+            "K": crate::linalg::to_rows(d.K.as_ref()), "P": crate::linalg::to_rows(d.P.as_ref()),
+        })).collect::<Vec<_>>(),
+        "runs": s.runs.iter().map(|r| serde_json::json!({
+            "x0": r.nominals[0].x[0], "certificate": r.certificate,
+        })).collect::<Vec<_>>(),
+        "seconds": s.seconds,
+    });
+    std::fs::write(
+        a.out.join("certificate.json"),
+        serde_json::to_string_pretty(&cert).into_diagnostic()?,
+    )
+    .into_diagnostic()?;
+    let deltas: Vec<f64> = s.runs.iter().map(|r| r.delta()).collect();
+    let (dmin, dmax) = deltas
+        .iter()
+        .fold((f64::INFINITY, 0.0f64), |(a, b), &d| (a.min(d), b.max(d)));
+    println!(
+        "runs              {} ({} seeds tried)",
+        s.runs.len(),
+        s.seeds_tried
+    );
+    println!("delta range       {dmin:.4} .. {dmax:.4} (CAF metric of the first location)");
+    println!(
+        "coverage          {:.5} (lower bound {:.5}, upper {:.5} at {} confidence, {} samples)",
+        s.coverage.mean,
+        s.coverage.lower,
+        s.coverage.upper,
+        s.coverage.confidence,
+        s.coverage.samples
+    );
+    println!("stop              {}", s.stop);
+    println!(
+        "verification      {} runs ({} switched, at most {} events), {} violations",
+        s.verify.runs, s.verify.switched, s.verify.max_events, s.verify.violations
+    );
+    println!("time              {:.1} s", s.seconds);
+    if !verified {
+        return Err(miette::miette!(
+            "verification found {} violations (first: {}): the image is NOT certified and was not written",
+            s.verify.violations,
+            s.verify.first_violation.as_deref().unwrap_or("?")
+        )
+        .into());
+    }
+    println!(
+        "image             {} ({} bytes)",
+        img_path.display(),
+        s.image.len()
+    );
+    if cancel.load(Ordering::Relaxed) {
+        return Err(Failure {
+            exit: Exit::Interrupted,
+            report: miette::miette!("interrupted: the image holds the runs certified so far"),
+        });
+    }
+    let target = task.problem.synthesis.coverage_target;
+    if s.coverage.lower >= target {
+        Ok(Exit::Success)
+    } else {
+        eprintln!(
+            "coverage target NOT met: the coverage of Init is at least {:.5} at {} confidence, short of the \
+             target {target} ({}); the image is certified for its cover only (exit status 3)",
+            s.coverage.lower, s.coverage.confidence, s.stop
+        );
+        Ok(Exit::ShortOfTarget)
+    }
+}
