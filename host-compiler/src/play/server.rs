@@ -93,7 +93,8 @@ fn answer(game: &Mutex<Game>, mut req: tiny_http::Request) {
     });
     let response = match outcome {
         Ok(Reply::Page) => tiny_http::Response::from_string(PAGE)
-            .with_header(header("Content-Type", "text/html; charset=utf-8")),
+            .with_header(header("Content-Type", "text/html; charset=utf-8"))
+            .with_chunked_threshold(usize::MAX),
         Ok(Reply::Json(v)) => json_response(200, &v),
         Err((code, msg)) => json_response(code, &json!({ "error": msg })),
     };
@@ -163,4 +164,6 @@ fn json_response(code: u16, v: &Value) -> tiny_http::Response<std::io::Cursor<Ve
         .with_status_code(code)
         .with_header(header("Content-Type", "application/json"))
         .with_header(header("Cache-Control", "no-store"))
+        // The length is known: send it, never chunked (simple clients read to the end).
+        .with_chunked_threshold(usize::MAX)
 }
