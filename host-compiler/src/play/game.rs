@@ -88,6 +88,16 @@ pub enum Ending {
 }
 
 impl Ending {
+    fn parse(s: &str) -> Option<Self> {
+        [
+            Ending::Goal,
+            Ending::Unsafe,
+            Ending::Timeout,
+            Ending::Finished,
+        ]
+        .into_iter()
+        .find(|e| e.name() == s)
+    }
     fn name(self) -> &'static str {
         match self {
             Ending::Goal => "goal",
@@ -250,7 +260,10 @@ impl Game {
             let when = comment(&text, "played").unwrap_or_default();
             let number = file_number(&f).unwrap_or(self.next_number);
             self.next_number = self.next_number.max(number + 1);
-            let run = self.judge(&rec, player, when, Ending::Finished, number);
+            let ending = comment(&text, "ending")
+                .and_then(|e| Ending::parse(&e))
+                .unwrap_or(Ending::Finished);
+            let run = self.judge(&rec, player, when, ending, number);
             let mut run = run;
             run.file = f.file_name().map(|s| s.to_string_lossy().into_owned());
             self.push_run(run);
@@ -643,7 +656,14 @@ impl Game {
         }
         let number = self.next_number;
         self.next_number += 1;
-        let text = recording_text(&s.player, &when, &s.x0, &s.v, self.task.plant.period());
+        let text = recording_text(
+            &s.player,
+            &when,
+            ending,
+            &s.x0,
+            &s.v,
+            self.task.plant.period(),
+        );
         let file = format!("run-{number:04}-{}.csv", slug(&s.player));
         // The same parser and certification as `synth --import`.
         let rec = parse_recording(
@@ -873,12 +893,20 @@ fn reason(c: &Certificate, ending: Ending, ended_at: f64, h: f64) -> String {
 }
 
 /// The recording as `synth --import` reads it, with the player and the time in comment lines.
-fn recording_text(player: &str, when: &str, x0: &[f64], v: &[Vec<f64>], h: f64) -> String {
+fn recording_text(
+    player: &str,
+    when: &str,
+    ending: Ending,
+    x0: &[f64],
+    v: &[Vec<f64>],
+    h: f64,
+) -> String {
     use std::fmt::Write;
     let mut s = String::new();
     let _ = writeln!(s, "# played with host-compiler play");
     let _ = writeln!(s, "# player = {player}");
     let _ = writeln!(s, "# played = {when}");
+    let _ = writeln!(s, "# ending = {}", ending.name());
     let x0: Vec<String> = x0.iter().map(|a| format!("{a:?}")).collect();
     let _ = writeln!(s, "# x0 = {}", x0.join(", "));
     let head: Vec<String> = (1..=v.first().map_or(0, Vec::len))
@@ -1071,6 +1099,7 @@ mod tests {
         let text = recording_text(
             "Ann",
             "2026-01-01T00:00:00Z",
+            Ending::Goal,
             &[0.1, -0.2],
             &[vec![1.5], vec![-0.25]],
             0.01,
@@ -1079,6 +1108,10 @@ mod tests {
         assert_eq!(rec.x0, vec![0.1, -0.2]);
         assert_eq!(rec.v, vec![vec![1.5], vec![-0.25]]);
         assert_eq!(comment(&text, "player").as_deref(), Some("Ann"));
+        assert_eq!(
+            comment(&text, "ending").and_then(|e| Ending::parse(&e)),
+            Some(Ending::Goal)
+        );
         assert_eq!(
             comment(&text, "played").as_deref(),
             Some("2026-01-01T00:00:00Z")

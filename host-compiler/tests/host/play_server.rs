@@ -241,6 +241,7 @@ fn two_players_at_once_each_certified_and_the_accepted_run_reads_back() {
     let text = std::fs::read_to_string(&files[0]).unwrap();
     assert!(text.contains("# player = Ann"), "{text}");
     assert!(text.contains("# played = 20"), "{text}");
+    assert!(text.contains("# ending = goal"), "{text}");
     let rec = host_compiler::trajectory::csv::load_recording(&files[0], 4, 2, 0.01, 500).unwrap();
     assert_eq!(rec.x0, vec![0.0, 0.0, 0.0, 1.0]);
     assert_eq!(rec.v.len(), r1["k"].as_u64().unwrap() as usize);
@@ -249,6 +250,12 @@ fn two_players_at_once_each_certified_and_the_accepted_run_reads_back() {
     let g = game(&out);
     assert_eq!(g.accepted(), 1);
     assert_eq!(g.coverage(), st["coverage"].as_f64().unwrap());
+    let again = g.state();
+    assert_eq!(again["runs"][0]["ending"], "goal");
+    assert_eq!(again["runs"][0]["player"], "Ann");
+    let ann = runs.iter().find(|r| r["player"] == "Ann").unwrap();
+    assert_eq!(again["runs"][0]["delta"], ann["delta"]);
+    assert_eq!(ann["delta"].as_f64().unwrap(), delta);
 }
 
 #[test]
