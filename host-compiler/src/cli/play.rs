@@ -47,14 +47,18 @@ pub fn run(a: &PlayArgs) -> Outcome {
     let served = crate::play::serve(game, addr)
         .map_err(|e| miette::miette!("{e}"))
         .bad_input()?;
-    println!("play: http://{}/", served.addr);
-    println!(
+    // Written without println!: a reader that closed the pipe (a test that read the address) must not
+    // stop the server.
+    use std::io::Write;
+    let mut out = std::io::stdout();
+    let _ = writeln!(out, "play: http://{}/", served.addr);
+    let _ = writeln!(
+        out,
         "runs: {} ({accepted} accepted runs there, coverage {:.1} %); Ctrl-C stops",
         a.out.display(),
         100.0 * coverage
     );
-    use std::io::Write;
-    let _ = std::io::stdout().flush();
+    let _ = out.flush();
     served.wait();
     Ok(Exit::Success)
 }

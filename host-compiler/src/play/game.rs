@@ -43,6 +43,8 @@ pub const COVERAGE_SAMPLES: usize = 2000;
 pub const RASTER: usize = 120;
 /// Longest player name (characters); longer names are refused.
 pub const MAX_NAME: usize = 40;
+/// Most points of an accepted run's path in `GET /api/state` (the finished run's answer has all).
+pub const STATE_PATH_POINTS: usize = 100;
 /// Samples of the "input held" preview (the text's game draws where the held input leads).
 pub const PREVIEW_STEPS: usize = 150;
 
@@ -373,7 +375,11 @@ impl Game {
             .values()
             .map(|s| {
                 let x = s.xs.last().expect("a session holds x0");
-                json!({"player": s.player, "at": self.project(x), "t": s.v.len() as f64 * self.task.plant.period()})
+                let mut p = json!({"player": s.player, "at": self.project(x), "t": s.v.len() as f64 * self.task.plant.period()});
+                if self.task.plant.locations() > 1 {
+                    p["location"] = json!(s.loc);
+                }
+                p
             })
             .collect();
         json!({
@@ -676,20 +682,21 @@ impl Game {
         )
         .map_err(|e| PlayError::Io(format!("the recording does not read back: {e}")))?;
         let mut run = self.judge(&rec, s.player.clone(), when, ending, number);
-        if run.accepted && self.cover.len() >= MAX_RUNS {
-            run.accepted = false;
-            run.reason = format!(
-                "certified, but the game keeps at most {MAX_RUNS} runs; run `synth --import` on the out directory"
-            );
-            self.cover.pop();
-        }
         if run.accepted {
             let path = self.settings.out.join(&file);
             let tmp = self.settings.out.join(format!(".{file}.tmp"));
-            std::fs::write(&tmp, &text)
-                .and_then(|()| std::fs::rename(&tmp, &path))
-                .map_err(|e| PlayError::Io(format!("{}: {e}", path.display())))?;
-            run.file = Some(file);
+            // The run is in the cover either way; a file that cannot be written is said in its reason.
+            match std::fs::write(&tmp, &text).and_then(|()| std::fs::rename(&tmp, &path)) {
+                Ok(()) => run.file = Some(file),
+                Err(e) => {
+                    let _ = std::fs::remove_file(&tmp);
+                    run.reason = format!(
+                        "{}; NOT written: cannot write {}: {e}",
+                        run.reason,
+                        path.display()
+                    );
+                }
+            }
         }
         let answer = self.run_json(&run, true);
         self.push_run(run);
@@ -707,7 +714,8 @@ impl Game {
     ) -> Run {
         let ended_at = rec.v.len() as f64 * self.task.plant.period();
         let (nominal, cert) = certify_recording(&self.lp(), &self.lc, rec);
-        let accepted = cert.is_certified();
+        let full = self.cover.len() >= MAX_RUNS;
+        let accepted = cert.is_certified() && !full;
         let h = self.task.plant.period();
         let mut new_coverage = 0.0;
         if accepted {
@@ -722,7 +730,12 @@ impl Game {
             }
             new_coverage = fresh as f64 / self.samples.len().max(1) as f64;
         }
-        let reason = reason(&cert, ending, ended_at, h);
+        let mut reason = reason(&cert, ending, ended_at, h);
+        if full && cert.is_certified() {
+            reason = format!(
+                "not added: the game keeps at most {MAX_RUNS} runs (run `synth --import` on the out directory); {reason}"
+            );
+        }
         let path = nominal.x.iter().map(|x| self.project(x)).collect();
         if accepted {
             self.cover.push(CoverTrajectory {
@@ -767,8 +780,19 @@ impl Game {
             "reason": r.reason,
             "file": r.file,
         });
-        if full || r.accepted {
+        if full {
             v["path"] = json!(r.path);
+        } else if r.accepted {
+            // The table's paths are thinned to at most STATE_PATH_POINTS points (ends kept), so that a
+            // state with many runs stays small.
+            let stride = r.path.len().div_ceil(STATE_PATH_POINTS).max(1);
+            let mut thin: Vec<[f64; 2]> = r.path.iter().step_by(stride).copied().collect();
+            if let Some(&end) = r.path.last() {
+                if (r.path.len() - 1) % stride != 0 {
+                    thin.push(end);
+                }
+            }
+            v["path"] = json!(thin);
         }
         if full {
             v["coverage"] = json!(self.coverage());

@@ -232,6 +232,16 @@ fn two_players_at_once_each_certified_and_the_accepted_run_reads_back() {
     assert_eq!(runs.len(), 2);
     assert!(st["coverage"].as_f64().unwrap() > 0.0);
     assert!(st["covered"].as_str().unwrap().contains('1'));
+    // The state's paths are thinned, ends kept; the run's own answer had all its samples.
+    let ann = runs.iter().find(|r| r["player"] == "Ann").unwrap();
+    let thin = ann["path"].as_array().unwrap();
+    let full = r1["result"]["path"].as_array().unwrap();
+    assert!(thin.len() <= host_compiler::play::game::STATE_PATH_POINTS + 1);
+    assert_eq!(full.len(), r1["k"].as_u64().unwrap() as usize + 1);
+    assert_eq!((thin.first(), thin.last()), (full.first(), full.last()));
+    assert!(runs
+        .iter()
+        .all(|r| r["accepted"] == true || r.get("path").is_none()));
     // Ann's recording is in the directory, and reads as `synth --import DIR` reads it.
     let files = host_compiler::trajectory::csv::recordings_in(&out).unwrap();
     assert_eq!(files.len(), 1, "{files:?}");
