@@ -269,6 +269,54 @@ fn two_players_at_once_each_certified_and_the_accepted_run_reads_back() {
 }
 
 #[test]
+fn a_run_that_idles_until_t_times_out_and_is_refused_for_goal() {
+    let out = scratch("timeout");
+    let srv = start_server(&out);
+    let a = srv.addr;
+    // Held near Init (the loop's reference pulling it back to x1 < 0.2): T runs out before Goal.
+    let (_, s) = post(
+        a,
+        "/api/start",
+        &json!({"player": "idle", "at": [-0.1, 0.1]}),
+    );
+    let id = s["session"].as_u64().unwrap();
+    let (_, r) = post(
+        a,
+        "/api/step",
+        &json!({"session": id, "v": [-0.9, 0.0], "steps": 1}),
+    );
+    assert_eq!(r["status"], "running");
+    assert_eq!(
+        r["preview"].as_array().unwrap().len(),
+        host_compiler::play::game::PREVIEW_STEPS
+    );
+    let (_, r) = post(
+        a,
+        "/api/step",
+        &json!({"session": id, "v": [-0.9, 0.0], "steps": 500}),
+    );
+    assert_eq!(r["status"], "timeout", "{}", r["result"]["reason"]);
+    assert_eq!(r["k"], 500);
+    assert_eq!(r["result"]["accepted"], false);
+    let why = r["result"]["reason"].as_str().unwrap();
+    assert!(
+        why.starts_with("the horizon T ran out at t = 5.00 s; refused: "),
+        "{why}"
+    );
+    assert!(
+        why.contains("Goal: not reached with a margin within T"),
+        "{why}"
+    );
+    // The session is gone once its run ended.
+    let r = post(a, "/api/step", &json!({"session": id, "v": [0, 0]}));
+    assert_eq!(r.0, 404);
+    assert!(host_compiler::trajectory::csv::recordings_in(&out)
+        .unwrap()
+        .is_empty());
+    srv.stop();
+}
+
+#[test]
 fn the_runs_in_play_are_capped() {
     let out = scratch("cap");
     let srv = start_server(&out);
