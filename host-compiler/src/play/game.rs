@@ -135,8 +135,8 @@ struct Run {
     new_coverage: f64,
     reason: String,
     file: Option<String>,
-    /// Projected nominal (the certified one) for the map.
-    path: Vec<[f64; 2]>,
+    /// The certified nominal's states, for the map.
+    path: Vec<Vec<f64>>,
 }
 
 /// The game (module doc).
@@ -221,7 +221,7 @@ impl Game {
             next_number: 1,
             world: Value::Null,
         };
-        game.world = game.make_world();
+        game.world = game.make_world(game.proj);
         game.load_out_dir()?;
         Ok(game)
     }
@@ -273,15 +273,21 @@ impl Game {
         Ok(())
     }
 
-    /// The static description of the task the page draws (`GET /api/world`).
-    pub fn world(&self) -> &Value {
-        &self.world
+    /// The static description of the task the page draws (`GET /api/world`), in the default projection
+    /// or in `projection` (`?projection=i,j`, 0-based state coordinates).
+    pub fn world(&self, projection: Option<&Value>) -> Result<Value, PlayError> {
+        let proj = self.projection(projection)?;
+        Ok(if proj == self.proj {
+            self.world.clone()
+        } else {
+            self.make_world(proj)
+        })
     }
 
-    fn make_world(&self) -> Value {
+    fn make_world(&self, proj: [usize; 2]) -> Value {
         let t = &self.task;
         let (n, m) = (t.plant.n(), t.plant.m());
-        let [a, b] = self.proj;
+        let [a, b] = proj;
         let init = t.init();
         // The view: Init and the sets' extents along the drawn coordinates, with a margin.
         let mut lo = [init.lo[a], init.lo[b]];
@@ -293,7 +299,7 @@ impl Game {
             }
         };
         for s in std::iter::once(&t.problem.goal).chain(&t.problem.unsafe_sets) {
-            if let Some((c, r)) = extent(s, n, &self.base, self.proj) {
+            if let Some((c, r)) = extent(s, n, &self.base, proj) {
                 widen(c, r);
             }
         }
@@ -356,7 +362,7 @@ impl Game {
             "K": crate::linalg::to_rows(self.design.K.as_ref()),
             "tube_shape": proj_shape,
             "ball_shape": slice_shape.flatten(),
-            "samples": self.samples.iter().map(|s| [s[a], s[b]]).collect::<Vec<_>>(),
+            "samples": self.samples,
             "slow": self.settings.slow,
             "min_robustness": t.problem.synthesis.min_robustness,
         })
@@ -375,7 +381,7 @@ impl Game {
             .values()
             .map(|s| {
                 let x = s.xs.last().expect("a session holds x0");
-                let mut p = json!({"player": s.player, "at": self.project(x), "t": s.v.len() as f64 * self.task.plant.period()});
+                let mut p = json!({"player": s.player, "x": x, "t": s.v.len() as f64 * self.task.plant.period()});
                 if self.task.plant.locations() > 1 {
                     p["location"] = json!(s.loc);
                 }
@@ -388,15 +394,30 @@ impl Game {
             "covered": covered,
             "runs": runs,
             "balls": self.cover.iter().map(|c| json!({
-                "center": self.project(&c.nominal.x[0]), "delta": c.certificate.delta_stored as f64,
+                "center": c.nominal.x[0], "delta": c.certificate.delta_stored as f64,
             })).collect::<Vec<_>>(),
             "players": players,
-            "suggestion": self.suggestion().map(|x| self.project(&x)),
+            "suggestion": self.suggestion(),
         })
     }
 
-    fn project(&self, x: &[f64]) -> [f64; 2] {
-        [x[self.proj[0]], x[self.proj[1]]]
+    /// A checked projection (two different coordinates of the state).
+    fn projection(&self, v: Option<&Value>) -> Result<[usize; 2], PlayError> {
+        let Some(v) = v else {
+            return Ok(self.proj);
+        };
+        let n = self.task.plant.n();
+        let ix: Option<Vec<usize>> = v
+            .as_array()
+            .map(|a| a.iter().map(|i| i.as_u64().map(|i| i as usize)).collect())
+            .unwrap_or(None);
+        match ix.as_deref() {
+            Some(&[a, b]) if a < n && b < n && a != b => Ok([a, b]),
+            _ => Err(bad(format!(
+                "`projection` must be two different coordinate indices from 0 to {}",
+                n - 1
+            ))),
+        }
     }
 
     /// The largest uncovered region's representative: the uncovered coverage sample farthest (in the
@@ -438,10 +459,11 @@ impl Game {
         let x0 = match (obj.get("x0"), obj.get("at")) {
             (Some(x), None) => numbers(x, n, "x0")?,
             (None, Some(p)) => {
+                let [a, b] = self.projection(obj.get("projection"))?;
                 let p = numbers(p, 2, "at")?;
                 let mut x = self.base.clone();
-                x[self.proj[0]] = p[0];
-                x[self.proj[1]] = p[1];
+                x[a] = p[0];
+                x[b] = p[1];
                 x
             }
             _ => {
@@ -499,7 +521,7 @@ impl Game {
         Ok(json!({
             "session": id,
             "x0": x0,
-            "at": self.project(&x0),
+
             "preview": self.preview(0, &x0, &vec![0.0; self.task.plant.m()]),
         }))
     }
@@ -598,7 +620,7 @@ impl Game {
             "session": id,
             "t": s.v.len() as f64 * plant.period(),
             "k": s.v.len(),
-            "states": s.xs[first..].iter().map(|x| self.project(x)).collect::<Vec<_>>(),
+            "states": &s.xs[first..],
             "u": s.u.last(),
             "v": s.v.last(),
             "clipped": clipped,
@@ -634,7 +656,7 @@ impl Game {
     }
 
     /// Where the held input leads from `x` ([`PREVIEW_STEPS`] samples, drawn coordinates).
-    fn preview(&self, loc: usize, x: &[f64], v: &[f64]) -> Vec<[f64; 2]> {
+    fn preview(&self, loc: usize, x: &[f64], v: &[f64]) -> Vec<Vec<f64>> {
         let mut x = x.to_vec();
         let mut out = Vec::with_capacity(PREVIEW_STEPS);
         for _ in 0..PREVIEW_STEPS {
@@ -643,7 +665,7 @@ impl Game {
             if x.iter().any(|v| !v.is_finite()) {
                 break;
             }
-            out.push(self.project(&x));
+            out.push(x.clone());
         }
         out
     }
@@ -736,7 +758,7 @@ impl Game {
                 "not added: the game keeps at most {MAX_RUNS} runs (run `synth --import` on the out directory); {reason}"
             );
         }
-        let path = nominal.x.iter().map(|x| self.project(x)).collect();
+        let path = nominal.x.clone();
         if accepted {
             self.cover.push(CoverTrajectory {
                 source: format!("play:{player}"),
@@ -786,8 +808,8 @@ impl Game {
             // The table's paths are thinned to at most STATE_PATH_POINTS points (ends kept), so that a
             // state with many runs stays small.
             let stride = r.path.len().div_ceil(STATE_PATH_POINTS).max(1);
-            let mut thin: Vec<[f64; 2]> = r.path.iter().step_by(stride).copied().collect();
-            if let Some(&end) = r.path.last() {
+            let mut thin: Vec<&Vec<f64>> = r.path.iter().step_by(stride).collect();
+            if let Some(end) = r.path.last() {
                 if (r.path.len() - 1) % stride != 0 {
                     thin.push(end);
                 }

@@ -1,7 +1,7 @@
 //! The game's HTTP side: a blocking `tiny_http` server on a few worker threads, the page embedded in
 //! the binary, and the JSON routes over [`Game`].
 //!
-//! Routes: `GET /` (the page), `GET /api/world` (the task as drawn), `GET /api/state` (runs, coverage,
+//! Routes: `GET /` (the page), `GET /api/world[?projection=i,j]` (the task as drawn), `GET /api/state` (runs, coverage,
 //! players), `POST /api/start`, `POST /api/step`, `POST /api/finish` ([`Game`]'s methods of those
 //! names). Every refusal is a JSON `{"error": message}` with a 4xx/5xx status; a request body is at most
 //! [`MAX_BODY`] bytes; a handler that panicked answers 500 and the server keeps serving.
@@ -75,7 +75,10 @@ pub fn serve(game: Game, addr: SocketAddr) -> Result<Served, String> {
 
 fn answer(game: &Mutex<Game>, mut req: tiny_http::Request) {
     let method = req.method().clone();
-    let url = req.url().split('?').next().unwrap_or("").to_string();
+    let (url, query) = match req.url().split_once('?') {
+        Some((u, q)) => (u.to_string(), q.to_string()),
+        None => (req.url().to_string(), String::new()),
+    };
     let mut body = Vec::new();
     let read = req
         .as_reader()
@@ -83,7 +86,7 @@ fn answer(game: &Mutex<Game>, mut req: tiny_http::Request) {
         .read_to_end(&mut body)
         .map_err(|e| format!("cannot read the request: {e}"));
     let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-        route(game, &method, &url, read.map(|_| body))
+        route(game, &method, &url, &query, read.map(|_| body))
     }))
     .unwrap_or_else(|_| {
         Err((
@@ -110,13 +113,29 @@ fn route(
     game: &Mutex<Game>,
     method: &tiny_http::Method,
     url: &str,
+    query: &str,
     body: Result<Vec<u8>, String>,
 ) -> Result<Reply, (u16, String)> {
     use tiny_http::Method::{Get, Post};
     let lock = || game.lock().unwrap_or_else(|e| e.into_inner());
     match (method, url) {
         (Get, "/" | "/index.html") => Ok(Reply::Page),
-        (Get, "/api/world") => Ok(Reply::Json(lock().world().clone())),
+        (Get, "/api/world") => {
+            // `?projection=i,j`: the two state coordinates drawn (0-based); numbers or not, the game
+            // checks them.
+            let projection = query
+                .split('&')
+                .find_map(|kv| kv.strip_prefix("projection="))
+                .map(|p| {
+                    Value::Array(
+                        p.split(',')
+                            .map(|i| i.parse::<u64>().map_or(Value::Null, Value::from))
+                            .collect(),
+                    )
+                });
+            let w = lock().world(projection.as_ref());
+            w.map(Reply::Json).map_err(|e| (status(&e), e.to_string()))
+        }
         (Get, "/api/state") => Ok(Reply::Json(lock().state())),
         (Post, "/api/start" | "/api/step" | "/api/finish") => {
             let body = body.map_err(|e| (400, e))?;

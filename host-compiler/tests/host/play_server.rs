@@ -195,6 +195,27 @@ fn malformed_requests_get_clear_errors_and_the_server_keeps_serving() {
     let (code, w) = request(a, "GET", "/api/world", "");
     assert_eq!(code, 200);
     assert_eq!(w["n"], 4);
+    // Another projection of the state: drawn from the same sets; a bad one is refused.
+    let (code, w) = request(a, "GET", "/api/world?projection=2,3", "");
+    assert_eq!(code, 200, "{w}");
+    assert_eq!(w["labels"], json!(["x3", "x4"]));
+    for bad in ["1,1", "0,4", "a,b", "0"] {
+        let r = request(a, "GET", &format!("/api/world?projection={bad}"), "");
+        assert_eq!(r.0, 400, "{bad}: {r:?}");
+        assert!(
+            error_of(&r).contains("two different coordinate indices from 0 to 3"),
+            "{r:?}"
+        );
+    }
+    let r = post(
+        a,
+        "/api/start",
+        &json!({"player": "p", "at": [0.5, 1.0], "projection": [2, 3]}),
+    );
+    assert_eq!(
+        error_of(&r),
+        "the start is not in Init: x3 = 0.5 is outside [0, 0]"
+    );
     let (code, page) = raw(a, b"GET / HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n");
     assert_eq!(code, 200);
     assert!(page.contains("safety-compiler play"), "the page is served");
@@ -273,7 +294,7 @@ fn a_run_that_idles_until_t_times_out_and_is_refused_for_goal() {
     let out = scratch("timeout");
     let srv = start_server(&out);
     let a = srv.addr;
-    // Held near Init (the loop's reference pulling it back to x1 < 0.2): T runs out before Goal.
+    // A reference that holds the vehicle away from Goal and from the obstacle: T runs out.
     let (_, s) = post(
         a,
         "/api/start",
