@@ -14,6 +14,12 @@
 //! same parser as `synth --import` and certified; an accepted run is written to
 //! `run-NNNN-<player>.csv` in the out directory, with the player and the time in comment lines. Runs
 //! already in that directory when the game starts are certified again and join the cover.
+//!
+//! # Plants
+//! The game asks only [`crate::model::Plant`] of the plant (its step, its states between samples, its
+//! locations), so any class the task builds plays. Each session keeps its location and the answers
+//! report it when the plant has more than one; `task::Task::new` does not build hybrid plants yet
+//! (issue #12), and their runs' certification (`certify::forced`) is not wired here.
 
 use crate::caf::Design;
 use crate::certify::{Binding, Certificate, Loop, LoopConstants};
@@ -437,8 +443,8 @@ impl Game {
     }
 
     /// Starts a run (`POST /api/start`): `{"player": name, "x0": [n numbers]}` or `{"player": name,
-    /// "at": [two numbers]}` (the drawn coordinates; the others from Init's centre). The start must be in
-    /// Init.
+    /// "at": [two numbers], "projection": [i, j]}` (the drawn coordinates, by default the game's pair;
+    /// the others from Init's centre). The start must be in Init.
     pub fn start(&mut self, body: &Value) -> Result<Value, PlayError> {
         let obj = body
             .as_object()
@@ -521,14 +527,14 @@ impl Game {
         Ok(json!({
             "session": id,
             "x0": x0,
-
             "preview": self.preview(0, &x0, &vec![0.0; self.task.plant.m()]),
         }))
     }
 
     /// Advances a run (`POST /api/step`): `{"session": id, "v": [m numbers], "steps": k}` holds the
-    /// reference v for k samples (1 ≤ k ≤ the horizon). The answer has the new states (drawn
-    /// coordinates), the applied inputs, whether the input was clipped, the run's status, the held-input
+    /// reference v for k samples (1 ≤ k ≤ the horizon); `"finish": true` ends the run after them. The
+    /// answer has the new states (whole state vectors), the last applied input and reference, whether the
+    /// input was clipped, the location when the plant has several, the run's status, the held-input
     /// preview, and, when the run ended, its certificate.
     pub fn step(&mut self, body: &Value) -> Result<Value, PlayError> {
         let obj = body
