@@ -16,6 +16,7 @@ pub mod geometry;
 pub mod linalg;
 pub mod model;
 pub mod optimize;
+pub mod play;
 pub mod property;
 pub mod pwa;
 pub mod report;

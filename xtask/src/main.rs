@@ -2,8 +2,9 @@
 //!
 //! * `test` (and `ci`, the same): everything CI checks, on a fresh machine:
 //!   1. adds the rustup target `thumbv7em-none-eabihf` if missing;
-//!   2. installs `qemu-system-arm` with apt-get if missing (as root; otherwise prints the command);
-//!   3. `cargo test --workspace --exclude qemu-tests` (host crates);
+//!   2. installs `qemu-system-arm` and `chromium` (the headless browser of `host-compiler play`'s
+//!      end-to-end test) with apt-get if missing (as root; otherwise prints the command);
+//!   3. `cargo test --workspace --exclude qemu-tests` (host crates, with that browser test);
 //!   4. builds shared-types and the firmware for `thumbv7em-none-eabihf` (proves `no_std`);
 //!   5. the QEMU hardware-in-the-loop suite: `cargo test -p qemu-tests`.
 //!
@@ -20,6 +21,8 @@ use std::time::Instant;
 
 const TARGET: &str = "thumbv7em-none-eabihf";
 const QEMU: &str = "qemu-system-arm";
+/// The Debian package and binary of the headless browser `host-compiler play`'s test drives.
+const CHROMIUM: &str = "chromium";
 
 fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -195,27 +198,50 @@ fn is_root() -> bool {
 
 /// Step 2: qemu-system-arm, from Debian/Ubuntu packages.
 fn ensure_qemu() -> Result<(), String> {
-    if qemu_present() {
+    ensure_package(QEMU, QEMU, qemu_present)
+}
+
+fn chromium_present() -> bool {
+    output({
+        let mut c = Command::new(CHROMIUM);
+        c.arg("--version");
+        c
+    })
+    .map(|v| println!("xtask: {}", v.lines().next().unwrap_or(CHROMIUM)))
+    .is_some()
+}
+
+/// Step 2: chromium (headless) for the end-to-end test of `host-compiler play`, from Debian packages.
+fn ensure_chromium() -> Result<(), String> {
+    ensure_package(CHROMIUM, CHROMIUM, chromium_present)
+}
+
+/// Installs the Debian package `package` with apt-get when `present` says `binary` is missing (as root;
+/// otherwise the error gives the command to run).
+fn ensure_package(binary: &str, package: &str, present: fn() -> bool) -> Result<(), String> {
+    if present() {
         return Ok(());
     }
-    let install = "apt-get update && DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends qemu-system-arm";
+    let install = format!(
+        "apt-get update && DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends {package}"
+    );
     if !is_root() {
         return Err(format!(
-            "{QEMU} is missing; install it with:\n    sudo sh -c '{install}'"
+            "{binary} is missing; install it with:\n    sudo sh -c '{install}'"
         ));
     }
-    println!("xtask: {QEMU} is missing; installing it");
+    println!("xtask: {binary} is missing; installing it");
     let apt = |args: &[&str]| {
         let mut c = Command::new("apt-get");
         c.args(args).env("DEBIAN_FRONTEND", "noninteractive");
         c
     };
     run(apt(&["update"]))?;
-    run(apt(&["install", "-y", "--no-install-recommends", QEMU]))?;
-    if qemu_present() {
+    run(apt(&["install", "-y", "--no-install-recommends", package]))?;
+    if present() {
         Ok(())
     } else {
-        Err(format!("{QEMU} still not runnable after apt-get install"))
+        Err(format!("{binary} still not runnable after apt-get install"))
     }
 }
 
@@ -225,6 +251,11 @@ fn test() -> ExitCode {
     };
     let target_ok = steps.run("rustup target thumbv7em-none-eabihf", ensure_target);
     let qemu_ok = steps.run("qemu-system-arm", ensure_qemu);
+    // Without it the host tests still run; the browser test then fails and says how to install it.
+    steps.run(
+        "chromium (the play page's end-to-end test)",
+        ensure_chromium,
+    );
     steps.run(
         "host tests: cargo test --workspace --exclude qemu-tests --no-fail-fast",
         || {

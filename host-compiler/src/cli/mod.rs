@@ -6,6 +6,7 @@ use std::path::PathBuf;
 
 pub mod inspect;
 pub mod mtl;
+pub mod play;
 pub mod simulate;
 pub mod synth;
 pub mod synth_hybrid;
@@ -58,6 +59,8 @@ pub enum Command {
     Inspect(inspect::InspectArgs),
     /// Robustness of a recorded trace against a metric temporal logic formula (Def 2.17).
     Mtl(mtl::MtlArgs),
+    /// Play the task in a browser: your runs are certified live and join the cover (`--out`).
+    Play(play::PlayArgs),
 }
 
 /// How a command ended: the process's exit status (listed in `--help`). Clap's own usage errors exit
@@ -142,6 +145,7 @@ pub fn main() -> std::process::ExitCode {
         Command::Synth(a) => synth::run(&a),
         Command::Verify(a) => verify::run(&a),
         Command::Simulate(a) => simulate::run(&a),
+        Command::Play(a) => play::run(&a),
     };
     let exit = outcome.unwrap_or_else(|f| {
         eprintln!("Error: {:?}", f.report);
@@ -164,8 +168,9 @@ pub struct SynthArgs {
     pub verify_runs: u64,
     /// A recorded trajectory to certify and use before any is generated (repeatable): CSV with a comment
     /// line `# x0 = …` giving the initial state, a header `t,v1,…,vm` and one row of reference inputs per
-    /// sample period; at most as many rows as the spec's horizon has samples.
-    #[arg(long = "import", value_name = "FILE.csv")]
+    /// sample period; at most as many rows as the spec's horizon has samples. A directory imports all its
+    /// `*.csv` files in sorted order (e.g. the runs `host-compiler play` wrote).
+    #[arg(long = "import", value_name = "FILE.csv|DIR")]
     pub imports: Vec<PathBuf>,
     /// How trajectories after the first are made: `algorithm4` (§5.4: grow from the boundary of the
     /// closest ball and maximise δ by §5.3) or `scp` (Algorithm 1: the SCP generator per uncovered seed).

@@ -41,11 +41,23 @@ pub fn run(a: &SynthArgs) -> Outcome {
     // A recording is at most the horizon long (which `spec::limits` keeps within the table capacity).
     let max_rows = problem.horizon_steps();
     let mut imports = Vec::new();
-    for p in &a.imports {
-        let rec = crate::trajectory::csv::load_recording(p, n, m, h, max_rows)
+    // A directory stands for its CSV files, in sorted order (`host-compiler play` writes its runs there).
+    for dir in &a.imports {
+        let files = crate::trajectory::csv::recordings_in(dir)
             .map_err(|e| miette::miette!("{e}"))
             .bad_input()?;
-        imports.push((p.display().to_string(), rec));
+        if files.is_empty() {
+            return Err(Failure::bad_input(miette::miette!(
+                "--import {}: the directory holds no .csv recording",
+                dir.display()
+            )));
+        }
+        for p in files {
+            let rec = crate::trajectory::csv::load_recording(&p, n, m, h, max_rows)
+                .map_err(|e| miette::miette!("{e}"))
+                .bad_input()?;
+            imports.push((p.display().to_string(), rec));
+        }
     }
     // Ctrl-C: the first stops the growth loop cleanly (what is certified so far is verified, written
     // and reported); a second one ends the process at once.

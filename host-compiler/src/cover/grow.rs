@@ -331,8 +331,7 @@ pub fn grow(
                 m,
             });
         }
-        let x0: Vec<f64> = rec.x0.iter().map(|&v| round32(v)).collect();
-        let (nom, cert) = shipped(&x0, &rec.v);
+        let (nom, cert) = certify_recording(lp, lc, rec);
         if cert.is_certified() {
             cover.push(
                 CoverTrajectory {
@@ -782,4 +781,16 @@ fn median(it: impl Iterator<Item = f64>) -> Option<f64> {
     }
     v.sort_by(|a, b| a.total_cmp(b));
     Some(v[v.len() / 2])
+}
+
+/// The one path from a recording (a person's run: `synth --import`, `host-compiler play`) to its nominal
+/// and certificate: the initial state rounded to f32 (what the image stores), then [`certify::shipped`]
+/// with the recorded reference inputs. A recording is accepted when the certificate is certified.
+pub fn certify_recording(
+    lp: &Loop<'_>,
+    lc: &LoopConstants,
+    rec: &Recording,
+) -> (Nominal, Certificate) {
+    let x0: Vec<f64> = rec.x0.iter().map(|&v| round32(v)).collect();
+    certify::shipped(lp, lc, &x0, &rec.v)
 }

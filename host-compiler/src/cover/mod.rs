@@ -12,7 +12,7 @@ pub mod estimate;
 mod grow;
 
 pub use estimate::{CoverageEstimate, SampleBox};
-pub use grow::{grow, Attempts, GrowError, GrowOptions, Grown};
+pub use grow::{certify_recording, grow, Attempts, GrowError, GrowOptions, Grown};
 
 use crate::certify::Certificate;
 use crate::emit::{EmitError, FallbackLaw, ImageBuilder, TrajectoryEntry};

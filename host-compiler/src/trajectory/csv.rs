@@ -240,6 +240,30 @@ pub fn load_recording(
     parse_recording(&text, &p, n, m, period, max_rows)
 }
 
+/// The recordings an import names: the file itself, or for a directory every `*.csv` file directly in
+/// it (not hidden), sorted by name so that an import of a directory is deterministic.
+pub fn recordings_in(path: &Path) -> Result<Vec<std::path::PathBuf>, CsvError> {
+    if !path.is_dir() {
+        return Ok(vec![path.to_path_buf()]);
+    }
+    let io = |e: std::io::Error| CsvError::Io {
+        path: path.display().to_string(),
+        reason: e.to_string(),
+    };
+    let mut files = Vec::new();
+    for entry in std::fs::read_dir(path).map_err(io)? {
+        let p = entry.map_err(io)?.path();
+        let name = p.file_name().map(|n| n.to_string_lossy().into_owned());
+        if p.is_file()
+            && name.is_some_and(|n| !n.starts_with('.') && n.to_ascii_lowercase().ends_with(".csv"))
+        {
+            files.push(p);
+        }
+    }
+    files.sort();
+    Ok(files)
+}
+
 /// Read and parse a recorded input sequence of at most `max_rows` rows.
 pub fn load_inputs(
     path: &Path,
