@@ -109,8 +109,12 @@ pub fn run(a: &SynthArgs, problem: crate::spec::Problem) -> Outcome {
     );
     println!("stop              {}", s.stop);
     println!(
-        "verification      {} runs ({} switched, at most {} events), {} violations",
-        s.verify.runs, s.verify.switched, s.verify.max_events, s.verify.violations
+        "verification      {} runs ({} switched, at most {} events; {} boundary starts refused by the f32 selection, not run), {} violations",
+        s.verify.runs - s.verify.rejected,
+        s.verify.switched,
+        s.verify.max_events,
+        s.verify.rejected,
+        s.verify.violations
     );
     println!("time              {:.1} s", s.seconds);
     if !verified {

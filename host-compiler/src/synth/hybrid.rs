@@ -26,9 +26,12 @@ use faer::Mat;
 /// How far past a guard's plane (Euclidean) a non-last segment's generated nominal must end: each is
 /// tried (a deeper target makes the nominal cross the plane more steeply, so that the tube's crossing
 /// points spread less; a location may not reach the deeper ones).
-pub const GUARD_DEPTHS: [f64; 3] = [0.2, 0.45, 0.7];
+pub const GUARD_DEPTHS: [f64; 2] = [0.2, 0.45];
 /// Segment durations tried, as fractions of the horizon T.
-pub const DURATIONS: [f64; 4] = [0.1, 0.2, 0.35, 0.5];
+pub const DURATIONS: [f64; 2] = [0.2, 0.35];
+/// The last segment's duration at most, as a fraction of T (what is left of T after the earlier
+/// segments, if less).
+pub const LAST_DURATION: f64 = 0.4;
 
 /// A hybrid task, built once from a validated spec: the automaton, the reach-avoid property, a CAF and
 /// shipped gain per location.
@@ -361,7 +364,7 @@ pub fn plan_run(task: &HybridTask, x0: &[f64]) -> Result<HybridRun, String> {
 /// Seconds left for the last segment after the earlier ones (their generated lengths).
 fn horizon_left(_task: &HybridTask, earlier: &[Nominal], h: f64, horizon: f64) -> f64 {
     let used: usize = earlier.iter().map(|n| n.steps()).sum();
-    ((horizon - used as f64 * h) / horizon).clamp(0.05, 1.0)
+    ((horizon - used as f64 * h) / horizon).clamp(0.05, LAST_DURATION)
 }
 
 /// The feedforward image of certified runs: per location its gain and metric; per run its first ball
@@ -455,7 +458,7 @@ pub fn ball_starts(
 pub struct HybridOptions {
     /// Uniform samples of Init from which seeds are chosen (default 2 000).
     pub working_samples: usize,
-    /// Monte Carlo runs from the cover's interior (default 1 000) and from each ball's boundary
+    /// Monte Carlo runs from the cover's interior (default 500) and from each ball's boundary
     /// (default 8).
     pub verify_interior: usize,
     pub verify_per_ball: usize,
@@ -472,7 +475,7 @@ impl Default for HybridOptions {
     fn default() -> Self {
         Self {
             working_samples: 2000,
-            verify_interior: 1000,
+            verify_interior: 500,
             verify_per_ball: 8,
             batch: 4,
             cancel: Default::default(),
@@ -620,19 +623,26 @@ pub fn synthesize_hybrid(
             refused.first().map_or("none", |r| r.1.as_str())
         ));
     }
-    // Coverage (§2.5.2) from fresh samples.
-    let n_cov = s.coverage_samples();
-    let coverage = crate::cover::estimate::estimate(&init, n_cov, s.confidence, &mut rng, |x| {
-        covered(task, &runs, x)
-    });
     let image = image(task, &runs).map_err(|e| format!("image: {e}"))?;
+    // Coverage (§2.5.2) from fresh samples: a sample is covered when the image's f32 selection accepts it
+    // (what it accepts lies in a certified ball; near a ball's boundary it may refuse a state the f64 test
+    // would count).
+    let decoded = shared_types::image::decode(&image).map_err(|e| format!("image: {e}"))?;
+    let ctl = shared_types::eval::Controller::new(decoded);
+    let accepted = |x: &[f64]| {
+        let x32: Vec<f32> = x.iter().map(|&v| v as f32).collect();
+        ctl.select(&x32).is_some()
+    };
+    let n_cov = s.coverage_samples();
+    let coverage =
+        crate::cover::estimate::estimate(&init, n_cov, s.confidence, &mut rng, |x| accepted(x));
     // Monte Carlo: covered samples of Init, and the boundary of every ball.
     let mut starts = Vec::new();
     let mut draws = 0usize;
     while starts.len() < opts.verify_interior && draws < 100 * opts.verify_interior.max(1) {
         draws += 1;
         let x = init.sample(&mut rng);
-        if covered(task, &runs, &x) {
+        if accepted(&x) {
             starts.push(x);
         }
     }

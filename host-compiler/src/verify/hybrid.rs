@@ -20,6 +20,9 @@ pub const SUBSTEPS: usize = 8;
 #[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
 pub struct HybridReport {
     pub runs: usize,
+    /// Starts the evaluator did not accept at κ = 0 (outside every ball as the f32 selection test sees
+    /// it; the firmware applies its fallback, and the certificate claims nothing there). Not judged.
+    pub rejected: usize,
     pub violations: usize,
     /// The first violation, in words.
     pub first_violation: Option<String>,
@@ -36,6 +39,7 @@ impl HybridReport {
     /// Adds another batch's counts (the first violation kept in batch order).
     pub fn merge(&mut self, o: HybridReport) {
         self.runs += o.runs;
+        self.rejected += o.rejected;
         self.violations += o.violations;
         if self.first_violation.is_none() {
             self.first_violation = o.first_violation;
@@ -64,7 +68,8 @@ fn input_ok(input: &InputBound, u: &[f32]) -> bool {
     }
 }
 
-/// Runs the image `bytes` from each start (in location `initial`) for `steps` samples (module doc).
+/// Runs the image `bytes` from each start (in location `initial`) for `steps` samples (module doc). A
+/// start the evaluator does not select a ball for is counted as rejected, not run.
 pub fn monte_carlo_hybrid(
     plant: &Hybrid,
     property: &ReachAvoid,
@@ -88,6 +93,11 @@ pub fn monte_carlo_hybrid(
     for x0 in starts {
         rep.runs += 1;
         let mut ctl = Controller::new(image);
+        let x32: Vec<f32> = x0.iter().map(|&v| v as f32).collect();
+        if ctl.select(&x32).is_none() {
+            rep.rejected += 1;
+            continue;
+        }
         let (mut x, mut loc) = (x0.clone(), initial);
         let mut events = 0usize;
         let mut why: Option<String> = None;
