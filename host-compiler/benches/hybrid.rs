@@ -20,25 +20,56 @@ fn main() {
     let mut rows = Vec::new();
     // Example 5.5: one run from the text's x0.
     let t55 = task("hybrid-internal-5-5.toml");
-    let run = plan_run(&t55, &[-5.0, 1.0, 2.0]).expect("a run from Example 5.5's x0");
-    let segs: Vec<String> = run
-        .certificate
-        .segments
-        .iter()
-        .map(|s| format!("δ = {:.4} ({})", s.delta, s.binding))
-        .collect();
-    println!(
-        "Example 5.5 from (−5, 1, 2): δ = {:.4}; segments: {}",
-        run.delta(),
-        segs.join("; ")
-    );
-    rows.push(Row::new("delta_hybrid_5_5", run.delta(), "CAF metric"));
-    // Example 5.6: the cover.
-    let t = Instant::now();
-    let s = synthesize_hybrid(&t55, &HybridOptions::default()).expect("a cover is certified");
-    let secs = t.elapsed().as_secs_f64();
-    println!(
-        "Example 5.6: {} runs ({} seeds tried), coverage {:.5} (lower {:.5} at {:.0} %), stop: {}; Monte Carlo {} runs ({} refused by the selection), {} violations; {secs:.1} s",
+    let delta = match plan_run(&t55, &[-5.0, 1.0, 2.0]) {
+        Ok(run) => {
+            let segs: Vec<String> = run
+                .certificate
+                .segments
+                .iter()
+                .map(|s| format!("δ = {:.4} ({})", s.delta, s.binding))
+                .collect();
+            println!(
+                "Example 5.5 from (−5, 1, 2): δ = {:.4}; segments: {}",
+                run.delta(),
+                segs.join("; ")
+            );
+            run.delta()
+        }
+        Err(why) => {
+            println!("Example 5.5 from (−5, 1, 2): no run ({why})");
+            0.0
+        }
+    };
+    rows.push(Row::new("delta_hybrid_5_5", delta, "CAF metric"));
+    // Example 4.25 (Unsafe the ball): the same run's δ, for comparison.
+    let t425 = task("hybrid-internal-4-25.toml");
+    let d425 = plan_run(&t425, &[-5.0, 1.0, 2.0]).map_or(0.0, |r| r.delta());
+    println!("Example 4.25 from (−5, 1, 2): δ = {d425:.4}");
+    rows.push(Row::new("delta_hybrid_4_25", d425, "CAF metric"));
+    // Example 5.6: the cover (Example 5.5's task with δε = 0.4); and the same growth on Example 4.25.
+    for (name, task, tag) in [
+        ("Example 5.6", &t55, "5_6"),
+        ("Example 4.25", &t425, "4_25"),
+    ] {
+        let t = Instant::now();
+        let s = match synthesize_hybrid(task, &HybridOptions::default()) {
+            Ok(s) => s,
+            Err(why) => {
+                let secs = t.elapsed().as_secs_f64();
+                println!("{name}: no cover ({why}); {secs:.1} s");
+                rows.push(Row::new(
+                    &format!("coverage_hybrid_{tag}"),
+                    0.0,
+                    "fraction of Init, 99 %",
+                ));
+                rows.push(Row::new(&format!("trajectories_hybrid_{tag}"), 0.0, "runs"));
+                rows.push(Row::new(&format!("synth_hybrid_{tag}_s"), secs, "s"));
+                continue;
+            }
+        };
+        let secs = t.elapsed().as_secs_f64();
+        println!(
+        "{name}: {} runs ({} seeds tried), coverage {:.5} (lower {:.5} at {:.0} %), stop: {}; Monte Carlo {} runs ({} refused by the selection), {} violations; {secs:.1} s",
         s.runs.len(),
         s.seeds_tried,
         s.coverage.mean,
@@ -49,10 +80,19 @@ fn main() {
         s.verify.rejected,
         s.verify.violations
     );
-    assert_eq!(s.verify.violations, 0, "{:?}", s.verify.first_violation);
-    rows.push(Row::new("coverage_hybrid_5_6", s.coverage.lower, "fraction of Init, 99 %"));
-    rows.push(Row::new("trajectories_hybrid_5_6", s.runs.len() as f64, "runs"));
-    rows.push(Row::new("synth_hybrid_5_6_s", secs, "s"));
+        assert_eq!(s.verify.violations, 0, "{:?}", s.verify.first_violation);
+        rows.push(Row::new(
+            &format!("coverage_hybrid_{tag}"),
+            s.coverage.lower,
+            "fraction of Init, 99 %",
+        ));
+        rows.push(Row::new(
+            &format!("trajectories_hybrid_{tag}"),
+            s.runs.len() as f64,
+            "runs",
+        ));
+        rows.push(Row::new(&format!("synth_hybrid_{tag}_s"), secs, "s"));
+    }
     let path = write_rows("hybrid", &rows).expect("rows written");
     println!("rows: {}", path.display());
 }

@@ -26,9 +26,9 @@ use faer::Mat;
 /// How far past a guard's plane (Euclidean) a non-last segment's generated nominal must end: each is
 /// tried (a deeper target makes the nominal cross the plane more steeply, so that the tube's crossing
 /// points spread less; a location may not reach the deeper ones).
-pub const GUARD_DEPTHS: [f64; 2] = [0.2, 0.45];
+pub const GUARD_DEPTHS: [f64; 3] = [0.05, 0.2, 0.45];
 /// Segment durations tried, as fractions of the horizon T.
-pub const DURATIONS: [f64; 2] = [0.2, 0.35];
+pub const DURATIONS: [f64; 3] = [0.1, 0.2, 0.35];
 /// The last segment's duration at most, as a fraction of T (what is left of T after the earlier
 /// segments, if less).
 pub const LAST_DURATION: f64 = 0.4;
@@ -358,7 +358,73 @@ pub fn plan_run(task: &HybridTask, x0: &[f64]) -> Result<HybridRun, String> {
             });
         }
     }
+    // One refinement of a two-segment run: the next segment restarted from the centre of the landings
+    // its certificate actually bounds.
+    if let Some(b) = &best {
+        if let Some(r) = refine_landing(task, b) {
+            if r.delta() > b.delta() {
+                best = Some(r);
+            }
+        }
+    }
     best.ok_or(why)
+}
+
+/// For a run of two segments whose first certifies event intervals κ ∈ [a, b]: the landings the
+/// certificate bounds are the next location's flow, for τ ∈ [0, h] with the input of row κ, from p̂(κ),
+/// the projection of x̃(κ) onto the guard's plane in the first location's metric
+/// ([`crate::certify::internal`], item 4). The next segment is generated again from the centre of their
+/// bounding box (in the next location's metric) and the run certified again; `None` if that fails.
+fn refine_landing(task: &HybridTask, run: &HybridRun) -> Option<HybridRun> {
+    if task.path.len() != 2 {
+        return None;
+    }
+    let (a, b) = run.certificate.segments[0].events?;
+    let (l0, l1) = (task.path[0], task.path[1]);
+    let edge = &task.plant.edges()[task.edges[0]];
+    let row = edge.guard.a.first()?;
+    let na = row.iter().map(|v| v * v).sum::<f64>().sqrt();
+    let (an, bn): (Vec<f64>, f64) = (row.iter().map(|v| v / na).collect(), edge.guard.b[0] / na);
+    let inv = &task.constants[l0].roots.inv;
+    let pa = crate::linalg::mat_vec(inv.as_ref(), &an);
+    let dn2: f64 = an.iter().zip(&pa).map(|(p, q)| p * q).sum();
+    let post = &task.plant.modes()[l1].flow;
+    let h = task.plant.period();
+    let nom = &run.nominals[0];
+    let roots1 = &task.constants[l1].roots;
+    let n = an.len();
+    let (mut lo, mut hi) = (vec![f64::INFINITY; n], vec![f64::NEG_INFINITY; n]);
+    for k in a..=b.min(nom.steps().saturating_sub(1)) {
+        let g: f64 = an.iter().zip(&nom.x[k]).map(|(p, q)| p * q).sum::<f64>() - bn;
+        let p: Vec<f64> = (0..n).map(|q| nom.x[k][q] - g / dn2 * pa[q]).collect();
+        for j in 0..=8 {
+            let tau = h * j as f64 / 8.0;
+            let x = if tau > 0.0 {
+                post.zoh(tau).ok()?.step(&p, &nom.u[k])
+            } else {
+                p.clone()
+            };
+            let w = crate::linalg::mat_vec(roots1.sqrt.as_ref(), &x);
+            for q in 0..n {
+                lo[q] = lo[q].min(w[q]);
+                hi[q] = hi[q].max(w[q]);
+            }
+        }
+    }
+    let mid: Vec<f64> = (0..n).map(|q| 0.5 * (lo[q] + hi[q])).collect();
+    let start = crate::linalg::mat_vec(roots1.inv_sqrt.as_ref(), &mid);
+    let gp = gen_problem(task, l1, &task.convex, run.nominals[1].steps());
+    let v = generate(&gp, &start, &GenSettings::default())
+        .ok()?
+        .nominal
+        .v;
+    let last = shipped_nominal(task, l1, &start, &v);
+    let nominals = vec![nom.clone(), last];
+    let certificate = certify_run(task, &nominals).ok()?;
+    Some(HybridRun {
+        nominals,
+        certificate,
+    })
 }
 
 /// Seconds left for the last segment after the earlier ones (their generated lengths).

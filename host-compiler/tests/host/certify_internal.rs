@@ -3,21 +3,14 @@
 use host_compiler::synth::hybrid::{ball_starts, image, plan_run, HybridTask};
 use host_compiler::verify::hybrid::monte_carlo_hybrid;
 
-fn task(period: f64) -> HybridTask {
-    let src = std::fs::read_to_string(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../examples/hybrid-internal-4-25.toml"
-    ))
-    .unwrap()
-    .replace("period = 0.05", &format!("period = {period}"))
-        + "\n[synthesis]\nmax_trajectories = 32\nsigma_margin = 0.002\n";
-    let problem = host_compiler::spec::parse(&src, "4-25").unwrap();
-    HybridTask::new(problem).unwrap()
+fn task(file: &str) -> HybridTask {
+    let path = format!("{}/../examples/{file}", env!("CARGO_MANIFEST_DIR"));
+    HybridTask::new(host_compiler::spec::load(&path).unwrap()).unwrap()
 }
 
 #[test]
 fn example_4_25_run_is_certified() {
-    let t = task(0.01);
+    let t = task("hybrid-internal-4-25.toml");
     let run = plan_run(&t, &[-5.0, 1.0, 2.0]).unwrap();
     for (i, s) in run.certificate.segments.iter().enumerate() {
         eprintln!(
@@ -36,7 +29,11 @@ fn example_4_25_run_is_certified() {
     eprintln!("{rep:?}");
     assert_eq!(rep.violations, 0, "{:?}", rep.first_violation);
     // Boundary starts are 1e-6 inside the stored radius: the f32 selection may refuse a few.
-    assert!(rep.rejected <= 8, "{} of 40 boundary starts refused", rep.rejected);
+    assert!(
+        rep.rejected <= 8,
+        "{} of 40 boundary starts refused",
+        rep.rejected
+    );
     assert_eq!(rep.switched, rep.runs - rep.rejected);
     assert_eq!(rep.max_events, 1);
 }
