@@ -198,7 +198,13 @@ pub struct ImageBuilder {
 #[derive(Clone, Debug, PartialEq)]
 pub enum SegmentExit {
     Table,
-    Guard { a: Vec<f32>, b: f32, theta: f32 },
+    /// The guard half-space, the detection threshold, and the next segment's nominal start.
+    Guard {
+        a: Vec<f32>,
+        b: f32,
+        theta: f32,
+        next: Vec<f32>,
+    },
 }
 
 /// f64 → f32, refusing non-finite values and values beyond the f32 range (rounding to nearest).
@@ -458,18 +464,18 @@ impl ImageBuilder {
                     match e {
                         SegmentExit::Table => {
                             exits.extend_from_slice(&EXIT_TABLE.to_le_bytes());
-                            exits.extend(std::iter::repeat_n(0u8, 4 * (n + 2)));
+                            exits.extend(std::iter::repeat_n(0u8, 4 * (2 * n + 2)));
                         }
-                        SegmentExit::Guard { a, b, theta } => {
-                            if a.len() != n {
+                        SegmentExit::Guard { a, b, theta, next } => {
+                            if a.len() != n || next.len() != n {
                                 return Err(EmitError::Shape {
-                                    what: format!("trajectory {t}: guard normal"),
+                                    what: format!("trajectory {t}: guard normal and next start"),
                                     expected: n,
-                                    found: a.len(),
+                                    found: if a.len() != n { a.len() } else { next.len() },
                                 });
                             }
                             exits.extend_from_slice(&EXIT_GUARD.to_le_bytes());
-                            for v in a.iter().chain([b, theta]) {
+                            for v in a.iter().chain([b, theta]).chain(next) {
                                 exits.extend_from_slice(&v.to_le_bytes());
                             }
                         }
@@ -549,12 +555,16 @@ impl ImageBuilder {
                         (s0..s0 + count)
                             .map(|s| match img.exit(s) {
                                 image::Exit::Table => SegmentExit::Table,
-                                image::Exit::Guard { a, b, theta } => SegmentExit::Guard {
+                                image::Exit::Guard { a, b, theta, next } => SegmentExit::Guard {
                                     a: a.chunks_exact(4)
                                         .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
                                         .collect(),
                                     b,
                                     theta,
+                                    next: next
+                                        .chunks_exact(4)
+                                        .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+                                        .collect(),
                                 },
                             })
                             .collect()

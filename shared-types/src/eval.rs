@@ -325,7 +325,7 @@ impl<'a> Controller<'a> {
         let n = img.n().clamp(1, MAX_N);
         let (s0, count) = img.trajectory_segments(t);
         let last = (s0 + count).saturating_sub(1);
-        let mut s = (self.segment as usize).clamp(s0, last);
+        let mut s = (self.segment as usize).max(s0).min(last);
         for _ in 0..count {
             let Some(g) = img.segment(s) else { break };
             let local = self.kappa.saturating_sub(self.seg_kappa) as usize;
@@ -333,7 +333,7 @@ impl<'a> Controller<'a> {
                 break;
             }
             match img.exit(s) {
-                Exit::Guard { a, b, theta } => {
+                Exit::Guard { a, b, theta, .. } => {
                     let mut acc = 0.0f32;
                     for (ai, &xi) in floats(a).zip(x).take(n) {
                         acc += ai * xi;

@@ -296,6 +296,8 @@ pub enum Exit<'a> {
         b: f32,
         /// θ ≥ 0.
         theta: f32,
+        /// The next segment's nominal start (n little-endian `f32`), for re-proving its certificate.
+        next: &'a [u8],
     },
 }
 
@@ -473,7 +475,7 @@ fn validate(mode: Mode, dims: Dims, period: f32, p: &Payload<'_>) -> Result<(), 
             let s1 = u16_le(p.seg_end, t) as usize;
             for s in s0..s1 {
                 let kind = u32_at_byte(p.exits, s * rec);
-                let vals = f32_span(p.exits, s * (n + 3) + 1, n + 2);
+                let vals = f32_span(p.exits, s * (2 * n + 3) + 1, 2 * n + 2);
                 let finite = floats(vals).all(|v| v.is_finite());
                 let theta = f32_at(vals, n + 1);
                 let ok = match kind {
@@ -809,11 +811,12 @@ impl<'a> Image<'a> {
         if u32_at_byte(self.payload.exits, s * rec) != crate::layout::EXIT_GUARD {
             return Exit::Table;
         }
-        let vals = f32_span(self.payload.exits, s * (n + 3) + 1, n + 2);
+        let vals = f32_span(self.payload.exits, s * (2 * n + 3) + 1, 2 * n + 2);
         Exit::Guard {
             a: f32_span(vals, 0, n),
             b: f32_at(vals, n),
             theta: f32_at(vals, n + 1),
+            next: f32_span(vals, n + 2, n),
         }
     }
 

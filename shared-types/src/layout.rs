@@ -25,9 +25,10 @@ pub const DIR_ENTRY_LEN: usize = 12;
 pub const SEGMENT_RECORD_LEN: usize = 9;
 
 /// Bytes of one segment-exit record for state dimension n: the kind (`u32`: [`EXIT_TABLE`] or
-/// [`EXIT_GUARD`]), then n + 2 `f32` values â, b̂, θ (zero for a table exit).
+/// [`EXIT_GUARD`]), then 2n + 2 `f32` values: â, b̂, θ, and the next segment's nominal start x̃(0) (what
+/// its certificate is re-proved from; the evaluator does not read it). All zero for a table exit.
 pub const fn exit_record_len(n: usize) -> usize {
-    4 * (n + 3)
+    4 * (2 * n + 3)
 }
 /// A segment that ends with its table (forced switching by time, or the run's last segment).
 pub const EXIT_TABLE: u32 = 0;

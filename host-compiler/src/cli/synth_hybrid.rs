@@ -61,7 +61,8 @@ pub fn run(a: &SynthArgs, problem: crate::spec::Problem) -> Outcome {
         report: miette::miette!("{e}"),
     })?;
     let img_path = a.out.join("controller.img");
-    let verified = s.verify.violations == 0;
+    let unproved: Vec<&str> = s.recheck.iter().filter_map(|r| r.why.as_deref()).collect();
+    let verified = s.verify.violations == 0 && unproved.is_empty();
     if verified {
         write_atomic(&img_path, &s.image)?;
     }
@@ -74,6 +75,7 @@ pub fn run(a: &SynthArgs, problem: crate::spec::Problem) -> Outcome {
         "stop": s.stop,
         "coverage": s.coverage,
         "verify": s.verify,
+        "recheck": s.recheck,
         "seeds_tried": s.seeds_tried,
         "refused": s.refused.iter().map(|(x, why)| serde_json::json!({"seed": x, "why": why})).collect::<Vec<_>>(),
         "locations": task.designs.iter().map(|d| serde_json::json!({
@@ -116,7 +118,20 @@ pub fn run(a: &SynthArgs, problem: crate::spec::Problem) -> Outcome {
         s.verify.rejected,
         s.verify.violations
     );
+    println!(
+        "re-proved         {} of {} runs from the image bytes",
+        s.recheck.iter().filter(|r| r.ok).count(),
+        s.recheck.len()
+    );
     println!("time              {:.1} s", s.seconds);
+    if !unproved.is_empty() {
+        return Err(miette::miette!(
+            "the image bytes do not re-prove {} runs (first: {}): the image is NOT certified and was not written",
+            unproved.len(),
+            unproved[0]
+        )
+        .into());
+    }
     if !verified {
         return Err(miette::miette!(
             "verification found {} violations (first: {}): the image is NOT certified and was not written",

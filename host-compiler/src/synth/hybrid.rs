@@ -337,7 +337,8 @@ pub fn plan_run(task: &HybridTask, x0: &[f64]) -> Result<HybridRun, String> {
             let nom = shipped_nominal(task, loc, &x, &v);
             if !last {
                 match landing(task, loc, &nom, task.edges[i]) {
-                    Some(l) => x = l,
+                    // f32-representable: the image stores it, and the certificate is re-proved from it.
+                    Some(l) => x = l.iter().map(|&v| v as f32 as f64).collect(),
                     None => {
                         why = format!("segment {i}: the generated nominal does not switch");
                         ok = false;
@@ -412,7 +413,10 @@ fn refine_landing(task: &HybridTask, run: &HybridRun) -> Option<HybridRun> {
         }
     }
     let mid: Vec<f64> = (0..n).map(|q| 0.5 * (lo[q] + hi[q])).collect();
-    let start = crate::linalg::mat_vec(roots1.inv_sqrt.as_ref(), &mid);
+    let start: Vec<f64> = crate::linalg::mat_vec(roots1.inv_sqrt.as_ref(), &mid)
+        .iter()
+        .map(|&v| v as f32 as f64)
+        .collect();
     let gp = gen_problem(task, l1, &task.convex, run.nominals[1].steps());
     let v = generate(&gp, &start, &GenSettings::default())
         .ok()?
@@ -455,6 +459,11 @@ pub fn image(task: &HybridTask, runs: &[HybridRun]) -> Result<Vec<u8>, crate::em
             .zip(&run.certificate.segments)
             .enumerate()
         {
+            let next: Vec<f32> = run
+                .nominals
+                .get(i + 1)
+                .map(|m| m.x[0].iter().map(|&v| v as f32).collect())
+                .unwrap_or_default();
             let rows = seg.rows.min(nom.steps());
             for row in &nom.v[..rows] {
                 v.extend_from_slice(row);
@@ -465,6 +474,7 @@ pub fn image(task: &HybridTask, runs: &[HybridRun]) -> Result<Vec<u8>, crate::em
                     a: g.a.clone(),
                     b: g.b,
                     theta: g.theta,
+                    next,
                 },
                 None => SegmentExit::Table,
             });
@@ -559,6 +569,8 @@ pub struct HybridSynthesis {
     pub coverage: crate::cover::CoverageEstimate,
     pub image: Vec<u8>,
     pub verify: crate::verify::hybrid::HybridReport,
+    /// Every run's certificate re-proved from the image bytes.
+    pub recheck: Vec<crate::verify::hybrid::RunCheck>,
     /// Why the growth stopped.
     pub stop: String,
     pub seconds: f64,
@@ -690,6 +702,7 @@ pub fn synthesize_hybrid(
         ));
     }
     let image = image(task, &runs).map_err(|e| format!("image: {e}"))?;
+    let recheck = crate::verify::hybrid::recheck(&task.plant, &task.property, task.steps, &image)?;
     // Coverage (§2.5.2) from fresh samples: a sample is covered when the image's f32 selection accepts it
     // (what it accepts lies in a certified ball; near a ball's boundary it may refuse a state the f64 test
     // would count).
@@ -750,6 +763,7 @@ pub fn synthesize_hybrid(
         coverage,
         image,
         verify,
+        recheck,
         stop,
         seconds: t0.elapsed().as_secs_f64(),
     })

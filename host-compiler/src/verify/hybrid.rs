@@ -162,3 +162,183 @@ pub fn monte_carlo_hybrid(
     }
     Ok(rep)
 }
+
+/// The recomputed certificate of one stored run of a hybrid image ([`recheck`]).
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct RunCheck {
+    pub trajectory: usize,
+    pub stored: f32,
+    /// The radius the bytes certify (selection radius of the recomputed δ).
+    pub certified: f32,
+    pub ok: bool,
+    /// Why not, when not.
+    pub why: Option<String>,
+}
+
+/// Re-proves every stored run of a hybrid image from its bytes and the spec's automaton and sets: per
+/// location the stored K̂ and P̂ (widened exactly); per run each segment's nominal re-simulated from its
+/// stored start (the ball's centre, then each guard exit's `next`) under its stored table; the edges
+/// between segments found in the automaton (the internal edge between the two locations whose guard,
+/// normalised and rounded, is the one stored); the run certified by the synthesiser's own code
+/// ([`crate::certify::internal::certify_internal`]). A run passes when the stored guard and threshold are
+/// the ones the certificate gives, every guard segment's rows reach its κ_f, and the stored radius is at
+/// most the selection radius of the recomputed δ times 1 + 16uκ(P̂) (as for a single location,
+/// [`super::feedforward::tolerance`]).
+pub fn recheck(
+    plant: &Hybrid,
+    property: &ReachAvoid,
+    steps: usize,
+    bytes: &[u8],
+) -> Result<Vec<RunCheck>, String> {
+    use crate::certify::internal::{certify_internal, InternalSegment};
+    use crate::certify::{selection_radius, Loop, LoopConstants};
+    use faer::Mat;
+    use shared_types::image::Exit;
+    let img = shared_types::image::decode(bytes).map_err(|e| format!("image: {e}"))?;
+    let (n, m) = (img.n(), img.m());
+    if img.n_locations() != plant.modes().len() {
+        return Err(format!(
+            "the image has {} locations, the automaton {}",
+            img.n_locations(),
+            plant.modes().len()
+        ));
+    }
+    let Ks: Vec<Mat<f64>> = (0..img.n_locations())
+        .map(|l| Mat::from_fn(m, n, |i, j| img.K(l, i, j) as f64))
+        .collect();
+    let Ps: Vec<Mat<f64>> = (0..img.n_locations())
+        .map(|l| crate::linalg::sym(Mat::from_fn(n, n, |i, j| img.P(l, i, j) as f64).as_ref()))
+        .collect();
+    let lps: Vec<Loop> = (0..img.n_locations())
+        .map(|l| Loop {
+            plant,
+            loc: l,
+            K: Ks[l].as_ref(),
+            P: Ps[l].as_ref(),
+            goal: property.goal.as_ref(),
+            unsafe_set: property.unsafe_region(),
+            input: &property.input,
+        })
+        .collect();
+    let lcs: Vec<Option<LoopConstants>> =
+        lps.iter().map(|lp| LoopConstants::new(lp).ok()).collect();
+    let f32s = |b: &[u8]| -> Vec<f64> {
+        b.chunks_exact(4)
+            .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]) as f64)
+            .collect()
+    };
+    let mut out = Vec::new();
+    for t in 0..img.n_trajectories() {
+        let (s0, count) = img.trajectory_segments(t);
+        let (tstart, _) = img.trajectory_rows(t);
+        let stored = img.delta(t);
+        let fail = |why: String| RunCheck {
+            trajectory: t,
+            stored,
+            certified: 0.0,
+            ok: false,
+            why: Some(why),
+        };
+        let mut noms = Vec::new();
+        let mut locs = Vec::new();
+        let mut edges = Vec::new();
+        let mut exits = Vec::new();
+        let mut start: Vec<f64> = (0..n).map(|i| img.centre(t, i) as f64).collect();
+        let mut bad = None;
+        for s in s0..s0 + count {
+            let Some(g) = img.segment(s) else { break };
+            let lp = &lps[g.location];
+            let v: Vec<Vec<f64>> = (0..g.len)
+                .map(|k| {
+                    (0..m)
+                        .map(|j| img.v(t, g.first_row - tstart + k, j) as f64)
+                        .collect()
+                })
+                .collect();
+            noms.push(lp.simulate(&start, &v));
+            locs.push(g.location);
+            let ex = img.exit(s);
+            if let Exit::Guard { next, .. } = ex {
+                start = f32s(next);
+            }
+            exits.push(ex);
+            if s + 1 < s0 + count {
+                let to = img.segment(s + 1).map_or(usize::MAX, |h| h.location);
+                match plant.edges().iter().position(|e| {
+                    e.from == g.location
+                        && e.to == to
+                        && e.kind == crate::model::hybrid::EdgeKind::Internal
+                }) {
+                    Some(e) => edges.push(e),
+                    None => {
+                        bad = Some(format!(
+                            "segment {s}: no internal edge {} → {to}",
+                            g.location
+                        ))
+                    }
+                }
+            }
+        }
+        if let Some(why) = bad {
+            out.push(fail(why));
+            continue;
+        }
+        if locs.iter().any(|&l| lcs[l].is_none()) {
+            out.push(fail("a location's stored K̂ and P̂ certify nothing".into()));
+            continue;
+        }
+        let segs: Vec<InternalSegment> = locs
+            .iter()
+            .zip(&noms)
+            .map(|(&l, nom)| InternalSegment {
+                lp: lps[l],
+                lc: lcs[l].as_ref().expect("checked"),
+                nominal: nom,
+            })
+            .collect();
+        let cert = match certify_internal(plant, &segs, &edges, steps) {
+            Ok(c) => c,
+            Err(e) => {
+                out.push(fail(e.to_string()));
+                continue;
+            }
+        };
+        let mut why = None;
+        for (i, (c, ex)) in cert.segments.iter().zip(&exits).enumerate() {
+            if let (Some(g), Exit::Guard { a, b, theta, .. }) = (&c.exit, ex) {
+                let a: Vec<f32> = f32s(a).iter().map(|&v| v as f32).collect();
+                if a != g.a || *b != g.b || *theta < g.theta {
+                    why = Some(format!(
+                        "segment {i}: the stored guard or threshold is not the certified one"
+                    ));
+                }
+                if c.rows > noms[i].steps() {
+                    why = Some(format!(
+                        "segment {i}: its {} rows end before κ_f = {}",
+                        noms[i].steps(),
+                        c.rows
+                    ));
+                }
+            }
+        }
+        let P0 = &Ps[locs[0]];
+        let x0: Vec<f64> = (0..n).map(|i| img.centre(t, i) as f64).collect();
+        let certified = selection_radius(P0.as_ref(), &x0, cert.delta());
+        let tol = super::feedforward::tolerance(P0.as_ref());
+        if why.is_none()
+            && !((stored as f64) <= certified as f64 * (1.0 + tol) && cert.delta() > 0.0)
+        {
+            why = Some(format!(
+                "the stored radius {stored:e} exceeds the {certified:e} the stored tables certify"
+            ));
+        }
+        out.push(RunCheck {
+            trajectory: t,
+            stored,
+            certified,
+            ok: why.is_none(),
+            why,
+        });
+    }
+    Ok(out)
+}

@@ -23,6 +23,18 @@ fn example_4_25_run_is_certified() {
     // The image of this run, run by the shared evaluator against the exact hybrid flow from the ball's
     // interior and boundary: every run switches once and meets the task.
     let bytes = image(&t, std::slice::from_ref(&run)).unwrap();
+    // Re-proved from the bytes alone.
+    let rc =
+        host_compiler::verify::hybrid::recheck(&t.plant, &t.property, t.steps, &bytes).unwrap();
+    eprintln!("{rc:?}");
+    assert!(rc.iter().all(|r| r.ok), "{rc:?}");
+    // An enlarged stored radius is refused.
+    let mut big = run.clone();
+    big.certificate.delta_stored *= 1.01;
+    let bytes_big = image(&t, std::slice::from_ref(&big)).unwrap();
+    let rc_big =
+        host_compiler::verify::hybrid::recheck(&t.plant, &t.property, t.steps, &bytes_big).unwrap();
+    assert!(!rc_big[0].ok, "{rc_big:?}");
     let starts = ball_starts(&t, &run, 40, 40, 7);
     let rep =
         monte_carlo_hybrid(&t.plant, &t.property, t.initial, t.steps, &bytes, &starts).unwrap();

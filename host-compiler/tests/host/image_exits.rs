@@ -27,6 +27,7 @@ fn guard() -> SegmentExit {
         a: vec![-1.0, 0.0],
         b: 0.0,
         theta: 0.5,
+        next: vec![0.25, 1.0],
     }
 }
 
@@ -77,6 +78,7 @@ fn exits_that_cannot_run_are_refused() {
         a: vec![-1.0, 0.0],
         b: 0.0,
         theta: -1.0,
+        next: vec![0.0, 0.0],
     });
     assert!(matches!(
         b.to_bytes(),
@@ -86,9 +88,9 @@ fn exits_that_cannot_run_are_refused() {
     ));
     // A flipped kind byte in an encoded image (CRC fixed up) is refused by decode.
     let mut bytes = builder(guard()).to_bytes().unwrap();
-    // The exits section is the last: its two records of 4(n + 3) bytes end the image, and the first
+    // The exits section is the last: its two records of 4(2n + 3) bytes end the image, and the first
     // record's kind is its first byte.
-    let pos = bytes.len() - 2 * 4 * (2 + 3);
+    let pos = bytes.len() - 2 * 4 * (2 * 2 + 3);
     assert_eq!(bytes[pos], 1, "the guard exit's kind");
     bytes[pos] = 7;
     let crc = shared_types::image::compute_crc(&bytes).unwrap();
