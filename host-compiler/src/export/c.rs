@@ -6,17 +6,24 @@
 //! * `controller_image.h`, `controller_image.c`: `sc_image_bytes` (the image bytes, unchanged) and
 //!   `sc_image_len`.
 //!
-//! The image is decoded before anything is written, so a rejected image writes nothing.
+//! The image is decoded before anything is written, so a rejected image writes nothing; an image with a
+//! section the C evaluator does not implement ([`C_SECTION_KINDS`]) is refused too, since the C would
+//! refuse it at `sc_init`.
 
 use std::path::{Path, PathBuf};
 
 use shared_types::capacity;
-use shared_types::image::{decode, ImageError, Mode, FORMAT_VERSION};
+use shared_types::image::{decode, directory, ImageError, Mode, FORMAT_VERSION};
 
 /// The evaluator's header template.
 pub const CONTROLLER_H: &str = include_str!("c/controller.h");
 /// The evaluator's source template.
 pub const CONTROLLER_C: &str = include_str!("c/controller.c");
+
+/// The section kinds `controller.c` decodes and evaluates (tags 1–8: locations, fallback, trajectories,
+/// segments, steps, PWA laws, tree and balls). A section kind added to the format must be added to the C
+/// (decoder and evaluator, and the harness's images) before it is added here.
+pub const C_SECTION_KINDS: [u16; 8] = [1, 2, 3, 4, 5, 6, 7, 8];
 
 /// Why an export failed.
 #[derive(Debug, thiserror::Error)]
@@ -24,6 +31,14 @@ pub enum ExportError {
     /// The bytes are not a valid image.
     #[error("the image is rejected: {0}")]
     Rejected(ImageError),
+    /// The image has a section the C evaluator does not implement.
+    #[error(
+        "the image has a section of kind {kind}, which the C evaluator does not implement (it knows kinds 1 to 8)"
+    )]
+    UnsupportedSection {
+        /// The section's kind tag.
+        kind: u16,
+    },
     /// A file could not be written.
     #[error("cannot write {path}: {source}")]
     Write {
@@ -72,6 +87,14 @@ fn fill(template: &str) -> String {
 /// The files of the C export of `image` (validated first with the firmware's decoder).
 pub fn files(image: &[u8]) -> Result<Vec<CFile>, ExportError> {
     let img = decode(image).map_err(ExportError::Rejected)?;
+    let dir = directory(image).map_err(ExportError::Rejected)?;
+    for i in 0..dir.len() {
+        if let Some(e) = dir.entry(i) {
+            if !C_SECTION_KINDS.contains(&e.kind) {
+                return Err(ExportError::UnsupportedSection { kind: e.kind });
+            }
+        }
+    }
     let mode = match img.mode() {
         Mode::Feedforward => "feedforward",
         Mode::PwaFeedback => "PWA feedback",
