@@ -437,8 +437,8 @@ pub fn scenario(image: &Image<'_>, seed: u64, states: usize) -> Vec<Op> {
                         let mut q = 0.0;
                         for r in 0..n {
                             let mut z = 0.0;
-                            for k in r..n {
-                                z += image.factor(l, r, k) as f64 * e[k];
+                            for (k, ek) in e.iter().enumerate().skip(r) {
+                                z += image.factor(l, r, k) as f64 * ek;
                             }
                             q += z * z;
                         }
