@@ -6,9 +6,10 @@
 //!   3. `cargo test --workspace --exclude qemu-tests` (host crates);
 //!   4. builds shared-types and the firmware for `thumbv7em-none-eabihf` (proves `no_std`);
 //!   5. no panic: builds the release firmware with the `panic-never` feature, whose panic handler calls a
-//!      function defined nowhere, so the link fails if any panicking path survives optimisation; on failure
-//!      it names the functions that call into the panic machinery, with the source line of each call
-//!      (from `llvm-objdump -d -l` of the ordinary release ELF);
+//!      function defined nowhere, so the link fails if any panicking path survives optimisation; if it
+//!      fails, traces every call into the panic machinery of the ordinary release ELF (`llvm-objdump`,
+//!      `llvm-symbolizer`) to its origin and chain of inlined callers, and fails naming every origin not
+//!      listed in `firmware/panic-allowlist.txt` (paths inside dependencies that remain, each with why);
 //!   6. the QEMU hardware-in-the-loop suite: `cargo test -p qemu-tests`.
 //!
 //!   It keeps going after a failure where it can, lists every step, ends with the line
@@ -267,7 +268,7 @@ fn test() -> ExitCode {
     } else {
         steps.skip(no_std, "the target is missing");
     }
-    let no_panic = "no panic: firmware release with --features panic-never links";
+    let no_panic = "no panic: release firmware (panic-never link, or only paths in firmware/panic-allowlist.txt)";
     if target_ok {
         steps.run(no_panic, no_panic_check);
     } else {
