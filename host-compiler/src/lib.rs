@@ -12,6 +12,7 @@ pub mod certify;
 pub mod cli;
 pub mod cover;
 pub mod emit;
+pub mod export;
 pub mod geometry;
 pub mod linalg;
 pub mod model;

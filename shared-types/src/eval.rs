@@ -234,7 +234,11 @@ impl<'a> Controller<'a> {
             return 0;
         }
         let (s0, count) = img.trajectory_segments(t);
-        let mut s = (self.segment as usize).clamp(s0, (s0 + count).saturating_sub(1));
+        // max/min, not clamp: clamp's `min <= max` assertion is a panic path the firmware must not link
+        // (for validated images count ≥ 1, and both give the same s).
+        let mut s = (self.segment as usize)
+            .max(s0)
+            .min((s0 + count).saturating_sub(1));
         for _ in 0..count {
             match img.segment(s) {
                 Some(g) if row >= g.first_row.saturating_add(g.len) && s + 1 < s0 + count => s += 1,
@@ -398,7 +402,8 @@ impl<'a> Controller<'a> {
         let mut u = Input::zero(m);
         for ((uj, krow), oj) in
             u.u.iter_mut()
-                .zip(K.chunks_exact(4 * n))
+                // `.max(4)`: a chunk size the optimiser sees is non-zero (no panic path; n ≥ 1 already).
+                .zip(K.chunks_exact((4 * n).max(4)))
                 .zip(floats(theta0))
         {
             let mut s = 0.0f32;
@@ -448,7 +453,8 @@ impl<'a> Controller<'a> {
                 for ((uj, krow), urj) in out
                     .u
                     .iter_mut()
-                    .zip(K.chunks_exact(4 * n))
+                    // `.max(4)`: as in `step_pwa`.
+                    .zip(K.chunks_exact((4 * n).max(4)))
                     .zip(floats(u_ref))
                 {
                     let mut s = 0.0f32;

@@ -73,8 +73,8 @@ impl<const N: usize> Vector<N> {
 
     /// The elements.
     pub fn as_slice(&self) -> &[f32] {
-        // `len <= N` is an invariant of every constructor.
-        &self.data[..self.len]
+        // `len <= N` is an invariant of every constructor; `get` keeps the panic path out of the firmware.
+        self.data.get(..self.len).unwrap_or(&self.data)
     }
 
     /// Number of elements.
@@ -294,7 +294,12 @@ impl<const N: usize> FrameReader<N> {
             } else if len == 0 {
                 None
             } else {
-                Some(FrameEvent::Frame(&self.buf[..len]))
+                // `len` never exceeds the buffer (push stops at its end); `get` keeps the panic path out.
+                Some(
+                    self.buf
+                        .get(..len)
+                        .map_or(FrameEvent::Oversize, FrameEvent::Frame),
+                )
             }
         } else {
             match self.buf.get_mut(self.len) {

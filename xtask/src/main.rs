@@ -6,10 +6,16 @@
 //!      end-to-end test) with apt-get if missing (as root; otherwise prints the command);
 //!   3. `cargo test --workspace --exclude qemu-tests` (host crates, with that browser test);
 //!   4. builds shared-types and the firmware for `thumbv7em-none-eabihf` (proves `no_std`);
-//!   5. the QEMU hardware-in-the-loop suite: `cargo test -p qemu-tests`.
+//!   5. no panic: builds the release firmware with the `panic-never` feature, whose panic handler calls a
+//!      function defined nowhere, so the link fails if any panicking path survives optimisation; if it
+//!      fails, traces every call into the panic machinery of the ordinary release ELF (`llvm-objdump`,
+//!      `llvm-symbolizer`) to its origin and chain of inlined callers, and fails naming every origin not
+//!      listed in `firmware/panic-allowlist.txt` (paths inside dependencies that remain, each with why);
+//!   6. the QEMU hardware-in-the-loop suite: `cargo test -p qemu-tests`.
 //!
 //!   It keeps going after a failure where it can, lists every step, ends with the line
 //!   `xtask: N passed, M failed`, and exits non-zero if any step failed.
+//! * `no-panic`: step 5 of `test` alone.
 //! * `bench`: `cargo bench -p host-compiler`, then the HIL measurement (`hil-bench`), then merges every
 //!   `target/bench/rows/*.json` into `target/bench/summary.json` and prints one table.
 
@@ -29,8 +35,18 @@ fn main() -> ExitCode {
     match args.first().map(String::as_str) {
         Some("test") | Some("ci") => test(),
         Some("bench") => bench(),
+        Some("no-panic") => match no_panic_check() {
+            Ok(()) => {
+                println!("xtask: no-panic check passed");
+                ExitCode::SUCCESS
+            }
+            Err(e) => {
+                eprintln!("xtask: {e}");
+                ExitCode::FAILURE
+            }
+        },
         _ => {
-            eprintln!("usage: cargo xtask <test|ci|bench>");
+            eprintln!("usage: cargo xtask <test|ci|bench|no-panic>");
             ExitCode::from(2)
         }
     }
@@ -283,6 +299,12 @@ fn test() -> ExitCode {
     } else {
         steps.skip(no_std, "the target is missing");
     }
+    let no_panic = "no panic: release firmware (panic-never link, or only paths in firmware/panic-allowlist.txt)";
+    if target_ok {
+        steps.run(no_panic, no_panic_check);
+    } else {
+        steps.skip(no_panic, "the target is missing");
+    }
     let hil = "HIL: cargo test -p qemu-tests --no-fail-fast";
     match (target_ok, qemu_ok) {
         (true, true) => {
@@ -423,4 +445,398 @@ fn merge(rows_dir: &Path) -> Result<(), String> {
         return Err("no bench rows were written".into());
     }
     Ok(())
+}
+
+/// The symbol the `panic-never` panic handler calls (firmware/src/main.rs); defined nowhere.
+const PANIC_NEVER_SYMBOL: &str = "firmware_panic_path_is_reachable";
+
+/// The known panicking paths that remain in dependencies (firmware/panic-allowlist.txt).
+const PANIC_ALLOWLIST: &str = "firmware/panic-allowlist.txt";
+
+/// The no-panic check (step 5 of `test`): the release firmware with the `panic-never` feature must link.
+/// If the link fails on [`PANIC_NEVER_SYMBOL`], the ordinary release ELF (same code, with a defined
+/// handler) is disassembled (`llvm-objdump`), every call into the panic machinery is traced through its
+/// inlined frames (`llvm-symbolizer`) to its origin, the first frame outside `core`, and the check fails
+/// naming every origin that [`PANIC_ALLOWLIST`] does not list.
+fn no_panic_check() -> Result<(), String> {
+    let mut c = firmware_cargo();
+    c.args(["build", "--release", "--features", "panic-never"]);
+    let what = show(&c);
+    println!("xtask: $ {what}");
+    let out = c
+        .output()
+        .map_err(|e| format!("could not run `{what}`: {e}"))?;
+    if out.status.success() {
+        println!("xtask: the panic-never build links: no panicking path is reachable");
+        return Ok(());
+    }
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    if !stderr.contains(PANIC_NEVER_SYMBOL) {
+        eprintln!("{stderr}");
+        return Err(format!("`{what}` failed ({})", out.status));
+    }
+    let mut c = firmware_cargo();
+    c.args(["build", "--release"]);
+    run(c)?;
+    let elf = root()
+        .join("firmware/target")
+        .join(TARGET)
+        .join("release/firmware");
+    let mut objdump = Command::new("llvm-objdump");
+    objdump
+        .args(["-d", "-C", "-l", "--no-show-raw-insn"])
+        .arg(&elf);
+    let listing = output(objdump).ok_or_else(|| {
+        format!(
+            "the release firmware has a reachable panicking path (the link needs \
+             `{PANIC_NEVER_SYMBOL}`), and llvm-objdump (apt-get install llvm) is needed to name it"
+        )
+    })?;
+    let calls = panic_calls(&listing);
+    let chains = symbolize(&elf, &calls).ok_or_else(|| {
+        "llvm-symbolizer (apt-get install llvm) is needed to trace the panicking paths".to_string()
+    })?;
+    let allow_text = std::fs::read_to_string(root().join(PANIC_ALLOWLIST)).unwrap_or_default();
+    let allow = allowlist(&allow_text);
+    let sites = origins(&calls, &chains);
+    let (allowed, new): (Vec<_>, Vec<_>) = sites
+        .iter()
+        .partition(|s| allow.iter().any(|a| s.location.contains(a.as_str())));
+    for s in &allowed {
+        println!(
+            "xtask: known panicking path (listed in {PANIC_ALLOWLIST}): {} ({}) -> {}",
+            s.function, s.location, s.target
+        );
+    }
+    if new.is_empty() {
+        println!(
+            "xtask: {} panicking path(s) remain, all in dependencies listed in {PANIC_ALLOWLIST}",
+            allowed.len()
+        );
+        return Ok(());
+    }
+    let list: Vec<String> = new.iter().map(|s| format!("  {s}")).collect();
+    Err(format!(
+        "the release firmware has {} reachable panicking path(s) not listed in {PANIC_ALLOWLIST} \
+         (origin, the first frame outside core, and the chain of inlined calls):\n{}",
+        new.len(),
+        list.join("\n")
+    ))
+}
+
+/// Whether a (demangled) function name belongs to the panic machinery: core's panic entry points and the
+/// helpers that only call them (`…_fail`, `…_failed`), defmt's panic, and the panic handler.
+fn is_panic_machinery(name: &str) -> bool {
+    let base = name.split('+').next().unwrap_or(name);
+    base.contains("panic") || base.ends_with("_fail") || base.ends_with("_failed")
+}
+
+/// A call into the panic machinery found in the disassembly.
+#[derive(Clone, Debug, PartialEq)]
+struct PanicCall {
+    /// The function the call instruction is in.
+    function: String,
+    /// The panic entry point called.
+    target: String,
+    /// Address of the call instruction (hex, without 0x).
+    address: String,
+    /// The last source line the listing gave before the call (used where the debug info says line 0).
+    line: String,
+}
+
+/// From an `llvm-objdump -d -C --no-show-raw-insn` listing: every call (`bl`, `blx`, `b`, `b.w`) from a
+/// function outside the panic machinery into it.
+fn panic_calls(listing: &str) -> Vec<PanicCall> {
+    let mut function = String::new();
+    let mut line = String::new();
+    let mut found = Vec::new();
+    for l in listing.lines() {
+        let t = l.trim();
+        if let Some(name) = t
+            .strip_suffix(">:")
+            .and_then(|h| h.split_once(" <"))
+            .map(|(_, n)| n)
+        {
+            // `$t`, `$d`, `$a`: Arm mapping symbols (code/data markers inside a function), not functions.
+            if !name.starts_with('$') {
+                function = name.to_string();
+                line.clear();
+            }
+            continue;
+        }
+        if let Some(src) = t.strip_prefix("; ") {
+            if src.contains(".rs:") {
+                line = src.to_string();
+            }
+            continue;
+        }
+        if function.is_empty() || is_panic_machinery(&function) {
+            continue;
+        }
+        let mut words = t.split_whitespace();
+        let address = words.next().unwrap_or("").trim_end_matches(':');
+        let op = words.next().unwrap_or("");
+        let is_branch = op.starts_with("bl") || op == "b" || op.starts_with("b.");
+        let target = t.split_once('<').and_then(|(_, r)| r.rsplit_once('>'));
+        if let (true, Some((target, _))) = (is_branch, target) {
+            let target = target.split('+').next().unwrap_or(target);
+            if is_panic_machinery(target) {
+                found.push(PanicCall {
+                    function: function.clone(),
+                    target: target.to_string(),
+                    address: address.to_string(),
+                    line: line.clone(),
+                });
+            }
+        }
+    }
+    found
+}
+
+/// The inlined frames (function, location), innermost first, of each call's address, from
+/// `llvm-symbolizer --inlining`; `None` if the tool is missing or fails.
+fn symbolize(elf: &Path, calls: &[PanicCall]) -> Option<Vec<Vec<(String, String)>>> {
+    use std::io::Write as _;
+    let mut child = Command::new("llvm-symbolizer")
+        .args(["--inlining", "--demangle"])
+        .arg(format!("--obj={}", elf.display()))
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .ok()?;
+    let input: String = calls.iter().map(|c| format!("0x{}\n", c.address)).collect();
+    child.stdin.take()?.write_all(input.as_bytes()).ok()?;
+    let out = child.wait_with_output().ok()?;
+    if !out.status.success() {
+        return None;
+    }
+    Some(parse_frames(&String::from_utf8_lossy(&out.stdout)))
+}
+
+/// llvm-symbolizer's output: per address, lines `function` / `file:line:col` in pairs, then a blank line.
+fn parse_frames(text: &str) -> Vec<Vec<(String, String)>> {
+    text.split("\n\n")
+        .filter(|b| !b.trim().is_empty())
+        .map(|b| {
+            let lines: Vec<&str> = b.lines().filter(|l| !l.trim().is_empty()).collect();
+            lines
+                .chunks(2)
+                .map(|p| {
+                    (
+                        demangle(p.first().copied().unwrap_or("")),
+                        short_path(p.get(1).copied().unwrap_or("")),
+                    )
+                })
+                .collect()
+        })
+        .collect()
+}
+
+/// Readable legacy Rust symbol names: hash suffix dropped, `$LT$`-style escapes replaced.
+fn demangle(name: &str) -> String {
+    let mut s = name.trim().to_string();
+    if let Some(i) = s.rfind("::h") {
+        if s.len() - i == 19 && s[i + 3..].chars().all(|c| c.is_ascii_hexdigit()) {
+            s.truncate(i);
+        }
+    }
+    for (from, to) in [
+        ("$LT$", "<"),
+        ("$GT$", ">"),
+        ("$u20$", " "),
+        ("$u7b$", "{"),
+        ("$u7d$", "}"),
+        ("$u5b$", "["),
+        ("$u5d$", "]"),
+        ("$u3b$", ";"),
+        ("$RF$", "&"),
+        ("$C$", ","),
+        ("..", "::"),
+    ] {
+        s = s.replace(from, to);
+    }
+    s.strip_prefix('_')
+        .filter(|r| r.starts_with('<'))
+        .map(str::to_string)
+        .unwrap_or(s)
+}
+
+/// A source path without the registry, toolchain or workspace prefix.
+fn short_path(path: &str) -> String {
+    let p = path.trim();
+    if let Some(i) = p.find("index.crates.io-") {
+        if let Some(j) = p[i..].find('/') {
+            return p[i + j + 1..].to_string();
+        }
+    }
+    if let Some(i) = p.find("/library/") {
+        return format!("rust{}", &p[i..]);
+    }
+    let root = root().display().to_string();
+    p.strip_prefix(&root)
+        .map(|r| r.trim_start_matches('/').to_string())
+        .unwrap_or_else(|| p.to_string())
+}
+
+/// One panicking path: its origin (the innermost frame outside Rust's own library), the panic entry point
+/// it reaches, and the chain of inlined frames from the origin outwards.
+#[derive(Clone, Debug, PartialEq)]
+struct PanicSite {
+    function: String,
+    location: String,
+    target: String,
+    chain: Vec<String>,
+}
+
+impl std::fmt::Display for PanicSite {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} ({}) -> {}",
+            self.function, self.location, self.target
+        )?;
+        if !self.chain.is_empty() {
+            write!(
+                f,
+                "\n      called from {}",
+                self.chain.join("\n      called from ")
+            )?;
+        }
+        Ok(())
+    }
+}
+
+/// The sites of `calls` (deduplicated by origin location and target).
+fn origins(calls: &[PanicCall], chains: &[Vec<(String, String)>]) -> Vec<PanicSite> {
+    let mut out: Vec<PanicSite> = Vec::new();
+    for (i, call) in calls.iter().enumerate() {
+        let frames = chains.get(i).cloned().unwrap_or_default();
+        let k = frames
+            .iter()
+            .position(|(_, loc)| !loc.starts_with("rust/library/"))
+            .unwrap_or(0);
+        let (function, mut location) = frames
+            .get(k)
+            .cloned()
+            .unwrap_or_else(|| (call.function.clone(), "?".into()));
+        // Line 0: code the compiler made up (no line of its own); the listing's last line before the call
+        // is the nearest source line.
+        if (location.ends_with(":0:0") || location.contains(":0:")) && !call.line.is_empty() {
+            location = format!("{} (nearest line before the call)", short_path(&call.line));
+        }
+        // Each frame's location is where the *next outer* frame's call happened, so the caller chain pairs
+        // the outer function with the location one frame in.
+        let chain = frames
+            .iter()
+            .skip(k + 1)
+            .map(|(f, l)| format!("{f} ({l})"))
+            .take(6)
+            .collect();
+        let site = PanicSite {
+            function,
+            location,
+            target: call.target.clone(),
+            chain,
+        };
+        if !out
+            .iter()
+            .any(|s| s.location == site.location && s.target == site.target)
+        {
+            out.push(site);
+        }
+    }
+    out
+}
+
+/// The allowlist's entries: one path fragment per line; `#` starts a comment.
+fn allowlist(text: &str) -> Vec<String> {
+    text.lines()
+        .map(|l| l.split('#').next().unwrap_or("").trim())
+        .filter(|l| !l.is_empty())
+        .map(str::to_string)
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A listing shaped like `llvm-objdump -d -C -l --no-show-raw-insn` output for thumbv7em.
+    const LISTING: &str = "
+00000400 <firmware::app::App::on_frame>:
+; /work/firmware/src/app.rs:140
+     400:      \tpush\t{r4, r5, r7, lr}
+; /work/shared-types/src/eval.rs:212
+     404:      \tbl\t0x900 <core::panicking::panic_bounds_check> @ imm = #1276
+     408:      \tbl\t0x500 <shared_types::eval::Controller::step>
+
+00000480 <$t>:
+     480:      \tb.w\t0x910 <core::slice::index::slice_index_fail+0x2>
+
+00000900 <core::panicking::panic_bounds_check>:
+     900:      \tbl\t0x920 <core::panicking::panic_fmt>
+";
+
+    #[test]
+    fn finds_each_call_into_the_panic_machinery_and_its_function() {
+        let calls = panic_calls(LISTING);
+        let got: Vec<(&str, &str, &str)> = calls
+            .iter()
+            .map(|c| (c.function.as_str(), c.target.as_str(), c.address.as_str()))
+            .collect();
+        assert_eq!(
+            got,
+            [
+                (
+                    "firmware::app::App::on_frame",
+                    "core::panicking::panic_bounds_check",
+                    "404"
+                ),
+                // A mapping symbol is not a function: the call belongs to on_frame.
+                (
+                    "firmware::app::App::on_frame",
+                    "core::slice::index::slice_index_fail",
+                    "480"
+                ),
+            ]
+        );
+        let clean = LISTING
+            .replace("0x900 <core::panicking::panic_bounds_check>", "0x900 <foo>")
+            .replace(
+                "0x910 <core::slice::index::slice_index_fail+0x2>",
+                "0x910 <bar>",
+            );
+        assert!(panic_calls(&clean).is_empty());
+    }
+
+    #[test]
+    fn the_origin_is_the_first_frame_outside_core_and_the_allowlist_matches_it() {
+        let symbolizer = "\
+_$LT$core..ops..range..Range$LT$usize$GT$$GT$::index::h01ae804ad2a2d4d4
+/rustc/5980/library/core/src/slice/index.rs:443:13
+shared_types::protocol::Vector$LT$_$GT$::as_slice::h52113ec7db15a4b7
+/root/.cargo/registry/src/index.crates.io-1949cf8c6b5b557f/cobs-0.3.0/src/dec.rs:77:19
+firmware::app::App::on_frame::h1c786a80a053fc5d
+/somewhere/firmware/src/app.rs:104:46
+
+";
+        let chains = parse_frames(symbolizer);
+        let calls = [PanicCall {
+            function: "main".into(),
+            target: "core::slice::index::slice_index_fail".into(),
+            address: "3428".into(),
+            line: String::new(),
+        }];
+        let sites = origins(&calls, &chains);
+        assert_eq!(sites.len(), 1);
+        assert_eq!(
+            sites[0].function,
+            "shared_types::protocol::Vector<_>::as_slice"
+        );
+        assert_eq!(sites[0].location, "cobs-0.3.0/src/dec.rs:77:19");
+        assert_eq!(sites[0].chain.len(), 1);
+        let allow = allowlist("# comment\ncobs-0.3.0/src/dec.rs  # why\n\n");
+        assert_eq!(allow, ["cobs-0.3.0/src/dec.rs"]);
+        assert!(allow.iter().any(|a| sites[0].location.contains(a.as_str())));
+    }
 }

@@ -4,6 +4,7 @@ use clap::{Parser, Subcommand};
 use miette::{IntoDiagnostic, WrapErr};
 use std::path::PathBuf;
 
+pub mod export;
 pub mod inspect;
 pub mod mtl;
 pub mod play;
@@ -24,7 +25,8 @@ pub mod verify;
     host-compiler synth examples/planar-vehicle.toml --out out/planar-vehicle\n  \
     host-compiler verify examples/planar-vehicle.toml out/planar-vehicle/controller.img\n  \
     host-compiler simulate examples/planar-vehicle.toml out/planar-vehicle/controller.img --x0 0.1,0,0,1\n  \
-    host-compiler inspect out/planar-vehicle/controller.img --json\n\n\
+    host-compiler inspect out/planar-vehicle/controller.img --json\n  \
+    host-compiler export --c out/planar-vehicle/controller.img --out out/planar-vehicle/c\n\n\
     `synth` covers Init with certified balls around nominal trajectories, writes the image the firmware \
     runs, a report (report.html) and the certificate data; everything it calls certified is re-checked by \
     closed-loop simulation through the firmware's own f32 evaluator.\n\n\
@@ -61,6 +63,11 @@ pub enum Command {
     Mtl(mtl::MtlArgs),
     /// Play the task in a browser: your runs are certified live and join the cover (`--out`).
     Play(play::PlayArgs),
+    /// Export an image for a C firmware: a self-contained C99 evaluator and the image as a const array.
+    ///
+    /// The C evaluator validates the bytes as the firmware's decoder does and gives the Rust evaluator's
+    /// status and input bits when compiled with -std=c99 -O2 -ffp-contract=off -fno-fast-math.
+    Export(export::ExportArgs),
 }
 
 /// How a command ended: the process's exit status (listed in `--help`). Clap's own usage errors exit
@@ -146,6 +153,7 @@ pub fn main() -> std::process::ExitCode {
         Command::Verify(a) => verify::run(&a),
         Command::Simulate(a) => simulate::run(&a),
         Command::Play(a) => play::run(&a),
+        Command::Export(a) => export::run(&a),
     };
     let exit = outcome.unwrap_or_else(|f| {
         eprintln!("Error: {:?}", f.report);

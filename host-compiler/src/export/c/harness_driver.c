@@ -1,0 +1,81 @@
+/*
+ * The differential-test driver for the exported evaluator (host_compiler::export::harness); not part of
+ * what `export --c` writes. Reads commands from stdin, writes answers to stdout (little-endian):
+ *   'I' u32 len, len bytes  init from these bytes        -> u8 sc_error
+ *   'E'                     init from the exported array -> u8 sc_error
+ *   'R'                     reset (and forget the applied input)
+ *   'S' u8 k, k f32         one period with a k-value state -> u8 status, SC_MAX_M f32: on SC_OK the
+ *                           input, else sc_fallback at x with the last applied input (as the firmware)
+ */
+#include <stdio.h>
+#include <string.h>
+
+#include "controller.h"
+#include "controller_image.h"
+
+static uint8_t buf[1u << 22];
+
+static int read_exact(void *p, size_t n) { return fread(p, 1, n, stdin) == n; }
+
+static uint32_t rd32(const uint8_t *p) {
+    return (uint32_t)p[0] | ((uint32_t)p[1] << 8) | ((uint32_t)p[2] << 16) | ((uint32_t)p[3] << 24);
+}
+
+static void put32(uint32_t v) {
+    uint8_t b[4];
+    b[0] = (uint8_t)v;
+    b[1] = (uint8_t)(v >> 8);
+    b[2] = (uint8_t)(v >> 16);
+    b[3] = (uint8_t)(v >> 24);
+    fwrite(b, 1, 4, stdout);
+}
+
+int main(void) {
+    static sc_controller c;
+    float applied[SC_MAX_M];
+    int op;
+    memset(applied, 0, sizeof applied);
+    while ((op = getchar()) != EOF) {
+        if (op == 'I' || op == 'E') {
+            uint8_t e;
+            if (op == 'I') {
+                uint8_t l[4];
+                uint32_t len;
+                if (!read_exact(l, 4)) return 2;
+                len = rd32(l);
+                if (len > sizeof buf || !read_exact(buf, len)) return 2;
+                e = (uint8_t)sc_init(&c, buf, len);
+            } else {
+                e = (uint8_t)sc_init(&c, sc_image_bytes, sc_image_len);
+            }
+            memset(applied, 0, sizeof applied);
+            fputc(e, stdout);
+        } else if (op == 'R') {
+            sc_reset(&c);
+            memset(applied, 0, sizeof applied);
+        } else if (op == 'S') {
+            uint8_t k, raw[4 * 16];
+            float x[16], u[SC_MAX_M];
+            uint32_t i, b;
+            sc_status s;
+            if (!read_exact(&k, 1) || k > 16 || !read_exact(raw, 4u * k)) return 2;
+            for (i = 0; i < k; i++) {
+                b = rd32(raw + 4 * i);
+                memcpy(&x[i], &b, 4);
+            }
+            memset(u, 0, sizeof u);
+            s = sc_step(&c, x, k, u);
+            if (s != SC_OK) sc_fallback(&c, x, k, applied, u);
+            memcpy(applied, u, sizeof u);
+            fputc((int)s, stdout);
+            for (i = 0; i < SC_MAX_M; i++) {
+                memcpy(&b, &u[i], 4);
+                put32(b);
+            }
+        } else {
+            return 2;
+        }
+    }
+    fflush(stdout);
+    return 0;
+}
