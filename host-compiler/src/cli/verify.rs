@@ -55,6 +55,9 @@ pub fn run(a: &VerifyArgs) -> Outcome {
             if pwa { "" } else { " --per-ball 0" }
         )));
     }
+    if problem.hybrid.is_some() {
+        return run_hybrid(a, runs, per_ball, problem, &bytes);
+    }
     let task = task_of(problem)?;
     let problem = &task.problem;
     let judge = Judge::new(&task);
@@ -228,6 +231,93 @@ fn run_pwa(
             "only {} of {} initial states could be drawn in F",
             mc.runs,
             runs
+        )
+        .into());
+    }
+    Ok(Exit::Success)
+}
+
+/// `verify` of a hybrid image: every run re-proved from the bytes ([`crate::verify::hybrid::recheck`]),
+/// then Monte Carlo against the automaton's exact flow from Init (states the image accepts) and from the
+/// boundary of every ball.
+fn run_hybrid(
+    a: &VerifyArgs,
+    runs: usize,
+    per_ball: usize,
+    problem: crate::spec::Problem,
+    bytes: &[u8],
+) -> Outcome {
+    use crate::verify::hybrid::{monte_carlo_hybrid, recheck, starts_from_image, HybridReport};
+    use rayon::prelude::*;
+    if a.attack {
+        return Err(Failure::bad_input(miette::miette!(
+            "--attack is not built for hybrid images yet"
+        )));
+    }
+    let task = crate::synth::hybrid::HybridTask::new(problem)
+        .map_err(|e| miette::miette!("{e}"))
+        .bad_input()?;
+    let rc = recheck(&task.plant, &task.property, task.steps, bytes)
+        .map_err(|e| miette::miette!("{}: {e}", a.image.display()))
+        .bad_input()?;
+    let init = crate::cover::estimate::SampleBox {
+        lo: task.problem.init.lo.clone(),
+        hi: task.problem.init.hi.clone(),
+    };
+    let seed = a.seed.unwrap_or(task.problem.seed ^ 0x7e51f1);
+    let starts = starts_from_image(bytes, &init, runs, per_ball, seed)
+        .map_err(|e| miette::miette!("{e}"))
+        .bad_input()?;
+    let parts: Vec<Result<HybridReport, String>> = starts
+        .par_chunks(64)
+        .map(|c| {
+            monte_carlo_hybrid(
+                &task.plant,
+                &task.property,
+                task.initial,
+                task.steps,
+                bytes,
+                c,
+            )
+        })
+        .collect();
+    let mut r = HybridReport {
+        min_unsafe_distance: f64::INFINITY,
+        ..Default::default()
+    };
+    for p in parts {
+        r.merge(p.map_err(|e| miette::miette!("{e}"))?);
+    }
+    let unproved: Vec<&str> = rc.iter().filter_map(|c| c.why.as_deref()).collect();
+    if a.json {
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&serde_json::json!({"recheck": rc, "monte_carlo": r}))
+                .into_diagnostic()?
+        );
+    } else {
+        println!(
+            "re-proved         {} of {} runs from the image bytes",
+            rc.len() - unproved.len(),
+            rc.len()
+        );
+        println!(
+            "monte carlo       {} runs ({} switched, at most {} events; {} starts refused by the f32 selection, not run), {} violations",
+            r.runs - r.rejected,
+            r.switched,
+            r.max_events,
+            r.rejected,
+            r.violations
+        );
+    }
+    if let Some(why) = unproved.first() {
+        return Err(miette::miette!("{}: not re-proved: {why}", a.image.display()).into());
+    }
+    if r.violations > 0 {
+        return Err(miette::miette!(
+            "{} violations (first: {})",
+            r.violations,
+            r.first_violation.as_deref().unwrap_or("?")
         )
         .into());
     }

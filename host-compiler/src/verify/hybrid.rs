@@ -342,3 +342,52 @@ pub fn recheck(
     }
     Ok(out)
 }
+
+/// Monte Carlo starts for a hybrid image: `interior` uniform samples of Init that the image's f32
+/// selection accepts (at most 100 draws per start), and `per_ball` points just inside the boundary of
+/// every stored ball (1 − 10⁻⁶ of its radius in its stored metric), seeded.
+pub fn starts_from_image(
+    bytes: &[u8],
+    init: &crate::cover::estimate::SampleBox,
+    interior: usize,
+    per_ball: usize,
+    seed: u64,
+) -> Result<Vec<Vec<f64>>, String> {
+    use rand::{Rng, SeedableRng};
+    let img = shared_types::image::decode(bytes).map_err(|e| format!("image: {e}"))?;
+    let n = img.n();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let ctl = Controller::new(img);
+    let mut out = Vec::new();
+    let mut draws = 0usize;
+    while out.len() < interior && draws < 100 * interior.max(1) {
+        draws += 1;
+        let x = init.sample(&mut rng);
+        let x32: Vec<f32> = x.iter().map(|&v| v as f32).collect();
+        if ctl.select(&x32).is_some() {
+            out.push(x);
+        }
+    }
+    for t in 0..img.n_trajectories() {
+        let (s0, _) = img.trajectory_segments(t);
+        let l = img.segment(s0).map_or(0, |s| s.location);
+        let P = crate::linalg::sym(faer::Mat::from_fn(n, n, |i, j| img.P(l, i, j) as f64).as_ref());
+        let Some(roots) = crate::linalg::PdRoots::new(P.as_ref()) else {
+            continue;
+        };
+        let delta = img.delta(t) as f64 * (1.0 - 1e-6);
+        for _ in 0..per_ball {
+            let w: Vec<f64> = (0..n)
+                .map(|_| {
+                    let (a, b): (f64, f64) = (rng.random::<f64>().max(1e-300), rng.random());
+                    (-2.0 * a.ln()).sqrt() * (std::f64::consts::TAU * b).cos()
+                })
+                .collect();
+            let norm = w.iter().map(|v| v * v).sum::<f64>().sqrt().max(1e-300);
+            let dir: Vec<f64> = w.iter().map(|v| v / norm * delta).collect();
+            let e = crate::linalg::mat_vec(roots.inv_sqrt.as_ref(), &dir);
+            out.push((0..n).map(|i| img.centre(t, i) as f64 + e[i]).collect());
+        }
+    }
+    Ok(out)
+}

@@ -18,6 +18,7 @@ mod certify_bounds;
 mod certify_forced;
 mod certify_internal;
 mod cli_exit;
+mod cli_hybrid;
 mod cli_limits;
 mod cli_synth;
 mod emit_image;

@@ -1,0 +1,77 @@
+//! `synth` and `verify` on a hybrid spec (Example 4.25 with a budget of one run): synth certifies,
+//! re-proves and verifies an image and exits 3 (short of the coverage target); verify re-proves the
+//! same image from its bytes and runs it against the exact hybrid flow (exit 0), and refuses an image
+//! whose stored radius was enlarged (exit 1).
+
+use std::process::Command;
+
+fn bin() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_host-compiler"))
+}
+
+#[test]
+fn hybrid_synth_then_verify() {
+    let dir = std::env::temp_dir().join(format!("hc-cli-hybrid-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let src = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../examples/hybrid-internal-4-25.toml"
+    ))
+    .unwrap()
+    .replace("max_trajectories = 32", "max_trajectories = 1");
+    let spec = dir.join("spec.toml");
+    std::fs::write(&spec, src).unwrap();
+    let out = dir.join("out");
+    let o = bin()
+        .args([
+            "synth",
+            spec.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ])
+        .args(["--verify-runs", "16", "--quiet"])
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(3), "{stdout}\n{stderr}");
+    assert!(stdout.contains("re-proved         1 of 1 runs"), "{stdout}");
+    assert!(stdout.contains(", 0 violations"), "{stdout}");
+    let img = out.join("controller.img");
+    assert!(img.exists());
+    let cert: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("certificate.json")).unwrap())
+            .unwrap();
+    assert_eq!(cert["runs"].as_array().unwrap().len(), 1);
+
+    let o = bin()
+        .args(["verify", spec.to_str().unwrap(), img.to_str().unwrap()])
+        .args(["--runs", "16", "--per-ball", "4"])
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert_eq!(
+        o.status.code(),
+        Some(0),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert!(stdout.contains("re-proved         1 of 1 runs"), "{stdout}");
+
+    // The first run's stored radius enlarged by 1 %, the CRC made right again: not re-proved.
+    let bytes = std::fs::read(&img).unwrap();
+    let decoded = shared_types::image::decode(&bytes).unwrap();
+    let mut b = host_compiler::emit::ImageBuilder::from_image(&decoded);
+    b.trajectories[0].delta *= 1.01;
+    let big = dir.join("big.img");
+    std::fs::write(&big, b.to_bytes().unwrap()).unwrap();
+    let o = bin()
+        .args(["verify", spec.to_str().unwrap(), big.to_str().unwrap()])
+        .args(["--runs", "4", "--per-ball", "1"])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("not re-proved"), "{stderr}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
