@@ -529,6 +529,9 @@ pub fn ball_starts(
     out
 }
 
+/// Rounds in a row without a certified run after which the growth stops.
+pub const MAX_EMPTY_ROUNDS: usize = 8;
+
 /// Options of a hybrid synthesis run that are not part of the task (defaults per field).
 #[derive(Clone)]
 pub struct HybridOptions {
@@ -620,6 +623,9 @@ pub fn synthesize_hybrid(
     let target = s.coverage_target + s.coverage_tolerance;
     let stop;
     let mut first = true;
+    // Rounds in a row that certified nothing: after MAX_EMPTY_ROUNDS of them the growth stops and asks
+    // for a new seed trajectory (planning a refused seed costs as much as an accepted one).
+    let mut empty_rounds = 0usize;
     loop {
         if opts.cancel.load(Ordering::Relaxed) {
             stop = "interrupted".to_string();
@@ -656,7 +662,14 @@ pub fn synthesize_hybrid(
                 "every uncovered working sample was tried: a new seed trajectory is needed".into();
             break;
         }
+        if empty_rounds >= MAX_EMPTY_ROUNDS {
+            stop = format!(
+                "{MAX_EMPTY_ROUNDS} rounds in a row certified no run: a new seed trajectory is needed"
+            );
+            break;
+        }
         seeds_tried += seeds.len();
+        let before = runs.len();
         let planned: Vec<Result<HybridRun, String>> =
             seeds.par_iter().map(|x| plan_run(task, x)).collect();
         for (x, r) in seeds.into_iter().zip(planned) {
@@ -693,6 +706,11 @@ pub fn synthesize_hybrid(
                 Err(e) => refused.push((x, e)),
             }
         }
+        empty_rounds = if runs.len() > before {
+            0
+        } else {
+            empty_rounds + 1
+        };
     }
     if runs.is_empty() {
         return Err(format!(
