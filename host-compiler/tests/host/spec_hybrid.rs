@@ -88,11 +88,13 @@ fn example_4_25_builds_an_automaton_whose_flow_crosses_the_plane() {
     assert_eq!(h.locations.len(), 2);
     assert_eq!(h.edges.len(), 2);
     let hy = Hybrid::from_spec(h, p.plant.period).unwrap();
-    // From just left of the plane with u = 0.5, Σ(1) carries the state across within one period.
-    let step = hy.flow(h.initial, &[-0.05, 1.0, 0.0], &[0.5]).unwrap();
+    // From just left of the plane with u = 0.5 (ẋ₁ ≈ 2.6), Σ(1) carries the state across within one
+    // period (0.01 s).
+    let step = hy.flow(h.initial, &[-0.01, 1.0, 0.0], &[0.5]).unwrap();
     assert_eq!(step.loc, 1);
     assert_eq!(step.events.len(), 1);
-    // The pipeline refuses it, naming what it is, instead of running location 0 alone.
+    // The single-location task refuses it, naming what it is, instead of running location 0 alone
+    // (`synth` takes it through `synth::hybrid`).
     match Task::new(p) {
         Err(TaskError::HybridNotSupported {
             locations: 2,

@@ -91,8 +91,14 @@ fn run() -> Result<(), Box<dyn std::error::Error>> {
         ),
         "pwa_double_integrator",
     )?;
+    let (hybrid_max, hybrid_stack) = hybrid_step_max()?;
     let size = qemu_tests::elf_size(&std::fs::read(&elf)?)?;
     let rows = [
+        Row::new(
+            "hybrid_step_instructions_max",
+            hybrid_max as f64,
+            "instructions (Ex 4.25, guard test included)",
+        ),
         Row::new("pwa_step_instructions_max", pwa_max as f64, "instructions"),
         Row::new(
             "pwa_step_instructions_max_double_integrator",
@@ -114,7 +120,7 @@ fn run() -> Result<(), Box<dyn std::error::Error>> {
         Row::new("firmware_stack_bytes_max", stack_max as f64, "bytes"),
         Row::new(
             "firmware_stack_bytes_bound",
-            stack_max.max(pwa_stack).max(pwa_di_stack) as f64,
+            stack_max.max(pwa_stack).max(pwa_di_stack).max(hybrid_stack) as f64,
             "bytes (measured: painted-stack high-water mark, every image mode)",
         ),
     ];
@@ -222,4 +228,54 @@ fn pwa_step_max(spec: &str, tag: &str) -> Result<(u32, String, u64), Box<dyn std
     );
     println!("{summary}");
     Ok((max, summary, stack))
+}
+
+/// The hybrid row: Example 4.25's run from the text's x0 in an image with a guard exit; closed loops from
+/// 8 starts in its ball (the centre and points towards its boundary), against the automaton's exact flow,
+/// over the horizon; the largest cost of any reply (every step tests the guard until the switch is seen)
+/// and the stack high-water mark.
+fn hybrid_step_max() -> Result<(u32, u64), Box<dyn std::error::Error>> {
+    use host_compiler::synth::hybrid::{ball_starts, image, plan_run, HybridTask};
+    let spec = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../examples/hybrid-internal-4-25.toml"
+    );
+    let problem = host_compiler::spec::load(spec).map_err(|e| format!("{e:?}"))?;
+    let task = HybridTask::new(problem)?;
+    let run = plan_run(&task, &[-5.0, 1.0, 2.0])?;
+    let bytes = image(&task, std::slice::from_ref(&run))?;
+    let path = firmware::write_image("hybrid_bench", &bytes)?;
+    let elf = firmware::build(
+        "hybrid_bench",
+        &FirmwareConfig {
+            image: Some(path),
+            ..Default::default()
+        },
+    )?;
+    let img = decode(&bytes).map_err(qemu_tests::HilError::Image)?;
+    let mut starts = vec![run.nominals[0].x[0].clone()];
+    starts.extend(ball_starts(&task, &run, 3, 4, task.problem.seed ^ 0xbe4c));
+    let (mut max, mut stack) = (0u32, 0u64);
+    for x0 in &starts {
+        let mut q = Qemu::launch(&elf, Duration::from_secs(120))?;
+        let mut host = HostEvaluator::new(img);
+        let (mut x, mut loc) = (x0.clone(), task.initial);
+        for k in 0..task.steps {
+            let reply = closed_loop::exchange(&mut q, k as u32, &x, |xf| host.step(xf))?;
+            max = max.max(reply.cost);
+            let u: Vec<f64> = reply.u.as_slice().iter().map(|&v| v as f64).collect();
+            let step = task.plant.flow(loc, &x, &u)?;
+            x = step.x;
+            loc = step.loc;
+        }
+        let exit = q.shutdown()?;
+        if exit.code != Some(0) {
+            return Err(format!("hybrid firmware exited with {:?}", exit.code).into());
+        }
+        let peak =
+            qemu_tests::logs::stack_peak(&exit.logs).ok_or("no stack_peak in the shutdown log")?;
+        stack = stack.max(peak);
+    }
+    println!("hybrid (Ex 4.25): δ = {:.4}, {} runs of {} steps, max step {max} instructions", run.delta(), starts.len(), task.steps);
+    Ok((max, stack))
 }
