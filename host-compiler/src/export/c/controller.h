@@ -14,8 +14,8 @@
  * Guarantees: no malloc, no recursion, no global state; every loop is bounded by the capacities below
  * (those of the Rust build that exported this file); sc_init validates everything the Rust decoder
  * validates (CRC, header, section directory, postcard framing, every length, every float finite, P
- * symmetric positive definite, segments, the PWA tree, ...) and never reads outside the array it is
- * given; a corrupted image is refused with an SC_E_* code. sc_init uses about 1.2 KiB of stack for the
+ * symmetric positive definite, segments, segment exits, the PWA tree, ...) and never reads outside the
+ * array it is given; a corrupted image is refused with an SC_E_* code. sc_init uses about 1.2 KiB of stack for the
  * PWA tree check; sc_step a few hundred bytes.
  *
  * Semantics (see shared-types/src/eval.rs):
