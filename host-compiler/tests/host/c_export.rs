@@ -3,8 +3,9 @@
 //! states per image mode (feedforward with one and several locations, both terminal behaviours and every
 //! fallback law; feedforward with segment exits, synthetic and a real hybrid image of Example 4.25 along
 //! closed-loop runs; PWA with one and several locations); corrupted arrays refused exactly when the Rust
-//! decoder refuses them (random corruption, and targeted corruption of exit records); and the
-//! subcommand's exit codes.
+//! decoder refuses them (random corruption, targeted corruption of exit records, and an exits section
+//! added by hand: empty, all tables, wrong length, trailing byte, in a PWA image); and the subcommand's
+//! exit codes.
 
 use std::path::PathBuf;
 use std::process::Command;
@@ -577,4 +578,119 @@ fn export_writes_the_files_and_refuses_bad_input_with_exit_2() {
         assert!(stderr.contains(what), "{what}: {stderr}");
     }
     assert!(!dir.join("c2").exists(), "a rejected image wrote files");
+}
+
+/// `image` with one more section of `kind` (a tag above the image's others, so it goes last) and this
+/// postcard `body`, the directory, payload length and CRC updated.
+fn with_section(image: &[u8], kind: u16, body: &[u8]) -> Vec<u8> {
+    let count = u16::from_le_bytes([image[18], image[19]]) as usize;
+    let dir_end = 32 + 12 * count;
+    let mut out = image[..dir_end].to_vec();
+    for i in 0..count {
+        let o = 32 + 12 * i + 4;
+        let off = u32::from_le_bytes(out[o..o + 4].try_into().unwrap()) + 12;
+        out[o..o + 4].copy_from_slice(&off.to_le_bytes());
+    }
+    out.extend_from_slice(&kind.to_le_bytes());
+    out.extend_from_slice(&0u16.to_le_bytes());
+    out.extend_from_slice(&(image.len() as u32 + 12).to_le_bytes());
+    out.extend_from_slice(&(body.len() as u32).to_le_bytes());
+    out.extend_from_slice(&image[dir_end..]);
+    out.extend_from_slice(body);
+    out[18..20].copy_from_slice(&(count as u16 + 1).to_le_bytes());
+    let payload = out.len() as u32 - 32;
+    out[24..28].copy_from_slice(&payload.to_le_bytes());
+    let crc = compute_crc(&out).expect("crc");
+    out[28..32].copy_from_slice(&crc.to_le_bytes());
+    out
+}
+
+/// A segment-exits section added by hand: empty (no exits) or all table records in a feedforward image
+/// (accepted, same answers), one record short or with a trailing byte (refused), in a PWA image (not
+/// admitted by the mode: refused). The C init decides as `decode` does, and accepted images step alike.
+#[test]
+fn an_exits_section_is_admitted_as_the_rust_decoder_admits_it() {
+    let ff = feedforward_image(700, 3, 2, 2, 5, Terminal::Fallback, 3);
+    let img = decode(&ff).unwrap();
+    let rec = exit_record_len(img.n());
+    let n_seg = img.n_segments();
+    let records = |k: usize| {
+        let mut b = Vec::new();
+        for _ in 0..k {
+            b.extend_from_slice(&0u32.to_le_bytes());
+            b.extend(std::iter::repeat_n(0u8, rec - 4));
+        }
+        b
+    };
+    let postcard = |bytes: &[u8]| {
+        let mut b = Vec::new();
+        let mut v = bytes.len();
+        loop {
+            let byte = (v & 0x7F) as u8;
+            v >>= 7;
+            if v == 0 {
+                b.push(byte);
+                break;
+            }
+            b.push(byte | 0x80);
+        }
+        b.extend_from_slice(bytes);
+        b
+    };
+    let tables = records(n_seg);
+    let mut trailing = postcard(&tables);
+    trailing.push(0);
+    let pwa = pwa_image(701, 3, 2, 1, 2, 10, 1);
+    let cases: Vec<(&str, Vec<u8>, bool)> = vec![
+        ("empty", with_section(&ff, 9, &postcard(&[])), true),
+        ("all tables", with_section(&ff, 9, &postcard(&tables)), true),
+        (
+            "one record short",
+            with_section(&ff, 9, &postcard(&records(n_seg - 1))),
+            false,
+        ),
+        ("trailing byte", with_section(&ff, 9, &trailing), false),
+        (
+            "in a PWA image",
+            with_section(&pwa, 9, &postcard(&[])),
+            false,
+        ),
+        (
+            "unknown kind 10",
+            with_section(&ff, 10, &postcard(&[])),
+            false,
+        ),
+    ];
+    let probe: Vec<Op> = scenario(&img, 9, 300)
+        .into_iter()
+        .filter(|op| matches!(op, Op::Step(_) | Op::Reset))
+        .collect();
+    let mut ops = Vec::new();
+    for (what, bytes, ok) in &cases {
+        assert_eq!(
+            decode(bytes).is_ok(),
+            *ok,
+            "{what}: {:?}",
+            decode(bytes).err()
+        );
+        ops.push(Op::InitBytes(bytes.clone()));
+        ops.extend(probe.iter().cloned());
+    }
+    let h = CHarness::build(&ff, &scratch("exits_section")).expect("harness");
+    let c = h.compare(&ops).expect("driver");
+    eprintln!(
+        "exits section: {} inits, {} init mismatches, {} states, {} mismatches",
+        c.inits, c.init_mismatches, c.states, c.mismatches
+    );
+    assert_eq!(c.init_mismatches, 0, "{:?}", c.first);
+    assert_eq!(c.mismatches, 0, "{:?}", c.first);
+    // The all-tables image (through the exits path) answers as the image without the section.
+    let mut run = vec![Op::InitEmbedded];
+    run.extend(probe.iter().cloned());
+    let plain = host_compiler::export::harness::reference(&ff, &run);
+    let all_tables = host_compiler::export::harness::reference(&cases[1].1, &run);
+    assert!(
+        plain == all_tables,
+        "the all-tables image answers differently"
+    );
 }
