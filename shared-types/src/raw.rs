@@ -47,9 +47,13 @@ pub(crate) fn f32_span(bytes: &[u8], start: usize, len: usize) -> &[u8] {
 /// Little-endian `f32` values of a byte string (a trailing partial value is ignored).
 #[inline(always)]
 pub(crate) fn floats(bytes: &[u8]) -> impl Iterator<Item = f32> + '_ {
-    bytes
-        .chunks_exact(4)
-        .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+    // A pattern, not `c[0]..c[3]`: the closure may be compiled out of line (e.g. under `all`'s
+    // `try_fold`), where the chunk length is unknown and indexing links a bounds-check panic. Chunks
+    // are always 4 bytes long, so the other arm is never taken.
+    bytes.chunks_exact(4).map(|c| match *c {
+        [a, b, c, d] => f32::from_le_bytes([a, b, c, d]),
+        _ => 0.0,
+    })
 }
 
 /// Little-endian `u16` number `i` of a byte string; 0 out of range.

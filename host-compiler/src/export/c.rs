@@ -20,10 +20,10 @@ pub const CONTROLLER_H: &str = include_str!("c/controller.h");
 /// The evaluator's source template.
 pub const CONTROLLER_C: &str = include_str!("c/controller.c");
 
-/// The section kinds `controller.c` decodes and evaluates (tags 1–8: locations, fallback, trajectories,
-/// segments, steps, PWA laws, tree and balls). A section kind added to the format must be added to the C
-/// (decoder and evaluator, and the harness's images) before it is added here.
-pub const C_SECTION_KINDS: [u16; 8] = [1, 2, 3, 4, 5, 6, 7, 8];
+/// The section kinds `controller.c` decodes and evaluates (tags 1–9: locations, fallback, trajectories,
+/// segments, steps, PWA laws, tree and balls, segment exits). A section kind added to the format must be
+/// added to the C (decoder and evaluator, and the harness's images) before it is added here.
+pub const C_SECTION_KINDS: [u16; 9] = [1, 2, 3, 4, 5, 6, 7, 8, 9];
 
 /// Why an export failed.
 #[derive(Debug, thiserror::Error)]
@@ -33,7 +33,7 @@ pub enum ExportError {
     Rejected(ImageError),
     /// The image has a section the C evaluator does not implement.
     #[error(
-        "the image has a section of kind {kind}, which the C evaluator does not implement (it knows kinds 1 to 8)"
+        "the image has a section of kind {kind}, which the C evaluator does not implement (it knows kinds 1 to 9)"
     )]
     UnsupportedSection {
         /// The section's kind tag.

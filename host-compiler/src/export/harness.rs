@@ -1,14 +1,16 @@
 //! The differential check of the C export: compiles the exported evaluator with the system C compiler
 //! (`cc`, or `$CC`) under the flags the generated header names, drives it with a sequence of [`Op`]s and
 //! compares every answer with the Rust evaluator (`shared_types::eval::Controller`) bit for bit; plus the
-//! seeded scenarios ([`scenario`]) and synthetic images of every mode ([`feedforward_image`],
-//! [`pwa_image`]) the tests and the `c_export` bench run it on. Not used by the pipeline.
+//! seeded scenarios ([`scenario`], [`exits_scenario`]) and synthetic images of every mode
+//! ([`feedforward_image`], [`exits_image`]: feedforward with segment exits, [`pwa_image`]) the tests and
+//! the `c_export` bench run it on. Not used by the pipeline.
 //!
 //! A step's answer is its status and all `MAX_M` input values: on `Ok` the input, otherwise the image's
 //! fallback at that state given the last applied input (what the firmware applies). An init's answer is
 //! whether the image was accepted (the C error codes are coarser than `ImageError`).
 #![allow(non_snake_case)]
 
+use std::collections::BTreeSet;
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
@@ -18,10 +20,10 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 use shared_types::capacity::MAX_M;
 use shared_types::eval::{Controller, Input, Status};
-use shared_types::image::{decode, Image, Mode, Terminal};
+use shared_types::image::{decode, Exit, Image, Mode, Terminal};
 
 use crate::emit::{
-    CertifiedBall, Child, FallbackLaw, ImageBuilder, PwaImageBuilder, PwaLaw, PwaLeaf,
+    CertifiedBall, Child, FallbackLaw, ImageBuilder, PwaImageBuilder, PwaLaw, PwaLeaf, SegmentExit,
     TrajectoryEntry, TreeNode,
 };
 
@@ -365,7 +367,8 @@ fn point_at(rng: &mut ChaCha8Rng, c: &[f64], s: f64, norm: impl Fn(&[f64]) -> f6
         .collect()
 }
 
-/// A seeded scenario of at least `states` steps for `image`, starting with [`Op::InitEmbedded`].
+/// A seeded scenario of at least `states` steps for `image`, starting with [`Op::InitEmbedded`]. An image
+/// with segment exits gets [`exits_scenario`]'s.
 ///
 /// Feedforward: runs of steps from a reset, whose first state lies inside a ball, on its boundary (to a
 /// few ulps) or outside it, continued past the trajectory's end (so the segment cursor, each location's
@@ -373,6 +376,9 @@ fn point_at(rng: &mut ChaCha8Rng, c: &[f64], s: f64, norm: impl Fn(&[f64]) -> f6
 /// outside the certified balls (in their own whitened metric) and across the whole envelope's bounding
 /// box. Both: about 2.5 % unusable or overflowing states.
 pub fn scenario(image: &Image<'_>, seed: u64, states: usize) -> Vec<Op> {
+    if image.has_exits() {
+        return exits_scenario(image, seed, states).0;
+    }
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let n = image.n();
     let mut ops = vec![Op::InitEmbedded];
@@ -459,6 +465,275 @@ pub fn scenario(image: &Image<'_>, seed: u64, states: usize) -> Vec<Op> {
     ops
 }
 
+/// What an [`exits_scenario`] exercised, as its own replica of the segment cursor (the logic of
+/// `Controller::step_exits`, run in f32 on the states it emits) counted it.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct ExitCoverage {
+    /// Guard exits taken.
+    pub crossings: usize,
+    /// The distinct samples (since their segment began) at which guard exits were taken.
+    pub crossing_samples: BTreeSet<usize>,
+    /// Table exits taken (a non-last segment's rows used up).
+    pub table_moves: usize,
+    /// Guard segments whose rows ran out before the guard was seen (the envelope is left).
+    pub run_outs: usize,
+    /// Of those, the ones at which the Rust evaluator indeed answered `OutOfEnvelope` (a check that the
+    /// replica and the evaluator agree).
+    pub run_outs_confirmed: usize,
+    /// States placed one ulp (in one component) from a guard's threshold, on the side that takes the exit.
+    pub at_threshold_taken: usize,
+    /// The same, on the side that does not.
+    pub at_threshold_not_taken: usize,
+    /// States exactly at a threshold: fl(Σⱼ âⱼxⱼ) − b̂ = −θ in the f32 test (taken, `<=`; possible for the
+    /// dyadic guards of [`exits_image`], whose arithmetic on a dyadic grid is exact).
+    pub at_threshold_exact: usize,
+}
+
+/// fl(Σⱼ âⱼxⱼ) − b̂ in f32, as `Controller::step_exits` computes it.
+fn guard_value(a: &[u8], b: f32, x: &[f32]) -> f32 {
+    let mut acc = 0.0f32;
+    for (c, &xi) in a.chunks_exact(4).zip(x) {
+        acc += f32::from_le_bytes([c[0], c[1], c[2], c[3]]) * xi;
+    }
+    acc - b
+}
+
+/// `x` snapped to the grid 1/64 and its component of largest |âⱼ| solved for â·x − b̂ = −θ (in f64, then
+/// f32); true if the f32 test then gives exactly −θ (`x` is changed only then).
+fn place_exact(a: &[u8], b: f32, theta: f32, x: &mut [f32]) -> bool {
+    let av: Vec<f64> = a
+        .chunks_exact(4)
+        .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]) as f64)
+        .collect();
+    let Some(j) = (0..av.len()).max_by(|&i, &k| av[i].abs().total_cmp(&av[k].abs())) else {
+        return false;
+    };
+    if av[j] == 0.0 {
+        return false;
+    }
+    let mut y: Vec<f32> = x.iter().map(|&v| (v * 64.0).round() / 64.0).collect();
+    let rest: f64 = (0..av.len())
+        .filter(|&i| i != j)
+        .map(|i| av[i] * y[i] as f64)
+        .sum();
+    y[j] = ((b as f64 - theta as f64 - rest) / av[j]) as f32;
+    let ok = guard_value(a, b, &y).to_bits() == (-theta).to_bits();
+    if ok {
+        x.copy_from_slice(&y);
+    }
+    ok
+}
+
+/// Whether a guard exit is taken at `x`: fl(Σⱼ âⱼxⱼ) − b̂ ≤ −θ, as `Controller::step_exits` computes it.
+fn guard_taken(a: &[u8], b: f32, theta: f32, x: &[f32]) -> bool {
+    guard_value(a, b, x) <= -theta
+}
+
+/// `x` moved along â so that â·x − b̂ = `target` (in f64, then rounded to f32); with `edge`, then moved
+/// ulp by ulp in its component of largest |âⱼ| to the last value on the side `take` of the f32 test (the
+/// neighbouring value is on the other side). Returns whether the guard test gives `take`.
+fn place(a: &[u8], b: f32, theta: f32, x: &mut [f32], target: f64, edge: bool, take: bool) -> bool {
+    let av: Vec<f64> = a
+        .chunks_exact(4)
+        .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]) as f64)
+        .collect();
+    let aa: f64 = av.iter().map(|v| v * v).sum();
+    if aa > 0.0 {
+        let g: f64 = av
+            .iter()
+            .zip(x.iter())
+            .map(|(p, &q)| p * q as f64)
+            .sum::<f64>()
+            - b as f64;
+        for (xi, ai) in x.iter_mut().zip(&av) {
+            *xi = (*xi as f64 + (target - g) * ai / aa) as f32;
+        }
+    }
+    if edge {
+        let j = (0..av.len())
+            .max_by(|&i, &k| av[i].abs().total_cmp(&av[k].abs()))
+            .unwrap_or(0);
+        let up = av[j] > 0.0;
+        // `toward` lowers âⱼxⱼ (towards taking the exit), `away` raises it.
+        let toward = |v: f32| if up { v.next_down() } else { v.next_up() };
+        let away = |v: f32| if up { v.next_up() } else { v.next_down() };
+        for _ in 0..4096 {
+            if guard_taken(a, b, theta, x) {
+                break;
+            }
+            x[j] = toward(x[j]);
+        }
+        for _ in 0..4096 {
+            if !guard_taken(a, b, theta, x) {
+                break;
+            }
+            x[j] = away(x[j]);
+        }
+        if take {
+            x[j] = toward(x[j]);
+        }
+    }
+    guard_taken(a, b, theta, x) == take
+}
+
+/// A seeded scenario for a feedforward image with segment exits, of at least `states` steps, starting with
+/// [`Op::InitEmbedded`], and what it exercised.
+///
+/// Runs of steps from a reset, the first state inside, on or outside a ball. The scenario keeps its own
+/// replica of the segment cursor; in a guard segment it plans the sample at which the guard is crossed (any
+/// sample of the segment, or, one time in eight, none before its rows run out) and places each state on
+/// the side of the guard the plan asks for: clearly (a random margin), or one ulp from the threshold of
+/// the f32 test (one time in five before the crossing, one time in three at it, and at it, half of those
+/// times, exactly on the threshold where the guard's arithmetic allows). Runs last the
+/// trajectory's rows plus up to 5 samples (a fifth of them shorter), so table exits, the terminal
+/// behaviour and the out-of-envelope latch are reached; about 2.5 % of the states are unusable or
+/// overflowing, as in [`scenario`].
+pub fn exits_scenario(image: &Image<'_>, seed: u64, states: usize) -> (Vec<Op>, ExitCoverage) {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let n = image.n();
+    let mut ops = vec![Op::InitEmbedded];
+    let mut cov = ExitCoverage::default();
+    let mut ctl = Controller::new(*image);
+    let mut count = 0usize;
+    while count < states {
+        ops.push(Op::Reset);
+        ctl.reset();
+        let t = rng.random_range(0..image.n_trajectories());
+        let (s0, _) = image.trajectory_segments(t);
+        let l = image.segment(s0).map_or(0, |s| s.location);
+        let c: Vec<f64> = (0..n).map(|i| image.centre(t, i) as f64).collect();
+        let delta = image.delta(t) as f64;
+        let norm = |e: &[f64]| {
+            let mut q = 0.0;
+            for r in 0..n {
+                for k in 0..n {
+                    q += e[r] * image.P(l, r, k) as f64 * e[k];
+                }
+            }
+            q.max(0.0).sqrt()
+        };
+        let rho = radius_factor(&mut rng);
+        let mut w = point_at(&mut rng, &c, delta * rho, norm);
+        let len = image.trajectory_len(t) + rng.random_range(0..6);
+        let len = if rng.random::<f64>() < 0.2 {
+            rng.random_range(1..=len)
+        } else {
+            len
+        };
+        // The replica: active trajectory, segment, κ at its start, κ; the planned crossing sample.
+        let mut active: Option<(usize, usize, usize)> = None; // (trajectory, first segment, count)
+        let (mut seg, mut seg_kappa, mut kappa) = (0usize, 0usize, 0usize);
+        let mut latched = false;
+        let mut plan: Option<usize> = None;
+        for k in 0..len {
+            let mut x = w.clone();
+            // Place the state relative to the active guard (not at κ = 0: that state selects the ball).
+            if let (Some((_, a0, cnt)), false, true) = (active, latched, k > 0) {
+                if seg + 1 < a0 + cnt {
+                    if let (Exit::Guard { a, b, theta, .. }, Some(g)) =
+                        (image.exit(seg), image.segment(seg))
+                    {
+                        let dwell = *plan.get_or_insert_with(|| {
+                            if rng.random::<f64>() < 0.125 {
+                                g.len + rng.random_range(0..3)
+                            } else {
+                                rng.random_range(0..g.len)
+                            }
+                        });
+                        let local = kappa - seg_kappa;
+                        let take = local >= dwell;
+                        let margin = 0.3 * normal(&mut rng).abs() + 1e-3;
+                        let target = if take {
+                            -(theta as f64) - margin
+                        } else {
+                            -(theta as f64) + margin
+                        };
+                        let edge = rng.random::<f64>() < if take { 1.0 / 3.0 } else { 0.2 };
+                        if take && edge && rng.random::<bool>() && place_exact(a, b, theta, &mut x)
+                        {
+                            cov.at_threshold_exact += 1;
+                        } else if place(a, b, theta, &mut x, target, edge, take) && edge {
+                            if take {
+                                cov.at_threshold_taken += 1;
+                            } else {
+                                cov.at_threshold_not_taken += 1;
+                            }
+                        }
+                    }
+                }
+            }
+            let x = perturb(&mut rng, x);
+            let result = ctl.step(&x);
+            ops.push(Op::Step(x.clone()));
+            count += 1;
+            for v in w.iter_mut() {
+                *v += (0.05 * normal(&mut rng)) as f32;
+            }
+            // The replica of `Controller::step_exits` on this state.
+            if x.len() != n || !x.iter().all(|v| v.is_finite()) || latched {
+                continue;
+            }
+            if active.is_none() {
+                match ctl.active_trajectory() {
+                    Some(tr) => {
+                        let (a0, cnt) = image.trajectory_segments(tr as usize);
+                        active = Some((tr as usize, a0, cnt));
+                        seg = a0;
+                    }
+                    None => {
+                        latched = true;
+                        continue;
+                    }
+                }
+            }
+            let Some((_, a0, cnt)) = active else { continue };
+            let last = a0 + cnt - 1;
+            for _ in 0..cnt {
+                let Some(g) = image.segment(seg) else { break };
+                if seg >= last {
+                    break;
+                }
+                match image.exit(seg) {
+                    Exit::Guard { a, b, theta, .. } => {
+                        if guard_taken(a, b, theta, &x) {
+                            cov.crossings += 1;
+                            cov.crossing_samples.insert(kappa - seg_kappa);
+                            seg += 1;
+                            seg_kappa = kappa;
+                            plan = None;
+                            continue;
+                        }
+                    }
+                    Exit::Table => {
+                        if kappa - seg_kappa >= g.len {
+                            cov.table_moves += 1;
+                            seg += 1;
+                            seg_kappa += g.len;
+                            plan = None;
+                            continue;
+                        }
+                    }
+                }
+                break;
+            }
+            if let Some(g) = image.segment(seg) {
+                if kappa - seg_kappa >= g.len && seg < last {
+                    cov.run_outs += 1;
+                    latched = true;
+                    if result == Err(Status::OutOfEnvelope) {
+                        cov.run_outs_confirmed += 1;
+                    }
+                    continue;
+                }
+            }
+            if result.is_ok() {
+                kappa += 1;
+            }
+        }
+    }
+    (ops, cov)
+}
+
 // ---------------------------------------------------------------------------------------------------------
 // Synthetic images.
 
@@ -538,6 +813,98 @@ pub fn feedforward_image(
     b.input_box = Some((vec![-1.0; m], vec![1.0; m]));
     b.terminal = terminal;
     b.to_bytes().expect("a valid synthetic feedforward image")
+}
+
+/// A seeded synthetic feedforward image with segment exits: `locations` locations (1 to 3: with one, every
+/// trajectory is one segment with a table exit), `trajectories` balls, each trajectory 2 or 3 segments
+/// of 3 to 12 rows (one with a single location) whose non-last segments end at a guard (three in four;
+/// θ = 0 one time in four, else up to 0.3; one guard in three dyadic: âⱼ = ±2^k, k ∈ −2..=1, b̂ and θ
+/// multiples of 1/16, so that states exactly on its threshold exist) or with their table; terminal behaviour and fallback law (index)
+/// as in [`feedforward_image`], input box `[-1, 1]^m`.
+#[allow(clippy::too_many_arguments)]
+pub fn exits_image(
+    seed: u64,
+    n: usize,
+    m: usize,
+    locations: usize,
+    trajectories: usize,
+    terminal: Terminal,
+    fallback: usize,
+) -> Vec<u8> {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let mut b = ImageBuilder::new(n, m, 0.05);
+    for _ in 0..locations {
+        let K = random_vec(&mut rng, m * n, 1.0);
+        let P = random_spd(&mut rng, n);
+        b.add_location(K, P);
+    }
+    let f32s = |rng: &mut ChaCha8Rng, k: usize, scale: f64| -> Vec<f32> {
+        (0..k).map(|_| (scale * normal(rng)) as f32).collect()
+    };
+    for _ in 0..trajectories {
+        let segments = if locations > 1 {
+            rng.random_range(2..=3)
+        } else {
+            1
+        };
+        let mut location = Vec::new();
+        let mut exits = Vec::new();
+        let mut l = rng.random_range(0..locations);
+        for s in 0..segments {
+            if s > 0 {
+                l = (l + rng.random_range(1..locations)) % locations;
+            }
+            let len = rng.random_range(3..=12);
+            location.extend(std::iter::repeat_n(l as u8, len));
+            exits.push(if s + 1 < segments && rng.random::<f64>() < 0.75 {
+                let theta = if rng.random::<f64>() < 0.25 {
+                    0.0
+                } else {
+                    rng.random_range(0.0..0.3) as f32
+                };
+                if rng.random::<f64>() < 1.0 / 3.0 {
+                    let a = (0..n)
+                        .map(|_| {
+                            let p = 2f32.powi(rng.random_range(-2..=1));
+                            if rng.random::<bool>() {
+                                p
+                            } else {
+                                -p
+                            }
+                        })
+                        .collect();
+                    SegmentExit::Guard {
+                        a,
+                        b: (8.0 * normal(&mut rng)).round() as f32 / 16.0,
+                        theta: rng.random_range(0..5) as f32 / 16.0,
+                        next: f32s(&mut rng, n, 1.0),
+                    }
+                } else {
+                    SegmentExit::Guard {
+                        a: f32s(&mut rng, n, 1.0),
+                        b: (0.5 * normal(&mut rng)) as f32,
+                        theta,
+                        next: f32s(&mut rng, n, 1.0),
+                    }
+                }
+            } else {
+                SegmentExit::Table
+            });
+        }
+        let rows = location.len();
+        b.add_trajectory(TrajectoryEntry {
+            x0: random_vec(&mut rng, n, 1.0),
+            delta: rng.random_range(0.3..2.0),
+            v: random_vec(&mut rng, rows * m, 0.5),
+            location,
+        });
+        b.exits.push(exits);
+    }
+    b.fallback = fallback_law(&mut rng, fallback, n, m);
+    b.input_box = Some((vec![-1.0; m], vec![1.0; m]));
+    b.terminal = terminal;
+    b.to_bytes()
+        .expect("a valid synthetic image with segment exits")
 }
 
 /// A seeded synthetic PWA-feedback image: a complete tree of depth 3 over random hyperplanes (one of its

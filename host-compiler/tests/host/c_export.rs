@@ -1,18 +1,23 @@
 //! The C export (`host-compiler export --c`): the exported C99 evaluator, compiled with the system `cc`
 //! under the header's flags, against the Rust evaluator, status and every input bit, on ≥ 10⁵ seeded
 //! states per image mode (feedforward with one and several locations, both terminal behaviours and every
-//! fallback law; PWA with one and several locations); corrupted arrays refused exactly when the Rust
-//! decoder refuses them; and the subcommand's exit codes.
+//! fallback law; feedforward with segment exits, synthetic and a real hybrid image of Example 4.25 along
+//! closed-loop runs; PWA with one and several locations); corrupted arrays refused exactly when the Rust
+//! decoder refuses them (random corruption, targeted corruption of exit records, and an exits section
+//! added by hand: empty, all tables, wrong length, trailing byte, in a PWA image); and the subcommand's
+//! exit codes.
 
 use std::path::PathBuf;
 use std::process::Command;
 
 use host_compiler::export::harness::{
-    feedforward_image, pwa_image, scenario, CHarness, Comparison, Op,
+    exits_image, exits_scenario, feedforward_image, pwa_image, scenario, Answer, CHarness,
+    Comparison, ExitCoverage, Op,
 };
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use shared_types::image::{compute_crc, decode, Terminal};
+use shared_types::image::{compute_crc, decode, directory, Terminal};
+use shared_types::layout::{exit_record_len, SectionKind};
 
 /// A fresh scratch directory for one test.
 fn scratch(name: &str) -> PathBuf {
@@ -115,6 +120,315 @@ fn feedforward_matches_the_rust_evaluator_bit_for_bit() {
     assert!(states >= 100_000, "{states}");
 }
 
+/// Synthetic images with segment exits (1 to 3 locations, 2 or 3 segments per trajectory, guard exits with
+/// θ = 0 and θ > 0, table exits, both terminal behaviours), on scenarios that cross guards at many
+/// samples, run out of guard segments' rows and sit one ulp either side of a threshold.
+#[test]
+fn exits_match_the_rust_evaluator_bit_for_bit() {
+    let cases = [
+        (
+            "one_location_tables_hold_last_hold",
+            3,
+            1,
+            1,
+            5,
+            Terminal::HoldLast,
+            0,
+        ),
+        (
+            "two_locations_fallback_linear",
+            4,
+            2,
+            2,
+            10,
+            Terminal::Fallback,
+            2,
+        ),
+        (
+            "three_locations_hold_last_constant",
+            3,
+            2,
+            3,
+            12,
+            Terminal::HoldLast,
+            3,
+        ),
+        (
+            "three_locations_fallback_zero",
+            5,
+            1,
+            3,
+            8,
+            Terminal::Fallback,
+            1,
+        ),
+        (
+            "two_locations_hold_last_hold_n12_m6",
+            12,
+            6,
+            2,
+            6,
+            Terminal::HoldLast,
+            0,
+        ),
+    ];
+    let mut results = Vec::new();
+    let mut total = ExitCoverage::default();
+    for (i, &(name, n, m, locs, trajs, terminal, fb)) in cases.iter().enumerate() {
+        let image = exits_image(500 + i as u64, n, m, locs, trajs, terminal, fb);
+        let img = decode(&image).expect("valid image");
+        assert!(img.has_exits(), "{name}");
+        let dir = scratch(name);
+        let h = CHarness::build(&image, &dir).unwrap_or_else(|e| panic!("{name}: {e}"));
+        let (ops, cov) = exits_scenario(&img, 37 + i as u64, 22_000);
+        let c = h.compare(&ops).unwrap_or_else(|e| panic!("{name}: {e}"));
+        assert_eq!((c.inits, c.init_mismatches), (1, 0), "{name}");
+        eprintln!(
+            "exits {name}: {} guard crossings at {} distinct samples, {} table exits, {} run-outs \
+             ({} confirmed), {} / {} states one ulp from a threshold (taken / not), {} exactly on it",
+            cov.crossings,
+            cov.crossing_samples.len(),
+            cov.table_moves,
+            cov.run_outs,
+            cov.run_outs_confirmed,
+            cov.at_threshold_taken,
+            cov.at_threshold_not_taken,
+            cov.at_threshold_exact
+        );
+        // The scenario's replica of the cursor agrees with the evaluator where it can be seen.
+        assert_eq!(cov.run_outs, cov.run_outs_confirmed, "{name}");
+        if locs > 1 {
+            assert!(cov.crossings > 100, "{name}: {cov:?}");
+            assert!(cov.run_outs > 10, "{name}: {cov:?}");
+            assert!(
+                cov.at_threshold_taken > 10 && cov.at_threshold_not_taken > 10,
+                "{name}"
+            );
+            assert!(cov.at_threshold_exact > 10, "{name}: {cov:?}");
+        }
+        total.crossings += cov.crossings;
+        total.crossing_samples.extend(cov.crossing_samples);
+        total.table_moves += cov.table_moves;
+        total.run_outs += cov.run_outs;
+        results.push((name, c));
+    }
+    assert!(total.crossing_samples.len() >= 8, "{total:?}");
+    assert!(total.table_moves > 0, "{total:?}");
+    let states = check_all("exits", &results);
+    assert!(states >= 100_000, "{states}");
+}
+
+/// A real image with guard exits: Example 4.25's run from (−5, 1, 2) (`synth::hybrid`), stepped along
+/// closed-loop runs of the exact hybrid flow from starts in and on its ball, the states fed exactly and
+/// with small noise; both evaluators see the same states.
+#[test]
+fn a_hybrid_image_matches_along_closed_loop_runs() {
+    use host_compiler::synth::hybrid::{ball_starts, image, plan_run, HybridTask};
+    use shared_types::eval::Controller;
+    let path = format!(
+        "{}/../examples/hybrid-internal-4-25.toml",
+        env!("CARGO_MANIFEST_DIR")
+    );
+    let task = HybridTask::new(host_compiler::spec::load(&path).unwrap()).unwrap();
+    let t0 = std::time::Instant::now();
+    let run = plan_run(&task, &[-5.0, 1.0, 2.0]).unwrap();
+    let bytes = image(&task, std::slice::from_ref(&run)).unwrap();
+    let planned = t0.elapsed();
+    let img = decode(&bytes).unwrap();
+    assert!(img.has_exits());
+    let dir = scratch("hybrid_4_25");
+    let h = CHarness::build(&bytes, &dir).expect("harness");
+    let starts = ball_starts(&task, &run, 40, 20, 11);
+    let mut rng = ChaCha8Rng::seed_from_u64(12);
+    let mut ops = vec![Op::InitEmbedded];
+    let (mut guard_runs, mut goal_runs) = (0usize, 0usize);
+    for noise in [0.0, 1e-3, 2e-2] {
+        for x0 in &starts {
+            ops.push(Op::Reset);
+            let mut ctl = Controller::new(img);
+            let (mut x, mut loc) = (x0.clone(), task.initial);
+            let mut events = 0usize;
+            // Each run stops 5 samples after it reaches Goal (or after the horizon plus 5).
+            let mut left = task.steps + 5;
+            while left > 0 {
+                left -= 1;
+                let x32: Vec<f32> = x
+                    .iter()
+                    .map(|&v| (v + noise * (rng.random::<f64>() - 0.5)) as f32)
+                    .collect();
+                ops.push(Op::Step(x32.clone()));
+                let Ok(u) = ctl.step(&x32) else { break };
+                let u: Vec<f64> = u.as_slice().iter().map(|&v| v as f64).collect();
+                let step = task.plant.flow(loc, &x, &u).unwrap();
+                events += step.events.len();
+                x = step.x;
+                loc = step.loc;
+                if left > 5 && task.property.goal.contains(&x) {
+                    left = 5;
+                    goal_runs += 1;
+                }
+            }
+            if events > 0 {
+                guard_runs += 1;
+            }
+        }
+    }
+    let simulated = t0.elapsed();
+    let c = h.compare(&ops).expect("driver");
+    eprintln!(
+        "hybrid 4.25: planned in {planned:.1?}, closed loops by {simulated:.1?}, compared by {:.1?}",
+        t0.elapsed()
+    );
+    eprintln!(
+        "hybrid 4.25: {} runs ({guard_runs} switched, {goal_runs} reached Goal), {} states, {} \
+         mismatches, by status {:?}",
+        3 * starts.len(),
+        c.states,
+        c.mismatches,
+        &c.by_status[..3]
+    );
+    assert_eq!(c.init_mismatches, 0);
+    assert_eq!(c.mismatches, 0, "{:?}", c.first);
+    assert!(guard_runs > starts.len(), "{guard_runs}");
+    assert!(goal_runs > starts.len(), "{goal_runs}");
+    assert!(c.by_status[0] > c.states / 2);
+}
+
+/// Each exit record of an image corrupted in the ways `decode` refuses (unknown kind, a nonzero value
+/// in a table record, a guard with a negative or non-finite θ, NaN or infinite â, b̂ or next start, a
+/// guard on a trajectory's last segment) and in ways it accepts (θ = −0, a guard with all zero values),
+/// the CRC repaired: the C init refuses exactly what `decode` refuses, and an accepted variant steps alike.
+#[test]
+fn corrupted_exit_records_are_refused_by_both() {
+    let image = exits_image(600, 3, 2, 3, 6, Terminal::Fallback, 2);
+    let img = decode(&image).expect("valid");
+    let (n, rec) = (img.n(), exit_record_len(img.n()));
+    let dir = directory(&image).expect("directory");
+    let e = (0..dir.len())
+        .filter_map(|i| dir.entry(i))
+        .find(|e| e.kind == SectionKind::SegmentExits as u16)
+        .expect("an exits section");
+    // The section is postcard: a varint length, then the records.
+    let mut start = e.offset as usize;
+    while image[start] & 0x80 != 0 {
+        start += 1;
+    }
+    start += 1;
+    let n_seg = img.n_segments();
+    assert_eq!(start + rec * n_seg, (e.offset + e.len) as usize);
+    // The last segment of each trajectory.
+    let last: Vec<bool> = (0..n_seg)
+        .map(|s| {
+            (0..img.n_trajectories()).any(|t| {
+                let (s0, c) = img.trajectory_segments(t);
+                s == s0 + c - 1
+            })
+        })
+        .collect();
+    let set_f32 = |b: &mut Vec<u8>, s: usize, k: usize, v: f32| {
+        let o = start + s * rec + 4 + 4 * k;
+        b[o..o + 4].copy_from_slice(&v.to_le_bytes());
+    };
+    let set_kind = |b: &mut Vec<u8>, s: usize, kind: u32| {
+        let o = start + s * rec;
+        b[o..o + 4].copy_from_slice(&kind.to_le_bytes());
+    };
+    let mut variants: Vec<(String, Vec<u8>)> = Vec::new();
+    for (s, &is_last) in last.iter().enumerate() {
+        let guard = img.exit(s) != shared_types::image::Exit::Table;
+        for kind in [2u32, 7, 0x100, u32::MAX] {
+            let mut b = image.clone();
+            set_kind(&mut b, s, kind);
+            variants.push((format!("segment {s}: kind {kind}"), b));
+        }
+        if guard {
+            for (what, k, v) in [
+                ("θ = -1e-3", n + 1, -1e-3f32),
+                ("θ = -inf", n + 1, f32::NEG_INFINITY),
+                ("θ = NaN", n + 1, f32::NAN),
+                ("θ = -0 (accepted)", n + 1, -0.0),
+                ("a0 = NaN", 0, f32::NAN),
+                ("b = inf", n, f32::INFINITY),
+                ("next0 = NaN", n + 2, f32::NAN),
+                ("next_last = -inf", 2 * n + 1, f32::NEG_INFINITY),
+            ] {
+                let mut b = image.clone();
+                set_f32(&mut b, s, k, v);
+                variants.push((format!("segment {s}: {what}"), b));
+            }
+            let mut b = image.clone();
+            set_kind(&mut b, s, 0);
+            variants.push((format!("segment {s}: guard relabelled table"), b));
+        } else {
+            for k in [0, n, n + 1, 2 * n + 1] {
+                for v in [1.0f32, -0.0, f32::NAN] {
+                    let mut b = image.clone();
+                    set_f32(&mut b, s, k, v);
+                    variants.push((format!("segment {s}: table value {k} = {v}"), b));
+                }
+            }
+            // A guard whose values are all zero: valid except on a last segment.
+            let mut b = image.clone();
+            set_kind(&mut b, s, 1);
+            let what = if is_last {
+                "guard on the last segment"
+            } else {
+                "zero guard (accepted)"
+            };
+            variants.push((format!("segment {s}: {what}"), b));
+            if is_last {
+                let mut b = image.clone();
+                set_kind(&mut b, s, 1);
+                set_f32(&mut b, s, 0, 1.0);
+                set_f32(&mut b, s, n + 1, 0.1);
+                variants.push((format!("segment {s}: finite guard on the last segment"), b));
+            }
+        }
+    }
+    let probe: Vec<Op> = exits_scenario(&img, 5, 60)
+        .0
+        .into_iter()
+        .filter(|op| matches!(op, Op::Step(_) | Op::Reset))
+        .collect();
+    let mut ops = Vec::new();
+    for (_, b) in variants.iter_mut() {
+        let crc = compute_crc(b).expect("crc");
+        b[28..32].copy_from_slice(&crc.to_le_bytes());
+        ops.push(Op::InitBytes(b.clone()));
+        ops.extend(probe.iter().cloned());
+    }
+    let sdir = scratch("corrupt_exits");
+    let h = CHarness::build(&image, &sdir).expect("harness");
+    let c = h.compare(&ops).expect("driver");
+    let rust: Vec<bool> = h
+        .run_rust(&ops)
+        .iter()
+        .filter_map(|a| match a {
+            Answer::Init(ok) => Some(*ok),
+            _ => None,
+        })
+        .collect();
+    let refused = rust.iter().filter(|ok| !**ok).count();
+    for ((what, _), ok) in variants.iter().zip(&rust) {
+        // A relabelled guard keeps its nonzero values (refused as a table record); a table value of
+        // -0 has a nonzero bit (refused).
+        let expect_ok = what.contains("(accepted)");
+        assert_eq!(*ok, expect_ok, "{what}: decode accepted = {ok}");
+    }
+    eprintln!(
+        "exit records: {} variants, {refused} refused by decode, {} init mismatches, {} states, {} step \
+         mismatches",
+        c.inits, c.init_mismatches, c.states, c.mismatches
+    );
+    assert_eq!(c.init_mismatches, 0, "{:?}", c.first);
+    assert_eq!(c.mismatches, 0, "{:?}", c.first);
+    assert!(
+        refused >= 40 && refused < c.inits,
+        "{refused} of {}",
+        c.inits
+    );
+}
+
 #[test]
 fn pwa_matches_the_rust_evaluator_bit_for_bit() {
     let cases = [
@@ -141,6 +455,7 @@ fn corrupted_arrays_are_refused_as_the_rust_decoder_refuses_them() {
             "feedforward",
             feedforward_image(300, 3, 2, 3, 6, Terminal::Fallback, 2),
         ),
+        ("exits", exits_image(302, 3, 2, 3, 6, Terminal::HoldLast, 0)),
         ("pwa", pwa_image(301, 3, 2, 2, 3, 20, 3)),
     ];
     for (name, image) in images {
@@ -263,4 +578,119 @@ fn export_writes_the_files_and_refuses_bad_input_with_exit_2() {
         assert!(stderr.contains(what), "{what}: {stderr}");
     }
     assert!(!dir.join("c2").exists(), "a rejected image wrote files");
+}
+
+/// `image` with one more section of `kind` (a tag above the image's others, so it goes last) and this
+/// postcard `body`, the directory, payload length and CRC updated.
+fn with_section(image: &[u8], kind: u16, body: &[u8]) -> Vec<u8> {
+    let count = u16::from_le_bytes([image[18], image[19]]) as usize;
+    let dir_end = 32 + 12 * count;
+    let mut out = image[..dir_end].to_vec();
+    for i in 0..count {
+        let o = 32 + 12 * i + 4;
+        let off = u32::from_le_bytes(out[o..o + 4].try_into().unwrap()) + 12;
+        out[o..o + 4].copy_from_slice(&off.to_le_bytes());
+    }
+    out.extend_from_slice(&kind.to_le_bytes());
+    out.extend_from_slice(&0u16.to_le_bytes());
+    out.extend_from_slice(&(image.len() as u32 + 12).to_le_bytes());
+    out.extend_from_slice(&(body.len() as u32).to_le_bytes());
+    out.extend_from_slice(&image[dir_end..]);
+    out.extend_from_slice(body);
+    out[18..20].copy_from_slice(&(count as u16 + 1).to_le_bytes());
+    let payload = out.len() as u32 - 32;
+    out[24..28].copy_from_slice(&payload.to_le_bytes());
+    let crc = compute_crc(&out).expect("crc");
+    out[28..32].copy_from_slice(&crc.to_le_bytes());
+    out
+}
+
+/// A segment-exits section added by hand: empty (no exits) or all table records in a feedforward image
+/// (accepted, same answers), one record short or with a trailing byte (refused), in a PWA image (not
+/// admitted by the mode: refused). The C init decides as `decode` does, and accepted images step alike.
+#[test]
+fn an_exits_section_is_admitted_as_the_rust_decoder_admits_it() {
+    let ff = feedforward_image(700, 3, 2, 2, 5, Terminal::Fallback, 3);
+    let img = decode(&ff).unwrap();
+    let rec = exit_record_len(img.n());
+    let n_seg = img.n_segments();
+    let records = |k: usize| {
+        let mut b = Vec::new();
+        for _ in 0..k {
+            b.extend_from_slice(&0u32.to_le_bytes());
+            b.extend(std::iter::repeat_n(0u8, rec - 4));
+        }
+        b
+    };
+    let postcard = |bytes: &[u8]| {
+        let mut b = Vec::new();
+        let mut v = bytes.len();
+        loop {
+            let byte = (v & 0x7F) as u8;
+            v >>= 7;
+            if v == 0 {
+                b.push(byte);
+                break;
+            }
+            b.push(byte | 0x80);
+        }
+        b.extend_from_slice(bytes);
+        b
+    };
+    let tables = records(n_seg);
+    let mut trailing = postcard(&tables);
+    trailing.push(0);
+    let pwa = pwa_image(701, 3, 2, 1, 2, 10, 1);
+    let cases: Vec<(&str, Vec<u8>, bool)> = vec![
+        ("empty", with_section(&ff, 9, &postcard(&[])), true),
+        ("all tables", with_section(&ff, 9, &postcard(&tables)), true),
+        (
+            "one record short",
+            with_section(&ff, 9, &postcard(&records(n_seg - 1))),
+            false,
+        ),
+        ("trailing byte", with_section(&ff, 9, &trailing), false),
+        (
+            "in a PWA image",
+            with_section(&pwa, 9, &postcard(&[])),
+            false,
+        ),
+        (
+            "unknown kind 10",
+            with_section(&ff, 10, &postcard(&[])),
+            false,
+        ),
+    ];
+    let probe: Vec<Op> = scenario(&img, 9, 300)
+        .into_iter()
+        .filter(|op| matches!(op, Op::Step(_) | Op::Reset))
+        .collect();
+    let mut ops = Vec::new();
+    for (what, bytes, ok) in &cases {
+        assert_eq!(
+            decode(bytes).is_ok(),
+            *ok,
+            "{what}: {:?}",
+            decode(bytes).err()
+        );
+        ops.push(Op::InitBytes(bytes.clone()));
+        ops.extend(probe.iter().cloned());
+    }
+    let h = CHarness::build(&ff, &scratch("exits_section")).expect("harness");
+    let c = h.compare(&ops).expect("driver");
+    eprintln!(
+        "exits section: {} inits, {} init mismatches, {} states, {} mismatches",
+        c.inits, c.init_mismatches, c.states, c.mismatches
+    );
+    assert_eq!(c.init_mismatches, 0, "{:?}", c.first);
+    assert_eq!(c.mismatches, 0, "{:?}", c.first);
+    // The all-tables image (through the exits path) answers as the image without the section.
+    let mut run = vec![Op::InitEmbedded];
+    run.extend(probe.iter().cloned());
+    let plain = host_compiler::export::harness::reference(&ff, &run);
+    let all_tables = host_compiler::export::harness::reference(&cases[1].1, &run);
+    assert!(
+        plain == all_tables,
+        "the all-tables image answers differently"
+    );
 }

@@ -15,7 +15,9 @@
 #define SC_FORMAT_VERSION @FORMAT_VERSION@u
 #define SC_LEAF_BASE 0x8000u
 #define SC_OUTSIDE 0xFFFFu
-#define SC_N_KINDS 8u
+#define SC_N_KINDS 9u
+#define SC_EXIT_TABLE 0u
+#define SC_EXIT_GUARD 1u
 
 /* ------------------------------------------------------------------------------------------------ */
 /* Total little-endian reads (shared_types::raw): out of range reads as 0, which a validated image never
@@ -265,6 +267,34 @@ static sc_error validate_feedforward(const sc_image *im) {
             if (rows > SC_MAX_STEPS) return SC_E_DIMENSION;
         }
         s0 = s1;
+    }
+    /* Segment exits (optional; an empty section is none): kinds known, a table exit all zero bits, a
+     * guard exit finite with theta >= 0 and not on its trajectory's last segment. */
+    if (im->exits.len != 0) {
+        uint64_t rec = 2ull * n + 3u; /* f32 words per record (layout::exit_record_len / 4) */
+        if ((uint64_t)im->exits.len != 4u * rec * n_seg) return SC_E_LENGTH;
+        s0 = 0;
+        for (t = 0; t < nt; t++) {
+            uint32_t s1 = u16_at(im->seg_end, t);
+            for (s = s0; s < s1; s++) {
+                uint32_t kind = u32_byte(im->exits, 4u * rec * s), k;
+                uint64_t v0 = rec * s + 1u;
+                float theta = f32_at(im->exits, v0 + n + 1u);
+                int ok = 1;
+                if (kind == SC_EXIT_TABLE) {
+                    for (k = 0; k < 2u * n + 2u; k++)
+                        if (f32_bits(f32_at(im->exits, v0 + k)) != 0u) ok = 0;
+                } else if (kind == SC_EXIT_GUARD) {
+                    for (k = 0; k < 2u * n + 2u; k++)
+                        if (!finite_f32(f32_at(im->exits, v0 + k))) ok = 0;
+                    if (!(theta >= 0.0f) || s + 1u >= s1) ok = 0;
+                } else {
+                    ok = 0;
+                }
+                if (!ok) return SC_E_EXIT;
+            }
+            s0 = s1;
+        }
     }
     if ((e = check_floats(im->centre, 4ull * nt * n)) != SC_E_NONE) return e;
     if ((e = check_floats(im->delta, 4ull * nt)) != SC_E_NONE) return e;
@@ -528,8 +558,10 @@ static sc_error decode(sc_image *im, const uint8_t *bytes, uint32_t len) {
         if (slen > len - next) return SC_E_DIRECTORY;
         if (i > 0 && kind <= prev_kind) return SC_E_DIRECTORY;
         if (kind < 1 || kind > SC_N_KINDS) return SC_E_DIRECTORY;
-        /* admitted by the mode: kinds 1-5 feedforward, 1, 2 and 6-8 PWA */
-        if (im->mode == 1 ? kind > 5 : (kind >= 3 && kind <= 5)) return SC_E_DIRECTORY;
+        /* admitted by the mode (layout::Mode::admits): kinds 1-5 and 9 (segment exits, optional)
+         * feedforward, 1, 2 and 6-8 PWA */
+        if (im->mode == 1 ? (kind > 5 && kind != 9) : ((kind >= 3 && kind <= 5) || kind == 9))
+            return SC_E_DIRECTORY;
         body[kind - 1].p = bytes + next;
         body[kind - 1].len = slen;
         present |= 1u << (kind - 1);
@@ -546,6 +578,8 @@ static sc_error decode(sc_image *im, const uint8_t *bytes, uint32_t len) {
         if ((e = parse_trajectories(im, body[2])) != SC_E_NONE) return e;
         if ((e = parse_one_bytes(&im->segment, body[3])) != SC_E_NONE) return e;
         if ((e = parse_one_bytes(&im->v, body[4])) != SC_E_NONE) return e;
+        if ((present & (1u << 8)) && (e = parse_one_bytes(&im->exits, body[8])) != SC_E_NONE)
+            return e;
     } else {
         if ((e = parse_pwa_laws(im, body[5])) != SC_E_NONE) return e;
         if ((e = parse_pwa_tree(im, body[6])) != SC_E_NONE) return e;
@@ -572,6 +606,7 @@ void sc_reset(sc_controller *c) {
     c->has_active = 0;
     c->active = 0;
     c->segment = 0;
+    c->seg_kappa = 0;
     c->out_of_envelope = 0;
     for (j = 0; j < SC_MAX_M; j++) c->last_u[j] = 0.0f;
 }
@@ -799,6 +834,71 @@ static int32_t pwa_locate(const sc_image *im, const float *x) {
     return -1;
 }
 
+static sc_status finish(sc_controller *c, const float *v, float u[SC_MAX_M]);
+
+/* Controller::step_exits: a feedforward step of an image with segment exits. The cursor moves to the
+ * next segment of the trajectory when the active one has a guard exit and
+ * fl(sum_j a_j x_j) - b <= -theta (summed in index order from 0; the next segment starts at this sample,
+ * row 0), or when a table exit's rows are used up; at most one move per segment per step. A guard
+ * segment whose rows run out leaves the envelope (latched); past the last segment's rows, the terminal
+ * behaviour. The cursor and the kappa its segment began at are updated even if the input then
+ * overflows, as in Rust. */
+static sc_status step_exits(sc_controller *c, uint32_t t, const float *x, uint32_t n_x,
+                            float u[SC_MAX_M]) {
+    const sc_image *im = &c->image;
+    uint32_t n = im->n, s0, count, last, s, i, j, local;
+    uint64_t rec = 2ull * n + 3u;
+    float v[SC_MAX_M];
+    sc_segment g;
+    trajectory_segments(im, t, &s0, &count);
+    last = s0 + count > 0 ? s0 + count - 1u : 0u;
+    s = c->segment;
+    if (s < s0) s = s0;
+    if (s > last) s = last;
+    for (i = 0; i < count; i++) {
+        uint64_t v0 = rec * s + 1u;
+        if (s >= n_segments(im)) break;
+        g = segment_at(im->segment, s);
+        local = c->kappa - c->seg_kappa;
+        if (c->kappa < c->seg_kappa) local = 0;
+        if (s >= last) break;
+        if ((uint64_t)im->exits.len >= 4u * rec * (s + 1u) &&
+            u32_byte(im->exits, 4u * rec * s) == SC_EXIT_GUARD) {
+            float acc = 0.0f, b = f32_at(im->exits, v0 + n), theta = f32_at(im->exits, v0 + n + 1u);
+            for (j = 0; j < n; j++) acc += f32_at(im->exits, v0 + j) * x[j];
+            if (acc - b <= -theta) {
+                s++;
+                c->seg_kappa = c->kappa;
+                continue;
+            }
+        } else if (local >= g.len) {
+            s++;
+            c->seg_kappa = c->seg_kappa > 0xFFFFFFFFu - g.len ? 0xFFFFFFFFu : c->seg_kappa + g.len;
+            continue;
+        }
+        break;
+    }
+    c->segment = (uint16_t)s;
+    if (s >= n_segments(im)) {
+        c->out_of_envelope = 1;
+        return SC_OUT_OF_ENVELOPE;
+    }
+    g = segment_at(im->segment, s);
+    local = c->kappa >= c->seg_kappa ? c->kappa - c->seg_kappa : 0u;
+    if (local < g.len) {
+        ff_law(im, g.first_row + local, g.location, x, v);
+    } else if (s < last) {
+        /* A guard exit not seen within its rows: outside what was certified. */
+        c->out_of_envelope = 1;
+        return SC_OUT_OF_ENVELOPE;
+    } else if (im->terminal == 0) {
+        ff_law(im, g.first_row + (g.len > 0 ? g.len - 1u : 0u), g.location, x, v);
+    } else {
+        sc_fallback(c, x, n_x, c->last_u, v);
+    }
+    return finish(c, v, u);
+}
+
 static sc_status finish(sc_controller *c, const float *v, float u[SC_MAX_M]) {
     uint32_t j;
     for (j = 0; j < c->image.m; j++)
@@ -852,6 +952,7 @@ sc_status sc_step(sc_controller *c, const float *x, uint32_t n_x, float u[SC_MAX
             trajectory_segments(im, t, &s0, &count);
             c->segment = (uint16_t)s0;
         }
+        if (im->exits.len != 0) return step_exits(c, t, x, n_x, u);
         trajectory_rows(im, t, &start, &len);
         k = c->kappa;
         if (k < len || im->terminal == 0) {

@@ -14,8 +14,8 @@
  * Guarantees: no malloc, no recursion, no global state; every loop is bounded by the capacities below
  * (those of the Rust build that exported this file); sc_init validates everything the Rust decoder
  * validates (CRC, header, section directory, postcard framing, every length, every float finite, P
- * symmetric positive definite, segments, the PWA tree, ...) and never reads outside the array it is
- * given; a corrupted image is refused with an SC_E_* code. sc_init uses about 1.2 KiB of stack for the
+ * symmetric positive definite, segments, segment exits, the PWA tree, ...) and never reads outside the
+ * array it is given; a corrupted image is refused with an SC_E_* code. sc_init uses about 1.2 KiB of stack for the
  * PWA tree check; sc_step a few hundred bytes.
  *
  * Semantics (see shared-types/src/eval.rs):
@@ -23,6 +23,11 @@
  *     is nearest in its metric (ties: lowest index); none -> SC_OUT_OF_ENVELOPE, latched until
  *     sc_reset. Then u = K_l x + v_i(kappa) with l the location of the segment holding row kappa; past
  *     the last row, HoldLast keeps the last row, Fallback applies the image's fallback law.
+ *   - feedforward with segment exits (optional section 9): the controller keeps the active segment and
+ *     the kappa it began at; a guard segment is left when fl(sum_j a_j x_j) - b <= -theta (f32, summed
+ *     in index order, then the subtraction, then the comparison) and the next segment starts at that
+ *     sample at row 0; a table segment is left when its rows are used up; a guard segment whose rows
+ *     run out -> SC_OUT_OF_ENVELOPE, latched; past the last segment's rows, the terminal behaviour.
  *   - PWA feedback: every step, walk the tree, test the leaf's balls; inside -> u = K_j x + theta0_j;
  *     otherwise SC_OUT_OF_ENVELOPE for this step only.
  *   - a state of the wrong length or with a non-finite component -> SC_BAD_FRAME; a non-finite input
@@ -84,7 +89,9 @@ typedef enum {
     SC_E_FALLBACK = 16,        /* fallback law or input box */
     SC_E_PWA = 17,             /* PWA laws, leaves, factors, balls, references */
     SC_E_TREE = 18,            /* PWA point-location tree */
-    SC_E_ARGUMENT = 19         /* a null pointer */
+    SC_E_ARGUMENT = 19,        /* a null pointer */
+    SC_E_EXIT = 20             /* segment exits: unknown kind, nonzero table record, guard exit with a
+                                  non-finite value, negative theta, or on a trajectory's last segment */
 } sc_error;
 
 typedef struct {
@@ -105,6 +112,8 @@ typedef struct {
     /* feedforward */
     uint8_t terminal;    /* 0 hold last row, 1 fallback */
     sc_bytes seg_end, centre, delta, segment, v;
+    sc_bytes exits;      /* segment exit records (optional section 9; empty: every segment ends with its
+                            table) */
     /* PWA feedback */
     uint8_t depth;
     uint32_t n_nodes, n_leaves, n_balls;
@@ -119,6 +128,7 @@ typedef struct {
     uint8_t has_active;
     uint16_t active;        /* trajectory selected at kappa = 0 */
     uint16_t segment;       /* segment cursor of the active trajectory */
+    uint32_t seg_kappa;     /* kappa at which the active segment began (images with segment exits) */
     uint8_t out_of_envelope;
     float last_u[SC_MAX_M]; /* last input returned with SC_OK (zero after reset) */
 } sc_controller;
