@@ -308,12 +308,7 @@ impl<'a> Controller<'a> {
         } else {
             self.fallback(x, &self.last_u)
         };
-        if !u.as_slice().iter().all(|v| v.is_finite()) {
-            return Err(Status::OutOfEnvelope);
-        }
-        self.kappa = self.kappa.saturating_add(1);
-        self.last_u = u;
-        Ok(u)
+        self.accept(u)
     }
 
     /// A feedforward step of an image with segment exits (internal switching, (4.41)–(4.42)): the cursor
@@ -375,6 +370,13 @@ impl<'a> Controller<'a> {
         } else {
             self.fallback(x, &self.last_u)
         };
+        self.accept(u)
+    }
+
+    /// The end of every step: a non-finite input is out of the envelope (κ does not advance); otherwise κ
+    /// advances and the input is remembered for [`Fallback::Hold`].
+    #[inline(always)]
+    fn accept(&mut self, u: Input) -> Result<Input, Status> {
         if !u.as_slice().iter().all(|v| v.is_finite()) {
             return Err(Status::OutOfEnvelope);
         }
@@ -412,12 +414,7 @@ impl<'a> Controller<'a> {
             }
             *uj = s + oj;
         }
-        if !u.as_slice().iter().all(|v| v.is_finite()) {
-            return Err(Status::OutOfEnvelope);
-        }
-        self.kappa = self.kappa.saturating_add(1);
-        self.last_u = u;
-        Ok(u)
+        self.accept(u)
     }
 
     /// The image's fallback input for state `x`, given the last applied input:

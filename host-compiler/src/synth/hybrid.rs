@@ -508,23 +508,15 @@ pub fn ball_starts(
     let delta = run.certificate.delta_stored as f64;
     let mut out = Vec::with_capacity(interior + boundary);
     for i in 0..interior + boundary {
-        let w: Vec<f64> = (0..n)
-            .map(|_| {
-                // Box–Muller normal.
-                let (a, b): (f64, f64) = (rng.random::<f64>().max(1e-300), rng.random());
-                (-2.0 * a.ln()).sqrt() * (std::f64::consts::TAU * b).cos()
-            })
-            .collect();
-        let norm = w.iter().map(|v| v * v).sum::<f64>().sqrt().max(1e-300);
         let radius = if i < interior {
             delta * rng.random::<f64>().powf(1.0 / n as f64)
         } else {
             // Just inside: the boundary itself is where the f32 selection test may go either way.
             delta * (1.0 - 1e-6)
         };
-        let dir: Vec<f64> = w.iter().map(|v| v / norm * radius).collect();
-        let e = crate::linalg::mat_vec(roots.inv_sqrt.as_ref(), &dir);
-        out.push((0..n).map(|j| c[j] + e[j]).collect());
+        out.push(crate::verify::hybrid::point_on_sphere(
+            &mut rng, roots, c, radius,
+        ));
     }
     out
 }

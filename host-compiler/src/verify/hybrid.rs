@@ -353,7 +353,7 @@ pub fn starts_from_image(
     per_ball: usize,
     seed: u64,
 ) -> Result<Vec<Vec<f64>>, String> {
-    use rand::{Rng, SeedableRng};
+    use rand::SeedableRng;
     let img = shared_types::image::decode(bytes).map_err(|e| format!("image: {e}"))?;
     let n = img.n();
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
@@ -376,18 +376,31 @@ pub fn starts_from_image(
             continue;
         };
         let delta = img.delta(t) as f64 * (1.0 - 1e-6);
+        let c: Vec<f64> = (0..n).map(|i| img.centre(t, i) as f64).collect();
         for _ in 0..per_ball {
-            let w: Vec<f64> = (0..n)
-                .map(|_| {
-                    let (a, b): (f64, f64) = (rng.random::<f64>().max(1e-300), rng.random());
-                    (-2.0 * a.ln()).sqrt() * (std::f64::consts::TAU * b).cos()
-                })
-                .collect();
-            let norm = w.iter().map(|v| v * v).sum::<f64>().sqrt().max(1e-300);
-            let dir: Vec<f64> = w.iter().map(|v| v / norm * delta).collect();
-            let e = crate::linalg::mat_vec(roots.inv_sqrt.as_ref(), &dir);
-            out.push((0..n).map(|i| img.centre(t, i) as f64 + e[i]).collect());
+            out.push(point_on_sphere(&mut rng, &roots, &c, delta));
         }
     }
     Ok(out)
+}
+
+/// A point at P-distance `radius` from `c` in a uniformly random direction (of the whitened coordinates
+/// P^{1/2}(x − c)), drawn from `rng` (Box–Muller normals).
+pub fn point_on_sphere<R: rand::Rng>(
+    rng: &mut R,
+    roots: &crate::linalg::PdRoots,
+    c: &[f64],
+    radius: f64,
+) -> Vec<f64> {
+    let n = c.len();
+    let w: Vec<f64> = (0..n)
+        .map(|_| {
+            let (a, b): (f64, f64) = (rng.random::<f64>().max(1e-300), rng.random());
+            (-2.0 * a.ln()).sqrt() * (std::f64::consts::TAU * b).cos()
+        })
+        .collect();
+    let norm = w.iter().map(|v| v * v).sum::<f64>().sqrt().max(1e-300);
+    let dir: Vec<f64> = w.iter().map(|v| v / norm * radius).collect();
+    let e = crate::linalg::mat_vec(roots.inv_sqrt.as_ref(), &dir);
+    (0..n).map(|i| c[i] + e[i]).collect()
 }

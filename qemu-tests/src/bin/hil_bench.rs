@@ -276,6 +276,11 @@ fn hybrid_step_max() -> Result<(u32, u64), Box<dyn std::error::Error>> {
             qemu_tests::logs::stack_peak(&exit.logs).ok_or("no stack_peak in the shutdown log")?;
         stack = stack.max(peak);
     }
-    println!("hybrid (Ex 4.25): δ = {:.4}, {} runs of {} steps, max step {max} instructions", run.delta(), starts.len(), task.steps);
+    println!(
+        "hybrid (Ex 4.25): δ = {:.4}, {} runs of {} steps, max step {max} instructions",
+        run.delta(),
+        starts.len(),
+        task.steps
+    );
     Ok((max, stack))
 }
