@@ -367,6 +367,28 @@ fn point_at(rng: &mut ChaCha8Rng, c: &[f64], s: f64, norm: impl Fn(&[f64]) -> f6
         .collect()
 }
 
+/// A random trajectory of a feedforward image and a start at a random multiple ([`radius_factor`]) of its
+/// ball's radius, in the metric of its first segment's location.
+fn start_near_ball(image: &Image<'_>, rng: &mut ChaCha8Rng) -> (usize, Vec<f32>) {
+    let n = image.n();
+    let t = rng.random_range(0..image.n_trajectories());
+    let (s0, _) = image.trajectory_segments(t);
+    let l = image.segment(s0).map_or(0, |s| s.location);
+    let c: Vec<f64> = (0..n).map(|i| image.centre(t, i) as f64).collect();
+    let delta = image.delta(t) as f64;
+    let norm = |e: &[f64]| {
+        let mut q = 0.0;
+        for r in 0..n {
+            for k in 0..n {
+                q += e[r] * image.P(l, r, k) as f64 * e[k];
+            }
+        }
+        q.max(0.0).sqrt()
+    };
+    let rho = radius_factor(rng);
+    (t, point_at(rng, &c, delta * rho, norm))
+}
+
 /// A seeded scenario of at least `states` steps for `image`, starting with [`Op::InitEmbedded`]. An image
 /// with segment exits gets [`exits_scenario`]'s.
 ///
@@ -387,22 +409,7 @@ pub fn scenario(image: &Image<'_>, seed: u64, states: usize) -> Vec<Op> {
         Mode::Feedforward => {
             while count < states {
                 ops.push(Op::Reset);
-                let t = rng.random_range(0..image.n_trajectories());
-                let (s0, _) = image.trajectory_segments(t);
-                let l = image.segment(s0).map_or(0, |s| s.location);
-                let c: Vec<f64> = (0..n).map(|i| image.centre(t, i) as f64).collect();
-                let delta = image.delta(t) as f64;
-                let norm = |e: &[f64]| {
-                    let mut q = 0.0;
-                    for r in 0..n {
-                        for k in 0..n {
-                            q += e[r] * image.P(l, r, k) as f64 * e[k];
-                        }
-                    }
-                    q.max(0.0).sqrt()
-                };
-                let rho = radius_factor(&mut rng);
-                let x0 = point_at(&mut rng, &c, delta * rho, norm);
+                let (t, x0) = start_near_ball(image, &mut rng);
                 let len = image.trajectory_len(t) + rng.random_range(0..4);
                 let len = if rng.random::<f64>() < 0.2 {
                     rng.random_range(1..=len)
@@ -598,22 +605,7 @@ pub fn exits_scenario(image: &Image<'_>, seed: u64, states: usize) -> (Vec<Op>, 
     while count < states {
         ops.push(Op::Reset);
         ctl.reset();
-        let t = rng.random_range(0..image.n_trajectories());
-        let (s0, _) = image.trajectory_segments(t);
-        let l = image.segment(s0).map_or(0, |s| s.location);
-        let c: Vec<f64> = (0..n).map(|i| image.centre(t, i) as f64).collect();
-        let delta = image.delta(t) as f64;
-        let norm = |e: &[f64]| {
-            let mut q = 0.0;
-            for r in 0..n {
-                for k in 0..n {
-                    q += e[r] * image.P(l, r, k) as f64 * e[k];
-                }
-            }
-            q.max(0.0).sqrt()
-        };
-        let rho = radius_factor(&mut rng);
-        let mut w = point_at(&mut rng, &c, delta * rho, norm);
+        let (t, mut w) = start_near_ball(image, &mut rng);
         let len = image.trajectory_len(t) + rng.random_range(0..6);
         let len = if rng.random::<f64>() < 0.2 {
             rng.random_range(1..=len)
