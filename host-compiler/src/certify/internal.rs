@@ -57,7 +57,7 @@ use super::{certify_at, Certificate, GoalAt, Loop, LoopConstants};
 use crate::geometry::{GeometryError, Metric, Polytope as Halfspaces, Region, Witness};
 use crate::linalg::{mat_t_vec, mat_vec, p_norm, spectral_norm, sym_eigenvalues, to_row_major};
 use crate::model::hybrid::{Edge, EdgeKind, Hybrid, Polytope};
-use crate::model::{ContinuousPlant, Location, Plant};
+use crate::model::{ContinuousPlant, Plant};
 use crate::trajectory::Nominal;
 use faer::{Mat, MatRef};
 
@@ -277,11 +277,6 @@ fn guard_eval_bound(a: &[f64], b: f64, X: &[f64]) -> f64 {
     2.0 * (3.0 * super::U32 + super::gamma_k(n + 1)) * s + 1e-40
 }
 
-/// f(x, u) = A x + B u + c.
-fn field(cp: &ContinuousPlant, x: &[f64], u: &[f64]) -> Vec<f64> {
-    cp.f(x, u)
-}
-
 /// Per-location constants the bounds use.
 struct Loc<'a> {
     cp: &'a ContinuousPlant,
@@ -477,7 +472,7 @@ fn check_entry(r: f64, loc: &Loc<'_>, entry: &Half, nom: &Nominal, end: usize, e
         .sqrt();
     let radius = |k: usize| -> f64 {
         if k < nom.steps() {
-            let f = field(loc.cp, &nom.x[k], &nom.u[k]);
+            let f = loc.cp.f(&nom.x[k], &nom.u[k]);
             loc.inter(r, loc.lc.phi * p_norm(loc.lc.P.as_ref(), &f), eps)
         } else {
             r
@@ -494,7 +489,7 @@ fn check_entry(r: f64, loc: &Loc<'_>, entry: &Half, nom: &Nominal, end: usize, e
     for w in 0..=end {
         // Transversality at sample w (its interval), then all deep after w.
         if w < nom.steps() {
-            let f = field(loc.cp, &nom.x[w], &nom.u[w]);
+            let f = loc.cp.f(&nom.x[w], &nom.u[w]);
             let t = dot(&entry.a, &f) + tA * radius(w) + tBK * r + tB * eps;
             if !(t < 0.0) {
                 return false;
@@ -805,7 +800,7 @@ pub fn certify_internal(
             rho: (0..=rows)
                 .map(|k| {
                     if k < rows {
-                        pre.lc.phi * p_norm(pre.lc.P.as_ref(), &field(pre.cp, &nom.x[k], &nom.u[k]))
+                        pre.lc.phi * p_norm(pre.lc.P.as_ref(), &pre.cp.f(&nom.x[k], &nom.u[k]))
                     } else {
                         0.0
                     }
@@ -814,19 +809,19 @@ pub fn certify_internal(
             f_pre: (0..=rows)
                 .map(|k| {
                     let u = nom.u.get(k).or(nom.u.last()).expect("rows ≥ 1");
-                    p_norm(post.lc.P.as_ref(), &field(pre.cp, &nom.x[k], u))
+                    p_norm(post.lc.P.as_ref(), &pre.cp.f(&nom.x[k], u))
                 })
                 .collect(),
             f_post: (0..=rows)
                 .map(|k| {
                     let u = nom.u.get(k).or(nom.u.last()).expect("rows ≥ 1");
-                    p_norm(post.lc.P.as_ref(), &field(post.cp, &nom.x[k], u))
+                    p_norm(post.lc.P.as_ref(), &post.cp.f(&nom.x[k], u))
                 })
                 .collect(),
             trans: (0..=rows)
                 .map(|k| {
                     let u = nom.u.get(k).or(nom.u.last()).expect("rows ≥ 1");
-                    dot(&exit.a, &field(post.cp, &nom.x[k], u))
+                    dot(&exit.a, &post.cp.f(&nom.x[k], u))
                 })
                 .collect(),
             unsafe_next: (0..=rows)
@@ -948,9 +943,4 @@ pub fn certify_internal(
         segments: certs,
         delta_stored,
     })
-}
-
-/// The location a segment runs in (for callers that build runs).
-pub fn location_of(seg: &InternalSegment<'_>) -> Location {
-    seg.lp.loc
 }

@@ -307,6 +307,11 @@ impl Hybrid {
         self.period
     }
 
+    /// The same automaton sampled with another period (e.g. a fraction of h, to look between samples).
+    pub fn resampled(&self, period: f64) -> Result<Self, HybridError> {
+        Self::new(self.modes.clone(), self.edges.clone(), period)
+    }
+
     /// The state after `s` seconds of location `loc`'s flow from `x` with `u` held (exact ZOH of length s).
     fn advance(&self, loc: Location, x: &[f64], u: &[f64], s: f64) -> Result<Vec<f64>, FlowError> {
         if s <= 0.0 {

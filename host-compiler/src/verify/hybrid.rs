@@ -10,7 +10,7 @@
 
 use crate::model::hybrid::{FlowError, Hybrid};
 use crate::model::Location;
-use crate::property::{InputBound, ReachAvoid};
+use crate::property::ReachAvoid;
 use shared_types::eval::Controller;
 
 /// Exact sub-periods per control period at which Unsafe is checked.
@@ -51,23 +51,6 @@ impl HybridReport {
     }
 }
 
-fn input_ok(input: &InputBound, u: &[f32]) -> bool {
-    match input {
-        InputBound::Box { lo, hi } => u
-            .iter()
-            .zip(lo.iter().zip(hi))
-            .all(|(&v, (&l, &h))| l <= v as f64 && v as f64 <= h),
-        InputBound::Norm2 { center, max } => {
-            u.iter()
-                .zip(center)
-                .map(|(&v, c)| (v as f64 - c).powi(2))
-                .sum::<f64>()
-                .sqrt()
-                <= *max
-        }
-    }
-}
-
 /// Runs the image `bytes` from each start (in location `initial`) for `steps` samples (module doc). A
 /// start the evaluator does not select a ball for is counted as rejected, not run.
 pub fn monte_carlo_hybrid(
@@ -79,12 +62,9 @@ pub fn monte_carlo_hybrid(
     starts: &[Vec<f64>],
 ) -> Result<HybridReport, String> {
     let image = shared_types::image::decode(bytes).map_err(|e| format!("image: {e}"))?;
-    let fine = Hybrid::new(
-        plant.modes().to_vec(),
-        plant.edges().to_vec(),
-        plant.period() / SUBSTEPS as f64,
-    )
-    .map_err(|e| e.to_string())?;
+    let fine = plant
+        .resampled(plant.period() / SUBSTEPS as f64)
+        .map_err(|e| e.to_string())?;
     let euclid = crate::geometry::Metric::euclidean(plant.modes()[0].flow.n());
     let mut rep = HybridReport {
         min_unsafe_distance: f64::INFINITY,
@@ -121,14 +101,14 @@ pub fn monte_carlo_hybrid(
                     break;
                 }
             };
-            if !input_ok(&property.input, u.as_slice()) {
+            let u64s: Vec<f64> = u.as_slice().iter().map(|&v| v as f64).collect();
+            if super::input_slack(&property.input, &u64s) < 0.0 {
                 why = Some(format!(
                     "sample {k}: input {:?} outside the input set",
                     u.as_slice()
                 ));
                 break;
             }
-            let u64s: Vec<f64> = u.as_slice().iter().map(|&v| v as f64).collect();
             for _ in 0..SUBSTEPS {
                 let step = fine
                     .flow(loc, &x, &u64s)

@@ -6,7 +6,6 @@
 //! apply only inputs in [−3, 3], with the firmware's inputs equal to the host evaluator's bit for bit.
 
 use host_compiler::geometry::Region;
-use host_compiler::model::hybrid::Hybrid;
 use host_compiler::synth::hybrid::{ball_starts, image, plan_run, HybridTask};
 use qemu_tests::closed_loop::{exchange, HostEvaluator};
 use qemu_tests::firmware::{self, FirmwareConfig};
@@ -39,12 +38,10 @@ fn hybrid_example_4_25_meets_the_spec_on_the_target_from_50_initial_states() {
     .unwrap_or_else(|e| panic!("{e}"));
     let img = shared_types::image::decode(&bytes).expect("the image decodes");
     let h = task.plant.period();
-    let fine = Hybrid::new(
-        task.plant.modes().to_vec(),
-        task.plant.edges().to_vec(),
-        h / SUBSTEPS as f64,
-    )
-    .expect("the automaton at a finer period");
+    let fine = task
+        .plant
+        .resampled(h / SUBSTEPS as f64)
+        .expect("the automaton at a finer period");
     let goal = &task.property.goal;
     let unsafe_set = task.property.unsafe_region().expect("Unsafe");
     let starts = ball_starts(
