@@ -31,6 +31,7 @@ pub mod forced;
 pub mod internal;
 pub mod pieces;
 pub mod pwa_ball;
+pub mod temporal;
 
 pub use forced::{certify_forced, ForcedCertificate, ForcedError, ForcedSegment};
 pub use pieces::Pieces;

@@ -23,6 +23,7 @@
 mod bundle;
 pub mod pieces;
 pub mod potential;
+pub mod temporal;
 
 use crate::certify::{Certificate, Loop, LoopConstants};
 use crate::settings::{settings_builder, Check, SettingError};

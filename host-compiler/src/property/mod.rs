@@ -9,9 +9,11 @@
 
 pub mod semantics;
 mod sets;
+pub mod temporal;
 
 pub use semantics::{Property, SemanticsError, Temporal};
 pub use sets::{convex_piece, input_bound, input_scale, ConvexPiece, InputBound};
+pub use temporal::{state_signals, TemporalError, TemporalTask};
 
 use crate::geometry::Region;
 use crate::spec::{Problem, SpecError};

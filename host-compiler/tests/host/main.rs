@@ -37,6 +37,7 @@ mod mtl_depth;
 mod mtl_errors;
 mod mtl_props;
 mod mtl_semantics;
+mod mtl_tube;
 mod no_trajectory;
 mod optimize_delta;
 mod optimize_gradient;

@@ -24,6 +24,7 @@ pub mod parse;
 pub mod reference;
 pub mod sets;
 pub mod trace;
+pub mod tube;
 mod window;
 
 pub use ast::{Expr, Interval, LinearPredicate, Span};
@@ -32,6 +33,7 @@ pub use parse::{parse, FormulaError, FormulaErrorKind};
 pub use reference::{robustness_naive, robustness_window_scan};
 pub use sets::NamedSet;
 pub use trace::{Trace, TraceError};
+pub use tube::{Margins, TubeError, TubeFormula};
 
 /// Errors of MTL monitoring.
 #[derive(Debug, thiserror::Error, miette::Diagnostic)]
@@ -62,6 +64,14 @@ impl Formula {
             expr: parse::parse(src)?,
             src: src.to_string(),
         })
+    }
+    /// The same source text with another tree (a rewriting of this one whose spans point into the same
+    /// text, so that binding errors still quote the formula as written).
+    pub fn with_expr(&self, expr: Expr) -> Self {
+        Self {
+            expr,
+            src: self.src.clone(),
+        }
     }
     /// The syntax tree.
     pub fn expr(&self) -> &Expr {
