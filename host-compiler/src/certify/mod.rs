@@ -487,6 +487,29 @@ pub enum GoalAt {
     Free(f64),
 }
 
+/// The evaluator's rounding bound over a nominal's table (module doc, item 3) for runs within the tube of
+/// radius `r_max` (negative counts as 0): the componentwise bound (max over the table) and its 2-norm ε̄.
+pub fn rounding_over_table(
+    lp: &Loop<'_>,
+    lc: &LoopConstants,
+    nom: &Nominal,
+    r_max: f64,
+) -> (Vec<f64>, f64) {
+    let r_max = r_max.max(0.0);
+    let mut eps_components = vec![0.0f64; lp.K.nrows()];
+    for k in 0..nom.steps() {
+        let X = tube_abs(&nom.x[k], r_max, &lc.axis);
+        for (e, b) in eps_components
+            .iter_mut()
+            .zip(evaluator_error_bound(lp.K, &nom.v[k], &X))
+        {
+            *e = e.max(b);
+        }
+    }
+    let eps_f32 = eps_components.iter().map(|e| e * e).sum::<f64>().sqrt();
+    (eps_components, eps_f32)
+}
+
 /// Certify one nominal trajectory (simulated with the shipped K̂, v̂) for the loop, with the target
 /// judged at its best sample ([`certify_at`] with [`GoalAt::Best`]).
 pub fn certify(lp: &Loop<'_>, lc: &LoopConstants, nom: &Nominal) -> Certificate {
@@ -519,21 +542,15 @@ pub fn certify_at(lp: &Loop<'_>, lc: &LoopConstants, nom: &Nominal, at: GoalAt) 
                 point: Vec::new(),
             },
         };
-        // Rounding bound over the table, with the tube radius at its largest possible value δ_Goal.
-        let r_max = goal.value.max(0.0);
-        let mut eps_components = vec![0.0f64; m];
-        for k in 0..N {
-            let X = tube_abs(&nom.x[k], r_max, &lc.axis);
-            for (e, b) in eps_components
-                .iter_mut()
-                .zip(evaluator_error_bound(lp.K, &nom.v[k], &X))
-            {
-                *e = e.max(b);
-            }
-        }
-        let eps_f32 = eps_components.iter().map(|e| e * e).sum::<f64>().sqrt();
-        // 2. Unsafe (4.14) at samples and between them, over the whole table (stronger than 0..=κ*).
-        let margin = |k: usize, d: f64| pc.unsafe_margin(nom, k, d, eps_f32);
+        // 2. Unsafe (4.14) at samples and between them, over the whole table (stronger than 0..=κ*). The
+        // margins need the rounding bound over the table, taken with the tube at its largest possible
+        // radius, min(δ_Goal, δ_Unsafe at the samples); without Unsafe, δ_Goal.
+        let rounding = std::cell::OnceCell::new();
+        let margin = |k: usize, d: f64, d_min: f64| {
+            let (_, eps_f32) =
+                rounding.get_or_init(|| rounding_over_table(lp, lc, nom, goal.value.min(d_min)));
+            pc.unsafe_margin(nom, k, d, *eps_f32)
+        };
         let unsafe_ = safety::unsafe_part(
             &traj,
             lp.unsafe_set().map(SafetySet::Region),
@@ -541,6 +558,9 @@ pub fn certify_at(lp: &Loop<'_>, lc: &LoopConstants, nom: &Nominal, at: GoalAt) 
             traj.len(),
             Some(&margin),
         )?;
+        let (eps_components, eps_f32) = rounding
+            .into_inner()
+            .unwrap_or_else(|| rounding_over_table(lp, lc, nom, goal.value));
         // 3. Input (4.15) with the rounding margin, at every step that applies an input.
         let input = LoopInput {
             pc: &pc,

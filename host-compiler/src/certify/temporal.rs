@@ -19,7 +19,7 @@
 //! selection radius as for reach-avoid. For a discrete-time plant there is nothing between samples and
 //! part 2 is skipped.
 
-use super::{evaluator_error_bound, selection_radius, tube_abs, Loop, LoopConstants, Pieces};
+use super::{rounding_over_table, selection_radius, Loop, LoopConstants, Pieces};
 use crate::geometry::Metric;
 use crate::linalg::p_norm;
 use crate::property::{state_signals, TemporalError, TemporalTask};
@@ -145,7 +145,6 @@ pub fn try_certify(
     tl: &TemporalLoop,
     nom: &Nominal,
 ) -> Result<TemporalCertificate, TemporalCertifyError> {
-    let m = lp.K.nrows();
     let N = nom.steps();
     let h = lp.plant.period();
     let trace = nominal_trace(nom, h, &tl.signals)?;
@@ -158,18 +157,7 @@ pub fn try_certify(
         .first()
         .map(|(s, k, neg)| (s.name.clone(), *k, *neg));
     // Rounding over the table with the tube at its largest possible radius ρ(0).
-    let r_max = rho0.max(0.0);
-    let mut eps_components = vec![0.0f64; m];
-    for k in 0..N {
-        let X = tube_abs(&nom.x[k], r_max, &lc.axis);
-        for (e, b) in eps_components
-            .iter_mut()
-            .zip(evaluator_error_bound(lp.K, &nom.v[k], &X))
-        {
-            *e = e.max(b);
-        }
-    }
-    let eps_f32 = eps_components.iter().map(|e| e * e).sum::<f64>().sqrt();
+    let (eps_components, eps_f32) = rounding_over_table(lp, lc, nom, rho0);
     // Inputs (4.15).
     let pc = Pieces::new(lp, lc);
     let (k_input, delta_input) = pc

@@ -35,25 +35,37 @@ pub fn objective_subgradient(
     let monitor = tl.monitor().ok()?;
     let rho0 = monitor.robustness(&trace).ok()?[0];
     let pc = Pieces::new(lp, lc);
-    let (ki, di) =
-        pc.input_values(nom, eps)
-            .into_iter()
-            .enumerate()
-            .fold(
-                (0, f64::INFINITY),
-                |b, (k, v)| if v < b.1 { (k, v) } else { b },
-            );
+    let di = pc
+        .input_values(nom, eps)
+        .into_iter()
+        .fold(f64::INFINITY, f64::min);
     let metric = Metric {
         n: lp.P.nrows(),
         R: crate::linalg::to_row_major(lp.P),
     };
     let m = lp.K.nrows();
+    let value = rho0.min(di);
+    if !value.is_finite() {
+        return None;
+    }
+    // The pieces active at the value (to a relative 10⁻³): the input piece at its nearest steps, the
+    // formula's critical atoms.
+    let tol = 1e-3 * value.abs().max(1e-3);
     let mut cands: Vec<LocalGrad> = Vec::new();
-    if di <= rho0 {
-        cands.push(pc.input_grad(nom, ki, eps).1);
-    } else {
+    if di <= value + tol {
+        let inputs = pc.input_values(nom, eps);
+        let mut near: Vec<usize> = (0..inputs.len())
+            .filter(|&k| inputs[k] <= value + tol)
+            .collect();
+        near.sort_by(|&a, &b| inputs[a].total_cmp(&inputs[b]));
+        near.truncate(MAX_ACTIVE);
+        for k in near {
+            cands.push(pc.input_grad(nom, k, eps).1);
+        }
+    }
+    if rho0 <= value + tol {
         let tube = TubeFormula::new(&monitor, &trace).ok()?;
-        for (set, k, neg) in tube.critical(rho0) {
+        for (set, k, neg) in tube.critical(rho0).into_iter().take(MAX_ACTIVE) {
             let g = signed_grad(set.region.as_ref(), &nom.x[k], &metric, lp);
             let s = if neg { -1.0 } else { 1.0 };
             cands.push(LocalGrad {
@@ -63,19 +75,46 @@ pub fn objective_subgradient(
             });
         }
     }
-    let value = rho0.min(di);
-    if !value.is_finite() {
+    let grads: Vec<Vec<f64>> = cands
+        .iter()
+        .map(|c| adjoint(&pc, N, &[(1.0, c)]).concat())
+        .collect();
+    if grads.is_empty() {
         return None;
     }
-    let mut best: Option<(f64, Vec<Vec<f64>>)> = None;
-    for c in &cands {
-        let g = adjoint(&pc, N, &[(1.0, c)]);
-        let nn: f64 = g.iter().flatten().map(|v| v * v).sum();
-        if best.as_ref().is_none_or(|(b, _)| nn > *b) {
-            best = Some((nn, g));
+    let g = min_norm_combination(&grads);
+    Some((value, g.chunks(m).map(|c| c.to_vec()).collect()))
+}
+
+/// Active pieces taken into the ascent direction, at most.
+const MAX_ACTIVE: usize = 8;
+
+/// The least-norm point of the convex hull of the gradients (Gilbert's algorithm): the steepest ascent
+/// direction of a minimum of the pieces they belong to (the Clarke subdifferential's least element).
+fn min_norm_combination(g: &[Vec<f64>]) -> Vec<f64> {
+    let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
+    let mut w = g[0].clone();
+    for _ in 0..100 {
+        // The vertex least aligned with w; stop when none improves.
+        let (i, best) = g
+            .iter()
+            .enumerate()
+            .map(|(i, gi)| (i, dot(&w, gi)))
+            .fold((0, f64::INFINITY), |b, x| if x.1 < b.1 { x } else { b });
+        let ww = dot(&w, &w);
+        if ww - best <= 1e-12 * ww.max(1e-300) {
+            break;
         }
+        // Minimise ‖w + t(g_i − w)‖ over t ∈ [0, 1].
+        let d: Vec<f64> = g[i].iter().zip(&w).map(|(a, b)| a - b).collect();
+        let dd = dot(&d, &d);
+        if !(dd > 0.0) {
+            break;
+        }
+        let t = (-dot(&w, &d) / dd).clamp(0.0, 1.0);
+        w.iter_mut().zip(&d).for_each(|(a, b)| *a += t * b);
     }
-    best.map(|(_, g)| (value, g))
+    w
 }
 
 /// ∇ₓ of the signed P-distance to a region (envelope theorem at the witness point, as in

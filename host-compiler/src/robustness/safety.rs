@@ -808,16 +808,17 @@ pub fn goal_at(
 /// outside Unsafe, minus the depth inside), first minimiser, with the witness; +∞ at κ = 0 when there is
 /// no Unsafe set.
 ///
-/// `margin`, when given, is a per-sample reduction (κ, d) ↦ d′ applied to that distance (certification
-/// adds the inter-sample excursion and the rounding of the input there); the result then also carries
-/// min over κ of d′ (the first minimiser and its value). Without it, ellipsoidal sets are scanned with
+/// `margin`, when given, is a per-sample reduction (κ, d, d_min) ↦ d′ applied to that distance, d_min the
+/// smallest distance over the samples (certification adds the inter-sample excursion and the rounding of
+/// the input there; the rounding is bounded over a tube whose radius d_min bounds); the result then also
+/// carries min over κ of d′ (the first minimiser and its value). Without it, ellipsoidal sets are scanned with
 /// the pruning of [`goal_part`]; with it every sample is evaluated.
 pub fn unsafe_part(
     traj: &SampledTrajectory,
     unsafe_set: Option<SafetySet>,
     metric: &Metric,
     end: usize,
-    margin: Option<&dyn Fn(usize, f64) -> f64>,
+    margin: Option<&dyn Fn(usize, f64, f64) -> f64>,
 ) -> Result<UnsafePart, SafetyError> {
     check_metric(traj.n(), metric)?;
     let end = end.clamp(1, traj.len());
@@ -847,7 +848,7 @@ pub fn unsafe_part(
         .map(|k| s.dist(k).map(|d| -d))
         .collect::<Result<_, _>>()?;
     let (k, d) = prefix_min(end, |k| Ok(dist[k]))?;
-    let (km, dm) = prefix_min(end, |k| not_nan(margin(k, dist[k]), UNSAFE, k))?;
+    let (km, dm) = prefix_min(end, |k| not_nan(margin(k, dist[k], d), UNSAFE, k))?;
     Ok(UnsafePart {
         at_samples: s.critical(d, k),
         margined: Some(s.critical(dm, km)),

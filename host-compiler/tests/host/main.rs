@@ -17,6 +17,7 @@ mod caf_status;
 mod certify_bounds;
 mod certify_forced;
 mod certify_internal;
+mod certify_temporal;
 mod cli_exit;
 mod cli_hybrid;
 mod cli_limits;

@@ -712,8 +712,19 @@ fn shared_scans_match_direct_scans_over_any_range() {
         let u: Vec<f64> = (0..end)
             .map(|k| -I.unsafe_set.signed_dist(st(k), &I.m).value)
             .collect();
-        let margin = |k: usize, d: f64| (d - 0.01 * k as f64) / 1.5;
-        let um: Vec<f64> = u.iter().enumerate().map(|(k, &d)| margin(k, d)).collect();
+        let umin = u.iter().cloned().fold(f64::INFINITY, f64::min);
+        let margin = |k: usize, d: f64, dmin: f64| {
+            assert_eq!(
+                dmin, umin,
+                "the margin sees the smallest distance at the samples"
+            );
+            (d - 0.01 * k as f64) / 1.5
+        };
+        let um: Vec<f64> = u
+            .iter()
+            .enumerate()
+            .map(|(k, &d)| margin(k, d, umin))
+            .collect();
         let up = unsafe_part(
             &traj,
             Some(SafetySet::Region(&I.unsafe_set)),
