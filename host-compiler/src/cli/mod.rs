@@ -12,6 +12,7 @@ pub mod simulate;
 pub mod synth;
 pub mod synth_hybrid;
 mod synth_pwa;
+pub mod synth_temporal;
 pub mod verify;
 
 /// Synthesise controllers that are provably safe for one task, and the fixed-size image a

@@ -291,18 +291,36 @@ pub fn feedforward_image(
     P: &Mat<f64>,
     trajs: &[CoverTrajectory],
 ) -> Result<Vec<u8>, EmitError> {
+    feedforward_image_of(
+        task,
+        Khat,
+        P,
+        trajs
+            .iter()
+            .map(|t| (&t.nominal, t.certificate.delta_stored)),
+    )
+}
+
+/// [`feedforward_image`] of nominals with their stored radii, whatever certified them (Theorem 4.7, or an
+/// MTL task's [`crate::certify::temporal`]).
+pub fn feedforward_image_of<'a>(
+    task: &Task,
+    Khat: &Mat<f64>,
+    P: &Mat<f64>,
+    balls: impl IntoIterator<Item = (&'a Nominal, f32)>,
+) -> Result<Vec<u8>, EmitError> {
     let plant = &*task.plant;
     let mut b = ImageBuilder::new(plant.n(), plant.m(), plant.period());
     b.add_location(
         crate::linalg::to_row_major(Khat.as_ref()),
         crate::linalg::to_row_major(P.as_ref()),
     );
-    for t in trajs {
+    for (nominal, delta_stored) in balls {
         b.add_trajectory(TrajectoryEntry {
-            x0: t.nominal.x[0].clone(),
-            delta: t.certificate.delta_stored as f64,
-            v: t.nominal.v.concat(),
-            location: vec![0; t.nominal.v.len()],
+            x0: nominal.x[0].clone(),
+            delta: delta_stored as f64,
+            v: nominal.v.concat(),
+            location: vec![0; nominal.v.len()],
         });
     }
     if let crate::spec::InputSet::Box { lo, hi } = &task.problem.input {

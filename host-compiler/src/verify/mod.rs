@@ -16,6 +16,7 @@ pub mod attack;
 pub mod feedforward;
 pub mod hybrid;
 pub mod pwa;
+pub mod temporal;
 
 /// Largest number of Monte Carlo runs from the cover one check may ask for (`verify --runs`,
 /// `synth --verify-runs`): every start is held in memory (8n + 24 bytes) and simulated over the horizon,

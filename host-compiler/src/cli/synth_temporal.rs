@@ -1,0 +1,173 @@
+//! `synth` for an MTL task (a spec with `[mtl] formula`, Problem 2.28) on a one-location plant: balls
+//! certified for the formula (`certify::temporal`), grown over Init
+//! ([`crate::synth::temporal::synthesize_temporal`]), re-proved from the image bytes and verified by
+//! Monte Carlo against the formula as written. Writes `controller.img` (only when both passed) and
+//! `certificate.json`; exit status as for `synth` ([`super::Exit`]).
+
+use super::synth::write_atomic;
+use super::{task_of, BadInput, Exit, Failure, Outcome, SynthArgs};
+use crate::property::TemporalTask;
+use crate::synth::temporal::{synthesize_temporal, TemporalOptions};
+use miette::IntoDiagnostic;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+
+pub fn run(a: &SynthArgs, problem: crate::spec::Problem) -> Outcome {
+    if problem.hybrid.is_some() {
+        return Err(Failure::bad_input(miette::miette!(
+            "an [mtl] formula on a hybrid plant is not synthesised: with internal switching the text leaves \
+             MTL open (§4.2.2), and forced switching (Def 4.18) is not built yet; drop [mtl] to synthesise \
+             the reach-avoid task"
+        )));
+    }
+    if !a.imports.is_empty() {
+        return Err(Failure::bad_input(miette::miette!(
+            "--import is not taken for MTL tasks yet: recordings are certified for reach-avoid"
+        )));
+    }
+    if problem.synthesis.mode == crate::spec::ControllerMode::Pwa {
+        return Err(Failure::bad_input(miette::miette!(
+            "mode = \"pwa\" is not built for MTL tasks: the PWA law is certified for reach-avoid; use \
+             mode = \"feedforward\""
+        )));
+    }
+    let tt = TemporalTask::from_problem(&problem)
+        .map_err(miette::Report::new)
+        .bad_input()?;
+    let task = task_of(problem)?;
+    let cancel = Arc::new(AtomicBool::new(false));
+    {
+        let cancel = cancel.clone();
+        if let Err(e) = ctrlc::set_handler(move || {
+            if cancel.swap(true, Ordering::SeqCst) {
+                std::process::exit(130);
+            }
+            eprintln!(
+                "\ninterrupt: finishing with the balls certified so far (Ctrl-C again to abort)"
+            );
+        }) {
+            eprintln!("warning: Ctrl-C handler not installed: {e}");
+        }
+    }
+    if !a.quiet {
+        eprintln!(
+            "MTL task: {} (judged on [0, {}] s, atoms in the CAF metric)",
+            tt.written.source(),
+            task.problem.horizon
+        );
+    }
+    let quiet = a.quiet;
+    let opts = TemporalOptions {
+        verify_interior: (a.verify_runs as usize).min(100_000),
+        cancel: cancel.clone(),
+        on_accept: (!quiet).then(|| {
+            Arc::new(|count: usize, delta: f64| {
+                eprintln!("certified ball {count} (δ = {delta:.4})")
+            }) as Arc<dyn Fn(usize, f64) + Send + Sync>
+        }),
+        ..TemporalOptions::default()
+    };
+    let s = synthesize_temporal(&task, &tt, &opts).map_err(|e| Failure {
+        exit: Exit::Failed,
+        report: miette::miette!("{e}"),
+    })?;
+    let img_path = a.out.join("controller.img");
+    let unproved = s.recheck.iter().filter(|c| !c.ok).count();
+    let verified = s.verify.violations == 0 && unproved == 0;
+    if verified {
+        write_atomic(&img_path, &s.image)?;
+    }
+    let cert = serde_json::json!({
+        "spec": a.spec.display().to_string(),
+        "seed": task.problem.seed,
+        "task": "mtl",
+        "formula": tt.written.source(),
+        "stop": s.stop,
+        "coverage": s.coverage,
+        "verify": s.verify,
+        "recheck": s.recheck,
+        "seeds_tried": s.seeds_tried,
+        "refused": s.refused.iter().map(|(x, why)| serde_json::json!({"seed": x, "why": why})).collect::<Vec<_>>(),
+        "K": crate::linalg::to_rows(s.K.as_ref()),
+        "P": crate::linalg::to_rows(s.P.as_ref()),
+        "trajectories": s.trajectories.iter().map(|t| serde_json::json!({
+            "source": t.source, "x0": t.nominal.x[0], "certificate": t.certificate,
+        })).collect::<Vec<_>>(),
+        "seconds": s.seconds,
+    });
+    std::fs::write(
+        a.out.join("certificate.json"),
+        serde_json::to_string_pretty(&cert).into_diagnostic()?,
+    )
+    .into_diagnostic()?;
+    let (dmin, dmax) = s
+        .trajectories
+        .iter()
+        .map(|t| t.certificate.delta)
+        .fold((f64::INFINITY, 0.0f64), |(a, b), d| (a.min(d), b.max(d)));
+    println!(
+        "trajectories      {} ({} seeds tried)",
+        s.trajectories.len(),
+        s.seeds_tried
+    );
+    println!("delta range       {dmin:.4} .. {dmax:.4} (CAF metric)");
+    println!(
+        "coverage          {:.5} (lower bound {:.5}, upper {:.5} at {} confidence, {} samples)",
+        s.coverage.mean,
+        s.coverage.lower,
+        s.coverage.upper,
+        s.coverage.confidence,
+        s.coverage.samples
+    );
+    println!("stop              {}", s.stop);
+    println!(
+        "verification      {} runs judged by the formula ({} starts refused by the f32 selection, not run), {} violations; least robustness {:.4e} at the samples, {:.4e} sampled finer",
+        s.verify.runs,
+        s.verify.rejected,
+        s.verify.violations,
+        s.verify.min_robustness,
+        s.verify.min_robustness_fine
+    );
+    println!(
+        "re-proved         {} of {} balls from the image bytes",
+        s.recheck.len() - unproved,
+        s.recheck.len()
+    );
+    println!("time              {:.1} s", s.seconds);
+    if unproved > 0 {
+        return Err(miette::miette!(
+            "the image bytes do not re-prove {unproved} balls: the image is NOT certified and was not written"
+        )
+        .into());
+    }
+    if !verified {
+        return Err(miette::miette!(
+            "verification found {} violations (first: {}): the image is NOT certified and was not written",
+            s.verify.violations,
+            s.verify.first_violation.as_deref().unwrap_or("?")
+        )
+        .into());
+    }
+    println!(
+        "image             {} ({} bytes)",
+        img_path.display(),
+        s.image.len()
+    );
+    if cancel.load(Ordering::Relaxed) {
+        return Err(Failure {
+            exit: Exit::Interrupted,
+            report: miette::miette!("interrupted: the image holds the balls certified so far"),
+        });
+    }
+    let target = task.problem.synthesis.coverage_target;
+    if s.coverage.lower >= target {
+        Ok(Exit::Success)
+    } else {
+        eprintln!(
+            "coverage target NOT met: the coverage of Init is at least {:.5} at {} confidence, short of the \
+             target {target} ({}); the image is certified for its cover only (exit status 3)",
+            s.coverage.lower, s.coverage.confidence, s.stop
+        );
+        Ok(Exit::ShortOfTarget)
+    }
+}

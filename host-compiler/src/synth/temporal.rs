@@ -1,0 +1,358 @@
+//! The synthesis pipeline for an MTL task (Problem 2.28) on a one-location plant: Algorithm 1 with the
+//! formula's certified robustness (Theorem 4.2 for the sampled f32 loop, [`crate::certify::temporal`]) in
+//! place of Theorem 4.7.
+//!
+//! Each seed x0 (the centre of Init first, then uncovered working samples, a fixed batch per round in
+//! parallel) gets a nominal from two starts, the first that certifies: (1) the table of the nearest ball
+//! of the cover, replayed from x0 (Algorithm 4's local variation), (2) the SCP generator's reach-avoid
+//! trajectory for the spec's Goal and Unsafe. From either, the critical-atom ascent of §5.3
+//! ([`crate::optimize::temporal`]) climbs the formula's robustness; the result is re-certified from the
+//! f32 table. The image is Algorithm 2's feedforward image, the firmware runs it unchanged; it is
+//! re-proved from its bytes and verified by Monte Carlo against the formula as written
+//! ([`crate::verify::temporal`]).
+//!
+//! Everything random is drawn from a ChaCha stream seeded by the spec's seed, and each round's seeds are
+//! collected in order, so the image does not depend on the number of threads.
+
+use crate::certify::temporal::{TemporalCertificate, TemporalLoop};
+use crate::certify::{Loop, LoopConstants};
+use crate::cover::estimate::{estimate, CoverageEstimate, SampleBox};
+use crate::optimize::temporal::{maximize_temporal, AscentSettings};
+use crate::property::{input_scale, TemporalTask};
+use crate::task::Task;
+use crate::trajectory::generate::{generate, GenProblem, GenSettings};
+use crate::trajectory::Nominal;
+use crate::verify::temporal::{monte_carlo_temporal, recheck, TemporalCheck, TemporalReport};
+use faer::Mat;
+use rand::SeedableRng;
+use rayon::prelude::*;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+
+/// Rounds in a row that certify nothing before the growth stops.
+const MAX_EMPTY_ROUNDS: usize = 6;
+
+/// Options of one run (defaults documented per field).
+#[derive(Clone)]
+pub struct TemporalOptions {
+    /// Monte Carlo runs from covered samples of Init (default 10 000).
+    pub verify_interior: usize,
+    /// Runs from the boundary of each ball (default 32).
+    pub verify_per_ball: usize,
+    /// Uniform samples of Init the seeds are chosen from (default 2 000).
+    pub working_samples: usize,
+    /// Seeds per round, in parallel (default 4).
+    pub batch: usize,
+    /// The ascent's iterations per seed (default: the spec's `max_iterations`).
+    pub iterations: Option<usize>,
+    pub cancel: Arc<AtomicBool>,
+    /// Called with the number of balls and the new ball's δ after each acceptance.
+    pub on_accept: Option<Arc<dyn Fn(usize, f64) + Send + Sync>>,
+}
+
+impl Default for TemporalOptions {
+    fn default() -> Self {
+        Self {
+            verify_interior: 10_000,
+            verify_per_ball: 32,
+            working_samples: 2_000,
+            batch: 4,
+            iterations: None,
+            cancel: Arc::new(AtomicBool::new(false)),
+            on_accept: None,
+        }
+    }
+}
+
+/// One certified ball of the cover.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct TemporalTrajectory {
+    /// "replay of ball i" or "generated".
+    pub source: String,
+    pub nominal: Nominal,
+    pub certificate: TemporalCertificate,
+}
+
+/// Everything a run produced.
+pub struct TemporalSynthesis {
+    pub K: Mat<f64>,
+    pub P: Mat<f64>,
+    pub trajectories: Vec<TemporalTrajectory>,
+    pub seeds_tried: usize,
+    /// Seeds that gave no certified ball, and why.
+    pub refused: Vec<(Vec<f64>, String)>,
+    pub coverage: CoverageEstimate,
+    pub image: Vec<u8>,
+    pub recheck: Vec<TemporalCheck>,
+    pub verify: TemporalReport,
+    pub stop: String,
+    pub seconds: f64,
+}
+
+/// What planning a seed borrows from the run.
+struct Planner<'a> {
+    lp: &'a Loop<'a>,
+    lc: &'a LoopConstants,
+    tl: &'a TemporalLoop,
+    gp: &'a GenProblem<'a>,
+    ascent: AscentSettings,
+    cancel: &'a AtomicBool,
+}
+
+/// A seed's best attempt: certified, or the reason it is not.
+fn plan(
+    p: &Planner<'_>,
+    x0: &[f64],
+    nearest: Option<(usize, &[Vec<f64>])>,
+) -> Result<TemporalTrajectory, String> {
+    let Planner {
+        lp,
+        lc,
+        tl,
+        gp,
+        ascent,
+        cancel,
+    } = p;
+    let mut why = Vec::new();
+    let mut starts: Vec<(String, Vec<Vec<f64>>)> = Vec::new();
+    if let Some((i, v)) = nearest {
+        starts.push((format!("replay of ball {i}"), v.to_vec()));
+    }
+    let mut generated = false;
+    let mut k = 0;
+    while k < starts.len() || !generated {
+        if k == starts.len() {
+            generated = true;
+            match generate(gp, x0, &GenSettings::default()) {
+                Ok(g) => starts.push(("generated".into(), g.nominal.v)),
+                Err(e) => {
+                    why.push(format!("generator: {e}"));
+                    break;
+                }
+            }
+        }
+        let (source, v) = &starts[k];
+        k += 1;
+        let o = maximize_temporal(lp, lc, tl, x0, v, ascent, cancel);
+        if o.certificate.is_certified() {
+            return Ok(TemporalTrajectory {
+                source: source.clone(),
+                nominal: o.nominal,
+                certificate: o.certificate,
+            });
+        }
+        why.push(format!(
+            "{source}: ρ(0) = {:.3e}, continuous {:.3e}, δ_Input = {:.3e} after {} ascent steps",
+            o.certificate.delta_samples,
+            o.certificate.delta_continuous,
+            o.certificate.delta_input,
+            o.iterations
+        ));
+    }
+    Err(why.join("; "))
+}
+
+/// Algorithm 1 for the formula (module doc).
+pub fn synthesize_temporal(
+    task: &Task,
+    tt: &TemporalTask,
+    opts: &TemporalOptions,
+) -> Result<TemporalSynthesis, String> {
+    let t0 = std::time::Instant::now();
+    let s = task.settings();
+    let design = crate::caf::design(task).map_err(|e| format!("no CAF and feedback: {e}"))?;
+    let lp = Loop::new(task, &design);
+    let lc = LoopConstants::new(&lp).map_err(|e| e.to_string())?;
+    let tl = TemporalLoop::new(tt, &lp).map_err(|e| e.to_string())?;
+    let gp = GenProblem {
+        loc: 0,
+        plant: &*task.plant,
+        K: lp.K,
+        P: lp.P,
+        property: &task.property,
+        convex: &task.convex,
+        steps: task.steps,
+        gamma: lc.gamma,
+        phi: lc.phi,
+        beta: lc.beta,
+        input_margin: 1e-5 * input_scale(&task.property.input),
+    };
+    let ascent = AscentSettings {
+        iterations: opts.iterations.unwrap_or(s.max_iterations),
+        initial_step: 0.05 * input_scale(&task.property.input),
+        min_step: 1e-6 * input_scale(&task.property.input),
+    };
+    let planner = Planner {
+        lp: &lp,
+        lc: &lc,
+        tl: &tl,
+        gp: &gp,
+        ascent,
+        cancel: &opts.cancel,
+    };
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(task.problem.seed);
+    let init = SampleBox {
+        lo: task.init().lo.clone(),
+        hi: task.init().hi.clone(),
+    };
+    let working = init.samples(opts.working_samples.max(1), &mut rng);
+    let round32 = |x: &[f64]| -> Vec<f64> { x.iter().map(|&a| a as f32 as f64).collect() };
+    let centre: Vec<f64> = init
+        .lo
+        .iter()
+        .zip(&init.hi)
+        .map(|(l, h)| 0.5 * (l + h))
+        .collect();
+    let mut balls: Vec<TemporalTrajectory> = Vec::new();
+    let mut refused = Vec::new();
+    let mut tried = vec![false; working.len()];
+    let (mut seeds_tried, mut empty_rounds, mut first) = (0usize, 0usize, true);
+    let target = (s.coverage_target + s.coverage_tolerance).min(1.0);
+    let budget = s.max_trajectories;
+    let P = lp.P.to_owned();
+    let inside = |balls: &[TemporalTrajectory], x: &[f64]| -> Option<(usize, f64)> {
+        // The nearest ball in the CAF metric, and whether x lies in it (the f64 test; the image's f32
+        // selection decides coverage at the end).
+        balls
+            .iter()
+            .enumerate()
+            .map(|(i, b)| {
+                let e: Vec<f64> = x.iter().zip(&b.nominal.x[0]).map(|(a, c)| a - c).collect();
+                (
+                    i,
+                    crate::linalg::p_norm(P.as_ref(), &e) - b.certificate.delta_stored as f64,
+                )
+            })
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+    };
+    let stop = loop {
+        if opts.cancel.load(Ordering::Relaxed) {
+            break "interrupted".to_string();
+        }
+        let covered = working
+            .iter()
+            .filter(|x| inside(&balls, x).is_some_and(|(_, g)| g <= 0.0))
+            .count();
+        let frac = covered as f64 / working.len() as f64;
+        if frac >= target {
+            break format!("the working samples are covered ({:.1} %)", 100.0 * frac);
+        }
+        if balls.len() >= budget {
+            break format!("the budget of {budget} trajectories is spent");
+        }
+        if empty_rounds >= MAX_EMPTY_ROUNDS {
+            break format!(
+                "{MAX_EMPTY_ROUNDS} rounds in a row certified no ball: a new seed trajectory is needed"
+            );
+        }
+        let seeds: Vec<Vec<f64>> = if first {
+            first = false;
+            vec![round32(&centre)]
+        } else {
+            let mut out = Vec::new();
+            for (i, x) in working.iter().enumerate() {
+                if out.len() == opts.batch.max(1) {
+                    break;
+                }
+                if !tried[i] && inside(&balls, x).is_none_or(|(_, g)| g > 0.0) {
+                    tried[i] = true;
+                    out.push(round32(x));
+                }
+            }
+            out
+        };
+        if seeds.is_empty() {
+            break "every uncovered working sample was tried: a new seed trajectory is needed"
+                .to_string();
+        }
+        seeds_tried += seeds.len();
+        let nearest: Vec<Option<usize>> = seeds
+            .iter()
+            .map(|x| inside(&balls, x).map(|(i, _)| i))
+            .collect();
+        let planned: Vec<Result<TemporalTrajectory, String>> = seeds
+            .par_iter()
+            .zip(&nearest)
+            .map(|(x, near)| {
+                let near = near.map(|i| (i, balls[i].nominal.v.as_slice()));
+                plan(&planner, x, near)
+            })
+            .collect();
+        let before = balls.len();
+        for (x, r) in seeds.into_iter().zip(planned) {
+            match r {
+                Ok(t) if t.certificate.delta >= s.min_robustness && balls.len() < budget => {
+                    balls.push(t);
+                    if let Some(f) = &opts.on_accept {
+                        f(
+                            balls.len(),
+                            balls.last().map_or(0.0, |b| b.certificate.delta),
+                        );
+                    }
+                }
+                Ok(t) => refused.push((
+                    x,
+                    format!(
+                        "δ = {:.3e} below min_robustness {:.3e}",
+                        t.certificate.delta, s.min_robustness
+                    ),
+                )),
+                Err(e) => refused.push((x, e)),
+            }
+        }
+        empty_rounds = if balls.len() > before {
+            0
+        } else {
+            empty_rounds + 1
+        };
+    };
+    if balls.is_empty() {
+        return Err(format!(
+            "no trajectory was certified for the formula ({seeds_tried} seeds tried; first reason: {})",
+            refused.first().map_or("none", |r| r.1.as_str())
+        ));
+    }
+    let K = lp.K.to_owned();
+    let image = crate::cover::feedforward_image_of(
+        task,
+        &K,
+        &P,
+        balls
+            .iter()
+            .map(|b| (&b.nominal, b.certificate.delta_stored)),
+    )
+    .map_err(|e| format!("image: {e}"))?;
+    let decoded = shared_types::image::decode(&image).map_err(|e| format!("image: {e:?}"))?;
+    let recheck = recheck(task, tt, &decoded).map_err(|e| e.to_string())?;
+    // Coverage (§2.5.2) on fresh samples through the image's own f32 selection.
+    let ctl = shared_types::eval::Controller::new(decoded);
+    let accepted = |x: &[f64]| {
+        let x32: Vec<f32> = x.iter().map(|&v| v as f32).collect();
+        ctl.select(&x32).is_some()
+    };
+    let coverage = estimate(&init, s.coverage_samples(), s.confidence, &mut rng, |x| {
+        accepted(x)
+    });
+    // Monte Carlo: covered samples of Init, and the boundary of every ball.
+    let starts = crate::verify::hybrid::starts_from_image(
+        &image,
+        &init,
+        opts.verify_interior,
+        opts.verify_per_ball,
+        task.problem.seed ^ 0x7e51f1,
+    )?;
+    let verify = monte_carlo_temporal(task, tt, &decoded, &starts).map_err(|e| e.to_string())?;
+    Ok(TemporalSynthesis {
+        K,
+        P,
+        trajectories: balls,
+        seeds_tried,
+        refused,
+        coverage,
+        image,
+        recheck,
+        verify,
+        stop,
+        seconds: t0.elapsed().as_secs_f64(),
+    })
+}

@@ -1,0 +1,238 @@
+//! Verification of a feedforward image for an MTL task (Problem 2.28), independent of how it was made:
+//!
+//! * [`recheck`]: every stored ball radius re-proved from the image bytes and the spec alone — the
+//!   nominal re-simulated from the stored centre and table under the stored gain, certified by
+//!   [`crate::certify::temporal`] in the stored metric, the radius the bytes certify compared with the
+//!   stored one (to [`super::feedforward::tolerance`], the change of metric from P to its f32 rounding);
+//! * [`monte_carlo_temporal`]: runs of the closed loop through the shared f32 evaluator on the exact
+//!   sampled plant, each judged by the formula *as written* (Euclidean sets, the monitor's semantics)
+//!   on its samples and again on the run sampled eight times finer (the plant's states between samples),
+//!   and by the input set at every step. A run violates the task when either robustness is negative, an
+//!   input leaves the input set, or the evaluator refuses a state after accepting the first.
+
+use crate::certify::temporal::{certify_temporal, TemporalLoop};
+use crate::certify::{selection_radius, CertifyError, Loop, LoopConstants};
+use crate::linalg::sym;
+use crate::property::{state_signals, TemporalTask};
+use crate::robustness::mtl::{NamedSet, Trace};
+use crate::task::Task;
+use faer::Mat;
+use rayon::prelude::*;
+use shared_types::eval::Controller;
+use shared_types::image::Image;
+
+/// The recomputed certificate of one stored ball.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct TemporalCheck {
+    pub trajectory: usize,
+    pub stored: f32,
+    /// The radius the bytes certify.
+    pub certified: f32,
+    pub ok: bool,
+}
+
+/// Why an image cannot be re-proved at all.
+#[derive(Debug, thiserror::Error)]
+pub enum TemporalRecheckError {
+    #[error(transparent)]
+    Certify(#[from] CertifyError),
+    #[error("the formula's sets: {0}")]
+    Sets(#[from] crate::property::TemporalError),
+}
+
+/// Re-proves every stored ball radius of the image (module doc).
+pub fn recheck(
+    task: &Task,
+    tt: &TemporalTask,
+    image: &Image<'_>,
+) -> Result<Vec<TemporalCheck>, TemporalRecheckError> {
+    let (n, m) = (image.n(), image.m());
+    let K = Mat::from_fn(m, n, |i, j| image.K(0, i, j) as f64);
+    let P = sym(Mat::from_fn(n, n, |i, j| image.P(0, i, j) as f64).as_ref());
+    let lp = Loop {
+        plant: &*task.plant,
+        loc: 0,
+        K: K.as_ref(),
+        P: P.as_ref(),
+        goal: task.property.goal.as_ref(),
+        unsafe_set: task.property.unsafe_region(),
+        input: &task.property.input,
+    };
+    let lc = LoopConstants::new(&lp)?;
+    let tl = TemporalLoop::new(tt, &lp)?;
+    let tol = super::feedforward::tolerance(P.as_ref());
+    Ok((0..image.n_trajectories())
+        .into_par_iter()
+        .map(|t| {
+            let x0: Vec<f64> = (0..n).map(|i| image.centre(t, i) as f64).collect();
+            let v: Vec<Vec<f64>> = (0..image.trajectory_len(t))
+                .map(|k| (0..m).map(|j| image.v(t, k, j) as f64).collect())
+                .collect();
+            let nom = lp.simulate(&x0, &v);
+            let cert = certify_temporal(&lp, &lc, &tl, &nom);
+            let stored = image.delta(t);
+            let certified = selection_radius(P.as_ref(), &x0, cert.delta);
+            TemporalCheck {
+                trajectory: t,
+                stored,
+                certified,
+                ok: cert.delta > 0.0 && (stored as f64) <= (certified as f64) * (1.0 + tol),
+            }
+        })
+        .collect())
+}
+
+/// What the Monte Carlo runs found.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+pub struct TemporalReport {
+    /// Runs started (the evaluator accepted x(0)).
+    pub runs: usize,
+    /// Starts the evaluator refused (boundary points outside the f32 selection; not run).
+    pub rejected: usize,
+    pub violations: usize,
+    /// The least robustness over the runs, at the samples and on the finer sampling.
+    pub min_robustness: f64,
+    pub min_robustness_fine: f64,
+    /// The least input slack over the runs (negative: outside the input set).
+    pub min_input_slack: f64,
+    pub first_violation: Option<String>,
+}
+
+impl TemporalReport {
+    fn empty() -> Self {
+        Self {
+            min_robustness: f64::INFINITY,
+            min_robustness_fine: f64::INFINITY,
+            min_input_slack: f64::INFINITY,
+            ..Self::default()
+        }
+    }
+    fn merge(&mut self, o: TemporalReport) {
+        self.runs += o.runs;
+        self.rejected += o.rejected;
+        self.violations += o.violations;
+        self.min_robustness = self.min_robustness.min(o.min_robustness);
+        self.min_robustness_fine = self.min_robustness_fine.min(o.min_robustness_fine);
+        self.min_input_slack = self.min_input_slack.min(o.min_input_slack);
+        if self.first_violation.is_none() {
+            self.first_violation = o.first_violation;
+        }
+    }
+}
+
+/// One closed-loop run from `x0` judged by the formula (module doc). `None` when the evaluator refuses
+/// x0 (the state is outside the certified cover).
+fn run(
+    task: &Task,
+    sets: &[NamedSet],
+    tt: &TemporalTask,
+    image: &Image<'_>,
+    x0: &[f64],
+) -> Option<Result<(f64, f64, f64), String>> {
+    let n = x0.len();
+    let h = task.plant.period();
+    let steps = task.steps;
+    let mut ctl = Controller::new(*image);
+    let mut x = x0.to_vec();
+    let (mut coarse, mut fine) = (vec![x.clone()], vec![(0.0, x.clone())]);
+    let mut slack = f64::INFINITY;
+    for k in 0..steps {
+        let xf: Vec<f32> = x.iter().map(|&v| v as f32).collect();
+        let u: Vec<f64> = match ctl.step(&xf) {
+            Ok(u) => u.as_slice().iter().map(|&v| v as f64).collect(),
+            Err(e) if k == 0 => {
+                let _ = e;
+                return None;
+            }
+            Err(e) => {
+                return Some(Err(format!(
+                    "x0 = {x0:?}: the evaluator refused the state at step {k} ({e:?})"
+                )))
+            }
+        };
+        slack = slack.min(super::input_slack(&task.property.input, &u));
+        let mut sub = Vec::new();
+        task.plant
+            .between_samples(0, &x, &u, &mut |xs| sub.push(xs.to_vec()));
+        let parts = sub.len() + 1;
+        for (s, xs) in sub.into_iter().enumerate() {
+            fine.push(((k as f64 + (s + 1) as f64 / parts as f64) * h, xs));
+        }
+        x = task.plant.step(0, &x, &u);
+        coarse.push(x.clone());
+        fine.push(((k + 1) as f64 * h, x.clone()));
+    }
+    let trace = |t: Vec<f64>, xs: Vec<&Vec<f64>>| {
+        let cols = (0..n).map(|i| xs.iter().map(|x| x[i]).collect()).collect();
+        Trace::new(t, state_signals(n), cols)
+    };
+    let judge = |tr: Trace| -> Result<f64, String> {
+        let m = tt
+            .written
+            .bind(tr.names(), sets)
+            .map_err(|e| e.to_string())?;
+        m.robustness(&tr).map(|r| r[0]).map_err(|e| e.to_string())
+    };
+    let tc = trace(
+        (0..coarse.len()).map(|k| k as f64 * h).collect(),
+        coarse.iter().collect(),
+    );
+    let tf = trace(
+        fine.iter().map(|(t, _)| *t).collect(),
+        fine.iter().map(|(_, x)| x).collect(),
+    );
+    let (tc, tf) = match (tc, tf) {
+        (Ok(a), Ok(b)) => (a, b),
+        (Err(e), _) | (_, Err(e)) => return Some(Err(format!("x0 = {x0:?}: {e}"))),
+    };
+    let r = match (judge(tc), judge(tf)) {
+        (Ok(a), Ok(b)) => (a, b, slack),
+        (Err(e), _) | (_, Err(e)) => return Some(Err(format!("x0 = {x0:?}: {e}"))),
+    };
+    Some(Ok(r))
+}
+
+/// Runs from every start (module doc), in parallel, in a fixed order.
+pub fn monte_carlo_temporal(
+    task: &Task,
+    tt: &TemporalTask,
+    image: &Image<'_>,
+    starts: &[Vec<f64>],
+) -> Result<TemporalReport, crate::property::TemporalError> {
+    let n = task.plant.n();
+    let sets = tt.sets(&crate::geometry::Metric::euclidean(n))?;
+    let reports: Vec<TemporalReport> = starts
+        .par_chunks(64)
+        .map(|chunk| {
+            let mut r = TemporalReport::empty();
+            for x0 in chunk {
+                match run(task, &sets, tt, image, x0) {
+                    None => r.rejected += 1,
+                    Some(Err(e)) => {
+                        r.runs += 1;
+                        r.violations += 1;
+                        r.first_violation.get_or_insert(e);
+                    }
+                    Some(Ok((rho, fine, slack))) => {
+                        r.runs += 1;
+                        r.min_robustness = r.min_robustness.min(rho);
+                        r.min_robustness_fine = r.min_robustness_fine.min(fine);
+                        r.min_input_slack = r.min_input_slack.min(slack);
+                        if rho < 0.0 || fine < 0.0 || slack < 0.0 {
+                            r.violations += 1;
+                            r.first_violation.get_or_insert(format!(
+                                "x0 = {x0:?}: robustness {rho:.3e} at the samples, {fine:.3e} sampled finer, input slack {slack:.3e}"
+                            ));
+                        }
+                    }
+                }
+            }
+            r
+        })
+        .collect();
+    let mut out = TemporalReport::empty();
+    for r in reports {
+        out.merge(r);
+    }
+    Ok(out)
+}
