@@ -94,6 +94,7 @@ pub fn run(a: &SynthArgs, problem: crate::spec::Problem) -> Outcome {
             "source": t.source, "x0": t.nominal.x[0], "certificate": t.certificate,
         })).collect::<Vec<_>>(),
         "seconds": s.seconds,
+        "timings": s.timings,
     });
     std::fs::write(
         a.out.join("certificate.json"),
@@ -121,19 +122,27 @@ pub fn run(a: &SynthArgs, problem: crate::spec::Problem) -> Outcome {
     );
     println!("stop              {}", s.stop);
     println!(
-        "verification      {} runs judged by the formula ({} starts refused by the f32 selection, not run), {} violations; least robustness {:.4e} at the samples, {:.4e} sampled finer",
+        "verification      {} runs judged by the formula at the samples and sampled 8× finer ({} starts refused by the f32 selection, not run), {} violations; least robustness {:.4e} (every {}th run)",
         s.verify.runs,
         s.verify.rejected,
         s.verify.violations,
         s.verify.min_robustness,
-        s.verify.min_robustness_fine
+        crate::verify::MARGIN_EVERY
     );
     println!(
         "re-proved         {} of {} balls from the image bytes",
         s.recheck.len() - unproved,
         s.recheck.len()
     );
-    println!("time              {:.1} s", s.seconds);
+    println!(
+        "time              {:.1} s ({})",
+        s.seconds,
+        s.timings
+            .iter()
+            .map(|(w, t)| format!("{w} {t:.1} s"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
     if unproved > 0 {
         return Err(miette::miette!(
             "the image bytes do not re-prove {unproved} balls: the image is NOT certified and was not written"

@@ -87,6 +87,8 @@ pub struct TemporalSynthesis {
     pub verify: TemporalReport,
     pub stop: String,
     pub seconds: f64,
+    /// Wall time per stage (growth, re-proof, coverage, Monte Carlo), seconds.
+    pub timings: Vec<(String, f64)>,
 }
 
 /// What planning a seed borrows from the run.
@@ -306,6 +308,12 @@ pub fn synthesize_temporal(
             empty_rounds + 1
         };
     };
+    let mut timings = vec![("growth".to_string(), t0.elapsed().as_secs_f64())];
+    let mut lap = std::time::Instant::now();
+    let mut mark = |what: &str, timings: &mut Vec<(String, f64)>| {
+        timings.push((what.to_string(), lap.elapsed().as_secs_f64()));
+        lap = std::time::Instant::now();
+    };
     if balls.is_empty() {
         return Err(format!(
             "no trajectory was certified for the formula ({seeds_tried} seeds tried; first reason: {})",
@@ -323,7 +331,9 @@ pub fn synthesize_temporal(
     )
     .map_err(|e| format!("image: {e}"))?;
     let decoded = shared_types::image::decode(&image).map_err(|e| format!("image: {e:?}"))?;
+    mark("image", &mut timings);
     let recheck = recheck(task, tt, &decoded).map_err(|e| e.to_string())?;
+    mark("re-proof", &mut timings);
     // Coverage (§2.5.2) on fresh samples through the image's own f32 selection.
     let ctl = shared_types::eval::Controller::new(decoded);
     let accepted = |x: &[f64]| {
@@ -333,6 +343,7 @@ pub fn synthesize_temporal(
     let coverage = estimate(&init, s.coverage_samples(), s.confidence, &mut rng, |x| {
         accepted(x)
     });
+    mark("coverage", &mut timings);
     // Monte Carlo: covered samples of Init, and the boundary of every ball.
     let starts = crate::verify::hybrid::starts_from_image(
         &image,
@@ -342,6 +353,7 @@ pub fn synthesize_temporal(
         task.problem.seed ^ 0x7e51f1,
     )?;
     let verify = monte_carlo_temporal(task, tt, &decoded, &starts).map_err(|e| e.to_string())?;
+    mark("monte carlo", &mut timings);
     Ok(TemporalSynthesis {
         K,
         P,
@@ -354,5 +366,6 @@ pub fn synthesize_temporal(
         verify,
         stop,
         seconds: t0.elapsed().as_secs_f64(),
+        timings,
     })
 }

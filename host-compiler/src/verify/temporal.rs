@@ -7,8 +7,11 @@
 //! * [`monte_carlo_temporal`]: runs of the closed loop through the shared f32 evaluator on the exact
 //!   sampled plant, each judged by the formula *as written* (Euclidean sets, the monitor's semantics)
 //!   on its samples and again on the run sampled eight times finer (the plant's states between samples),
-//!   and by the input set at every step. A run violates the task when either robustness is negative, an
-//!   input leaves the input set, or the evaluator refuses a state after accepting the first.
+//!   and by the input set at every step. A run violates the task when the formula is false on either
+//!   sampling (its Boolean semantics: each atom ±1 by set membership, closed sets, so a run on a set's
+//!   boundary is in it), an input leaves the input set, or the evaluator refuses a state after accepting
+//!   the first. The robustness itself (signed Euclidean distances) is computed on the samples of every
+//!   [`super::MARGIN_EVERY`]-th run, for the report.
 
 use crate::certify::temporal::{certify_temporal, TemporalLoop};
 use crate::certify::{selection_radius, CertifyError, Loop, LoopConstants};
@@ -90,9 +93,9 @@ pub struct TemporalReport {
     /// Starts the evaluator refused (boundary points outside the f32 selection; not run).
     pub rejected: usize,
     pub violations: usize,
-    /// The least robustness over the runs, at the samples and on the finer sampling.
+    /// The least robustness (Euclidean signed distances) at the samples over every
+    /// [`super::MARGIN_EVERY`]-th run.
     pub min_robustness: f64,
-    pub min_robustness_fine: f64,
     /// The least input slack over the runs (negative: outside the input set).
     pub min_input_slack: f64,
     pub first_violation: Option<String>,
@@ -102,7 +105,6 @@ impl TemporalReport {
     fn empty() -> Self {
         Self {
             min_robustness: f64::INFINITY,
-            min_robustness_fine: f64::INFINITY,
             min_input_slack: f64::INFINITY,
             ..Self::default()
         }
@@ -112,7 +114,6 @@ impl TemporalReport {
         self.rejected += o.rejected;
         self.violations += o.violations;
         self.min_robustness = self.min_robustness.min(o.min_robustness);
-        self.min_robustness_fine = self.min_robustness_fine.min(o.min_robustness_fine);
         self.min_input_slack = self.min_input_slack.min(o.min_input_slack);
         if self.first_violation.is_none() {
             self.first_violation = o.first_violation;
@@ -120,15 +121,58 @@ impl TemporalReport {
     }
 }
 
+/// A set judged by membership alone: its "signed distance" is +1 inside (boundary included), −1 outside,
+/// so the robust semantics over such atoms is the formula's Boolean semantics (±1, or ±∞ for constants).
+struct Membership(Box<dyn crate::geometry::Region>);
+
+impl crate::geometry::Region for Membership {
+    fn dim(&self) -> usize {
+        self.0.dim()
+    }
+    fn contains(&self, x: &[f64]) -> bool {
+        self.0.contains(x)
+    }
+    fn dist(&self, x: &[f64], _: &crate::geometry::Metric) -> crate::geometry::Witness {
+        let value = if self.0.contains(x) { 0.0 } else { 1.0 };
+        crate::geometry::Witness {
+            value,
+            point: Vec::new(),
+        }
+    }
+    fn depth(&self, x: &[f64], _: &crate::geometry::Metric) -> crate::geometry::Witness {
+        let value = if self.0.contains(x) { 1.0 } else { 0.0 };
+        crate::geometry::Witness {
+            value,
+            point: Vec::new(),
+        }
+    }
+}
+
+/// The sets a run is judged with: by membership (every run) and by Euclidean signed distance (reported).
+struct Judges {
+    boolean: Vec<NamedSet>,
+    robust: Vec<NamedSet>,
+}
+
+/// What one run gave: Boolean verdicts at the samples and sampled finer, the robustness at the samples
+/// when it was asked for, the least input slack.
+struct Verdict {
+    holds: bool,
+    holds_fine: bool,
+    robustness: Option<f64>,
+    slack: f64,
+}
+
 /// One closed-loop run from `x0` judged by the formula (module doc). `None` when the evaluator refuses
 /// x0 (the state is outside the certified cover).
 fn run(
     task: &Task,
-    sets: &[NamedSet],
+    judges: &Judges,
     tt: &TemporalTask,
     image: &Image<'_>,
     x0: &[f64],
-) -> Option<Result<(f64, f64, f64), String>> {
+    robust: bool,
+) -> Option<Result<Verdict, String>> {
     let n = x0.len();
     let h = task.plant.period();
     let steps = task.steps;
@@ -166,12 +210,12 @@ fn run(
         let cols = (0..n).map(|i| xs.iter().map(|x| x[i]).collect()).collect();
         Trace::new(t, state_signals(n), cols)
     };
-    let judge = |tr: Trace| -> Result<f64, String> {
+    let judge = |tr: &Trace, sets: &[NamedSet]| -> Result<f64, String> {
         let m = tt
             .written
             .bind(tr.names(), sets)
             .map_err(|e| e.to_string())?;
-        m.robustness(&tr).map(|r| r[0]).map_err(|e| e.to_string())
+        m.robustness(tr).map(|r| r[0]).map_err(|e| e.to_string())
     };
     let tc = trace(
         (0..coarse.len()).map(|k| k as f64 * h).collect(),
@@ -185,11 +229,19 @@ fn run(
         (Ok(a), Ok(b)) => (a, b),
         (Err(e), _) | (_, Err(e)) => return Some(Err(format!("x0 = {x0:?}: {e}"))),
     };
-    let r = match (judge(tc), judge(tf)) {
-        (Ok(a), Ok(b)) => (a, b, slack),
-        (Err(e), _) | (_, Err(e)) => return Some(Err(format!("x0 = {x0:?}: {e}"))),
-    };
-    Some(Ok(r))
+    let verdict = (|| -> Result<Verdict, String> {
+        Ok(Verdict {
+            holds: judge(&tc, &judges.boolean)? > 0.0,
+            holds_fine: judge(&tf, &judges.boolean)? > 0.0,
+            robustness: if robust {
+                Some(judge(&tc, &judges.robust)?)
+            } else {
+                None
+            },
+            slack,
+        })
+    })();
+    Some(verdict.map_err(|e| format!("x0 = {x0:?}: {e}")))
 }
 
 /// Runs from every start (module doc), in parallel, in a fixed order.
@@ -200,28 +252,45 @@ pub fn monte_carlo_temporal(
     starts: &[Vec<f64>],
 ) -> Result<TemporalReport, crate::property::TemporalError> {
     let n = task.plant.n();
-    let sets = tt.sets(&crate::geometry::Metric::euclidean(n))?;
+    let euclidean = crate::geometry::Metric::euclidean(n);
+    let judges = Judges {
+        boolean: tt
+            .sets(&euclidean)?
+            .into_iter()
+            .map(|s| NamedSet {
+                region: Box::new(Membership(s.region)),
+                ..s
+            })
+            .collect(),
+        robust: tt.sets(&euclidean)?,
+    };
     let reports: Vec<TemporalReport> = starts
         .par_chunks(64)
-        .map(|chunk| {
+        .enumerate()
+        .map(|(c, chunk)| {
             let mut r = TemporalReport::empty();
-            for x0 in chunk {
-                match run(task, &sets, tt, image, x0) {
+            for (i, x0) in chunk.iter().enumerate() {
+                let robust = (c * 64 + i) % super::MARGIN_EVERY == 0;
+                match run(task, &judges, tt, image, x0, robust) {
                     None => r.rejected += 1,
                     Some(Err(e)) => {
                         r.runs += 1;
                         r.violations += 1;
                         r.first_violation.get_or_insert(e);
                     }
-                    Some(Ok((rho, fine, slack))) => {
+                    Some(Ok(v)) => {
                         r.runs += 1;
-                        r.min_robustness = r.min_robustness.min(rho);
-                        r.min_robustness_fine = r.min_robustness_fine.min(fine);
-                        r.min_input_slack = r.min_input_slack.min(slack);
-                        if rho < 0.0 || fine < 0.0 || slack < 0.0 {
+                        if let Some(rho) = v.robustness {
+                            r.min_robustness = r.min_robustness.min(rho);
+                        }
+                        r.min_input_slack = r.min_input_slack.min(v.slack);
+                        if !v.holds || !v.holds_fine || v.slack < 0.0 {
                             r.violations += 1;
                             r.first_violation.get_or_insert(format!(
-                                "x0 = {x0:?}: robustness {rho:.3e} at the samples, {fine:.3e} sampled finer, input slack {slack:.3e}"
+                                "x0 = {x0:?}: the formula is {} at the samples and {} sampled finer; least input slack {:.3e}",
+                                if v.holds { "true" } else { "FALSE" },
+                                if v.holds_fine { "true" } else { "FALSE" },
+                                v.slack
                             ));
                         }
                     }
