@@ -154,6 +154,67 @@ fn plan(
     Err(why.join("; "))
 }
 
+/// One ball from one seed, without a cover: the CAF, the nominal from the SCP generator climbed by the
+/// ascent and certified, and its one-ball feedforward image (for the HIL tests and examples).
+pub fn single_ball(
+    task: &Task,
+    tt: &TemporalTask,
+    x0: &[f64],
+) -> Result<(TemporalTrajectory, Vec<u8>), String> {
+    let s = task.settings();
+    let design = crate::caf::design(task).map_err(|e| format!("no CAF and feedback: {e}"))?;
+    let lp = Loop::new(task, &design);
+    let lc = LoopConstants::new(&lp).map_err(|e| e.to_string())?;
+    let tl = TemporalLoop::new(tt, &lp).map_err(|e| e.to_string())?;
+    let gp = gen_problem(task, &lp, &lc);
+    let cancel = AtomicBool::new(false);
+    let planner = Planner {
+        lp: &lp,
+        lc: &lc,
+        tl: &tl,
+        gp: &gp,
+        ascent: ascent_settings(task, s.max_iterations),
+        cancel: &cancel,
+    };
+    let x0: Vec<f64> = x0.iter().map(|&a| a as f32 as f64).collect();
+    let ball = plan(&planner, &x0, None)?;
+    let image = crate::cover::feedforward_image_of(
+        task,
+        &lp.K.to_owned(),
+        &lp.P.to_owned(),
+        [(&ball.nominal, ball.certificate.delta_stored)],
+    )
+    .map_err(|e| format!("image: {e}"))?;
+    Ok((ball, image))
+}
+
+/// The generator's problem: the spec's Goal and Unsafe with the loop's tube constants.
+fn gen_problem<'a>(task: &'a Task, lp: &Loop<'a>, lc: &LoopConstants) -> GenProblem<'a> {
+    GenProblem {
+        loc: 0,
+        plant: &*task.plant,
+        K: lp.K,
+        P: lp.P,
+        property: &task.property,
+        convex: &task.convex,
+        steps: task.steps,
+        gamma: lc.gamma,
+        phi: lc.phi,
+        beta: lc.beta,
+        input_margin: 1e-5 * input_scale(&task.property.input),
+    }
+}
+
+/// The ascent's settings, scaled to the input set.
+fn ascent_settings(task: &Task, iterations: usize) -> AscentSettings {
+    let scale = input_scale(&task.property.input);
+    AscentSettings {
+        iterations,
+        initial_step: 0.05 * scale,
+        min_step: 1e-6 * scale,
+    }
+}
+
 /// Algorithm 1 for the formula (module doc).
 pub fn synthesize_temporal(
     task: &Task,
@@ -166,24 +227,8 @@ pub fn synthesize_temporal(
     let lp = Loop::new(task, &design);
     let lc = LoopConstants::new(&lp).map_err(|e| e.to_string())?;
     let tl = TemporalLoop::new(tt, &lp).map_err(|e| e.to_string())?;
-    let gp = GenProblem {
-        loc: 0,
-        plant: &*task.plant,
-        K: lp.K,
-        P: lp.P,
-        property: &task.property,
-        convex: &task.convex,
-        steps: task.steps,
-        gamma: lc.gamma,
-        phi: lc.phi,
-        beta: lc.beta,
-        input_margin: 1e-5 * input_scale(&task.property.input),
-    };
-    let ascent = AscentSettings {
-        iterations: opts.iterations.unwrap_or(s.max_iterations),
-        initial_step: 0.05 * input_scale(&task.property.input),
-        min_step: 1e-6 * input_scale(&task.property.input),
-    };
+    let gp = gen_problem(task, &lp, &lc);
+    let ascent = ascent_settings(task, opts.iterations.unwrap_or(s.max_iterations));
     let planner = Planner {
         lp: &lp,
         lc: &lc,

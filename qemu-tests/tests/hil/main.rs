@@ -4,5 +4,6 @@
 
 mod board;
 mod hybrid;
+mod mtl;
 mod planar_vehicle;
 mod pwa;
