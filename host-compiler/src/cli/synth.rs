@@ -30,6 +30,34 @@ const OUTPUTS: &[&str] = &[
     "report.html",
 ];
 
+/// The exit of a run whose image was written: interrupted (130), the coverage target met (0), or short of
+/// it (3, said on stderr with the lower bound and why the growth stopped). `what` names the certified
+/// units ("runs", "balls").
+pub(crate) fn coverage_exit(
+    interrupted: bool,
+    coverage: &crate::cover::CoverageEstimate,
+    target: f64,
+    stop: &str,
+    what: &str,
+) -> Outcome {
+    if interrupted {
+        return Err(Failure {
+            exit: Exit::Interrupted,
+            report: miette::miette!("interrupted: the image holds the {what} certified so far"),
+        });
+    }
+    if coverage.lower >= target {
+        Ok(Exit::Success)
+    } else {
+        eprintln!(
+            "coverage target NOT met: the coverage of Init is at least {:.5} at {} confidence, short of the \
+             target {target} ({stop}); the image is certified for its cover only (exit status 3)",
+            coverage.lower, coverage.confidence
+        );
+        Ok(Exit::ShortOfTarget)
+    }
+}
+
 pub fn run(a: &SynthArgs) -> Outcome {
     // First of all, even before the spec is read: whatever happens next, no earlier result is left.
     prepare_out(&a.out)?;

@@ -145,21 +145,11 @@ pub fn run(a: &SynthArgs, problem: crate::spec::Problem) -> Outcome {
         img_path.display(),
         s.image.len()
     );
-    if cancel.load(Ordering::Relaxed) {
-        return Err(Failure {
-            exit: Exit::Interrupted,
-            report: miette::miette!("interrupted: the image holds the runs certified so far"),
-        });
-    }
-    let target = task.problem.synthesis.coverage_target;
-    if s.coverage.lower >= target {
-        Ok(Exit::Success)
-    } else {
-        eprintln!(
-            "coverage target NOT met: the coverage of Init is at least {:.5} at {} confidence, short of the \
-             target {target} ({}); the image is certified for its cover only (exit status 3)",
-            s.coverage.lower, s.coverage.confidence, s.stop
-        );
-        Ok(Exit::ShortOfTarget)
-    }
+    super::synth::coverage_exit(
+        cancel.load(Ordering::Relaxed),
+        &s.coverage,
+        task.problem.synthesis.coverage_target,
+        &s.stop,
+        "runs",
+    )
 }

@@ -121,6 +121,68 @@ impl TemporalReport {
     }
 }
 
+/// A run's states at the samples and sampled finer (the plant's own states between samples), as it is
+/// simulated step by step.
+pub struct RunRecord {
+    h: f64,
+    coarse: Vec<Vec<f64>>,
+    fine: Vec<(f64, Vec<f64>)>,
+}
+
+impl RunRecord {
+    /// A run from `x0` at sample period `h`.
+    pub fn new(x0: &[f64], h: f64) -> Self {
+        Self {
+            h,
+            coarse: vec![x0.to_vec()],
+            fine: vec![(0.0, x0.to_vec())],
+        }
+    }
+    /// One period of the one-location `plant` from `x` under the held input `u`: records the states
+    /// between the samples and the next sample, and returns it.
+    pub fn step(&mut self, plant: &dyn crate::model::Plant, x: &[f64], u: &[f64]) -> Vec<f64> {
+        let k = self.coarse.len() - 1;
+        let mut sub = Vec::new();
+        plant.between_samples(0, x, u, &mut |xs| sub.push(xs.to_vec()));
+        let parts = sub.len() + 1;
+        for (s, xs) in sub.into_iter().enumerate() {
+            let t = (k as f64 + (s + 1) as f64 / parts as f64) * self.h;
+            self.fine.push((t, xs));
+        }
+        let next = plant.step(0, x, u);
+        self.coarse.push(next.clone());
+        self.fine.push(((k + 1) as f64 * self.h, next.clone()));
+        next
+    }
+    /// The run as traces over x1 … xn: at the samples, and sampled finer.
+    pub fn traces(&self) -> Result<(Trace, Trace), crate::robustness::mtl::TraceError> {
+        let n = self.coarse[0].len();
+        let trace = |t: Vec<f64>, xs: Vec<&Vec<f64>>| {
+            let cols = (0..n).map(|i| xs.iter().map(|x| x[i]).collect()).collect();
+            Trace::new(t, state_signals(n), cols)
+        };
+        Ok((
+            trace(
+                (0..self.coarse.len()).map(|k| k as f64 * self.h).collect(),
+                self.coarse.iter().collect(),
+            )?,
+            trace(
+                self.fine.iter().map(|(t, _)| *t).collect(),
+                self.fine.iter().map(|(_, x)| x).collect(),
+            )?,
+        ))
+    }
+}
+
+/// The formula as written, over `sets`, at the start of `trace`.
+pub fn formula_value(tt: &TemporalTask, sets: &[NamedSet], trace: &Trace) -> Result<f64, String> {
+    let m = tt
+        .written
+        .bind(trace.names(), sets)
+        .map_err(|e| e.to_string())?;
+    m.robustness(trace).map(|r| r[0]).map_err(|e| e.to_string())
+}
+
 /// A set judged by membership alone: its "signed distance" is +1 inside (boundary included), −1 outside,
 /// so the robust semantics over such atoms is the formula's Boolean semantics (±1, or ±∞ for constants).
 struct Membership(Box<dyn crate::geometry::Region>);
@@ -173,21 +235,15 @@ fn run(
     x0: &[f64],
     robust: bool,
 ) -> Option<Result<Verdict, String>> {
-    let n = x0.len();
-    let h = task.plant.period();
-    let steps = task.steps;
-    let mut ctl = Controller::new(*image);
+    let mut rec = RunRecord::new(x0, task.plant.period());
     let mut x = x0.to_vec();
-    let (mut coarse, mut fine) = (vec![x.clone()], vec![(0.0, x.clone())]);
+    let mut ctl = Controller::new(*image);
     let mut slack = f64::INFINITY;
-    for k in 0..steps {
+    for k in 0..task.steps {
         let xf: Vec<f32> = x.iter().map(|&v| v as f32).collect();
         let u: Vec<f64> = match ctl.step(&xf) {
             Ok(u) => u.as_slice().iter().map(|&v| v as f64).collect(),
-            Err(e) if k == 0 => {
-                let _ = e;
-                return None;
-            }
+            Err(_) if k == 0 => return None,
             Err(e) => {
                 return Some(Err(format!(
                     "x0 = {x0:?}: the evaluator refused the state at step {k} ({e:?})"
@@ -195,40 +251,13 @@ fn run(
             }
         };
         slack = slack.min(super::input_slack(&task.property.input, &u));
-        let mut sub = Vec::new();
-        task.plant
-            .between_samples(0, &x, &u, &mut |xs| sub.push(xs.to_vec()));
-        let parts = sub.len() + 1;
-        for (s, xs) in sub.into_iter().enumerate() {
-            fine.push(((k as f64 + (s + 1) as f64 / parts as f64) * h, xs));
-        }
-        x = task.plant.step(0, &x, &u);
-        coarse.push(x.clone());
-        fine.push(((k + 1) as f64 * h, x.clone()));
+        x = rec.step(&*task.plant, &x, &u);
     }
-    let trace = |t: Vec<f64>, xs: Vec<&Vec<f64>>| {
-        let cols = (0..n).map(|i| xs.iter().map(|x| x[i]).collect()).collect();
-        Trace::new(t, state_signals(n), cols)
+    let (tc, tf) = match rec.traces() {
+        Ok(t) => t,
+        Err(e) => return Some(Err(format!("x0 = {x0:?}: {e}"))),
     };
-    let judge = |tr: &Trace, sets: &[NamedSet]| -> Result<f64, String> {
-        let m = tt
-            .written
-            .bind(tr.names(), sets)
-            .map_err(|e| e.to_string())?;
-        m.robustness(tr).map(|r| r[0]).map_err(|e| e.to_string())
-    };
-    let tc = trace(
-        (0..coarse.len()).map(|k| k as f64 * h).collect(),
-        coarse.iter().collect(),
-    );
-    let tf = trace(
-        fine.iter().map(|(t, _)| *t).collect(),
-        fine.iter().map(|(_, x)| x).collect(),
-    );
-    let (tc, tf) = match (tc, tf) {
-        (Ok(a), Ok(b)) => (a, b),
-        (Err(e), _) | (_, Err(e)) => return Some(Err(format!("x0 = {x0:?}: {e}"))),
-    };
+    let judge = |tr: &Trace, sets: &[NamedSet]| formula_value(tt, sets, tr);
     let verdict = (|| -> Result<Verdict, String> {
         Ok(Verdict {
             holds: judge(&tc, &judges.boolean)? > 0.0,

@@ -21,6 +21,7 @@ mod certify_temporal;
 mod cli_exit;
 mod cli_hybrid;
 mod cli_limits;
+mod cli_mtl;
 mod cli_synth;
 mod emit_image;
 mod emit_pwa;

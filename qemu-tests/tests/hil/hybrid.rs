@@ -5,7 +5,6 @@
 //! reach Goal within T, never enter Unsafe (at every sample and at 8 sub-samples of each period) and
 //! apply only inputs in [−3, 3], with the firmware's inputs equal to the host evaluator's bit for bit.
 
-use host_compiler::geometry::Region;
 use host_compiler::synth::hybrid::{ball_starts, image, plan_run, HybridTask};
 use qemu_tests::closed_loop::{exchange, HostEvaluator};
 use qemu_tests::firmware::{self, FirmwareConfig};

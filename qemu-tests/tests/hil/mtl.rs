@@ -8,10 +8,10 @@
 
 use host_compiler::geometry::Metric;
 use host_compiler::linalg::PdRoots;
-use host_compiler::property::{state_signals, TemporalTask};
-use host_compiler::robustness::mtl::Trace;
+use host_compiler::property::TemporalTask;
 use host_compiler::synth::temporal::single_ball;
 use host_compiler::task::Task;
+use host_compiler::verify::temporal::{formula_value, RunRecord};
 use qemu_tests::closed_loop::{exchange, HostEvaluator};
 use qemu_tests::firmware::{self, FirmwareConfig};
 use qemu_tests::qemu::Qemu;
@@ -73,7 +73,7 @@ fn mtl_waypoints_hold_on_the_target_from_50_initial_states() {
         let mut q = Qemu::launch(&elf, Duration::from_secs(120)).unwrap_or_else(|e| panic!("{e}"));
         let mut host = HostEvaluator::new(img);
         let mut x = x0.clone();
-        let (mut coarse, mut fine) = (vec![x.clone()], vec![(0.0, x.clone())]);
+        let mut rec = RunRecord::new(x0, h);
         for k in 0..task.steps {
             let reply = exchange(&mut q, k as u32, &x, |xf| host.step(xf))
                 .unwrap_or_else(|e| panic!("run {r}: {e}"));
@@ -84,36 +84,13 @@ fn mtl_waypoints_hold_on_the_target_from_50_initial_states() {
                 host_compiler::verify::input_slack(&task.property.input, &u) >= 0.0,
                 "run {r}: input {u:?} outside the input set at step {k}"
             );
-            let mut sub = Vec::new();
-            task.plant
-                .between_samples(0, &x, &u, &mut |xs| sub.push(xs.to_vec()));
-            let parts = sub.len() + 1;
-            for (s, xs) in sub.into_iter().enumerate() {
-                fine.push(((k as f64 + (s + 1) as f64 / parts as f64) * h, xs));
-            }
-            x = task.plant.step(0, &x, &u);
-            coarse.push(x.clone());
-            fine.push(((k + 1) as f64 * h, x.clone()));
+            x = rec.step(&*task.plant, &x, &u);
         }
         let exit = q.shutdown().unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(exit.code, Some(0), "run {r}: firmware exit");
-        let judge = |t: Vec<f64>, xs: Vec<&Vec<f64>>| -> f64 {
-            let cols = (0..n).map(|i| xs.iter().map(|x| x[i]).collect()).collect();
-            let tr = Trace::new(t, state_signals(n), cols).expect("a trace");
-            let m = tt
-                .written
-                .bind(tr.names(), &sets)
-                .expect("the formula binds");
-            m.robustness(&tr).expect("robustness")[0]
-        };
-        let rho = judge(
-            (0..coarse.len()).map(|k| k as f64 * h).collect(),
-            coarse.iter().collect(),
-        );
-        let rho_fine = judge(
-            fine.iter().map(|(t, _)| *t).collect(),
-            fine.iter().map(|(_, x)| x).collect(),
-        );
+        let (tc, tf) = rec.traces().expect("the run's traces");
+        let rho = formula_value(&tt, &sets, &tc).expect("the formula at the samples");
+        let rho_fine = formula_value(&tt, &sets, &tf).expect("the formula sampled finer");
         assert!(
             rho > 0.0 && rho_fine > 0.0,
             "run {r} from {x0:?}: robustness {rho} at the samples, {rho_fine} sampled finer"
