@@ -1040,6 +1040,27 @@ mod tests {
     }
 
     #[test]
+    fn the_argument_registers_set_before_a_panic_call_are_kept_for_its_location() {
+        let listing = "
+00001f00 <mps2_an386::__cortex_m_rt_main>:
+    1f3c:      \tmovw\tr0, #1656
+    1f40:      \tmovw\tr2, #916
+    1f44:      \tmovt\tr0, #1
+    1f48:      \tmovt\tr2, #1
+    1f4c:      \tmovs\tr1, #27
+    1f4e:      \tbl\t0x4a24 <core::panicking::panic> @ imm = #10962
+    1f52:      \tmovw\tr5, #7
+    1f60:      \tbl\t0x4a24 <core::panicking::panic> @ imm = #10926
+";
+        let calls = panic_calls(listing);
+        assert_eq!(calls.len(), 2);
+        // r0 = 0x10678 (the message), r2 = 0x10394 (the Location).
+        assert_eq!(calls[0].constants, [0x1_0678, 0x1_0394]);
+        // A call clobbers r0–r3, and r5 is no argument register.
+        assert!(calls[1].constants.is_empty());
+    }
+
+    #[test]
     fn the_origin_is_the_first_frame_outside_core_and_the_allowlist_matches_it() {
         let symbolizer = "\
 _$LT$core..ops..range..Range$LT$usize$GT$$GT$::index::h01ae804ad2a2d4d4
