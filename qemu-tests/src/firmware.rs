@@ -1,7 +1,8 @@
-//! Builds the firmware for a given controller image and keeps a copy of each ELF.
+//! Builds the firmware of the mps2-an386 board for a given controller image and keeps a copy of each ELF.
 //!
-//! The build runs `cargo build --release` with its working directory in `firmware/` (cargo reads
-//! `firmware/.cargo/config.toml` from there: target, linker scripts, runner), passing the image path in
+//! The build runs `cargo build --release` with its working directory in `firmware/boards/mps2-an386/`
+//! (cargo reads the `.cargo/config.toml` there and in `firmware/`: target, linker scripts, runner), passing
+//! the image path in
 //! `CONTROLLER_IMAGE`. Builds are serialised within the process (they share `firmware/target`), and each
 //! configuration is built once per process; the resulting ELF is copied to `<target>/hil/<name>.elf` so
 //! that later builds with other images do not overwrite it.
@@ -25,18 +26,26 @@ pub struct FirmwareConfig {
 
 static BUILDS: Mutex<Option<HashMap<FirmwareConfig, PathBuf>>> = Mutex::new(None);
 
-/// The firmware crate's directory.
+/// The board the HIL suite runs: the one `qemu-system-arm -machine mps2-an386` emulates.
+pub const BOARD: &str = "mps2-an386";
+
+/// The firmware workspace's directory.
 pub fn firmware_dir() -> PathBuf {
     workspace_root().join("firmware")
 }
 
-/// Where cargo puts the release ELF.
+/// The board's folder, where the build runs.
+pub fn board_dir() -> PathBuf {
+    firmware_dir().join("boards").join(BOARD)
+}
+
+/// Where cargo puts the board's release ELF (the firmware workspace's target directory).
 pub fn built_elf() -> PathBuf {
     firmware_dir()
         .join("target")
         .join("thumbv7em-none-eabihf")
         .join("release")
-        .join("firmware")
+        .join(BOARD)
 }
 
 /// Builds the firmware for `config` (once per process) and returns the path of its ELF copy
@@ -50,7 +59,7 @@ pub fn build(name: &str, config: &FirmwareConfig) -> Result<PathBuf, HilError> {
     }
     let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
     let mut cmd = Command::new(&cargo);
-    cmd.current_dir(firmware_dir()).args(["build", "--release"]);
+    cmd.current_dir(board_dir()).args(["build", "--release"]);
     // The outer cargo's settings must not leak into the firmware build.
     for var in [
         "CARGO_TARGET_DIR",
@@ -76,7 +85,7 @@ pub fn build(name: &str, config: &FirmwareConfig) -> Result<PathBuf, HilError> {
     };
     let command = format!(
         "cd {} && {:?} build --release",
-        firmware_dir().display(),
+        board_dir().display(),
         cargo
     );
     let out = cmd

@@ -1,7 +1,8 @@
 //! Hardware-in-the-loop harness: builds the firmware, boots it in QEMU, and closes the loop over UART.
 //!
-//! * [`firmware`]: builds the firmware with a given controller image (working directory `firmware/`, so
-//!   that cargo reads `firmware/.cargo/config.toml`) and keeps one ELF per configuration;
+//! * [`firmware`]: builds the mps2-an386 board's firmware with a given controller image (working
+//!   directory `firmware/boards/mps2-an386/`, so that cargo reads the `.cargo/config.toml` files there and
+//!   in `firmware/`) and keeps one ELF per configuration;
 //! * [`qemu`]: one QEMU `mps2-an386` session: UART0 on a loopback TCP socket, semihosting (defmt) on
 //!   QEMU's stdout, kept apart; an overall deadline on every wait, and QEMU killed on drop;
 //! * [`logs`]: decodes the defmt stream with the ELF's table (`defmt-decoder`);

@@ -1,4 +1,5 @@
-//! Decodes the firmware's defmt log stream (semihosting output) with the table in its ELF.
+//! Decodes the firmware's defmt log stream (semihosting output) with the table in its ELF, and records each
+//! session's stack high-water mark for the boards' RAM budget (`cargo xtask test`).
 
 use crate::HilError;
 use defmt_decoder::{DecodeError, Table};
@@ -59,4 +60,33 @@ pub fn stack_peak(logs: &[LogLine]) -> Option<u64> {
                 .find_map(|w| w.strip_prefix("stack_peak="))
         })
         .and_then(|v| v.parse().ok())
+}
+
+/// The file every session's stack high-water mark is appended to (`<elf> <bytes>` per line):
+/// `<target>/hil/stack-peaks.txt`. `cargo xtask test` empties it before the HIL suite and takes the
+/// largest figure as the loop's stack for the boards' RAM budget.
+pub fn stack_peaks_file() -> std::path::PathBuf {
+    crate::hil_dir().join("stack-peaks.txt")
+}
+
+/// Appends one session's stack high-water mark to [`stack_peaks_file`]. Best effort: a record that cannot
+/// be written is reported on stderr, and the budget check then fails for want of figures, not this test.
+pub fn record_stack_peak(elf: &std::path::Path, peak: u64) {
+    use std::io::Write as _;
+    let path = stack_peaks_file();
+    let name = elf.file_name().unwrap_or_default().to_string_lossy();
+    let written = std::fs::create_dir_all(crate::hil_dir()).and_then(|()| {
+        let mut f = std::fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(&path)?;
+        // One write per line (O_APPEND): lines of concurrent tests do not interleave.
+        f.write_all(format!("{name} {peak}\n").as_bytes())
+    });
+    if let Err(e) = written {
+        eprintln!(
+            "qemu-tests: recording the stack peak in {}: {e}",
+            path.display()
+        );
+    }
 }

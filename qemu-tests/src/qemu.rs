@@ -297,9 +297,13 @@ impl Qemu {
         for d in self.drains.drain(..) {
             let _ = d.join();
         }
+        let logs = self.logs()?;
+        if let Some(peak) = logs::stack_peak(&logs) {
+            logs::record_stack_peak(&self.elf, peak);
+        }
         Ok(Exit {
             code: status.code(),
-            logs: self.logs()?,
+            logs,
         })
     }
 

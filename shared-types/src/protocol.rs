@@ -33,9 +33,10 @@ use serde::{Deserialize, Deserializer, Serialize, Serializer};
 /// A vector of at most `N` `f32`, stored inline. Serialised as a postcard sequence (a varint length, then
 /// the elements); deserialising more than `N` elements is an error, never a panic or an allocation.
 ///
-/// Hand-written rather than `heapless::Vec` so that shared-types needs no further dependency for a type
-/// this small; equality is bitwise (so `NaN == NaN` and `0.0 != -0.0`), which is what "bit for bit" tests
-/// want.
+/// Hand-written rather than `heapless::Vec`: a `heapless::Vec` is never `Copy` (it implements `Drop`),
+/// and the messages built from this type ([`Request`], [`Reply`]) are `Copy` values that the firmware's
+/// loop and the host harness pass around. Equality is bitwise (so `NaN == NaN` and `0.0 != -0.0`), which
+/// is what "bit for bit" tests want.
 #[derive(Clone, Copy)]
 pub struct Vector<const N: usize> {
     len: usize,
@@ -262,14 +263,16 @@ pub enum FrameEvent<'a> {
     Oversize,
 }
 
-/// Splits a byte stream into frames at `0x00`, with a fixed buffer of `N` bytes.
+/// Splits a byte stream into frames at `0x00`, with a fixed buffer of `N` bytes (a `heapless::Vec`).
 ///
 /// Hand-written (a dozen lines) rather than postcard's `CobsAccumulator`: after an overflow that one
 /// restarts in the middle of the oversize frame and parses its tail as a new message, whereas a frame that
 /// overflows must be dropped whole, up to its delimiter, and reported once.
 pub struct FrameReader<const N: usize> {
-    buf: [u8; N],
-    len: usize,
+    buf: heapless::Vec<u8, N>,
+    /// The frame in `buf` was delivered (or dropped) at its delimiter; cleared at the next byte, so that
+    /// the delivered frame can be borrowed until then.
+    done: bool,
     overflow: bool,
 }
 
@@ -277,37 +280,31 @@ impl<const N: usize> FrameReader<N> {
     /// An empty reader.
     pub const fn new() -> Self {
         Self {
-            buf: [0; N],
-            len: 0,
+            buf: heapless::Vec::new(),
+            done: false,
             overflow: false,
         }
     }
 
     /// Feed one byte. Returns an event when `byte` is a delimiter that ends a non-empty frame.
     pub fn push(&mut self, byte: u8) -> Option<FrameEvent<'_>> {
+        if self.done {
+            self.buf.clear();
+            self.done = false;
+        }
         if byte == 0 {
-            let (len, overflow) = (self.len, self.overflow);
-            self.len = 0;
-            self.overflow = false;
-            if overflow {
+            self.done = true;
+            if core::mem::replace(&mut self.overflow, false) {
                 Some(FrameEvent::Oversize)
-            } else if len == 0 {
+            } else if self.buf.is_empty() {
                 None
             } else {
-                // `len` never exceeds the buffer (push stops at its end); `get` keeps the panic path out.
-                Some(
-                    self.buf
-                        .get(..len)
-                        .map_or(FrameEvent::Oversize, FrameEvent::Frame),
-                )
+                Some(FrameEvent::Frame(&self.buf))
             }
         } else {
-            match self.buf.get_mut(self.len) {
-                Some(slot) if !self.overflow => {
-                    *slot = byte;
-                    self.len += 1;
-                }
-                _ => self.overflow = true,
+            // A full buffer refuses the byte: the frame is dropped up to its delimiter.
+            if self.overflow || self.buf.push(byte).is_err() {
+                self.overflow = true;
             }
             None
         }

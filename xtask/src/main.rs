@@ -5,19 +5,34 @@
 //!   2. installs `qemu-system-arm` and `chromium` (the headless browser of `host-compiler play`'s
 //!      end-to-end test) with apt-get if missing (as root; otherwise prints the command);
 //!   3. `cargo test --workspace --exclude qemu-tests` (host crates, with that browser test);
-//!   4. builds shared-types and the firmware for `thumbv7em-none-eabihf` (proves `no_std`);
-//!   5. no panic: builds the release firmware with the `panic-never` feature, whose panic handler calls a
-//!      function defined nowhere, so the link fails if any panicking path survives optimisation; if it
-//!      fails, traces every call into the panic machinery of the ordinary release ELF (`llvm-objdump`,
-//!      `llvm-symbolizer`) to its origin and chain of inlined callers, and fails naming every origin not
-//!      listed in `firmware/panic-allowlist.txt` (paths inside dependencies that remain, each with why);
-//!   6. the QEMU hardware-in-the-loop suite: `cargo test -p qemu-tests`.
+//!   4. the firmware's control loop on the host: `cargo test --target <host triple> -p control-loop` in
+//!      `firmware/` (the loop crate is `no_std` but tested with std against a mock board; the explicit
+//!      `--target` overrides the firmware workspace's default `thumbv7em-none-eabihf`);
+//!   5. builds shared-types and every board ([`boards::BOARDS`]) for `thumbv7em-none-eabihf` (proves
+//!      `no_std`; compile only, there is no probe);
+//!   6. no panic, per board: builds the board's release firmware with the `panic-never` feature, whose
+//!      panic handler calls a function defined nowhere, so the link fails if any panicking path survives
+//!      optimisation; if it fails, traces every call into the panic machinery of the ordinary release ELF
+//!      (`llvm-objdump`, `llvm-symbolizer`) to its origin and chain of inlined callers, and fails naming
+//!      every origin not listed in `firmware/panic-allowlist.txt` (paths inside dependencies that remain,
+//!      each with why);
+//!   7. the QEMU hardware-in-the-loop suite: `cargo test -p qemu-tests` (it synthesises the shipped
+//!      examples' images and records every session's stack high-water mark);
+//!   8. board budgets: every board built with the longest shipped example's image, its flash and its RAM
+//!      (static + the HIL suite's largest stack mark) against [`boards::BUDGETS`]; fails naming the board
+//!      and the figure over budget.
 //!
 //!   It keeps going after a failure where it can, lists every step, ends with the line
 //!   `xtask: N passed, M failed`, and exits non-zero if any step failed.
-//! * `no-panic`: step 5 of `test` alone.
-//! * `bench`: `cargo bench -p host-compiler`, then the HIL measurement (`hil-bench`), then merges every
-//!   `target/bench/rows/*.json` into `target/bench/summary.json` and prints one table.
+//! * `no-panic`: step 6 of `test` alone.
+//! * `budgets`: step 8 of `test` alone (needs the images and stack figures a HIL run left).
+//! * `board-sizes`: the boards' bench rows alone (after a HIL run), merged into the table.
+//! * `bench`: `cargo bench -p host-compiler`, then the HIL measurement (`hil-bench`), then the boards' rows
+//!   `board_<name>_flash_bytes` and `board_<name>_ram_bytes` (RAM with hil-bench's
+//!   `firmware_stack_bytes_bound`), then merges every `target/bench/rows/*.json` into
+//!   `target/bench/summary.json` and prints one table.
+
+mod boards;
 
 use serde_json::Value;
 use std::ffi::OsStr;
@@ -35,18 +50,35 @@ fn main() -> ExitCode {
     match args.first().map(String::as_str) {
         Some("test") | Some("ci") => test(),
         Some("bench") => bench(),
-        Some("no-panic") => match no_panic_check() {
-            Ok(()) => {
-                println!("xtask: no-panic check passed");
-                ExitCode::SUCCESS
+        Some("no-panic") => {
+            let mut steps = Steps {
+                results: Vec::new(),
+            };
+            for &board in boards::BOARDS {
+                steps.run(&no_panic_step(board), || no_panic_check(board));
             }
-            Err(e) => {
-                eprintln!("xtask: {e}");
-                ExitCode::FAILURE
-            }
-        },
+            steps.finish()
+        }
+        Some("board-sizes") => {
+            let mut steps = Steps {
+                results: Vec::new(),
+            };
+            let rows_dir = target_dir().join("bench").join("rows");
+            steps.run(BOARD_SIZES_STEP, || board_rows(&rows_dir));
+            steps.run("merge rows into target/bench/summary.json", || {
+                merge(&rows_dir)
+            });
+            steps.finish()
+        }
+        Some("budgets") => {
+            let mut steps = Steps {
+                results: Vec::new(),
+            };
+            steps.run(BUDGET_STEP, budget_check);
+            steps.finish()
+        }
         _ => {
-            eprintln!("usage: cargo xtask <test|ci|bench|no-panic>");
+            eprintln!("usage: cargo xtask <test|ci|bench|no-panic|budgets|board-sizes>");
             ExitCode::from(2)
         }
     }
@@ -78,6 +110,7 @@ fn firmware_cargo() -> Command {
     for var in [
         "CARGO_TARGET_DIR",
         "CARGO_BUILD_TARGET",
+        "CARGO_BUILD_TARGET_DIR",
         "RUSTFLAGS",
         "CARGO_ENCODED_RUSTFLAGS",
         "CARGO_BUILD_RUSTFLAGS",
@@ -261,6 +294,43 @@ fn ensure_package(binary: &str, package: &str, present: fn() -> bool) -> Result<
     }
 }
 
+/// The host's target triple (`rustc -vV`), for the firmware loop's host tests.
+fn host_triple() -> Result<String, String> {
+    let v = output({
+        let mut c = Command::new("rustc");
+        c.current_dir(root()).arg("-vV");
+        c
+    })
+    .ok_or("`rustc -vV` failed")?;
+    v.lines()
+        .find_map(|l| l.strip_prefix("host: "))
+        .map(|h| h.trim().to_string())
+        .ok_or_else(|| "`rustc -vV` names no host".to_string())
+}
+
+/// Step 4: the control loop's unit tests on the host, from `firmware/` with an explicit host `--target`
+/// (the firmware workspace's `[build] target` is the board's).
+fn loop_host_tests() -> Result<(), String> {
+    let host = host_triple()?;
+    let mut c = firmware_cargo();
+    c.args(["test", "--target", &host, "-p", "control-loop"]);
+    run(c)
+}
+
+fn no_panic_step(board: &str) -> String {
+    format!("no panic: {board} release firmware (panic-never link, or only paths in firmware/panic-allowlist.txt)")
+}
+
+const BUDGET_STEP: &str =
+    "board budgets: every board, longest shipped example image, flash and RAM + stack (xtask/src/boards.rs)";
+
+/// Step 8: every board against the budgets, with the HIL suite's largest stack mark.
+fn budget_check() -> Result<(), String> {
+    let stack = boards::hil_stack_peak()?;
+    let figures = boards::measure(stack)?;
+    boards::check(&figures)
+}
+
 fn test() -> ExitCode {
     let mut steps = Steps {
         results: Vec::new(),
@@ -286,36 +356,67 @@ fn test() -> ExitCode {
             run(c)
         },
     );
-    let no_std = "no_std: shared-types and firmware for thumbv7em-none-eabihf";
+    steps.run(
+        "firmware loop on the host: cargo test --target <host> -p control-loop (in firmware/)",
+        loop_host_tests,
+    );
+    let no_std = "no_std: shared-types and every board for thumbv7em-none-eabihf (compile only)";
     if target_ok {
         steps.run(no_std, || {
             let mut c = cargo();
             c.args(["build", "-p", "shared-types", "--target", TARGET]);
             run(c)?;
-            let mut c = firmware_cargo();
-            c.args(["build", "--release"]);
-            run(c)
+            let mut failed = Vec::new();
+            for &board in boards::BOARDS {
+                if let Err(e) = boards::build(board, None) {
+                    failed.push(format!("{board}: {e}"));
+                }
+            }
+            if failed.is_empty() {
+                Ok(())
+            } else {
+                Err(failed.join("; "))
+            }
         });
     } else {
         steps.skip(no_std, "the target is missing");
     }
-    let no_panic = "no panic: release firmware (panic-never link, or only paths in firmware/panic-allowlist.txt)";
-    if target_ok {
-        steps.run(no_panic, no_panic_check);
-    } else {
-        steps.skip(no_panic, "the target is missing");
+    for &board in boards::BOARDS {
+        let name = no_panic_step(board);
+        if target_ok {
+            steps.run(&name, || no_panic_check(board));
+        } else {
+            steps.skip(&name, "the target is missing");
+        }
     }
     let hil = "HIL: cargo test -p qemu-tests --no-fail-fast";
-    match (target_ok, qemu_ok) {
-        (true, true) => {
-            steps.run(hil, || {
-                let mut c = cargo();
-                c.args(["test", "-p", "qemu-tests", "--no-fail-fast"]);
-                run(c)
-            });
+    let hil_ok = match (target_ok, qemu_ok) {
+        (true, true) => steps.run(hil, || {
+            // Figures of an earlier run would be mistaken for this run's.
+            let peaks = boards::stack_peaks_file();
+            if peaks.exists() {
+                std::fs::remove_file(&peaks)
+                    .map_err(|e| format!("removing {}: {e}", peaks.display()))?;
+            }
+            let mut c = cargo();
+            c.args(["test", "-p", "qemu-tests", "--no-fail-fast"]);
+            run(c)
+        }),
+        (false, _) => {
+            steps.skip(hil, "the target is missing");
+            false
         }
-        (false, _) => steps.skip(hil, "the target is missing"),
-        (_, false) => steps.skip(hil, "qemu-system-arm is missing"),
+        (_, false) => {
+            steps.skip(hil, "qemu-system-arm is missing");
+            false
+        }
+    };
+    // The budget check needs the HIL suite's images and stack figures; after a failed HIL run they may
+    // be partial, and the check still runs on what is there (and says what is missing).
+    if target_ok && (hil_ok || boards::stack_peaks_file().exists()) {
+        steps.run(BUDGET_STEP, budget_check);
+    } else {
+        steps.skip(BUDGET_STEP, "the HIL suite did not run");
     }
     steps.finish()
 }
@@ -350,10 +451,59 @@ fn bench() -> ExitCode {
     } else {
         steps.skip(hil, "the target or qemu-system-arm is missing");
     }
+    let sizes =
+        "board sizes: board_<name>_flash_bytes, board_<name>_ram_bytes (against the budgets)";
+    if target_ok {
+        steps.run(sizes, || board_rows(&rows_dir));
+    } else {
+        steps.skip(sizes, "the target is missing");
+    }
     steps.run("merge rows into target/bench/summary.json", || {
         merge(&rows_dir)
     });
     steps.finish()
+}
+
+const BOARD_SIZES_STEP: &str =
+    "board sizes: board_<name>_flash_bytes, board_<name>_ram_bytes (against the budgets)";
+
+/// The boards' bench rows, with hil-bench's `firmware_stack_bytes_bound` (`rows/hil.json`) as the stack,
+/// or, without it (`cargo xtask board-sizes` after `cargo xtask test`), the HIL suite's largest stack
+/// mark; written to `rows/boards.json` before the budgets are checked, so that the table shows the
+/// figures either way.
+fn board_rows(rows_dir: &Path) -> Result<(), String> {
+    let hil = rows_dir.join("hil.json");
+    let bound = std::fs::read_to_string(&hil).ok().and_then(|text| {
+        let list: Vec<Value> = serde_json::from_str(&text).ok()?;
+        list.iter()
+            .find(|r| r.get("name").and_then(Value::as_str) == Some("firmware_stack_bytes_bound"))
+            .and_then(|r| r.get("value").and_then(Value::as_f64))
+    });
+    let stack = match bound {
+        Some(b) => {
+            println!(
+                "xtask: stack: firmware_stack_bytes_bound = {b} bytes ({})",
+                hil.display()
+            );
+            b as u64
+        }
+        None => {
+            let s = boards::hil_stack_peak()?;
+            println!(
+                "xtask: stack: no firmware_stack_bytes_bound in {}; the HIL suite's largest mark, {s} bytes",
+                hil.display()
+            );
+            s
+        }
+    };
+    std::fs::create_dir_all(rows_dir)
+        .map_err(|e| format!("creating {}: {e}", rows_dir.display()))?;
+    let figures = boards::measure(stack)?;
+    let rows = Value::Array(boards::rows(&figures));
+    let out = rows_dir.join("boards.json");
+    let text = serde_json::to_string_pretty(&rows).map_err(|e| e.to_string())?;
+    std::fs::write(&out, text).map_err(|e| format!("writing {}: {e}", out.display()))?;
+    boards::check(&figures)
 }
 
 fn field(row: &Value, key: &str) -> Value {
@@ -447,27 +597,31 @@ fn merge(rows_dir: &Path) -> Result<(), String> {
     Ok(())
 }
 
-/// The symbol the `panic-never` panic handler calls (firmware/src/main.rs); defined nowhere.
+/// The symbol the `panic-never` panic handler calls (each board's `src/main.rs`); defined nowhere.
 const PANIC_NEVER_SYMBOL: &str = "firmware_panic_path_is_reachable";
 
 /// The known panicking paths that remain in dependencies (firmware/panic-allowlist.txt).
 const PANIC_ALLOWLIST: &str = "firmware/panic-allowlist.txt";
 
-/// The no-panic check (step 5 of `test`): the release firmware with the `panic-never` feature must link.
+/// The no-panic check of one board (step 6 of `test`): its release firmware with the `panic-never`
+/// feature must link.
 /// If the link fails on [`PANIC_NEVER_SYMBOL`], the ordinary release ELF (same code, with a defined
 /// handler) is disassembled (`llvm-objdump`), every call into the panic machinery is traced through its
 /// inlined frames (`llvm-symbolizer`) to its origin, the first frame outside `core`, and the check fails
 /// naming every origin that [`PANIC_ALLOWLIST`] does not list.
-fn no_panic_check() -> Result<(), String> {
-    let mut c = firmware_cargo();
+fn no_panic_check(board: &str) -> Result<(), String> {
+    let mut c = boards::board_cargo(board);
     c.args(["build", "--release", "--features", "panic-never"]);
+    c.env_remove("CONTROLLER_IMAGE")
+        .env_remove("CONTROLLER_REJECTED_M")
+        .env_remove("FIRMWARE_FAULT_INJECTION");
     let what = show(&c);
     println!("xtask: $ {what}");
     let out = c
         .output()
         .map_err(|e| format!("could not run `{what}`: {e}"))?;
     if out.status.success() {
-        println!("xtask: the panic-never build links: no panicking path is reachable");
+        println!("xtask: {board}: the panic-never build links: no panicking path is reachable");
         return Ok(());
     }
     let stderr = String::from_utf8_lossy(&out.stderr);
@@ -475,24 +629,25 @@ fn no_panic_check() -> Result<(), String> {
         eprintln!("{stderr}");
         return Err(format!("`{what}` failed ({})", out.status));
     }
-    let mut c = firmware_cargo();
-    c.args(["build", "--release"]);
-    run(c)?;
-    let elf = root()
-        .join("firmware/target")
-        .join(TARGET)
-        .join("release/firmware");
+    boards::build(board, None)?;
+    let elf = boards::elf(board);
     let mut objdump = Command::new("llvm-objdump");
     objdump
         .args(["-d", "-C", "-l", "--no-show-raw-insn"])
         .arg(&elf);
     let listing = output(objdump).ok_or_else(|| {
         format!(
-            "the release firmware has a reachable panicking path (the link needs \
+            "{board}: the release firmware has a reachable panicking path (the link needs \
              `{PANIC_NEVER_SYMBOL}`), and llvm-objdump (apt-get install llvm) is needed to name it"
         )
     })?;
-    let calls = panic_calls(&listing);
+    let mut calls = panic_calls(&listing);
+    let elf_bytes = std::fs::read(&elf).map_err(|e| format!("reading {}: {e}", elf.display()))?;
+    let file =
+        object::File::parse(&*elf_bytes).map_err(|e| format!("reading {}: {e}", elf.display()))?;
+    for c in &mut calls {
+        c.location = c.constants.iter().find_map(|&a| panic_location(&file, a));
+    }
     let chains = symbolize(&elf, &calls).ok_or_else(|| {
         "llvm-symbolizer (apt-get install llvm) is needed to trace the panicking paths".to_string()
     })?;
@@ -510,14 +665,14 @@ fn no_panic_check() -> Result<(), String> {
     }
     if new.is_empty() {
         println!(
-            "xtask: {} panicking path(s) remain, all in dependencies listed in {PANIC_ALLOWLIST}",
+            "xtask: {board}: {} panicking path(s) remain, all in dependencies listed in {PANIC_ALLOWLIST}",
             allowed.len()
         );
         return Ok(());
     }
     let list: Vec<String> = new.iter().map(|s| format!("  {s}")).collect();
     Err(format!(
-        "the release firmware has {} reachable panicking path(s) not listed in {PANIC_ALLOWLIST} \
+        "{board}: the release firmware has {} reachable panicking path(s) not listed in {PANIC_ALLOWLIST} \
          (origin, the first frame outside core, and the chain of inlined calls):\n{}",
         new.len(),
         list.join("\n")
@@ -542,6 +697,43 @@ struct PanicCall {
     address: String,
     /// The last source line the listing gave before the call (used where the debug info says line 0).
     line: String,
+    /// Values the call's argument registers r0–r3 were given by `movw`/`movt` before it: one of them is
+    /// usually the address of the panic's `core::panic::Location` (see [`panic_location`]).
+    constants: Vec<u32>,
+    /// The panic's own `Location` (file:line:col, the `#[track_caller]` site), when found in the ELF.
+    location: Option<String>,
+}
+
+/// Reads a `core::panic::Location` at `addr` in the ELF (`&str` file as pointer and length, then line and
+/// column, 32-bit little-endian), if it is one: the file is UTF-8 and names a `.rs` file, line and column
+/// are plausible. This is the exact site a panic reports, where the debug info of an inlined call may say
+/// line 0.
+fn panic_location(elf: &object::File, addr: u32) -> Option<String> {
+    use object::{Object, ObjectSection};
+    let read = |a: u32, n: u32| -> Option<&[u8]> {
+        elf.sections().find_map(|s| {
+            let start = s.address();
+            let (a, n) = (u64::from(a), u64::from(n));
+            if a < start || a + n > start + s.size() {
+                return None;
+            }
+            let data = s.data().ok()?;
+            data.get((a - start) as usize..(a - start + n) as usize)
+        })
+    };
+    let raw = read(addr, 16)?;
+    let word = |i: usize| -> Option<u32> {
+        Some(u32::from_le_bytes(
+            raw.get(4 * i..4 * i + 4)?.try_into().ok()?,
+        ))
+    };
+    let (ptr, len, line, col) = (word(0)?, word(1)?, word(2)?, word(3)?);
+    if !(1..=1024).contains(&len) || !(1..=1_000_000).contains(&line) || col > 10_000 {
+        return None;
+    }
+    let file = std::str::from_utf8(read(ptr, len)?).ok()?;
+    file.ends_with(".rs")
+        .then(|| format!("{}:{line}:{col}", short_path(file)))
 }
 
 /// From an `llvm-objdump -d -C --no-show-raw-insn` listing: every call (`bl`, `blx`, `b`, `b.w`) from a
@@ -550,6 +742,8 @@ fn panic_calls(listing: &str) -> Vec<PanicCall> {
     let mut function = String::new();
     let mut line = String::new();
     let mut found = Vec::new();
+    // r0–r3 as set by movw/movt since the function's start or the last call (which clobbers them).
+    let mut regs: [Option<u32>; 4] = [None; 4];
     for l in listing.lines() {
         let t = l.trim();
         if let Some(name) = t
@@ -561,6 +755,7 @@ fn panic_calls(listing: &str) -> Vec<PanicCall> {
             if !name.starts_with('$') {
                 function = name.to_string();
                 line.clear();
+                regs = [None; 4];
             }
             continue;
         }
@@ -576,6 +771,28 @@ fn panic_calls(listing: &str) -> Vec<PanicCall> {
         let mut words = t.split_whitespace();
         let address = words.next().unwrap_or("").trim_end_matches(':');
         let op = words.next().unwrap_or("");
+        if op == "movw" || op == "movt" {
+            let reg = words.next().unwrap_or("").trim_end_matches(',');
+            let imm = words
+                .next()
+                .and_then(|w| w.strip_prefix('#'))
+                .and_then(|w| w.parse::<u32>().ok());
+            let slot = match reg {
+                "r0" => Some(0),
+                "r1" => Some(1),
+                "r2" => Some(2),
+                "r3" => Some(3),
+                _ => None,
+            };
+            if let (Some(i), Some(imm)) = (slot, imm) {
+                regs[i] = Some(if op == "movw" {
+                    imm
+                } else {
+                    (regs[i].unwrap_or(0) & 0xFFFF) | (imm << 16)
+                });
+            }
+            continue;
+        }
         let is_branch = op.starts_with("bl") || op == "b" || op.starts_with("b.");
         let target = t.split_once('<').and_then(|(_, r)| r.rsplit_once('>'));
         if let (true, Some((target, _))) = (is_branch, target) {
@@ -586,8 +803,13 @@ fn panic_calls(listing: &str) -> Vec<PanicCall> {
                     target: target.to_string(),
                     address: address.to_string(),
                     line: line.clone(),
+                    constants: regs.iter().flatten().copied().collect(),
+                    location: None,
                 });
             }
+        }
+        if op.starts_with("bl") {
+            regs = [None; 4];
         }
     }
     found
@@ -719,10 +941,18 @@ fn origins(calls: &[PanicCall], chains: &[Vec<(String, String)>]) -> Vec<PanicSi
             .get(k)
             .cloned()
             .unwrap_or_else(|| (call.function.clone(), "?".into()));
-        // Line 0: code the compiler made up (no line of its own); the listing's last line before the call
-        // is the nearest source line.
-        if (location.ends_with(":0:0") || location.contains(":0:")) && !call.line.is_empty() {
-            location = format!("{} (nearest line before the call)", short_path(&call.line));
+        match &call.location {
+            // The panic's own Location, outside Rust's library: the exact site, whatever the debug info
+            // of the inlined frames says.
+            Some(site) if !site.starts_with("rust/library/") => location = site.clone(),
+            // Line 0: code the compiler made up (no line of its own); the listing's last line before the
+            // call is the nearest source line.
+            _ if (location.ends_with(":0:0") || location.contains(":0:"))
+                && !call.line.is_empty() =>
+            {
+                location = format!("{} (nearest line before the call)", short_path(&call.line));
+            }
+            _ => {}
         }
         // Each frame's location is where the *next outer* frame's call happened, so the caller chain pairs
         // the outer function with the location one frame in.
@@ -810,6 +1040,27 @@ mod tests {
     }
 
     #[test]
+    fn the_argument_registers_set_before_a_panic_call_are_kept_for_its_location() {
+        let listing = "
+00001f00 <mps2_an386::__cortex_m_rt_main>:
+    1f3c:      \tmovw\tr0, #1656
+    1f40:      \tmovw\tr2, #916
+    1f44:      \tmovt\tr0, #1
+    1f48:      \tmovt\tr2, #1
+    1f4c:      \tmovs\tr1, #27
+    1f4e:      \tbl\t0x4a24 <core::panicking::panic> @ imm = #10962
+    1f52:      \tmovw\tr5, #7
+    1f60:      \tbl\t0x4a24 <core::panicking::panic> @ imm = #10926
+";
+        let calls = panic_calls(listing);
+        assert_eq!(calls.len(), 2);
+        // r0 = 0x10678 (the message), r2 = 0x10394 (the Location).
+        assert_eq!(calls[0].constants, [0x1_0678, 0x1_0394]);
+        // A call clobbers r0–r3, and r5 is no argument register.
+        assert!(calls[1].constants.is_empty());
+    }
+
+    #[test]
     fn the_origin_is_the_first_frame_outside_core_and_the_allowlist_matches_it() {
         let symbolizer = "\
 _$LT$core..ops..range..Range$LT$usize$GT$$GT$::index::h01ae804ad2a2d4d4
@@ -826,6 +1077,8 @@ firmware::app::App::on_frame::h1c786a80a053fc5d
             target: "core::slice::index::slice_index_fail".into(),
             address: "3428".into(),
             line: String::new(),
+            constants: Vec::new(),
+            location: None,
         }];
         let sites = origins(&calls, &chains);
         assert_eq!(sites.len(), 1);

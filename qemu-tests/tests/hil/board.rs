@@ -66,7 +66,7 @@ fn check_calibration(logs: &[LogLine]) {
     );
 }
 
-/// The documented conversion (firmware/src/cost.rs): 1 ns per instruction, SysTick at 25 MHz.
+/// The documented conversion (firmware/boards/mps2-an386/src/cost.rs): 1 ns per instruction, SysTick at 25 MHz.
 fn firmware_instructions_per_tick() -> u64 {
     1_000_000_000 / 25_000_000
 }

@@ -1,29 +1,53 @@
-//! The firmware binary: boot, validate the embedded image, then serve control steps over UART0 forever
-//! (until the host sends `Shutdown`). Panics, HardFaults and unexpected exceptions exit QEMU with a failure
-//! code through semihosting, so nothing hangs silently.
+//! The mps2-an386 board: the Arm MPS2 with the AN386 FPGA image (Cortex-M4F), as emulated by
+//! `qemu-system-arm -machine mps2-an386`. Boot, validate the embedded image, then serve control steps over
+//! UART0 ([`uart`]) until the host sends `Shutdown`, with SysTick under `-icount` as the cost meter
+//! ([`cost`]). Logs go out as defmt over semihosting, apart from the UART. Panics, HardFaults and
+//! unexpected exceptions exit QEMU with a failure code through semihosting, so nothing hangs silently.
+//!
+//! # Building and running
+//! Build from this folder, so that cargo reads `.cargo/config.toml` here (the QEMU runner) and in
+//! `firmware/` (target, linker scripts):
+//!
+//! ```text
+//! cd firmware/boards/mps2-an386
+//! CONTROLLER_IMAGE=/path/to/controller.img cargo build --release   # without it: the default test image
+//! cargo run --release                                                # boots it in qemu-system-arm
+//! ```
+//!
+//! `cargo run` puts UART0 on the terminal; the HIL harness (`qemu-tests`) connects it to a socket instead
+//! and decodes the defmt log.
 #![no_std]
 #![no_main]
 
+mod cost;
+mod uart;
+
+use control_loop::board::StackMeter;
+use control_loop::serve::{serve, End};
+use control_loop::stack::PaintedStack;
 use core::sync::atomic::{AtomicBool, Ordering};
 use cortex_m_rt::{entry, exception, ExceptionFrame};
+use cost::{SysTickMeter, INSTRUCTIONS_PER_TICK};
 use defmt::{error, info, Display2Format};
 use defmt_semihosting as _;
-use firmware::app::{Action, App};
-use firmware::cost::{self, SysTickMeter, INSTRUCTIONS_PER_TICK};
-use firmware::uart::{Uart, UART0_BASE};
-use firmware::{exit_code, BAUD};
-use shared_types::protocol::{encode_frame, Reader, MAX_FRAME};
+use uart::{Uart, UART0_BASE};
 
-mod build_config {
-    include!(concat!(env!("OUT_DIR"), "/build_config.rs"));
+/// Exit codes reported to QEMU through semihosting (`SYS_EXIT_EXTENDED`); QEMU exits with the same status.
+mod exit_code {
+    /// The host asked for shutdown.
+    pub const SUCCESS: i32 = 0;
+    /// A panic (there should be none: bad data is handled without panicking).
+    pub const PANIC: i32 = 101;
+    /// A HardFault.
+    pub const HARD_FAULT: i32 = 102;
+    /// An interrupt or exception that has no handler.
+    pub const UNEXPECTED_EXCEPTION: i32 = 103;
+    /// Boot failed before the loop (core peripherals already taken).
+    pub const BOOT: i32 = 104;
 }
 
-/// Byte array with the alignment of `f64`, so that the image is stored word-aligned in flash.
-#[repr(C, align(8))]
-struct Aligned<T: ?Sized>(T);
-
-/// The controller image chosen at build time (see build.rs).
-static IMAGE: &Aligned<[u8]> = &Aligned(*include_bytes!(concat!(env!("OUT_DIR"), "/image.bin")));
+/// UART baud rate. QEMU ignores it (bytes move at socket speed), but the divisor must be valid.
+const BAUD: u32 = 115_200;
 
 /// Iterations of the boot calibration loop (2 instructions each).
 const CALIBRATION_ITERATIONS: u32 = 100_000;
@@ -47,11 +71,12 @@ fn main() -> ! {
     #[cfg(fault_injection = "hardfault")]
     fault_injection_hardfault();
 
-    let (mut app, boot) = App::new(&IMAGE.0, build_config::REJECTED_M);
+    let image = control_loop::image::image();
+    let (mut app, boot) = control_loop::boot();
     match boot {
         Ok(img) => info!(
             "image accepted: {=usize} bytes, n={=usize} m={=usize} trajectories={=usize} steps={=usize}",
-            IMAGE.0.len(),
+            image.len(),
             img.n(),
             img.m(),
             img.n_trajectories(),
@@ -60,44 +85,32 @@ fn main() -> ! {
         Err(e) => error!(
             "image rejected: {} ({=usize} bytes); applying the build-time fallback (zero input, m={=usize})",
             Display2Format(&e),
-            IMAGE.0.len(),
-            build_config::REJECTED_M
+            image.len(),
+            control_loop::image::REJECTED_M
         ),
     }
 
     // SAFETY: UART0 is used by nothing else.
     let mut uart = unsafe { Uart::new(UART0_BASE, BAUD) };
-    let mut reader = Reader::new();
-    let mut out = [0u8; MAX_FRAME];
     info!("ready");
-    loop {
-        let byte = uart.read_byte();
-        let Some(ev) = reader.push(byte) else {
-            continue;
-        };
-        match app.on_frame(ev, &mut meter) {
-            Action::Reply(reply) => match encode_frame(&reply, &mut out) {
-                Ok(frame) => uart.write_all(frame),
-                // MAX_FRAME is sized for the largest reply; reaching this is a bug, so say so loudly and
-                // exit with the panic code, without a panic (no panicking path: `cargo xtask no-panic`).
-                Err(_) => {
-                    error!("reply does not fit MAX_FRAME");
-                    semihosting::process::exit(exit_code::PANIC)
-                }
-            },
-            Action::Shutdown => {
-                let s = app.stats();
-                info!(
-                    "shutdown: ok={=u32} out_of_envelope={=u32} bad_frames={=u32} rejected={=u32} max_cost={=u32} stack_peak={=u32}",
-                    s.ok,
-                    s.out_of_envelope,
-                    s.bad_frames,
-                    s.rejected,
-                    s.max_cost,
-                    firmware::stack::peak_bytes()
-                );
-                semihosting::process::exit(exit_code::SUCCESS)
-            }
+    match serve(&mut app, &mut uart, &mut meter) {
+        End::Shutdown(s) => {
+            info!(
+                "shutdown: ok={=u32} out_of_envelope={=u32} bad_frames={=u32} rejected={=u32} max_cost={=u32} stack_peak={=u32}",
+                s.ok,
+                s.out_of_envelope,
+                s.bad_frames,
+                s.rejected,
+                s.max_cost,
+                PaintedStack.peak_bytes()
+            );
+            semihosting::process::exit(exit_code::SUCCESS)
+        }
+        // MAX_FRAME is sized for the largest reply; reaching this is a bug, so say so loudly and exit with
+        // the panic code, without a panic (no panicking path: `cargo xtask no-panic`).
+        End::ReplyTooLarge => {
+            error!("reply does not fit MAX_FRAME");
+            semihosting::process::exit(exit_code::PANIC)
         }
     }
 }

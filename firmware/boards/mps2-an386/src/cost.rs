@@ -1,4 +1,5 @@
-//! The cost of a control step, in guest instructions, measured with SysTick.
+//! The mps2-an386 board's step-cost meter: the cost of a control step in guest instructions, measured with
+//! SysTick.
 //!
 //! # Conversion
 //! Under `qemu-system-arm -icount shift=0` every guest instruction advances QEMU's virtual clock by
@@ -17,6 +18,7 @@
 //! SysTick is 24 bits wide and free-running here (reload `0xFF_FFFF`): a measurement is exact for steps
 //! shorter than 2^24 ticks (≈ 671 million instructions), far beyond any bounded control step.
 
+use control_loop::board::Meter;
 use core::sync::atomic::{compiler_fence, Ordering};
 use cortex_m::peripheral::{syst::SystClkSource, SYST};
 
@@ -28,12 +30,6 @@ pub const NS_PER_INSTRUCTION: u32 = 1;
 pub const INSTRUCTIONS_PER_TICK: u32 = 1_000_000_000 / SYSCLK_HZ / NS_PER_INSTRUCTION;
 
 const MASK: u32 = 0x00FF_FFFF;
-
-/// Something that can run a closure and say what it cost, in instructions.
-pub trait Meter {
-    /// Runs `f`, returning its result and its cost in instructions.
-    fn measure<R>(&mut self, f: impl FnOnce() -> R) -> (R, u32);
-}
 
 /// SysTick as a free-running 24-bit down-counter at the core clock.
 pub struct SysTickMeter {

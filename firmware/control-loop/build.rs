@@ -1,12 +1,12 @@
-//! Build script of the firmware:
-//! 1. copies the board's memory map `../memory.x` into `OUT_DIR` (cortex-m-rt's `link.x` includes it);
-//! 2. embeds the controller image: the file named by `CONTROLLER_IMAGE` (a path, relative paths taken from
-//!    `firmware/`), else a default test image generated here (see [`default_image`]);
-//! 3. writes the build-time fallback used when the image is rejected at boot: a zero input of dimension
+//! Build script of the control loop, the same for every board:
+//! 1. embeds the controller image: the file named by `CONTROLLER_IMAGE` (a path; a relative path is taken
+//!    from `firmware/`, the firmware workspace's root, whichever folder cargo runs in), else a default test
+//!    image generated here (see [`default_image`]);
+//! 2. writes the build-time fallback used when the image is rejected at boot: a zero input of dimension
 //!    `CONTROLLER_REJECTED_M` if set, else the `m` the image's header declares (if the header is readable at
 //!    all), else 0.
 //!
-//! `FIRMWARE_FAULT_INJECTION=panic|hardfault` builds a test firmware that faults on purpose at boot.
+//! Each board's own build script places its memory map (`memory.x`).
 //!
 //! The default image is generated rather than committed so that it always matches the current image format
 //! (a committed file would silently go stale when `FORMAT_VERSION` changes).
@@ -20,28 +20,16 @@ fn main() {
     let out = PathBuf::from(std::env::var_os("OUT_DIR").expect("cargo sets OUT_DIR"));
     let manifest = PathBuf::from(std::env::var_os("CARGO_MANIFEST_DIR").expect("cargo sets it"));
 
-    let memory_x = manifest.join("..").join("memory.x");
-    std::fs::copy(&memory_x, out.join("memory.x")).expect("copy ../memory.x");
-    println!("cargo:rustc-link-search={}", out.display());
-    println!("cargo:rerun-if-changed={}", memory_x.display());
+    // Relative image paths are taken from the firmware workspace's root (this crate's parent), as before
+    // the boards moved into their own folders.
+    let firmware_root = manifest.join("..");
     println!("cargo:rerun-if-changed=build.rs");
     println!("cargo:rerun-if-env-changed=CONTROLLER_IMAGE");
     println!("cargo:rerun-if-env-changed=CONTROLLER_REJECTED_M");
-    println!("cargo:rerun-if-env-changed=FIRMWARE_FAULT_INJECTION");
-
-    // Test-only builds that fault on purpose at boot, to check that faults exit QEMU with failure.
-    println!("cargo::rustc-check-cfg=cfg(fault_injection, values(\"panic\", \"hardfault\"))");
-    match std::env::var("FIRMWARE_FAULT_INJECTION").as_deref() {
-        Ok(kind @ ("panic" | "hardfault")) => {
-            println!("cargo:rustc-cfg=fault_injection=\"{kind}\"")
-        }
-        Ok("") | Err(_) => {}
-        Ok(other) => panic!("FIRMWARE_FAULT_INJECTION={other:?}: expected panic or hardfault"),
-    }
 
     let bytes = match std::env::var_os("CONTROLLER_IMAGE") {
         Some(p) => {
-            let path = manifest.join(Path::new(&p));
+            let path = firmware_root.join(Path::new(&p));
             println!("cargo:rerun-if-changed={}", path.display());
             std::fs::read(&path)
                 .unwrap_or_else(|e| panic!("CONTROLLER_IMAGE={}: {e}", path.display()))

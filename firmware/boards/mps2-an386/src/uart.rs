@@ -4,6 +4,7 @@
 //! Hand-written: there is no maintained crate for this IP block (no PAC covers the MPS2 FPGA images), and
 //! the whole driver is a few volatile register accesses.
 
+use control_loop::board::Link;
 use core::ptr::{read_volatile, write_volatile};
 
 /// Base address of UART0 on mps2-an386.
@@ -69,5 +70,14 @@ impl Uart {
                 self.write(DATA, b as u32);
             }
         }
+    }
+}
+
+impl Link for Uart {
+    fn read_byte(&mut self) -> u8 {
+        Uart::read_byte(self)
+    }
+    fn write_all(&mut self, bytes: &[u8]) {
+        Uart::write_all(self, bytes)
     }
 }

@@ -1,4 +1,4 @@
-//! What the firmware does with each frame: the control loop's logic, without the hardware.
+//! What the loop does with each frame: the protocol and the evaluator's answer, without the hardware.
 //!
 //! One [`App`] holds either a running [`Controller`] over the validated image or, when the image was
 //! rejected at boot, only the build-time fallback input. [`App::on_frame`] turns one received frame into
@@ -15,7 +15,7 @@
 //! The cost reported is that of the evaluation (step, and fallback when the step failed), in instructions;
 //! 0 when nothing was evaluated.
 
-use crate::cost::Meter;
+use crate::board::Meter;
 use shared_types::eval::{rejected_image_input, Controller, Input, Status};
 use shared_types::image::{decode, Image, ImageError};
 use shared_types::protocol::{decode_frame, FrameEvent, InputVec, Reply, Request, State};
