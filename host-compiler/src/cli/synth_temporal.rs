@@ -1,8 +1,9 @@
 //! `synth` for an MTL task (a spec with `[mtl] formula`, Problem 2.28) on a one-location plant: balls
 //! certified for the formula (`certify::temporal`), grown over Init
 //! ([`crate::synth::temporal::synthesize_temporal`]), re-proved from the image bytes and verified by
-//! Monte Carlo against the formula as written. Writes `controller.img` (only when both passed) and
-//! `certificate.json`; exit status as for `synth` ([`super::Exit`]).
+//! Monte Carlo against the formula as written. Writes `controller.img` (only when both passed),
+//! `certificate.json` and `report.html` ([`crate::report::temporal`]); exit status as for `synth`
+//! ([`super::Exit`]).
 
 use super::synth::write_atomic;
 use super::{task_of, BadInput, Exit, Failure, Outcome, SynthArgs};
@@ -101,6 +102,13 @@ pub fn run(a: &SynthArgs, problem: crate::spec::Problem) -> Outcome {
         serde_json::to_string_pretty(&cert).into_diagnostic()?,
     )
     .into_diagnostic()?;
+    let page = crate::report::temporal::render(
+        &task.problem,
+        &a.spec.display().to_string(),
+        tt.written.source(),
+        &s,
+    );
+    std::fs::write(a.out.join("report.html"), page).into_diagnostic()?;
     let (dmin, dmax) = s
         .trajectories
         .iter()

@@ -11,6 +11,7 @@ pub mod planar;
 pub mod plots;
 mod present;
 pub mod pwa;
+pub mod temporal;
 
 pub use html::{render_html, verdict, write_report, Verdict};
 pub use present::report_data;
