@@ -46,6 +46,21 @@ pub const MAX_BALL_REFS: usize = 4096;
 /// Largest number of balls one leaf may list: bounds the envelope test of one control step.
 pub const MAX_LEAF_BALLS: usize = 64;
 
+/// Largest model program ([`crate::program`]) in bytes: header, constant pool and code together. One
+/// instruction is one to three bytes, so this bounds the instructions one evaluation executes.
+pub const MAX_PROGRAM_LEN: usize = 4096;
+/// Largest number of `f32` constants in a model program's pool.
+pub const MAX_PROGRAM_CONSTS: usize = 512;
+/// Largest number of input slots a model program reads (states, inputs and parameters it is given).
+pub const MAX_PROGRAM_INPUTS: usize = 64;
+/// Largest number of outputs a model program stores.
+pub const MAX_PROGRAM_OUTPUTS: usize = 64;
+/// Largest operand-stack depth of a model program: the evaluator's stack is a `[f32; MAX_PROGRAM_STACK]`.
+pub const MAX_PROGRAM_STACK: usize = 32;
+/// Largest magnitude of an integer power `x^k` in a model program; the evaluator multiplies `|k| − 1`
+/// times (and divides once for `k < 0`).
+pub const MAX_PROGRAM_POWI: i8 = 16;
+
 /// Worst-case multiply-adds of one PWA control step at capacity (see the module docs): tree, whitening
 /// before every ball (the worst case of alternating locations), ball tests, law.
 pub const PWA_STEP_MAX_MULADDS: usize =

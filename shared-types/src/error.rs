@@ -37,6 +37,16 @@ pub enum Dim {
     Segments,
     /// Entries of the section directory.
     Sections,
+    /// Bytes of a model program ([`crate::program`]).
+    ProgramBytes,
+    /// Constants of a model program.
+    ProgramConsts,
+    /// Input slots of a model program.
+    ProgramInputs,
+    /// Outputs of a model program.
+    ProgramOutputs,
+    /// Operand-stack depth of a model program.
+    ProgramStack,
 }
 
 /// Which payload field an error is about.
@@ -101,6 +111,10 @@ pub enum Field {
     BallThreshold,
     /// Segment-exit records (kind, â, b̂, θ).
     Exit,
+    /// A model program as a whole (header, constant pool and code).
+    Program,
+    /// The constant pool of a model program.
+    ProgramConst,
 }
 
 /// Position of a bad value. Its meaning depends on the field: `K`, `P`: (location, row, col); `Centre`:
@@ -433,6 +447,56 @@ pub enum ImageError {
         /// Row (= column) of the entry.
         row: u16,
     },
+    /// A model program's code has a byte that is not a known opcode.
+    UnknownOpcode {
+        /// Offset of the byte within the code.
+        offset: u16,
+        /// The byte.
+        opcode: u8,
+    },
+    /// A model program's instruction has a truncated operand, or one out of range (input slot, constant
+    /// index, output index, or a power exponent outside `±1..=±MAX_PROGRAM_POWI`).
+    ProgramOperand {
+        /// Offset of the instruction within the code.
+        offset: u16,
+    },
+    /// A model program's instruction pops more values than the stack holds.
+    StackUnderflow {
+        /// Offset of the instruction within the code.
+        offset: u16,
+    },
+    /// A model program's instruction pushes the stack beyond
+    /// [`crate::capacity::MAX_PROGRAM_STACK`].
+    StackOverflow {
+        /// Offset of the instruction within the code.
+        offset: u16,
+    },
+    /// A model program's stored stack depth differs from the depth of its code.
+    ProgramStackMismatch {
+        /// Depth in the header.
+        stored: u8,
+        /// Depth the code reaches.
+        actual: u8,
+    },
+    /// A model program stores an output twice.
+    OutputStoredTwice {
+        /// The output.
+        output: u8,
+    },
+    /// A model program never stores an output.
+    OutputNotStored {
+        /// The output.
+        output: u8,
+    },
+    /// A model program ends with values left on its stack.
+    StackNotEmpty,
+    /// A model program was evaluated with a slice of the wrong length.
+    ProgramArity {
+        /// Length the program declares.
+        expected: u16,
+        /// Length given.
+        found: u16,
+    },
     /// The output buffer of [`encode`] is too small.
     BufferTooSmall {
         /// Bytes needed.
@@ -458,6 +522,11 @@ impl fmt::Display for Dim {
             Dim::TreeDepth => "tree depth",
             Dim::Segments => "number of segments",
             Dim::Sections => "number of sections",
+            Dim::ProgramBytes => "model program length in bytes",
+            Dim::ProgramConsts => "number of program constants",
+            Dim::ProgramInputs => "number of program inputs",
+            Dim::ProgramOutputs => "number of program outputs",
+            Dim::ProgramStack => "program stack depth",
         })
     }
 }
@@ -494,6 +563,8 @@ impl fmt::Display for Field {
             Field::BallThreshold => "ball thresholds",
             Field::Segment => "segment records",
             Field::Exit => "segment exits",
+            Field::Program => "model program",
+            Field::ProgramConst => "program constants",
         })
     }
 }
@@ -668,6 +739,32 @@ impl fmt::Display for ImageError {
             FactorDiagonal { location, row } => write!(
                 f,
                 "location {location}: factor R has a non-positive diagonal entry R[{row},{row}]"
+            ),
+            UnknownOpcode { offset, opcode } => {
+                write!(f, "program byte {offset}: unknown opcode {opcode:#04x}")
+            }
+            ProgramOperand { offset } => write!(
+                f,
+                "program byte {offset}: operand truncated or out of range"
+            ),
+            StackUnderflow { offset } => {
+                write!(f, "program byte {offset}: pops an empty stack")
+            }
+            StackOverflow { offset } => write!(
+                f,
+                "program byte {offset}: stack deeper than {}",
+                crate::capacity::MAX_PROGRAM_STACK
+            ),
+            ProgramStackMismatch { stored, actual } => write!(
+                f,
+                "stored program stack depth {stored} differs from the code's depth {actual}"
+            ),
+            OutputStoredTwice { output } => write!(f, "program output {output} is stored twice"),
+            OutputNotStored { output } => write!(f, "program output {output} is never stored"),
+            StackNotEmpty => f.write_str("program ends with values left on its stack"),
+            ProgramArity { expected, found } => write!(
+                f,
+                "program evaluated with {found} values where it declares {expected}"
             ),
             BufferTooSmall { needed } => write!(f, "output buffer too small: {needed} bytes needed"),
             Encode => f.write_str("payload could not be serialised"),

@@ -9,6 +9,7 @@
 //! * [`image`]: the content, [`image::encode`] and the validating zero-copy [`image::decode`];
 //! * [`pwa`]: the PWA-feedback tables (Ch. 6), their validation and bounded-depth point location;
 //! * [`eval`]: the f32 evaluator ([`eval::Controller`]), [`eval::Status`] and [`eval::Input`];
+//! * [`program`]: model programs, the validated `f32` stack bytecode of a nonlinear plant's maps;
 //! * [`protocol`]: the UART protocol between plant and firmware.
 #![no_std]
 
@@ -18,6 +19,7 @@ pub mod eval;
 pub mod header;
 pub mod image;
 pub mod layout;
+pub mod program;
 pub mod protocol;
 pub mod pwa;
 mod raw;

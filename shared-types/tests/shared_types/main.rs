@@ -5,5 +5,6 @@ mod common;
 mod decode_fuzz;
 mod evaluator;
 mod image_format;
+mod program;
 mod pwa_eval;
 mod pwa_format;

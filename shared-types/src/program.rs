@@ -1,0 +1,563 @@
+//! Model programs: the maps a nonlinear plant's controller evaluates on the target (the coordinates ξ(x),
+//! κ(x) and λ(x) of the feedback law (3.17) for §3.1.2, the flat maps of §3.1.3), as a compact stack
+//! bytecode evaluated in `f32` with `libm` (DESIGN §5 "model programs"; issue 13).
+//!
+//! [`Program::decode`] validates every byte before anything runs: the length against
+//! [`MAX_PROGRAM_LEN`], the counts against their capacities, every constant finite, every opcode known,
+//! every slot, constant and output index in range, and the stack depth by one forward pass (no underflow,
+//! never beyond [`MAX_PROGRAM_STACK`], equal to the depth the header stores, empty at the end), and that
+//! every output is stored exactly once. A decoded program then evaluates with a fixed `[f32;
+//! MAX_PROGRAM_STACK]` stack in one pass over at most [`MAX_PROGRAM_LEN`] bytes of code, so its cost is
+//! bounded by its length. Nothing here panics or allocates.
+//!
+//! # Byte layout (little endian; one image section's body, so it can become a section kind unchanged)
+//!
+//! | offset | size | field |
+//! |---|---|---|
+//! | 0 | 1 | `n_inputs`: input slots the program reads, `0..=MAX_PROGRAM_INPUTS` |
+//! | 1 | 1 | `n_outputs`: outputs it stores, `1..=MAX_PROGRAM_OUTPUTS` |
+//! | 2 | 2 | `n_consts`: `f32` constants in the pool, `0..=MAX_PROGRAM_CONSTS` |
+//! | 4 | 2 | `code_len`: bytes of code |
+//! | 6 | 1 | `max_stack`: the stack depth the code reaches (re-derived and compared at decode) |
+//! | 7 | 1 | reserved, 0 |
+//! | 8 | 4·`n_consts` | the constant pool, `f32` each (4-byte aligned relative to the body) |
+//! | 8 + 4·`n_consts` | `code_len` | the code |
+//!
+//! The body is exactly `8 + 4·n_consts + code_len` bytes. Instructions (one opcode byte, then its operand):
+//!
+//! | opcode | operand | effect |
+//! |---|---|---|
+//! | `0x01` LOAD | slot `u8` | push `inputs[slot]` |
+//! | `0x02` CONST | index `u16` | push `consts[index]` |
+//! | `0x03` STORE | output `u8` | pop into `out[output]` |
+//! | `0x10`–`0x13` ADD SUB MUL DIV | — | pop `b`, pop `a`, push `a ∘ b` |
+//! | `0x14` NEG | — | negate the top |
+//! | `0x15` POWI | exponent `i8`, `1 ≤ |k| ≤ MAX_PROGRAM_POWI` | `x^|k|` by `|k| − 1` multiplications left to right, then `1 / ·` if `k < 0` |
+//! | `0x20`–`0x28` SIN COS TAN EXP LOG SQRT ABS ATAN TANH | — | replace the top by `libm`'s `f32` function of it |
+//! | `0x29` ATAN2 | — | pop `x`, pop `y`, push `atan2(y, x)` |
+//!
+//! A nonlinear image would carry one such section whose outputs are every map the controller needs, with
+//! the slots laid out as the section's neighbours declare (states, then inputs, then parameters).
+
+use crate::capacity::{
+    MAX_PROGRAM_CONSTS, MAX_PROGRAM_INPUTS, MAX_PROGRAM_LEN, MAX_PROGRAM_OUTPUTS, MAX_PROGRAM_POWI,
+    MAX_PROGRAM_STACK,
+};
+use crate::error::{Dim, Field, ImageError, Pos};
+use crate::raw::{check_dim, check_finite, f32_at, sat16, sat32, u16_at};
+
+/// Bytes of a program's header.
+pub const PROGRAM_HEADER_LEN: usize = 8;
+
+/// The opcode bytes.
+pub mod opcode {
+    /// Push an input slot.
+    pub const LOAD: u8 = 0x01;
+    /// Push a pool constant.
+    pub const CONST: u8 = 0x02;
+    /// Pop into an output.
+    pub const STORE: u8 = 0x03;
+    /// `a + b`.
+    pub const ADD: u8 = 0x10;
+    /// `a − b`.
+    pub const SUB: u8 = 0x11;
+    /// `a · b`.
+    pub const MUL: u8 = 0x12;
+    /// `a / b`.
+    pub const DIV: u8 = 0x13;
+    /// `−a`.
+    pub const NEG: u8 = 0x14;
+    /// `a^k` for an integer `k`.
+    pub const POWI: u8 = 0x15;
+    /// First of the unary functions, in [`super::Func`] order.
+    pub const FUNC0: u8 = 0x20;
+    /// `atan2(y, x)`.
+    pub const ATAN2: u8 = 0x29;
+}
+
+/// The unary functions a program evaluates through `libm`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Func {
+    /// `sinf`.
+    Sin,
+    /// `cosf`.
+    Cos,
+    /// `tanf`.
+    Tan,
+    /// `expf`.
+    Exp,
+    /// `logf` (natural logarithm).
+    Log,
+    /// `sqrtf` (correctly rounded, IEEE 754).
+    Sqrt,
+    /// `fabsf` (exact).
+    Abs,
+    /// `atanf`.
+    Atan,
+    /// `tanhf`.
+    Tanh,
+}
+
+impl Func {
+    /// Every function, in opcode order (`opcode::FUNC0 + i`).
+    pub const ALL: [Func; 9] = [
+        Func::Sin,
+        Func::Cos,
+        Func::Tan,
+        Func::Exp,
+        Func::Log,
+        Func::Sqrt,
+        Func::Abs,
+        Func::Atan,
+        Func::Tanh,
+    ];
+
+    /// Its opcode byte.
+    pub const fn opcode(self) -> u8 {
+        opcode::FUNC0 + self as u8
+    }
+
+    /// Its name in expressions.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Func::Sin => "sin",
+            Func::Cos => "cos",
+            Func::Tan => "tan",
+            Func::Exp => "exp",
+            Func::Log => "log",
+            Func::Sqrt => "sqrt",
+            Func::Abs => "abs",
+            Func::Atan => "atan",
+            Func::Tanh => "tanh",
+        }
+    }
+
+    /// The `f32` value the target computes.
+    #[inline]
+    pub fn apply(self, x: f32) -> f32 {
+        match self {
+            Func::Sin => libm::sinf(x),
+            Func::Cos => libm::cosf(x),
+            Func::Tan => libm::tanf(x),
+            Func::Exp => libm::expf(x),
+            Func::Log => libm::logf(x),
+            Func::Sqrt => libm::sqrtf(x),
+            Func::Abs => libm::fabsf(x),
+            Func::Atan => libm::atanf(x),
+            Func::Tanh => libm::tanhf(x),
+        }
+    }
+}
+
+/// One decoded instruction.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Op {
+    /// Push input slot `i`.
+    Load(u8),
+    /// Push constant `i` of the pool.
+    Const(u16),
+    /// Pop into output `i`.
+    Store(u8),
+    /// Pop `b`, pop `a`, push `a + b`.
+    Add,
+    /// Pop `b`, pop `a`, push `a − b`.
+    Sub,
+    /// Pop `b`, pop `a`, push `a · b`.
+    Mul,
+    /// Pop `b`, pop `a`, push `a / b`.
+    Div,
+    /// Negate the top.
+    Neg,
+    /// Replace the top `x` by `x^k` ([`powi`]).
+    Powi(i8),
+    /// Replace the top by a function of it.
+    Func(Func),
+    /// Pop `x`, pop `y`, push `atan2(y, x)`.
+    Atan2,
+}
+
+impl Op {
+    /// Values popped and pushed.
+    pub const fn arity(self) -> (usize, usize) {
+        match self {
+            Op::Load(_) | Op::Const(_) => (0, 1),
+            Op::Store(_) => (1, 0),
+            Op::Add | Op::Sub | Op::Mul | Op::Div | Op::Atan2 => (2, 1),
+            Op::Neg | Op::Powi(_) | Op::Func(_) => (1, 1),
+        }
+    }
+
+    /// Its bytes: the first `len` of the array.
+    pub const fn encode(self) -> ([u8; 3], usize) {
+        match self {
+            Op::Load(i) => ([opcode::LOAD, i, 0], 2),
+            Op::Const(i) => {
+                let b = i.to_le_bytes();
+                ([opcode::CONST, b[0], b[1]], 3)
+            }
+            Op::Store(i) => ([opcode::STORE, i, 0], 2),
+            Op::Add => ([opcode::ADD, 0, 0], 1),
+            Op::Sub => ([opcode::SUB, 0, 0], 1),
+            Op::Mul => ([opcode::MUL, 0, 0], 1),
+            Op::Div => ([opcode::DIV, 0, 0], 1),
+            Op::Neg => ([opcode::NEG, 0, 0], 1),
+            Op::Powi(k) => ([opcode::POWI, k as u8, 0], 2),
+            Op::Func(f) => ([f.opcode(), 0, 0], 1),
+            Op::Atan2 => ([opcode::ATAN2, 0, 0], 1),
+        }
+    }
+}
+
+/// `x^k` as the target computes it: `|k| − 1` multiplications left to right (`((x·x)·x)·…`), then one
+/// division `1 / ·` for `k < 0`; `k = 0` gives 1 (the decoder refuses it in code). The rounding analysis
+/// on the host follows exactly these operations.
+#[inline]
+pub fn powi(x: f32, k: i8) -> f32 {
+    if k == 0 {
+        return 1.0;
+    }
+    let n = k.unsigned_abs();
+    let mut acc = x;
+    let mut i = 1u8;
+    while i < n {
+        acc *= x;
+        i += 1;
+    }
+    if k < 0 {
+        1.0 / acc
+    } else {
+        acc
+    }
+}
+
+/// The instruction at `offset` of `code` and its length in bytes. Checks the opcode, that the operand is
+/// present, and the exponent range; index ranges are checked by [`Program::decode`].
+fn decode_op(code: &[u8], offset: usize) -> Result<(Op, usize), ImageError> {
+    let at = sat16(offset);
+    let operand = |k: usize| code.get(offset.saturating_add(k)).copied();
+    let Some(byte) = operand(0) else {
+        return Err(ImageError::ProgramOperand { offset: at });
+    };
+    let bad = ImageError::ProgramOperand { offset: at };
+    let op = match byte {
+        opcode::LOAD => (Op::Load(operand(1).ok_or(bad)?), 2),
+        opcode::STORE => (Op::Store(operand(1).ok_or(bad)?), 2),
+        opcode::CONST => {
+            if operand(2).is_none() {
+                return Err(bad);
+            }
+            (Op::Const(u16_at(code, offset.saturating_add(1))), 3)
+        }
+        opcode::ADD => (Op::Add, 1),
+        opcode::SUB => (Op::Sub, 1),
+        opcode::MUL => (Op::Mul, 1),
+        opcode::DIV => (Op::Div, 1),
+        opcode::NEG => (Op::Neg, 1),
+        opcode::POWI => {
+            let k = operand(1).ok_or(bad)? as i8;
+            if k == 0 || k.unsigned_abs() > MAX_PROGRAM_POWI.unsigned_abs() {
+                return Err(bad);
+            }
+            (Op::Powi(k), 2)
+        }
+        opcode::ATAN2 => (Op::Atan2, 1),
+        b => {
+            let i = b.wrapping_sub(opcode::FUNC0) as usize;
+            match Func::ALL.get(i) {
+                Some(&f) if b >= opcode::FUNC0 => (Op::Func(f), 1),
+                _ => {
+                    return Err(ImageError::UnknownOpcode {
+                        offset: at,
+                        opcode: b,
+                    })
+                }
+            }
+        }
+    };
+    Ok(op)
+}
+
+/// A validated model program: a zero-copy view of its bytes.
+#[derive(Clone, Copy, Debug)]
+pub struct Program<'a> {
+    consts: &'a [u8],
+    code: &'a [u8],
+    n_inputs: u8,
+    n_outputs: u8,
+    max_stack: u8,
+}
+
+impl<'a> Program<'a> {
+    /// Validates `bytes` (see the module docs for every check) and returns the program.
+    pub fn decode(bytes: &'a [u8]) -> Result<Self, ImageError> {
+        check_dim(
+            Dim::ProgramBytes,
+            bytes.len(),
+            PROGRAM_HEADER_LEN,
+            MAX_PROGRAM_LEN,
+        )?;
+        let header = |i: usize| bytes.get(i).copied().unwrap_or(0);
+        let n_inputs = header(0);
+        let n_outputs = header(1);
+        let n_consts = usize::from(u16_at(bytes, 2));
+        let code_len = usize::from(u16_at(bytes, 4));
+        let stored_stack = header(6);
+        if header(7) != 0 {
+            return Err(ImageError::ReservedNotZero);
+        }
+        check_dim(Dim::ProgramInputs, n_inputs.into(), 0, MAX_PROGRAM_INPUTS)?;
+        check_dim(
+            Dim::ProgramOutputs,
+            n_outputs.into(),
+            1,
+            MAX_PROGRAM_OUTPUTS,
+        )?;
+        check_dim(Dim::ProgramConsts, n_consts, 0, MAX_PROGRAM_CONSTS)?;
+        let code_start = PROGRAM_HEADER_LEN + 4 * n_consts;
+        let expected = code_start + code_len;
+        if bytes.len() != expected {
+            return Err(ImageError::FieldLength {
+                field: Field::Program,
+                expected: sat32(expected),
+                found: sat32(bytes.len()),
+            });
+        }
+        let consts = bytes.get(PROGRAM_HEADER_LEN..code_start).unwrap_or(&[]);
+        let code = bytes.get(code_start..).unwrap_or(&[]);
+        check_finite(Field::ProgramConst, consts, |i| Pos(sat16(i), 0, 0))?;
+
+        // One forward pass: every instruction decodes, its indices are in range, the stack never
+        // underflows nor exceeds the capacity, and each output is stored exactly once.
+        let mut depth = 0usize;
+        let mut max_depth = 0usize;
+        let mut stored = 0u64;
+        let mut offset = 0usize;
+        while offset < code.len() {
+            let (op, len) = decode_op(code, offset)?;
+            let at = sat16(offset);
+            let in_range = match op {
+                Op::Load(i) => i < n_inputs,
+                Op::Const(i) => usize::from(i) < n_consts,
+                Op::Store(i) => i < n_outputs,
+                _ => true,
+            };
+            if !in_range {
+                return Err(ImageError::ProgramOperand { offset: at });
+            }
+            let (pops, pushes) = op.arity();
+            depth = depth
+                .checked_sub(pops)
+                .ok_or(ImageError::StackUnderflow { offset: at })?
+                + pushes;
+            if depth > MAX_PROGRAM_STACK {
+                return Err(ImageError::StackOverflow { offset: at });
+            }
+            max_depth = max_depth.max(depth);
+            if let Op::Store(i) = op {
+                let bit = 1u64.checked_shl(u32::from(i)).unwrap_or(0);
+                if stored & bit != 0 {
+                    return Err(ImageError::OutputStoredTwice { output: i });
+                }
+                stored |= bit;
+            }
+            offset += len;
+        }
+        if depth != 0 {
+            return Err(ImageError::StackNotEmpty);
+        }
+        for i in 0..n_outputs {
+            if stored & 1u64.checked_shl(u32::from(i)).unwrap_or(0) == 0 {
+                return Err(ImageError::OutputNotStored { output: i });
+            }
+        }
+        if usize::from(stored_stack) != max_depth {
+            return Err(ImageError::ProgramStackMismatch {
+                stored: stored_stack,
+                actual: u8::try_from(max_depth).unwrap_or(u8::MAX),
+            });
+        }
+        Ok(Self {
+            consts,
+            code,
+            n_inputs,
+            n_outputs,
+            max_stack: stored_stack,
+        })
+    }
+
+    /// Input slots the program reads.
+    pub fn n_inputs(&self) -> usize {
+        self.n_inputs.into()
+    }
+
+    /// Outputs the program stores.
+    pub fn n_outputs(&self) -> usize {
+        self.n_outputs.into()
+    }
+
+    /// Constants in the pool.
+    pub fn n_consts(&self) -> usize {
+        self.consts.len() / 4
+    }
+
+    /// The stack depth the code reaches.
+    pub fn max_stack(&self) -> usize {
+        self.max_stack.into()
+    }
+
+    /// Bytes of code.
+    pub fn code_len(&self) -> usize {
+        self.code.len()
+    }
+
+    /// Constant `i` of the pool (0 out of range).
+    pub fn constant(&self, i: usize) -> f32 {
+        f32_at(self.consts, i)
+    }
+
+    /// The instructions with their offsets in the code, in order.
+    pub fn ops(&self) -> Ops<'a> {
+        Ops {
+            code: self.code,
+            offset: 0,
+        }
+    }
+
+    /// Evaluates the program: `inputs` has [`Self::n_inputs`] values, `out` receives
+    /// [`Self::n_outputs`]. Slices of other lengths are refused with [`ImageError::ProgramArity`].
+    /// Non-finite inputs or results are not refused here: the caller judges the outputs.
+    pub fn eval(&self, inputs: &[f32], out: &mut [f32]) -> Result<(), ImageError> {
+        if inputs.len() != self.n_inputs() {
+            return Err(ImageError::ProgramArity {
+                expected: self.n_inputs.into(),
+                found: sat16(inputs.len()),
+            });
+        }
+        if out.len() != self.n_outputs() {
+            return Err(ImageError::ProgramArity {
+                expected: self.n_outputs.into(),
+                found: sat16(out.len()),
+            });
+        }
+        let mut stack = [0.0f32; MAX_PROGRAM_STACK];
+        // `sp` is the number of values on the stack. Validation proved every access in range; the
+        // accessors still use `get` so that no path can panic.
+        let mut sp = 0usize;
+        let top = |stack: &[f32; MAX_PROGRAM_STACK], sp: usize| {
+            stack.get(sp.wrapping_sub(1)).copied().unwrap_or(0.0)
+        };
+        for (_, op) in self.ops() {
+            match op {
+                Op::Load(i) => {
+                    let v = inputs.get(usize::from(i)).copied().unwrap_or(0.0);
+                    if let Some(s) = stack.get_mut(sp) {
+                        *s = v;
+                    }
+                    sp += 1;
+                }
+                Op::Const(i) => {
+                    let v = self.constant(i.into());
+                    if let Some(s) = stack.get_mut(sp) {
+                        *s = v;
+                    }
+                    sp += 1;
+                }
+                Op::Store(i) => {
+                    let v = top(&stack, sp);
+                    if let Some(o) = out.get_mut(usize::from(i)) {
+                        *o = v;
+                    }
+                    sp = sp.saturating_sub(1);
+                }
+                Op::Add | Op::Sub | Op::Mul | Op::Div | Op::Atan2 => {
+                    let b = top(&stack, sp);
+                    sp = sp.saturating_sub(1);
+                    let a = top(&stack, sp);
+                    let v = match op {
+                        Op::Add => a + b,
+                        Op::Sub => a - b,
+                        Op::Mul => a * b,
+                        Op::Div => a / b,
+                        _ => libm::atan2f(a, b),
+                    };
+                    if let Some(s) = stack.get_mut(sp.wrapping_sub(1)) {
+                        *s = v;
+                    }
+                }
+                Op::Neg | Op::Powi(_) | Op::Func(_) => {
+                    let a = top(&stack, sp);
+                    let v = match op {
+                        Op::Neg => -a,
+                        Op::Powi(k) => powi(a, k),
+                        Op::Func(f) => f.apply(a),
+                        _ => a,
+                    };
+                    if let Some(s) = stack.get_mut(sp.wrapping_sub(1)) {
+                        *s = v;
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The instructions of a validated program ([`Program::ops`]): `(offset, op)` in code order.
+#[derive(Clone, Debug)]
+pub struct Ops<'a> {
+    code: &'a [u8],
+    offset: usize,
+}
+
+impl Iterator for Ops<'_> {
+    type Item = (usize, Op);
+
+    fn next(&mut self) -> Option<(usize, Op)> {
+        if self.offset >= self.code.len() {
+            return None;
+        }
+        match decode_op(self.code, self.offset) {
+            Ok((op, len)) => {
+                let at = self.offset;
+                self.offset += len;
+                Some((at, op))
+            }
+            // Not reached for a decoded program; stop rather than loop.
+            Err(_) => {
+                self.offset = self.code.len();
+                None
+            }
+        }
+    }
+}
+
+/// Writes the header of a program with these counts into the first [`PROGRAM_HEADER_LEN`] bytes of
+/// `buf` (the host's encoder; the decoder is the judge of the result). Returns `false` if a count does
+/// not fit its field or `buf` is too short.
+pub fn write_header(
+    buf: &mut [u8],
+    n_inputs: usize,
+    n_outputs: usize,
+    n_consts: usize,
+    code_len: usize,
+    max_stack: usize,
+) -> bool {
+    let (Ok(i), Ok(o), Ok(c), Ok(l), Ok(s)) = (
+        u8::try_from(n_inputs),
+        u8::try_from(n_outputs),
+        u16::try_from(n_consts),
+        u16::try_from(code_len),
+        u8::try_from(max_stack),
+    ) else {
+        return false;
+    };
+    let Some(h) = buf.get_mut(..PROGRAM_HEADER_LEN) else {
+        return false;
+    };
+    let [c0, c1] = c.to_le_bytes();
+    let [l0, l1] = l.to_le_bytes();
+    for (d, v) in h.iter_mut().zip([i, o, c0, c1, l0, l1, s, 0]) {
+        *d = v;
+    }
+    true
+}

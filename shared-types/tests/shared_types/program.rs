@@ -1,0 +1,307 @@
+//! Model programs: hand-assembled programs evaluate to what their expressions say, every validation rule
+//! refuses what it names, and random or mutated bytes never panic the decoder or the evaluator.
+
+use proptest::prelude::*;
+use shared_types::capacity::{MAX_PROGRAM_LEN, MAX_PROGRAM_STACK};
+use shared_types::error::{Dim, Field, ImageError};
+use shared_types::program::{powi, write_header, Func, Op, Program, PROGRAM_HEADER_LEN};
+
+/// Assembles a program from its parts (the stored stack depth is given, so tests can lie about it).
+fn assemble(
+    n_inputs: usize,
+    n_outputs: usize,
+    consts: &[f32],
+    ops: &[Op],
+    stack: usize,
+) -> Vec<u8> {
+    let mut code = Vec::new();
+    for op in ops {
+        let (b, len) = op.encode();
+        code.extend_from_slice(&b[..len]);
+    }
+    let mut bytes = vec![0u8; PROGRAM_HEADER_LEN];
+    assert!(write_header(
+        &mut bytes,
+        n_inputs,
+        n_outputs,
+        consts.len(),
+        code.len(),
+        stack
+    ));
+    for c in consts {
+        bytes.extend_from_slice(&c.to_le_bytes());
+    }
+    bytes.extend_from_slice(&code);
+    bytes
+}
+
+/// out0 = x0·sin(x1) + 2, out1 = atan2(x1, x0)^-2 − exp(−x0)
+fn sample() -> Vec<u8> {
+    use Op::*;
+    assemble(
+        2,
+        2,
+        &[2.0],
+        &[
+            Load(0),
+            Load(1),
+            Func(shared_types::program::Func::Sin),
+            Mul,
+            Const(0),
+            Add,
+            Store(0),
+            Load(1),
+            Load(0),
+            Atan2,
+            Powi(-2),
+            Load(0),
+            Neg,
+            Func(shared_types::program::Func::Exp),
+            Sub,
+            Store(1),
+        ],
+        2,
+    )
+}
+
+#[test]
+fn sample_program_evaluates_its_expressions() {
+    let bytes = sample();
+    let p = Program::decode(&bytes).expect("valid");
+    assert_eq!(
+        (p.n_inputs(), p.n_outputs(), p.n_consts(), p.max_stack()),
+        (2, 2, 1, 2)
+    );
+    let x = [0.7f32, -1.3f32];
+    let mut out = [0.0f32; 2];
+    p.eval(&x, &mut out).unwrap();
+    let (a, b) = (x[0] as f64, x[1] as f64);
+    let e0 = a * b.sin() + 2.0;
+    let e1 = b.atan2(a).powi(-2) - (-a).exp();
+    assert!((out[0] as f64 - e0).abs() < 1e-6, "{} vs {e0}", out[0]);
+    assert!((out[1] as f64 - e1).abs() < 1e-5, "{} vs {e1}", out[1]);
+}
+
+#[test]
+fn powi_multiplies_left_to_right_and_inverts_negative_powers() {
+    let x = 1.1f32;
+    assert_eq!(powi(x, 3), (x * x) * x);
+    assert_eq!(powi(x, -2), 1.0 / (x * x));
+    assert_eq!(powi(x, 1), x);
+}
+
+#[test]
+fn eval_refuses_slices_of_the_wrong_length() {
+    let bytes = sample();
+    let p = Program::decode(&bytes).unwrap();
+    let mut out = [0.0f32; 2];
+    assert_eq!(
+        p.eval(&[1.0], &mut out),
+        Err(ImageError::ProgramArity {
+            expected: 2,
+            found: 1
+        })
+    );
+    let mut short = [0.0f32; 1];
+    assert_eq!(
+        p.eval(&[1.0, 2.0], &mut short),
+        Err(ImageError::ProgramArity {
+            expected: 2,
+            found: 1
+        })
+    );
+}
+
+#[test]
+fn every_validation_rule_refuses_what_it_names() {
+    use Op::*;
+    // Stack depth stored wrong.
+    let b = assemble(1, 1, &[], &[Load(0), Store(0)], 2);
+    assert_eq!(
+        Program::decode(&b).unwrap_err(),
+        ImageError::ProgramStackMismatch {
+            stored: 2,
+            actual: 1
+        }
+    );
+    // Underflow.
+    let b = assemble(1, 1, &[], &[Load(0), Add, Store(0)], 1);
+    assert_eq!(
+        Program::decode(&b).unwrap_err(),
+        ImageError::StackUnderflow { offset: 2 }
+    );
+    // Slot out of range.
+    let b = assemble(1, 1, &[], &[Load(1), Store(0)], 1);
+    assert_eq!(
+        Program::decode(&b).unwrap_err(),
+        ImageError::ProgramOperand { offset: 0 }
+    );
+    // Constant out of range.
+    let b = assemble(0, 1, &[1.0], &[Const(1), Store(0)], 1);
+    assert_eq!(
+        Program::decode(&b).unwrap_err(),
+        ImageError::ProgramOperand { offset: 0 }
+    );
+    // Output out of range, stored twice, never stored.
+    let b = assemble(1, 1, &[], &[Load(0), Store(1)], 1);
+    assert_eq!(
+        Program::decode(&b).unwrap_err(),
+        ImageError::ProgramOperand { offset: 2 }
+    );
+    let b = assemble(1, 1, &[], &[Load(0), Store(0), Load(0), Store(0)], 1);
+    assert_eq!(
+        Program::decode(&b).unwrap_err(),
+        ImageError::OutputStoredTwice { output: 0 }
+    );
+    let b = assemble(1, 2, &[], &[Load(0), Store(0)], 1);
+    assert_eq!(
+        Program::decode(&b).unwrap_err(),
+        ImageError::OutputNotStored { output: 1 }
+    );
+    // Values left on the stack.
+    let b = assemble(1, 1, &[], &[Load(0), Load(0), Store(0)], 2);
+    assert_eq!(Program::decode(&b).unwrap_err(), ImageError::StackNotEmpty);
+    // Non-finite constant.
+    let b = assemble(0, 1, &[f32::NAN], &[Const(0), Store(0)], 1);
+    assert!(matches!(
+        Program::decode(&b).unwrap_err(),
+        ImageError::NonFinite {
+            field: Field::ProgramConst,
+            ..
+        }
+    ));
+    // Unknown opcode, truncated operand, zero and too large exponents.
+    let mut b = assemble(1, 1, &[], &[Load(0), Neg, Store(0)], 1);
+    b[PROGRAM_HEADER_LEN + 2] = 0x7f;
+    assert_eq!(
+        Program::decode(&b).unwrap_err(),
+        ImageError::UnknownOpcode {
+            offset: 2,
+            opcode: 0x7f
+        }
+    );
+    let mut b = assemble(1, 1, &[], &[Load(0), Store(0)], 1);
+    b.pop();
+    b[4] -= 1;
+    assert_eq!(
+        Program::decode(&b).unwrap_err(),
+        ImageError::ProgramOperand { offset: 2 }
+    );
+    for k in [0i8, 17, -17] {
+        let b = assemble(1, 1, &[], &[Load(0), Powi(k), Store(0)], 1);
+        assert_eq!(
+            Program::decode(&b).unwrap_err(),
+            ImageError::ProgramOperand { offset: 2 }
+        );
+    }
+    // Length disagreeing with the header, reserved byte, dimensions.
+    let mut b = sample();
+    b.push(0);
+    assert!(matches!(
+        Program::decode(&b).unwrap_err(),
+        ImageError::FieldLength {
+            field: Field::Program,
+            ..
+        }
+    ));
+    let mut b = sample();
+    b[7] = 1;
+    assert_eq!(
+        Program::decode(&b).unwrap_err(),
+        ImageError::ReservedNotZero
+    );
+    let b = assemble(1, 0, &[], &[], 0);
+    assert!(matches!(
+        Program::decode(&b).unwrap_err(),
+        ImageError::DimOutOfRange {
+            dim: Dim::ProgramOutputs,
+            ..
+        }
+    ));
+    assert!(matches!(
+        Program::decode(&vec![0u8; MAX_PROGRAM_LEN + 1]).unwrap_err(),
+        ImageError::DimOutOfRange {
+            dim: Dim::ProgramBytes,
+            ..
+        }
+    ));
+}
+
+#[test]
+fn stack_beyond_capacity_is_refused_at_the_instruction_that_overflows() {
+    let mut ops = vec![Op::Load(0); MAX_PROGRAM_STACK + 1];
+    ops.extend(std::iter::repeat_n(Op::Add, MAX_PROGRAM_STACK));
+    ops.push(Op::Store(0));
+    let b = assemble(1, 1, &[], &ops, MAX_PROGRAM_STACK + 1);
+    assert_eq!(
+        Program::decode(&b).unwrap_err(),
+        ImageError::StackOverflow {
+            offset: 2 * MAX_PROGRAM_STACK as u16
+        }
+    );
+    // At capacity exactly it decodes.
+    let mut ops = vec![Op::Load(0); MAX_PROGRAM_STACK];
+    ops.extend(std::iter::repeat_n(Op::Add, MAX_PROGRAM_STACK - 1));
+    ops.push(Op::Store(0));
+    let b = assemble(1, 1, &[], &ops, MAX_PROGRAM_STACK);
+    let p = Program::decode(&b).unwrap();
+    let mut out = [0.0];
+    p.eval(&[1.0], &mut out).unwrap();
+    assert_eq!(out[0], MAX_PROGRAM_STACK as f32);
+}
+
+#[test]
+fn every_function_matches_f64_closely() {
+    for (i, f) in Func::ALL.iter().enumerate() {
+        let b = assemble(1, 1, &[], &[Op::Load(0), Op::Func(*f), Op::Store(0)], 1);
+        let p = Program::decode(&b).unwrap();
+        let x = 0.3f32 + 0.1 * i as f32;
+        let mut out = [0.0];
+        p.eval(&[x], &mut out).unwrap();
+        let x = x as f64;
+        let exact = match f {
+            Func::Sin => x.sin(),
+            Func::Cos => x.cos(),
+            Func::Tan => x.tan(),
+            Func::Exp => x.exp(),
+            Func::Log => x.ln(),
+            Func::Sqrt => x.sqrt(),
+            Func::Abs => x.abs(),
+            Func::Atan => x.atan(),
+            Func::Tanh => x.tanh(),
+        };
+        assert!(
+            (out[0] as f64 - exact).abs() <= 4.0 * f32::EPSILON as f64 * exact.abs(),
+            "{}: {} vs {exact}",
+            f.name(),
+            out[0]
+        );
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(2000))]
+
+    /// Random bytes: decode answers (almost always an error) and never panics; what decodes evaluates.
+    #[test]
+    fn random_bytes_never_panic(bytes in proptest::collection::vec(any::<u8>(), 0..96)) {
+        if let Ok(p) = Program::decode(&bytes) {
+            let inputs = vec![0.5f32; p.n_inputs()];
+            let mut out = vec![0.0f32; p.n_outputs()];
+            prop_assert!(p.eval(&inputs, &mut out).is_ok());
+        }
+    }
+
+    /// Mutations of a valid program: decode either refuses or gives a program that evaluates.
+    #[test]
+    fn mutated_programs_never_panic(pos in 0usize..64, byte in any::<u8>(), x in -3.0f32..3.0) {
+        let mut b = sample();
+        let i = pos % b.len();
+        b[i] = byte;
+        if let Ok(p) = Program::decode(&b) {
+            let inputs = vec![x; p.n_inputs()];
+            let mut out = vec![0.0f32; p.n_outputs()];
+            prop_assert!(p.eval(&inputs, &mut out).is_ok());
+        }
+    }
+}
