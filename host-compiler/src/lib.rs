@@ -13,6 +13,7 @@ pub mod cli;
 pub mod cover;
 pub mod emit;
 pub mod export;
+pub mod expr;
 pub mod geometry;
 pub mod linalg;
 pub mod model;

@@ -37,6 +37,17 @@ pub enum TaskError {
          synthesis, verification and simulation do not take hybrid plants yet"
     )]
     HybridNotSupported { locations: usize, edges: usize },
+    /// The spec's nonlinear plant is valid (its relative degree and decoupling matrix are checked over
+    /// Init, `spec::nonlinear`), but it is not synthesised yet.
+    #[error(
+        "the plant is feedback linearizable (n = {n}, m = {m}, relative degree {relative_degree:?}); it \
+         is valid, but it is not synthesised yet"
+    )]
+    NonlinearNotSupported {
+        n: usize,
+        m: usize,
+        relative_degree: Vec<usize>,
+    },
 }
 
 impl Task {
@@ -50,6 +61,13 @@ impl Task {
             return Err(TaskError::HybridNotSupported {
                 locations: hy.modes().len(),
                 edges: hy.edges().len(),
+            });
+        }
+        if let Some(nl) = &problem.nonlinear {
+            return Err(TaskError::NonlinearNotSupported {
+                n: nl.system.n(),
+                m: nl.system.m(),
+                relative_degree: nl.relative_degree.clone(),
             });
         }
         let plant: Box<dyn Plant> = Box::new(LinearAffine::from_spec(&problem.plant)?);
@@ -73,5 +91,24 @@ impl Task {
     /// The spec's `[synthesis]` settings.
     pub fn settings(&self) -> &SynthesisSettings {
         &self.problem.synthesis
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A valid feedback-linearizable spec (Example 4.9) is refused as a task, with the class's figures,
+    /// until its synthesis is built (issue 13).
+    #[test]
+    fn a_nonlinear_plant_is_refused_as_not_yet_synthesised() {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../examples/fl-4-9.toml");
+        let problem = crate::spec::load(path).expect("the shipped example");
+        let err = Task::new(problem).err().expect("refused");
+        assert!(matches!(
+            err,
+            TaskError::NonlinearNotSupported { n: 6, m: 2, ref relative_degree } if relative_degree == &[2, 2]
+        ));
+        assert!(err.to_string().contains("not synthesised yet"), "{err}");
     }
 }

@@ -5,16 +5,12 @@
 //! inter-sample excursion bound ([`InterSampleBound`]) the certification uses to account for what the
 //! continuous plant does between samples.
 //!
-//! Expressions for nonlinear plants (§3.1.2, §3.1.3), their derivatives, their compilation to the
-//! target's model program and the interval bounds on it are in [`expr`].
-//!
 //! Hybrid automata over linear affine locations, with their exact simulation across events, are in
 //! [`hybrid`].
 //!
 //! Matrices are faer `Mat<f64>`, vectors `Vec<f64>` / `&[f64]`.
 
 mod expm;
-pub mod expr;
 pub mod hybrid;
 mod intersample;
 mod linear;

@@ -50,6 +50,11 @@ pub enum ErrorKind {
     /// A size the spec implies (dimension, samples in the horizon, table rows, polytope rows, coverage
     /// samples) exceeds the image's capacity or the work budget (`spec::limits`).
     Capacity,
+    /// An expression of a nonlinear plant is not one (syntax, unknown name, size limits: `spec::nonlinear`).
+    Expression,
+    /// A nonlinear plant fails a check of its class (relative degree, a singular decoupling matrix Γ, a
+    /// value that is not finite), named with the equation and the point.
+    Model,
 }
 
 impl ErrorKind {
@@ -75,6 +80,8 @@ impl ErrorKind {
             ErrorKind::Seed => "spec::seed",
             ErrorKind::Setting => "spec::setting",
             ErrorKind::Capacity => "spec::capacity",
+            ErrorKind::Expression => "spec::expression",
+            ErrorKind::Model => "spec::model",
         }
     }
 }

@@ -45,6 +45,7 @@ pub mod checks;
 pub mod error;
 pub mod hybrid;
 pub mod limits;
+pub mod nonlinear;
 mod raw;
 pub mod sets;
 pub mod settings;
@@ -279,6 +280,9 @@ pub struct Problem {
     pub sets: Vec<(String, SetDesc)>,
     /// The hybrid automaton, when `[plant]` has locations; `plant` is then its initial location's model.
     pub hybrid: Option<HybridDesc>,
+    /// The plant written as expressions, when `[plant]` has a `class` (`spec::nonlinear`); `plant` is then
+    /// its linearisation at the centre of Init.
+    pub nonlinear: Option<nonlinear::NonlinearDesc>,
 }
 
 impl Problem {

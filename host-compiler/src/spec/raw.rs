@@ -12,15 +12,16 @@ pub(crate) type RawVec = Spanned<Vec<RawF>>;
 /// A matrix as an array of rows, with spans on the whole, on each row and on each entry.
 pub(crate) type RawMat = Spanned<Vec<RawVec>>;
 
-/// Top level of a task spec.
+/// Top level of a task spec. `P` is the `[plant]` table: [`RawPlant`] for linear and hybrid plants,
+/// `super::nonlinear::RawFlPlant` for a plant with a `class`.
 #[derive(Deserialize, Debug)]
 #[serde(deny_unknown_fields)]
-pub(crate) struct RawSpec {
+pub(crate) struct RawSpec<P = RawPlant> {
     pub name: Option<Spanned<String>>,
     /// Read wide so that out-of-range values get a range error rather than a type error.
     pub seed: Spanned<i128>,
     pub horizon: Spanned<f64>,
-    pub plant: Spanned<RawPlant>,
+    pub plant: Spanned<P>,
     pub init: Spanned<RawSet>,
     pub goal: Spanned<RawSet>,
     #[serde(default, rename = "unsafe")]

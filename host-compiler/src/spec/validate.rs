@@ -317,7 +317,12 @@ pub(crate) fn check_psd(Q: &Matrix, raw: &RawMat, name: &str) -> Result<(), Spec
     Ok(())
 }
 
-fn positive(x: &Spanned<f64>, name: &str, kind: ErrorKind, extra: &str) -> Result<f64, SpecError> {
+pub(crate) fn positive(
+    x: &Spanned<f64>,
+    name: &str,
+    kind: ErrorKind,
+    extra: &str,
+) -> Result<f64, SpecError> {
     let v = finite(x, name)?;
     if v > 0.0 {
         Ok(v)
@@ -331,6 +336,16 @@ fn positive(x: &Spanned<f64>, name: &str, kind: ErrorKind, extra: &str) -> Resul
 
 /// Parse the TOML and validate everything.
 pub(crate) fn problem(src: &str) -> Result<Problem, SpecError> {
+    if super::nonlinear::has_class(src) {
+        // A plant written as expressions (`spec::nonlinear`): its own `[plant]` table, the rest alike.
+        let raw: RawSpec<super::nonlinear::RawFlPlant> =
+            toml::from_str(src).map_err(|e| SpecError::from_toml(&e))?;
+        let model = super::nonlinear::model(&raw.plant, src)?;
+        let (horizon, seed) = horizon_seed(&raw, model.period, raw.plant.get_ref().period.span())?;
+        let init = init_box(&raw, model.n())?;
+        let (plant, desc) = super::nonlinear::check(model, &init, &raw.plant)?;
+        return problem_sets(raw, plant, None, Some(desc), horizon, seed, init);
+    }
     let raw: RawSpec = toml::from_str(src).map_err(|e| SpecError::from_toml(&e))?;
 
     // ---- plant ----
@@ -342,10 +357,23 @@ pub(crate) fn problem(src: &str) -> Result<Problem, SpecError> {
     } else {
         (single_plant(&raw.plant)?, None)
     };
-    let period = plant.period;
+    let (horizon, seed) = horizon_seed(&raw, plant.period, p.period.span())?;
     let n_state = plant.n();
 
-    // ---- horizon, seed ----
+    // ---- init ----
+    let init = init_box(&raw, n_state)?;
+    if let Some(h) = &hybrid {
+        hybrid::check_init(h, &init, &raw.plant, raw.init.span())?;
+    }
+    problem_sets(raw, plant, hybrid, None, horizon, seed, init)
+}
+
+/// The horizon (at least one period, at most [`MAX_STEPS`] samples) and the seed.
+fn horizon_seed<P>(
+    raw: &RawSpec<P>,
+    period: f64,
+    period_span: Range<usize>,
+) -> Result<(f64, u64), SpecError> {
     let horizon = positive(&raw.horizon, "horizon", ErrorKind::Horizon, "")?;
     if horizon < period * (1.0 - 1e-12) {
         return Err(SpecError::new(
@@ -353,7 +381,7 @@ pub(crate) fn problem(src: &str) -> Result<Problem, SpecError> {
             format!("horizon {horizon} s is shorter than one sample period ({period} s)"),
         )
         .at(raw.horizon.span(), "shorter than plant.period")
-        .at(p.period.span(), "the period"));
+        .at(period_span, "the period"));
     }
     let steps = limits::steps_in(horizon, period);
     if steps > MAX_STEPS {
@@ -370,7 +398,7 @@ pub(crate) fn problem(src: &str) -> Result<Problem, SpecError> {
                 MAX_STEPS as f64 * period
             ),
         )
-        .at(p.period.span(), "the period"));
+        .at(period_span, "the period"));
     }
     let seed = *raw.seed.get_ref();
     let seed = u64::try_from(seed).map_err(|_| {
@@ -380,13 +408,7 @@ pub(crate) fn problem(src: &str) -> Result<Problem, SpecError> {
         )
         .at(raw.seed.span(), "out of range")
     })?;
-
-    // ---- init ----
-    let init = init_box(&raw, n_state)?;
-    if let Some(h) = &hybrid {
-        hybrid::check_init(h, &init, &raw.plant, raw.init.span())?;
-    }
-    problem_sets(raw, plant, hybrid, horizon, seed, init)
+    Ok((horizon, seed))
 }
 
 /// A `[plant]` with one location: A and B required.
@@ -451,10 +473,12 @@ fn single_plant(raw: &Spanned<super::raw::RawPlant>) -> Result<Plant, SpecError>
 
 /// The sets, input, settings and cross-set checks of a spec whose plant, horizon, seed and Init are
 /// validated.
-fn problem_sets(
-    mut raw: RawSpec,
+#[allow(clippy::too_many_arguments)]
+fn problem_sets<P>(
+    mut raw: RawSpec<P>,
     plant: Plant,
     hybrid: Option<hybrid::HybridDesc>,
+    nonlinear: Option<super::nonlinear::NonlinearDesc>,
     horizon: f64,
     seed: u64,
     init: InitBox,
@@ -585,6 +609,7 @@ fn problem_sets(
         mtl,
         sets,
         hybrid,
+        nonlinear,
     })
 }
 
@@ -593,7 +618,7 @@ fn fmt_vec(x: &[f64]) -> String {
     format!("({})", parts.join(", "))
 }
 
-fn init_box(raw: &RawSpec, n_state: usize) -> Result<InitBox, SpecError> {
+fn init_box<P>(raw: &RawSpec<P>, n_state: usize) -> Result<InitBox, SpecError> {
     let r = raw.init.get_ref();
     let span = raw.init.span();
     if r.kind.get_ref() != "box" {
