@@ -60,11 +60,21 @@ fn bench(c: &mut Criterion) {
         })
         .collect();
     let x = [0.05, 0.2, -0.03, 0.9, 0.7, 0.1];
-    let g = host_compiler::expr::diff::eval_matrix(&rd.gamma, &Point { x: &x, u: &[], p: &pv });
+    let g = host_compiler::expr::diff::eval_matrix(
+        &rd.gamma,
+        &Point {
+            x: &x,
+            u: &[],
+            p: &pv,
+        },
+    );
     for i in 0..m {
         for j in 0..m {
             let gg: f64 = (0..m).map(|k| g[i][k] * g[k][j]).sum();
-            assert!((gg - if i == j { 1.0 } else { 0.0 }).abs() < 1e-12, "Γ·Γ ≠ I");
+            assert!(
+                (gg - if i == j { 1.0 } else { 0.0 }).abs() < 1e-12,
+                "Γ·Γ ≠ I"
+            );
         }
     }
     let n = nl.system.n();

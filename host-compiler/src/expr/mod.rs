@@ -16,6 +16,7 @@
 //! | depth of a parsed tree | [`MAX_EXPR_DEPTH`] = 256 | every recursive walk of the tree |
 //! | nodes of a derived expression (derivatives, Lie derivatives) | [`MAX_DERIVED_NODES`] = 50 000 | memory and work |
 //! | depth of a derived expression | [`MAX_DERIVED_DEPTH`] = 1 024 | recursion of every walk |
+//! | parameters of one name table | [`MAX_PARAMS`] = 256 | `u16` variable indices |
 //! | integer power `x^k` | `1 ≤ |k| ≤` [`MAX_PROGRAM_POWI`] = 16 | the target's multiplication loop |
 //!
 //! Derivatives are symbolic (the tree of the derivative, simplified by the smart constructors), never
@@ -38,6 +39,9 @@ pub const MAX_EXPR_LEN: usize = 4096;
 pub const MAX_EXPR_NESTING: usize = 64;
 /// Deepest parsed tree (a long sum `a + b + …` is a deep tree without any nesting).
 pub const MAX_EXPR_DEPTH: usize = 256;
+/// Most parameters a name table may declare (variables are indexed by `u16`; states and inputs are
+/// bounded by the image capacities).
+pub const MAX_PARAMS: usize = 256;
 /// Most nodes of a derived expression.
 pub const MAX_DERIVED_NODES: usize = 50_000;
 /// Deepest derived expression.
@@ -137,6 +141,20 @@ impl Names {
     /// Checks that every name is an identifier, distinct, and neither a function name nor `pi`; and
     /// that parameter values are finite.
     pub fn validate(&self) -> Result<(), ExprError> {
+        for (what, len, limit) in [
+            ("number of states", self.states.len(), usize::from(u16::MAX)),
+            ("number of inputs", self.inputs.len(), usize::from(u16::MAX)),
+            ("number of parameters", self.params.len(), MAX_PARAMS),
+        ] {
+            if len > limit {
+                return Err(ExprError::TooLarge {
+                    what,
+                    value: len,
+                    limit,
+                    span: 0..0,
+                });
+            }
+        }
         let mut seen = std::collections::HashSet::new();
         let all = self
             .states
@@ -455,12 +473,11 @@ impl std::fmt::Display for Display<'_> {
 }
 
 fn write_expr(f: &mut std::fmt::Formatter<'_>, e: &Expr, names: &Names) -> std::fmt::Result {
-    // A binary operand in parentheses unless it is a leaf or a call.
+    // An operand in parentheses unless it is a variable, a call or a non-negative number.
     let operand = |f: &mut std::fmt::Formatter<'_>, e: &Expr| {
-        if matches!(
-            e,
-            Expr::Const(_) | Expr::Var(_) | Expr::Func(..) | Expr::Atan2(..)
-        ) {
+        let bare = matches!(e, Expr::Const(v) if *v >= 0.0)
+            || matches!(e, Expr::Var(_) | Expr::Func(..) | Expr::Atan2(..));
+        if bare {
             write_expr(f, e, names)
         } else {
             f.write_str("(")?;

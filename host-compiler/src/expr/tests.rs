@@ -45,6 +45,15 @@ fn names_are_validated() {
     let mut n = names();
     n.params.push(("c".into(), f64::NAN));
     assert!(n.validate().is_err());
+    let mut n = names();
+    n.params = (0..=MAX_PARAMS).map(|i| (format!("p{i}"), 1.0)).collect();
+    assert!(matches!(
+        n.validate(),
+        Err(ExprError::TooLarge {
+            limit: MAX_PARAMS,
+            ..
+        })
+    ));
 }
 
 #[test]
@@ -221,6 +230,28 @@ fn derivatives_match_hand_derived_ones() {
                 );
             }
         }
+    }
+}
+
+/// What `display` writes parses back to the same value.
+#[test]
+fn display_round_trips_through_the_parser() {
+    let n = names();
+    let x = [0.7, 1.3, -0.4, 2.0, 0.3, -1.1];
+    let pt = at(&x, &[0.5, -0.25], &PARAMS);
+    for t in [
+        "-x1^2 + (x2 - x3)*(-2)",
+        "x1^(-3) / (1 - x2) - atan2(-x3, x4)",
+        "exp(-(x5 + a)) * tanh(b*x6) - -x1",
+        "u1*sin(x5) - (x2/(x3*x4))^2",
+    ] {
+        let e = p(t);
+        let shown = e.display(&n).to_string();
+        let back = parse(&shown, &n).unwrap_or_else(|err| panic!("{shown}: {err}"));
+        assert!(
+            (back.eval(&pt) - e.eval(&pt)).abs() <= 1e-12 * (1.0 + e.eval(&pt).abs()),
+            "{t} → {shown}"
+        );
     }
 }
 

@@ -12,6 +12,9 @@
 //! | table rows of a full budget, samples × `synthesis.max_trajectories` | [`MAX_STEPS`] = 32 768 | image capacity |
 //! | `synthesis.max_trajectories` | [`MAX_TRAJECTORIES`] = 256 | image capacity |
 //! | rows of one polytope (`A` of a `kind = "polytope"` set, an invariant or a guard) | [`MAX_POLYTOPE_ROWS`] = 64 | work per distance |
+//! | one expression of a nonlinear plant (`plant.f`, `g`, `h`): bytes, nesting, tree depth, integer power | 4 096, 64, 256, 16 ([`crate::expr`]) | parse work and recursion |
+//! | derivatives of a nonlinear plant (Lie derivatives, Jacobians): nodes, depth | 50 000, 1 024 ([`crate::expr`]) | memory and recursion |
+//! | boxes of the interval proof that Γ is nonsingular over Init | 256 ([`super::nonlinear::MAX_GAMMA_BOXES`]) | work |
 //! | coverage samples implied by `synthesis.coverage_tolerance` and `confidence` | [`MAX_SAMPLE_BYTES`] = 512 MiB of states | memory |
 //!
 //! Flags are bounded where they are parsed (`verify --runs`, `--per-ball`: see `crate::verify`), and an

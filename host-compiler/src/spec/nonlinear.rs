@@ -273,30 +273,37 @@ pub(crate) fn model(raw: &Spanned<RawFlPlant>, src: &str) -> Result<Model, SpecE
             .collect(),
         params,
     };
-    if let Err(e) = names.validate() {
-        let ExprError::BadName { name, .. } = &e else {
-            unreachable!("Names::validate returns BadName")
-        };
-        let span = p
-            .states
-            .get_ref()
-            .iter()
-            .chain(p.inputs.get_ref())
-            .find(|s| s.get_ref() == name)
-            .map(|s| s.span())
-            .or_else(|| {
-                p.params.as_ref().and_then(|ps| {
-                    ps.get_ref()
-                        .0
-                        .iter()
-                        .find(|(k, _)| k.get_ref() == name)
-                        .map(|(k, _)| k.span())
+    match names.validate() {
+        Ok(()) => {}
+        Err(ExprError::BadName { name, why }) => {
+            let span = p
+                .states
+                .get_ref()
+                .iter()
+                .chain(p.inputs.get_ref())
+                .find(|s| *s.get_ref() == name)
+                .map(|s| s.span())
+                .or_else(|| {
+                    p.params.as_ref().and_then(|ps| {
+                        ps.get_ref()
+                            .0
+                            .iter()
+                            .find(|(k, _)| *k.get_ref() == name)
+                            .map(|(k, _)| k.span())
+                    })
                 })
-            })
-            .unwrap_or_else(|| raw.span());
-        return Err(
-            SpecError::new(ErrorKind::BadValue, format!("plant: {e}")).at(span, "this name")
-        );
+                .unwrap_or_else(|| raw.span());
+            return Err(
+                SpecError::new(ErrorKind::BadValue, format!("plant: name `{name}` {why}"))
+                    .at(span, "this name"),
+            );
+        }
+        Err(e) => {
+            let span = p.params.as_ref().map_or_else(|| raw.span(), |ps| ps.span());
+            return Err(
+                SpecError::new(ErrorKind::Capacity, format!("plant: {e}")).at(span, "too many")
+            );
+        }
     }
 
     // ---- expressions ----
