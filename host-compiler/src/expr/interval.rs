@@ -86,6 +86,8 @@ fn up(x: f64) -> f64 {
     x.next_up()
 }
 
+// Named like the operators on purpose: each rounds outward, which `std::ops` would hide.
+#[allow(clippy::should_implement_trait)]
 impl Interval {
     /// [lo, hi].
     pub fn new(lo: f64, hi: f64) -> Self {
@@ -241,7 +243,7 @@ pub fn func(f: Func, a: Interval) -> Result<Interval, IntervalError> {
     };
     a.finite()?;
     let mono = |g: fn(f64) -> f64| wide(g(a.lo)).hull(wide(g(a.hi)));
-    Ok(match f {
+    match f {
         Func::Sin | Func::Cos => {
             if a.hi - a.lo >= 2.0 * PI {
                 Interval::new(-1.0, 1.0)
@@ -298,7 +300,7 @@ pub fn func(f: Func, a: Interval) -> Result<Interval, IntervalError> {
             Interval::new(r.lo.max(-1.0), r.hi.min(1.0))
         }
     }
-    .finite()?)
+    .finite()
 }
 
 /// atan2(y, x) over a box that neither contains the origin nor crosses the branch cut (y = 0, x < 0):
@@ -371,6 +373,7 @@ pub fn enclose_matrix(
 /// Whether every matrix in the square interval matrix `a` is nonsingular, proved by: R ≈ inverse of the
 /// midpoint matrix (any R will do), M = R·[a] in interval arithmetic, and ‖I − M‖∞ < 1 with magnitudes
 /// rounded up; then R·A is nonsingular for every A in [a], hence A is. `false` means "not proved".
+#[allow(clippy::needless_range_loop)]
 pub fn certainly_regular(a: &[Vec<Interval>]) -> bool {
     let m = a.len();
     if a.iter().any(|row| row.len() != m) || m == 0 {
@@ -488,7 +491,10 @@ fn prod_up(a: f64, b: f64) -> f64 {
 /// Refuses a value that may leave the f32 range.
 fn in_f32(v: Val) -> Result<Val, IntervalError> {
     let mag = v.y().mag();
-    if !(mag <= f32::MAX as f64) || !v.e.is_finite() {
+    // Negated so that a NaN magnitude is refused too.
+    #[allow(clippy::neg_cmp_op_on_partial_ord)]
+    let beyond = !(mag <= f32::MAX as f64);
+    if beyond || !v.e.is_finite() {
         return Err(IntervalError::Overflow { mag });
     }
     Ok(v)

@@ -366,6 +366,7 @@ fn fmt_point(names: &Names, x: &[f64]) -> String {
 
 /// The smallest pivot of Gaussian elimination with partial pivoting, relative to the largest entry (0
 /// for a singular or non-finite matrix).
+#[allow(clippy::needless_range_loop)]
 fn pivot_ratio(a: &[Vec<f64>]) -> f64 {
     let m = a.len();
     let scale = a.iter().flatten().fold(0.0f64, |s, v| s.max(v.abs()));
@@ -546,7 +547,10 @@ pub(crate) fn check(
     for x in &pts {
         let g = crate::expr::diff::eval_matrix(&rd.gamma, &point(x, &pv));
         let ratio = pivot_ratio(&g);
-        if !(ratio > SINGULAR_PIVOT) {
+        // Negated so that a NaN ratio counts as singular.
+        #[allow(clippy::neg_cmp_op_on_partial_ord)]
+        let singular = !(ratio > SINGULAR_PIVOT);
+        if singular {
             return Err(model_err(
                 format!(
                     "the decoupling matrix Γ (Def 3.5, (3.19)) is singular at the point {} of Init: \
