@@ -12,6 +12,9 @@
 //!   location) and at most [`MAX_LEAF_BALLS`] whitened ball tests (`n` subtractions and `n` multiply-adds
 //!   each, [`crate::pwa`]), then `m·n` multiply-adds for the law; [`PWA_STEP_MAX_MULADDS`] is the total at
 //!   capacity, counting a location change before every ball (a single-location image whitens once).
+//! * A model program ([`crate::program`]): one pass over at most [`MAX_PROGRAM_LEN`] bytes of code, one
+//!   instruction per 1–3 bytes, each an f32 operation, a `libm` call or (for `x^k`) at most
+//!   [`MAX_PROGRAM_POWI`] multiplications and a division.
 
 /// Largest state dimension `n`.
 pub const MAX_N: usize = 12;
