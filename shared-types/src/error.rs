@@ -10,6 +10,7 @@ use crate::layout::{Mode, SectionKind, FORMAT_VERSION, MAGIC};
 /// Which dimension an [`ImageError::DimOutOfRange`] is about.
 #[non_exhaustive]
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum Dim {
     /// `n`.
     N,
@@ -52,6 +53,7 @@ pub enum Dim {
 /// Which payload field an error is about.
 #[non_exhaustive]
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum Field {
     /// Feedback gains `K_ℓ`.
     K,
@@ -123,11 +125,13 @@ pub enum Field {
 /// `NodeNormal`: (node, component, 0); `NodeOffset`: (node, 0, 0); `BallCentre`, `BallCentreZ`: (ball,
 /// component, 0); `BallThreshold`: (ball, 0, 0); `Factor`: (location, row, col); vectors: (component, 0, 0).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Pos(pub u16, pub u16, pub u16);
 
 /// Why an image was rejected. Small and `Copy`; `Display` says what is wrong in words.
 #[non_exhaustive]
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum ImageError {
     /// Fewer bytes than the header.
     Truncated {

@@ -39,6 +39,7 @@ pub const EXIT_GUARD: u32 = 1;
 #[repr(u8)]
 #[non_exhaustive]
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum Mode {
     /// Algorithm 2: select a robust ball at κ = 0, then `u = K x + v_i(κ)`.
     Feedforward = 1,
@@ -110,6 +111,7 @@ pub struct Dims {
 #[repr(u16)]
 #[non_exhaustive]
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum SectionKind {
     /// `K_ℓ` and `P_ℓ` per location.
     Locations = 1,

@@ -166,7 +166,7 @@ fn b_a_corrupted_image_is_refused_and_every_reply_says_image_rejected() {
     let exit = ok(q.shutdown());
     assert_eq!(exit.code, Some(0));
     assert!(
-        has_line(&exit.logs, "image rejected: CRC"),
+        has_line(&exit.logs, "image rejected: CrcMismatch"),
         "logs:\n{}",
         dump(&exit.logs)
     );

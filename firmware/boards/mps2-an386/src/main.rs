@@ -84,7 +84,7 @@ fn main() -> ! {
         ),
         Err(e) => error!(
             "image rejected: {} ({=usize} bytes); applying the build-time fallback (zero input, m={=usize})",
-            Display2Format(&e),
+            e,
             image.len(),
             control_loop::image::REJECTED_M
         ),
