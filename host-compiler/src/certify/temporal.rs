@@ -149,6 +149,9 @@ pub fn try_certify(
     let h = lp.plant.period();
     let trace = nominal_trace(nom, h, &tl.signals)?;
     let monitor = tl.monitor()?;
+    // The samples' semantics is the monitor's own (the verifier's), on the trace's f64 times; the tube
+    // converts window bounds to sample counts to 10⁻⁹ of a period, which can differ from it when a window
+    // ends within rounding of a sample.
     let signal = monitor.robustness(&trace).map_err(Box::new)?;
     let tube = TubeFormula::new(&monitor, &trace)?;
     let rho0 = signal[0];
