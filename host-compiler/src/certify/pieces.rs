@@ -65,7 +65,7 @@ impl<'a, 'b> Pieces<'a, 'b> {
     }
 
     /// Signed distance (2.8) in the P-metric and its gradient (envelope theorem at the witness).
-    fn signed(&self, region: &dyn Region, x: &[f64]) -> (f64, Vec<f64>) {
+    pub fn signed(&self, region: &dyn Region, x: &[f64]) -> (f64, Vec<f64>) {
         let w = region.signed_dist(x, &self.metric);
         let n = x.len();
         if w.point.len() != n {

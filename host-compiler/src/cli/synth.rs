@@ -30,6 +30,33 @@ const OUTPUTS: &[&str] = &[
     "report.html",
 ];
 
+/// Refuses a run whose image the bytes do not re-prove (`unproved`: why, per refused trajectory) or the
+/// Monte Carlo refuted; such an image is not written.
+pub(crate) fn refuse_unless_certified(
+    unproved: &[impl AsRef<str>],
+    violations: usize,
+    first_violation: Option<&str>,
+) -> Result<(), Failure> {
+    if let Some(first) = unproved.first() {
+        let first = first.as_ref();
+        return Err(miette::miette!(
+            "the image bytes do not re-prove {} of its trajectories (first: {first}): the image is NOT \
+             certified and was not written",
+            unproved.len()
+        )
+        .into());
+    }
+    if violations > 0 {
+        return Err(miette::miette!(
+            "verification found {violations} violations (first: {}): the image is NOT certified and was \
+             not written",
+            first_violation.unwrap_or("?")
+        )
+        .into());
+    }
+    Ok(())
+}
+
 /// The exit of a run whose image was written: interrupted (130), the coverage target met (0), or short of
 /// it (3, said on stderr with the lower bound and why the growth stopped). `what` names the certified
 /// units ("runs", "balls").

@@ -124,22 +124,11 @@ pub fn run(a: &SynthArgs, problem: crate::spec::Problem) -> Outcome {
         s.recheck.len()
     );
     println!("time              {:.1} s", s.seconds);
-    if !unproved.is_empty() {
-        return Err(miette::miette!(
-            "the image bytes do not re-prove {} runs (first: {}): the image is NOT certified and was not written",
-            unproved.len(),
-            unproved[0]
-        )
-        .into());
-    }
-    if !verified {
-        return Err(miette::miette!(
-            "verification found {} violations (first: {}): the image is NOT certified and was not written",
-            s.verify.violations,
-            s.verify.first_violation.as_deref().unwrap_or("?")
-        )
-        .into());
-    }
+    super::synth::refuse_unless_certified(
+        &unproved,
+        s.verify.violations,
+        s.verify.first_violation.as_deref(),
+    )?;
     println!(
         "image             {} ({} bytes)",
         img_path.display(),

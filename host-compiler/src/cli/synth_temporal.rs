@@ -73,8 +73,18 @@ pub fn run(a: &SynthArgs, problem: crate::spec::Problem) -> Outcome {
         report: miette::miette!("{e}"),
     })?;
     let img_path = a.out.join("controller.img");
-    let unproved = s.recheck.iter().filter(|c| !c.ok).count();
-    let verified = s.verify.violations == 0 && unproved == 0;
+    let unproved: Vec<String> = s
+        .recheck
+        .iter()
+        .filter(|c| !c.ok)
+        .map(|c| {
+            format!(
+                "ball {}: stored radius {:e}, the bytes certify {:e}",
+                c.trajectory, c.stored, c.certified
+            )
+        })
+        .collect();
+    let verified = s.verify.violations == 0 && unproved.is_empty();
     if verified {
         write_atomic(&img_path, &s.image)?;
     }
@@ -139,7 +149,7 @@ pub fn run(a: &SynthArgs, problem: crate::spec::Problem) -> Outcome {
     );
     println!(
         "re-proved         {} of {} balls from the image bytes",
-        s.recheck.len() - unproved,
+        s.recheck.len() - unproved.len(),
         s.recheck.len()
     );
     println!(
@@ -151,20 +161,11 @@ pub fn run(a: &SynthArgs, problem: crate::spec::Problem) -> Outcome {
             .collect::<Vec<_>>()
             .join(", ")
     );
-    if unproved > 0 {
-        return Err(miette::miette!(
-            "the image bytes do not re-prove {unproved} balls: the image is NOT certified and was not written"
-        )
-        .into());
-    }
-    if !verified {
-        return Err(miette::miette!(
-            "verification found {} violations (first: {}): the image is NOT certified and was not written",
-            s.verify.violations,
-            s.verify.first_violation.as_deref().unwrap_or("?")
-        )
-        .into());
-    }
+    super::synth::refuse_unless_certified(
+        &unproved,
+        s.verify.violations,
+        s.verify.first_violation.as_deref(),
+    )?;
     println!(
         "image             {} ({} bytes)",
         img_path.display(),

@@ -14,8 +14,6 @@ use crate::certify::temporal::{
     certify_temporal, nominal_trace, TemporalCertificate, TemporalLoop,
 };
 use crate::certify::{Loop, LoopConstants};
-use crate::geometry::{Metric, Region};
-use crate::linalg::{mat_vec, p_norm};
 use crate::robustness::mtl::TubeFormula;
 use crate::trajectory::Nominal;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -39,10 +37,6 @@ pub fn objective_subgradient(
         .input_values(nom, eps)
         .into_iter()
         .fold(f64::INFINITY, f64::min);
-    let metric = Metric {
-        n: lp.P.nrows(),
-        R: crate::linalg::to_row_major(lp.P),
-    };
     let m = lp.K.nrows();
     let value = rho0.min(di);
     if !value.is_finite() {
@@ -66,7 +60,7 @@ pub fn objective_subgradient(
     if rho0 <= value + tol {
         let tube = TubeFormula::new(&monitor, &trace).ok()?;
         for (set, k, neg) in tube.critical(rho0).into_iter().take(MAX_ACTIVE) {
-            let g = signed_grad(set.region.as_ref(), &nom.x[k], &metric, lp);
+            let (_, g) = pc.signed(set.region.as_ref(), &nom.x[k]);
             let s = if neg { -1.0 } else { 1.0 };
             cands.push(LocalGrad {
                 k,
@@ -115,23 +109,6 @@ fn min_norm_combination(g: &[Vec<f64>]) -> Vec<f64> {
         w.iter_mut().zip(&d).for_each(|(a, b)| *a += t * b);
     }
     w
-}
-
-/// ∇ₓ of the signed P-distance to a region (envelope theorem at the witness point, as in
-/// [`crate::certify::pieces`]).
-fn signed_grad(region: &dyn Region, x: &[f64], metric: &Metric, lp: &Loop<'_>) -> Vec<f64> {
-    let w = region.signed_dist(x, metric);
-    let n = x.len();
-    if w.point.len() != n {
-        return vec![0.0; n];
-    }
-    let e: Vec<f64> = x.iter().zip(&w.point).map(|(a, b)| a - b).collect();
-    let r = p_norm(lp.P, &e);
-    if !(r > 0.0) {
-        return vec![0.0; n];
-    }
-    let s = if w.value < 0.0 { -1.0 } else { 1.0 };
-    mat_vec(lp.P, &e).iter().map(|v| s * v / r).collect()
 }
 
 /// The result of [`maximize_temporal`].
