@@ -6,7 +6,8 @@
 //! continuous plant does between samples.
 //!
 //! Hybrid automata over linear affine locations, with their exact simulation across events, are in
-//! [`hybrid`].
+//! [`hybrid`]; nonlinear input-affine plants written in the spec, flowed by an adaptive integrator, in
+//! [`nonlinear`].
 //!
 //! Matrices are faer `Mat<f64>`, vectors `Vec<f64>` / `&[f64]`.
 
@@ -14,6 +15,7 @@ mod expm;
 pub mod hybrid;
 mod intersample;
 mod linear;
+pub mod nonlinear;
 mod plant;
 mod sim;
 
