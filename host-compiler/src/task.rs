@@ -4,6 +4,7 @@
 //! its sets in the forms the stages compute with, Init, the horizon in samples and the spec's settings.
 //! No stage builds any of these again.
 
+use crate::model::feedback_linearizable::{self, FlError};
 use crate::model::hybrid::{Hybrid, HybridError};
 use crate::model::{LinearAffine, ModelError, Plant};
 use crate::property::{ConvexSets, PropertyError, ReachAvoid};
@@ -37,22 +38,15 @@ pub enum TaskError {
          synthesis, verification and simulation do not take hybrid plants yet"
     )]
     HybridNotSupported { locations: usize, edges: usize },
-    /// The spec's nonlinear plant is valid (its relative degree and decoupling matrix are checked over
-    /// Init, `spec::nonlinear`), but it is not synthesised yet.
-    #[error(
-        "the plant is feedback linearizable (n = {n}, m = {m}, relative degree {relative_degree:?}); it \
-         is valid, but it is not synthesised yet"
-    )]
-    NonlinearNotSupported {
-        n: usize,
-        m: usize,
-        relative_degree: Vec<usize>,
-    },
+    /// A feedback-linearizable plant outside what this version linearises and bounds.
+    #[error("plant: {0}")]
+    Linearize(#[from] FlError),
 }
 
 impl Task {
     /// The task of a validated spec: the plant's class from the spec (linear affine, in continuous time
-    /// sampled by an exact zero-order hold, or in discrete time), and the reach-avoid property.
+    /// sampled by an exact zero-order hold, or in discrete time; feedback linearizable, whose task is the
+    /// linear one in ξ with the maps on the plant), and the reach-avoid property.
     pub fn new(problem: Problem) -> Result<Self, TaskError> {
         if let Some(h) = &problem.hybrid {
             // Built (so that every check of the automaton runs), then refused: the pipeline's stages
@@ -63,14 +57,17 @@ impl Task {
                 edges: hy.edges().len(),
             });
         }
-        if let Some(nl) = &problem.nonlinear {
-            return Err(TaskError::NonlinearNotSupported {
-                n: nl.system.n(),
-                m: nl.system.m(),
-                relative_degree: nl.relative_degree.clone(),
-            });
+        if problem.nonlinear.is_some() {
+            // Every stage works on the linear model in ξ; the plant carries the maps and bounds.
+            let (xi, maps) = feedback_linearizable::linearize(&problem)?;
+            let plant: Box<dyn Plant> = Box::new(feedback_linearizable::plant(&xi, maps)?);
+            return Self::with_plant(xi, plant);
         }
         let plant: Box<dyn Plant> = Box::new(LinearAffine::from_spec(&problem.plant)?);
+        Self::with_plant(problem, plant)
+    }
+
+    fn with_plant(problem: Problem, plant: Box<dyn Plant>) -> Result<Self, TaskError> {
         let property = ReachAvoid::from_problem(&problem)?;
         let convex = ConvexSets::from_problem(&problem)?;
         let steps = problem.horizon_steps();
@@ -98,17 +95,16 @@ impl Task {
 mod tests {
     use super::*;
 
-    /// A valid feedback-linearizable spec (Example 4.9) is refused as a task, with the class's figures,
-    /// until its synthesis is built (issue 13).
+    /// A feedback-linearizable spec (Example 4.9) becomes the task of its linear model in ξ, with the
+    /// plant's mismatch bound and maps on the plant.
     #[test]
-    fn a_nonlinear_plant_is_refused_as_not_yet_synthesised() {
+    fn a_feedback_linearizable_plant_is_a_task_in_xi() {
         let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../examples/fl-4-9.toml");
         let problem = crate::spec::load(path).expect("the shipped example");
-        let err = Task::new(problem).err().expect("refused");
-        assert!(matches!(
-            err,
-            TaskError::NonlinearNotSupported { n: 6, m: 2, ref relative_degree } if relative_degree == &[2, 2]
-        ));
-        assert!(err.to_string().contains("not synthesised yet"), "{err}");
+        let task = Task::new(problem).expect("a task");
+        assert_eq!((task.plant.n(), task.plant.m()), (4, 2));
+        assert!(task.plant.model_mismatch() > 0.0);
+        let maps = task.plant.linearization().expect("maps");
+        assert_eq!(maps.n_plant, 6);
     }
 }

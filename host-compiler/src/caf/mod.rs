@@ -56,7 +56,7 @@ mod validate;
 
 pub use design::{design, design_location, design_locations, outcome_message, Design, DesignError};
 pub use pbh::{uncontrollable_modes, UncontrollableMode};
-pub use rcrit::{r_crit, RCrit};
+pub use rcrit::{r_crit, r_crit_mixed, RCrit};
 pub use settings::{CafSettings, CafSettingsBuilder, Formulation};
 pub use synth::{synthesize, synthesize_continuous, synthesize_discrete};
 pub use validate::{certify, Certificate};

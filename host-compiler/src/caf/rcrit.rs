@@ -64,6 +64,24 @@ pub fn r_crit(
     E: MatRef<'_, f64>,
     delta: f64,
 ) -> Result<RCrit, CafError> {
+    r_crit_mixed(At, P, E, delta, 0.0)
+}
+
+/// Theorem 3.21 with a second disturbance z added to the step, known only by ‖z‖_P ≤ `z`: e⁺ = Ãe − Eε − z.
+/// The proof of (3.82) goes through with 2aδ replaced by 2(aδ + a_z z), a_z = ‖P^{1/2}Ã‖₂ (since
+/// |2eᵀÃᵀPz| ≤ 2‖P^{1/2}Ãe‖‖z‖_P), and bδ² by (√b δ + z)²; (3.83)–(3.87) follow unchanged in those two
+/// terms. A feedback-linearizable plant's sampled-loop mismatch, which varies within the period, enters
+/// this way (`certify::LoopConstants::mismatch`).
+pub fn r_crit_mixed(
+    At: MatRef<'_, f64>,
+    P: MatRef<'_, f64>,
+    E: MatRef<'_, f64>,
+    delta: f64,
+    z: f64,
+) -> Result<RCrit, CafError> {
+    if !(z.is_finite() && z >= 0.0) {
+        return Err(CafError::Disturbance(z));
+    }
     let n = At.nrows();
     if At.ncols() != n || P.nrows() != n || P.ncols() != n || E.nrows() != n {
         return Err(CafError::Dimension {
@@ -113,9 +131,20 @@ pub fn r_crit(
     };
     let sigma = cert.margin;
     let lambda_max = cert.lambda_max_P;
-    let rho_crit = delta * (a + (a * a + sigma * b).sqrt()) / sigma;
+    // The linear and quadratic disturbance terms of (3.82): a·δ and b·δ² for z = 0.
+    let a_z = if z > 0.0 {
+        let roots = crate::linalg::PdRoots::new(P.as_ref())
+            .ok_or(CafError::NonFinite { what: "P^{1/2}" })?;
+        spectral_norm(&(&roots.sqrt * At)).ok_or(CafError::NonFinite { what: "P^{1/2}Ã" })?
+            * inflate
+    } else {
+        0.0
+    };
+    let lin = a * delta + a_z * z;
+    let quad = (b.sqrt() * delta + z).powi(2) * inflate;
+    let rho_crit = (lin + (lin * lin + sigma * quad).sqrt()) / sigma;
     let r_tilde = rho_crit * lambda_max.sqrt();
-    let r_crit = (r_tilde * r_tilde + (a * a / sigma + b) * delta * delta).sqrt();
+    let r_crit = (r_tilde * r_tilde + lin * lin / sigma + quad).sqrt();
     Ok(RCrit {
         delta,
         sigma_min: sigma,

@@ -287,7 +287,7 @@ struct Loc<'a> {
 impl Loc<'_> {
     /// Rκ = γ r + ρκ + φβε̄ (the inter-sample ball around x̃(κ)).
     fn inter(&self, r: f64, rho: f64, eps: f64) -> f64 {
-        self.lc.gamma * r + rho + self.lc.phi * self.lc.beta * eps
+        self.lc.gamma * r + rho + self.lc.held_disturbance(eps)
     }
 }
 

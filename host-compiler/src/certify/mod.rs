@@ -197,6 +197,13 @@ pub struct LoopConstants {
     pub beta: f64,
     /// sqrt((P⁻¹)_jj): the largest |e_j| over ‖e‖_P ≤ 1.
     pub axis: Vec<f64>,
+    /// The plant's sampled-loop mismatch D ([`Plant::model_mismatch`]): an input-channel disturbance
+    /// that varies within the period, 0 for linear affine plants. Each step it moves the state by at most
+    /// φβD in the P-metric (the inter-sample bound's own argument), which r_crit and the inter-sample
+    /// margin take with the rounding ([`LoopConstants::held_disturbance`]).
+    pub mismatch: f64,
+    /// Prefix sums of ‖Ã^j‖_P ([`LoopConstants::accumulation`]), computed once when first asked.
+    accumulated: std::sync::OnceLock<Vec<f64>>,
 }
 
 /// Why a loop cannot be certified at all.
@@ -245,6 +252,7 @@ impl LoopConstants {
         };
         let n = lp.P.nrows();
         let axis = (0..n).map(|j| roots.inv[(j, j)].max(0.0).sqrt()).collect();
+        let mismatch = lp.plant.model_mismatch();
         Ok(Self {
             roots,
             sigma_min,
@@ -255,13 +263,48 @@ impl LoopConstants {
             gamma,
             beta,
             axis,
+            mismatch,
+            accumulated: std::sync::OnceLock::new(),
         })
     }
 
+    /// S_k = Σ_{j<k} ‖Ã^j‖_P (the P-induced norms of the closed loop's powers, each rounded up by a
+    /// relative 10⁻⁹): a disturbance of P-norm ≤ z every step moves a run at most S_k·z from where the
+    /// undisturbed loop would take it within k steps, by the variation-of-constants sum.
+    pub fn accumulation(&self, k: usize) -> f64 {
+        let sums = |k: usize| {
+            let At = &self.roots.sqrt * &self.At * &self.roots.inv_sqrt;
+            let n = At.nrows();
+            let mut pw = Mat::<f64>::from_fn(n, n, |i, j| if i == j { 1.0 } else { 0.0 });
+            let mut out = Vec::with_capacity(k + 1);
+            let mut s = 0.0;
+            out.push(0.0);
+            for _ in 0..k {
+                s += crate::linalg::spectral_norm(pw.as_ref()) * (1.0 + 1e-9);
+                out.push(s);
+                pw = &At * &pw;
+            }
+            out
+        };
+        let pre = self.accumulated.get_or_init(|| sums(k));
+        match pre.get(k) {
+            Some(&s) => s,
+            None => sums(k)[k],
+        }
+    }
+
+    /// How far the held input's disturbances move the state within one period, in the P-metric: φβ(ε̄ + D)
+    /// for the evaluator's rounding ε̄ and the plant's mismatch D (0 for discrete-time plants).
+    pub fn held_disturbance(&self, eps_f32: f64) -> f64 {
+        self.phi * self.beta * (eps_f32 + self.mismatch)
+    }
+
     /// r_crit of Theorem 3.21, (3.83)–(3.87), for a disturbance bound ε̄ (2-norm per step) entering through B
-    /// ([`crate::caf::r_crit`], with its validated, rounding-guarded norms); ∞ when it does not exist.
+    /// and the plant's mismatch φβD on the state ([`crate::caf::r_crit_mixed`], with its validated,
+    /// rounding-guarded norms); ∞ when it does not exist.
     pub fn r_crit(&self, eps: f64) -> f64 {
-        crate::caf::r_crit(self.At.as_ref(), self.P.as_ref(), self.B.as_ref(), eps)
+        let z = self.phi * self.beta * self.mismatch;
+        crate::caf::r_crit_mixed(self.At.as_ref(), self.P.as_ref(), self.B.as_ref(), eps, z)
             .map(|r| r.r_crit)
             .unwrap_or(f64::INFINITY)
     }
@@ -287,6 +330,16 @@ pub struct Certificate {
     pub delta: f64,
     /// The radius to store in the image (f32, rounded down), accounting for selection in f32.
     pub delta_stored: f32,
+    /// When the plant has a sampled-loop mismatch: how far the disturbances (rounding and mismatch) can
+    /// move a run from the undisturbed tube over the table, S_N·(‖P^{1/2}B‖ε̄ + φβD); δ may then be the
+    /// parts' minimum less this (the tube of radius δ + it then satisfies every part), where that beats
+    /// r_crit. 0 otherwise.
+    #[serde(skip_serializing_if = "is_zero")]
+    pub accumulated: f64,
+}
+
+fn is_zero(v: &f64) -> bool {
+    *v == 0.0
 }
 
 impl Certificate {
@@ -584,6 +637,7 @@ pub fn certify_at(lp: &Loop<'_>, lc: &LoopConstants, nom: &Nominal, at: GoalAt) 
             r_crit: f64::NAN,
             delta: 0.0,
             delta_stored: 0.0,
+            accumulated: 0.0,
         };
     };
     let delta_unsafe_is = unsafe_
@@ -594,11 +648,20 @@ pub fn certify_at(lp: &Loop<'_>, lc: &LoopConstants, nom: &Nominal, at: GoalAt) 
     let r_crit = lc.r_crit(eps_f32);
     let d47 = goal.value.min(delta_unsafe_is).min(delta_input);
     // Theorem 3.21: any r in [r_crit, d47) works; the strict inequalities of Lemma 4.4 need r < d47.
-    let delta = if d47 > 0.0 && r_crit < d47 {
+    let mut delta = if d47 > 0.0 && r_crit < d47 {
         d47 * (1.0 - 1e-9)
     } else {
         0.0
     };
+    // With a sampled-loop mismatch, r_crit (a one-step Lyapunov argument) is far more conservative than
+    // summing the disturbances over the table: a run from the δ-ball stays within δ + `accumulated` of
+    // the nominal at every sample (‖Ã^j‖_P ≤ 1), so every part holds for δ = d47 − `accumulated`.
+    let mut accumulated = 0.0;
+    if lc.mismatch > 0.0 && d47 > 0.0 {
+        let per_step = lc.roots.norm_into(lc.B.as_ref()) * eps_f32 + lc.phi * lc.beta * lc.mismatch;
+        accumulated = lc.accumulation(N) * per_step * (1.0 + 1e-9);
+        delta = delta.max((d47 - accumulated) * (1.0 - 1e-9));
+    }
     let delta_stored = selection_radius(lp.P, &nom.x[0], delta);
     Certificate {
         delta_goal: goal.value,
@@ -613,6 +676,7 @@ pub fn certify_at(lp: &Loop<'_>, lc: &LoopConstants, nom: &Nominal, at: GoalAt) 
         r_crit,
         delta,
         delta_stored,
+        accumulated,
     }
 }
 

@@ -136,13 +136,13 @@ impl<'a, 'b> Pieces<'a, 'b> {
             .collect()
     }
 
-    /// The Unsafe piece at sample k from its distance d at the sample: (d − φ‖f‖_P − φβε̄)/γ between
+    /// The Unsafe piece at sample k from its distance d at the sample: (d − φ‖f‖_P − φβ(ε̄ + D))/γ between
     /// samples, d at the last sample and for discrete-time plants.
     pub fn unsafe_margin(&self, nom: &Nominal, k: usize, d: f64, eps_f32: f64) -> f64 {
         match self.excursion(nom, k) {
             Some(f) => {
                 let rho = self.lc.phi * p_norm(self.lp.P, &f);
-                (d - rho - self.lc.phi * self.lc.beta * eps_f32) / self.lc.gamma
+                (d - rho - self.lc.held_disturbance(eps_f32)) / self.lc.gamma
             }
             None => d,
         }

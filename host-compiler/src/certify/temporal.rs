@@ -181,7 +181,7 @@ pub fn try_certify(
                         .plant
                         .vector_field(lp.loc, &nom.x[k], &nom.u[k])
                         .unwrap_or_else(|| vec![f64::INFINITY; nom.x[k].len()]);
-                    lc.phi * p_norm(lp.P, &f) + lc.phi * lc.beta * eps_f32
+                    lc.phi * p_norm(lp.P, &f) + lc.held_disturbance(eps_f32)
                 })
                 .collect();
             let mut between = vec![0.0; N];

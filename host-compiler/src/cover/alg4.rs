@@ -199,6 +199,7 @@ mod tests {
                 r_crit: 0.0,
                 delta: delta as f64,
                 delta_stored: delta,
+                accumulated: 0.0,
             },
         }
     }

@@ -12,6 +12,7 @@
 //! Matrices are faer `Mat<f64>`, vectors `Vec<f64>` / `&[f64]`.
 
 mod expm;
+pub mod feedback_linearizable;
 pub mod hybrid;
 mod intersample;
 mod linear;

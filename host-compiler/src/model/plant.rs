@@ -54,4 +54,15 @@ pub trait Plant: Send + Sync + std::fmt::Debug {
     /// in time order, for the verifier's check between samples (none for a discrete-time plant). A visitor
     /// rather than a list: the verifier calls this every step of every Monte Carlo run.
     fn between_samples(&self, loc: Location, x: &[f64], u: &[f64], visit: &mut dyn FnMut(&[f64]));
+    /// A bound on a disturbance in the input channel of the linear model, varying within the period, by
+    /// which the sampled loop departs from that model (2-norm, input units): 0 when the sampled model is
+    /// exact (linear affine plants); a feedback-linearizable plant's held input drifts from the
+    /// linearising one between samples (`feedback_linearizable`, module doc item 3).
+    fn model_mismatch(&self) -> f64 {
+        0.0
+    }
+    /// The maps between the plant's own coordinates and those of the linear model, when they differ.
+    fn linearization(&self) -> Option<&super::feedback_linearizable::FlMaps> {
+        None
+    }
 }

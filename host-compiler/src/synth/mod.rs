@@ -183,13 +183,25 @@ pub fn synthesize(task: &Task, opts: &SynthOptions) -> Result<Synthesis, SynthEr
     let t2 = Instant::now();
     let img = shared_types::image::decode(&image).map_err(SynthError::ImageRejected)?;
     let judge = Judge::new(task);
-    let verify = monte_carlo(
-        &judge,
-        &img,
-        opts.verify_interior,
-        opts.verify_per_ball,
-        problem.seed ^ 0x7e51f1,
-    )?;
+    let linearized = task.plant.linearization().is_some();
+    // A linearised plant is verified against the plant itself, not its linear model.
+    let verify = if linearized {
+        crate::verify::nonlinear::monte_carlo_fl(
+            task,
+            &img,
+            opts.verify_interior,
+            opts.verify_per_ball,
+            problem.seed ^ 0x7e51f1,
+        )?
+    } else {
+        monte_carlo(
+            &judge,
+            &img,
+            opts.verify_interior,
+            opts.verify_per_ball,
+            problem.seed ^ 0x7e51f1,
+        )?
+    };
     timings.push(("verification".to_string(), t2.elapsed().as_secs_f64()));
     if verify.violations > 0 {
         warnings.push(format!(
@@ -198,6 +210,14 @@ pub fn synthesize(task: &Task, opts: &SynthOptions) -> Result<Synthesis, SynthEr
         ));
     }
     let attack = match &opts.attack {
+        Some(_) if linearized => {
+            warnings.push(
+                "the falsifier runs the linear model's loop only; it was skipped for this \
+                 feedback-linearizable plant (the Monte Carlo ran the plant itself)"
+                    .to_string(),
+            );
+            None
+        }
         Some(a) => {
             let t3 = Instant::now();
             let settings = AttackSettings {

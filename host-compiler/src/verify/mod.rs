@@ -15,6 +15,7 @@
 pub mod attack;
 pub mod feedforward;
 pub mod hybrid;
+pub mod nonlinear;
 pub mod pwa;
 pub mod temporal;
 
@@ -385,6 +386,16 @@ pub fn monte_carlo(
         .enumerate()
         .map(|(i, x0)| run(judge, image, x0, i % MARGIN_EVERY == 0))
         .collect();
+    Ok(summarize(&outcomes, interior_runs, boundary_runs))
+}
+
+/// The report of a Monte Carlo's runs: the first `interior_runs` drawn inside, the next `boundary_runs` on
+/// the balls' boundaries; margins from every [`MARGIN_EVERY`]-th run.
+pub fn summarize(
+    outcomes: &[RunOutcome],
+    interior_runs: usize,
+    boundary_runs: usize,
+) -> VerifyReport {
     let boundary_rejected = outcomes[interior_runs..]
         .iter()
         .filter(|o| o.rejected)
@@ -400,7 +411,7 @@ pub fn monte_carlo(
         wu = wu.min(o.unsafe_margin);
         wi = wi.min(o.input_margin);
     }
-    Ok(VerifyReport {
+    VerifyReport {
         interior_runs,
         boundary_runs,
         boundary_rejected,
@@ -414,5 +425,5 @@ pub fn monte_carlo(
             .filter(|o| o.after_goal_input_excursion)
             .count(),
         after_goal_unsafe: outcomes.iter().filter(|o| o.after_goal_unsafe).count(),
-    })
+    }
 }

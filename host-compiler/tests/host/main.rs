@@ -15,6 +15,7 @@ mod caf_example33;
 mod caf_props;
 mod caf_status;
 mod certify_bounds;
+mod certify_fl;
 mod certify_forced;
 mod certify_internal;
 mod certify_temporal;

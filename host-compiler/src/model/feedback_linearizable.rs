@@ -1,0 +1,968 @@
+//! Feedback-linearizable plants (§3.1.2, Def 3.5, law (3.17)) as a [`Plant`] of the pipeline: the
+//! certificate lives on the linear system in the coordinates ξ, the firmware maps the measured state to ξ
+//! and the linear law's output w back to the plant's input u through two model programs, and the sampled
+//! loop's departure from the linear model is a bounded disturbance in the w channel (Theorem 3.21).
+//!
+//! **Coordinates.** For outputs y_i = h_i(x) of relative degree r_i, ξ stacks (h_i, L_f h_i, …,
+//! L_f^{r_i−1} h_i) per output, so ξ̇ is a chain of integrators per output ending in
+//! ξ̇_{i,r_i−1} = α_i(x) + (Γ(x)u)_i, α_i = L_f^{r_i} h_i, Γ the decoupling matrix (3.19). This module takes
+//! plants whose every ξ coordinate is one of the plant's states (mechanical systems written in positions
+//! and velocities); the other states are the zero dynamics (Remark 3.6), which the certificate does not
+//! track but bounds (below).
+//!
+//! **The law.** Where α_i is exactly affine in the ξ states, that affine part a_iᵀξ + c_i stays in the
+//! linear model (Example 4.9's drift 1 − X + 0.1Ẋ, so κ = 0 there as in the text) and α_res,i = 0;
+//! otherwise all of α_i is cancelled (α_res,i = α_i). The linear model is ξ̇ = A_ξ ξ + B_ξ w + c_ξ and the
+//! firmware applies u = λ(x)(w − α_res(x)), λ = Γ⁻¹ (symbolic, by cofactors, m ≤ 3): (3.17) with
+//! κ = −λ α_res.
+//!
+//! **What is bounded, and how.** This module takes plants whose zero dynamics, λ and α_res depend only on
+//! the zero-dynamics states (and u), so every bound below is independent of the nominal trajectory:
+//! 1. *Zero dynamics over [0, T]*: a validated first-order enclosure per sample period (Picard iteration
+//!    of Z_k + [0, h]·F(Z̃) ⊆ Z̃, F the interval field with u in the input set: runs in the certified tube
+//!    apply inputs in U, so this is an induction over samples), from Init's zero-dynamics box. Their hull
+//!    Z is where every bound below is taken, over a grid of up to [`MAX_PIECES`] sub-boxes.
+//! 2. *The input set pulled back* to w: ‖u − c‖ ≤ ‖λ‖(‖w‖ + ‖α_res‖) + ‖c‖ + e_prog, so the ball
+//!    W = {‖w‖ ≤ (ρ − ‖c‖ − e_prog)/L − A} maps into U (for a box U, the analogous componentwise bound),
+//!    with L ≥ ‖λ‖₂ from the enclosure of λᵀλ, A ≥ ‖α_res‖₂ and e_prog the input program's f32 rounding
+//!    bound (`expr::interval::rounding_bound`). For Example 4.9 λ is a rotation and W is U shrunk by the
+//!    enclosures' slack and the rounding.
+//! 3. *The sampled-loop mismatch* D: with u_k held, ξ̇ of the last chain element is
+//!    a_iᵀξ + c_i + w_k,i + φ_i(x(t)) − φ_i(x_k) with φ = α_res + Γ u_k (because Γ(x_k)u_k = w_k − α_res(x_k)),
+//!    and |φ(x(t)) − φ(x_k)| ≤ h·sup‖E‖, E = the Lie derivative of φ along f + g u_k, a polynomial of degree
+//!    2 in u bounded as ‖e₀‖ + ‖M‖₂R_u + ½‖Q‖R_u² over Z × U. The input program's rounding enters the same
+//!    channel through Γ: D = h·sup‖E‖ + sup‖Γ‖₂·e_prog. The certificate takes D as a w-channel disturbance
+//!    that varies within the period (`certify::LoopConstants::mismatch`).
+
+use super::linear::{ContinuousPlant, DiscretePlant, LinearAffine};
+use super::nonlinear::NonlinearPlant;
+use super::{Location, ModelError, Plant};
+use crate::expr::compile::{compile, Compiled};
+use crate::expr::diff::{derivative, gradient, lie};
+use crate::expr::interval::{enclose, rounding_bound, Interval, IntervalError, VarBox};
+use crate::expr::{Expr, ExprError, Point, Var};
+use crate::spec::sets::Coords;
+use crate::spec::{InitBox, InputSet, Matrix, Plant as SpecPlant, Problem, SetDesc, TimeDomain};
+use std::sync::Arc;
+
+/// Most sub-boxes of the zero-dynamics hull a bound is taken over (a grid over the coordinates the
+/// bounded expressions use).
+pub const MAX_PIECES: usize = 4096;
+/// Picard iterations allowed for one period's a-priori enclosure of the zero dynamics.
+const PICARD_ITERATIONS: usize = 30;
+
+/// Why a feedback-linearizable spec cannot be taken.
+#[derive(Debug, thiserror::Error)]
+pub enum FlError {
+    #[error("{0}")]
+    Expr(#[from] ExprError),
+    #[error("plant: {0}")]
+    Model(#[from] ModelError),
+    #[error(
+        "ξ coordinate {index} is L_f^{k} h_{output} = {expr}, which is not one of the plant's states; \
+         this version takes plants whose outputs and their derivatives up to the relative degree are \
+         states (write the model in those coordinates)"
+    )]
+    CoordinateNotAState {
+        index: usize,
+        output: usize,
+        k: usize,
+        expr: String,
+    },
+    #[error(
+        "{what} depends on {state}, a state of the linearised coordinates ξ; this version bounds \
+             the law and the zero dynamics over the zero-dynamics states only"
+    )]
+    DependsOnXi { what: String, state: String },
+    #[error("the decoupling matrix Γ is {m}×{m}; its symbolic inverse is built for m ≤ 3")]
+    TooManyInputs { m: usize },
+    #[error(
+        "{what} constrains {state}, a state of the zero dynamics; sets may only constrain the \
+             linearised coordinates ξ (the outputs and their derivatives)"
+    )]
+    SetOnZeroDynamics { what: String, state: String },
+    #[error(
+        "the zero dynamics could not be enclosed over the horizon (period {k}: {why}); the \
+             certificate needs them bounded"
+    )]
+    ZeroDynamicsUnbounded { k: usize, why: String },
+    #[error("an interval bound of {what} failed: {why}")]
+    Bound { what: String, why: String },
+    #[error(
+        "the input set pulled back through u = λ(x)(w − α_res(x)) is empty: {why} (‖λ‖₂ ≤ {lambda:.4}, \
+         ‖α_res‖₂ ≤ {alpha:.4}, program rounding {e_prog:.3e})"
+    )]
+    EmptyInputSet {
+        why: String,
+        lambda: f64,
+        alpha: f64,
+        e_prog: f64,
+    },
+    #[error("an MTL formula over a feedback-linearizable plant is not synthesised yet")]
+    Mtl,
+}
+
+/// The maps and bounds of a linearised plant (module doc).
+#[derive(Clone, Debug)]
+pub struct FlMaps {
+    /// The plant's own state and input dimensions.
+    pub n_plant: usize,
+    pub m_plant: usize,
+    /// ξ_j is state `xi_states[j]`.
+    pub xi_states: Vec<usize>,
+    /// The zero-dynamics states, in state order.
+    pub zero_states: Vec<usize>,
+    pub relative_degree: Vec<usize>,
+    /// x ↦ ξ (inputs: the n_plant states).
+    pub coords: Compiled,
+    /// (x, w) ↦ u (inputs: the n_plant states, then w).
+    pub input_map: Compiled,
+    /// u_i(x, w) as expressions (parameters bound), the f64 reference of `input_map`.
+    pub input_exprs: Vec<Expr>,
+    /// The plant in f64 (for verification).
+    pub plant: NonlinearPlant,
+    /// The plant's input set U (the task's input set is W, in w).
+    pub input: InputSet,
+    /// The plant's Init (the task's Init is its ξ part).
+    pub init: InitBox,
+    /// The zero-dynamics hull Z over [0, T] (one interval per zero state).
+    pub zero_hull: Vec<Interval>,
+    /// L ≥ sup ‖λ‖₂, A ≥ sup ‖α_res‖₂, G ≥ sup ‖Γ‖₂ over Z, and the input program's rounding bound.
+    pub lambda_norm: f64,
+    pub alpha_res_norm: f64,
+    pub gamma_norm: f64,
+    pub e_prog: f64,
+    /// D: the w-channel disturbance of the sampled loop (module doc, item 3), and its parts.
+    pub mismatch: f64,
+    pub mismatch_flow: f64,
+}
+
+impl FlMaps {
+    /// ξ of a plant state.
+    pub fn xi_of(&self, x: &[f64]) -> Vec<f64> {
+        self.xi_states.iter().map(|&s| x[s]).collect()
+    }
+}
+
+/// A feedback-linearizable plant as the pipeline sees it: the linear model in ξ (sampled exactly by the
+/// zero-order hold, which is what the nominal and the CAF use) and the maps with their bounds.
+#[derive(Clone, Debug)]
+pub struct FeedbackLinearized {
+    pub linear: LinearAffine,
+    pub maps: Arc<FlMaps>,
+}
+
+impl Plant for FeedbackLinearized {
+    fn n(&self) -> usize {
+        self.linear.n()
+    }
+    fn m(&self) -> usize {
+        self.linear.m()
+    }
+    fn period(&self) -> f64 {
+        Plant::period(&self.linear)
+    }
+    fn error_dynamics(&self, loc: Location) -> &DiscretePlant {
+        self.linear.error_dynamics(loc)
+    }
+    fn continuous(&self, loc: Location) -> Option<&ContinuousPlant> {
+        self.linear.continuous(loc)
+    }
+    fn step(&self, loc: Location, x: &[f64], u: &[f64]) -> Vec<f64> {
+        self.linear.step(loc, x, u)
+    }
+    fn between_samples(&self, loc: Location, x: &[f64], u: &[f64], visit: &mut dyn FnMut(&[f64])) {
+        self.linear.between_samples(loc, x, u, visit)
+    }
+    fn model_mismatch(&self) -> f64 {
+        self.maps.mismatch
+    }
+    fn linearization(&self) -> Option<&FlMaps> {
+        Some(&self.maps)
+    }
+}
+
+fn state_name(problem_names: &crate::expr::Names, s: usize) -> String {
+    problem_names
+        .states
+        .get(s)
+        .cloned()
+        .unwrap_or_else(|| format!("x{}", s + 1))
+}
+
+/// Whether `e` uses a state outside `allowed`; the first such state.
+fn uses_other_state(e: &Expr, n: usize, allowed: &[usize]) -> Option<usize> {
+    (0..n).find(|&s| !allowed.contains(&s) && e.uses(Var::State(s as u16)))
+}
+
+/// The symbolic inverse of a square matrix of expressions by cofactors (m ≤ 3).
+fn inverse(g: &[Vec<Expr>]) -> Result<Vec<Vec<Expr>>, FlError> {
+    let m = g.len();
+    let e = |i: usize, j: usize| g[i][j].clone();
+    let det2 = |a: Expr, b: Expr, c: Expr, d: Expr| Expr::sub(Expr::mul(a, d), Expr::mul(b, c));
+    match m {
+        1 => Ok(vec![vec![Expr::div(Expr::c(1.0), e(0, 0))]]),
+        2 => {
+            let det = det2(e(0, 0), e(0, 1), e(1, 0), e(1, 1));
+            Ok(vec![
+                vec![
+                    Expr::div(e(1, 1), det.clone()),
+                    Expr::div(Expr::neg(e(0, 1)), det.clone()),
+                ],
+                vec![
+                    Expr::div(Expr::neg(e(1, 0)), det.clone()),
+                    Expr::div(e(0, 0), det),
+                ],
+            ])
+        }
+        3 => {
+            // cof(i, j) = (−1)^{i+j} det of the minor without row i and column j.
+            let cof = |i: usize, j: usize| {
+                let r: Vec<usize> = (0..3).filter(|&k| k != i).collect();
+                let c: Vec<usize> = (0..3).filter(|&k| k != j).collect();
+                let d = det2(e(r[0], c[0]), e(r[0], c[1]), e(r[1], c[0]), e(r[1], c[1]));
+                if (i + j) % 2 == 0 {
+                    d
+                } else {
+                    Expr::neg(d)
+                }
+            };
+            let det = (0..3).fold(Expr::c(0.0), |acc, j| {
+                Expr::add(acc, Expr::mul(e(0, j), cof(0, j)))
+            });
+            // λ = adj(Γ)/det, adj(Γ)_ij = cof(j, i).
+            Ok((0..3)
+                .map(|i| (0..3).map(|j| Expr::div(cof(j, i), det.clone())).collect())
+                .collect())
+        }
+        _ => Err(FlError::TooManyInputs { m }),
+    }
+}
+
+/// The interval [0, h]·a.
+fn times_period(a: Interval, h: f64) -> Interval {
+    a.mul(Interval::new(0.0, h))
+}
+
+/// How the input set bounds u: the interval box, and for a ball its centre and radius.
+struct UBound {
+    boxed: Vec<Interval>,
+    ball: Option<(Vec<f64>, f64)>,
+    /// sup ‖u‖₂ over the set.
+    r_u: f64,
+}
+
+impl UBound {
+    fn new(u: &InputSet) -> Self {
+        match u {
+            InputSet::Box { lo, hi } => Self {
+                boxed: lo
+                    .iter()
+                    .zip(hi)
+                    .map(|(&l, &h)| Interval::new(l, h))
+                    .collect(),
+                ball: None,
+                r_u: lo
+                    .iter()
+                    .zip(hi)
+                    .map(|(l, h)| l.abs().max(h.abs()).powi(2))
+                    .sum::<f64>()
+                    .sqrt(),
+            },
+            InputSet::Ball { center, radius } => Self {
+                boxed: center
+                    .iter()
+                    .map(|&c| Interval::new(c - radius, c + radius))
+                    .collect(),
+                ball: Some((center.clone(), *radius)),
+                r_u: center.iter().map(|c| c * c).sum::<f64>().sqrt() + radius,
+            },
+        }
+    }
+
+    /// An enclosure of f + Σ_l g_l u_l over the state box, u in the set: for a ball, the g-part is
+    /// bounded by ‖(|g_l|)_l‖₂·ρ around g·c (tighter than the ball's bounding box).
+    fn field(&self, f: &Expr, g: &[Expr], b: &VarBox<'_>) -> Result<Interval, IntervalError> {
+        let fi = enclose(f, b)?;
+        match &self.ball {
+            None => {
+                let mut s = fi;
+                for (gl, ul) in g.iter().zip(&self.boxed) {
+                    if !gl.is_zero() {
+                        s = s.add(enclose(gl, b)?.mul(*ul));
+                    }
+                }
+                Ok(s)
+            }
+            Some((c, rho)) => {
+                let mut s = fi;
+                let mut mag2 = 0.0;
+                for (gl, cl) in g.iter().zip(c) {
+                    if !gl.is_zero() {
+                        let gi = enclose(gl, b)?;
+                        s = s.add(gi.mul(Interval::point(*cl)));
+                        mag2 += gi.mag() * gi.mag();
+                    }
+                }
+                Ok(s.widen(mag2.sqrt() * rho * (1.0 + 1e-12)))
+            }
+        }
+    }
+}
+
+/// The supremum of `f` over a grid of sub-boxes of `hull` (the coordinates in `dims` split evenly, at most
+/// [`MAX_PIECES`] boxes in all). `f` gets the full state box (ξ states unbounded is never asked: every
+/// bounded expression uses zero states only).
+fn sup_over_grid(
+    n: usize,
+    zero_states: &[usize],
+    hull: &[Interval],
+    dims: &[usize],
+    f: &dyn Fn(&[Interval]) -> Result<f64, IntervalError>,
+) -> Result<f64, IntervalError> {
+    let d = dims.len();
+    let per = if d == 0 {
+        1
+    } else {
+        ((MAX_PIECES as f64).powf(1.0 / d as f64).floor() as usize).max(1)
+    };
+    let total = per.pow(d as u32);
+    let mut best = f64::NEG_INFINITY;
+    let mut x = vec![Interval::point(0.0); n];
+    for idx in 0..total {
+        let mut rest = idx;
+        for (zi, &s) in zero_states.iter().enumerate() {
+            x[s] = hull[zi];
+        }
+        for &dz in dims {
+            let k = rest % per;
+            rest /= per;
+            let iv = hull[dz];
+            let w = (iv.hi - iv.lo) / per as f64;
+            let lo = if k == 0 { iv.lo } else { iv.lo + w * k as f64 };
+            let hi = if k + 1 == per {
+                iv.hi
+            } else {
+                iv.lo + w * (k + 1) as f64
+            };
+            // Outward by a hair so that the pieces' union covers the hull despite rounding.
+            x[zero_states[dz]] = Interval::new(lo, hi).widen(1e-15 * (1.0 + iv.mag()));
+        }
+        best = best.max(f(&x)?);
+    }
+    Ok(best)
+}
+
+/// The zero-dynamics coordinates (indices into `zero_states`) the expressions use.
+fn dims_used(es: &[&Expr], zero_states: &[usize]) -> Vec<usize> {
+    (0..zero_states.len())
+        .filter(|&zi| {
+            es.iter()
+                .any(|e| e.uses(Var::State(zero_states[zi] as u16)))
+        })
+        .collect()
+}
+
+/// Upper bound of ‖M‖₂ for an interval matrix given as expressions: sqrt of the largest absolute row
+/// sum of the enclosure of MᵀM (built symbolically, so that the entries of a rotation collapse).
+fn norm2_bound(mtm: &[Vec<Expr>], b: &VarBox<'_>) -> Result<f64, IntervalError> {
+    let mut worst = 0.0f64;
+    for row in mtm {
+        let mut s = 0.0;
+        for e in row {
+            s += enclose(e, b)?.mag();
+        }
+        worst = worst.max(s);
+    }
+    Ok(worst.sqrt())
+}
+
+/// MᵀM symbolically.
+fn gram(m: &[Vec<Expr>]) -> Vec<Vec<Expr>> {
+    let cols = m.first().map_or(0, |r| r.len());
+    (0..cols)
+        .map(|a| {
+            (0..cols)
+                .map(|b| {
+                    m.iter().fold(Expr::c(0.0), |acc, row| {
+                        Expr::add(acc, Expr::mul(row[a].clone(), row[b].clone()))
+                    })
+                })
+                .collect()
+        })
+        .collect()
+}
+
+fn bound_err(what: &str) -> impl Fn(IntervalError) -> FlError + '_ {
+    move |e| FlError::Bound {
+        what: what.to_string(),
+        why: e.to_string(),
+    }
+}
+
+/// The linearised task of a validated feedback-linearizable spec: the spec in ξ coordinates (its plant
+/// the linear model, Init, Goal and Unsafe on the ξ states, its input set W) and the maps with their
+/// bounds (module doc).
+pub fn linearize(problem: &Problem) -> Result<(Problem, FlMaps), FlError> {
+    let desc = problem
+        .nonlinear
+        .as_ref()
+        .expect("linearize is called on a nonlinear problem");
+    if problem.mtl.is_some() {
+        return Err(FlError::Mtl);
+    }
+    let names = &desc.names;
+    let p = names.param_values();
+    let sys = &desc.system;
+    let (n, m) = (sys.n(), sys.m());
+    let centre: Vec<f64> = problem
+        .init
+        .lo
+        .iter()
+        .zip(&problem.init.hi)
+        .map(|(l, h)| 0.5 * (l + h))
+        .collect();
+    let at = Point {
+        x: &centre,
+        u: &[],
+        p: &p,
+    };
+    let rd = sys
+        .relative_degree_at(&at, 1e-12)
+        .map_err(|e| FlError::Bound {
+            what: "the relative degree".into(),
+            why: e.to_string(),
+        })?;
+    // 1. ξ: every L_f^k h_i (k < r_i) must be a state.
+    let mut xi_states = Vec::new();
+    for (i, tower) in rd.lf.iter().enumerate() {
+        for (k, e) in tower.iter().take(rd.r[i]).enumerate() {
+            let e = e.bind_params(&p);
+            match e {
+                Expr::Var(Var::State(s)) if !xi_states.contains(&(s as usize)) => {
+                    xi_states.push(s as usize)
+                }
+                _ => {
+                    return Err(FlError::CoordinateNotAState {
+                        index: xi_states.len(),
+                        output: i + 1,
+                        k,
+                        expr: e.display(names).to_string(),
+                    })
+                }
+            }
+        }
+    }
+    let zero_states: Vec<usize> = (0..n).filter(|s| !xi_states.contains(s)).collect();
+    let n_xi = xi_states.len();
+    // 2. α, Γ, the kept affine part and α_res.
+    let alpha: Vec<Expr> = rd
+        .lf
+        .iter()
+        .zip(&rd.r)
+        .map(|(t, &r)| t[r].bind_params(&p))
+        .collect();
+    let gamma: Vec<Vec<Expr>> = rd
+        .gamma
+        .iter()
+        .map(|row| row.iter().map(|e| e.bind_params(&p)).collect())
+        .collect();
+    let zero_x = vec![0.0; n];
+    let mut kept_a = vec![vec![0.0; n_xi]; m];
+    let mut kept_c = vec![0.0; m];
+    let mut alpha_res = Vec::with_capacity(m);
+    for (i, a) in alpha.iter().enumerate() {
+        let grad = gradient(a, n)?;
+        let affine_in_xi = grad.iter().enumerate().all(|(s, d)| match d.as_const() {
+            Some(v) => v == 0.0 || xi_states.contains(&s),
+            None => false,
+        });
+        if affine_in_xi {
+            for (j, &s) in xi_states.iter().enumerate() {
+                kept_a[i][j] = grad[s].as_const().unwrap_or(0.0);
+            }
+            kept_c[i] = a.eval(&Point {
+                x: &zero_x,
+                u: &[],
+                p: &[],
+            });
+            alpha_res.push(Expr::c(0.0));
+        } else {
+            alpha_res.push(a.clone());
+        }
+    }
+    // 3. What the bounds need to depend on the zero dynamics only.
+    let check_zero = |what: String, e: &Expr| -> Result<(), FlError> {
+        match uses_other_state(e, n, &zero_states) {
+            Some(s) => Err(FlError::DependsOnXi {
+                what,
+                state: state_name(names, s),
+            }),
+            None => Ok(()),
+        }
+    };
+    for (i, a) in alpha_res.iter().enumerate() {
+        check_zero(
+            format!("α_{} (the part of L_f^r h the law cancels)", i + 1),
+            a,
+        )?;
+    }
+    for (i, row) in gamma.iter().enumerate() {
+        for (j, e) in row.iter().enumerate() {
+            check_zero(format!("Γ[{}][{}]", i + 1, j + 1), e)?;
+        }
+    }
+    let f: Vec<Expr> = sys.f.iter().map(|e| e.bind_params(&p)).collect();
+    let g: Vec<Vec<Expr>> = sys
+        .g
+        .iter()
+        .map(|r| r.iter().map(|e| e.bind_params(&p)).collect())
+        .collect();
+    for &z in &zero_states {
+        let nm = state_name(names, z);
+        check_zero(format!("f for {nm} (zero dynamics)"), &f[z])?;
+        for (j, e) in g[z].iter().enumerate() {
+            check_zero(format!("g[{nm}][{}] (zero dynamics)", j + 1), e)?;
+        }
+    }
+    // 4. λ = Γ⁻¹ and the two programs.
+    let lambda = inverse(&gamma)?;
+    let w = |j: usize| Expr::var(Var::Input(j as u16));
+    let input_exprs: Vec<Expr> = (0..m)
+        .map(|i| {
+            (0..m).fold(Expr::c(0.0), |acc, j| {
+                Expr::add(
+                    acc,
+                    Expr::mul(lambda[i][j].clone(), Expr::sub(w(j), alpha_res[j].clone())),
+                )
+            })
+        })
+        .collect();
+    let coords_exprs: Vec<Expr> = xi_states
+        .iter()
+        .map(|&s| Expr::var(Var::State(s as u16)))
+        .collect();
+    let coords = compile(&coords_exprs, n, 0, &[])?;
+    let input_map = compile(&input_exprs, n, m, &[])?;
+    // 5. The linear model in ξ.
+    let mut A = Matrix::zeros(n_xi, n_xi);
+    let mut B = Matrix::zeros(n_xi, m);
+    let mut C = Matrix::zeros(m, n_xi);
+    let mut c = vec![0.0; n_xi];
+    let mut o = 0;
+    for (i, &r) in rd.r.iter().enumerate() {
+        for k in 0..r - 1 {
+            A.data[(o + k) * n_xi + o + k + 1] = 1.0;
+        }
+        let last = o + r - 1;
+        for j in 0..n_xi {
+            A.data[last * n_xi + j] = kept_a[i][j];
+        }
+        c[last] = kept_c[i];
+        B.data[last * m + i] = 1.0;
+        C.data[i * n_xi + o] = 1.0;
+        o += r;
+    }
+    // 6. The zero dynamics over the horizon, Init's zero box onwards.
+    let ub = UBound::new(&problem.input);
+    let h = desc.period;
+    let steps = problem.horizon_steps();
+    let mut zk: Vec<Interval> = zero_states
+        .iter()
+        .map(|&s| Interval::new(problem.init.lo[s], problem.init.hi[s]))
+        .collect();
+    let mut hull = zk.clone();
+    let mut xbox = vec![Interval::point(0.0); n];
+    let field =
+        |zb: &[Interval], xbox: &mut Vec<Interval>| -> Result<Vec<Interval>, IntervalError> {
+            for (zi, &s) in zero_states.iter().enumerate() {
+                xbox[s] = zb[zi];
+            }
+            let b = VarBox {
+                x: xbox,
+                u: &[],
+                p: &[],
+            };
+            zero_states
+                .iter()
+                .map(|&s| ub.field(&f[s], &g[s], &b))
+                .collect()
+        };
+    for k in 0..steps {
+        let mut tilde: Vec<Interval> = zk.iter().map(|z| z.widen(1e-9 * (1.0 + z.mag()))).collect();
+        let mut ok = false;
+        for _ in 0..PICARD_ITERATIONS {
+            let fz = field(&tilde, &mut xbox).map_err(|e| FlError::ZeroDynamicsUnbounded {
+                k,
+                why: e.to_string(),
+            })?;
+            let cand: Vec<Interval> = zk
+                .iter()
+                .zip(&fz)
+                .map(|(z, fi)| z.add(times_period(*fi, h)))
+                .collect();
+            if cand
+                .iter()
+                .zip(&tilde)
+                .all(|(c, t)| t.lo <= c.lo && c.hi <= t.hi)
+            {
+                ok = true;
+                zk = cand;
+                break;
+            }
+            tilde = cand
+                .iter()
+                .zip(&tilde)
+                .map(|(c, t)| {
+                    let u = c.hull(*t);
+                    u.widen(0.1 * (u.hi - u.lo) + 1e-12)
+                })
+                .collect();
+        }
+        if !ok {
+            return Err(FlError::ZeroDynamicsUnbounded {
+                k,
+                why: "no a-priori enclosure within the Picard iterations".into(),
+            });
+        }
+        // Z_k + [0, h]·F(Z̃) encloses the whole period (it lies in Z̃, which encloses the flow).
+        for (hz, z) in hull.iter_mut().zip(&zk) {
+            *hz = hz.hull(*z);
+        }
+    }
+    // 7. The bounds over the hull.
+    let us: Vec<Interval> = vec![Interval::point(0.0); m];
+    let lam_gram = gram(&lambda);
+    let lam_refs: Vec<&Expr> = lambda.iter().flatten().collect();
+    let lambda_norm = sup_over_grid(
+        n,
+        &zero_states,
+        &hull,
+        &dims_used(&lam_refs, &zero_states),
+        &|x| norm2_bound(&lam_gram, &VarBox { x, u: &us, p: &[] }),
+    )
+    .map_err(bound_err("‖λ‖₂"))?;
+    let ar_refs: Vec<&Expr> = alpha_res.iter().collect();
+    let alpha_res_norm = sup_over_grid(
+        n,
+        &zero_states,
+        &hull,
+        &dims_used(&ar_refs, &zero_states),
+        &|x| {
+            let b = VarBox { x, u: &us, p: &[] };
+            let mut s = 0.0;
+            for a in &alpha_res {
+                s += enclose(a, &b)?.mag().powi(2);
+            }
+            Ok(s.sqrt())
+        },
+    )
+    .map_err(bound_err("‖α_res‖₂"))?;
+    let g_gram = gram(&gamma);
+    let g_refs: Vec<&Expr> = gamma.iter().flatten().collect();
+    let gamma_norm = sup_over_grid(
+        n,
+        &zero_states,
+        &hull,
+        &dims_used(&g_refs, &zero_states),
+        &|x| norm2_bound(&g_gram, &VarBox { x, u: &us, p: &[] }),
+    )
+    .map_err(bound_err("‖Γ‖₂"))?;
+    // W before the rounding shrink, then the program's rounding over that W (monotone in |w|).
+    let w_set = |e_prog: f64| -> Result<InputSet, FlError> {
+        let empty = |why: String| FlError::EmptyInputSet {
+            why,
+            lambda: lambda_norm,
+            alpha: alpha_res_norm,
+            e_prog,
+        };
+        match &problem.input {
+            InputSet::Ball { center, radius } => {
+                let cn = center.iter().map(|v| v * v).sum::<f64>().sqrt();
+                let r = (radius - cn - e_prog) / lambda_norm - alpha_res_norm;
+                if !(r > 0.0) {
+                    return Err(empty(format!("‖w‖ ≤ {r:.4e}")));
+                }
+                Ok(InputSet::Ball {
+                    center: vec![0.0; m],
+                    radius: r * (1.0 - 1e-12),
+                })
+            }
+            InputSet::Box { lo, hi } => {
+                // |u_i| ≤ Σ_j |λ_ij|(|w_j| + |α_j|) + e ≤ L(ω√m + A) + e in every component.
+                let half = lo
+                    .iter()
+                    .zip(hi)
+                    .map(|(l, h)| (-l).min(*h))
+                    .fold(f64::INFINITY, f64::min);
+                let om = ((half - e_prog) / lambda_norm - alpha_res_norm) / (m as f64).sqrt();
+                if !(om > 0.0) {
+                    return Err(empty(format!(
+                        "the input box does not contain a neighbourhood of 0 large enough (ω = {om:.4e})"
+                    )));
+                }
+                let om = om * (1.0 - 1e-12);
+                Ok(InputSet::Box {
+                    lo: vec![-om; m],
+                    hi: vec![om; m],
+                })
+            }
+        }
+    };
+    let w0 = w_set(0.0)?;
+    let w_box: Vec<Interval> = match &w0 {
+        InputSet::Ball { radius, .. } => vec![Interval::new(-radius, *radius); m],
+        InputSet::Box { lo, hi } => lo
+            .iter()
+            .zip(hi)
+            .map(|(&l, &h)| Interval::new(l, h))
+            .collect(),
+    };
+    let in_refs: Vec<&Expr> = input_exprs.iter().collect();
+    let e_prog = sup_over_grid(
+        n,
+        &zero_states,
+        &hull,
+        &dims_used(&in_refs, &zero_states),
+        &|x| {
+            let bounds = rounding_bound(&input_map, x, &w_box)?;
+            Ok(bounds.iter().map(|b| b.error * b.error).sum::<f64>().sqrt())
+        },
+    )
+    .map_err(bound_err("the input program's rounding"))?;
+    let w_final = w_set(e_prog)?;
+    // 8. The mismatch D: E = L_{f+g u} φ, φ = α_res + Γ u, a quadratic in u.
+    let field_u: Vec<Expr> = (0..n)
+        .map(|s| {
+            (0..m).fold(f[s].clone(), |acc, l| {
+                Expr::add(
+                    acc,
+                    Expr::mul(g[s][l].clone(), Expr::var(Var::Input(l as u16))),
+                )
+            })
+        })
+        .collect();
+    let mut e0 = Vec::with_capacity(m);
+    let mut mlin = Vec::with_capacity(m);
+    let mut quad = Vec::with_capacity(m);
+    let zero_u = |e: &Expr| e.map_vars(&|v| matches!(v, Var::Input(_)).then(|| Expr::c(0.0)));
+    for i in 0..m {
+        let phi = (0..m).fold(alpha_res[i].clone(), |acc, l| {
+            Expr::add(
+                acc,
+                Expr::mul(gamma[i][l].clone(), Expr::var(Var::Input(l as u16))),
+            )
+        });
+        let e = lie(&phi, &field_u)?;
+        e0.push(zero_u(&e));
+        let mut row = Vec::with_capacity(m);
+        let mut qrow = Vec::with_capacity(m * m);
+        for l in 0..m {
+            let dl = derivative(&e, Var::Input(l as u16))?;
+            row.push(zero_u(&dl));
+            for k in 0..m {
+                qrow.push(derivative(&dl, Var::Input(k as u16))?);
+            }
+        }
+        mlin.push(row);
+        quad.push(qrow);
+    }
+    let m_gram = gram(&mlin);
+    let mut e_refs: Vec<&Expr> = e0.iter().collect();
+    e_refs.extend(mlin.iter().flatten());
+    e_refs.extend(quad.iter().flatten());
+    let r_u = ub.r_u;
+    let sup_e = sup_over_grid(
+        n,
+        &zero_states,
+        &hull,
+        &dims_used(&e_refs, &zero_states),
+        &|x| {
+            let b = VarBox { x, u: &us, p: &[] };
+            let mut n0 = 0.0;
+            for e in &e0 {
+                n0 += enclose(e, &b)?.mag().powi(2);
+            }
+            let mut nq = 0.0;
+            for q in quad.iter().flatten() {
+                nq += enclose(q, &b)?.mag().powi(2);
+            }
+            Ok(n0.sqrt() + norm2_bound(&m_gram, &b)? * r_u + 0.5 * nq.sqrt() * r_u * r_u)
+        },
+    )
+    .map_err(bound_err("the sampled-loop mismatch"))?;
+    let mismatch_flow = h * sup_e;
+    let mismatch = (mismatch_flow + gamma_norm * e_prog) * (1.0 + 1e-9);
+    // 9. The problem in ξ.
+    let remap = |what: &str, s: &SetDesc| -> Result<SetDesc, FlError> {
+        let mut s = s.clone();
+        s.coords = match &s.coords {
+            Coords::State => {
+                if let Some(&z) = zero_states.first() {
+                    return Err(FlError::SetOnZeroDynamics {
+                        what: what.to_string(),
+                        state: state_name(names, z),
+                    });
+                }
+                Coords::StateIndices(xi_states.clone())
+            }
+            Coords::StateIndices(idx) => Coords::StateIndices(
+                idx.iter()
+                    .map(|&i| {
+                        xi_states.iter().position(|&s| s == i).ok_or_else(|| {
+                            FlError::SetOnZeroDynamics {
+                                what: what.to_string(),
+                                state: state_name(names, i),
+                            }
+                        })
+                    })
+                    .collect::<Result<_, _>>()?,
+            ),
+            Coords::Output { C: cx } => {
+                let mut cm = Matrix::zeros(cx.rows, n_xi);
+                for r in 0..cx.rows {
+                    for s in 0..n {
+                        let v = cx.data[r * cx.cols + s];
+                        match xi_states.iter().position(|&q| q == s) {
+                            Some(j) => cm.data[r * n_xi + j] = v,
+                            None if v != 0.0 => {
+                                return Err(FlError::SetOnZeroDynamics {
+                                    what: what.to_string(),
+                                    state: state_name(names, s),
+                                })
+                            }
+                            None => {}
+                        }
+                    }
+                }
+                Coords::Output { C: cm }
+            }
+        };
+        Ok(s)
+    };
+    let mut xi = problem.clone();
+    xi.plant = SpecPlant {
+        time: TimeDomain::Continuous,
+        A,
+        B,
+        offset: c,
+        period: h,
+        C,
+    };
+    xi.init = InitBox {
+        lo: xi_states.iter().map(|&s| problem.init.lo[s]).collect(),
+        hi: xi_states.iter().map(|&s| problem.init.hi[s]).collect(),
+    };
+    xi.goal = remap("Goal", &problem.goal)?;
+    xi.unsafe_sets = problem
+        .unsafe_sets
+        .iter()
+        .map(|s| remap("Unsafe", s))
+        .collect::<Result<_, _>>()?;
+    xi.sets = problem
+        .sets
+        .iter()
+        .map(|(k, s)| Ok((k.clone(), remap(&format!("[sets.{k}]"), s)?)))
+        .collect::<Result<_, FlError>>()?;
+    xi.input = w_final;
+    xi.nonlinear = None;
+    let maps = FlMaps {
+        n_plant: n,
+        m_plant: m,
+        xi_states,
+        zero_states,
+        relative_degree: rd.r.clone(),
+        coords,
+        input_map,
+        input_exprs,
+        plant: NonlinearPlant::from_desc(desc),
+        input: problem.input.clone(),
+        init: problem.init.clone(),
+        zero_hull: hull,
+        lambda_norm,
+        alpha_res_norm,
+        gamma_norm,
+        e_prog,
+        mismatch,
+        mismatch_flow,
+    };
+    Ok((xi, maps))
+}
+
+/// The task's plant of a linearised spec.
+pub fn plant(xi: &Problem, maps: FlMaps) -> Result<FeedbackLinearized, ModelError> {
+    Ok(FeedbackLinearized {
+        linear: LinearAffine::from_spec(&xi.plant)?,
+        maps: Arc::new(maps),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn ex49() -> Problem {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../examples/fl-4-9.toml");
+        crate::spec::load(path).expect("the shipped example")
+    }
+
+    /// Example 4.9: ξ = (X, Ẋ, Y, Ẏ) with the drift kept (κ = 0, (3.32)–(3.33)), θ and θ̇ the zero
+    /// dynamics, λ a rotation, so W is U up to the enclosures' slack; the programs reproduce u = R(θ)w.
+    #[test]
+    fn example_4_9_linearises_as_the_text_says() {
+        let p = ex49();
+        let (xi, maps) = linearize(&p).expect("linearises");
+        assert_eq!(maps.xi_states, vec![0, 1, 2, 3]);
+        assert_eq!(maps.zero_states, vec![4, 5]);
+        let a = &xi.plant.A;
+        // Rows of ẋ2 and ẋ4: 1 − X + 0.1 Ẋ kept.
+        assert_eq!(&a.data[4..8], &[-1.0, 0.1, 0.0, 0.0]);
+        assert_eq!(&a.data[12..16], &[0.0, 0.0, -1.0, 0.1]);
+        assert_eq!(xi.plant.offset, vec![0.0, 1.0, 0.0, 1.0]);
+        assert_eq!(maps.alpha_res_norm, 0.0);
+        assert!(
+            maps.lambda_norm >= 1.0 && maps.lambda_norm < 1.02,
+            "{}",
+            maps.lambda_norm
+        );
+        let InputSet::Ball { radius, .. } = xi.input else {
+            panic!("a ball")
+        };
+        assert!(radius < 2.0 && radius > 1.95, "{radius}");
+        // θ̇ grows by at most ‖(a/I, −b/I)‖·2 per second from 0.
+        let k = (0.1f64 * 0.1 + 0.1 * 0.1).sqrt() * 2.0 * p.horizon;
+        let thd = maps.zero_hull[1];
+        assert!(thd.hi >= k * 0.999 && thd.hi < k * 1.05, "{thd:?} vs {k}");
+        assert!(maps.mismatch > 0.0 && maps.mismatch.is_finite());
+        eprintln!(
+            "L {} A {} G {} e_prog {:e} D {} Dflow {} hull {:?} W {:?}",
+            maps.lambda_norm,
+            maps.alpha_res_norm,
+            maps.gamma_norm,
+            maps.e_prog,
+            maps.mismatch,
+            maps.mismatch_flow,
+            maps.zero_hull,
+            xi.input
+        );
+        // u = R(θ) w through the program, against the expression in f64.
+        let x = [0.05, 0.0, -0.03, 1.0, 0.7, 0.2];
+        let w = [0.3, -1.1];
+        let u = maps.input_map.eval_f32(&x, &w);
+        let (s, c) = (0.7f64.sin(), 0.7f64.cos());
+        let exact = [-s * w[0] + c * w[1], c * w[0] + s * w[1]];
+        for (a, b) in u.iter().zip(exact) {
+            assert!((*a as f64 - b).abs() <= maps.e_prog, "{a} vs {b}");
+        }
+        assert_eq!(maps.coords.eval_f32(&x, &[]), vec![0.05, 0.0, -0.03, 1.0]);
+    }
+
+    /// A set that constrains a zero-dynamics state is refused with the state's name.
+    #[test]
+    fn a_set_on_the_zero_dynamics_is_refused() {
+        let mut p = ex49();
+        p.goal.coords = Coords::StateIndices(vec![0, 4]);
+        let err = linearize(&p).err().expect("refused");
+        assert!(err.to_string().contains("th"), "{err}");
+    }
+}
