@@ -42,6 +42,12 @@ pub fn run(a: &SimulateArgs) -> Outcome {
     let bytes = read_image(&a.image)?;
     let img = decode_image(&bytes, &a.image)?;
     image_matches_spec(&problem, &img, &a.image, &a.spec)?;
+    if problem.nonlinear.is_some() {
+        return Err(Failure::bad_input(miette::miette!(
+            "simulate runs linear plants; for a feedback-linearizable plant, `verify` runs the image on \
+             the plant itself (adaptive integration)"
+        )));
+    }
     let n = problem.plant.n();
     if a.x0.len() != n {
         return Err(Failure::bad_input(miette::miette!(

@@ -95,6 +95,20 @@ pub fn run(a: &SynthArgs) -> Outcome {
     if problem.hybrid.is_some() {
         return crate::cli::synth_hybrid::run(a, problem);
     }
+    if problem.nonlinear.is_some() {
+        let refuse = |what: &str| {
+            Err(Failure::bad_input(miette::miette!(
+                "{what} is not built for feedback-linearizable plants yet (the feedforward image of \
+                 generated trajectories is)"
+            )))
+        };
+        if !a.imports.is_empty() {
+            return refuse("--import");
+        }
+        if problem.synthesis.mode == crate::spec::ControllerMode::Pwa {
+            return refuse("[synthesis] mode = \"pwa\"");
+        }
+    }
     let (n, m, h) = (problem.plant.n(), problem.plant.m(), problem.plant.period);
     // A recording is at most the horizon long (which `spec::limits` keeps within the table capacity).
     let max_rows = problem.horizon_steps();

@@ -67,15 +67,21 @@ pub fn run(a: &VerifyArgs) -> Outcome {
     if pwa {
         return run_pwa(a, runs, &judge, &img);
     }
+    let linearized = task.plant.linearization().is_some();
+    if linearized && a.attack {
+        return Err(Failure::bad_input(miette::miette!(
+            "--attack runs the linear model's loop only, not a feedback-linearizable plant; the Monte \
+             Carlo of `verify` runs the plant itself"
+        )));
+    }
     let rc = crate::verify::feedforward::recheck(&judge, &img)
         .map_err(|e| miette::miette!("{}: {e}", a.image.display()))?;
-    let r = monte_carlo(
-        &judge,
-        &img,
-        runs,
-        per_ball,
-        a.seed.unwrap_or(problem.seed ^ 0x7e51f1),
-    )
+    let seed = a.seed.unwrap_or(problem.seed ^ 0x7e51f1);
+    let r = if linearized {
+        crate::verify::nonlinear::monte_carlo_fl(&task, &img, runs, per_ball, seed)
+    } else {
+        monte_carlo(&judge, &img, runs, per_ball, seed)
+    }
     .into_diagnostic()?;
     let attack = if a.attack {
         let settings = crate::verify::attack::AttackSettings::builder()

@@ -98,10 +98,15 @@ pub enum Mismatch {
 /// compared as the f32 the image stores: exactly the value `emit` writes for the spec's period.
 pub fn check_matches(problem: &crate::spec::Problem, image: &Image<'_>) -> Result<(), Mismatch> {
     let p = &problem.plant;
-    if image.n() != p.n() {
+    // A feedback-linearizable plant's image works in ξ, of dimension Σ r_i.
+    let n = problem
+        .nonlinear
+        .as_ref()
+        .map_or(p.n(), |d| d.relative_degree.iter().sum());
+    if image.n() != n {
         return Err(Mismatch::States {
             image: image.n(),
-            spec: p.n(),
+            spec: n,
         });
     }
     if image.m() != p.m() {

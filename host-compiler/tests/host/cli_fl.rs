@@ -1,0 +1,107 @@
+//! `synth` and `verify` on a feedback-linearizable spec (Example 4.9, `examples/fl-4-9.toml`): synthesis
+//! covers Init, the image runs on the plant itself with no violation (exit 0), `verify` re-proves the radii
+//! from the bytes and runs the plant again (exit 0); what is not built for this class (`simulate`,
+//! `--attack`, `--import`, PWA mode) is bad input (exit 2) with the reason, and the same image against a
+//! spec whose plant turns faster (a/I = b/I = 1, so its mismatch bound is larger) is refused (exit 1).
+
+use std::process::Command;
+
+fn bin() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_host-compiler"))
+}
+
+fn example() -> String {
+    std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../examples/fl-4-9.toml"
+    ))
+    .unwrap()
+}
+
+#[test]
+fn fl_synth_then_verify() {
+    let dir = std::env::temp_dir().join(format!("hc-cli-fl-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let spec = dir.join("spec.toml");
+    std::fs::write(&spec, example()).unwrap();
+    let out = dir.join("out");
+    let o = bin()
+        .args(["synth", spec.to_str().unwrap(), "--out"])
+        .arg(&out)
+        .args(["--verify-runs", "200", "--quiet"])
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(0), "{stdout}\n{stderr}");
+    assert!(stdout.contains("Init covered"), "{stdout}");
+    assert!(stdout.contains(", 0 violations"), "{stdout}");
+    let img = out.join("controller.img");
+    assert!(img.exists());
+
+    let verify = |spec: &std::path::Path, extra: &[&str]| {
+        bin()
+            .args(["verify", spec.to_str().unwrap(), img.to_str().unwrap()])
+            .args(["--runs", "100", "--per-ball", "4"])
+            .args(extra)
+            .output()
+            .unwrap()
+    };
+    let o = verify(&spec, &[]);
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert_eq!(
+        o.status.code(),
+        Some(0),
+        "{stdout}{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert!(stdout.contains("0 failing"), "{stdout}");
+    assert!(stdout.contains("violations 0"), "{stdout}");
+
+    let o = verify(&spec, &["--attack"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--attack"));
+
+    // A faster-turning vehicle: the stored radii are not certified for its larger mismatch.
+    let faster = dir.join("faster.toml");
+    std::fs::write(
+        &faster,
+        example().replace(
+            "params = { aI = 0.1, bI = 0.1 }",
+            "params = { aI = 0.2, bI = 0.2 }",
+        ),
+    )
+    .unwrap();
+    let o = verify(&faster, &[]);
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert_eq!(
+        o.status.code(),
+        Some(1),
+        "{stdout}{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert!(stdout.contains("certificate failure"), "{stdout}");
+
+    let o = bin()
+        .args(["simulate", spec.to_str().unwrap(), img.to_str().unwrap()])
+        .args(["--x0", "0,0,0,1,0,0"])
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("verify"));
+
+    let pwa = dir.join("pwa.toml");
+    std::fs::write(
+        &pwa,
+        example().replace("[synthesis]\n", "[synthesis]\nmode = \"pwa\"\n"),
+    )
+    .unwrap();
+    let o = bin()
+        .args(["synth", pwa.to_str().unwrap(), "--out"])
+        .arg(dir.join("out-pwa"))
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("pwa"));
+    let _ = std::fs::remove_dir_all(&dir);
+}
