@@ -8,8 +8,10 @@
 use super::ModelError;
 use crate::expr::{Expr, Point};
 use crate::spec::nonlinear::NonlinearDesc;
+use nalgebra::allocator::Allocator;
+use nalgebra::{DefaultAllocator, Dim, OVector};
 use ode_solvers::dop_shared::OutputType;
-use ode_solvers::{DVector, Dop853, System};
+use ode_solvers::{DVector, Dop853, SVector, System};
 
 /// Relative tolerance of the integrator.
 pub const RTOL: f64 = 1e-10;
@@ -26,16 +28,24 @@ pub struct NonlinearPlant {
     period: f64,
 }
 
-/// The vector field with the input held, as `ode_solvers` asks for it.
+/// The vector field with the input held, as `ode_solvers` asks for it; `V` is a stack vector of the
+/// state's dimension (the integrator's stages then allocate nothing), or a heap vector beyond 12.
 struct Held<'a> {
     plant: &'a NonlinearPlant,
     u: &'a [f64],
 }
 
+impl<const N: usize> System<f64, SVector<f64, N>> for Held<'_> {
+    fn system(&self, _t: f64, y: &SVector<f64, N>, dy: &mut SVector<f64, N>) {
+        self.plant
+            .field_into(y.as_slice(), self.u, dy.as_mut_slice());
+    }
+}
+
 impl System<f64, DVector<f64>> for Held<'_> {
     fn system(&self, _t: f64, y: &DVector<f64>, dy: &mut DVector<f64>) {
-        let v = self.plant.field(y.as_slice(), self.u);
-        dy.as_mut_slice().copy_from_slice(&v);
+        self.plant
+            .field_into(y.as_slice(), self.u, dy.as_mut_slice());
     }
 }
 
@@ -70,18 +80,23 @@ impl NonlinearPlant {
 
     /// f(x) + g(x)u.
     pub fn field(&self, x: &[f64], u: &[f64]) -> Vec<f64> {
+        let mut out = vec![0.0; self.n];
+        self.field_into(x, u, &mut out);
+        out
+    }
+
+    /// f(x) + g(x)u into `out` (length n).
+    fn field_into(&self, x: &[f64], u: &[f64], out: &mut [f64]) {
         let at = Point { x, u: &[], p: &[] };
-        (0..self.n)
-            .map(|i| {
-                let mut s = self.f[i].eval(&at);
-                for (gij, uj) in self.g[i].iter().zip(u) {
-                    if !gij.is_zero() {
-                        s += gij.eval(&at) * uj;
-                    }
+        for (i, o) in out.iter_mut().enumerate() {
+            let mut s = self.f[i].eval(&at);
+            for (gij, uj) in self.g[i].iter().zip(u) {
+                if !gij.is_zero() {
+                    s += gij.eval(&at) * uj;
                 }
-                s
-            })
-            .collect()
+            }
+            *o = s;
+        }
     }
 
     /// The state `t` seconds after `x` with `u` held, and the states at `sub − 1` equally spaced instants
@@ -99,46 +114,71 @@ impl NonlinearPlant {
         if !(t.is_finite() && t > 0.0) {
             return Err(ModelError::Period(t));
         }
-        // The state at t from a sparse run (the integrator's own solution: its dense interpolant was seen
-        // 10⁴× less accurate at the end of a long step); the instants inside from a dense run, which
-        // only the verifier's membership checks read.
         let sub = sub.max(1);
-        let run = |out: OutputType| -> Result<Vec<Vec<f64>>, ModelError> {
-            let sys = Held { plant: self, u };
-            let mut solver = Dop853::new(
-                sys,
-                0.0,
-                t,
-                t / sub as f64,
-                DVector::from_column_slice(x),
-                RTOL,
-                ATOL,
-            );
-            solver.set_output(out);
-            solver.integrate().map_err(|_| ModelError::NonFinite {
-                what: "the nonlinear flow (integration failed)",
-            })?;
-            let (ts, ys) = solver.results().get();
-            let _ = ts;
-            Ok(ys.iter().map(|y| y.as_slice().to_vec()).collect())
-        };
-        if sub > 1 {
-            let dense = run(OutputType::Dense)?;
-            for y in dense.iter().skip(1).take(sub - 1) {
-                visit(y);
-            }
+        macro_rules! fixed {
+            ($($k:literal)*) => {
+                match self.n {
+                    $($k => self.flow_in::<nalgebra::Const<$k>>(SVector::<f64, $k>::from_column_slice(x), u, t, sub, visit)?,)*
+                    _ => self.flow_in::<nalgebra::Dyn>(DVector::from_column_slice(x), u, t, sub, visit)?,
+                }
+            };
         }
-        let y = run(OutputType::Sparse)?
-            .pop()
-            .ok_or(ModelError::NonFinite {
-                what: "the nonlinear flow (no end state)",
-            })?;
+        let y = fixed!(1 2 3 4 5 6 7 8 9 10 11 12);
         if y.iter().any(|v| !v.is_finite()) {
             return Err(ModelError::NonFinite {
                 what: "the nonlinear flow",
             });
         }
         Ok(y)
+    }
+
+    /// [`NonlinearPlant::flow`] with the integrator's vectors of dimension `D` (on the stack for a fixed
+    /// size). The state at t comes from a sparse run (the integrator's own solution: its dense
+    /// interpolant was seen 10⁴× less accurate at the end of a long step); the instants inside from a
+    /// dense run, which only the verifier's membership checks read.
+    fn flow_in<D: Dim>(
+        &self,
+        x0: OVector<f64, D>,
+        u: &[f64],
+        t: f64,
+        sub: usize,
+        visit: &mut dyn FnMut(&[f64]),
+    ) -> Result<Vec<f64>, ModelError>
+    where
+        DefaultAllocator: Allocator<D>,
+        OVector<f64, D>: std::ops::Mul<f64, Output = OVector<f64, D>>,
+        for<'a> Held<'a>: System<f64, OVector<f64, D>>,
+    {
+        let failed = ModelError::NonFinite {
+            what: "the nonlinear flow (integration failed)",
+        };
+        let run = |out: OutputType| {
+            let mut solver = Dop853::new(
+                Held { plant: self, u },
+                0.0,
+                t,
+                t / sub as f64,
+                x0.clone(),
+                RTOL,
+                ATOL,
+            );
+            solver.set_output(out);
+            solver.integrate().map(|_| solver)
+        };
+        if sub > 1 {
+            let solver = run(OutputType::Dense).map_err(|_| failed.clone())?;
+            for y in solver.y_out().iter().skip(1).take(sub - 1) {
+                visit(y.as_slice());
+            }
+        }
+        let solver = run(OutputType::Sparse).map_err(|_| failed.clone())?;
+        solver
+            .y_out()
+            .last()
+            .map(|y| y.as_slice().to_vec())
+            .ok_or(ModelError::NonFinite {
+                what: "the nonlinear flow (no end state)",
+            })
     }
 }
 
