@@ -30,8 +30,8 @@
 //!
 //! The validated [`NonlinearDesc`] goes into `Problem::nonlinear`; `Problem::plant` is then the
 //! linearisation of f + g u at the centre of Init (u = 0) with C = ∂h/∂x, so that sets in output
-//! coordinates and every size check read as for a linear plant. Synthesis does not take this class yet
-//! (`task::TaskError::NonlinearNotSupported`).
+//! coordinates and every size check read as for a linear plant. The task is built on the linear model in
+//! ξ (`model::feedback_linearizable`).
 
 use std::ops::Range;
 
