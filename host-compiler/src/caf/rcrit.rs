@@ -131,20 +131,27 @@ pub fn r_crit_mixed(
     };
     let sigma = cert.margin;
     let lambda_max = cert.lambda_max_P;
-    // The linear and quadratic disturbance terms of (3.82): a·δ and b·δ² for z = 0.
-    let a_z = if z > 0.0 {
+    let (rho_crit, r_crit_sq_rest) = if z > 0.0 {
+        // The linear and quadratic disturbance terms of (3.82) with the second disturbance.
         let roots = crate::linalg::PdRoots::new(P.as_ref())
             .ok_or(CafError::NonFinite { what: "P^{1/2}" })?;
-        spectral_norm(&(&roots.sqrt * At)).ok_or(CafError::NonFinite { what: "P^{1/2}Ã" })?
-            * inflate
+        let a_z = spectral_norm(&(&roots.sqrt * At))
+            .ok_or(CafError::NonFinite { what: "P^{1/2}Ã" })?
+            * inflate;
+        let lin = a * delta + a_z * z;
+        let quad = (b.sqrt() * delta + z).powi(2) * inflate;
+        (
+            (lin + (lin * lin + sigma * quad).sqrt()) / sigma,
+            lin * lin / sigma + quad,
+        )
     } else {
-        0.0
+        (
+            delta * (a + (a * a + sigma * b).sqrt()) / sigma,
+            (a * a / sigma + b) * delta * delta,
+        )
     };
-    let lin = a * delta + a_z * z;
-    let quad = (b.sqrt() * delta + z).powi(2) * inflate;
-    let rho_crit = (lin + (lin * lin + sigma * quad).sqrt()) / sigma;
     let r_tilde = rho_crit * lambda_max.sqrt();
-    let r_crit = (r_tilde * r_tilde + lin * lin / sigma + quad).sqrt();
+    let r_crit = (r_tilde * r_tilde + r_crit_sq_rest).sqrt();
     Ok(RCrit {
         delta,
         sigma_min: sigma,
