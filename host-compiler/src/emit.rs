@@ -192,6 +192,8 @@ pub struct ImageBuilder {
     /// How each segment ends, per trajectory (its segments are the maximal runs of one location of its
     /// rows); empty: every segment ends with its table, and the image has no exits section.
     pub exits: Vec<Vec<SegmentExit>>,
+    /// The spec fingerprint to store (`crate::spec::SpecFingerprint`'s bytes), or none.
+    pub fingerprint: Option<Vec<u8>>,
 }
 
 /// How a segment ends ([`shared_types::image::Exit`]), owned, with the f32 values stored.
@@ -277,6 +279,7 @@ impl ImageBuilder {
             input_box: None,
             terminal: Terminal::HoldLast,
             exits: Vec::new(),
+            fingerprint: None,
         }
     }
 
@@ -508,7 +511,7 @@ impl ImageBuilder {
             n_partitions: 0,
         };
         let img = Image::new(Mode::Feedforward, dims, period, payload)?;
-        encode_to_vec(&img)
+        encode_to_vec(&with_fingerprint(img, &self.fingerprint)?)
     }
 
     /// [`ImageBuilder::to_bytes`], then writes the file.
@@ -573,6 +576,7 @@ impl ImageBuilder {
             } else {
                 Vec::new()
             },
+            fingerprint: img.fingerprint().map(<[u8]>::to_vec),
         }
     }
 }
@@ -675,6 +679,8 @@ pub struct PwaImageBuilder {
     pub fallback: FallbackLaw,
     /// Optional input box `(lo, hi)`, m values each.
     pub input_box: Option<(Vec<f64>, Vec<f64>)>,
+    /// The spec fingerprint to store (`crate::spec::SpecFingerprint`'s bytes), or none.
+    pub fingerprint: Option<Vec<u8>>,
 }
 
 fn invalid(what: String, reason: &'static str) -> EmitError {
@@ -778,6 +784,7 @@ impl PwaImageBuilder {
             balls: Vec::new(),
             fallback: FallbackLaw::Zero,
             input_box: None,
+            fingerprint: None,
         }
     }
 
@@ -1021,7 +1028,7 @@ impl PwaImageBuilder {
             n_partitions: self.laws.len(),
         };
         let img = Image::new_pwa(dims, period, payload)?;
-        encode_to_vec(&img)
+        encode_to_vec(&with_fingerprint(img, &self.fingerprint)?)
     }
 
     /// [`PwaImageBuilder::to_bytes`], then writes the file.
@@ -1092,7 +1099,16 @@ impl PwaImageBuilder {
                 .collect(),
             fallback: fallback_from_image(img),
             input_box: input_box_from_image(img),
+            fingerprint: img.fingerprint().map(<[u8]>::to_vec),
         })
+    }
+}
+
+/// `img` with the spec fingerprint, if one is given (refused unless it has the stored length).
+fn with_fingerprint<'a>(img: Image<'a>, fp: &'a Option<Vec<u8>>) -> Result<Image<'a>, EmitError> {
+    match fp {
+        Some(f) => Ok(img.with_fingerprint(f)?),
+        None => Ok(img),
     }
 }
 

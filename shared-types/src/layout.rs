@@ -49,8 +49,8 @@ pub const SPEC_PARTS: [&str; 10] = [
     "[unsafe]",
     "[input]",
     "horizon",
-    "[mtl] and [sets]",
-    "[synthesis] and seed",
+    "[mtl] with [sets]",
+    "[synthesis] with seed",
     "other top-level keys",
     "spec",
 ];

@@ -265,6 +265,9 @@ fn synth_and_verify_a_pwa_spec() {
     ] {
         assert!(out.join(f).is_file(), "{f} missing");
     }
+    for img in ["controller.img", "feedforward.img"] {
+        crate::spec_fingerprint::assert_stamped(&out.join(img), &spec);
+    }
     let html = std::fs::read_to_string(out.join("report.html")).unwrap();
     assert!(html.contains("id=\"pwa\"") && html.contains("id=\"pwa-table\""));
     let o = bin()

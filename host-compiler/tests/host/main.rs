@@ -56,6 +56,7 @@ mod robustness_safety;
 mod spec_bounds;
 mod spec_errors;
 mod spec_examples;
+mod spec_fingerprint;
 mod spec_hybrid;
 mod spec_limits;
 mod spec_parse;
