@@ -14,6 +14,7 @@ pub mod cover;
 pub mod emit;
 pub mod export;
 pub mod expr;
+pub mod fuzz;
 pub mod geometry;
 pub mod linalg;
 pub mod model;

@@ -8,9 +8,9 @@
 //! `5e0`) do not change it; any change of a value does. `verify` and `simulate` refuse an image whose
 //! fingerprint differs from the spec's and name the parts that changed.
 
+use serde::de::{Deserialize, Deserializer, MapAccess, SeqAccess, Visitor};
 use sha2::{Digest, Sha256};
 use shared_types::image::{SPEC_FINGERPRINT_LEN, SPEC_HASH_LEN, SPEC_PARTS};
-use toml::Value;
 
 use super::error::SpecError;
 
@@ -40,12 +40,13 @@ impl SpecFingerprint {
     /// Fails only on text that is not TOML.
     pub fn of(src: &str) -> Result<Self, SpecError> {
         let src = src.strip_prefix('\u{feff}').unwrap_or(src);
-        let table: toml::Table = toml::from_str(src).map_err(|e| SpecError::from_toml(&e))?;
-        Ok(Self::of_table(&table))
-    }
-
-    /// The fingerprint of a parsed spec.
-    pub fn of_table(table: &toml::Table) -> Self {
+        let top: Value = toml::from_str(src).map_err(|e| SpecError::from_toml(&e))?;
+        let Value::Map(table) = top else {
+            return Err(SpecError::new(
+                super::ErrorKind::Syntax,
+                "a spec is a TOML table".to_string(),
+            ));
+        };
         let mut out = [0u8; SPEC_FINGERPRINT_LEN];
         let listed = |k: &str| PART_KEYS.iter().any(|p| p.contains(&k));
         for (i, slot) in out.chunks_exact_mut(SPEC_HASH_LEN).enumerate() {
@@ -61,10 +62,15 @@ impl SpecFingerprint {
                 b'n',
                 SPEC_PARTS.get(i).map_or(&b""[..], |s| s.as_bytes()),
             );
-            table_entries(&mut h, table.iter().filter(|(k, _)| keep(k)));
+            let part: Vec<(String, Value)> = table
+                .iter()
+                .filter(|(k, _)| keep(k))
+                .map(|(k, v)| (k.clone(), v.clone()))
+                .collect();
+            value(&mut h, &Value::Map(part));
             slot.copy_from_slice(&h.finalize()[..SPEC_HASH_LEN]);
         }
-        SpecFingerprint(out)
+        Ok(SpecFingerprint(out))
     }
 
     /// The fingerprint an image stores; `None` for a slice of another length.
@@ -108,18 +114,6 @@ fn bytes(h: &mut Sha256, tag: u8, b: &[u8]) {
     h.update(b);
 }
 
-/// A table's entries in key order: a count, then per entry the key and its value.
-fn table_entries<'a>(h: &mut Sha256, entries: impl Iterator<Item = (&'a String, &'a Value)>) {
-    let mut e: Vec<(&String, &Value)> = entries.collect();
-    e.sort_by(|a, b| a.0.cmp(b.0));
-    h.update([b't']);
-    h.update((e.len() as u64).to_le_bytes());
-    for (k, v) in e {
-        bytes(h, b'k', k.as_bytes());
-        value(h, v);
-    }
-}
-
 /// One item of the canonical walk: a value still to encode, or a key to write before its value.
 enum Item<'a> {
     Value(&'a Value),
@@ -138,27 +132,25 @@ fn value(h: &mut Sha256, v: &Value) {
             Item::Value(v) => v,
         };
         match v {
-            Value::String(s) => bytes(h, b's', s.as_bytes()),
-            Value::Integer(i) => {
-                let f = *i as f64;
-                if f.abs() <= 9_007_199_254_740_992.0 {
-                    number(h, f);
+            Value::Str(s) => bytes(h, b's', s.as_bytes()),
+            Value::Int(i) => {
+                if i.unsigned_abs() <= 1 << 53 {
+                    number(h, *i as f64);
                 } else {
                     h.update([b'i']);
                     h.update(i.to_le_bytes());
                 }
             }
             Value::Float(f) => number(h, *f),
-            Value::Boolean(b) => h.update([b'b', u8::from(*b)]),
-            Value::Datetime(d) => bytes(h, b'd', d.to_string().as_bytes()),
-            Value::Array(a) => {
+            Value::Bool(b) => h.update([b'b', u8::from(*b)]),
+            Value::Seq(a) => {
                 h.update([b'a']);
                 h.update((a.len() as u64).to_le_bytes());
                 stack.extend(a.iter().rev().map(Item::Value));
             }
-            Value::Table(t) => {
-                let mut e: Vec<(&String, &Value)> = t.iter().collect();
-                e.sort_by(|a, b| a.0.cmp(b.0));
+            Value::Map(t) => {
+                let mut e: Vec<&(String, Value)> = t.iter().collect();
+                e.sort_by(|a, b| a.0.cmp(&b.0));
                 h.update([b't']);
                 h.update((e.len() as u64).to_le_bytes());
                 for (k, v) in e.into_iter().rev() {
@@ -181,4 +173,64 @@ fn number(h: &mut Sha256, f: f64) {
     };
     h.update([b'f']);
     h.update(f.to_bits().to_le_bytes());
+}
+
+/// A parsed TOML value as the fingerprint sees it: integers of the whole u64 and i64 ranges (a `seed` may
+/// exceed `i64::MAX`, which `toml::Value` cannot hold), tables as key–value lists (a datetime arrives as
+/// the deserializer's one-key table, which encodes it faithfully).
+#[derive(Clone, Debug)]
+enum Value {
+    Str(String),
+    Int(i128),
+    Float(f64),
+    Bool(bool),
+    Seq(Vec<Value>),
+    Map(Vec<(String, Value)>),
+}
+
+impl<'de> Deserialize<'de> for Value {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        d.deserialize_any(ValueVisitor)
+    }
+}
+
+struct ValueVisitor;
+
+impl<'de> Visitor<'de> for ValueVisitor {
+    type Value = Value;
+    fn expecting(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("a TOML value")
+    }
+    fn visit_bool<E>(self, v: bool) -> Result<Value, E> {
+        Ok(Value::Bool(v))
+    }
+    fn visit_i64<E>(self, v: i64) -> Result<Value, E> {
+        Ok(Value::Int(v.into()))
+    }
+    fn visit_u64<E>(self, v: u64) -> Result<Value, E> {
+        Ok(Value::Int(v.into()))
+    }
+    fn visit_f64<E>(self, v: f64) -> Result<Value, E> {
+        Ok(Value::Float(v))
+    }
+    fn visit_str<E>(self, v: &str) -> Result<Value, E> {
+        Ok(Value::Str(v.to_string()))
+    }
+    fn visit_string<E>(self, v: String) -> Result<Value, E> {
+        Ok(Value::Str(v))
+    }
+    fn visit_seq<A: SeqAccess<'de>>(self, mut a: A) -> Result<Value, A::Error> {
+        let mut v = Vec::new();
+        while let Some(x) = a.next_element()? {
+            v.push(x);
+        }
+        Ok(Value::Seq(v))
+    }
+    fn visit_map<A: MapAccess<'de>>(self, mut a: A) -> Result<Value, A::Error> {
+        let mut v = Vec::new();
+        while let Some((k, x)) = a.next_entry::<String, Value>()? {
+            v.push((k, x));
+        }
+        Ok(Value::Map(v))
+    }
 }

@@ -26,6 +26,7 @@ mod cli_synth;
 mod emit_image;
 mod emit_pwa;
 mod fallback_input;
+mod fuzz_corpus;
 mod geometry_common;
 mod geometry_ellipsoid;
 mod geometry_polytope;
