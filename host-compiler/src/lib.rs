@@ -11,6 +11,7 @@ pub mod caf;
 pub mod certify;
 pub mod cli;
 pub mod cover;
+pub mod csv;
 pub mod emit;
 pub mod export;
 pub mod expr;

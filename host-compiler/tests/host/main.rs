@@ -23,6 +23,7 @@ mod cli_hybrid;
 mod cli_limits;
 mod cli_mtl;
 mod cli_synth;
+mod csv_dialect;
 mod emit_image;
 mod emit_pwa;
 mod fallback_input;
