@@ -638,6 +638,43 @@ fn fingerprint() -> Vec<u8> {
         .collect()
 }
 
+/// Runs `cases` (what, bytes, whether `decode` accepts) through the C init with a probe of `img`'s states
+/// after each, in a harness built on `embedded`: `decode` decides as stated, the C init decides as `decode`
+/// does and accepted images step alike. Returns the probe.
+fn check_section_cases(
+    name: &str,
+    embedded: &[u8],
+    img: &shared_types::image::Image<'_>,
+    seed: u64,
+    cases: &[(&str, Vec<u8>, bool)],
+) -> Vec<Op> {
+    let probe: Vec<Op> = scenario(img, seed, 300)
+        .into_iter()
+        .filter(|op| matches!(op, Op::Step(_) | Op::Reset))
+        .collect();
+    let mut ops = Vec::new();
+    for (what, bytes, ok) in cases {
+        assert_eq!(
+            decode(bytes).is_ok(),
+            *ok,
+            "{what}: {:?}",
+            decode(bytes).err()
+        );
+        ops.push(Op::InitBytes(bytes.clone()));
+        ops.extend(probe.iter().cloned());
+    }
+    let h = CHarness::build(embedded, &scratch(name)).expect("harness");
+    let c = h.compare(&ops).expect("driver");
+    eprintln!(
+        "{name}: {} inits, {} init mismatches, {} states, {} mismatches",
+        c.inits, c.init_mismatches, c.states, c.mismatches
+    );
+    assert_eq!(c.inits, cases.len(), "{name}");
+    assert_eq!(c.init_mismatches, 0, "{name}: {:?}", c.first);
+    assert_eq!(c.mismatches, 0, "{name}: {:?}", c.first);
+    probe
+}
+
 /// A spec-fingerprint section (tag 12) added by hand: of the stored length in a feedforward image, a PWA
 /// image and one with segment exits (accepted, same answers as without it); short, long, empty, with a
 /// trailing byte or an overlong length prefix, twice, or under the reserved tag 11 (refused). The C init
@@ -687,30 +724,7 @@ fn a_fingerprint_section_is_admitted_as_the_rust_decoder_admits_it() {
             false,
         ),
     ];
-    let probe: Vec<Op> = scenario(&img, 10, 300)
-        .into_iter()
-        .filter(|op| matches!(op, Op::Step(_) | Op::Reset))
-        .collect();
-    let mut ops = Vec::new();
-    for (what, bytes, ok) in &cases {
-        assert_eq!(
-            decode(bytes).is_ok(),
-            *ok,
-            "{what}: {:?}",
-            decode(bytes).err()
-        );
-        ops.push(Op::InitBytes(bytes.clone()));
-        ops.extend(probe.iter().cloned());
-    }
-    let h = CHarness::build(&ff, &scratch("fingerprint_section")).expect("harness");
-    let c = h.compare(&ops).expect("driver");
-    eprintln!(
-        "fingerprint section: {} inits, {} init mismatches, {} states, {} mismatches",
-        c.inits, c.init_mismatches, c.states, c.mismatches
-    );
-    assert_eq!(c.inits, cases.len());
-    assert_eq!(c.init_mismatches, 0, "{:?}", c.first);
-    assert_eq!(c.mismatches, 0, "{:?}", c.first);
+    let probe = check_section_cases("fingerprint_section", &ff, &img, 10, &cases);
     // The evaluator does not read the fingerprint: the image answers as without it.
     let mut run = vec![Op::InitEmbedded];
     run.extend(probe.iter().cloned());
@@ -765,29 +779,7 @@ fn an_exits_section_is_admitted_as_the_rust_decoder_admits_it() {
             false,
         ),
     ];
-    let probe: Vec<Op> = scenario(&img, 9, 300)
-        .into_iter()
-        .filter(|op| matches!(op, Op::Step(_) | Op::Reset))
-        .collect();
-    let mut ops = Vec::new();
-    for (what, bytes, ok) in &cases {
-        assert_eq!(
-            decode(bytes).is_ok(),
-            *ok,
-            "{what}: {:?}",
-            decode(bytes).err()
-        );
-        ops.push(Op::InitBytes(bytes.clone()));
-        ops.extend(probe.iter().cloned());
-    }
-    let h = CHarness::build(&ff, &scratch("exits_section")).expect("harness");
-    let c = h.compare(&ops).expect("driver");
-    eprintln!(
-        "exits section: {} inits, {} init mismatches, {} states, {} mismatches",
-        c.inits, c.init_mismatches, c.states, c.mismatches
-    );
-    assert_eq!(c.init_mismatches, 0, "{:?}", c.first);
-    assert_eq!(c.mismatches, 0, "{:?}", c.first);
+    let probe = check_section_cases("exits_section", &ff, &img, 9, &cases);
     // The all-tables image (through the exits path) answers as the image without the section.
     let mut run = vec![Op::InitEmbedded];
     run.extend(probe.iter().cloned());

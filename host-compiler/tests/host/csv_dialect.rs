@@ -51,32 +51,33 @@ fn a_simulated_run_is_imported_and_monitored_as_written() {
     let marked = dir.join("marked.csv");
     std::fs::write(&marked, format!("\u{feff}{}\n", lines.join("\n"))).unwrap();
     for file in [&run, &marked] {
-        let o = bin()
-            .args(["mtl", "--formula", "F[0,4] x1 >= 0.95", "--trace"])
-            .arg(file)
-            .output()
-            .unwrap();
-        assert_eq!(
-            o.status.code(),
-            Some(0),
-            "mtl {}: {}",
-            file.display(),
-            String::from_utf8_lossy(&o.stderr)
+        let ok = |o: std::process::Output, what: &str| {
+            assert_eq!(
+                o.status.code(),
+                Some(0),
+                "{what} {}: {}",
+                file.display(),
+                String::from_utf8_lossy(&o.stderr)
+            )
+        };
+        ok(
+            bin()
+                .args(["mtl", "--formula", "F[0,4] x1 >= 0.95", "--trace"])
+                .arg(file)
+                .output()
+                .unwrap(),
+            "mtl",
         );
         let out2 = dir.join("imported");
-        let o = bin()
-            .args(["synth", spec, "--out"])
-            .arg(&out2)
-            .args(["--quiet", "--verify-runs", "100", "--import"])
-            .arg(file)
-            .output()
-            .unwrap();
-        assert_eq!(
-            o.status.code(),
-            Some(0),
-            "import {}: {}",
-            file.display(),
-            String::from_utf8_lossy(&o.stderr)
+        ok(
+            bin()
+                .args(["synth", spec, "--out"])
+                .arg(&out2)
+                .args(["--quiet", "--verify-runs", "100", "--import"])
+                .arg(file)
+                .output()
+                .unwrap(),
+            "import",
         );
         let cert: serde_json::Value =
             serde_json::from_str(&std::fs::read_to_string(out2.join("certificate.json")).unwrap())

@@ -4,30 +4,12 @@
 //! warning; the builders round-trip the section; `inspect` shows it. [`assert_stamped`] is called by the
 //! PWA, hybrid and MTL CLI tests on the images their `synth` writes.
 
+use crate::cli_exit::{base, bin, scratch};
 use host_compiler::emit::{ImageBuilder, PwaImageBuilder};
 use host_compiler::spec::SpecFingerprint;
 use shared_types::image::{decode, SPEC_PARTS};
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
-
-fn bin() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_host-compiler"))
-}
-
-fn base() -> String {
-    std::fs::read_to_string(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../examples/double-integrator.toml"
-    ))
-    .unwrap()
-}
-
-fn scratch(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("hc-fingerprint-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
+use std::path::Path;
+use std::process::Output;
 
 fn fp(src: &str) -> SpecFingerprint {
     SpecFingerprint::of(src).unwrap()
@@ -226,7 +208,7 @@ fn text(o: &Output) -> String {
 /// reformatted, with its goal or goal and horizon changed, and against an image without a fingerprint.
 #[test]
 fn verify_and_simulate_refuse_an_image_whose_spec_changed() {
-    let dir = scratch("cli");
+    let dir = scratch("fingerprint");
     let spec = dir.join("spec.toml");
     let src = base();
     std::fs::write(&spec, &src).unwrap();
