@@ -8,6 +8,16 @@ fn bin() -> Command {
     Command::new(env!("CARGO_BIN_EXE_host-compiler"))
 }
 
+/// The command ended with status 0.
+fn ok(o: std::process::Output, what: &str) {
+    assert_eq!(
+        o.status.code(),
+        Some(0),
+        "{what}: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+}
+
 #[test]
 fn a_simulated_run_is_imported_and_monitored_as_written() {
     let dir = std::env::temp_dir().join(format!("hc-csv-dialect-{}", std::process::id()));
@@ -18,31 +28,25 @@ fn a_simulated_run_is_imported_and_monitored_as_written() {
         "/../examples/double-integrator.toml"
     );
     let out = dir.join("out");
-    let o = bin()
-        .args(["synth", spec, "--out"])
-        .arg(&out)
-        .args(["--quiet", "--verify-runs", "100"])
-        .output()
-        .unwrap();
-    assert_eq!(
-        o.status.code(),
-        Some(0),
-        "{}",
-        String::from_utf8_lossy(&o.stderr)
+    ok(
+        bin()
+            .args(["synth", spec, "--out"])
+            .arg(&out)
+            .args(["--quiet", "--verify-runs", "100"])
+            .output()
+            .unwrap(),
+        "synth",
     );
     let run = dir.join("run.csv");
-    let o = bin()
-        .args(["simulate", spec])
-        .arg(out.join("controller.img"))
-        .args(["--x0", "0.03,0", "--out"])
-        .arg(&run)
-        .output()
-        .unwrap();
-    assert_eq!(
-        o.status.code(),
-        Some(0),
-        "{}",
-        String::from_utf8_lossy(&o.stderr)
+    ok(
+        bin()
+            .args(["simulate", spec])
+            .arg(out.join("controller.img"))
+            .args(["--x0", "0.03,0", "--out"])
+            .arg(&run)
+            .output()
+            .unwrap(),
+        "simulate",
     );
     // The same run with a byte-order mark and a comment in the middle.
     let text = std::fs::read_to_string(&run).unwrap();
@@ -51,22 +55,13 @@ fn a_simulated_run_is_imported_and_monitored_as_written() {
     let marked = dir.join("marked.csv");
     std::fs::write(&marked, format!("\u{feff}{}\n", lines.join("\n"))).unwrap();
     for file in [&run, &marked] {
-        let ok = |o: std::process::Output, what: &str| {
-            assert_eq!(
-                o.status.code(),
-                Some(0),
-                "{what} {}: {}",
-                file.display(),
-                String::from_utf8_lossy(&o.stderr)
-            )
-        };
         ok(
             bin()
                 .args(["mtl", "--formula", "F[0,4] x1 >= 0.95", "--trace"])
                 .arg(file)
                 .output()
                 .unwrap(),
-            "mtl",
+            &format!("mtl {}", file.display()),
         );
         let out2 = dir.join("imported");
         ok(
@@ -77,7 +72,7 @@ fn a_simulated_run_is_imported_and_monitored_as_written() {
                 .arg(file)
                 .output()
                 .unwrap(),
-            "import",
+            &format!("import {}", file.display()),
         );
         let cert: serde_json::Value =
             serde_json::from_str(&std::fs::read_to_string(out2.join("certificate.json")).unwrap())
