@@ -4,14 +4,31 @@
 //! only when an invariant of the code under test is broken: a decoded image or frame that does not
 //! re-encode to its own bytes, a parse that succeeds on one path and fails on its twin.
 
+use shared_types::capacity::HEADER_LEN;
 use shared_types::eval::Controller;
 use shared_types::image::{decode, encode};
 use shared_types::protocol::{decode_frame, encode_frame, FrameEvent, Reader, Reply, Request};
 
-/// The image decoder: any bytes give an error or an image; an image re-encodes to exactly its bytes (the
-/// format is canonical) and steps through the shared evaluator on a few states (zero, each of the first
-/// balls' centres, states taken from the input's own bytes, a non-finite one) without panicking.
+/// The image decoder, on the bytes as they are and on a copy whose header payload length and CRC are
+/// made to match (so that mutations reach the checks after the CRC): any bytes give an error or an
+/// image; an image re-encodes to exactly its bytes (the format is canonical) and steps through the shared
+/// evaluator on a few states (zero, each of the first balls' centres, states taken from the input's own
+/// bytes, a non-finite one) without panicking.
 pub fn image(data: &[u8]) {
+    decoded_image(data);
+    if data.len() >= HEADER_LEN {
+        let mut fixed = data.to_vec();
+        let payload = u32::try_from(fixed.len() - HEADER_LEN).unwrap_or(u32::MAX);
+        fixed[24..28].copy_from_slice(&payload.to_le_bytes());
+        if let Ok(crc) = shared_types::image::compute_crc(&fixed) {
+            fixed[28..32].copy_from_slice(&crc.to_le_bytes());
+        }
+        decoded_image(&fixed);
+    }
+}
+
+/// [`image`] on one byte string.
+fn decoded_image(data: &[u8]) {
     let Ok(img) = decode(data) else {
         return;
     };
