@@ -12,8 +12,11 @@ fn fuzz_dir() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../fuzz")
 }
 
+/// What a fuzz target runs on one input.
+type Entry = fn(&[u8]);
+
 /// The targets and the function each runs.
-const TARGETS: [(&str, fn(&[u8])); 5] = [
+const TARGETS: [(&str, Entry); 5] = [
     ("image_decode", host_compiler::fuzz::image),
     ("spec_parse", host_compiler::fuzz::spec),
     ("csv_readers", host_compiler::fuzz::csv),
