@@ -196,8 +196,10 @@ pub struct ImageBuilder {
     pub fingerprint: Option<Vec<u8>>,
 }
 
-/// How a segment ends ([`shared_types::image::Exit`]), owned, with the f32 values stored.
-#[derive(Clone, Debug, PartialEq)]
+/// How a segment ends ([`shared_types::image::Exit`]), owned, with the f32 values stored (serialised as
+/// `inspect --json` shows it: `{"kind": "table"}` or `{"kind": "guard", "a", "b", "theta", "next"}`).
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
 pub enum SegmentExit {
     Table,
     /// The guard half-space, the detection threshold, and the next segment's nominal start.
@@ -207,6 +209,26 @@ pub enum SegmentExit {
         theta: f32,
         next: Vec<f32>,
     },
+}
+
+impl SegmentExit {
+    /// The exit as a decoded image stores it.
+    pub fn of(exit: image::Exit<'_>) -> Self {
+        let f32s = |b: &[u8]| -> Vec<f32> {
+            b.chunks_exact(4)
+                .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+                .collect()
+        };
+        match exit {
+            image::Exit::Table => SegmentExit::Table,
+            image::Exit::Guard { a, b, theta, next } => SegmentExit::Guard {
+                a: f32s(a),
+                b,
+                theta,
+                next: f32s(next),
+            },
+        }
+    }
 }
 
 /// f64 → f32, refusing non-finite values and values beyond the f32 range (rounding to nearest).
@@ -556,20 +578,7 @@ impl ImageBuilder {
                     .map(|t| {
                         let (s0, count) = img.trajectory_segments(t);
                         (s0..s0 + count)
-                            .map(|s| match img.exit(s) {
-                                image::Exit::Table => SegmentExit::Table,
-                                image::Exit::Guard { a, b, theta, next } => SegmentExit::Guard {
-                                    a: a.chunks_exact(4)
-                                        .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
-                                        .collect(),
-                                    b,
-                                    theta,
-                                    next: next
-                                        .chunks_exact(4)
-                                        .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
-                                        .collect(),
-                                },
-                            })
+                            .map(|s| SegmentExit::of(img.exit(s)))
                             .collect()
                     })
                     .collect()

@@ -163,28 +163,7 @@ struct SegmentJson {
     steps: usize,
     /// How the segment ends (only for an image with the segment-exits section).
     #[serde(skip_serializing_if = "Option::is_none")]
-    exit: Option<ExitJson>,
-}
-
-/// A segment's exit as stored: with its table, or at the guard `fl(Σⱼ âⱼx̂ⱼ − b̂) ≤ −θ` with the next
-/// segment's nominal start.
-#[derive(Serialize)]
-#[serde(tag = "kind", rename_all = "snake_case")]
-enum ExitJson {
-    Table,
-    Guard {
-        a: Vec<f32>,
-        b: f32,
-        theta: f32,
-        next: Vec<f32>,
-    },
-}
-
-/// Little-endian `f32` values of a byte string.
-fn f32s(b: &[u8]) -> Vec<f32> {
-    b.chunks_exact(4)
-        .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
-        .collect()
+    exit: Option<crate::emit::SegmentExit>,
 }
 
 #[derive(Serialize)]
@@ -486,17 +465,9 @@ impl Report {
                         location: g.location,
                         first_row: g.first_row,
                         steps: g.len,
-                        exit: img.has_exits().then(|| match img.exit(s) {
-                            shared_types::image::Exit::Table => ExitJson::Table,
-                            shared_types::image::Exit::Guard { a, b, theta, next } => {
-                                ExitJson::Guard {
-                                    a: f32s(a),
-                                    b,
-                                    theta,
-                                    next: f32s(next),
-                                }
-                            }
-                        }),
+                        exit: img
+                            .has_exits()
+                            .then(|| crate::emit::SegmentExit::of(img.exit(s))),
                     })
                 })
                 .collect(),
