@@ -169,3 +169,17 @@ fn write_seeds() {
     }
     write("uart_frame", "stream.bin", &stream);
 }
+
+/// The campaign record the bench rows are read from lists every target, each with its executions.
+#[test]
+fn the_campaign_record_lists_every_target() {
+    let text = std::fs::read_to_string(fuzz_dir().join("CAMPAIGN.md")).unwrap();
+    let rows = host_compiler::benchkit::fuzz_campaign(&text).unwrap();
+    let names: Vec<&str> = rows.iter().map(|r| r.target.as_str()).collect();
+    let mut want: Vec<&str> = TARGETS.iter().map(|t| t.0).collect();
+    let mut got = names.clone();
+    want.sort();
+    got.sort();
+    assert_eq!(got, want);
+    assert!(rows.iter().all(|r| r.executions > 0), "{rows:?}");
+}
