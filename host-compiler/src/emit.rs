@@ -192,10 +192,14 @@ pub struct ImageBuilder {
     /// How each segment ends, per trajectory (its segments are the maximal runs of one location of its
     /// rows); empty: every segment ends with its table, and the image has no exits section.
     pub exits: Vec<Vec<SegmentExit>>,
+    /// The spec fingerprint to store (`crate::spec::SpecFingerprint`'s bytes), or none.
+    pub fingerprint: Option<Vec<u8>>,
 }
 
-/// How a segment ends ([`shared_types::image::Exit`]), owned, with the f32 values stored.
-#[derive(Clone, Debug, PartialEq)]
+/// How a segment ends ([`shared_types::image::Exit`]), owned, with the f32 values stored (serialised as
+/// `inspect --json` shows it: `{"kind": "table"}` or `{"kind": "guard", "a", "b", "theta", "next"}`).
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
 pub enum SegmentExit {
     Table,
     /// The guard half-space, the detection threshold, and the next segment's nominal start.
@@ -205,6 +209,26 @@ pub enum SegmentExit {
         theta: f32,
         next: Vec<f32>,
     },
+}
+
+impl SegmentExit {
+    /// The exit as a decoded image stores it.
+    pub fn of(exit: image::Exit<'_>) -> Self {
+        let f32s = |b: &[u8]| -> Vec<f32> {
+            b.chunks_exact(4)
+                .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+                .collect()
+        };
+        match exit {
+            image::Exit::Table => SegmentExit::Table,
+            image::Exit::Guard { a, b, theta, next } => SegmentExit::Guard {
+                a: f32s(a),
+                b,
+                theta,
+                next: f32s(next),
+            },
+        }
+    }
 }
 
 /// f64 → f32, refusing non-finite values and values beyond the f32 range (rounding to nearest).
@@ -277,6 +301,7 @@ impl ImageBuilder {
             input_box: None,
             terminal: Terminal::HoldLast,
             exits: Vec::new(),
+            fingerprint: None,
         }
     }
 
@@ -508,7 +533,7 @@ impl ImageBuilder {
             n_partitions: 0,
         };
         let img = Image::new(Mode::Feedforward, dims, period, payload)?;
-        encode_to_vec(&img)
+        encode_to_vec(&with_fingerprint(img, &self.fingerprint)?)
     }
 
     /// [`ImageBuilder::to_bytes`], then writes the file.
@@ -553,26 +578,14 @@ impl ImageBuilder {
                     .map(|t| {
                         let (s0, count) = img.trajectory_segments(t);
                         (s0..s0 + count)
-                            .map(|s| match img.exit(s) {
-                                image::Exit::Table => SegmentExit::Table,
-                                image::Exit::Guard { a, b, theta, next } => SegmentExit::Guard {
-                                    a: a.chunks_exact(4)
-                                        .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
-                                        .collect(),
-                                    b,
-                                    theta,
-                                    next: next
-                                        .chunks_exact(4)
-                                        .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
-                                        .collect(),
-                                },
-                            })
+                            .map(|s| SegmentExit::of(img.exit(s)))
                             .collect()
                     })
                     .collect()
             } else {
                 Vec::new()
             },
+            fingerprint: img.fingerprint().map(<[u8]>::to_vec),
         }
     }
 }
@@ -675,6 +688,8 @@ pub struct PwaImageBuilder {
     pub fallback: FallbackLaw,
     /// Optional input box `(lo, hi)`, m values each.
     pub input_box: Option<(Vec<f64>, Vec<f64>)>,
+    /// The spec fingerprint to store (`crate::spec::SpecFingerprint`'s bytes), or none.
+    pub fingerprint: Option<Vec<u8>>,
 }
 
 fn invalid(what: String, reason: &'static str) -> EmitError {
@@ -778,6 +793,7 @@ impl PwaImageBuilder {
             balls: Vec::new(),
             fallback: FallbackLaw::Zero,
             input_box: None,
+            fingerprint: None,
         }
     }
 
@@ -1021,7 +1037,7 @@ impl PwaImageBuilder {
             n_partitions: self.laws.len(),
         };
         let img = Image::new_pwa(dims, period, payload)?;
-        encode_to_vec(&img)
+        encode_to_vec(&with_fingerprint(img, &self.fingerprint)?)
     }
 
     /// [`PwaImageBuilder::to_bytes`], then writes the file.
@@ -1092,7 +1108,16 @@ impl PwaImageBuilder {
                 .collect(),
             fallback: fallback_from_image(img),
             input_box: input_box_from_image(img),
+            fingerprint: img.fingerprint().map(<[u8]>::to_vec),
         })
+    }
+}
+
+/// `img` with the spec fingerprint, if one is given (refused unless it has the stored length).
+fn with_fingerprint<'a>(img: Image<'a>, fp: &'a Option<Vec<u8>>) -> Result<Image<'a>, EmitError> {
+    match fp {
+        Some(f) => Ok(img.with_fingerprint(f)?),
+        None => Ok(img),
     }
 }
 

@@ -78,6 +78,7 @@ const COMMON_PAYLOAD_LEN: usize = 4
         + MAX_LOCATIONS * MAX_N * MAX_N   // P per location
         + MAX_M * MAX_N + MAX_N + MAX_M   // fallback linear law
         + 2 * MAX_M) // input box
+    + crate::layout::SPEC_FINGERPRINT_LEN // the optional spec fingerprint
     + MAX_SECTIONS * (DIR_ENTRY_LEN + SECTION_FRAMING); // directory and per-section postcard framing
 
 /// Largest feedforward payload.

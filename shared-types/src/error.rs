@@ -117,6 +117,8 @@ pub enum Field {
     Program,
     /// The constant pool of a model program.
     ProgramConst,
+    /// The spec fingerprint's hashes.
+    Fingerprint,
 }
 
 /// Position of a bad value. Its meaning depends on the field: `K`, `P`: (location, row, col); `Centre`:
@@ -569,6 +571,7 @@ impl fmt::Display for Field {
             Field::Exit => "segment exits",
             Field::Program => "model program",
             Field::ProgramConst => "program constants",
+            Field::Fingerprint => "spec fingerprint",
         })
     }
 }

@@ -38,8 +38,13 @@
 //! | 6   | `PwaLaws`               | [`crate::pwa::PwaLaws`]    | PWA         |
 //! | 7   | `PwaTree`               | [`crate::pwa::PwaTree`]    | PWA         |
 //! | 8   | `PwaBalls`              | [`crate::pwa::PwaBalls`]   | PWA         |
+//! | 9   | `SegmentExits`          | [`SegmentExitsSection`]    | feedforward, optional |
+//! | 12  | `SpecFingerprint`       | [`SpecFingerprintSection`] | both, optional |
 //!
 //! Every section a mode lists is required, exactly once; a known section of the other mode is refused.
+//! The spec fingerprint is [`SPEC_FINGERPRINT_LEN`] bytes: per part of the spec ([`SPEC_PARTS`], in
+//! that order) a hash of [`SPEC_HASH_LEN`] bytes that the host computes; the firmware only checks its
+//! length.
 //! **Growth.** Later issues add sections (guards and resets, model programs for nonlinear plants,
 //! controller states) under new tags, without changing these. A decoder that meets a tag it does not know
 //! refuses the image ([`ImageError::UnknownSection`]) rather than skipping the section: the certificate may
@@ -98,7 +103,7 @@ pub use crate::header::{
 };
 pub use crate::layout::{
     exit_record_len, Dims, Mode, SectionKind, EXIT_GUARD, EXIT_TABLE, FORMAT_VERSION, MAGIC,
-    SEGMENT_RECORD_LEN,
+    SEGMENT_RECORD_LEN, SPEC_FINGERPRINT_LEN, SPEC_HASH_LEN, SPEC_PARTS,
 };
 use crate::pwa::{node_child, node_value, Child, PwaBalls, PwaLaws, PwaTables, PwaTree, Region};
 use crate::raw::{
@@ -280,6 +285,14 @@ pub struct SegmentsSection<'a> {
 pub struct SegmentExitsSection<'a> {
     /// Exit records.
     pub exit: &'a [u8],
+}
+
+/// The optional `SpecFingerprint` section: [`SPEC_FINGERPRINT_LEN`] bytes, one hash of
+/// [`SPEC_HASH_LEN`] bytes per part of [`SPEC_PARTS`] in that order (see [`Image::fingerprint`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct SpecFingerprintSection<'a> {
+    /// The hashes, back to back.
+    pub hash: &'a [u8],
 }
 
 /// How a segment ends, as [`Image::exit`] reads it.
@@ -642,6 +655,8 @@ pub struct Image<'a> {
     pub(crate) period: f32,
     pub(crate) payload: Payload<'a>,
     pub(crate) pwa: PwaTables<'a>,
+    /// The spec fingerprint's hashes, or empty when the image has none.
+    pub(crate) fingerprint: &'a [u8],
 }
 
 impl<'a> Image<'a> {
@@ -660,6 +675,7 @@ impl<'a> Image<'a> {
             period,
             payload,
             pwa: PwaTables::EMPTY,
+            fingerprint: &[],
         })
     }
 
@@ -685,7 +701,23 @@ impl<'a> Image<'a> {
                 exits: &[],
             },
             pwa: payload.tables,
+            fingerprint: &[],
         })
+    }
+
+    /// This image with the spec fingerprint `hash` ([`SPEC_FINGERPRINT_LEN`] bytes, any values), stored as
+    /// the optional `SpecFingerprint` section; refused with [`ImageError::FieldLength`] if its length is
+    /// not exactly that.
+    pub fn with_fingerprint(mut self, hash: &'a [u8]) -> Result<Self, ImageError> {
+        check_len(Field::Fingerprint, hash, SPEC_FINGERPRINT_LEN)?;
+        self.fingerprint = hash;
+        Ok(self)
+    }
+
+    /// The spec fingerprint's hashes ([`SPEC_FINGERPRINT_LEN`] bytes, part `i` of [`SPEC_PARTS`] at
+    /// `i * SPEC_HASH_LEN`), or `None` for an image without the section.
+    pub fn fingerprint(&self) -> Option<&'a [u8]> {
+        (!self.fingerprint.is_empty()).then_some(self.fingerprint)
     }
 
     /// The PWA payload this image encodes to (meaningful for PWA images; for a feedforward image its
@@ -940,47 +972,57 @@ impl<'a> Image<'a> {
                 input_box: p.input_box,
             },
         );
-        match self.mode {
-            Mode::Feedforward => {
-                let trajectories = PostcardSection::new(
-                    SectionKind::Trajectories,
-                    TrajectoriesSection {
-                        terminal: p.terminal,
-                        seg_end: p.seg_end,
-                        centre: p.centre,
-                        delta: p.delta,
-                    },
-                );
-                let segments = PostcardSection::new(
-                    SectionKind::Segments,
-                    SegmentsSection { segment: p.segment },
-                );
-                let steps = PostcardSection::new(SectionKind::Steps, StepsSection { v: p.v });
-                if p.exits.is_empty() {
-                    f(&[&locations, &fallback, &trajectories, &segments, &steps])
-                } else {
-                    let exits = PostcardSection::new(
-                        SectionKind::SegmentExits,
-                        SegmentExitsSection { exit: p.exits },
-                    );
-                    f(&[
-                        &locations,
-                        &fallback,
-                        &trajectories,
-                        &segments,
-                        &steps,
-                        &exits,
-                    ])
-                }
-            }
-            Mode::PwaFeedback => {
-                let (laws, tree, balls) = self.pwa.sections();
-                let laws = PostcardSection::new(SectionKind::PwaLaws, laws);
-                let tree = PostcardSection::new(SectionKind::PwaTree, tree);
-                let balls = PostcardSection::new(SectionKind::PwaBalls, balls);
-                f(&[&locations, &fallback, &laws, &tree, &balls])
-            }
+        let trajectories = PostcardSection::new(
+            SectionKind::Trajectories,
+            TrajectoriesSection {
+                terminal: p.terminal,
+                seg_end: p.seg_end,
+                centre: p.centre,
+                delta: p.delta,
+            },
+        );
+        let segments = PostcardSection::new(
+            SectionKind::Segments,
+            SegmentsSection { segment: p.segment },
+        );
+        let steps = PostcardSection::new(SectionKind::Steps, StepsSection { v: p.v });
+        let exits = PostcardSection::new(
+            SectionKind::SegmentExits,
+            SegmentExitsSection { exit: p.exits },
+        );
+        let (laws, tree, balls) = self.pwa.sections();
+        let laws = PostcardSection::new(SectionKind::PwaLaws, laws);
+        let tree = PostcardSection::new(SectionKind::PwaTree, tree);
+        let balls = PostcardSection::new(SectionKind::PwaBalls, balls);
+        let fingerprint = PostcardSection::new(
+            SectionKind::SpecFingerprint,
+            SpecFingerprintSection {
+                hash: self.fingerprint,
+            },
+        );
+        let feedforward: [&dyn SectionWrite; 6] = [
+            &locations,
+            &fallback,
+            &trajectories,
+            &segments,
+            &steps,
+            &exits,
+        ];
+        let pwa: [&dyn SectionWrite; 5] = [&locations, &fallback, &laws, &tree, &balls];
+        let base: &[&dyn SectionWrite] = match self.mode {
+            Mode::Feedforward if p.exits.is_empty() => feedforward.get(..5).unwrap_or(&[]),
+            Mode::Feedforward => &feedforward,
+            Mode::PwaFeedback => &pwa,
+        };
+        let fp = (!self.fingerprint.is_empty()).then_some(&fingerprint as &dyn SectionWrite);
+        // At most 7 sections (feedforward with exits and a fingerprint), in kind order.
+        let mut list: [&dyn SectionWrite; 7] = [&locations; 7];
+        let mut count = 0;
+        for (slot, s) in list.iter_mut().zip(base.iter().copied().chain(fp)) {
+            *slot = s;
+            count += 1;
         }
+        f(list.get(..count).unwrap_or(&[]))
     }
 }
 
@@ -1034,7 +1076,8 @@ pub fn decode(bytes: &[u8]) -> Result<Image<'_>, ImageError> {
                 terminal: tr.terminal,
                 exits: exits.exit,
             };
-            Image::new(mode, d, h.period, payload)
+            let img = Image::new(mode, d, h.period, payload)?;
+            with_stored_fingerprint(&dir, img)
         }
         Mode::PwaFeedback => {
             let laws: PwaLaws<'_> = parse_section(&dir, SectionKind::PwaLaws)?;
@@ -1047,8 +1090,23 @@ pub fn decode(bytes: &[u8]) -> Result<Image<'_>, ImageError> {
                 fallback: fallback.fallback,
                 input_box: fallback.input_box,
             };
-            Image::new_pwa(d, h.period, payload)
+            let img = Image::new_pwa(d, h.period, payload)?;
+            with_stored_fingerprint(&dir, img)
         }
+    }
+}
+
+/// `img` with the directory's optional spec fingerprint, validated.
+fn with_stored_fingerprint<'a>(
+    dir: &Directory<'a>,
+    img: Image<'a>,
+) -> Result<Image<'a>, ImageError> {
+    match dir.section(SectionKind::SpecFingerprint) {
+        Some(_) => {
+            let fp: SpecFingerprintSection<'a> = parse_section(dir, SectionKind::SpecFingerprint)?;
+            img.with_fingerprint(fp.hash)
+        }
+        None => Ok(img),
     }
 }
 

@@ -35,6 +35,29 @@ pub const EXIT_TABLE: u32 = 0;
 /// A segment that ends when fl(Σⱼ âⱼx̂ⱼ − b̂) ≤ −θ at a sample: the controller moves to the next segment, row 0.
 pub const EXIT_GUARD: u32 = 1;
 
+/// Bytes of one hash of the spec fingerprint (the first bytes of a SHA-256 digest, computed by the host).
+pub const SPEC_HASH_LEN: usize = 8;
+
+/// The parts of a spec the fingerprint section hashes, in their stored order: a part is a set of the
+/// spec's top-level keys (its tables and values), named as messages print it. The order is part of the
+/// format. `other` holds every top-level key no other part lists (the spec's `name`); `spec` is the whole
+/// spec.
+pub const SPEC_PARTS: [&str; 10] = [
+    "[plant]",
+    "[init]",
+    "[goal]",
+    "[unsafe]",
+    "[input]",
+    "horizon",
+    "[mtl] with [sets]",
+    "[synthesis] with seed",
+    "other top-level keys",
+    "spec",
+];
+
+/// Bytes of the fingerprint's hashes: [`SPEC_PARTS`] × [`SPEC_HASH_LEN`].
+pub const SPEC_FINGERPRINT_LEN: usize = SPEC_PARTS.len() * SPEC_HASH_LEN;
+
 /// How the controller computes its input.
 #[repr(u8)]
 #[non_exhaustive]
@@ -78,11 +101,12 @@ impl Mode {
         }
     }
 
-    /// Whether a section of `kind` belongs in an image of this mode: the required ones, and the optional
-    /// segment exits of a feedforward image.
+    /// Whether a section of `kind` belongs in an image of this mode: the required ones, the optional
+    /// segment exits of a feedforward image, and the optional spec fingerprint of either mode.
     pub fn admits(self, kind: SectionKind) -> bool {
         self.required_sections().contains(&kind)
             || (self == Mode::Feedforward && kind == SectionKind::SegmentExits)
+            || kind == SectionKind::SpecFingerprint
     }
 }
 
@@ -132,11 +156,15 @@ pub enum SectionKind {
     /// Feedforward segment exits (optional): per segment, whether it ends with its table or when the
     /// measured state enters a guard half-space (internal switching, (4.41)–(4.42)).
     SegmentExits = 9,
+    /// The spec fingerprint (optional, both modes): [`SPEC_PARTS`] hashes of [`SPEC_HASH_LEN`] bytes of
+    /// the spec the image was synthesised from, so that a tool can refuse an image whose spec changed
+    /// since. The evaluator does not read it. (Tags 10 and 11 are reserved for other sections.)
+    SpecFingerprint = 12,
 }
 
 impl SectionKind {
     /// Every kind this build knows, in tag order.
-    pub const ALL: [SectionKind; 9] = [
+    pub const ALL: [SectionKind; 10] = [
         SectionKind::Locations,
         SectionKind::Fallback,
         SectionKind::Trajectories,
@@ -146,6 +174,7 @@ impl SectionKind {
         SectionKind::PwaTree,
         SectionKind::PwaBalls,
         SectionKind::SegmentExits,
+        SectionKind::SpecFingerprint,
     ];
 
     /// The kind with this tag, if this build knows it.
@@ -160,13 +189,21 @@ impl SectionKind {
             7 => Some(SectionKind::PwaTree),
             8 => Some(SectionKind::PwaBalls),
             9 => Some(SectionKind::SegmentExits),
+            12 => Some(SectionKind::SpecFingerprint),
             _ => None,
         }
     }
 
-    /// Index into [`SectionKind::ALL`] (tag − 1).
+    /// Index into [`SectionKind::ALL`] (its position there; tags need not be contiguous).
     pub const fn index(self) -> usize {
-        self as usize - 1
+        let mut i = 0;
+        while i < Self::ALL.len() {
+            if Self::ALL[i] as u16 == self as u16 {
+                return i;
+            }
+            i += 1;
+        }
+        Self::ALL.len()
     }
 
     /// Short lowercase name, as `inspect` prints it.
@@ -181,6 +218,7 @@ impl SectionKind {
             SectionKind::PwaTree => "pwa_tree",
             SectionKind::PwaBalls => "pwa_balls",
             SectionKind::SegmentExits => "segment_exits",
+            SectionKind::SpecFingerprint => "spec_fingerprint",
         }
     }
 }

@@ -15,6 +15,7 @@ use std::io::Write as _;
 use serde::Serialize;
 use shared_types::image::{
     decode, directory, Fallback, Header, Image, ImageError, Mode, SectionKind, Terminal, MAGIC,
+    SPEC_PARTS,
 };
 use shared_types::pwa::Child;
 
@@ -160,6 +161,9 @@ struct SegmentJson {
     location: usize,
     first_row: usize,
     steps: usize,
+    /// How the segment ends (only for an image with the segment-exits section).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    exit: Option<crate::emit::SegmentExit>,
 }
 
 #[derive(Serialize)]
@@ -395,6 +399,14 @@ struct Report {
     /// PWA feedback only.
     #[serde(skip_serializing_if = "Option::is_none")]
     pwa: Option<PwaJson>,
+    /// The spec fingerprint: per part of the spec its hash in hex (`null`: the image stores none).
+    spec_fingerprint: Option<Vec<FingerprintPartJson>>,
+}
+
+#[derive(Serialize)]
+struct FingerprintPartJson {
+    part: &'static str,
+    hash: String,
 }
 
 fn matrix(rows: usize, cols: usize, at: impl Fn(usize, usize) -> f32) -> Vec<Vec<f32>> {
@@ -428,6 +440,19 @@ impl Report {
                 size,
             },
             sections: Vec::new(),
+            spec_fingerprint: img
+                .fingerprint()
+                .and_then(crate::spec::SpecFingerprint::from_bytes)
+                .map(|f| {
+                    SPEC_PARTS
+                        .iter()
+                        .enumerate()
+                        .map(|(i, &part)| FingerprintPartJson {
+                            part,
+                            hash: f.hex(i),
+                        })
+                        .collect()
+                }),
             segments: (0..img.n_trajectories())
                 .flat_map(|t| {
                     let (s0, count) = img.trajectory_segments(t);
@@ -440,6 +465,9 @@ impl Report {
                         location: g.location,
                         first_row: g.first_row,
                         steps: g.len,
+                        exit: img
+                            .has_exits()
+                            .then(|| crate::emit::SegmentExit::of(img.exit(s))),
                     })
                 })
                 .collect(),
@@ -550,6 +578,17 @@ fn summary(r: &Report, path: &str) -> String {
             "n = {}, m = {}, locations = {}, trajectories = {}, table rows = {}, partitions = {}",
             h.n, h.m, h.locations, h.trajectories, r.total_steps, h.partitions
         );
+    }
+    match &r.spec_fingerprint {
+        Some(parts) => {
+            let _ = writeln!(s, "spec fingerprint (SHA-256, first 8 bytes per part):");
+            for p in parts {
+                let _ = writeln!(s, "  {:<22} {}", p.part, p.hash);
+            }
+        }
+        None => {
+            let _ = writeln!(s, "spec fingerprint: none stored");
+        }
     }
     if let Some(t) = r.terminal {
         let _ = writeln!(

@@ -208,8 +208,9 @@ pub(crate) fn decode_image<'a>(
         .bad_input()
 }
 
-/// The image's dimensions and sample period against the spec's (`verify::check_matches`); a mismatch is
-/// bad input naming both files.
+/// The image's dimensions, sample period and spec fingerprint against the spec's
+/// (`verify::check_matches`); a mismatch is bad input naming both files. An image without a fingerprint is
+/// accepted with a warning on standard error.
 pub(crate) fn image_matches_spec(
     problem: &crate::spec::Problem,
     img: &shared_types::image::Image<'_>,
@@ -224,7 +225,16 @@ pub(crate) fn image_matches_spec(
                 spec.display()
             )
         })
-        .bad_input()
+        .bad_input()?;
+    if img.fingerprint().is_none() {
+        eprintln!(
+            "warning: {} stores no spec fingerprint (written before images had one): it cannot be told \
+             whether {} changed since it was synthesised",
+            image.display(),
+            spec.display()
+        );
+    }
+    Ok(())
 }
 
 /// The task of a validated spec; a spec that makes no task (its plant cannot be sampled, a set cannot be

@@ -1,5 +1,7 @@
 //! `host-compiler simulate SPEC IMAGE --x0 …`: one closed-loop run through the shared f32 evaluator,
-//! written as CSV (t, x…, u…, status), and a verdict on standard error: when Goal was first reached,
+//! written as CSV in the tools' dialect ([`crate::csv`]: the `# x0` line, then t, x…, u…, the references
+//! v = u − K̂ x of the image's gain, status; a trace `mtl` reads and a recording `synth --import` reads),
+//! and a verdict on standard error: when Goal was first reached,
 //! the least distance to Unsafe before it, the steps out of the certified envelope, the inputs outside
 //! the input set, and the run's reach-avoid robustness ([`crate::property::Property`], Euclidean).
 
@@ -70,12 +72,20 @@ pub fn run(a: &SimulateArgs) -> Outcome {
         None => Box::new(std::io::stdout().lock()),
     };
     let m = problem.plant.m();
+    // The initial state, and per row the reference v = u − K̂ x of the image's gain (location 0): the
+    // file is then a recording `synth --import` reads as it is (`trajectory::csv`).
+    let x0: Vec<String> = a.x0.iter().map(|v| format!("{v}")).collect();
+    writeln!(out, "# x0 = {}", x0.join(", ")).into_diagnostic()?;
     let head: Vec<String> = std::iter::once("t".to_string())
         .chain((1..=n).map(|i| format!("x{i}")))
         .chain((1..=m).map(|i| format!("u{i}")))
-        .chain(std::iter::once("status".to_string()))
+        .chain((1..=m).map(|i| format!("v{i}")))
+        .chain(std::iter::once(crate::csv::STATUS.to_string()))
         .collect();
     writeln!(out, "{}", head.join(",")).into_diagnostic()?;
+    let K: Vec<Vec<f64>> = (0..m)
+        .map(|j| (0..n).map(|i| img.K(0, j, i) as f64).collect())
+        .collect();
     let mut x = a.x0.clone();
     let mut last = shared_types::eval::Input::zero(m);
     let mut states: Vec<Vec<f64>> = Vec::with_capacity(steps + 1);
@@ -98,6 +108,10 @@ pub fn run(a: &SimulateArgs) -> Outcome {
         let row: Vec<String> = std::iter::once(format!("{}", k as f64 * problem.plant.period))
             .chain(x.iter().map(|v| format!("{v}")))
             .chain(uf.iter().map(|v| format!("{v}")))
+            .chain(K.iter().zip(&uf).map(|(k, u)| {
+                let kx: f64 = k.iter().zip(&x).map(|(a, b)| a * b).sum();
+                format!("{}", u - kx)
+            }))
             .chain(std::iter::once(status))
             .collect();
         writeln!(out, "{}", row.join(",")).into_diagnostic()?;

@@ -327,5 +327,6 @@ pub fn feedforward_image_of<'a>(
         b.input_box = Some((lo.clone(), hi.clone()));
     }
     b.fallback = FallbackLaw::constant(&task.problem.fallback_input);
+    b.fingerprint = Some(task.problem.fingerprint.as_bytes().to_vec());
     b.to_bytes()
 }

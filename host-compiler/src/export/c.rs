@@ -21,9 +21,10 @@ pub const CONTROLLER_H: &str = include_str!("c/controller.h");
 pub const CONTROLLER_C: &str = include_str!("c/controller.c");
 
 /// The section kinds `controller.c` decodes and evaluates (tags 1–9: locations, fallback, trajectories,
-/// segments, steps, PWA laws, tree and balls, segment exits). A section kind added to the format must be
-/// added to the C (decoder and evaluator, and the harness's images) before it is added here.
-pub const C_SECTION_KINDS: [u16; 9] = [1, 2, 3, 4, 5, 6, 7, 8, 9];
+/// segments, steps, PWA laws, tree and balls, segment exits; 12: the spec fingerprint, whose length it
+/// checks and which it does not evaluate). A section kind added to the format must be added to the C
+/// (decoder and evaluator, and the harness's images) before it is added here.
+pub const C_SECTION_KINDS: [u16; 10] = [1, 2, 3, 4, 5, 6, 7, 8, 9, 12];
 
 /// Why an export failed.
 #[derive(Debug, thiserror::Error)]
@@ -33,7 +34,7 @@ pub enum ExportError {
     Rejected(ImageError),
     /// The image has a section the C evaluator does not implement.
     #[error(
-        "the image has a section of kind {kind}, which the C evaluator does not implement (it knows kinds 1 to 9)"
+        "the image has a section of kind {kind}, which the C evaluator does not implement (it knows kinds 1 to 9 and 12)"
     )]
     UnsupportedSection {
         /// The section's kind tag.
@@ -60,7 +61,7 @@ pub struct CFile {
 
 /// The template with every `@NAME@` placeholder replaced.
 fn fill(template: &str) -> String {
-    let values: [(&str, usize); 15] = [
+    let values: [(&str, usize); 16] = [
         ("FORMAT_VERSION", FORMAT_VERSION as usize),
         ("MAX_N", capacity::MAX_N),
         ("MAX_M", capacity::MAX_M),
@@ -76,6 +77,10 @@ fn fill(template: &str) -> String {
         ("MAX_BALLS", capacity::MAX_BALLS),
         ("MAX_BALL_REFS", capacity::MAX_BALL_REFS),
         ("MAX_LEAF_BALLS", capacity::MAX_LEAF_BALLS),
+        (
+            "SPEC_FINGERPRINT_LEN",
+            shared_types::image::SPEC_FINGERPRINT_LEN,
+        ),
     ];
     let mut out = template.to_string();
     for (name, v) in values {

@@ -621,6 +621,7 @@ pub fn build_pwa(
         builder.input_box = Some((lo.clone(), hi.clone()));
     }
     builder.fallback = crate::emit::FallbackLaw::constant(&task.problem.fallback_input);
+    builder.fingerprint = Some(task.problem.fingerprint.as_bytes().to_vec());
     let image = builder.to_bytes()?;
     let partition_seconds = t1.elapsed().as_secs_f64();
     Ok(PwaController {

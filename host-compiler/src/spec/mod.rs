@@ -43,6 +43,7 @@
 
 pub mod checks;
 pub mod error;
+pub mod fingerprint;
 pub mod hybrid;
 pub mod limits;
 pub mod nonlinear;
@@ -52,6 +53,7 @@ pub mod settings;
 mod validate;
 
 pub use error::{ErrorKind, SpecError};
+pub use fingerprint::SpecFingerprint;
 pub use hybrid::{EdgeDesc, EdgeKindDesc, HybridDesc, LocationDesc, PolytopeDesc};
 pub use sets::{load_named_sets, parse_named_sets, Coords, SetDesc, Shape};
 pub use settings::{ControllerMode, SettingsError, SynthesisSettings, SynthesisSettingsBuilder};
@@ -283,6 +285,9 @@ pub struct Problem {
     /// The plant written as expressions, when `[plant]` has a `class` (`spec::nonlinear`); `plant` is then
     /// its linearisation at the centre of Init.
     pub nonlinear: Option<nonlinear::NonlinearDesc>,
+    /// The hashes of the spec's parts an image stores ([`fingerprint`]), so that a tool can tell whether
+    /// an image was synthesised from this spec as it is now.
+    pub fingerprint: SpecFingerprint,
 }
 
 impl Problem {

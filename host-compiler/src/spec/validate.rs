@@ -336,6 +336,13 @@ pub(crate) fn positive(
 
 /// Parse the TOML and validate everything.
 pub(crate) fn problem(src: &str) -> Result<Problem, SpecError> {
+    let mut p = problem_of(src)?;
+    p.fingerprint = super::fingerprint::SpecFingerprint::of(src)?;
+    Ok(p)
+}
+
+/// [`problem`] before its fingerprint is set (the value it holds until then is all zero).
+fn problem_of(src: &str) -> Result<Problem, SpecError> {
     if super::nonlinear::has_class(src) {
         // A plant written as expressions (`spec::nonlinear`): its own `[plant]` table, the rest alike.
         let raw: RawSpec<super::nonlinear::RawFlPlant> =
@@ -610,6 +617,9 @@ fn problem_sets<P>(
         sets,
         hybrid,
         nonlinear,
+        fingerprint: super::fingerprint::SpecFingerprint(
+            [0; shared_types::image::SPEC_FINGERPRINT_LEN],
+        ),
     })
 }
 

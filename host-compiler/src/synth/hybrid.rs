@@ -487,6 +487,7 @@ pub fn image(task: &HybridTask, runs: &[HybridRun]) -> Result<Vec<u8>, crate::em
         });
         b.exits.push(exits);
     }
+    b.fingerprint = Some(task.problem.fingerprint.as_bytes().to_vec());
     b.to_bytes()
 }
 

@@ -1,8 +1,12 @@
 //! CSV import of a recorded reference-input sequence (how a person's trajectories come in).
 //!
-//! Format: a header `t,v1,…,vm` (or `k,…`), then one row per sample period with the reference input v(κ)
-//! of the closed loop u = K x + v. Times must increase by the plant's sample period. A recording also names
-//! its initial state in a comment line `# x0 = a, b, …` before the header.
+//! Format: the tools' one CSV dialect ([`crate::csv`]: byte-order mark, comments, the `# x0` line, the
+//! `status` column skipped); a header `t,v1,…,vm` (or `k,…`), then one row per sample period with the
+//! reference input v(κ) of the closed loop u = K x + v. Times must increase by the plant's sample period.
+//! A recording also names its initial state in a comment line `# x0 = a, b, …` before the header. The
+//! inputs are the columns named `v1…vm` when the header has them, so a run `simulate` wrote (`t`, the
+//! states `x1…xn`, the applied inputs `u1…um`, the references `v1…vm`, `status`) is a recording as it is:
+//! its last row is the final state, whose input no step applies, and is not read.
 //!
 //! # Bounds
 //! The caller gives the most rows it can use (for an import, the samples in the spec's horizon, at most
@@ -83,8 +87,44 @@ pub enum CsvError {
     },
 }
 
-/// Parse a recorded input sequence from CSV text. `period` is the plant's sample period; `m` its input
-/// count; `max_rows` the most rows accepted ([`CsvError::TooLong`] beyond).
+/// Where a file's reference inputs are: the field index of `v1…vm`, and whether the file is a run.
+struct Layout {
+    /// Field index of each input, in input order.
+    inputs: Vec<usize>,
+    /// The header names the state columns `x1…xn` (a run `simulate` wrote): its last row is the final
+    /// state, whose input no step applies.
+    run: bool,
+}
+
+impl Layout {
+    /// The inputs are the columns named `v1`…`vm` when the header has them all (the other columns, such
+    /// as a run's states and applied inputs, are not read); otherwise every column after `t` but
+    /// [`crate::csv::STATUS`], which must be m. `None`: neither (or a run without `v1…vm`).
+    fn of(header: &[(usize, &str)], m: usize) -> Option<Layout> {
+        let run = header.iter().any(|&(_, h)| h == "x1");
+        let named: Option<Vec<usize>> = (1..=m)
+            .map(|j| {
+                let name = format!("v{j}");
+                header.iter().position(|&(_, h)| h == name)
+            })
+            .collect();
+        if let Some(inputs) = named {
+            return Some(Layout { inputs, run });
+        }
+        // A run without its references: its columns are states and applied inputs, none of them v.
+        if run {
+            return None;
+        }
+        let inputs: Vec<usize> = (1..header.len())
+            .filter(|&i| header.get(i).is_some_and(|&(_, h)| h != crate::csv::STATUS))
+            .collect();
+        (inputs.len() == m).then_some(Layout { inputs, run })
+    }
+}
+
+/// Parse a recorded input sequence from CSV text in the tools' dialect ([`crate::csv`]). `period` is the
+/// plant's sample period; `m` its input count; `max_rows` the most rows accepted ([`CsvError::TooLong`]
+/// beyond; a run's final-state row is not counted).
 pub fn parse_inputs(
     text: &str,
     path: &str,
@@ -92,61 +132,56 @@ pub fn parse_inputs(
     period: f64,
     max_rows: usize,
 ) -> Result<Vec<Vec<f64>>, CsvError> {
-    let mut lines = text
-        .lines()
-        .enumerate()
-        .filter(|(_, l)| !l.trim().is_empty() && !l.trim_start().starts_with('#'));
+    let mut lines = crate::csv::data_lines(text);
     let (_, header) = lines
         .next()
         .ok_or_else(|| CsvError::Empty { path: path.into() })?;
-    let cols: Vec<&str> = header.split(',').map(str::trim).collect();
-    if cols.len() != m + 1 {
-        return Err(CsvError::Columns {
-            path: path.into(),
-            expected: m,
-            found: cols.len().saturating_sub(1),
-        });
-    }
+    let cols = crate::csv::split(header);
+    let layout = Layout::of(&cols, m).ok_or_else(|| CsvError::Columns {
+        path: path.into(),
+        expected: m,
+        found: cols
+            .iter()
+            .skip(1)
+            .filter(|&&(_, h)| h != crate::csv::STATUS)
+            .count(),
+    })?;
+    // A run has one row more than inputs: its final state.
+    let limit = max_rows.saturating_add(usize::from(layout.run));
     let mut out = Vec::new();
     let mut prev_t: Option<f64> = None;
-    for (i, line) in lines {
-        let lineno = i + 1;
-        if out.len() >= max_rows {
+    for (lineno, line) in lines {
+        if out.len() >= limit {
             return Err(CsvError::TooLong {
                 path: path.into(),
                 line: lineno,
                 max: max_rows,
             });
         }
-        let fields: Vec<&str> = line.split(',').collect();
-        if fields.len() != m + 1 {
-            let col = line.len().min(line.rfind(',').map(|p| p + 2).unwrap_or(1));
+        let fields = crate::csv::split(line);
+        if fields.len() != cols.len() {
+            let col = fields.last().map_or(1, |&(c, _)| c);
             return Err(CsvError::RowLength {
                 path: path.into(),
                 line: lineno,
                 col,
-                expected: m + 1,
+                expected: cols.len(),
                 found: fields.len(),
             });
         }
-        let mut vals = Vec::with_capacity(m + 1);
-        let mut col = 1;
-        for f in &fields {
-            let v: f64 = f
-                .trim()
-                .parse()
+        let number = |i: usize| {
+            let (col, f) = fields.get(i).copied().unwrap_or((1, ""));
+            f.parse::<f64>()
                 .ok()
-                .filter(|v: &f64| v.is_finite())
+                .filter(|v| v.is_finite())
                 .ok_or_else(|| CsvError::NotNumber {
                     path: path.into(),
                     line: lineno,
                     col,
-                    field: crate::text::excerpt(f.trim()),
-                })?;
-            vals.push(v);
-            col += f.len() + 1;
-        }
-        let t = vals[0];
+                    field: crate::text::excerpt(f),
+                })
+        };
+        let t = number(0)?;
         if let Some(p) = prev_t {
             if ((t - p) - period).abs() > 1e-6 * period.max(1.0) {
                 return Err(CsvError::Time {
@@ -159,7 +194,16 @@ pub fn parse_inputs(
             }
         }
         prev_t = Some(t);
-        out.push(vals[1..].to_vec());
+        out.push(
+            layout
+                .inputs
+                .iter()
+                .map(|&i| number(i))
+                .collect::<Result<Vec<f64>, _>>()?,
+        );
+    }
+    if layout.run {
+        out.pop();
     }
     if out.is_empty() {
         return Err(CsvError::NoRows { path: path.into() });
@@ -184,37 +228,25 @@ pub fn parse_recording(
     max_rows: usize,
 ) -> Result<Recording, CsvError> {
     let mut x0 = None;
-    for (i, line) in text.lines().enumerate() {
-        let t = line.trim();
-        if let Some(rest) = t
-            .strip_prefix('#')
-            .map(str::trim)
-            .and_then(|r| r.strip_prefix("x0"))
-        {
-            let err = |reason: String| CsvError::X0 {
-                path: path.into(),
-                line: i + 1,
-                reason,
-            };
-            let rest = rest
-                .trim_start()
-                .strip_prefix('=')
-                .ok_or_else(|| err("has no `=`".into()))?;
-            let vals: Result<Vec<f64>, _> =
-                rest.split(',').map(|f| f.trim().parse::<f64>()).collect();
-            let vals = vals.map_err(|e| err(format!("has a field that is not a number ({e})")))?;
-            if vals.len() != n || vals.iter().any(|v| !v.is_finite()) {
-                return Err(err(format!(
-                    "must give {n} finite values, found {}",
-                    vals.len()
-                )));
-            }
-            x0 = Some(vals);
-            break;
+    if let Some((line, rest)) = crate::csv::x0_comment(text) {
+        let err = |reason: String| CsvError::X0 {
+            path: path.into(),
+            line,
+            reason,
+        };
+        let rest = rest
+            .trim_start()
+            .strip_prefix('=')
+            .ok_or_else(|| err("has no `=`".into()))?;
+        let vals: Result<Vec<f64>, _> = rest.split(',').map(|f| f.trim().parse::<f64>()).collect();
+        let vals = vals.map_err(|e| err(format!("has a field that is not a number ({e})")))?;
+        if vals.len() != n || vals.iter().any(|v| !v.is_finite()) {
+            return Err(err(format!(
+                "must give {n} finite values, found {}",
+                vals.len()
+            )));
         }
-        if !t.is_empty() && !t.starts_with('#') {
-            break;
-        }
+        x0 = Some(vals);
     }
     let x0 = x0.ok_or_else(|| CsvError::X0 {
         path: path.into(),
@@ -331,6 +363,68 @@ mod tests {
             e.to_string().contains("must give 2 finite values, found 1"),
             "{e}"
         );
+    }
+
+    /// A run as `simulate` writes it: the `# x0` line, states, applied inputs, references, status.
+    const RUN: &str = "# x0 = 0.1, 0\nt,x1,x2,u1,v1,status\n0,0.1,0,0.5,0.25,ok\n\
+                       0.1,0.2,0.1,0.4,0.125,ok\n0.2,0.3,0.1,0.3,0.0625,out-of-envelope\n";
+
+    #[test]
+    fn a_run_simulate_wrote_is_a_recording_and_a_trace() {
+        // Its references, not its applied inputs; the final state's row is not an input.
+        let r = parse_recording(RUN, "run.csv", 2, 1, 0.1, 2).unwrap();
+        assert_eq!(r.x0, vec![0.1, 0.0]);
+        assert_eq!(r.v, vec![vec![0.25], vec![0.125]]);
+        // One row more than that is too long.
+        let e = parse_recording(RUN, "run.csv", 2, 1, 0.1, 1).unwrap_err();
+        assert!(
+            matches!(
+                e,
+                CsvError::TooLong {
+                    line: 5,
+                    max: 1,
+                    ..
+                }
+            ),
+            "{e}"
+        );
+        // `mtl` reads the same file as a trace (status skipped).
+        let t = crate::robustness::mtl::Trace::from_csv_str(RUN, "run.csv").unwrap();
+        assert_eq!(t.names(), ["x1", "x2", "u1", "v1"]);
+        // A run without its references is refused: its columns are no inputs.
+        let bare = "t,x1,x2,u1\n0,0,0,1\n0.1,0,0,1\n";
+        assert!(matches!(
+            parse_inputs(bare, "a.csv", 1, 0.1, 9),
+            Err(CsvError::Columns { .. })
+        ));
+    }
+
+    #[test]
+    fn a_byte_order_mark_comments_and_the_status_column_are_read_as_mtl_reads_them() {
+        let text = "\u{feff}# x0 = 1, 2\n# recorded by hand\n\nt, v1, status\n0, 1, ok\n# mid\n\n0.5, 2, ok\n";
+        let r = parse_recording(text, "r.csv", 2, 1, 0.5, 9).unwrap();
+        assert_eq!(r.x0, vec![1.0, 2.0]);
+        assert_eq!(r.v, vec![vec![1.0], vec![2.0]]);
+        let t = crate::robustness::mtl::Trace::from_csv_str(text, "r.csv").unwrap();
+        assert_eq!(t.names(), ["v1"]);
+        assert_eq!(t.times(), [0.0, 0.5]);
+        // Without the BOM the same; a positional header (no `v` names) reads its one column.
+        let r2 = parse_recording(
+            &text.replace('\u{feff}', "").replace("v1", "u"),
+            "r.csv",
+            2,
+            1,
+            0.5,
+            9,
+        )
+        .unwrap();
+        assert_eq!(r2, r);
+        // The x0 line after the header is not the initial state.
+        let late = "t,v1\n# x0 = 1, 2\n0,1\n";
+        assert!(matches!(
+            parse_recording(late, "r.csv", 2, 1, 0.5, 9),
+            Err(CsvError::X0 { .. })
+        ));
     }
 
     #[test]

@@ -81,7 +81,7 @@ pub(crate) fn inverse_sqrt_metric(image: &Image<'_>) -> Result<faer::Mat<f64>, M
 
 /// Why an image does not belong to a spec: it was made for another plant or sample period, so nothing
 /// it was certified for says anything about this spec.
-#[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum Mismatch {
     #[error("the image is for n = {image} states but the spec's plant has n = {spec} (plant.A)")]
     States { image: usize, spec: usize },
@@ -92,10 +92,29 @@ pub enum Mismatch {
          (the image was certified for another sampled loop)"
     )]
     Period { image: f32, spec: f64 },
+    #[error("{}", spec_changed(.changed))]
+    Spec { changed: Vec<&'static str> },
 }
 
-/// Refuses an image whose dimensions (n, m) or sample period differ from the spec's. The period is
-/// compared as the f32 the image stores: exactly the value `emit` writes for the spec's period.
+/// "the spec's [goal] and horizon changed since this image was synthesised": the parts that changed,
+/// without the whole-spec hash (which changes with any of them).
+fn spec_changed(changed: &[&str]) -> String {
+    let parts: Vec<&str> = changed.iter().copied().filter(|&p| p != "spec").collect();
+    let list = match parts.as_slice() {
+        [] => return "the spec changed since this image was synthesised".into(),
+        [one] => (*one).to_string(),
+        [init @ .., last] => format!("{} and {last}", init.join(", ")),
+    };
+    format!(
+        "the spec's {list} changed since this image was synthesised (synthesise it again from the \
+         spec as it is now)"
+    )
+}
+
+/// Refuses an image whose dimensions (n, m) or sample period differ from the spec's, or whose spec
+/// fingerprint (if it stores one) is not the spec's ([`Mismatch::Spec`] names the parts that changed).
+/// The period is compared as the f32 the image stores: exactly the value `emit` writes for the spec's
+/// period.
 pub fn check_matches(problem: &crate::spec::Problem, image: &Image<'_>) -> Result<(), Mismatch> {
     let p = &problem.plant;
     // A feedback-linearizable plant's image works in ξ, of dimension Σ r_i.
@@ -120,6 +139,16 @@ pub fn check_matches(problem: &crate::spec::Problem, image: &Image<'_>) -> Resul
             image: image.period(),
             spec: p.period,
         });
+    }
+    // An image without a fingerprint (written before it existed) is accepted; the CLI warns.
+    if let Some(stored) = image
+        .fingerprint()
+        .and_then(crate::spec::SpecFingerprint::from_bytes)
+    {
+        let changed = problem.fingerprint.changed(&stored);
+        if !changed.is_empty() {
+            return Err(Mismatch::Spec { changed });
+        }
     }
     Ok(())
 }

@@ -4,7 +4,8 @@
 //! fallback law; feedforward with segment exits, synthetic and a real hybrid image of Example 4.25 along
 //! closed-loop runs; PWA with one and several locations); corrupted arrays refused exactly when the Rust
 //! decoder refuses them (random corruption, targeted corruption of exit records, and an exits section
-//! added by hand: empty, all tables, wrong length, trailing byte, in a PWA image); and the subcommand's
+//! added by hand: empty, all tables, wrong length, trailing byte, in a PWA image; a spec-fingerprint
+//! section added by hand, well-formed and malformed); and the subcommand's
 //! exit codes.
 
 use std::path::PathBuf;
@@ -16,7 +17,7 @@ use host_compiler::export::harness::{
 };
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use shared_types::image::{compute_crc, decode, directory, Terminal};
+use shared_types::image::{compute_crc, decode, directory, Terminal, SPEC_FINGERPRINT_LEN};
 use shared_types::layout::{exit_record_len, SectionKind};
 
 /// A fresh scratch directory for one test.
@@ -457,6 +458,14 @@ fn corrupted_arrays_are_refused_as_the_rust_decoder_refuses_them() {
         ),
         ("exits", exits_image(302, 3, 2, 3, 6, Terminal::HoldLast, 0)),
         ("pwa", pwa_image(301, 3, 2, 2, 3, 20, 3)),
+        (
+            "fingerprint",
+            with_section(
+                &feedforward_image(303, 3, 2, 2, 4, Terminal::HoldLast, 1),
+                SectionKind::SpecFingerprint as u16,
+                &postcard(&fingerprint()),
+            ),
+        ),
     ];
     for (name, image) in images {
         let dir = scratch(&format!("corrupt_{name}"));
@@ -605,6 +614,130 @@ fn with_section(image: &[u8], kind: u16, body: &[u8]) -> Vec<u8> {
     out
 }
 
+/// A postcard byte string: its length as a varint, then the bytes.
+fn postcard(bytes: &[u8]) -> Vec<u8> {
+    let mut b = Vec::new();
+    let mut v = bytes.len();
+    loop {
+        let byte = (v & 0x7F) as u8;
+        v >>= 7;
+        if v == 0 {
+            b.push(byte);
+            break;
+        }
+        b.push(byte | 0x80);
+    }
+    b.extend_from_slice(bytes);
+    b
+}
+
+/// Some spec fingerprint hashes (any bytes of the stored length).
+fn fingerprint() -> Vec<u8> {
+    (0..SPEC_FINGERPRINT_LEN)
+        .map(|i| (i * 31 + 5) as u8)
+        .collect()
+}
+
+/// Runs `cases` (what, bytes, whether `decode` accepts) through the C init with a probe of `img`'s states
+/// after each, in a harness built on `embedded`: `decode` decides as stated, the C init decides as `decode`
+/// does and accepted images step alike. Returns the probe.
+fn check_section_cases(
+    name: &str,
+    embedded: &[u8],
+    img: &shared_types::image::Image<'_>,
+    seed: u64,
+    cases: &[(&str, Vec<u8>, bool)],
+) -> Vec<Op> {
+    let probe: Vec<Op> = scenario(img, seed, 300)
+        .into_iter()
+        .filter(|op| matches!(op, Op::Step(_) | Op::Reset))
+        .collect();
+    let mut ops = Vec::new();
+    for (what, bytes, ok) in cases {
+        assert_eq!(
+            decode(bytes).is_ok(),
+            *ok,
+            "{what}: {:?}",
+            decode(bytes).err()
+        );
+        ops.push(Op::InitBytes(bytes.clone()));
+        ops.extend(probe.iter().cloned());
+    }
+    let h = CHarness::build(embedded, &scratch(name)).expect("harness");
+    let c = h.compare(&ops).expect("driver");
+    eprintln!(
+        "{name}: {} inits, {} init mismatches, {} states, {} mismatches",
+        c.inits, c.init_mismatches, c.states, c.mismatches
+    );
+    assert_eq!(c.inits, cases.len(), "{name}");
+    assert_eq!(c.init_mismatches, 0, "{name}: {:?}", c.first);
+    assert_eq!(c.mismatches, 0, "{name}: {:?}", c.first);
+    probe
+}
+
+/// A spec-fingerprint section (tag 12) added by hand: of the stored length in a feedforward image, a PWA
+/// image and one with segment exits (accepted, same answers as without it); short, long, empty, with a
+/// trailing byte or an overlong length prefix, twice, or under the reserved tag 11 (refused). The C init
+/// decides as `decode` does, and accepted images step alike.
+#[test]
+fn a_fingerprint_section_is_admitted_as_the_rust_decoder_admits_it() {
+    let ff = feedforward_image(710, 3, 2, 2, 5, Terminal::Fallback, 3);
+    let img = decode(&ff).unwrap();
+    let pwa = pwa_image(711, 3, 2, 1, 2, 10, 1);
+    let tag = SectionKind::SpecFingerprint as u16;
+    let fp = fingerprint();
+    let mut trailing = postcard(&fp);
+    trailing.push(0);
+    let mut overlong = vec![0x80 | SPEC_FINGERPRINT_LEN as u8, 0];
+    overlong.extend_from_slice(&fp);
+    let with_exits = with_section(&ff, 9, &postcard(&[]));
+    let cases: Vec<(&str, Vec<u8>, bool)> = vec![
+        ("feedforward", with_section(&ff, tag, &postcard(&fp)), true),
+        ("PWA", with_section(&pwa, tag, &postcard(&fp)), true),
+        (
+            "after segment exits",
+            with_section(&with_exits, tag, &postcard(&fp)),
+            true,
+        ),
+        (
+            "one byte short",
+            with_section(&ff, tag, &postcard(&fp[1..])),
+            false,
+        ),
+        (
+            "one byte long",
+            with_section(&ff, tag, &postcard(&[&fp[..], &[0]].concat())),
+            false,
+        ),
+        ("empty", with_section(&ff, tag, &postcard(&[])), false),
+        ("no body", with_section(&ff, tag, &[]), false),
+        ("trailing byte", with_section(&ff, tag, &trailing), false),
+        ("overlong length", with_section(&ff, tag, &overlong), false),
+        (
+            "twice",
+            with_section(&with_section(&ff, tag, &postcard(&fp)), tag, &postcard(&fp)),
+            false,
+        ),
+        (
+            "reserved tag 11",
+            with_section(&ff, 11, &postcard(&fp)),
+            false,
+        ),
+    ];
+    let probe = check_section_cases("fingerprint_section", &ff, &img, 10, &cases);
+    // The evaluator does not read the fingerprint: the image answers as without it.
+    let mut run = vec![Op::InitEmbedded];
+    run.extend(probe.iter().cloned());
+    let plain = host_compiler::export::harness::reference(&ff, &run);
+    let stamped = host_compiler::export::harness::reference(&cases[0].1, &run);
+    assert!(
+        plain == stamped,
+        "the fingerprinted image answers differently"
+    );
+    // And `export --c` accepts it.
+    assert!(host_compiler::export::c::files(&cases[0].1).is_ok());
+}
+
 /// A segment-exits section added by hand: empty (no exits) or all table records in a feedforward image
 /// (accepted, same answers), one record short or with a trailing byte (refused), in a PWA image (not
 /// admitted by the mode: refused). The C init decides as `decode` does, and accepted images step alike.
@@ -620,21 +753,6 @@ fn an_exits_section_is_admitted_as_the_rust_decoder_admits_it() {
             b.extend_from_slice(&0u32.to_le_bytes());
             b.extend(std::iter::repeat_n(0u8, rec - 4));
         }
-        b
-    };
-    let postcard = |bytes: &[u8]| {
-        let mut b = Vec::new();
-        let mut v = bytes.len();
-        loop {
-            let byte = (v & 0x7F) as u8;
-            v >>= 7;
-            if v == 0 {
-                b.push(byte);
-                break;
-            }
-            b.push(byte | 0x80);
-        }
-        b.extend_from_slice(bytes);
         b
     };
     let tables = records(n_seg);
@@ -661,29 +779,7 @@ fn an_exits_section_is_admitted_as_the_rust_decoder_admits_it() {
             false,
         ),
     ];
-    let probe: Vec<Op> = scenario(&img, 9, 300)
-        .into_iter()
-        .filter(|op| matches!(op, Op::Step(_) | Op::Reset))
-        .collect();
-    let mut ops = Vec::new();
-    for (what, bytes, ok) in &cases {
-        assert_eq!(
-            decode(bytes).is_ok(),
-            *ok,
-            "{what}: {:?}",
-            decode(bytes).err()
-        );
-        ops.push(Op::InitBytes(bytes.clone()));
-        ops.extend(probe.iter().cloned());
-    }
-    let h = CHarness::build(&ff, &scratch("exits_section")).expect("harness");
-    let c = h.compare(&ops).expect("driver");
-    eprintln!(
-        "exits section: {} inits, {} init mismatches, {} states, {} mismatches",
-        c.inits, c.init_mismatches, c.states, c.mismatches
-    );
-    assert_eq!(c.init_mismatches, 0, "{:?}", c.first);
-    assert_eq!(c.mismatches, 0, "{:?}", c.first);
+    let probe = check_section_cases("exits_section", &ff, &img, 9, &cases);
     // The all-tables image (through the exits path) answers as the image without the section.
     let mut run = vec![Op::InitEmbedded];
     run.extend(probe.iter().cloned());

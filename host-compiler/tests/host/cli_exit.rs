@@ -7,11 +7,11 @@ use host_compiler::report::format::{directed, pct_down, pct_up, Round};
 use std::path::PathBuf;
 use std::process::{Command, Output};
 
-fn bin() -> Command {
+pub(crate) fn bin() -> Command {
     Command::new(env!("CARGO_BIN_EXE_host-compiler"))
 }
 
-fn base() -> String {
+pub(crate) fn base() -> String {
     std::fs::read_to_string(concat!(
         env!("CARGO_MANIFEST_DIR"),
         "/../examples/double-integrator.toml"
@@ -20,7 +20,7 @@ fn base() -> String {
 }
 
 /// A scratch directory for one test.
-fn scratch(name: &str) -> PathBuf {
+pub(crate) fn scratch(name: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("hc-cli-exit-{name}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&d);
     std::fs::create_dir_all(&d).unwrap();

@@ -39,6 +39,7 @@ fn hybrid_synth_then_verify() {
     assert!(stdout.contains(", 0 violations"), "{stdout}");
     let img = out.join("controller.img");
     assert!(img.exists());
+    crate::spec_fingerprint::assert_stamped(&img, &spec);
     let cert: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("certificate.json")).unwrap())
             .unwrap();

@@ -39,6 +39,7 @@ fn mtl_synth_then_verify() {
     assert!(stdout.contains(", 0 violations"), "{stdout}");
     let img = out.join("controller.img");
     assert!(img.exists());
+    crate::spec_fingerprint::assert_stamped(&img, &spec);
     let cert: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("certificate.json")).unwrap())
             .unwrap();
@@ -79,8 +80,25 @@ fn mtl_synth_then_verify() {
         ),
     )
     .unwrap();
+    // Refused at once by its spec fingerprint (bad input) ...
     let o = bin()
         .args(["verify", other.to_str().unwrap(), img.to_str().unwrap()])
+        .args(["--runs", "64", "--per-ball", "8"])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("[mtl] with [sets]"), "{stderr}");
+    // ... and without the fingerprint, by the re-proof from the bytes (a failed check).
+    let bytes = std::fs::read(&img).unwrap();
+    let mut b = host_compiler::emit::ImageBuilder::from_image(
+        &shared_types::image::decode(&bytes).unwrap(),
+    );
+    b.fingerprint = None;
+    let bare = dir.join("bare.img");
+    std::fs::write(&bare, b.to_bytes().unwrap()).unwrap();
+    let o = bin()
+        .args(["verify", other.to_str().unwrap(), bare.to_str().unwrap()])
         .args(["--runs", "64", "--per-ball", "8"])
         .output()
         .unwrap();

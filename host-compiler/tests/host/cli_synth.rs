@@ -65,8 +65,10 @@ fn synth_then_verify_simulate_and_inspect() {
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let csv = String::from_utf8_lossy(&o.stdout);
-    let lines: Vec<&str> = csv.lines().collect();
-    assert_eq!(lines[0], "t,x1,x2,u1,status");
+    let all: Vec<&str> = csv.lines().collect();
+    assert_eq!(all[0], "# x0 = 0.05, 0");
+    let lines = &all[1..];
+    assert_eq!(lines[0], "t,x1,x2,u1,v1,status");
     assert_eq!(lines.len(), 1 + 41, "header + horizon 4 s / 0.1 s + 1 rows");
     let last: Vec<&str> = lines.last().unwrap().split(',').collect();
     let x1: f64 = last[1].parse().unwrap();
@@ -84,7 +86,7 @@ fn synth_then_verify_simulate_and_inspect() {
     // The CSV is a trace `mtl` reads as it is: the status column is skipped.
     let trace = host_compiler::robustness::mtl::Trace::from_csv_str(&csv, "simulate").unwrap();
     assert_eq!(trace.len(), 41);
-    assert_eq!(trace.names(), ["x1", "x2", "u1"]);
+    assert_eq!(trace.names(), ["x1", "x2", "u1", "v1"]);
     // The verdict on standard error agrees with the CSV: Goal reached at the first row inside the goal
     // box, nothing out of the envelope, a positive robustness.
     let err = String::from_utf8_lossy(&o.stderr);
@@ -123,7 +125,7 @@ fn synth_then_verify_simulate_and_inspect() {
         .unwrap();
     let csv = String::from_utf8_lossy(&o.stdout);
     assert!(
-        csv.lines().nth(1).unwrap().ends_with("out-of-envelope") || csv.contains("envelope"),
+        csv.lines().nth(2).unwrap().ends_with("out-of-envelope") || csv.contains("envelope"),
         "{csv}"
     );
     let err = String::from_utf8_lossy(&o.stderr);
@@ -264,6 +266,9 @@ fn synth_and_verify_a_pwa_spec() {
         "certificate.json",
     ] {
         assert!(out.join(f).is_file(), "{f} missing");
+    }
+    for img in ["controller.img", "feedforward.img"] {
+        crate::spec_fingerprint::assert_stamped(&out.join(img), &spec);
     }
     let html = std::fs::read_to_string(out.join("report.html")).unwrap();
     assert!(html.contains("id=\"pwa\"") && html.contains("id=\"pwa-table\""));

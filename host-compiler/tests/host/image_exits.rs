@@ -1,6 +1,6 @@
 //! Segment exits in the image (section 9) and the evaluator's re-synchronisation at a guard ((4.41)–(4.42)):
 //! the segment changes at the first sample whose state is θ deep in the guard, its table restarts at row
-//! 0, and the image refuses exits that cannot be run.
+//! 0, and the image refuses exits that cannot be run; `inspect` shows them.
 
 use host_compiler::emit::{ImageBuilder, SegmentExit, TrajectoryEntry};
 use shared_types::eval::{Controller, Status};
@@ -99,4 +99,26 @@ fn exits_that_cannot_run_are_refused() {
         decode(&bytes).err(),
         Some(ImageError::BadExit { segment: 0 })
     );
+}
+
+/// `inspect --json` shows each segment's exit as stored (kind, â, b̂, θ, the next start); an image without
+/// the section shows none.
+#[test]
+fn inspect_shows_the_exits() {
+    let bytes = builder(guard()).to_bytes().unwrap();
+    let out = host_compiler::cli::inspect::render(&bytes, "exits.img", true).unwrap();
+    let j: serde_json::Value = serde_json::from_str(&out).unwrap();
+    let segs = j["segments"].as_array().unwrap();
+    assert_eq!(segs.len(), 2);
+    assert_eq!(
+        segs[0]["exit"],
+        serde_json::json!({"kind": "guard", "a": [-1.0, 0.0], "b": 0.0, "theta": 0.5, "next": [0.25, 1.0]})
+    );
+    assert_eq!(segs[1]["exit"], serde_json::json!({"kind": "table"}));
+    let mut plain = builder(SegmentExit::Table);
+    plain.exits.clear();
+    let bytes = plain.to_bytes().unwrap();
+    let out = host_compiler::cli::inspect::render(&bytes, "plain.img", true).unwrap();
+    let j: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert!(j["segments"][0].get("exit").is_none(), "{j}");
 }

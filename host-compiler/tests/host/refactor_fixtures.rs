@@ -118,7 +118,8 @@ fn check(example: &str) {
     );
 }
 
-/// The format-v4 layout `inspect` reports: the section directory a mode requires, in tag order, and for a
+/// The format-v4 layout `inspect` reports: the section directory a mode requires and the spec fingerprint,
+/// in tag order, and for a
 /// feedforward image of a one-location plant one segment per trajectory covering its rows.
 fn check_layout(example: &str, got: &Value) {
     let kinds: Vec<&str> = got["sections"]
@@ -128,10 +129,25 @@ fn check_layout(example: &str, got: &Value) {
         .map(|s| s["kind"].as_str().unwrap())
         .collect();
     let pwa = got.get("pwa").is_some();
+    // The spec fingerprint (optional, tag 12) last: `synth` always writes it.
     let want: &[&str] = if pwa {
-        &["locations", "fallback", "pwa_laws", "pwa_tree", "pwa_balls"]
+        &[
+            "locations",
+            "fallback",
+            "pwa_laws",
+            "pwa_tree",
+            "pwa_balls",
+            "spec_fingerprint",
+        ]
     } else {
-        &["locations", "fallback", "trajectories", "segments", "steps"]
+        &[
+            "locations",
+            "fallback",
+            "trajectories",
+            "segments",
+            "steps",
+            "spec_fingerprint",
+        ]
     };
     assert_eq!(kinds, want, "{example}: section directory");
     let segments = got["segments"].as_array().unwrap();

@@ -4,6 +4,7 @@
 mod common;
 mod decode_fuzz;
 mod evaluator;
+mod fingerprint;
 mod image_format;
 mod program;
 mod pwa_eval;

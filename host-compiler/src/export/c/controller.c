@@ -15,7 +15,8 @@
 #define SC_FORMAT_VERSION @FORMAT_VERSION@u
 #define SC_LEAF_BASE 0x8000u
 #define SC_OUTSIDE 0xFFFFu
-#define SC_N_KINDS 9u
+#define SC_N_KINDS 12u /* highest known tag; 10 and 11 are not known (reserved) */
+#define SC_KIND_SPEC_FINGERPRINT 12u
 #define SC_EXIT_TABLE 0u
 #define SC_EXIT_GUARD 1u
 
@@ -557,10 +558,11 @@ static sc_error decode(sc_image *im, const uint8_t *bytes, uint32_t len) {
         if (offset != next) return SC_E_DIRECTORY;
         if (slen > len - next) return SC_E_DIRECTORY;
         if (i > 0 && kind <= prev_kind) return SC_E_DIRECTORY;
-        if (kind < 1 || kind > SC_N_KINDS) return SC_E_DIRECTORY;
+        if (kind < 1 || kind > SC_N_KINDS || kind == 10 || kind == 11) return SC_E_DIRECTORY;
         /* admitted by the mode (layout::Mode::admits): kinds 1-5 and 9 (segment exits, optional)
-         * feedforward, 1, 2 and 6-8 PWA */
-        if (im->mode == 1 ? (kind > 5 && kind != 9) : ((kind >= 3 && kind <= 5) || kind == 9))
+         * feedforward, 1, 2 and 6-8 PWA, 12 (spec fingerprint, optional) both */
+        if (kind != SC_KIND_SPEC_FINGERPRINT &&
+            (im->mode == 1 ? (kind > 5 && kind != 9) : ((kind >= 3 && kind <= 5) || kind == 9)))
             return SC_E_DIRECTORY;
         body[kind - 1].p = bytes + next;
         body[kind - 1].len = slen;
@@ -584,6 +586,12 @@ static sc_error decode(sc_image *im, const uint8_t *bytes, uint32_t len) {
         if ((e = parse_pwa_laws(im, body[5])) != SC_E_NONE) return e;
         if ((e = parse_pwa_tree(im, body[6])) != SC_E_NONE) return e;
         if ((e = parse_pwa_balls(im, body[7])) != SC_E_NONE) return e;
+    }
+    /* the spec fingerprint (optional, not evaluated): one byte string of exactly its length */
+    if (present & (1u << (SC_KIND_SPEC_FINGERPRINT - 1u))) {
+        sc_bytes fp;
+        if ((e = parse_one_bytes(&fp, body[SC_KIND_SPEC_FINGERPRINT - 1u])) != SC_E_NONE) return e;
+        if (fp.len != SC_SPEC_FINGERPRINT_LEN) return SC_E_LENGTH;
     }
     /* content */
     if (!(finite_f32(im->period) && im->period > 0.0f)) return SC_E_PERIOD;

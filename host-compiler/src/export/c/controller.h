@@ -59,6 +59,8 @@ extern "C" {
 #define SC_MAX_BALLS @MAX_BALLS@
 #define SC_MAX_BALL_REFS @MAX_BALL_REFS@
 #define SC_MAX_LEAF_BALLS @MAX_LEAF_BALLS@
+/* Bytes of the optional spec fingerprint (shared-types/src/layout.rs). */
+#define SC_SPEC_FINGERPRINT_LEN @SPEC_FINGERPRINT_LEN@u
 
 /* Status of one step: the wire values of shared_types::eval::Status. */
 typedef enum {

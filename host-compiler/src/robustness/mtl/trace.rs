@@ -1,10 +1,9 @@
 //! Discrete-time traces for MTL monitoring and their CSV form.
 //!
 //! A trace is a strictly increasing list of sample times t_k with one value per named signal at each
-//! sample. The CSV form has a header `t,<signal names>` and one row per sample; fields are separated by
-//! commas and trimmed of surrounding whitespace; blank lines and comment lines (`#` first, such as the
-//! `# x0` line of a recording) are skipped; a leading byte-order mark is ignored; quoting is not
-//! supported. A column named `status` (what `simulate` writes) is not a signal: its fields are skipped.
+//! sample. The CSV form is the tools' one dialect ([`crate::csv`]: byte-order mark, comment and blank
+//! lines, the `# x0` line, trimmed fields, the `status` column skipped), with a header
+//! `t,<signal names>` and one row per sample.
 //! Every other field must be a finite number. Errors name the 1-based line, the 1-based field number
 //! and the 1-based character column where the field starts.
 
@@ -167,16 +166,11 @@ impl Trace {
     /// Parse CSV text (format in the module doc). `origin` names the source in error messages.
     pub fn from_csv_str(text: &str, origin: &str) -> Result<Self, TraceError> {
         let origin_s = origin.to_string();
-        let text = text.strip_prefix('\u{feff}').unwrap_or(text);
-        let mut lines = text
-            .lines()
-            .enumerate()
-            .map(|(i, l)| (i + 1, l))
-            .filter(|(_, l)| !l.trim().is_empty() && !l.trim_start().starts_with('#'));
+        let mut lines = crate::csv::data_lines(text);
         let (hline, header) = lines.next().ok_or_else(|| TraceError::Empty {
             origin: origin_s.clone(),
         })?;
-        let hfields = split(header);
+        let hfields = crate::csv::split(header);
         let herr = |column: usize, char_column: usize, message: String| TraceError::Header {
             origin: origin_s.clone(),
             line: hline,
@@ -201,7 +195,7 @@ impl Trace {
         // Seen names, for the duplicate check in linear time (a header may have a million columns).
         let mut seen = std::collections::HashSet::new();
         for (i, &(cc, name)) in hfields.iter().enumerate().skip(1) {
-            if name == "status" && status.is_none() {
+            if name == crate::csv::STATUS && status.is_none() {
                 status = Some(i);
                 continue;
             }
@@ -227,7 +221,7 @@ impl Trace {
         let mut times = Vec::new();
         let mut columns: Vec<Vec<f64>> = vec![Vec::new(); names.len()];
         for (line, row) in lines {
-            let fields = split(row);
+            let fields = crate::csv::split(row);
             if fields.len() != width {
                 let missing = if fields.len() < width {
                     format!(
@@ -345,19 +339,4 @@ impl Trace {
             .position(|n| n == name)
             .map(|i| self.columns[i].as_slice())
     }
-}
-
-/// Split a CSV row into trimmed fields with the 1-based character column where each field's text
-/// starts.
-fn split(row: &str) -> Vec<(usize, &str)> {
-    let mut out = Vec::new();
-    // Characters before the current piece, counted as we go (linear in the row's length).
-    let mut before = 0usize;
-    for piece in row.split(',') {
-        let trimmed = piece.trim_start();
-        let lead = piece[..piece.len() - trimmed.len()].chars().count();
-        out.push((before + lead + 1, piece.trim()));
-        before += piece.chars().count() + 1;
-    }
-    out
 }
