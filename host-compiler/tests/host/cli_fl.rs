@@ -62,7 +62,7 @@ fn fl_synth_then_verify() {
     assert_eq!(o.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&o.stderr).contains("--attack"));
 
-    // A faster-turning vehicle: the stored radii are not certified for its larger mismatch.
+    // A faster-turning vehicle: refused at once by the spec fingerprint ...
     let faster = dir.join("faster.toml");
     std::fs::write(
         &faster,
@@ -73,6 +73,22 @@ fn fl_synth_then_verify() {
     )
     .unwrap();
     let o = verify(&faster, &[]);
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("[plant]"), "{stderr}");
+    // ... and without the fingerprint, because its larger mismatch does not certify the stored radii.
+    let bytes = std::fs::read(&img).unwrap();
+    let mut b = host_compiler::emit::ImageBuilder::from_image(
+        &shared_types::image::decode(&bytes).unwrap(),
+    );
+    b.fingerprint = None;
+    let bare = dir.join("bare.img");
+    std::fs::write(&bare, b.to_bytes().unwrap()).unwrap();
+    let o = bin()
+        .args(["verify", faster.to_str().unwrap(), bare.to_str().unwrap()])
+        .args(["--runs", "100", "--per-ball", "4"])
+        .output()
+        .unwrap();
     let stdout = String::from_utf8_lossy(&o.stdout);
     assert_eq!(
         o.status.code(),
