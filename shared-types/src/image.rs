@@ -38,8 +38,13 @@
 //! | 6   | `PwaLaws`               | [`crate::pwa::PwaLaws`]    | PWA         |
 //! | 7   | `PwaTree`               | [`crate::pwa::PwaTree`]    | PWA         |
 //! | 8   | `PwaBalls`              | [`crate::pwa::PwaBalls`]   | PWA         |
+//! | 9   | `SegmentExits`          | [`SegmentExitsSection`]    | feedforward, optional |
+//! | 10  | `ModelMaps`             | raw, [`crate::maps`]       | feedforward, optional |
 //!
 //! Every section a mode lists is required, exactly once; a known section of the other mode is refused.
+//! The model maps section is the one body that is not postcard: its layout is [`crate::maps`]'s (two
+//! model programs, which must keep their constant pools aligned), and with it the fallback and the input
+//! box are in the plant's input space (`m_plant` values) and a linear fallback is refused.
 //! **Growth.** Later issues add sections (guards and resets, model programs for nonlinear plants,
 //! controller states) under new tags, without changing these. A decoder that meets a tag it does not know
 //! refuses the image ([`ImageError::UnknownSection`]) rather than skipping the section: the certificate may
@@ -100,6 +105,7 @@ pub use crate::layout::{
     exit_record_len, Dims, Mode, SectionKind, EXIT_GUARD, EXIT_TABLE, FORMAT_VERSION, MAGIC,
     SEGMENT_RECORD_LEN,
 };
+pub use crate::maps::ModelMaps;
 use crate::pwa::{node_child, node_value, Child, PwaBalls, PwaLaws, PwaTables, PwaTree, Region};
 use crate::raw::{
     check_dim, check_finite, check_len, div, f32_at, f32_span, floats, positive_definite, rem,
@@ -387,7 +393,15 @@ fn check_dims(mode: Mode, d: Dims) -> Result<(), ImageError> {
     }
 }
 
-fn validate(mode: Mode, dims: Dims, period: f32, p: &Payload<'_>) -> Result<(), ImageError> {
+/// `maps`: the validated model maps, if the image has them (the fallback and the input box are then in
+/// the plant's input space, and a linear fallback is refused).
+fn validate(
+    mode: Mode,
+    dims: Dims,
+    period: f32,
+    p: &Payload<'_>,
+    maps: Option<&ModelMaps<'_>>,
+) -> Result<(), ImageError> {
     if mode != Mode::Feedforward {
         return Err(ImageError::UnsupportedMode { mode });
     }
@@ -519,7 +533,13 @@ fn validate(mode: Mode, dims: Dims, period: f32, p: &Payload<'_>) -> Result<(), 
         })?;
         start = end;
     }
-    validate_fallback_box(n, m, p.fallback, p.input_box)
+    match maps {
+        None => validate_fallback_box(n, m, p.fallback, p.input_box),
+        Some(_) if matches!(p.fallback, Fallback::Linear { .. }) => {
+            Err(ImageError::LinearFallbackWithMaps)
+        }
+        Some(mm) => validate_fallback_box(n, mm.m_plant(), p.fallback, p.input_box),
+    }
 }
 
 /// The PWA counterpart of [`validate`]: dimensions, period, `K`, `P`, the tables (see [`crate::pwa`]), the
@@ -642,6 +662,7 @@ pub struct Image<'a> {
     pub(crate) period: f32,
     pub(crate) payload: Payload<'a>,
     pub(crate) pwa: PwaTables<'a>,
+    pub(crate) maps: Option<ModelMaps<'a>>,
 }
 
 impl<'a> Image<'a> {
@@ -653,13 +674,35 @@ impl<'a> Image<'a> {
         period: f32,
         payload: Payload<'a>,
     ) -> Result<Self, ImageError> {
-        validate(mode, dims, period, &payload)?;
+        Self::new_with_maps(mode, dims, period, payload, None)
+    }
+
+    /// [`Image::new`] for an image that may carry model maps: `maps` is the model maps section's body
+    /// ([`crate::maps`]), validated against the dimensions, and with it the fallback and the input box
+    /// are checked in the plant's input space.
+    pub fn new_with_maps(
+        mode: Mode,
+        dims: Dims,
+        period: f32,
+        payload: Payload<'a>,
+        maps: Option<&'a [u8]>,
+    ) -> Result<Self, ImageError> {
+        if mode != Mode::Feedforward {
+            return Err(ImageError::UnsupportedMode { mode });
+        }
+        check_dims(mode, dims)?;
+        let maps = match maps {
+            Some(body) => Some(ModelMaps::decode(body, dims.n, dims.m)?),
+            None => None,
+        };
+        validate(mode, dims, period, &payload, maps.as_ref())?;
         Ok(Image {
             mode,
             dims,
             period,
             payload,
             pwa: PwaTables::EMPTY,
+            maps,
         })
     }
 
@@ -685,6 +728,7 @@ impl<'a> Image<'a> {
                 exits: &[],
             },
             pwa: payload.tables,
+            maps: None,
         })
     }
 
@@ -715,6 +759,19 @@ impl<'a> Image<'a> {
     /// Input dimension m.
     pub fn m(&self) -> usize {
         self.dims.m
+    }
+    /// The model maps (section 10), if the image has them: the law then works on ξ = coords(x).
+    pub fn model_maps(&self) -> Option<ModelMaps<'a>> {
+        self.maps
+    }
+    /// The plant's state dimension: `n_plant` of the model maps, else n.
+    pub fn plant_n(&self) -> usize {
+        self.maps.as_ref().map_or(self.dims.n, ModelMaps::n_plant)
+    }
+    /// The plant's input dimension: `m_plant` of the model maps, else m. The fallback and the input box
+    /// have this many values.
+    pub fn plant_m(&self) -> usize {
+        self.maps.as_ref().map_or(self.dims.m, ModelMaps::m_plant)
     }
     /// Number of locations.
     pub fn n_locations(&self) -> usize {
@@ -899,10 +956,11 @@ impl<'a> Image<'a> {
         }
     }
 
-    /// Constant fallback input `u[j]`; 0.0 if the fallback is not constant or out of range.
+    /// Constant fallback input `u[j]` (`j < plant_m`); 0.0 if the fallback is not constant or out of
+    /// range.
     pub fn fallback_input(&self, j: usize) -> f32 {
         match self.payload.fallback {
-            Fallback::Constant { u } if j < self.dims.m => f32_at(u, j),
+            Fallback::Constant { u } if j < self.plant_m() => f32_at(u, j),
             _ => 0.0,
         }
     }
@@ -915,10 +973,10 @@ impl<'a> Image<'a> {
         }
     }
 
-    /// Input box bounds `(lo_j, hi_j)`, if a box is stored and `j < m`.
+    /// Input box bounds `(lo_j, hi_j)`, if a box is stored and `j < plant_m`.
     pub fn input_bounds(&self, j: usize) -> Option<(f32, f32)> {
         match self.payload.input_box {
-            Some(b) if j < self.dims.m => Some((f32_at(b.lo, j), f32_at(b.hi, j))),
+            Some(b) if j < self.plant_m() => Some((f32_at(b.lo, j), f32_at(b.hi, j))),
             _ => None,
         }
     }
@@ -956,22 +1014,37 @@ impl<'a> Image<'a> {
                     SegmentsSection { segment: p.segment },
                 );
                 let steps = PostcardSection::new(SectionKind::Steps, StepsSection { v: p.v });
-                if p.exits.is_empty() {
-                    f(&[&locations, &fallback, &trajectories, &segments, &steps])
-                } else {
-                    let exits = PostcardSection::new(
-                        SectionKind::SegmentExits,
-                        SegmentExitsSection { exit: p.exits },
-                    );
-                    f(&[
-                        &locations,
-                        &fallback,
-                        &trajectories,
-                        &segments,
-                        &steps,
-                        &exits,
-                    ])
+                let exits = PostcardSection::new(
+                    SectionKind::SegmentExits,
+                    SegmentExitsSection { exit: p.exits },
+                );
+                let maps = RawSection {
+                    kind: SectionKind::ModelMaps as u16,
+                    body: self.maps.as_ref().map_or(&[][..], ModelMaps::body),
+                };
+                let mut all: [&dyn SectionWrite; 7] = [
+                    &locations,
+                    &fallback,
+                    &trajectories,
+                    &segments,
+                    &steps,
+                    &exits,
+                    &maps,
+                ];
+                // The optional sections, in kind order, only when present.
+                let mut len = 5;
+                for (present, s) in [
+                    (!p.exits.is_empty(), &exits as &dyn SectionWrite),
+                    (self.maps.is_some(), &maps),
+                ] {
+                    if present {
+                        if let Some(slot) = all.get_mut(len) {
+                            *slot = s;
+                        }
+                        len += 1;
+                    }
                 }
+                f(all.get(..len).unwrap_or(&all))
             }
             Mode::PwaFeedback => {
                 let (laws, tree, balls) = self.pwa.sections();
@@ -1021,6 +1094,7 @@ pub fn decode(bytes: &[u8]) -> Result<Image<'_>, ImageError> {
                 Some(_) => parse_section(&dir, SectionKind::SegmentExits)?,
                 None => SegmentExitsSection { exit: &[] },
             };
+            let maps = dir.section(SectionKind::ModelMaps);
             let payload = Payload {
                 K: locations.K,
                 P: locations.P,
@@ -1034,7 +1108,7 @@ pub fn decode(bytes: &[u8]) -> Result<Image<'_>, ImageError> {
                 terminal: tr.terminal,
                 exits: exits.exit,
             };
-            Image::new(mode, d, h.period, payload)
+            Image::new_with_maps(mode, d, h.period, payload, maps)
         }
         Mode::PwaFeedback => {
             let laws: PwaLaws<'_> = parse_section(&dir, SectionKind::PwaLaws)?;

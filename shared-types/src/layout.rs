@@ -79,10 +79,11 @@ impl Mode {
     }
 
     /// Whether a section of `kind` belongs in an image of this mode: the required ones, and the optional
-    /// segment exits of a feedforward image.
+    /// segment exits and model maps of a feedforward image.
     pub fn admits(self, kind: SectionKind) -> bool {
         self.required_sections().contains(&kind)
-            || (self == Mode::Feedforward && kind == SectionKind::SegmentExits)
+            || (self == Mode::Feedforward
+                && matches!(kind, SectionKind::SegmentExits | SectionKind::ModelMaps))
     }
 }
 
@@ -132,11 +133,14 @@ pub enum SectionKind {
     /// Feedforward segment exits (optional): per segment, whether it ends with its table or when the
     /// measured state enters a guard half-space (internal switching, (4.41)–(4.42)).
     SegmentExits = 9,
+    /// Model maps (optional, feedforward only): the programs `coords: x ↦ ξ` and `input_map: (x, w) ↦ u`
+    /// of a feedback-linearizable plant, whose controller runs the linear law in ξ ([`crate::image`]).
+    ModelMaps = 10,
 }
 
 impl SectionKind {
     /// Every kind this build knows, in tag order.
-    pub const ALL: [SectionKind; 9] = [
+    pub const ALL: [SectionKind; 10] = [
         SectionKind::Locations,
         SectionKind::Fallback,
         SectionKind::Trajectories,
@@ -146,6 +150,7 @@ impl SectionKind {
         SectionKind::PwaTree,
         SectionKind::PwaBalls,
         SectionKind::SegmentExits,
+        SectionKind::ModelMaps,
     ];
 
     /// The kind with this tag, if this build knows it.
@@ -160,6 +165,7 @@ impl SectionKind {
             7 => Some(SectionKind::PwaTree),
             8 => Some(SectionKind::PwaBalls),
             9 => Some(SectionKind::SegmentExits),
+            10 => Some(SectionKind::ModelMaps),
             _ => None,
         }
     }
@@ -181,6 +187,7 @@ impl SectionKind {
             SectionKind::PwaTree => "pwa_tree",
             SectionKind::PwaBalls => "pwa_balls",
             SectionKind::SegmentExits => "segment_exits",
+            SectionKind::ModelMaps => "model_maps",
         }
     }
 }

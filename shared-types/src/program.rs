@@ -36,8 +36,7 @@
 //! | `0x20`–`0x28` SIN COS TAN EXP LOG SQRT ABS ATAN TANH | — | replace the top by `libm`'s `f32` function of it |
 //! | `0x29` ATAN2 | — | pop `x`, pop `y`, push `atan2(y, x)` |
 //!
-//! A nonlinear image would carry one such section whose outputs are every map the controller needs, with
-//! the slots laid out as the section's neighbours declare (states, then inputs, then parameters).
+//! An image carries programs in its model maps section ([`crate::maps`]), which declares their slots.
 
 use crate::capacity::{
     MAX_PROGRAM_CONSTS, MAX_PROGRAM_INPUTS, MAX_PROGRAM_LEN, MAX_PROGRAM_OUTPUTS, MAX_PROGRAM_POWI,
@@ -278,7 +277,7 @@ fn decode_op(code: &[u8], offset: usize) -> Result<(Op, usize), ImageError> {
 }
 
 /// A validated model program: a zero-copy view of its bytes.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Program<'a> {
     consts: &'a [u8],
     code: &'a [u8],

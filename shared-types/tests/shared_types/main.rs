@@ -5,6 +5,7 @@ mod common;
 mod decode_fuzz;
 mod evaluator;
 mod image_format;
+mod maps;
 mod program;
 mod pwa_eval;
 mod pwa_format;
