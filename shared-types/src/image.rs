@@ -97,7 +97,7 @@ use crate::capacity::{
     HEADER_LEN, MAX_LOCATIONS, MAX_M, MAX_N, MAX_PARTITIONS, MAX_SEGMENTS, MAX_STEPS,
     MAX_TRAJECTORIES,
 };
-pub use crate::error::{Dim, Field, ImageError, Pos};
+pub use crate::error::{Dim, Field, ImageError, ModelMap, Pos};
 pub use crate::header::{
     compute_crc, image_len, write_image, DirEntry, Directory, Header, RawSection, SectionWrite,
 };

@@ -58,6 +58,8 @@ pub struct ModelMaps<'a> {
     m_plant: u8,
     coords: Program<'a>,
     input_map: Program<'a>,
+    coords_bytes: &'a [u8],
+    input_map_bytes: &'a [u8],
 }
 
 impl<'a> ModelMaps<'a> {
@@ -100,8 +102,10 @@ impl<'a> ModelMaps<'a> {
                 }
             }
         }
-        let coords = Program::decode(body.get(c0..c0 + coords_len).unwrap_or(&[]))?;
-        let input_map = Program::decode(body.get(i0..i0 + input_map_len).unwrap_or(&[]))?;
+        let coords_bytes = body.get(c0..c0 + coords_len).unwrap_or(&[]);
+        let input_map_bytes = body.get(i0..i0 + input_map_len).unwrap_or(&[]);
+        let coords = Program::decode(coords_bytes)?;
+        let input_map = Program::decode(input_map_bytes)?;
         let (np, mp) = (usize::from(n_plant), usize::from(m_plant));
         for (map, p, inputs, outputs) in [
             (ModelMap::Coords, &coords, np, n),
@@ -128,6 +132,8 @@ impl<'a> ModelMaps<'a> {
             m_plant,
             coords,
             input_map,
+            coords_bytes,
+            input_map_bytes,
         })
     }
 
@@ -149,6 +155,16 @@ impl<'a> ModelMaps<'a> {
     /// `input_map: (x, w) ↦ u`.
     pub fn input_map(&self) -> Program<'a> {
         self.input_map
+    }
+
+    /// The bytes of the `coords` program (without padding).
+    pub fn coords_bytes(&self) -> &'a [u8] {
+        self.coords_bytes
+    }
+
+    /// The bytes of the `input_map` program (without padding).
+    pub fn input_map_bytes(&self) -> &'a [u8] {
+        self.input_map_bytes
     }
 
     /// The section body as stored.

@@ -24,6 +24,7 @@ mod cli_limits;
 mod cli_mtl;
 mod cli_synth;
 mod emit_image;
+mod emit_maps;
 mod emit_pwa;
 mod fallback_input;
 mod geometry_common;
