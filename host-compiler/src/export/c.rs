@@ -20,10 +20,11 @@ pub const CONTROLLER_H: &str = include_str!("c/controller.h");
 /// The evaluator's source template.
 pub const CONTROLLER_C: &str = include_str!("c/controller.c");
 
-/// The section kinds `controller.c` decodes and evaluates (tags 1–9: locations, fallback, trajectories,
-/// segments, steps, PWA laws, tree and balls, segment exits). A section kind added to the format must be
-/// added to the C (decoder and evaluator, and the harness's images) before it is added here.
-pub const C_SECTION_KINDS: [u16; 9] = [1, 2, 3, 4, 5, 6, 7, 8, 9];
+/// The section kinds `controller.c` decodes and evaluates (tags 1–10: locations, fallback, trajectories,
+/// segments, steps, PWA laws, tree and balls, segment exits, model maps). A section kind added to the
+/// format must be added to the C (decoder and evaluator, and the harness's images) before it is added
+/// here.
+pub const C_SECTION_KINDS: [u16; 10] = [1, 2, 3, 4, 5, 6, 7, 8, 9, 10];
 
 /// Why an export failed.
 #[derive(Debug, thiserror::Error)]
@@ -33,7 +34,7 @@ pub enum ExportError {
     Rejected(ImageError),
     /// The image has a section the C evaluator does not implement.
     #[error(
-        "the image has a section of kind {kind}, which the C evaluator does not implement (it knows kinds 1 to 9)"
+        "the image has a section of kind {kind}, which the C evaluator does not implement (it knows kinds 1 to 10)"
     )]
     UnsupportedSection {
         /// The section's kind tag.
@@ -60,7 +61,7 @@ pub struct CFile {
 
 /// The template with every `@NAME@` placeholder replaced.
 fn fill(template: &str) -> String {
-    let values: [(&str, usize); 15] = [
+    let values: [(&str, usize); 21] = [
         ("FORMAT_VERSION", FORMAT_VERSION as usize),
         ("MAX_N", capacity::MAX_N),
         ("MAX_M", capacity::MAX_M),
@@ -76,6 +77,15 @@ fn fill(template: &str) -> String {
         ("MAX_BALLS", capacity::MAX_BALLS),
         ("MAX_BALL_REFS", capacity::MAX_BALL_REFS),
         ("MAX_LEAF_BALLS", capacity::MAX_LEAF_BALLS),
+        ("MAX_PROGRAM_LEN", capacity::MAX_PROGRAM_LEN),
+        ("MAX_PROGRAM_CONSTS", capacity::MAX_PROGRAM_CONSTS),
+        ("MAX_PROGRAM_INPUTS", capacity::MAX_PROGRAM_INPUTS),
+        ("MAX_PROGRAM_OUTPUTS", capacity::MAX_PROGRAM_OUTPUTS),
+        ("MAX_PROGRAM_STACK", capacity::MAX_PROGRAM_STACK),
+        (
+            "MAX_PROGRAM_POWI",
+            capacity::MAX_PROGRAM_POWI.unsigned_abs() as usize,
+        ),
     ];
     let mut out = template.to_string();
     for (name, v) in values {

@@ -123,6 +123,8 @@ impl CHarness {
             .arg(dir.join("controller.c"))
             .arg(dir.join("controller_image.c"))
             .arg(&driver)
+            // <math.h>'s functions of model programs.
+            .arg("-lm")
             .output()
             .map_err(io("running the C compiler"))?;
         if !out.status.success() {
@@ -287,19 +289,19 @@ pub fn reference(image: &[u8], ops: &[Op]) -> Vec<Answer> {
                     _ => image,
                 };
                 ctl = decode(bytes).ok().map(Controller::new);
-                applied = Input::zero(ctl.as_ref().map_or(0, |c| c.image().m()));
+                applied = Input::zero(ctl.as_ref().map_or(0, |c| c.image().plant_m()));
                 answers.push(Answer::Init(ctl.is_some()));
             }
             Op::Reset => {
                 if let Some(c) = ctl.as_mut() {
                     c.reset();
-                    applied = Input::zero(c.image().m());
+                    applied = Input::zero(c.image().plant_m());
                 }
             }
             Op::Step(x) => {
                 let (status, u) = match ctl.as_mut() {
                     None => (Status::ImageRejected, Input::zero(0)),
-                    Some(c) => match c.step(x) {
+                    Some(c) => match c.step_plant(x) {
                         Ok(u) => (Status::Ok, u),
                         Err(s) => (s, c.fallback(x, &applied)),
                     },
