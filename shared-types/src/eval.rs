@@ -125,14 +125,6 @@ pub const fn rejected_image_input(m: usize) -> Input {
     Input::zero(m)
 }
 
-/// What the feedforward law gives at a step: an input of the image's linear law, or the fallback.
-enum Law {
-    /// `K_ℓ x + v` (in ξ coordinates with model maps: w).
-    Input(Input),
-    /// The image's fallback (past the table with [`Terminal::Fallback`]).
-    Fallback,
-}
-
 /// Controller state over a validated image (either mode).
 #[derive(Clone, Copy, Debug)]
 pub struct Controller<'a> {
@@ -293,13 +285,14 @@ impl<'a> Controller<'a> {
         if x.len() != self.image.n() || !x.iter().all(|v| v.is_finite()) {
             return Err(Status::BadFrame);
         }
-        match self.feedforward(x)? {
-            Law::Input(u) => self.accept(u),
-            Law::Fallback => {
-                let u = self.fallback(x, &self.last_u);
-                self.accept(u)
-            }
-        }
+        self.feedforward(
+            x,
+            |c, u| c.accept(u),
+            |c| {
+                let u = c.fallback(x, &c.last_u);
+                c.accept(u)
+            },
+        )
     }
 
     /// One control period of the plant: `x` is the plant's state ([`Image::plant_n`] values) and the
@@ -337,35 +330,45 @@ impl<'a> Controller<'a> {
         if maps.coords().eval(x, xi).is_err() || !xi.iter().all(|v| v.is_finite()) {
             return Err(Status::OutOfEnvelope);
         }
-        let w = match self.feedforward(xi)? {
-            Law::Input(w) => w,
-            Law::Fallback => {
-                let u = self.fallback(x, &self.last_u);
-                return self.accept(u);
-            }
-        };
-        if !w.as_slice().iter().all(|v| v.is_finite()) {
-            return Err(Status::OutOfEnvelope);
-        }
-        // The slots of input_map: x, then w.
-        let mut slots = [0.0f32; MAX_N + MAX_M];
-        for (s, &v) in slots.iter_mut().zip(x.iter().chain(w.as_slice())) {
-            *s = v;
-        }
-        let mut u = Input::zero(mp);
-        let (Some(inputs), Some(out)) = (slots.get(..np + m), u.u.get_mut(..mp)) else {
-            return Err(Status::OutOfEnvelope);
-        };
-        if maps.input_map().eval(inputs, out).is_err() {
-            return Err(Status::OutOfEnvelope);
-        }
-        self.accept(u)
+        let input_map = maps.input_map();
+        self.feedforward(
+            xi,
+            |c, w| {
+                if !w.as_slice().iter().all(|v| v.is_finite()) {
+                    return Err(Status::OutOfEnvelope);
+                }
+                // The slots of input_map: x, then w.
+                let mut slots = [0.0f32; MAX_N + MAX_M];
+                for (s, &v) in slots.iter_mut().zip(x.iter().chain(w.as_slice())) {
+                    *s = v;
+                }
+                let mut u = Input::zero(mp);
+                let (Some(inputs), Some(out)) = (slots.get(..np + m), u.u.get_mut(..mp)) else {
+                    return Err(Status::OutOfEnvelope);
+                };
+                if input_map.eval(inputs, out).is_err() {
+                    return Err(Status::OutOfEnvelope);
+                }
+                c.accept(u)
+            },
+            |c| {
+                let u = c.fallback(x, &c.last_u);
+                c.accept(u)
+            },
+        )
     }
 
     /// The feedforward law of one step at the (finite, length-n) state `x`: selection at κ = 0 and its
-    /// latch, the table row (or exits), the terminal behaviour. Does not advance κ.
+    /// latch, the table row (or exits), the terminal behaviour; then `law(self, u)` with the law's input
+    /// or `fallback(self)` where the image's fallback applies. Closures rather than a returned value, so
+    /// that `step` compiles to what it was before model maps shared this code.
     #[inline(always)]
-    fn feedforward(&mut self, x: &[f32]) -> Result<Law, Status> {
+    fn feedforward(
+        &mut self,
+        x: &[f32],
+        law: impl FnOnce(&mut Self, Input) -> Result<Input, Status>,
+        fallback: impl FnOnce(&mut Self) -> Result<Input, Status>,
+    ) -> Result<Input, Status> {
         if self.out_of_envelope {
             return Err(Status::OutOfEnvelope);
         }
@@ -384,17 +387,18 @@ impl<'a> Controller<'a> {
             },
         };
         if self.image.has_exits() {
-            return self.step_exits(t as usize, x);
+            return self.step_exits(t as usize, x, law, fallback);
         }
         let (start, len) = self.image.trajectory_rows(t as usize);
         let k = self.kappa as usize;
-        Ok(if k < len || self.image.terminal() == Terminal::HoldLast {
+        if k < len || self.image.terminal() == Terminal::HoldLast {
             let row = start + k.min(len.saturating_sub(1));
             let l = self.row_location(t as usize, row);
-            Law::Input(self.law(row, l, x))
+            let u = self.law(row, l, x);
+            law(self, u)
         } else {
-            Law::Fallback
-        })
+            fallback(self)
+        }
     }
 
     /// A feedforward step of an image with segment exits (internal switching, (4.41)–(4.42)): the cursor
@@ -405,7 +409,13 @@ impl<'a> Controller<'a> {
     /// past the last segment's rows, the terminal behaviour. At most one move per segment of the
     /// trajectory per step.
     #[inline(never)]
-    fn step_exits(&mut self, t: usize, x: &[f32]) -> Result<Law, Status> {
+    fn step_exits(
+        &mut self,
+        t: usize,
+        x: &[f32],
+        law: impl FnOnce(&mut Self, Input) -> Result<Input, Status>,
+        fallback: impl FnOnce(&mut Self) -> Result<Input, Status>,
+    ) -> Result<Input, Status> {
         let img = self.image;
         let n = img.n().clamp(1, MAX_N);
         let (s0, count) = img.trajectory_segments(t);
@@ -445,17 +455,18 @@ impl<'a> Controller<'a> {
             return Err(Status::OutOfEnvelope);
         };
         let local = self.kappa.saturating_sub(self.seg_kappa) as usize;
-        Ok(if local < g.len {
-            Law::Input(self.law(g.first_row + local, g.location, x))
+        let u = if local < g.len {
+            self.law(g.first_row + local, g.location, x)
         } else if s < last {
             // A guard exit not seen within its rows: outside what was certified.
             self.out_of_envelope = true;
             return Err(Status::OutOfEnvelope);
         } else if img.terminal() == Terminal::HoldLast {
-            Law::Input(self.law(g.first_row + g.len.saturating_sub(1), g.location, x))
+            self.law(g.first_row + g.len.saturating_sub(1), g.location, x)
         } else {
-            Law::Fallback
-        })
+            return fallback(self);
+        };
+        law(self, u)
     }
 
     /// The end of every step: a non-finite input is out of the envelope (κ does not advance); otherwise κ
