@@ -110,8 +110,16 @@ pub fn files(image: &[u8]) -> Result<Vec<CFile>, ExportError> {
         Mode::PwaFeedback => "PWA feedback",
         _ => "unknown",
     };
+    let maps = match img.model_maps() {
+        Some(mm) => format!(
+            ", model maps (plant n = {}, m = {})",
+            mm.n_plant(),
+            mm.m_plant()
+        ),
+        None => String::new(),
+    };
     let summary = format!(
-        "{} bytes, {mode}, n = {}, m = {}, {} location(s), CRC-32 {:#010x}",
+        "{} bytes, {mode}, n = {}, m = {}{maps}, {} location(s), CRC-32 {:#010x}",
         image.len(),
         img.n(),
         img.m(),
