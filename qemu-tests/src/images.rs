@@ -234,6 +234,18 @@ fn per_axis(k: [f64; 2]) -> Vec<f64> {
     vec![k[0], k[1], 0.0, 0.0, 0.0, 0.0, k[0], k[1]]
 }
 
+/// The ξ-system of Example 4.9 under u = R(θ)w, ξ = (X, Ẋ, Y, Ẏ): per axis ẋ = v, v̇ = 1 − x + 0.1v + w.
+pub fn fl_xi_system() -> ContinuousPlant {
+    let A = Mat::from_fn(4, 4, |i, j| match (i % 2, j, i / 2) {
+        (0, j, a) if j == 2 * a + 1 => 1.0,
+        (1, j, a) if j == 2 * a => -1.0,
+        (1, j, a) if j == 2 * a + 1 => 0.1,
+        _ => 0.0,
+    });
+    let B = Mat::from_fn(4, 2, |i, j| if i == 2 * j + 1 { 1.0 } else { 0.0 });
+    ContinuousPlant::new(A, B, vec![0.0, 1.0, 0.0, 1.0]).expect("the ξ-system is a valid plant")
+}
+
 /// The image of the module doc ([`fl_4_9`]'s data).
 pub fn fl_4_9() -> Result<NonlinearImage, ImageBuildError> {
     use host_compiler::expr::compile::compile;
@@ -270,16 +282,8 @@ pub fn fl_4_9() -> Result<NonlinearImage, ImageBuildError> {
         &params,
     )?;
 
-    // The ξ-system: per axis ẋ = v, v̇ = 1 − x + 0.1v + w.
     let (n, m) = (4, 2);
-    let A = Mat::from_fn(n, n, |i, j| match (i % 2, j, i / 2) {
-        (0, j, a) if j == 2 * a + 1 => 1.0,
-        (1, j, a) if j == 2 * a => -1.0,
-        (1, j, a) if j == 2 * a + 1 => 0.1,
-        _ => 0.0,
-    });
-    let B = Mat::from_fn(n, m, |i, j| if i == 2 * j + 1 { 1.0 } else { 0.0 });
-    let d = ContinuousPlant::new(A, B, vec![0.0, 1.0, 0.0, 1.0])?.zoh(h)?;
+    let d = fl_xi_system().zoh(h)?;
     let K = per_axis(FL_K_AXIS);
     let Acl = Mat::from_fn(n, n, |i, j| {
         d.A[(i, j)] + (0..m).map(|k| d.B[(i, k)] * K[k * n + j]).sum::<f64>()
@@ -453,17 +457,7 @@ mod tests {
             -th.sin() * u[0] + th.cos() * u[1],
             th.cos() * u[0] + th.sin() * u[1],
         ];
-        let A = Mat::from_fn(4, 4, |i, j| match (i % 2, j, i / 2) {
-            (0, j, a) if j == 2 * a + 1 => 1.0,
-            (1, j, a) if j == 2 * a => -1.0,
-            (1, j, a) if j == 2 * a + 1 => 0.1,
-            _ => 0.0,
-        });
-        let B = Mat::from_fn(4, 2, |i, j| if i == 2 * j + 1 { 1.0 } else { 0.0 });
-        let d = ContinuousPlant::new(A, B, vec![0.0, 1.0, 0.0, 1.0])
-            .unwrap()
-            .zoh(t.h)
-            .unwrap();
+        let d = fl_xi_system().zoh(t.h).unwrap();
         let xi1 = d.step(&[x0[0], x0[1], x0[2], x0[3]], &w);
         for i in 0..4 {
             assert!(

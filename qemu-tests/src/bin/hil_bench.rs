@@ -226,19 +226,9 @@ fn pwa_step_max(spec: &str, tag: &str) -> Result<(u32, String, u64), Box<dyn std
     starts.push(vec![10.0; n]);
     let (mut max, mut stack) = (0u32, 0u64);
     for x0 in &starts {
-        let mut q = Qemu::launch(&elf, Duration::from_secs(120))?;
-        let mut host = HostEvaluator::new(image);
-        let trace = closed_loop::run(&mut q, plant, &mut host, x0, 0, task.steps)?;
-        for st in [Status::Ok, Status::OutOfEnvelope] {
-            max = max.max(trace.max_cost(st).unwrap_or(0));
-        }
-        let exit = q.shutdown()?;
-        if exit.code != Some(0) {
-            return Err(format!("PWA firmware exited with {:?}", exit.code).into());
-        }
-        let peak =
-            qemu_tests::logs::stack_peak(&exit.logs).ok_or("no stack_peak in the shutdown log")?;
-        stack = stack.max(peak);
+        let (m, s) = session(&elf, image, x0, task.steps, |x, u| Ok(plant.step(x, u)))?;
+        max = max.max(m);
+        stack = stack.max(s);
     }
     let summary = format!(
         "pwa ({tag}): {} partitions, tree depth {}, at most {} balls per leaf, {} runs (the 8 costliest starts found on the host make {worst_tests} ball tests), max step {max} instructions",
@@ -324,21 +314,9 @@ fn nonlinear_step_max() -> Result<(u32, u64, usize), Box<dyn std::error::Error>>
     let starts = t.starts();
     let steps = t.table_len + 100;
     for x0 in &starts {
-        let mut q = Qemu::launch(&elf, Duration::from_secs(120))?;
-        let mut host = HostEvaluator::new(img);
-        let trace = closed_loop::run_with(&mut q, &mut host, x0, 0, steps, |x, u| {
-            t.plant.flow(x, u, t.h)
-        })?;
-        for st in [Status::Ok, Status::OutOfEnvelope] {
-            max = max.max(trace.max_cost(st).unwrap_or(0));
-        }
-        let exit = q.shutdown()?;
-        if exit.code != Some(0) {
-            return Err(format!("fl-4-9 firmware exited with {:?}", exit.code).into());
-        }
-        let peak =
-            qemu_tests::logs::stack_peak(&exit.logs).ok_or("no stack_peak in the shutdown log")?;
-        stack = stack.max(peak);
+        let (m, s) = session(&elf, img, x0, steps, |x, u| t.plant.flow(x, u, t.h))?;
+        max = max.max(m);
+        stack = stack.max(s);
     }
     println!(
         "nonlinear (Ex 4.9, model maps): {} runs of {steps} steps, programs {} bytes, max step {max} instructions",
@@ -346,4 +324,31 @@ fn nonlinear_step_max() -> Result<(u32, u64, usize), Box<dyn std::error::Error>>
         t.program_bytes
     );
     Ok((max, stack, t.program_bytes))
+}
+
+/// One closed-loop session: the firmware `elf` booted in QEMU, `steps` periods from `x0` against the host
+/// evaluator of `image` (bit for bit) with `plant` the one-period step, the firmware's exit checked.
+/// Returns the largest cost of a reply (`Ok` or out of the envelope) and the stack high-water mark.
+fn session(
+    elf: &std::path::Path,
+    image: shared_types::image::Image<'_>,
+    x0: &[f64],
+    steps: usize,
+    plant: impl FnMut(&[f64], &[f64]) -> Result<Vec<f64>, String>,
+) -> Result<(u32, u64), Box<dyn std::error::Error>> {
+    let mut q = Qemu::launch(elf, Duration::from_secs(120))?;
+    let mut host = HostEvaluator::new(image);
+    let trace = closed_loop::run_with(&mut q, &mut host, x0, 0, steps, plant)?;
+    let max = [Status::Ok, Status::OutOfEnvelope]
+        .iter()
+        .filter_map(|&st| trace.max_cost(st))
+        .max()
+        .unwrap_or(0);
+    let exit = q.shutdown()?;
+    if exit.code != Some(0) {
+        return Err(format!("firmware {} exited with {:?}", elf.display(), exit.code).into());
+    }
+    let peak =
+        qemu_tests::logs::stack_peak(&exit.logs).ok_or("no stack_peak in the shutdown log")?;
+    Ok((max, peak))
 }

@@ -4,6 +4,7 @@
 //! acts in the plant's input space, and mutated bytes never panic the decoder or the evaluator.
 
 use crate::common::{fix_header, sections_of, with_sections, Content, FallbackC};
+use crate::program::assemble;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use shared_types::capacity::{MAX_IMAGE_LEN, MAX_N};
@@ -11,28 +12,7 @@ use shared_types::error::{Dim, Field, ModelMap};
 use shared_types::eval::{Controller, Status};
 use shared_types::image::{decode, encode, Image, ImageError, Mode, SectionKind, Terminal};
 use shared_types::maps::{body_len, write_body, ModelMaps, MAPS_HEADER_LEN};
-use shared_types::program::{write_header, Func, Op, Program, PROGRAM_HEADER_LEN};
-
-/// A program from its parts (stack depth given).
-fn assemble(n_in: usize, n_out: usize, consts: &[f32], ops: &[Op], stack: usize) -> Vec<u8> {
-    let mut code = Vec::new();
-    for op in ops {
-        let (b, len) = op.encode();
-        code.extend_from_slice(&b[..len]);
-    }
-    let mut bytes = vec![0u8; PROGRAM_HEADER_LEN];
-    assert!(write_header(
-        &mut bytes,
-        n_in,
-        n_out,
-        consts.len(),
-        code.len(),
-        stack
-    ));
-    bytes.extend(consts.iter().flat_map(|c| c.to_le_bytes()));
-    bytes.extend_from_slice(&code);
-    bytes
-}
+use shared_types::program::{Func, Op, Program};
 
 /// coords: ξ0 = x0 + 0.5·x1, ξ1 = sin(x2)·x1 (3 plant states, n = 2). 11 bytes of code: the body is
 /// not a multiple of 4, so the section has padding.

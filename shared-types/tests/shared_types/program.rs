@@ -7,7 +7,7 @@ use shared_types::error::{Dim, Field, ImageError};
 use shared_types::program::{powi, write_header, Func, Op, Program, PROGRAM_HEADER_LEN};
 
 /// Assembles a program from its parts (the stored stack depth is given, so tests can lie about it).
-fn assemble(
+pub(crate) fn assemble(
     n_inputs: usize,
     n_outputs: usize,
     consts: &[f32],
