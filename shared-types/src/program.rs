@@ -439,6 +439,7 @@ impl<'a> Program<'a> {
             });
         }
         let mut stack = [0.0f32; MAX_PROGRAM_STACK];
+        let mut memo = Memo::new();
         // `sp` is the number of values on the stack. Validation proved every access in range; the
         // accessors still use `get` so that no path can panic.
         let mut sp = 0usize;
@@ -488,7 +489,8 @@ impl<'a> Program<'a> {
                     let v = match op {
                         Op::Neg => -a,
                         Op::Powi(k) => powi(a, k),
-                        Op::Func(f) => f.apply(a),
+                        Op::Func(f @ (Func::Sqrt | Func::Abs)) => f.apply(a),
+                        Op::Func(f) => memo.apply(f, a),
                         _ => a,
                     };
                     if let Some(s) = stack.get_mut(sp.wrapping_sub(1)) {
@@ -498,6 +500,69 @@ impl<'a> Program<'a> {
             }
         }
         Ok(())
+    }
+}
+
+/// How many library calls one evaluation remembers ([`Memo`]).
+const MEMO_LEN: usize = 4;
+
+/// The library calls already made in one evaluation, by function and argument bits: the bytecode has no
+/// shared subexpressions, so a program that needs sin θ in two outputs (a rotation) would otherwise pay
+/// for it twice, and a call costs far more on the target than a few comparisons (`libm` computes in f64,
+/// which a Cortex-M4F emulates). The functions are pure, so a remembered value has exactly the bits a
+/// new call would give. Oldest entry replaced first; bounded by [`MEMO_LEN`].
+struct Memo {
+    /// (opcode, argument bits, value); opcode 0 (no function has it) marks an empty entry.
+    entries: [(u8, u32, f32); MEMO_LEN],
+    next: usize,
+}
+
+impl Memo {
+    fn new() -> Self {
+        Memo {
+            entries: [(0, 0, 0.0); MEMO_LEN],
+            next: 0,
+        }
+    }
+
+    /// `f(x)`, remembered. A sine or cosine is computed with `libm::sincosf` and both are remembered
+    /// (a rotation needs both of the same angle): `sincosf` gives exactly the bits of `sinf` and `cosf`
+    /// for every f32 (checked exhaustively for the `libm` version in `Cargo.lock`; the test suite
+    /// samples it).
+    #[inline]
+    fn apply(&mut self, f: Func, x: f32) -> f32 {
+        let bits = x.to_bits();
+        if let Some(&(_, _, v)) = self
+            .entries
+            .iter()
+            .find(|e| e.0 == f.opcode() && e.1 == bits)
+        {
+            return v;
+        }
+        match f {
+            Func::Sin | Func::Cos => {
+                let (s, c) = libm::sincosf(x);
+                self.remember(Func::Sin, bits, s);
+                self.remember(Func::Cos, bits, c);
+                if f == Func::Sin {
+                    s
+                } else {
+                    c
+                }
+            }
+            _ => {
+                let v = f.apply(x);
+                self.remember(f, bits, v);
+                v
+            }
+        }
+    }
+
+    fn remember(&mut self, f: Func, bits: u32, v: f32) {
+        if let Some(e) = self.entries.get_mut(self.next % MEMO_LEN) {
+            *e = (f.opcode(), bits, v);
+        }
+        self.next = self.next.wrapping_add(1);
     }
 }
 
