@@ -446,7 +446,9 @@ impl<'a> Program<'a> {
         let top = |stack: &[f32; MAX_PROGRAM_STACK], sp: usize| {
             stack.get(sp.wrapping_sub(1)).copied().unwrap_or(0.0)
         };
-        for (_, op) in self.ops() {
+        let mut pc = 0usize;
+        while let Some((op, len)) = fetch(self.code, pc) {
+            pc += len;
             match op {
                 Op::Load(i) => {
                     let v = inputs.get(usize::from(i)).copied().unwrap_or(0.0);
@@ -501,6 +503,34 @@ impl<'a> Program<'a> {
         }
         Ok(())
     }
+}
+
+/// The instruction at `pc` of validated code and its length; `None` past the end (and, never for a
+/// validated program, at a byte that is not an opcode). [`decode_op`] without its checks and error
+/// values: the interpreter's fetch, once [`Program::decode`] has checked every instruction.
+#[inline(always)]
+fn fetch(code: &[u8], pc: usize) -> Option<(Op, usize)> {
+    let b = *code.get(pc)?;
+    let a = code.get(pc.wrapping_add(1)).copied().unwrap_or(0);
+    Some(match b {
+        opcode::LOAD => (Op::Load(a), 2),
+        opcode::STORE => (Op::Store(a), 2),
+        opcode::CONST => {
+            let hi = code.get(pc.wrapping_add(2)).copied().unwrap_or(0);
+            (Op::Const(u16::from_le_bytes([a, hi])), 3)
+        }
+        opcode::ADD => (Op::Add, 1),
+        opcode::SUB => (Op::Sub, 1),
+        opcode::MUL => (Op::Mul, 1),
+        opcode::DIV => (Op::Div, 1),
+        opcode::NEG => (Op::Neg, 1),
+        opcode::POWI => (Op::Powi(a as i8), 2),
+        opcode::ATAN2 => (Op::Atan2, 1),
+        b => (
+            Op::Func(*Func::ALL.get(usize::from(b.wrapping_sub(opcode::FUNC0)))?),
+            1,
+        ),
+    })
 }
 
 /// How many library calls one evaluation remembers ([`Memo`]).
