@@ -3,8 +3,15 @@
 //!    from `firmware/`, the firmware workspace's root, whichever folder cargo runs in), else a default test
 //!    image generated here (see [`default_image`]);
 //! 2. writes the build-time fallback used when the image is rejected at boot: a zero input of dimension
-//!    `CONTROLLER_REJECTED_M` if set, else the `m` the image's header declares (if the header is readable at
-//!    all), else 0.
+//!    `CONTROLLER_REJECTED_M` if set, else the plant's input dimension of the image if it decodes (`m`, or
+//!    `m_plant` with model maps), else the `m` its header declares (if the header is readable at all),
+//!    else 0.
+//! 3. sets `cfg(model_maps)` when the embedded image has model maps (a feedback-linearizable plant,
+//!    `shared_types::maps`), or when `CONTROLLER_MODEL_MAPS=1` (the no-panic check sets it, so that the
+//!    path is checked whatever the image). With it the loop runs the evaluator's `step_plant`, and the
+//!    program interpreter and `libm` are linked; without it the loop runs `step`, which for an image
+//!    without maps is the same function (`step_plant` is `step` there), and the interpreter stays out
+//!    of flash. The image is fixed at build time, so the choice cannot disagree with what boots.
 //!
 //! Each board's own build script places its memory map (`memory.x`).
 //!
@@ -26,6 +33,8 @@ fn main() {
     println!("cargo:rerun-if-changed=build.rs");
     println!("cargo:rerun-if-env-changed=CONTROLLER_IMAGE");
     println!("cargo:rerun-if-env-changed=CONTROLLER_REJECTED_M");
+    println!("cargo:rerun-if-env-changed=CONTROLLER_MODEL_MAPS");
+    println!("cargo::rustc-check-cfg=cfg(model_maps)");
 
     let bytes = match std::env::var_os("CONTROLLER_IMAGE") {
         Some(p) => {
@@ -46,12 +55,21 @@ fn main() {
     }
     std::fs::write(out.join("image.bin"), &bytes).expect("write image.bin");
 
+    let has_maps = image::decode(&bytes).is_ok_and(|img| img.model_maps().is_some());
+    let forced = std::env::var("CONTROLLER_MODEL_MAPS").is_ok_and(|v| v.trim() == "1");
+    if has_maps || forced {
+        println!("cargo:rustc-cfg=model_maps");
+    }
+
     let rejected_m = match std::env::var("CONTROLLER_REJECTED_M") {
         Ok(s) => s
             .trim()
             .parse::<usize>()
             .unwrap_or_else(|e| panic!("CONTROLLER_REJECTED_M={s:?}: {e}")),
-        Err(_) => Header::parse(&bytes).map(|h| h.dims.m).unwrap_or(0),
+        Err(_) => image::decode(&bytes)
+            .map(|img| img.plant_m())
+            .or_else(|_| Header::parse(&bytes).map(|h| h.dims.m))
+            .unwrap_or(0),
     }
     .min(MAX_M);
     std::fs::write(

@@ -12,6 +12,11 @@
 //! segments section), then runs the same validation the firmware runs at decode. The effect of rounding `K`,
 //! `P`, `v` and the centres to f32 is for certification to bound (DESIGN §5), not for this module.
 //!
+//! A feedback-linearizable plant's image also carries its model maps ([`ModelMapsSpec`]: the programs
+//! `coords: x ↦ ξ` and `input_map: (x, w) ↦ u`, section 10, layout in `shared_types::maps`): the table,
+//! balls, `K` and `P` are then in ξ (dims n, m), while the fallback and the input box are in the plant's
+//! input space (`m_plant` values) and a linear fallback is refused.
+//!
 //! [`PwaImageBuilder`] is its sibling for the PWA-feedback image of Ch. 6 (layout and rationale in
 //! `shared_types::pwa`): per partition j the law `u = K_j x + θ0_j` with the full gain `K_j = K + θ_j`
 //! (summed in f64 here, see [`PwaLaw::from_theta`], and rounded once), the point-location tree over
@@ -35,6 +40,7 @@ use shared_types::image::{
     self, Dims, Fallback, Image, ImageError, InputBox, Mode, Payload, PwaPayload, EXIT_GUARD,
     EXIT_TABLE,
 };
+use shared_types::maps;
 use shared_types::pwa::PwaTables;
 
 pub use shared_types::image::Terminal;
@@ -194,6 +200,22 @@ pub struct ImageBuilder {
     pub exits: Vec<Vec<SegmentExit>>,
     /// The spec fingerprint to store (`crate::spec::SpecFingerprint`'s bytes), or none.
     pub fingerprint: Option<Vec<u8>>,
+    /// The model maps of a feedback-linearizable plant (section 10), if any.
+    pub model_maps: Option<ModelMapsSpec>,
+}
+
+/// The model maps of a feedback-linearizable plant (`shared_types::maps`): the plant's dimensions and
+/// the two program bodies as `crate::expr::compile::compile` produces them (`.bytes`).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct ModelMapsSpec {
+    /// The plant's state dimension (the slots of `coords`, the first slots of `input_map`).
+    pub n_plant: usize,
+    /// The plant's input dimension (the outputs of `input_map`).
+    pub m_plant: usize,
+    /// `coords: x ↦ ξ`: `n_plant` inputs, n outputs.
+    pub coords: Vec<u8>,
+    /// `input_map: (x, w) ↦ u`: `n_plant + m` inputs (x, then w), `m_plant` outputs.
+    pub input_map: Vec<u8>,
 }
 
 /// How a segment ends ([`shared_types::image::Exit`]), owned, with the f32 values stored (serialised as
@@ -302,7 +324,14 @@ impl ImageBuilder {
             terminal: Terminal::HoldLast,
             exits: Vec::new(),
             fingerprint: None,
+            model_maps: None,
         }
+    }
+
+    /// Attaches the model maps of a feedback-linearizable plant (the image's law then works on ξ).
+    pub fn model_maps(&mut self, maps: ModelMapsSpec) -> &mut Self {
+        self.model_maps = Some(maps);
+        self
     }
 
     /// Adds a location with gain `K` (m×n row-major) and metric `P` (n×n); returns its index.
@@ -511,7 +540,25 @@ impl ImageBuilder {
             seg_end.extend_from_slice(&(n_segments as u16).to_le_bytes());
         }
 
-        let (fb, bx) = fallback_box_bytes(n, m, &self.fallback, &self.input_box)?;
+        // With model maps the fallback and the box act on the plant's input.
+        let maps = match &self.model_maps {
+            Some(mm) => {
+                capacity("plant state dimension n_plant", mm.n_plant, 1, MAX_N)?;
+                capacity("plant input dimension m_plant", mm.m_plant, 1, MAX_M)?;
+                if matches!(self.fallback, FallbackLaw::Linear { .. }) {
+                    return Err(invalid(
+                        "a linear fallback".into(),
+                        "cannot go with model maps (its gain would act on the linear coordinates)",
+                    ));
+                }
+                let mut body = vec![0u8; maps::body_len(mm.coords.len(), mm.input_map.len())];
+                maps::write_body(&mut body, mm.n_plant, mm.m_plant, &mm.coords, &mm.input_map)?;
+                Some(body)
+            }
+            None => None,
+        };
+        let m_fb = self.model_maps.as_ref().map_or(m, |mm| mm.m_plant);
+        let (fb, bx) = fallback_box_bytes(n, m_fb, &self.fallback, &self.input_box)?;
         let payload = Payload {
             K: &K,
             P: &P,
@@ -532,7 +579,7 @@ impl ImageBuilder {
             n_trajectories: self.trajectories.len(),
             n_partitions: 0,
         };
-        let img = Image::new(Mode::Feedforward, dims, period, payload)?;
+        let img = Image::new_with_maps(Mode::Feedforward, dims, period, payload, maps.as_deref())?;
         encode_to_vec(&with_fingerprint(img, &self.fingerprint)?)
     }
 
@@ -586,6 +633,12 @@ impl ImageBuilder {
                 Vec::new()
             },
             fingerprint: img.fingerprint().map(<[u8]>::to_vec),
+            model_maps: img.model_maps().map(|mm| ModelMapsSpec {
+                n_plant: mm.n_plant(),
+                m_plant: mm.m_plant(),
+                coords: mm.coords_bytes().to_vec(),
+                input_map: mm.input_map_bytes().to_vec(),
+            }),
         }
     }
 }
@@ -751,9 +804,11 @@ fn fallback_from_image(img: &Image<'_>) -> FallbackLaw {
     match img.fallback() {
         Fallback::Hold => FallbackLaw::Hold,
         Fallback::Zero => FallbackLaw::Zero,
-        Fallback::Constant { .. } => {
-            FallbackLaw::Constant((0..m).map(|j| img.fallback_input(j) as f64).collect())
-        }
+        Fallback::Constant { .. } => FallbackLaw::Constant(
+            (0..img.plant_m())
+                .map(|j| img.fallback_input(j) as f64)
+                .collect(),
+        ),
         Fallback::Linear { .. } => FallbackLaw::Linear {
             K: (0..m * n)
                 .map(|i| img.fallback_K(i / n, i % n) as f64)
@@ -766,7 +821,9 @@ fn fallback_from_image(img: &Image<'_>) -> FallbackLaw {
 
 fn input_box_from_image(img: &Image<'_>) -> Option<(Vec<f64>, Vec<f64>)> {
     img.has_input_box().then(|| {
-        let b: Vec<(f32, f32)> = (0..img.m()).filter_map(|j| img.input_bounds(j)).collect();
+        let b: Vec<(f32, f32)> = (0..img.plant_m())
+            .filter_map(|j| img.input_bounds(j))
+            .collect();
         (
             b.iter().map(|p| p.0 as f64).collect(),
             b.iter().map(|p| p.1 as f64).collect(),

@@ -1,5 +1,8 @@
 //! The closed loop: the plant on the host, the controller on the (emulated) target, and the host's own
-//! evaluation of the same image alongside, compared bit for bit every step.
+//! evaluation of the same image alongside, compared bit for bit every step. The plant is a sampled
+//! linear one ([`run`]) or any one-period step ([`run_with`], e.g. a nonlinear plant's
+//! [`crate::nonlinear::PlantFlow`]); states and inputs are the plant's (an image with model maps runs
+//! `step_plant`).
 
 use crate::plant::DiscretePlant;
 use crate::qemu::Qemu;
@@ -9,7 +12,8 @@ use shared_types::image::Image;
 use shared_types::protocol::{InputVec, Reply};
 
 /// What the firmware should answer, computed on the host with `shared_types::eval` in f32: the same rules
-/// as the firmware's `app` module (the fallback replaces the input whenever the step is not `Ok`).
+/// as the firmware's `app` module (`step_plant`; the fallback replaces the input whenever the step is not
+/// `Ok`).
 pub struct HostEvaluator<'a> {
     controller: Controller<'a>,
     last_u: Input,
@@ -19,7 +23,7 @@ pub struct HostEvaluator<'a> {
 impl<'a> HostEvaluator<'a> {
     /// A fresh evaluator, as the firmware is after boot.
     pub fn new(image: Image<'a>) -> Self {
-        let m = image.m();
+        let m = image.plant_m();
         Self {
             controller: Controller::new(image),
             last_u: Input::zero(m),
@@ -29,7 +33,7 @@ impl<'a> HostEvaluator<'a> {
 
     /// One accepted step: the status and the input the firmware must reply.
     pub fn step(&mut self, x: &[f32]) -> (Status, Input) {
-        let (status, u) = match self.controller.step(x) {
+        let (status, u) = match self.controller.step_plant(x) {
             Ok(u) => (Status::Ok, u),
             Err(s) => (s, self.controller.fallback(x, &self.last_u)),
         };
@@ -126,6 +130,19 @@ pub fn run(
     first_seq: u32,
     steps: usize,
 ) -> Result<Trace, HilError> {
+    run_with(q, host, x0, first_seq, steps, |x, u| Ok(plant.step(x, u)))
+}
+
+/// [`run`] with the plant given as its one-period step `plant(x, u)` (the state one sample period later
+/// with `u` held); an error of the plant ends the run.
+pub fn run_with(
+    q: &mut Qemu,
+    host: &mut HostEvaluator<'_>,
+    x0: &[f64],
+    first_seq: u32,
+    steps: usize,
+    mut plant: impl FnMut(&[f64], &[f64]) -> Result<Vec<f64>, String>,
+) -> Result<Trace, HilError> {
     let mut trace = Trace {
         states: vec![x0.to_vec()],
         replies: Vec::with_capacity(steps),
@@ -135,7 +152,7 @@ pub fn run(
         let seq = first_seq.wrapping_add(k as u32);
         let reply = exchange(q, seq, &x, |xf| host.step(xf))?;
         let u: Vec<f64> = reply.u.as_slice().iter().map(|&v| v as f64).collect();
-        x = plant.step(&x, &u);
+        x = plant(&x, &u).map_err(|e| HilError::Check(format!("seq {seq}: the plant: {e}")))?;
         trace.states.push(x.clone());
         trace.replies.push(reply);
     }

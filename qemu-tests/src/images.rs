@@ -7,11 +7,21 @@
 //! with `Ad + Bd K`. The balls use the Lyapunov metric `P` of `Ad + Bd K` (`AclᵀP Acl − P = −I`), with
 //! radii a little under half the smallest centre distance, so they are disjoint. Past the table
 //! (40 rows) the last row is held; the fallback is the linear law `u = K x` saturated to |u| ≤ 20.
+//!
+//! [`fl_4_9`]: the offset-thruster vehicle of Example 4.9 (`examples/fl-4-9.toml`, a feedback-linearizable
+//! plant) with a hand-built image that carries model maps: `coords` ξ = (X, Ẋ, Y, Ẏ) and `input_map`
+//! u = R(θ) w, R(θ) = [[−sin θ, cos θ], [cos θ, sin θ]], compiled from expressions with
+//! `host_compiler::expr`. Since g(x)R(θ) adds w to (Ẍ, Ÿ), the ξ-system is linear affine, two copies of
+//! `ẍ = 1 − x + 0.1ẋ + w` ((3.28)), sampled exactly here. One nominal from Init's centre to the goal
+//! (2, 0) under a faster gain, tracked with `K` (both axes' poles at −2 s⁻¹); `P` is the Lyapunov metric
+//! of the sampled closed loop and the ball covers Init's corners. Not certified: it exercises the
+//! section, the interpreter and the loop.
 #![allow(non_snake_case)]
 
+use crate::nonlinear::ControlAffine;
 use crate::plant::{double_integrator as double_integrator_plant, ContinuousPlant, DiscretePlant};
 use faer::Mat;
-use host_compiler::emit::{EmitError, FallbackLaw, ImageBuilder, Terminal};
+use host_compiler::emit::{EmitError, FallbackLaw, ImageBuilder, ModelMapsSpec, Terminal};
 use host_compiler::model::ModelError;
 use shared_types::image;
 
@@ -72,6 +82,10 @@ pub enum ImageBuildError {
     Emit(#[from] EmitError),
     #[error(transparent)]
     Image(#[from] image::ImageError),
+    #[error("the spec: {0}")]
+    Spec(String),
+    #[error("a model map: {0}")]
+    Expr(#[from] host_compiler::expr::ExprError),
 }
 
 /// Tracking gain `K` (closed-loop poles of the sampled double integrator at 0.8, 0.8, h = 0.1).
@@ -174,6 +188,169 @@ pub fn double_integrator() -> Result<TestImage, ImageBuildError> {
     })
 }
 
+/// The Example 4.9 image of the module doc and what the HIL test needs to know about it.
+#[derive(Clone, Debug)]
+pub struct NonlinearImage {
+    /// The encoded image.
+    pub bytes: Vec<u8>,
+    /// The plant of the spec, `ẋ = f(x) + g(x)u`.
+    pub plant: ControlAffine,
+    /// Sample period, seconds.
+    pub h: f64,
+    /// Init's box (lo, hi) in the plant's state.
+    pub init: (Vec<f64>, Vec<f64>),
+    /// Rows of the table (the run's steps before the last row is held).
+    pub table_len: usize,
+    /// Bytes of the two model programs.
+    pub program_bytes: usize,
+}
+
+impl NonlinearImage {
+    /// The HIL runs' initial states: Init's four corners in (X, Y) and its centre, at Init's (Ẋ, Ẏ); θ and
+    /// θ̇ zero (as Init has them) in two of them and off zero in the others, so that the maps' sin and
+    /// cos see more than 0 from the first step on.
+    pub fn starts(&self) -> Vec<Vec<f64>> {
+        let (lo, hi) = &self.init;
+        let mid = |i: usize| 0.5 * (lo[i] + hi[i]);
+        vec![
+            vec![lo[0], lo[1], lo[2], lo[3], 0.0, 0.0],
+            vec![hi[0], lo[1], lo[2], lo[3], 0.0, 0.0],
+            vec![lo[0], lo[1], hi[2], lo[3], 0.5, 0.0],
+            vec![hi[0], lo[1], hi[2], lo[3], -1.0, 0.3],
+            vec![mid(0), mid(1), mid(2), mid(3), 2.5, -0.4],
+        ]
+    }
+}
+
+/// Tracking gain of the ξ-system per axis (`ẍ = 1 − x + 0.1ẋ + w`, w = −3x − 4.1ẋ: s² + 4s + 4).
+const FL_K_AXIS: [f64; 2] = [-3.0, -4.1];
+/// The nominal's gain per axis (s² + 6s + 9).
+const FL_K_NOMINAL_AXIS: [f64; 2] = [-8.0, -6.1];
+/// Rows of the Example 4.9 table (3 s at h = 0.01 s).
+pub const FL_TABLE_LEN: usize = 300;
+
+/// `[[k, 0], [0, k]]` over ξ = (X, Ẋ, Y, Ẏ): 2×4 row-major.
+fn per_axis(k: [f64; 2]) -> Vec<f64> {
+    vec![k[0], k[1], 0.0, 0.0, 0.0, 0.0, k[0], k[1]]
+}
+
+/// The ξ-system of Example 4.9 under u = R(θ)w, ξ = (X, Ẋ, Y, Ẏ): per axis ẋ = v, v̇ = 1 − x + 0.1v + w.
+pub fn fl_xi_system() -> ContinuousPlant {
+    let A = Mat::from_fn(4, 4, |i, j| match (i % 2, j, i / 2) {
+        (0, j, a) if j == 2 * a + 1 => 1.0,
+        (1, j, a) if j == 2 * a => -1.0,
+        (1, j, a) if j == 2 * a + 1 => 0.1,
+        _ => 0.0,
+    });
+    let B = Mat::from_fn(4, 2, |i, j| if i == 2 * j + 1 { 1.0 } else { 0.0 });
+    ContinuousPlant::new(A, B, vec![0.0, 1.0, 0.0, 1.0]).expect("the ξ-system is a valid plant")
+}
+
+/// The image of the module doc ([`fl_4_9`]'s data).
+pub fn fl_4_9() -> Result<NonlinearImage, ImageBuildError> {
+    use host_compiler::expr::compile::compile;
+    use host_compiler::expr::{parse, Names};
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../examples/fl-4-9.toml");
+    let problem =
+        host_compiler::spec::load(path).map_err(|e| ImageBuildError::Spec(format!("{e:?}")))?;
+    let desc = problem
+        .nonlinear
+        .as_ref()
+        .ok_or_else(|| ImageBuildError::Spec("fl-4-9 has no nonlinear plant".into()))?;
+    let h = desc.period;
+    let names = &desc.names;
+    let params = names.param_values();
+    let n_plant = names.states.len();
+    let exprs = |texts: &[&str], names: &Names| -> Result<Vec<_>, ImageBuildError> {
+        Ok(texts
+            .iter()
+            .map(|t| parse(t, names))
+            .collect::<Result<Vec<_>, _>>()?)
+    };
+    let coords = compile(&exprs(&["X", "Xd", "Y", "Yd"], names)?, n_plant, 0, &params)?;
+    let w_names = Names {
+        inputs: vec!["w1".into(), "w2".into()],
+        ..names.clone()
+    };
+    let input_map = compile(
+        &exprs(
+            &["-sin(th)*w1 + cos(th)*w2", "cos(th)*w1 + sin(th)*w2"],
+            &w_names,
+        )?,
+        n_plant,
+        2,
+        &params,
+    )?;
+
+    let (n, m) = (4, 2);
+    let d = fl_xi_system().zoh(h)?;
+    let K = per_axis(FL_K_AXIS);
+    let Acl = Mat::from_fn(n, n, |i, j| {
+        d.A[(i, j)] + (0..m).map(|k| d.B[(i, k)] * K[k * n + j]).sum::<f64>()
+    });
+    let Pm = lyapunov(&Acl);
+    let P: Vec<f64> = (0..n * n)
+        .map(|k| 0.5 * (Pm[(k / n, k % n)] + Pm[(k % n, k / n)]))
+        .collect();
+
+    // The nominal: from ξ of Init's centre to the goal's equilibrium ξ = (2, 0, 0, 0), w = (1, −1).
+    let (lo, hi) = (problem.init.lo.clone(), problem.init.hi.clone());
+    let centre: Vec<f64> = lo.iter().zip(&hi).map(|(a, b)| 0.5 * (a + b)).collect();
+    let xi0 = vec![centre[0], centre[1], centre[2], centre[3]];
+    let (goal, w_eq) = ([2.0, 0.0, 0.0, 0.0], [1.0, -1.0]);
+    let K2 = per_axis(FL_K_NOMINAL_AXIS);
+    let (mut x_nom, mut u_nom) = (Vec::new(), Vec::new());
+    let mut x = xi0.clone();
+    for _ in 0..FL_TABLE_LEN {
+        let u: Vec<f64> = (0..m)
+            .map(|r| {
+                w_eq[r]
+                    + (0..n)
+                        .map(|c| K2[r * n + c] * (x[c] - goal[c]))
+                        .sum::<f64>()
+            })
+            .collect();
+        x_nom.extend_from_slice(&x);
+        u_nom.extend_from_slice(&u);
+        x = d.step(&x, &u);
+    }
+    // The ball covers ξ of Init's corners (X and Y at their bounds), with 5 % to spare.
+    let mut r2: f64 = 0.0;
+    for (X, Y) in [
+        (lo[0], lo[2]),
+        (lo[0], hi[2]),
+        (hi[0], lo[2]),
+        (hi[0], hi[2]),
+    ] {
+        let e = [X - xi0[0], 0.0, Y - xi0[2], 0.0];
+        r2 = r2.max(
+            (0..n)
+                .map(|i| (0..n).map(|j| e[i] * P[i * n + j] * e[j]).sum::<f64>())
+                .sum(),
+        );
+    }
+    let mut b = ImageBuilder::new(n, m, h);
+    b.add_location(K, P);
+    b.add_nominal_trajectory(&x_nom, &u_nom, &[0; FL_TABLE_LEN], 1.05 * r2.sqrt())?;
+    b.fallback = FallbackLaw::Zero;
+    b.terminal = Terminal::HoldLast;
+    b.model_maps(ModelMapsSpec {
+        n_plant,
+        m_plant: names.inputs.len(),
+        coords: coords.bytes.clone(),
+        input_map: input_map.bytes.clone(),
+    });
+    let bytes = b.to_bytes()?;
+    Ok(NonlinearImage {
+        bytes,
+        plant: ControlAffine::from_spec(desc),
+        h,
+        init: (lo, hi),
+        table_len: FL_TABLE_LEN,
+        program_bytes: coords.bytes.len() + input_map.bytes.len(),
+    })
+}
+
 /// A copy of `bytes` with one payload byte flipped: the CRC no longer matches, the header still parses.
 pub fn corrupted(bytes: &[u8]) -> Vec<u8> {
     let mut b = bytes.to_vec();
@@ -254,5 +431,68 @@ mod tests {
         }
         assert!(t.outside_every_ball(&[10.0, 10.0]));
         assert!(image::decode(&corrupted(&t.bytes)).is_err());
+    }
+
+    #[test]
+    fn fl_4_9_image_carries_its_maps_and_flow_matches_the_linear_xi_system() {
+        use crate::nonlinear::PlantFlow;
+        let t = fl_4_9().unwrap();
+        let img = image::decode(&t.bytes).unwrap();
+        assert_eq!(
+            (img.n(), img.m(), img.plant_n(), img.plant_m()),
+            (4, 2, 6, 2)
+        );
+        let maps = img.model_maps().unwrap();
+        assert_eq!(
+            maps.coords_bytes().len() + maps.input_map_bytes().len(),
+            t.program_bytes
+        );
+        // With F1 = F2 (aI = bI) and θ̇ = 0, θ stays put, so ξ follows the sampled linear ξ-system with
+        // w = R(θ)u (R is its own inverse).
+        let th: f64 = 0.4;
+        let x0 = [0.05, 0.2, -0.03, 1.0, th, 0.0];
+        let u = [0.7, 0.7];
+        let x1 = t.plant.flow(&x0, &u, t.h).unwrap();
+        let w = [
+            -th.sin() * u[0] + th.cos() * u[1],
+            th.cos() * u[0] + th.sin() * u[1],
+        ];
+        let d = fl_xi_system().zoh(t.h).unwrap();
+        let xi1 = d.step(&[x0[0], x0[1], x0[2], x0[3]], &w);
+        for i in 0..4 {
+            assert!(
+                (x1[i] - xi1[i]).abs() < 1e-9,
+                "{i}: {} vs {}",
+                x1[i],
+                xi1[i]
+            );
+        }
+        assert!((x1[4] - th).abs() < 1e-12 && x1[5].abs() < 1e-12);
+    }
+
+    #[test]
+    fn fl_4_9_host_loop_tracks_to_the_goal() {
+        use crate::nonlinear::PlantFlow;
+        let t = fl_4_9().unwrap();
+        let img = image::decode(&t.bytes).unwrap();
+        for x0 in [
+            vec![t.init.0[0], 0.0, t.init.0[2], 1.0, 0.0, 0.0],
+            vec![t.init.1[0], 0.0, t.init.0[2], 1.0, 0.3, -0.2],
+        ] {
+            let mut c = shared_types::eval::Controller::new(img);
+            let mut x = x0.clone();
+            for k in 0..FL_TABLE_LEN + 100 {
+                let xf: Vec<f32> = x.iter().map(|&v| v as f32).collect();
+                let u = c
+                    .step_plant(&xf)
+                    .unwrap_or_else(|s| panic!("step {k} from {x0:?}: {s:?}"));
+                let u: Vec<f64> = u.as_slice().iter().map(|&v| v as f64).collect();
+                x = t.plant.flow(&x, &u, t.h).unwrap();
+            }
+            assert!(
+                (x[0] - 2.0).abs() < 0.02 && x[2].abs() < 0.02,
+                "from {x0:?} ends at {x:?}"
+            );
+        }
     }
 }

@@ -7,6 +7,7 @@
 //!   QEMU's stdout, kept apart; an overall deadline on every wait, and QEMU killed on drop;
 //! * [`logs`]: decodes the defmt stream with the ELF's table (`defmt-decoder`);
 //! * [`plant`]: the plant on the host, sampled with `host_compiler::model`'s exact zero-order hold;
+//! * [`nonlinear`]: nonlinear plants on the host, flowed over each period by an adaptive ODE solver;
 //! * [`closed_loop`]: runs N steps against the plant and the host evaluator, comparing bit for bit;
 //! * [`images`]: the test controller images.
 //!
@@ -19,6 +20,7 @@ pub mod closed_loop;
 pub mod firmware;
 pub mod images;
 pub mod logs;
+pub mod nonlinear;
 pub mod plant;
 pub mod qemu;
 

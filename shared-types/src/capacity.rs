@@ -87,7 +87,12 @@ const FEEDFORWARD_PAYLOAD_LEN: usize = COMMON_PAYLOAD_LEN
         + MAX_TRAJECTORIES                // ball radii
         + MAX_STEPS * MAX_M)              // v table
     + 2 * MAX_TRAJECTORIES                // trajectory segment ends (u16)
-    + SEGMENT_RECORD_LEN * MAX_SEGMENTS; // segment records
+    + SEGMENT_RECORD_LEN * MAX_SEGMENTS // segment records
+    + 4 * MAX_SEGMENTS * (2 * MAX_N + 3) // segment exits
+    + MAX_MAPS_LEN; // model maps
+
+/// Largest model maps section body ([`crate::maps`]): its header and two programs, each padded to 4 bytes.
+const MAX_MAPS_LEN: usize = 12 + 2 * (MAX_PROGRAM_LEN + 3);
 
 /// Largest PWA-feedback payload.
 const PWA_PAYLOAD_LEN: usize = COMMON_PAYLOAD_LEN

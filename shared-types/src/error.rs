@@ -48,6 +48,10 @@ pub enum Dim {
     ProgramOutputs,
     /// Operand-stack depth of a model program.
     ProgramStack,
+    /// The plant's state dimension `n_plant` of the model maps section.
+    PlantN,
+    /// The plant's input dimension `m_plant` of the model maps section.
+    PlantM,
 }
 
 /// Which payload field an error is about.
@@ -119,6 +123,18 @@ pub enum Field {
     ProgramConst,
     /// The spec fingerprint's hashes.
     Fingerprint,
+    /// The model maps section as a whole (its header's program lengths against its size).
+    ModelMaps,
+}
+
+/// Which program of the model maps section an error is about.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ModelMap {
+    /// `coords: x ↦ ξ`.
+    Coords,
+    /// `input_map: (x, w) ↦ u`.
+    InputMap,
 }
 
 /// Position of a bad value. Its meaning depends on the field: `K`, `P`: (location, row, col); `Centre`:
@@ -503,6 +519,34 @@ pub enum ImageError {
         /// Length given.
         found: u16,
     },
+    /// A reserved or padding byte of the model maps section is not zero.
+    MapsPadding {
+        /// Offset of the byte within the section.
+        offset: u32,
+    },
+    /// A model map reads another number of input slots than the image's dimensions give it
+    /// (`coords`: `n_plant`; `input_map`: `n_plant + m`).
+    MapInputs {
+        /// The map.
+        map: ModelMap,
+        /// Slots it must read.
+        expected: u16,
+        /// Slots it declares.
+        found: u16,
+    },
+    /// A model map stores another number of outputs than the image's dimensions need (`coords`: `n`;
+    /// `input_map`: `m_plant`).
+    MapOutputs {
+        /// The map.
+        map: ModelMap,
+        /// Outputs it must store.
+        expected: u16,
+        /// Outputs it declares.
+        found: u16,
+    },
+    /// A linear fallback in an image with model maps: its gain would act on the linear coordinates ξ,
+    /// while the fallback must act on the plant's own state and input.
+    LinearFallbackWithMaps,
     /// The output buffer of [`encode`] is too small.
     BufferTooSmall {
         /// Bytes needed.
@@ -533,6 +577,8 @@ impl fmt::Display for Dim {
             Dim::ProgramInputs => "number of program inputs",
             Dim::ProgramOutputs => "number of program outputs",
             Dim::ProgramStack => "program stack depth",
+            Dim::PlantN => "plant state dimension n_plant",
+            Dim::PlantM => "plant input dimension m_plant",
         })
     }
 }
@@ -572,6 +618,16 @@ impl fmt::Display for Field {
             Field::Program => "model program",
             Field::ProgramConst => "program constants",
             Field::Fingerprint => "spec fingerprint",
+            Field::ModelMaps => "model maps section",
+        })
+    }
+}
+
+impl fmt::Display for ModelMap {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            ModelMap::Coords => "coords",
+            ModelMap::InputMap => "input_map",
         })
     }
 }
@@ -772,6 +828,22 @@ impl fmt::Display for ImageError {
             ProgramArity { expected, found } => write!(
                 f,
                 "program evaluated with {found} values where it declares {expected}"
+            ),
+            MapsPadding { offset } => write!(
+                f,
+                "model maps section byte {offset}: reserved or padding byte is not zero"
+            ),
+            MapInputs { map, expected, found } => write!(
+                f,
+                "model map {map} reads {found} input slots, the image gives it {expected}"
+            ),
+            MapOutputs { map, expected, found } => write!(
+                f,
+                "model map {map} stores {found} outputs, the image needs {expected}"
+            ),
+            LinearFallbackWithMaps => f.write_str(
+                "a linear fallback in an image with model maps (its gain would act on the linear \
+                 coordinates, not on the plant's state)",
             ),
             BufferTooSmall { needed } => write!(f, "output buffer too small: {needed} bytes needed"),
             Encode => f.write_str("payload could not be serialised"),

@@ -17,6 +17,11 @@
 //! `u = K_j x + θ0_j` with `K_j = K + θ_j` of that ball's partition j; otherwise [`Status::OutOfEnvelope`]
 //! for this step only (nothing is latched, and there is no default region).
 //!
+//! With model maps ([`crate::maps`], a feedback-linearizable plant, §3.1.2), [`Controller::step_plant`]
+//! wraps the feedforward law: ξ = coords(x), the feedforward law above on ξ gives w, and u = input_map(x,
+//! w); where the law would apply the fallback, the image's fallback (in the plant's input space) is applied
+//! without running `input_map`. Without model maps `step_plant` is `step`.
+//!
 //! Distances are compared squared (`(x − c)ᵀP(x − c) ≤ δ²`), so no square root is needed. Arithmetic is
 //! plain f32 multiply and add in a fixed order, without fused multiply-add, so host and Cortex-M4F give the
 //! same bits. Every loop is bounded by the capacities in [`crate::capacity`]; nothing allocates or panics.
@@ -25,7 +30,7 @@
 #![allow(non_snake_case)]
 
 use crate::capacity::{MAX_M, MAX_N};
-use crate::image::{Exit, Fallback, Image, Mode, Terminal};
+use crate::image::{Exit, Fallback, Image, Mode, ModelMaps, Terminal};
 use crate::pwa::Region;
 use crate::raw::{f32_span, floats};
 
@@ -137,7 +142,7 @@ pub struct Controller<'a> {
 impl<'a> Controller<'a> {
     /// A controller at κ = 0 with no trajectory selected.
     pub fn new(image: Image<'a>) -> Controller<'a> {
-        let m = image.m();
+        let m = image.plant_m();
         Controller {
             image,
             kappa: 0,
@@ -271,7 +276,8 @@ impl<'a> Controller<'a> {
     /// returns `Err(OutOfEnvelope)` if no ball contained the state at κ = 0 (latched until reset). PWA:
     /// returns `Err(OutOfEnvelope)` for this step if the state is outside the certified envelope. Both:
     /// `Err(OutOfEnvelope)` if the input is not finite. On success κ advances and the input is remembered
-    /// for [`Fallback::Hold`].
+    /// for [`Fallback::Hold`]. This is the law in the image's own coordinates: for an image with model
+    /// maps, `x` is ξ and the answer is w; the plant's loop calls [`Controller::step_plant`].
     pub fn step(&mut self, x: &[f32]) -> Result<Input, Status> {
         if self.image.mode() != Mode::Feedforward {
             return self.step_pwa(x);
@@ -279,6 +285,91 @@ impl<'a> Controller<'a> {
         if x.len() != self.image.n() || !x.iter().all(|v| v.is_finite()) {
             return Err(Status::BadFrame);
         }
+        self.feedforward(
+            x,
+            |c, u| c.accept(u),
+            |c| {
+                let u = c.fallback(x, &c.last_u);
+                c.accept(u)
+            },
+        )
+    }
+
+    /// One control period of the plant: `x` is the plant's state ([`Image::plant_n`] values) and the
+    /// answer the plant's input ([`Image::plant_m`] values). Without model maps exactly
+    /// [`Controller::step`]. With them: `x` must have `n_plant` finite values, else `Err(BadFrame)`;
+    /// ξ = coords(x), `Err(OutOfEnvelope)` if not finite; the feedforward law of `step` on ξ gives w
+    /// (`Err(OutOfEnvelope)` if not finite); u = input_map(x, w), `Err(OutOfEnvelope)` if not finite.
+    /// Where the law applies the fallback, the image's fallback is applied to the plant directly. κ and
+    /// the remembered input as for `step`.
+    pub fn step_plant(&mut self, x: &[f32]) -> Result<Input, Status> {
+        match self.image.maps {
+            None => self.step(x),
+            Some(maps) => self.step_maps(&maps, x),
+        }
+    }
+
+    /// [`Controller::step_plant`] with model maps; out of line, so that `step`'s code is not mixed with it.
+    #[inline(never)]
+    fn step_maps(&mut self, maps: &ModelMaps<'a>, x: &[f32]) -> Result<Input, Status> {
+        let (n, m) = (
+            self.image.n().clamp(1, MAX_N),
+            self.image.m().clamp(1, MAX_M),
+        );
+        let (np, mp) = (
+            maps.n_plant().clamp(1, MAX_N),
+            maps.m_plant().clamp(1, MAX_M),
+        );
+        if x.len() != np || !x.iter().all(|v| v.is_finite()) {
+            return Err(Status::BadFrame);
+        }
+        let mut xi_buf = [0.0f32; MAX_N];
+        let Some(xi) = xi_buf.get_mut(..n) else {
+            return Err(Status::OutOfEnvelope);
+        };
+        if maps.coords().eval(x, xi).is_err() || !xi.iter().all(|v| v.is_finite()) {
+            return Err(Status::OutOfEnvelope);
+        }
+        let input_map = maps.input_map();
+        self.feedforward(
+            xi,
+            |c, w| {
+                if !w.as_slice().iter().all(|v| v.is_finite()) {
+                    return Err(Status::OutOfEnvelope);
+                }
+                // The slots of input_map: x, then w.
+                let mut slots = [0.0f32; MAX_N + MAX_M];
+                for (s, &v) in slots.iter_mut().zip(x.iter().chain(w.as_slice())) {
+                    *s = v;
+                }
+                let mut u = Input::zero(mp);
+                let (Some(inputs), Some(out)) = (slots.get(..np + m), u.u.get_mut(..mp)) else {
+                    return Err(Status::OutOfEnvelope);
+                };
+                if input_map.eval(inputs, out).is_err() {
+                    return Err(Status::OutOfEnvelope);
+                }
+                c.accept(u)
+            },
+            |c| {
+                let u = c.fallback(x, &c.last_u);
+                c.accept(u)
+            },
+        )
+    }
+
+    /// The feedforward law of one step at the (finite, length-n) state `x`: selection at κ = 0 and its
+    /// latch, the table row (or exits), the terminal behaviour; then `law(self, u)` with the law's input
+    /// or `fallback(self)` where the image's fallback applies. Closures rather than a returned enum, which
+    /// the optimiser does not resolve branch by branch: this way `step` costs what its own inline code
+    /// would.
+    #[inline(always)]
+    fn feedforward(
+        &mut self,
+        x: &[f32],
+        law: impl FnOnce(&mut Self, Input) -> Result<Input, Status>,
+        fallback: impl FnOnce(&mut Self) -> Result<Input, Status>,
+    ) -> Result<Input, Status> {
         if self.out_of_envelope {
             return Err(Status::OutOfEnvelope);
         }
@@ -297,18 +388,18 @@ impl<'a> Controller<'a> {
             },
         };
         if self.image.has_exits() {
-            return self.step_exits(t as usize, x);
+            return self.step_exits(t as usize, x, law, fallback);
         }
         let (start, len) = self.image.trajectory_rows(t as usize);
         let k = self.kappa as usize;
-        let u = if k < len || self.image.terminal() == Terminal::HoldLast {
+        if k < len || self.image.terminal() == Terminal::HoldLast {
             let row = start + k.min(len.saturating_sub(1));
             let l = self.row_location(t as usize, row);
-            self.law(row, l, x)
+            let u = self.law(row, l, x);
+            law(self, u)
         } else {
-            self.fallback(x, &self.last_u)
-        };
-        self.accept(u)
+            fallback(self)
+        }
     }
 
     /// A feedforward step of an image with segment exits (internal switching, (4.41)–(4.42)): the cursor
@@ -319,7 +410,13 @@ impl<'a> Controller<'a> {
     /// past the last segment's rows, the terminal behaviour. At most one move per segment of the
     /// trajectory per step.
     #[inline(never)]
-    fn step_exits(&mut self, t: usize, x: &[f32]) -> Result<Input, Status> {
+    fn step_exits(
+        &mut self,
+        t: usize,
+        x: &[f32],
+        law: impl FnOnce(&mut Self, Input) -> Result<Input, Status>,
+        fallback: impl FnOnce(&mut Self) -> Result<Input, Status>,
+    ) -> Result<Input, Status> {
         let img = self.image;
         let n = img.n().clamp(1, MAX_N);
         let (s0, count) = img.trajectory_segments(t);
@@ -368,9 +465,9 @@ impl<'a> Controller<'a> {
         } else if img.terminal() == Terminal::HoldLast {
             self.law(g.first_row + g.len.saturating_sub(1), g.location, x)
         } else {
-            self.fallback(x, &self.last_u)
+            return fallback(self);
         };
-        self.accept(u)
+        law(self, u)
     }
 
     /// The end of every step: a non-finite input is out of the envelope (κ does not advance); otherwise κ
@@ -417,7 +514,9 @@ impl<'a> Controller<'a> {
         self.accept(u)
     }
 
-    /// The image's fallback input for state `x`, given the last applied input:
+    /// The image's fallback input for state `x`, given the last applied input, in the plant's input
+    /// space ([`Image::plant_m`] values; with model maps `x` is the plant's state and the law is never
+    /// linear):
     /// * `Hold`: `last_u` (its first m values; missing or non-finite components become 0);
     /// * `Zero`: zero;
     /// * `Constant`: the stored input, whatever the state;
@@ -425,7 +524,7 @@ impl<'a> Controller<'a> {
     ///   length or a non-finite component, or the result is not finite, zero instead.
     pub fn fallback(&self, x: &[f32], last_u: &Input) -> Input {
         let img = &self.image;
-        let (n, m) = (img.n().clamp(1, MAX_N), img.m().clamp(1, MAX_M));
+        let (n, m) = (img.n().clamp(1, MAX_N), img.plant_m().clamp(1, MAX_M));
         let mut out = Input::zero(m);
         match img.fallback() {
             Fallback::Zero => {}

@@ -39,9 +39,13 @@
 //! | 7   | `PwaTree`               | [`crate::pwa::PwaTree`]    | PWA         |
 //! | 8   | `PwaBalls`              | [`crate::pwa::PwaBalls`]   | PWA         |
 //! | 9   | `SegmentExits`          | [`SegmentExitsSection`]    | feedforward, optional |
+//! | 10  | `ModelMaps`             | raw, [`crate::maps`]       | feedforward, optional |
 //! | 12  | `SpecFingerprint`       | [`SpecFingerprintSection`] | both, optional |
 //!
 //! Every section a mode lists is required, exactly once; a known section of the other mode is refused.
+//! The model maps section is the one body that is not postcard: its layout is [`crate::maps`]'s (two
+//! model programs, which must keep their constant pools aligned), and with it the fallback and the input
+//! box are in the plant's input space (`m_plant` values) and a linear fallback is refused.
 //! The spec fingerprint is [`SPEC_FINGERPRINT_LEN`] bytes: per part of the spec ([`SPEC_PARTS`], in
 //! that order) a hash of [`SPEC_HASH_LEN`] bytes that the host computes; the firmware only checks its
 //! length.
@@ -97,7 +101,7 @@ use crate::capacity::{
     HEADER_LEN, MAX_LOCATIONS, MAX_M, MAX_N, MAX_PARTITIONS, MAX_SEGMENTS, MAX_STEPS,
     MAX_TRAJECTORIES,
 };
-pub use crate::error::{Dim, Field, ImageError, Pos};
+pub use crate::error::{Dim, Field, ImageError, ModelMap, Pos};
 pub use crate::header::{
     compute_crc, image_len, write_image, DirEntry, Directory, Header, RawSection, SectionWrite,
 };
@@ -105,6 +109,7 @@ pub use crate::layout::{
     exit_record_len, Dims, Mode, SectionKind, EXIT_GUARD, EXIT_TABLE, FORMAT_VERSION, MAGIC,
     SEGMENT_RECORD_LEN, SPEC_FINGERPRINT_LEN, SPEC_HASH_LEN, SPEC_PARTS,
 };
+pub use crate::maps::ModelMaps;
 use crate::pwa::{node_child, node_value, Child, PwaBalls, PwaLaws, PwaTables, PwaTree, Region};
 use crate::raw::{
     check_dim, check_finite, check_len, div, f32_at, f32_span, floats, positive_definite, rem,
@@ -400,7 +405,15 @@ fn check_dims(mode: Mode, d: Dims) -> Result<(), ImageError> {
     }
 }
 
-fn validate(mode: Mode, dims: Dims, period: f32, p: &Payload<'_>) -> Result<(), ImageError> {
+/// `maps`: the validated model maps, if the image has them (the fallback and the input box are then in
+/// the plant's input space, and a linear fallback is refused).
+fn validate(
+    mode: Mode,
+    dims: Dims,
+    period: f32,
+    p: &Payload<'_>,
+    maps: Option<&ModelMaps<'_>>,
+) -> Result<(), ImageError> {
     if mode != Mode::Feedforward {
         return Err(ImageError::UnsupportedMode { mode });
     }
@@ -532,7 +545,13 @@ fn validate(mode: Mode, dims: Dims, period: f32, p: &Payload<'_>) -> Result<(), 
         })?;
         start = end;
     }
-    validate_fallback_box(n, m, p.fallback, p.input_box)
+    match maps {
+        None => validate_fallback_box(n, m, p.fallback, p.input_box),
+        Some(_) if matches!(p.fallback, Fallback::Linear { .. }) => {
+            Err(ImageError::LinearFallbackWithMaps)
+        }
+        Some(mm) => validate_fallback_box(n, mm.m_plant(), p.fallback, p.input_box),
+    }
 }
 
 /// The PWA counterpart of [`validate`]: dimensions, period, `K`, `P`, the tables (see [`crate::pwa`]), the
@@ -657,6 +676,7 @@ pub struct Image<'a> {
     pub(crate) pwa: PwaTables<'a>,
     /// The spec fingerprint's hashes, or empty when the image has none.
     pub(crate) fingerprint: &'a [u8],
+    pub(crate) maps: Option<ModelMaps<'a>>,
 }
 
 impl<'a> Image<'a> {
@@ -668,7 +688,28 @@ impl<'a> Image<'a> {
         period: f32,
         payload: Payload<'a>,
     ) -> Result<Self, ImageError> {
-        validate(mode, dims, period, &payload)?;
+        Self::new_with_maps(mode, dims, period, payload, None)
+    }
+
+    /// [`Image::new`] for an image that may carry model maps: `maps` is the model maps section's body
+    /// ([`crate::maps`]), validated against the dimensions, and with it the fallback and the input box
+    /// are checked in the plant's input space.
+    pub fn new_with_maps(
+        mode: Mode,
+        dims: Dims,
+        period: f32,
+        payload: Payload<'a>,
+        maps: Option<&'a [u8]>,
+    ) -> Result<Self, ImageError> {
+        if mode != Mode::Feedforward {
+            return Err(ImageError::UnsupportedMode { mode });
+        }
+        check_dims(mode, dims)?;
+        let maps = match maps {
+            Some(body) => Some(ModelMaps::decode(body, dims.n, dims.m)?),
+            None => None,
+        };
+        validate(mode, dims, period, &payload, maps.as_ref())?;
         Ok(Image {
             mode,
             dims,
@@ -676,6 +717,7 @@ impl<'a> Image<'a> {
             payload,
             pwa: PwaTables::EMPTY,
             fingerprint: &[],
+            maps,
         })
     }
 
@@ -702,6 +744,7 @@ impl<'a> Image<'a> {
             },
             pwa: payload.tables,
             fingerprint: &[],
+            maps: None,
         })
     }
 
@@ -747,6 +790,19 @@ impl<'a> Image<'a> {
     /// Input dimension m.
     pub fn m(&self) -> usize {
         self.dims.m
+    }
+    /// The model maps (section 10), if the image has them: the law then works on ξ = coords(x).
+    pub fn model_maps(&self) -> Option<ModelMaps<'a>> {
+        self.maps
+    }
+    /// The plant's state dimension: `n_plant` of the model maps, else n.
+    pub fn plant_n(&self) -> usize {
+        self.maps.as_ref().map_or(self.dims.n, ModelMaps::n_plant)
+    }
+    /// The plant's input dimension: `m_plant` of the model maps, else m. The fallback and the input box
+    /// have this many values.
+    pub fn plant_m(&self) -> usize {
+        self.maps.as_ref().map_or(self.dims.m, ModelMaps::m_plant)
     }
     /// Number of locations.
     pub fn n_locations(&self) -> usize {
@@ -931,10 +987,11 @@ impl<'a> Image<'a> {
         }
     }
 
-    /// Constant fallback input `u[j]`; 0.0 if the fallback is not constant or out of range.
+    /// Constant fallback input `u[j]` (`j < plant_m`); 0.0 if the fallback is not constant or out of
+    /// range.
     pub fn fallback_input(&self, j: usize) -> f32 {
         match self.payload.fallback {
-            Fallback::Constant { u } if j < self.dims.m => f32_at(u, j),
+            Fallback::Constant { u } if j < self.plant_m() => f32_at(u, j),
             _ => 0.0,
         }
     }
@@ -947,10 +1004,10 @@ impl<'a> Image<'a> {
         }
     }
 
-    /// Input box bounds `(lo_j, hi_j)`, if a box is stored and `j < m`.
+    /// Input box bounds `(lo_j, hi_j)`, if a box is stored and `j < plant_m`.
     pub fn input_bounds(&self, j: usize) -> Option<(f32, f32)> {
         match self.payload.input_box {
-            Some(b) if j < self.dims.m => Some((f32_at(b.lo, j), f32_at(b.hi, j))),
+            Some(b) if j < self.plant_m() => Some((f32_at(b.lo, j), f32_at(b.hi, j))),
             _ => None,
         }
     }
@@ -990,6 +1047,10 @@ impl<'a> Image<'a> {
             SectionKind::SegmentExits,
             SegmentExitsSection { exit: p.exits },
         );
+        let maps = RawSection {
+            kind: SectionKind::ModelMaps as u16,
+            body: self.maps.as_ref().map_or(&[][..], ModelMaps::body),
+        };
         let (laws, tree, balls) = self.pwa.sections();
         let laws = PostcardSection::new(SectionKind::PwaLaws, laws);
         let tree = PostcardSection::new(SectionKind::PwaTree, tree);
@@ -1000,25 +1061,22 @@ impl<'a> Image<'a> {
                 hash: self.fingerprint,
             },
         );
-        let feedforward: [&dyn SectionWrite; 6] = [
-            &locations,
-            &fallback,
-            &trajectories,
-            &segments,
-            &steps,
-            &exits,
-        ];
+        let feedforward: [&dyn SectionWrite; 5] =
+            [&locations, &fallback, &trajectories, &segments, &steps];
         let pwa: [&dyn SectionWrite; 5] = [&locations, &fallback, &laws, &tree, &balls];
-        let base: &[&dyn SectionWrite] = match self.mode {
-            Mode::Feedforward if p.exits.is_empty() => feedforward.get(..5).unwrap_or(&[]),
-            Mode::Feedforward => &feedforward,
-            Mode::PwaFeedback => &pwa,
-        };
-        let fp = (!self.fingerprint.is_empty()).then_some(&fingerprint as &dyn SectionWrite);
-        // At most 7 sections (feedforward with exits and a fingerprint), in kind order.
-        let mut list: [&dyn SectionWrite; 7] = [&locations; 7];
+        let ff = self.mode == Mode::Feedforward;
+        let base: &[&dyn SectionWrite] = if ff { &feedforward } else { &pwa };
+        // The optional sections, in kind order, only when present.
+        let optional: [(bool, &dyn SectionWrite); 3] = [
+            (ff && !p.exits.is_empty(), &exits),
+            (ff && self.maps.is_some(), &maps),
+            (!self.fingerprint.is_empty(), &fingerprint),
+        ];
+        let present = optional.iter().filter(|(on, _)| *on).map(|(_, s)| *s);
+        // At most 8 sections (feedforward with exits, maps and a fingerprint).
+        let mut list: [&dyn SectionWrite; 8] = [&locations; 8];
         let mut count = 0;
-        for (slot, s) in list.iter_mut().zip(base.iter().copied().chain(fp)) {
+        for (slot, s) in list.iter_mut().zip(base.iter().copied().chain(present)) {
             *slot = s;
             count += 1;
         }
@@ -1063,6 +1121,7 @@ pub fn decode(bytes: &[u8]) -> Result<Image<'_>, ImageError> {
                 Some(_) => parse_section(&dir, SectionKind::SegmentExits)?,
                 None => SegmentExitsSection { exit: &[] },
             };
+            let maps = dir.section(SectionKind::ModelMaps);
             let payload = Payload {
                 K: locations.K,
                 P: locations.P,
@@ -1076,7 +1135,7 @@ pub fn decode(bytes: &[u8]) -> Result<Image<'_>, ImageError> {
                 terminal: tr.terminal,
                 exits: exits.exit,
             };
-            let img = Image::new(mode, d, h.period, payload)?;
+            let img = Image::new_with_maps(mode, d, h.period, payload, maps)?;
             with_stored_fingerprint(&dir, img)
         }
         Mode::PwaFeedback => {

@@ -102,10 +102,12 @@ impl Mode {
     }
 
     /// Whether a section of `kind` belongs in an image of this mode: the required ones, the optional
-    /// segment exits of a feedforward image, and the optional spec fingerprint of either mode.
+    /// segment exits and model maps of a feedforward image, and the optional spec fingerprint of either
+    /// mode.
     pub fn admits(self, kind: SectionKind) -> bool {
         self.required_sections().contains(&kind)
-            || (self == Mode::Feedforward && kind == SectionKind::SegmentExits)
+            || (self == Mode::Feedforward
+                && matches!(kind, SectionKind::SegmentExits | SectionKind::ModelMaps))
             || kind == SectionKind::SpecFingerprint
     }
 }
@@ -156,15 +158,18 @@ pub enum SectionKind {
     /// Feedforward segment exits (optional): per segment, whether it ends with its table or when the
     /// measured state enters a guard half-space (internal switching, (4.41)–(4.42)).
     SegmentExits = 9,
+    /// Model maps (optional, feedforward only): the programs `coords: x ↦ ξ` and `input_map: (x, w) ↦ u`
+    /// of a feedback-linearizable plant, whose controller runs the linear law in ξ ([`crate::image`]).
+    ModelMaps = 10,
     /// The spec fingerprint (optional, both modes): [`SPEC_PARTS`] hashes of [`SPEC_HASH_LEN`] bytes of
     /// the spec the image was synthesised from, so that a tool can refuse an image whose spec changed
-    /// since. The evaluator does not read it. (Tags 10 and 11 are reserved for other sections.)
+    /// since. The evaluator does not read it. (Tag 11 is reserved.)
     SpecFingerprint = 12,
 }
 
 impl SectionKind {
     /// Every kind this build knows, in tag order.
-    pub const ALL: [SectionKind; 10] = [
+    pub const ALL: [SectionKind; 11] = [
         SectionKind::Locations,
         SectionKind::Fallback,
         SectionKind::Trajectories,
@@ -174,6 +179,7 @@ impl SectionKind {
         SectionKind::PwaTree,
         SectionKind::PwaBalls,
         SectionKind::SegmentExits,
+        SectionKind::ModelMaps,
         SectionKind::SpecFingerprint,
     ];
 
@@ -189,6 +195,7 @@ impl SectionKind {
             7 => Some(SectionKind::PwaTree),
             8 => Some(SectionKind::PwaBalls),
             9 => Some(SectionKind::SegmentExits),
+            10 => Some(SectionKind::ModelMaps),
             12 => Some(SectionKind::SpecFingerprint),
             _ => None,
         }
@@ -218,6 +225,7 @@ impl SectionKind {
             SectionKind::PwaTree => "pwa_tree",
             SectionKind::PwaBalls => "pwa_balls",
             SectionKind::SegmentExits => "segment_exits",
+            SectionKind::ModelMaps => "model_maps",
             SectionKind::SpecFingerprint => "spec_fingerprint",
         }
     }

@@ -10,6 +10,8 @@
 //! * [`pwa`]: the PWA-feedback tables (Ch. 6), their validation and bounded-depth point location;
 //! * [`eval`]: the f32 evaluator ([`eval::Controller`]), [`eval::Status`] and [`eval::Input`];
 //! * [`program`]: model programs, the validated `f32` stack bytecode of a nonlinear plant's maps;
+//! * [`maps`]: the model maps section (`coords: x ↦ ξ`, `input_map: (x, w) ↦ u`) of a
+//!   feedback-linearizable plant's image;
 //! * [`protocol`]: the UART protocol between plant and firmware.
 #![no_std]
 
@@ -19,6 +21,7 @@ pub mod eval;
 pub mod header;
 pub mod image;
 pub mod layout;
+pub mod maps;
 pub mod program;
 pub mod protocol;
 pub mod pwa;

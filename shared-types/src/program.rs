@@ -36,8 +36,7 @@
 //! | `0x20`–`0x28` SIN COS TAN EXP LOG SQRT ABS ATAN TANH | — | replace the top by `libm`'s `f32` function of it |
 //! | `0x29` ATAN2 | — | pop `x`, pop `y`, push `atan2(y, x)` |
 //!
-//! A nonlinear image would carry one such section whose outputs are every map the controller needs, with
-//! the slots laid out as the section's neighbours declare (states, then inputs, then parameters).
+//! An image carries programs in its model maps section ([`crate::maps`]), which declares their slots.
 
 use crate::capacity::{
     MAX_PROGRAM_CONSTS, MAX_PROGRAM_INPUTS, MAX_PROGRAM_LEN, MAX_PROGRAM_OUTPUTS, MAX_PROGRAM_POWI,
@@ -278,7 +277,7 @@ fn decode_op(code: &[u8], offset: usize) -> Result<(Op, usize), ImageError> {
 }
 
 /// A validated model program: a zero-copy view of its bytes.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Program<'a> {
     consts: &'a [u8],
     code: &'a [u8],
@@ -440,13 +439,16 @@ impl<'a> Program<'a> {
             });
         }
         let mut stack = [0.0f32; MAX_PROGRAM_STACK];
+        let mut memo = Memo::new();
         // `sp` is the number of values on the stack. Validation proved every access in range; the
         // accessors still use `get` so that no path can panic.
         let mut sp = 0usize;
         let top = |stack: &[f32; MAX_PROGRAM_STACK], sp: usize| {
             stack.get(sp.wrapping_sub(1)).copied().unwrap_or(0.0)
         };
-        for (_, op) in self.ops() {
+        let mut pc = 0usize;
+        while let Some((op, len)) = fetch(self.code, pc) {
+            pc += len;
             match op {
                 Op::Load(i) => {
                     let v = inputs.get(usize::from(i)).copied().unwrap_or(0.0);
@@ -489,7 +491,8 @@ impl<'a> Program<'a> {
                     let v = match op {
                         Op::Neg => -a,
                         Op::Powi(k) => powi(a, k),
-                        Op::Func(f) => f.apply(a),
+                        Op::Func(f @ (Func::Sqrt | Func::Abs)) => f.apply(a),
+                        Op::Func(f) => memo.apply(f, a),
                         _ => a,
                     };
                     if let Some(s) = stack.get_mut(sp.wrapping_sub(1)) {
@@ -499,6 +502,97 @@ impl<'a> Program<'a> {
             }
         }
         Ok(())
+    }
+}
+
+/// The instruction at `pc` of validated code and its length; `None` past the end (and, never for a
+/// validated program, at a byte that is not an opcode). [`decode_op`] without its checks and error
+/// values: the interpreter's fetch, once [`Program::decode`] has checked every instruction.
+#[inline(always)]
+fn fetch(code: &[u8], pc: usize) -> Option<(Op, usize)> {
+    let b = *code.get(pc)?;
+    let a = code.get(pc.wrapping_add(1)).copied().unwrap_or(0);
+    Some(match b {
+        opcode::LOAD => (Op::Load(a), 2),
+        opcode::STORE => (Op::Store(a), 2),
+        opcode::CONST => {
+            let hi = code.get(pc.wrapping_add(2)).copied().unwrap_or(0);
+            (Op::Const(u16::from_le_bytes([a, hi])), 3)
+        }
+        opcode::ADD => (Op::Add, 1),
+        opcode::SUB => (Op::Sub, 1),
+        opcode::MUL => (Op::Mul, 1),
+        opcode::DIV => (Op::Div, 1),
+        opcode::NEG => (Op::Neg, 1),
+        opcode::POWI => (Op::Powi(a as i8), 2),
+        opcode::ATAN2 => (Op::Atan2, 1),
+        b => (
+            Op::Func(*Func::ALL.get(usize::from(b.wrapping_sub(opcode::FUNC0)))?),
+            1,
+        ),
+    })
+}
+
+/// How many library calls one evaluation remembers ([`Memo`]).
+const MEMO_LEN: usize = 4;
+
+/// The library calls already made in one evaluation, by function and argument bits: the bytecode has no
+/// shared subexpressions, so a program that needs sin θ in two outputs (a rotation) would otherwise pay
+/// for it twice, and a call costs far more on the target than a few comparisons (`libm` computes in f64,
+/// which a Cortex-M4F emulates). The functions are pure, so a remembered value has exactly the bits a
+/// new call would give. Oldest entry replaced first; bounded by [`MEMO_LEN`].
+struct Memo {
+    /// (opcode, argument bits, value); opcode 0 (no function has it) marks an empty entry.
+    entries: [(u8, u32, f32); MEMO_LEN],
+    next: usize,
+}
+
+impl Memo {
+    fn new() -> Self {
+        Memo {
+            entries: [(0, 0, 0.0); MEMO_LEN],
+            next: 0,
+        }
+    }
+
+    /// `f(x)`, remembered. A sine or cosine is computed with `libm::sincosf` and both are remembered
+    /// (a rotation needs both of the same angle): `sincosf` gives exactly the bits of `sinf` and `cosf`
+    /// for every f32 (checked exhaustively for the `libm` version in `Cargo.lock`; the test suite
+    /// samples it).
+    #[inline]
+    fn apply(&mut self, f: Func, x: f32) -> f32 {
+        let bits = x.to_bits();
+        if let Some(&(_, _, v)) = self
+            .entries
+            .iter()
+            .find(|e| e.0 == f.opcode() && e.1 == bits)
+        {
+            return v;
+        }
+        match f {
+            Func::Sin | Func::Cos => {
+                let (s, c) = libm::sincosf(x);
+                self.remember(Func::Sin, bits, s);
+                self.remember(Func::Cos, bits, c);
+                if f == Func::Sin {
+                    s
+                } else {
+                    c
+                }
+            }
+            _ => {
+                let v = f.apply(x);
+                self.remember(f, bits, v);
+                v
+            }
+        }
+    }
+
+    fn remember(&mut self, f: Func, bits: u32, v: f32) {
+        if let Some(e) = self.entries.get_mut(self.next % MEMO_LEN) {
+            *e = (f.opcode(), bits, v);
+        }
+        self.next = self.next.wrapping_add(1);
     }
 }
 

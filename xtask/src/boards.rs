@@ -74,8 +74,10 @@ pub fn elf(board: &str) -> PathBuf {
         .join(board)
 }
 
-/// `cargo build --release` of `board` with `image` embedded (`None`: the default test image).
-pub fn build(board: &str, image: Option<&Path>) -> Result<(), String> {
+/// `cargo build --release` of `board` with `image` embedded (`None`: the default test image); with
+/// `all_paths`, the model maps' path linked whatever the image (`CONTROLLER_MODEL_MAPS=1`, see
+/// `firmware/control-loop/build.rs`).
+pub fn build(board: &str, image: Option<&Path>, all_paths: bool) -> Result<(), String> {
     let mut c = board_cargo(board);
     c.args(["build", "--release"]);
     match image {
@@ -84,6 +86,10 @@ pub fn build(board: &str, image: Option<&Path>) -> Result<(), String> {
     };
     c.env_remove("CONTROLLER_REJECTED_M")
         .env_remove("FIRMWARE_FAULT_INJECTION");
+    match all_paths {
+        true => c.env("CONTROLLER_MODEL_MAPS", "1"),
+        false => c.env_remove("CONTROLLER_MODEL_MAPS"),
+    };
     run(c)
 }
 
@@ -171,7 +177,7 @@ pub fn measure(stack: u64) -> Result<Vec<Figure>, String> {
     );
     let mut figures = Vec::new();
     for &board in BOARDS {
-        build(board, Some(&image))?;
+        build(board, Some(&image), false)?;
         let path = elf(board);
         let bytes = std::fs::read(&path).map_err(|e| format!("reading {}: {e}", path.display()))?;
         let size = elf_size(&bytes).map_err(|e| format!("{}: {e}", path.display()))?;

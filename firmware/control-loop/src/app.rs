@@ -9,8 +9,14 @@
 //! | image rejected at boot (any frame but Shutdown)  | `ImageRejected` | build-time fallback (zero)     | advances on a valid step |
 //! | frame oversize / not COBS / not a message        | `BadFrame`      | image fallback at the last state | unchanged |
 //! | step with a wrong `seq`, wrong dimension, NaN    | `BadFrame`      | image fallback at the last state | unchanged |
-//! | step, state in the envelope                      | `Ok`            | `K x + v_i(κ)`                 | advances |
+//! | step, state in the envelope                      | `Ok`            | `K x + v_i(κ)` (with model maps: `input_map(x, K ξ + v_i(κ))`) | advances |
 //! | step, state outside every ball (latched)         | `OutOfEnvelope` | image fallback at `x`          | advances |
+//!
+//! States and inputs are the plant's ([`Image::plant_n`], [`Image::plant_m`] values): the evaluator's
+//! [`Controller::step_plant`] runs an image's model maps, if it has them, around its law. A firmware
+//! whose embedded image has no model maps is built without `cfg(model_maps)` (`build.rs`) and calls
+//! [`Controller::step`], which is `step_plant` for such an image, so the program interpreter and
+//! `libm` take no flash.
 //!
 //! The cost reported is that of the evaluation (step, and fallback when the step failed), in instructions;
 //! 0 when nothing was evaluated.
@@ -19,6 +25,20 @@ use crate::board::Meter;
 use shared_types::eval::{rejected_image_input, Controller, Input, Status};
 use shared_types::image::{decode, Image, ImageError};
 use shared_types::protocol::{decode_frame, FrameEvent, InputVec, Reply, Request, State};
+
+/// One control period of the plant (module doc): `step_plant` where the image may have model maps.
+#[cfg(model_maps)]
+#[inline(always)]
+fn step(c: &mut Controller<'_>, x: &[f32]) -> Result<Input, Status> {
+    c.step_plant(x)
+}
+
+/// One control period of the plant: the embedded image has no model maps, so `step_plant` is `step`.
+#[cfg(not(model_maps))]
+#[inline(always)]
+fn step(c: &mut Controller<'_>, x: &[f32]) -> Result<Input, Status> {
+    c.step(x)
+}
 
 /// What to do after a frame.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -71,7 +91,10 @@ impl<'a> App<'a> {
     pub fn new(image_bytes: &'a [u8], rejected_m: usize) -> (Self, Result<Image<'a>, ImageError>) {
         let decoded = decode(image_bytes);
         let (engine, last_u) = match decoded {
-            Ok(img) => (Engine::Running(Controller::new(img)), Input::zero(img.m())),
+            Ok(img) => (
+                Engine::Running(Controller::new(img)),
+                Input::zero(img.plant_m()),
+            ),
             Err(_) => {
                 let u = rejected_image_input(rejected_m);
                 (Engine::Rejected(u), u)
@@ -143,7 +166,7 @@ impl<'a> App<'a> {
                 (Status::ImageRejected, *u, 0)
             }
             Engine::Running(c) => {
-                let ((status, u), cost) = meter.measure(|| match c.step(x.as_slice()) {
+                let ((status, u), cost) = meter.measure(|| match step(c, x.as_slice()) {
                     Ok(u) => (Status::Ok, u),
                     Err(s) => (s, c.fallback(x.as_slice(), &last_u)),
                 });

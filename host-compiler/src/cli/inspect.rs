@@ -7,6 +7,10 @@
 //! children), the leaves (partition and certified balls), the ball table (centre, whitened centre, stored
 //! radius), the factors R̂ of the whitened ball test, and the worst-case work of one control step for this
 //! image.
+//!
+//! For an image with model maps (a feedback-linearizable plant, `shared_types::maps`) it adds the plant's
+//! dimensions and, per program (`coords`, `input_map`), its length, slots, outputs, constants, code length
+//! and stack depth; the fallback and the input box are then shown in the plant's input space.
 #![allow(non_snake_case)]
 
 use std::fmt::Write as _;
@@ -381,6 +385,39 @@ impl PwaJson {
     }
 }
 
+/// One model program.
+#[derive(Serialize)]
+struct ProgramJson {
+    bytes: usize,
+    inputs: usize,
+    outputs: usize,
+    consts: usize,
+    code_len: usize,
+    max_stack: usize,
+}
+
+impl ProgramJson {
+    fn new(bytes: &[u8], p: &shared_types::program::Program<'_>) -> Self {
+        ProgramJson {
+            bytes: bytes.len(),
+            inputs: p.n_inputs(),
+            outputs: p.n_outputs(),
+            consts: p.n_consts(),
+            code_len: p.code_len(),
+            max_stack: p.max_stack(),
+        }
+    }
+}
+
+/// The model maps section.
+#[derive(Serialize)]
+struct MapsJson {
+    n_plant: usize,
+    m_plant: usize,
+    coords: ProgramJson,
+    input_map: ProgramJson,
+}
+
 #[derive(Serialize)]
 struct Report {
     header: HeaderJson,
@@ -401,6 +438,9 @@ struct Report {
     pwa: Option<PwaJson>,
     /// The spec fingerprint: per part of the spec its hash in hex (`null`: the image stores none).
     spec_fingerprint: Option<Vec<FingerprintPartJson>>,
+    /// Feedback-linearizable plants only.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    model_maps: Option<MapsJson>,
 }
 
 #[derive(Serialize)]
@@ -418,6 +458,8 @@ fn matrix(rows: usize, cols: usize, at: impl Fn(usize, usize) -> f32) -> Vec<Vec
 impl Report {
     fn new(img: &Image<'_>, h: &Header, size: usize) -> Report {
         let (n, m) = (img.n(), img.m());
+        // The fallback and the box act on the plant's input (m itself without model maps).
+        let mp = img.plant_m();
         Report {
             header: HeaderJson {
                 magic: String::from_utf8_lossy(&MAGIC).into_owned(),
@@ -480,7 +522,7 @@ impl Report {
                 Fallback::Hold => FallbackJson::Hold,
                 Fallback::Zero => FallbackJson::Zero,
                 Fallback::Constant { .. } => FallbackJson::Constant {
-                    u: (0..m).map(|j| img.fallback_input(j)).collect(),
+                    u: (0..mp).map(|j| img.fallback_input(j)).collect(),
                 },
                 Fallback::Linear { .. } => FallbackJson::Linear {
                     K: matrix(m, n, |r, c| img.fallback_K(r, c)),
@@ -489,7 +531,7 @@ impl Report {
                 },
             },
             input_box: img.has_input_box().then(|| {
-                let b: Vec<(f32, f32)> = (0..m).filter_map(|j| img.input_bounds(j)).collect();
+                let b: Vec<(f32, f32)> = (0..mp).filter_map(|j| img.input_bounds(j)).collect();
                 BoxJson {
                     lo: b.iter().map(|p| p.0).collect(),
                     hi: b.iter().map(|p| p.1).collect(),
@@ -517,6 +559,12 @@ impl Report {
                 })
                 .collect(),
             pwa: (img.mode() == Mode::PwaFeedback).then(|| PwaJson::new(img)),
+            model_maps: img.model_maps().map(|mm| MapsJson {
+                n_plant: mm.n_plant(),
+                m_plant: mm.m_plant(),
+                coords: ProgramJson::new(mm.coords_bytes(), &mm.coords()),
+                input_map: ProgramJson::new(mm.input_map_bytes(), &mm.input_map()),
+            }),
         }
     }
 }
@@ -588,6 +636,21 @@ fn summary(r: &Report, path: &str) -> String {
         }
         None => {
             let _ = writeln!(s, "spec fingerprint: none stored");
+        }
+    }
+    if let Some(mm) = &r.model_maps {
+        let _ = writeln!(
+            s,
+            "model maps: the law works on xi = coords(x) (n = {}) and gives w (m = {}); the plant has \
+             n_plant = {}, m_plant = {}, u = input_map(x, w)",
+            h.n, h.m, mm.n_plant, mm.m_plant
+        );
+        for (name, p) in [("coords", &mm.coords), ("input_map", &mm.input_map)] {
+            let _ = writeln!(
+                s,
+                "  {name}: {} bytes, {} inputs, {} outputs, {} constants, {} bytes of code, stack depth {}",
+                p.bytes, p.inputs, p.outputs, p.consts, p.code_len, p.max_stack
+            );
         }
     }
     if let Some(t) = r.terminal {

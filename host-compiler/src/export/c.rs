@@ -20,11 +20,11 @@ pub const CONTROLLER_H: &str = include_str!("c/controller.h");
 /// The evaluator's source template.
 pub const CONTROLLER_C: &str = include_str!("c/controller.c");
 
-/// The section kinds `controller.c` decodes and evaluates (tags 1–9: locations, fallback, trajectories,
-/// segments, steps, PWA laws, tree and balls, segment exits; 12: the spec fingerprint, whose length it
-/// checks and which it does not evaluate). A section kind added to the format must be added to the C
-/// (decoder and evaluator, and the harness's images) before it is added here.
-pub const C_SECTION_KINDS: [u16; 10] = [1, 2, 3, 4, 5, 6, 7, 8, 9, 12];
+/// The section kinds `controller.c` decodes and evaluates (tags 1–10: locations, fallback, trajectories,
+/// segments, steps, PWA laws, tree and balls, segment exits, model maps; 12: the spec fingerprint, whose
+/// length it checks and which it does not evaluate). A section kind added to the format must be added to
+/// the C (decoder and evaluator, and the harness's images) before it is added here.
+pub const C_SECTION_KINDS: [u16; 11] = [1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 12];
 
 /// Why an export failed.
 #[derive(Debug, thiserror::Error)]
@@ -34,7 +34,7 @@ pub enum ExportError {
     Rejected(ImageError),
     /// The image has a section the C evaluator does not implement.
     #[error(
-        "the image has a section of kind {kind}, which the C evaluator does not implement (it knows kinds 1 to 9 and 12)"
+        "the image has a section of kind {kind}, which the C evaluator does not implement (it knows kinds 1 to 10 and 12)"
     )]
     UnsupportedSection {
         /// The section's kind tag.
@@ -61,7 +61,7 @@ pub struct CFile {
 
 /// The template with every `@NAME@` placeholder replaced.
 fn fill(template: &str) -> String {
-    let values: [(&str, usize); 16] = [
+    let values: [(&str, usize); 22] = [
         ("FORMAT_VERSION", FORMAT_VERSION as usize),
         ("MAX_N", capacity::MAX_N),
         ("MAX_M", capacity::MAX_M),
@@ -80,6 +80,15 @@ fn fill(template: &str) -> String {
         (
             "SPEC_FINGERPRINT_LEN",
             shared_types::image::SPEC_FINGERPRINT_LEN,
+        ),
+        ("MAX_PROGRAM_LEN", capacity::MAX_PROGRAM_LEN),
+        ("MAX_PROGRAM_CONSTS", capacity::MAX_PROGRAM_CONSTS),
+        ("MAX_PROGRAM_INPUTS", capacity::MAX_PROGRAM_INPUTS),
+        ("MAX_PROGRAM_OUTPUTS", capacity::MAX_PROGRAM_OUTPUTS),
+        ("MAX_PROGRAM_STACK", capacity::MAX_PROGRAM_STACK),
+        (
+            "MAX_PROGRAM_POWI",
+            capacity::MAX_PROGRAM_POWI.unsigned_abs() as usize,
         ),
     ];
     let mut out = template.to_string();
@@ -105,8 +114,16 @@ pub fn files(image: &[u8]) -> Result<Vec<CFile>, ExportError> {
         Mode::PwaFeedback => "PWA feedback",
         _ => "unknown",
     };
+    let maps = match img.model_maps() {
+        Some(mm) => format!(
+            ", model maps (plant n = {}, m = {})",
+            mm.n_plant(),
+            mm.m_plant()
+        ),
+        None => String::new(),
+    };
     let summary = format!(
-        "{} bytes, {mode}, n = {}, m = {}, {} location(s), CRC-32 {:#010x}",
+        "{} bytes, {mode}, n = {}, m = {}{maps}, {} location(s), CRC-32 {:#010x}",
         image.len(),
         img.n(),
         img.m(),

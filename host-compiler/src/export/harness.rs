@@ -2,8 +2,13 @@
 //! (`cc`, or `$CC`) under the flags the generated header names, drives it with a sequence of [`Op`]s and
 //! compares every answer with the Rust evaluator (`shared_types::eval::Controller`) bit for bit; plus the
 //! seeded scenarios ([`scenario`], [`exits_scenario`]) and synthetic images of every mode
-//! ([`feedforward_image`], [`exits_image`]: feedforward with segment exits, [`pwa_image`]) the tests and
-//! the `c_export` bench run it on. Not used by the pipeline.
+//! ([`feedforward_image`], [`exits_image`]: feedforward with segment exits, [`pwa_image`], [`maps_image`]:
+//! feedforward with model maps) the tests and the `c_export` bench run it on. Not used by the pipeline.
+//!
+//! Model programs that call `sin`, `cos`, `tan`, `exp`, `log`, `atan`, `tanh` or `atan2` run the C
+//! library's functions in C and the `libm` crate's in Rust, which may differ in the last place:
+//! [`CHarness::compare_within`] then accepts inputs that differ by at most a given number of ulps (and
+//! reports the largest difference it saw); everything else is compared bit for bit.
 //!
 //! A step's answer is its status and all `MAX_M` input values: on `Ok` the input, otherwise the image's
 //! fallback at that state given the last applied input (what the firmware applies). An init's answer is
@@ -70,6 +75,34 @@ pub struct Comparison {
     pub by_status: [usize; 4],
     /// The first difference, described.
     pub first: Option<String>,
+    /// Steps whose status agreed and whose inputs differed, but by no more than the ulps allowed
+    /// ([`CHarness::compare_within`]; 0 for [`CHarness::compare`]).
+    pub inexact: usize,
+    /// The largest difference in ulps between the two sides' inputs on steps whose status agreed.
+    pub ulp_max: u32,
+}
+
+/// Distance in ulps between two f32 bit patterns, counted along the ordered line of floats: 0 for equal
+/// bits, at least 1 for different bits (−0 and +0 are 1 apart), `u32::MAX` if one is NaN and the bits
+/// differ.
+pub fn ulp_distance(a: u32, b: u32) -> u32 {
+    if a == b {
+        return 0;
+    }
+    if f32::from_bits(a).is_nan() || f32::from_bits(b).is_nan() {
+        return u32::MAX;
+    }
+    // Map the sign-magnitude bits onto a monotone integer line.
+    let key = |x: u32| -> i64 {
+        if x & 0x8000_0000 != 0 {
+            -((x & 0x7FFF_FFFF) as i64)
+        } else {
+            x as i64
+        }
+    };
+    u32::try_from((key(a) - key(b)).unsigned_abs())
+        .unwrap_or(u32::MAX)
+        .max(1)
 }
 
 /// Why the harness could not run.
@@ -123,6 +156,8 @@ impl CHarness {
             .arg(dir.join("controller.c"))
             .arg(dir.join("controller_image.c"))
             .arg(&driver)
+            // <math.h>'s functions of model programs.
+            .arg("-lm")
             .output()
             .map_err(io("running the C compiler"))?;
         if !out.status.success() {
@@ -226,8 +261,14 @@ impl CHarness {
         reference(&self.image, ops)
     }
 
-    /// Runs `ops` through both and compares.
+    /// Runs `ops` through both and compares, bit for bit.
     pub fn compare(&self, ops: &[Op]) -> Result<Comparison, HarnessError> {
+        self.compare_within(ops, 0)
+    }
+
+    /// Runs `ops` through both and compares: statuses and accepted images exactly, inputs within `ulps`
+    /// ulps per component (the module doc says when that is needed).
+    pub fn compare_within(&self, ops: &[Op], ulps: u32) -> Result<Comparison, HarnessError> {
         let c = self.run_c(ops)?;
         let r = self.run_rust(ops);
         let mut out = Comparison::default();
@@ -255,7 +296,19 @@ impl CHarness {
                     if let Some(k) = out.by_status.get_mut(*sb as usize) {
                         *k += 1;
                     }
-                    if sa != sb || ua != ub {
+                    let d = ua
+                        .iter()
+                        .zip(ub)
+                        .map(|(&a, &b)| ulp_distance(a, b))
+                        .max()
+                        .unwrap_or(0);
+                    if sa == sb {
+                        out.ulp_max = out.ulp_max.max(d);
+                        if d > 0 && d <= ulps {
+                            out.inexact += 1;
+                        }
+                    }
+                    if sa != sb || d > ulps {
                         out.mismatches += 1;
                         out.first.get_or_insert_with(|| {
                             format!(
@@ -287,19 +340,19 @@ pub fn reference(image: &[u8], ops: &[Op]) -> Vec<Answer> {
                     _ => image,
                 };
                 ctl = decode(bytes).ok().map(Controller::new);
-                applied = Input::zero(ctl.as_ref().map_or(0, |c| c.image().m()));
+                applied = Input::zero(ctl.as_ref().map_or(0, |c| c.image().plant_m()));
                 answers.push(Answer::Init(ctl.is_some()));
             }
             Op::Reset => {
                 if let Some(c) = ctl.as_mut() {
                     c.reset();
-                    applied = Input::zero(c.image().m());
+                    applied = Input::zero(c.image().plant_m());
                 }
             }
             Op::Step(x) => {
                 let (status, u) = match ctl.as_mut() {
                     None => (Status::ImageRejected, Input::zero(0)),
-                    Some(c) => match c.step(x) {
+                    Some(c) => match c.step_plant(x) {
                         Ok(u) => (Status::Ok, u),
                         Err(s) => (s, c.fallback(x, &applied)),
                     },
@@ -389,8 +442,43 @@ fn start_near_ball(image: &Image<'_>, rng: &mut ChaCha8Rng) -> (usize, Vec<f32>)
     (t, point_at(rng, &c, delta * rho, norm))
 }
 
+/// The plant state whose ξ is `xi`, for an image with model maps made by [`maps_image`] (whose coords are
+/// ξ_i = x_i + h_i(z), z the states past the first n): z drawn at random (its first component of order 1,
+/// the others, which only the input map reads, at scales up to 10⁵ so that the functions' argument
+/// reduction is exercised), x_i = ξ_i − h_i(z) with h(z) = coords(0, z) as the target computes it. `xi`
+/// itself without model maps, or if it has another length than n (then z is appended, and the state
+/// has a wrong length as `xi` had).
+fn lift(image: &Image<'_>, rng: &mut ChaCha8Rng, xi: Vec<f32>) -> Vec<f32> {
+    let Some(maps) = image.model_maps() else {
+        return xi;
+    };
+    let (n, np) = (image.n(), maps.n_plant());
+    let z: Vec<f32> = (n..np)
+        .map(|k| {
+            let scale = if k == n {
+                1.0
+            } else {
+                [1.0, 1.0, 10.0, 1e3, 1e5][rng.random_range(0..5)]
+            };
+            (scale * normal(rng)) as f32
+        })
+        .collect();
+    let mut probe = vec![0.0f32; np];
+    probe[n..].copy_from_slice(&z);
+    let mut h = vec![0.0f32; n];
+    if xi.len() != n || maps.coords().eval(&probe, &mut h).is_err() {
+        return xi.into_iter().chain(z).collect();
+    }
+    xi.iter()
+        .zip(&h)
+        .map(|(&a, &b)| (a as f64 - b as f64) as f32)
+        .chain(z)
+        .collect()
+}
+
 /// A seeded scenario of at least `states` steps for `image`, starting with [`Op::InitEmbedded`]. An image
-/// with segment exits gets [`exits_scenario`]'s.
+/// with segment exits gets [`exits_scenario`]'s; an image with model maps ([`maps_image`]) gets the
+/// feedforward one in ξ, each state lifted to a plant state ([`lift`]).
 ///
 /// Feedforward: runs of steps from a reset, whose first state lies inside a ball, on its boundary (to a
 /// few ulps) or outside it, continued past the trajectory's end (so the segment cursor, each location's
@@ -418,7 +506,8 @@ pub fn scenario(image: &Image<'_>, seed: u64, states: usize) -> Vec<Op> {
                 };
                 let mut x = x0;
                 for _ in 0..len {
-                    ops.push(Op::Step(perturb(&mut rng, x.clone())));
+                    let plant = lift(image, &mut rng, x.clone());
+                    ops.push(Op::Step(perturb(&mut rng, plant)));
                     count += 1;
                     for v in x.iter_mut() {
                         *v += (0.05 * normal(&mut rng)) as f32;
@@ -993,4 +1082,96 @@ pub fn pwa_image(
     b.fallback = fallback_law(&mut rng, fallback, n, m);
     b.input_box = Some((vec![-1.0; m], vec![1.0; m]));
     b.to_bytes().expect("a valid synthetic PWA image")
+}
+
+/// A seeded synthetic feedforward image with model maps (`shared_types::maps`): the law of a one-location
+/// [`feedforward_image`] in ξ (dims n, m, `trajectories` balls, the given terminal behaviour), a plant of
+/// `n_plant ≥ n + 1` states and `m_plant` inputs, the fallback `fallback` in the plant's input space (0
+/// hold, 1 zero, 3 constant) with the input box `[-1, 1]^m_plant`, and the maps compiled from expressions
+/// with `crate::expr`:
+/// * coords: ξ_i = x_i + h(z₀) with h(z) = 0.25·z² − z/(2 + z²) + 0.5·(1 + z²)^−1 − (−z)·0.125 and z₀ the
+///   state after the first n (arithmetic only; [`lift`] inverts it);
+/// * input_map, `transcendental = false`: u_j = w_(j mod m)·(1 + 0.5·x_a²)^−1 − 0.25·x_b/(3 + x_a²)
+///   (arithmetic only: the C and Rust sides agree bit for bit);
+/// * input_map, `transcendental = true`: u_j = F(x_a)·w_(j mod m) with F the j-th (from `first_func`) of
+///   sin, cos, tan, exp(0.5·), log(1 + ·²), sqrt(1 + ·²), abs, atan, tanh, atan2(·, 1 + x_b²): one
+///   library call per output, multiplied, so that a difference of the two sides' libraries shows as
+///   about the same number of ulps in u.
+///
+/// Here x_a, x_b are plant states past the first n + 1 when there are some (free of coords), else z₀.
+#[allow(clippy::too_many_arguments)]
+pub fn maps_image(
+    seed: u64,
+    n_plant: usize,
+    m_plant: usize,
+    n: usize,
+    m: usize,
+    trajectories: usize,
+    terminal: Terminal,
+    fallback: usize,
+    transcendental: bool,
+    first_func: usize,
+) -> Vec<u8> {
+    use crate::emit::ModelMapsSpec;
+    use crate::expr::{compile::compile, parse, Names};
+    assert!(n_plant > n, "maps_image needs a state past the first n");
+    let base = feedforward_image(seed, n, m, 1, trajectories, terminal, 1);
+    let img = decode(&base).expect("feedforward_image is valid");
+    let mut b = ImageBuilder::from_image(&img);
+    let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x6d61_7073);
+    b.fallback = fallback_law(&mut rng, fallback, n_plant, m_plant);
+    b.input_box = Some((vec![-1.0; m_plant], vec![1.0; m_plant]));
+    let names = Names {
+        states: (0..n_plant).map(|i| format!("x{i}")).collect(),
+        inputs: (0..m).map(|j| format!("w{j}")).collect(),
+        params: vec![],
+    };
+    let z = format!("x{n}");
+    let h = format!("(0.25*{z}^2 - {z}/(2 + {z}^2) + 0.5*(1 + {z}^2)^(-1) - (-{z})*0.125)");
+    let coords: Vec<String> = (0..n).map(|i| format!("x{i} + {h}")).collect();
+    let free = |k: usize| {
+        if n_plant > n + 1 {
+            format!("x{}", n + 1 + k % (n_plant - n - 1))
+        } else {
+            z.clone()
+        }
+    };
+    let input_map: Vec<String> = (0..m_plant)
+        .map(|j| {
+            let (xa, xb, w) = (free(j), free(j + 1), format!("w{}", j % m));
+            if transcendental {
+                let f = match (first_func + j) % 10 {
+                    0 => format!("sin({xa})"),
+                    1 => format!("cos({xa})"),
+                    2 => format!("tan({xa})"),
+                    3 => format!("exp(0.5*{xa})"),
+                    4 => format!("log(1 + {xa}^2)"),
+                    5 => format!("sqrt(1 + {xa}^2)"),
+                    6 => format!("abs({xa})"),
+                    7 => format!("atan({xa})"),
+                    8 => format!("tanh({xa})"),
+                    _ => format!("atan2({xa}, 1 + {xb}^2)"),
+                };
+                format!("{f}*{w}")
+            } else {
+                format!("{w}*(1 + 0.5*{xa}^2)^(-1) - 0.25*{xb}/(3 + {xa}^2)")
+            }
+        })
+        .collect();
+    let program = |texts: &[String], inputs: usize| {
+        let exprs: Vec<_> = texts
+            .iter()
+            .map(|t| parse(t, &names).expect("the harness's expressions parse"))
+            .collect();
+        compile(&exprs, n_plant, inputs, &[])
+            .expect("the harness's expressions compile")
+            .bytes
+    };
+    b.model_maps(ModelMapsSpec {
+        n_plant,
+        m_plant,
+        coords: program(&coords, 0),
+        input_map: program(&input_map, m),
+    });
+    b.to_bytes().expect("maps_image is valid")
 }

@@ -5,15 +5,17 @@
 //! closed-loop runs; PWA with one and several locations); corrupted arrays refused exactly when the Rust
 //! decoder refuses them (random corruption, targeted corruption of exit records, and an exits section
 //! added by hand: empty, all tables, wrong length, trailing byte, in a PWA image; a spec-fingerprint
-//! section added by hand, well-formed and malformed); and the subcommand's
-//! exit codes.
+//! section added by hand, well-formed and malformed); images with model maps (section 10):
+//! arithmetic-only programs bit for bit, programs calling the C library's and the `libm` crate's
+//! functions within [`LIBM_ULPS`] ulps, corrupted maps sections refused exactly when Rust refuses them;
+//! and the subcommand's exit codes.
 
 use std::path::PathBuf;
 use std::process::Command;
 
 use host_compiler::export::harness::{
-    exits_image, exits_scenario, feedforward_image, pwa_image, scenario, Answer, CHarness,
-    Comparison, ExitCoverage, Op,
+    exits_image, exits_scenario, feedforward_image, maps_image, pwa_image, scenario, Answer,
+    CHarness, Comparison, ExitCoverage, Op,
 };
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -789,4 +791,232 @@ fn an_exits_section_is_admitted_as_the_rust_decoder_admits_it() {
         plain == all_tables,
         "the all-tables image answers differently"
     );
+}
+
+/// The ulps by which the C library's `sinf`, `cosf`, ... and the `libm` crate's may make one input differ,
+/// for the transcendental images, whose outputs are one library call times an input: the host's rounding
+/// analysis of a model program assumes each call within 4 ulp of the true value
+/// (`host_compiler::expr::interval`), so two libraries that both meet it differ by at most 8 ulp in the
+/// call, and the product's rounding adds at most 1.
+const LIBM_ULPS: u32 = 2 * 4 + 1;
+
+/// Images with model maps (section 10): the C's `sc_step_plant` against Rust's `step_plant`. Arithmetic
+/// programs (+ − · /, negation, integer powers, constants) bit for bit; programs with the ten library
+/// functions (two images cover them all, with arguments up to 10⁵ in magnitude) statuses exactly and
+/// inputs within [`LIBM_ULPS`]; the largest difference seen is printed.
+#[test]
+fn model_maps_match_the_rust_evaluator() {
+    // (name, n_plant, m_plant, n, m, trajectories, terminal, fallback, transcendental, first function)
+    let cases = [
+        (
+            "arith_hold_last_hold",
+            4,
+            2,
+            2,
+            2,
+            6,
+            Terminal::HoldLast,
+            0,
+            false,
+            0,
+        ),
+        (
+            "arith_fallback_constant",
+            6,
+            3,
+            3,
+            1,
+            8,
+            Terminal::Fallback,
+            3,
+            false,
+            0,
+        ),
+        (
+            "arith_fallback_zero_n12",
+            12,
+            6,
+            8,
+            3,
+            4,
+            Terminal::Fallback,
+            1,
+            false,
+            0,
+        ),
+        ("libm_0_to_4", 7, 5, 2, 2, 6, Terminal::HoldLast, 3, true, 0),
+        ("libm_5_to_9", 7, 5, 3, 2, 6, Terminal::Fallback, 0, true, 5),
+    ];
+    let (mut exact_states, mut libm_states, mut ulp_max, mut inexact) = (0, 0, 0u32, 0usize);
+    for (i, &(name, np, mp, n, m, trajs, terminal, fb, libm, first)) in cases.iter().enumerate() {
+        let image = maps_image(
+            500 + i as u64,
+            np,
+            mp,
+            n,
+            m,
+            trajs,
+            terminal,
+            fb,
+            libm,
+            first,
+        );
+        let dir = scratch(&format!("maps_{name}"));
+        let h = CHarness::build(&image, &dir).unwrap_or_else(|e| panic!("{name}: {e}"));
+        let img = decode(&image).expect("valid image");
+        assert_eq!((img.plant_n(), img.plant_m()), (np, mp));
+        let ops = scenario(&img, 40 + i as u64, 20_000);
+        let c = h
+            .compare_within(&ops, if libm { LIBM_ULPS } else { 0 })
+            .unwrap_or_else(|e| panic!("{name}: {e}"));
+        eprintln!(
+            "maps {name}: {} states, {} mismatches, {} within {} ulp, max {} ulp, by status {:?}",
+            c.states,
+            c.mismatches,
+            c.inexact,
+            if libm { LIBM_ULPS } else { 0 },
+            c.ulp_max,
+            &c.by_status[..3]
+        );
+        assert_eq!(
+            c.init_mismatches, 0,
+            "{name}: the exported array is refused"
+        );
+        assert_eq!(c.mismatches, 0, "{name}: {:?}", c.first);
+        assert!(c.by_status[0] > c.states / 10, "{name}: too few Ok");
+        assert!(c.by_status[1] > 0, "{name}: no out-of-envelope step");
+        assert!(c.by_status[2] > 0, "{name}: no bad frame");
+        if libm {
+            libm_states += c.states;
+            ulp_max = ulp_max.max(c.ulp_max);
+            inexact += c.inexact;
+        } else {
+            assert_eq!(c.ulp_max, 0, "{name}");
+            exact_states += c.states;
+        }
+    }
+    eprintln!(
+        "maps: {exact_states} arithmetic states bit for bit; {libm_states} states with library calls, \
+         {inexact} of them within {LIBM_ULPS} ulp but not bit for bit, largest difference {ulp_max} ulp"
+    );
+    assert!(exact_states >= 60_000 && libm_states >= 40_000);
+}
+
+/// Corrupted model maps sections, CRC repaired: one to three bytes of the section changed (header,
+/// program headers, constants, code, padding), the section cut short or lengthened by a byte, or the
+/// header's program lengths moved; the C refuses exactly what the Rust decoder refuses, and where both
+/// accept, their steps agree.
+#[test]
+fn corrupted_model_maps_are_refused_by_both() {
+    let image = maps_image(600, 5, 2, 3, 2, 4, Terminal::Fallback, 3, false, 0);
+    let dir = scratch("corrupt_maps");
+    let h = CHarness::build(&image, &dir).expect("harness");
+    let img = decode(&image).expect("valid");
+    let probe: Vec<Op> = scenario(&img, 6, 40)
+        .into_iter()
+        .filter(|op| matches!(op, Op::Step(_) | Op::Reset))
+        .collect();
+    let dir_entries = directory(&image).expect("directory");
+    let maps = (0..dir_entries.len())
+        .filter_map(|i| dir_entries.entry(i))
+        .find(|e| e.kind == SectionKind::ModelMaps as u16)
+        .expect("a model maps section");
+    let (off, len) = (maps.offset as usize, maps.len as usize);
+    let body = image[off..off + len].to_vec();
+    let mut rng = ChaCha8Rng::seed_from_u64(77);
+    // A corrupted opcode may become a library function's: the C and Rust libraries may then differ in
+    // the last place (see `LIBM_ULPS`), so such images are compared within that, the others bit for bit.
+    let (mut ops, mut libm_ops) = (Vec::new(), Vec::new());
+    for k in 0..1200 {
+        let mut b = body.clone();
+        match k % 4 {
+            0 | 1 => {
+                for _ in 0..rng.random_range(1..=3) {
+                    let i = rng.random_range(0..b.len());
+                    if k % 4 == 0 {
+                        b[i] = rng.random();
+                    } else {
+                        b[i] ^= 1 << rng.random_range(0..8);
+                    }
+                }
+            }
+            2 => {
+                if rng.random::<bool>() {
+                    b.truncate(rng.random_range(0..b.len()));
+                } else {
+                    b.push(rng.random_range(0..2));
+                }
+            }
+            _ => {
+                // A program length moved by a few bytes (the padding then no longer fits).
+                let at = if rng.random::<bool>() { 4 } else { 8 };
+                let l = u32::from_le_bytes(b[at..at + 4].try_into().unwrap());
+                let l = l.wrapping_add(rng.random_range(1..6)).wrapping_sub(3);
+                b[at..at + 4].copy_from_slice(&l.to_le_bytes());
+            }
+        }
+        let bytes = with_section_body(&image, off, len, &b);
+        let to = if decode(&bytes).is_ok_and(|i| calls_library(&i)) {
+            &mut libm_ops
+        } else {
+            &mut ops
+        };
+        to.push(Op::InitBytes(bytes));
+        to.extend(probe.iter().cloned());
+    }
+    ops.push(Op::InitEmbedded);
+    ops.extend(probe.iter().cloned());
+    let c = h.compare(&ops).expect("driver");
+    let accepted = h
+        .run_rust(&ops)
+        .iter()
+        .filter(|a| matches!(a, Answer::Init(true)))
+        .count();
+    eprintln!(
+        "corrupted maps: {} inits, {accepted} accepted by Rust, {} states, {} init mismatches, {} step mismatches",
+        c.inits, c.states, c.init_mismatches, c.mismatches
+    );
+    assert_eq!(c.init_mismatches, 0, "{:?}", c.first);
+    assert_eq!(c.mismatches, 0, "{:?}", c.first);
+    assert!(accepted > 1 && accepted < c.inits / 2, "{accepted}");
+    if !libm_ops.is_empty() {
+        let c = h.compare_within(&libm_ops, LIBM_ULPS).expect("driver");
+        eprintln!(
+            "corrupted maps calling a library function: {} inits, {} states, max {} ulp",
+            c.inits, c.states, c.ulp_max
+        );
+        assert_eq!(c.init_mismatches, 0, "{:?}", c.first);
+        assert_eq!(c.mismatches, 0, "{:?}", c.first);
+    }
+}
+
+/// Whether an image's model programs call a library function whose C and Rust results may differ
+/// (all but `sqrt` and `abs`, which are exact).
+fn calls_library(img: &shared_types::image::Image<'_>) -> bool {
+    use shared_types::program::{Func, Op as P};
+    img.model_maps().is_some_and(|m| {
+        [m.coords(), m.input_map()].iter().any(|p| {
+            p.ops().any(|(_, op)| match op {
+                P::Func(f) => !matches!(f, Func::Sqrt | Func::Abs),
+                P::Atan2 => true,
+                _ => false,
+            })
+        })
+    })
+}
+
+/// `image` with the section body at `off..off + len` replaced by `body` (the last section, as the model
+/// maps are), with the directory entry's length, the payload length and the CRC updated.
+fn with_section_body(image: &[u8], off: usize, len: usize, body: &[u8]) -> Vec<u8> {
+    assert_eq!(off + len, image.len(), "the model maps section is the last");
+    let mut out = image[..off].to_vec();
+    out.extend_from_slice(body);
+    let count = u16::from_le_bytes([out[18], out[19]]) as usize;
+    let entry = 32 + 12 * (count - 1);
+    out[entry + 8..entry + 12].copy_from_slice(&(body.len() as u32).to_le_bytes());
+    let payload = (out.len() - 32) as u32;
+    out[24..28].copy_from_slice(&payload.to_le_bytes());
+    let crc = compute_crc(&out).expect("a header");
+    out[28..32].copy_from_slice(&crc.to_le_bytes());
+    out
 }

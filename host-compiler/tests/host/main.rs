@@ -27,6 +27,7 @@ mod cli_mtl;
 mod cli_synth;
 mod csv_dialect;
 mod emit_image;
+mod emit_maps;
 mod emit_pwa;
 mod fallback_input;
 mod fuzz_corpus;

@@ -14,6 +14,12 @@
 //! (`.data`, `.bss`, `.uninit`) and does not include the stack, whose high-water mark (painted stack,
 //! reported by the firmware at shutdown) is the separate `firmware_stack_bytes_max`.
 //!
+//! `nonlinear_step_instructions_max`: the largest cost of one control step of an image with model maps
+//! (a feedback-linearizable plant: ξ = coords(x), the feedforward law, u = input_map(x, w)), over the
+//! closed loops of the Example 4.9 image of `qemu_tests::images::fl_4_9` (u = R(θ)w: four sin/cos calls
+//! per step) from its five starts, against the nonlinear plant integrated on the host;
+//! `model_program_bytes` is the size of its two programs.
+//!
 //! `firmware_stack_bytes_bound`: the worst-case stack of the control loop, as the measured high-water mark
 //! of the painted stack over every run of every image mode here (the feedforward double-integrator image
 //! and the two PWA images, from inside and outside the envelope, so the law, the envelope test and the
@@ -92,12 +98,23 @@ fn run() -> Result<(), Box<dyn std::error::Error>> {
         "pwa_double_integrator",
     )?;
     let (hybrid_max, hybrid_stack) = hybrid_step_max()?;
+    let (nonlinear_max, nonlinear_stack, program_bytes) = nonlinear_step_max()?;
     let size = qemu_tests::elf_size(&std::fs::read(&elf)?)?;
     let rows = [
         Row::new(
             "hybrid_step_instructions_max",
             hybrid_max as f64,
             "instructions (Ex 4.25, guard test included)",
+        ),
+        Row::new(
+            "nonlinear_step_instructions_max",
+            nonlinear_max as f64,
+            "instructions (Ex 4.9 image with model maps, programs included)",
+        ),
+        Row::new(
+            "model_program_bytes",
+            program_bytes as f64,
+            "bytes (Ex 4.9)",
         ),
         Row::new("pwa_step_instructions_max", pwa_max as f64, "instructions"),
         Row::new(
@@ -120,7 +137,11 @@ fn run() -> Result<(), Box<dyn std::error::Error>> {
         Row::new("firmware_stack_bytes_max", stack_max as f64, "bytes"),
         Row::new(
             "firmware_stack_bytes_bound",
-            stack_max.max(pwa_stack).max(pwa_di_stack).max(hybrid_stack) as f64,
+            stack_max
+                .max(pwa_stack)
+                .max(pwa_di_stack)
+                .max(hybrid_stack)
+                .max(nonlinear_stack) as f64,
             "bytes (measured: painted-stack high-water mark, every image mode)",
         ),
     ];
@@ -205,19 +226,9 @@ fn pwa_step_max(spec: &str, tag: &str) -> Result<(u32, String, u64), Box<dyn std
     starts.push(vec![10.0; n]);
     let (mut max, mut stack) = (0u32, 0u64);
     for x0 in &starts {
-        let mut q = Qemu::launch(&elf, Duration::from_secs(120))?;
-        let mut host = HostEvaluator::new(image);
-        let trace = closed_loop::run(&mut q, plant, &mut host, x0, 0, task.steps)?;
-        for st in [Status::Ok, Status::OutOfEnvelope] {
-            max = max.max(trace.max_cost(st).unwrap_or(0));
-        }
-        let exit = q.shutdown()?;
-        if exit.code != Some(0) {
-            return Err(format!("PWA firmware exited with {:?}", exit.code).into());
-        }
-        let peak =
-            qemu_tests::logs::stack_peak(&exit.logs).ok_or("no stack_peak in the shutdown log")?;
-        stack = stack.max(peak);
+        let (m, s) = session(&elf, image, x0, task.steps, |x, u| Ok(plant.step(x, u)))?;
+        max = max.max(m);
+        stack = stack.max(s);
     }
     let summary = format!(
         "pwa ({tag}): {} partitions, tree depth {}, at most {} balls per leaf, {} runs (the 8 costliest starts found on the host make {worst_tests} ball tests), max step {max} instructions",
@@ -283,4 +294,61 @@ fn hybrid_step_max() -> Result<(u32, u64), Box<dyn std::error::Error>> {
         task.steps
     );
     Ok((max, stack))
+}
+
+/// The nonlinear row (module doc): the largest cost of any reply over the Example 4.9 image's closed loops,
+/// the stack high-water mark, and the bytes of its model programs.
+fn nonlinear_step_max() -> Result<(u32, u64, usize), Box<dyn std::error::Error>> {
+    use qemu_tests::nonlinear::PlantFlow;
+    let t = images::fl_4_9()?;
+    let path = firmware::write_image("fl_4_9_bench", &t.bytes)?;
+    let elf = firmware::build(
+        "fl_4_9_bench",
+        &FirmwareConfig {
+            image: Some(path),
+            ..Default::default()
+        },
+    )?;
+    let img = decode(&t.bytes).map_err(qemu_tests::HilError::Image)?;
+    let (mut max, mut stack) = (0u32, 0u64);
+    let starts = t.starts();
+    let steps = t.table_len + 100;
+    for x0 in &starts {
+        let (m, s) = session(&elf, img, x0, steps, |x, u| t.plant.flow(x, u, t.h))?;
+        max = max.max(m);
+        stack = stack.max(s);
+    }
+    println!(
+        "nonlinear (Ex 4.9, model maps): {} runs of {steps} steps, programs {} bytes, max step {max} instructions",
+        starts.len(),
+        t.program_bytes
+    );
+    Ok((max, stack, t.program_bytes))
+}
+
+/// One closed-loop session: the firmware `elf` booted in QEMU, `steps` periods from `x0` against the host
+/// evaluator of `image` (bit for bit) with `plant` the one-period step, the firmware's exit checked.
+/// Returns the largest cost of a reply (`Ok` or out of the envelope) and the stack high-water mark.
+fn session(
+    elf: &std::path::Path,
+    image: shared_types::image::Image<'_>,
+    x0: &[f64],
+    steps: usize,
+    plant: impl FnMut(&[f64], &[f64]) -> Result<Vec<f64>, String>,
+) -> Result<(u32, u64), Box<dyn std::error::Error>> {
+    let mut q = Qemu::launch(elf, Duration::from_secs(120))?;
+    let mut host = HostEvaluator::new(image);
+    let trace = closed_loop::run_with(&mut q, &mut host, x0, 0, steps, plant)?;
+    let max = [Status::Ok, Status::OutOfEnvelope]
+        .iter()
+        .filter_map(|&st| trace.max_cost(st))
+        .max()
+        .unwrap_or(0);
+    let exit = q.shutdown()?;
+    if exit.code != Some(0) {
+        return Err(format!("firmware {} exited with {:?}", elf.display(), exit.code).into());
+    }
+    let peak =
+        qemu_tests::logs::stack_peak(&exit.logs).ok_or("no stack_peak in the shutdown log")?;
+    Ok((max, peak))
 }

@@ -5,5 +5,6 @@
 mod board;
 mod hybrid;
 mod mtl;
+mod nonlinear;
 mod planar_vehicle;
 mod pwa;

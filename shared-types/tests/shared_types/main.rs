@@ -6,6 +6,7 @@ mod decode_fuzz;
 mod evaluator;
 mod fingerprint;
 mod image_format;
+mod maps;
 mod program;
 mod pwa_eval;
 mod pwa_format;

@@ -7,7 +7,7 @@ use shared_types::error::{Dim, Field, ImageError};
 use shared_types::program::{powi, write_header, Func, Op, Program, PROGRAM_HEADER_LEN};
 
 /// Assembles a program from its parts (the stored stack depth is given, so tests can lie about it).
-fn assemble(
+pub(crate) fn assemble(
     n_inputs: usize,
     n_outputs: usize,
     consts: &[f32],
@@ -302,6 +302,106 @@ proptest! {
             let inputs = vec![x; p.n_inputs()];
             let mut out = vec![0.0f32; p.n_outputs()];
             prop_assert!(p.eval(&inputs, &mut out).is_ok());
+        }
+    }
+}
+
+/// The evaluator computes a sine or cosine with `libm::sincosf` and remembers both: that needs
+/// `sincosf(x) == (sinf(x), cosf(x))` bit for bit. Checked exhaustively for the `libm` version in
+/// Cargo.lock when the evaluator began to rely on it; here on the branch thresholds of its argument
+/// reduction (±4 ulp around each), special values and 300 000 random bit patterns.
+#[test]
+fn sincosf_gives_the_bits_of_sinf_and_cosf() {
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0x51c0);
+    let mut xs: Vec<u32> = vec![
+        0,
+        0x8000_0000,
+        1,
+        0x7f80_0000,
+        0xff80_0000,
+        0x7fc0_0000,
+        0x7f7f_ffff,
+    ];
+    for t in [
+        0x3980_0000u32,
+        0x3f49_0fda,
+        0x4016_cbe3,
+        0x407b_53d1,
+        0x40af_eddf,
+        0x40e2_31d5,
+        0x4b80_0000,
+    ] {
+        for d in 0..9u32 {
+            let b = t.wrapping_add(d).wrapping_sub(4);
+            xs.extend([b, b | 0x8000_0000]);
+        }
+    }
+    xs.extend((0..300_000).map(|_| rng.random::<u32>()));
+    for b in xs {
+        let x = f32::from_bits(b);
+        let (s, c) = libm::sincosf(x);
+        assert_eq!(
+            (s.to_bits(), c.to_bits()),
+            (libm::sinf(x).to_bits(), libm::cosf(x).to_bits()),
+            "x = {x:e} ({b:#010x})"
+        );
+    }
+}
+
+/// Remembered library calls ([`Program::eval`]'s memo) give the bits of fresh ones: a program with the
+/// same calls repeated, more distinct calls than the memo holds, and sine and cosine of one argument.
+#[test]
+fn remembered_calls_give_the_bits_of_fresh_ones() {
+    use rand::{Rng, SeedableRng};
+    let funcs = [
+        Func::Sin,
+        Func::Cos,
+        Func::Tan,
+        Func::Exp,
+        Func::Atan,
+        Func::Tanh,
+    ];
+    // out_k = f_k(x_(k mod 2)), for the functions above twice over (12 outputs, 6 distinct calls per
+    // input), then cos(x0) and sin(x0) once more.
+    let mut ops = Vec::new();
+    let mut expect: Vec<(Func, usize)> = Vec::new();
+    for rep in 0..2 {
+        for (k, &f) in funcs.iter().enumerate() {
+            let slot = (k + rep) % 2;
+            ops.extend([
+                Op::Load(slot as u8),
+                Op::Func(f),
+                Op::Store(expect.len() as u8),
+            ]);
+            expect.push((f, slot));
+        }
+    }
+    for f in [Func::Cos, Func::Sin] {
+        ops.extend([Op::Load(0), Op::Func(f), Op::Store(expect.len() as u8)]);
+        expect.push((f, 0));
+    }
+    let bytes = assemble(2, expect.len(), &[], &ops, 1);
+    let p = Program::decode(&bytes).unwrap();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0x4e30);
+    let mut out = vec![0.0f32; expect.len()];
+    for i in 0..2000 {
+        let x = match i {
+            0 => [0.0, -0.0],
+            1 => [f32::NAN, 1e30],
+            _ => [
+                rng.random_range(-10.0f32..10.0),
+                f32::from_bits(rng.random::<u32>()),
+            ],
+        };
+        p.eval(&x, &mut out).unwrap();
+        for (k, &(f, slot)) in expect.iter().enumerate() {
+            assert_eq!(
+                out[k].to_bits(),
+                f.apply(x[slot]).to_bits(),
+                "{f:?}({})",
+                x[slot]
+            );
         }
     }
 }

@@ -593,8 +593,11 @@ fn rejects_invalid_payload_bytes() {
                   let mut s = sections_of(b); s.remove(3); *b = with_sections(b, &s); },
             Is(ImageError::MissingSection { kind: SectionKind::PwaTree })),
         byte_row("directory: an unknown section kind", |b| {
-                  let mut s = sections_of(b); s.push((10, vec![])); *b = with_sections(b, &s); },
-            Is(ImageError::UnknownSection { kind: 10 })),
+                  let mut s = sections_of(b); s.push((200, vec![])); *b = with_sections(b, &s); },
+            Is(ImageError::UnknownSection { kind: 200 })),
+        byte_row("directory: model maps (feedforward only)", |b| {
+                  let mut s = sections_of(b); s.push((10, vec![0])); *b = with_sections(b, &s); },
+            Is(ImageError::UnexpectedSection { kind: SectionKind::ModelMaps, mode: Mode::PwaFeedback })),
         byte_row("directory: segment exits (feedforward only)", |b| {
                   let mut s = sections_of(b); s.push((9, vec![0])); *b = with_sections(b, &s); },
             Is(ImageError::UnexpectedSection { kind: SectionKind::SegmentExits, mode: Mode::PwaFeedback })),

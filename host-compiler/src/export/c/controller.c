@@ -6,6 +6,7 @@
  */
 #include "controller.h"
 
+#include <math.h>
 #include <string.h>
 
 #define SC_HEADER_LEN 32u
@@ -15,8 +16,10 @@
 #define SC_FORMAT_VERSION @FORMAT_VERSION@u
 #define SC_LEAF_BASE 0x8000u
 #define SC_OUTSIDE 0xFFFFu
-#define SC_N_KINDS 12u /* highest known tag; 10 and 11 are not known (reserved) */
+#define SC_N_KINDS 12u /* highest known tag; 11 is not known (reserved) */
 #define SC_KIND_SPEC_FINGERPRINT 12u
+#define SC_MAPS_HEADER_LEN 12u
+#define SC_PROGRAM_HEADER_LEN 8u
 #define SC_EXIT_TABLE 0u
 #define SC_EXIT_GUARD 1u
 
@@ -200,8 +203,10 @@ static sc_error validate_K_P(const sc_image *im) {
 
 /* image::validate_fallback_box. */
 static sc_error validate_fallback_box(const sc_image *im) {
-    uint32_t n = im->n, m = im->m, j;
+    uint32_t n = im->n, m = im->m_plant, j;
     sc_error e;
+    /* With model maps the fallback and the box act on the plant's input, and a linear law is refused. */
+    if (im->has_maps && im->fallback == 2) return SC_E_MAPS;
     if (im->fallback == 2) {
         if ((e = check_floats(im->fb_K, 4ull * m * n)) != SC_E_NONE) return e;
         if ((e = check_floats(im->fb_x_ref, 4ull * n)) != SC_E_NONE) return e;
@@ -510,6 +515,201 @@ static sc_error parse_pwa_balls(sc_image *im, sc_bytes s) {
     return reader_done(&r) ? SC_E_NONE : SC_E_SECTION;
 }
 
+/* ------------------------------------------------------------------------------------------------ */
+/* Model programs (shared_types::program) and the model maps section (shared_types::maps). */
+
+#define SC_OP_LOAD 0x01u
+#define SC_OP_CONST 0x02u
+#define SC_OP_STORE 0x03u
+#define SC_OP_ADD 0x10u
+#define SC_OP_SUB 0x11u
+#define SC_OP_MUL 0x12u
+#define SC_OP_DIV 0x13u
+#define SC_OP_NEG 0x14u
+#define SC_OP_POWI 0x15u
+#define SC_OP_FUNC0 0x20u /* sin cos tan exp log sqrt abs atan tanh, in this order */
+#define SC_OP_FUNC_LAST 0x28u
+#define SC_OP_ATAN2 0x29u
+
+/* Length in bytes of the instruction at code[pc] (1 to 3), or 0 if its opcode is unknown, its operand is
+ * truncated or a power's exponent is out of range (program::decode_op). */
+static uint32_t op_len(sc_bytes code, uint32_t pc) {
+    uint8_t op = code.p[pc];
+    uint32_t rest = code.len - pc - 1u;
+    if (op == SC_OP_LOAD || op == SC_OP_STORE) return rest >= 1u ? 2u : 0u;
+    if (op == SC_OP_CONST) return rest >= 2u ? 3u : 0u;
+    if (op == SC_OP_POWI) {
+        int k;
+        if (rest < 1u) return 0u;
+        k = (int)(int8_t)code.p[pc + 1u];
+        return (k != 0 && k >= -SC_MAX_PROGRAM_POWI && k <= SC_MAX_PROGRAM_POWI) ? 2u : 0u;
+    }
+    if ((op >= SC_OP_ADD && op <= SC_OP_NEG) || (op >= SC_OP_FUNC0 && op <= SC_OP_ATAN2)) return 1u;
+    return 0u;
+}
+
+/* program::Program::decode: every check, in one forward pass over the code. */
+static sc_error decode_program(sc_program *pr, sc_bytes b) {
+    uint32_t n_consts, code_len, pc = 0, depth = 0, max_depth = 0, stack, i;
+    uint64_t stored = 0;
+    sc_bytes consts;
+    memset(pr, 0, sizeof *pr);
+    if (b.len < SC_PROGRAM_HEADER_LEN || b.len > SC_MAX_PROGRAM_LEN) return SC_E_PROGRAM;
+    pr->n_inputs = b.p[0];
+    pr->n_outputs = b.p[1];
+    n_consts = le16(b.p + 2);
+    code_len = le16(b.p + 4);
+    stack = b.p[6];
+    if (b.p[7] != 0) return SC_E_PROGRAM;
+    if (pr->n_inputs > SC_MAX_PROGRAM_INPUTS || pr->n_outputs < 1 ||
+        pr->n_outputs > SC_MAX_PROGRAM_OUTPUTS || n_consts > SC_MAX_PROGRAM_CONSTS)
+        return SC_E_PROGRAM;
+    if ((uint64_t)b.len != (uint64_t)SC_PROGRAM_HEADER_LEN + 4ull * n_consts + code_len)
+        return SC_E_PROGRAM;
+    consts.p = b.p + SC_PROGRAM_HEADER_LEN;
+    consts.len = 4u * n_consts;
+    if (!all_finite(consts)) return SC_E_PROGRAM;
+    pr->consts = consts;
+    pr->code.p = consts.p + consts.len;
+    pr->code.len = code_len;
+    while (pc < code_len) {
+        uint32_t len = op_len(pr->code, pc), pops = 0, pushes = 0;
+        uint8_t op = pr->code.p[pc];
+        if (len == 0) return SC_E_PROGRAM;
+        if (op == SC_OP_LOAD) {
+            if (pr->code.p[pc + 1u] >= pr->n_inputs) return SC_E_PROGRAM;
+            pushes = 1;
+        } else if (op == SC_OP_CONST) {
+            if (le16(pr->code.p + pc + 1u) >= n_consts) return SC_E_PROGRAM;
+            pushes = 1;
+        } else if (op == SC_OP_STORE) {
+            uint32_t out = pr->code.p[pc + 1u];
+            if (out >= pr->n_outputs) return SC_E_PROGRAM;
+            pops = 1;
+            if (stored & (1ull << out)) return SC_E_PROGRAM;
+            stored |= 1ull << out;
+        } else if ((op >= SC_OP_ADD && op <= SC_OP_DIV) || op == SC_OP_ATAN2) {
+            pops = 2;
+            pushes = 1;
+        } else {
+            pops = 1;
+            pushes = 1;
+        }
+        if (depth < pops) return SC_E_PROGRAM;
+        depth = depth - pops + pushes;
+        if (depth > SC_MAX_PROGRAM_STACK) return SC_E_PROGRAM;
+        if (depth > max_depth) max_depth = depth;
+        pc += len;
+    }
+    if (depth != 0) return SC_E_PROGRAM;
+    for (i = 0; i < pr->n_outputs; i++)
+        if (!(stored & (1ull << i))) return SC_E_PROGRAM;
+    if (max_depth != stack) return SC_E_PROGRAM;
+    pr->max_stack = stack;
+    return SC_E_NONE;
+}
+
+/* program::powi: |k| - 1 multiplications left to right, then 1 / . for k < 0. */
+static float powi_f32(float x, int k) {
+    int n = k < 0 ? -k : k, i;
+    float acc = x;
+    if (k == 0) return 1.0f;
+    for (i = 1; i < n && i < SC_MAX_PROGRAM_POWI; i++) acc *= x;
+    return k < 0 ? 1.0f / acc : acc;
+}
+
+/* program::Program::eval on a validated program: inputs[0..n_inputs) -> out[0..n_outputs). One pass
+ * over at most SC_MAX_PROGRAM_LEN bytes of code with a fixed stack; every access is in range for a
+ * validated program, and checked anyway. */
+static void eval_program(const sc_program *pr, const float *inputs, float *out) {
+    float st[SC_MAX_PROGRAM_STACK];
+    uint32_t pc = 0, sp = 0;
+    while (pc < pr->code.len) {
+        uint32_t len = op_len(pr->code, pc);
+        uint8_t op = pr->code.p[pc];
+        float a, b, v;
+        if (len == 0) return;
+        if (op == SC_OP_LOAD || op == SC_OP_CONST) {
+            uint32_t i = op == SC_OP_LOAD ? pr->code.p[pc + 1u] : le16(pr->code.p + pc + 1u);
+            v = op == SC_OP_LOAD ? (i < pr->n_inputs ? inputs[i] : 0.0f) : f32_at(pr->consts, i);
+            if (sp >= SC_MAX_PROGRAM_STACK) return;
+            st[sp++] = v;
+        } else if (op == SC_OP_STORE) {
+            uint32_t o = pr->code.p[pc + 1u];
+            if (sp == 0) return;
+            sp--;
+            if (o < pr->n_outputs) out[o] = st[sp];
+        } else if ((op >= SC_OP_ADD && op <= SC_OP_DIV) || op == SC_OP_ATAN2) {
+            if (sp < 2) return;
+            b = st[sp - 1u];
+            a = st[sp - 2u];
+            switch (op) {
+            case SC_OP_ADD: v = a + b; break;
+            case SC_OP_SUB: v = a - b; break;
+            case SC_OP_MUL: v = a * b; break;
+            case SC_OP_DIV: v = a / b; break;
+            default: v = atan2f(a, b); break;
+            }
+            sp--;
+            st[sp - 1u] = v;
+        } else {
+            if (sp < 1) return;
+            a = st[sp - 1u];
+            switch (op) {
+            case SC_OP_NEG: v = -a; break;
+            case SC_OP_POWI: v = powi_f32(a, (int)(int8_t)pr->code.p[pc + 1u]); break;
+            case SC_OP_FUNC0 + 0u: v = sinf(a); break;
+            case SC_OP_FUNC0 + 1u: v = cosf(a); break;
+            case SC_OP_FUNC0 + 2u: v = tanf(a); break;
+            case SC_OP_FUNC0 + 3u: v = expf(a); break;
+            case SC_OP_FUNC0 + 4u: v = logf(a); break;
+            case SC_OP_FUNC0 + 5u: v = sqrtf(a); break;
+            case SC_OP_FUNC0 + 6u: v = fabsf(a); break;
+            case SC_OP_FUNC0 + 7u: v = atanf(a); break;
+            default: v = tanhf(a); break;
+            }
+            st[sp - 1u] = v;
+        }
+        pc += len;
+    }
+}
+
+/* maps::ModelMaps::decode: the section body of an image of dimensions n (xi) and m (w). */
+static sc_error parse_maps(sc_image *im, sc_bytes s) {
+    uint32_t coords_len, input_map_len, c0 = SC_MAPS_HEADER_LEN, i0, i;
+    uint64_t pc, pi, expected;
+    sc_bytes c, p;
+    sc_error e;
+    if (s.len < SC_MAPS_HEADER_LEN) return SC_E_MAPS;
+    im->n_plant = s.p[0];
+    im->m_plant = s.p[1];
+    if (im->n_plant < 1 || im->n_plant > SC_MAX_N || im->m_plant < 1 || im->m_plant > SC_MAX_M)
+        return SC_E_MAPS;
+    if (s.p[2] != 0 || s.p[3] != 0) return SC_E_MAPS;
+    coords_len = le32(s.p + 4);
+    input_map_len = le32(s.p + 8);
+    pc = ((uint64_t)coords_len + 3u) & ~(uint64_t)3u;
+    pi = ((uint64_t)input_map_len + 3u) & ~(uint64_t)3u;
+    expected = SC_MAPS_HEADER_LEN + pc + pi;
+    if (expected != (uint64_t)s.len) return SC_E_MAPS;
+    i0 = c0 + (uint32_t)pc;
+    for (i = c0 + coords_len; i < i0; i++)
+        if (s.p[i] != 0) return SC_E_MAPS;
+    for (i = i0 + input_map_len; i < s.len; i++)
+        if (s.p[i] != 0) return SC_E_MAPS;
+    c.p = s.p + c0;
+    c.len = coords_len;
+    p.p = s.p + i0;
+    p.len = input_map_len;
+    if ((e = decode_program(&im->coords, c)) != SC_E_NONE) return e;
+    if ((e = decode_program(&im->input_map, p)) != SC_E_NONE) return e;
+    if (im->coords.n_inputs != im->n_plant || im->coords.n_outputs != im->n) return SC_E_MAPS;
+    if (im->input_map.n_inputs != im->n_plant + im->m || im->input_map.n_outputs != im->m_plant)
+        return SC_E_MAPS;
+    im->has_maps = 1;
+    return SC_E_NONE;
+}
+
 /* image::decode. */
 static sc_error decode(sc_image *im, const uint8_t *bytes, uint32_t len) {
     sc_bytes body[SC_N_KINDS];
@@ -558,11 +758,11 @@ static sc_error decode(sc_image *im, const uint8_t *bytes, uint32_t len) {
         if (offset != next) return SC_E_DIRECTORY;
         if (slen > len - next) return SC_E_DIRECTORY;
         if (i > 0 && kind <= prev_kind) return SC_E_DIRECTORY;
-        if (kind < 1 || kind > SC_N_KINDS || kind == 10 || kind == 11) return SC_E_DIRECTORY;
-        /* admitted by the mode (layout::Mode::admits): kinds 1-5 and 9 (segment exits, optional)
-         * feedforward, 1, 2 and 6-8 PWA, 12 (spec fingerprint, optional) both */
+        if (kind < 1 || kind > SC_N_KINDS || kind == 11) return SC_E_DIRECTORY;
+        /* admitted by the mode (layout::Mode::admits): kinds 1-5, 9 (segment exits) and 10 (model
+         * maps), both optional, feedforward; 1, 2 and 6-8 PWA; 12 (spec fingerprint, optional) both */
         if (kind != SC_KIND_SPEC_FINGERPRINT &&
-            (im->mode == 1 ? (kind > 5 && kind != 9) : ((kind >= 3 && kind <= 5) || kind == 9)))
+            (im->mode == 1 ? (kind > 5 && kind < 9) : ((kind >= 3 && kind <= 5) || kind >= 9)))
             return SC_E_DIRECTORY;
         body[kind - 1].p = bytes + next;
         body[kind - 1].len = slen;
@@ -593,7 +793,11 @@ static sc_error decode(sc_image *im, const uint8_t *bytes, uint32_t len) {
         if ((e = parse_one_bytes(&fp, body[SC_KIND_SPEC_FINGERPRINT - 1u])) != SC_E_NONE) return e;
         if (fp.len != SC_SPEC_FINGERPRINT_LEN) return SC_E_LENGTH;
     }
-    /* content */
+    /* content (Image::new_with_maps: the maps first, then the rest with the plant's input dimension) */
+    im->n_plant = im->n;
+    im->m_plant = im->m;
+    if (im->mode == 1 && (present & (1u << 9)) && (e = parse_maps(im, body[9])) != SC_E_NONE)
+        return e;
     if (!(finite_f32(im->period) && im->period > 0.0f)) return SC_E_PERIOD;
     if (im->mode == 1) return validate_feedforward(im);
     if ((e = validate_K_P(im)) != SC_E_NONE) return e;
@@ -607,6 +811,8 @@ static sc_error decode(sc_image *im, const uint8_t *bytes, uint32_t len) {
 
 uint32_t sc_n(const sc_controller *c) { return c->image.n; }
 uint32_t sc_m(const sc_controller *c) { return c->image.m; }
+uint32_t sc_plant_n(const sc_controller *c) { return c->image.n_plant; }
+uint32_t sc_plant_m(const sc_controller *c) { return c->image.m_plant; }
 
 void sc_reset(sc_controller *c) {
     uint32_t j;
@@ -738,7 +944,7 @@ static void ff_law(const sc_image *im, uint32_t row, uint32_t l, const float *x,
 void sc_fallback(const sc_controller *c, const float *x, uint32_t n_x, const float *last_u,
                  float u[SC_MAX_M]) {
     const sc_image *im = &c->image;
-    uint32_t n = im->n, m = im->m, i, j;
+    uint32_t n = im->n, m = im->m_plant, i, j;
     float e[SC_MAX_N];
     for (j = 0; j < SC_MAX_M; j++) u[j] = 0.0f;
     switch (im->fallback) {
@@ -842,7 +1048,12 @@ static int32_t pwa_locate(const sc_image *im, const float *x) {
     return -1;
 }
 
-static sc_status finish(sc_controller *c, const float *v, float u[SC_MAX_M]);
+static sc_status finish(sc_controller *c, const float *v, uint32_t m, float u[SC_MAX_M]);
+static sc_status feedforward(sc_controller *c, const float *x, float w[SC_MAX_M], int *law);
+
+/* What the feedforward law gives (eval::Law): the law's input in w, or the fallback. */
+#define SC_LAW 0
+#define SC_LAW_FALLBACK 1
 
 /* Controller::step_exits: a feedforward step of an image with segment exits. The cursor moves to the
  * next segment of the trajectory when the active one has a guard exit and
@@ -851,12 +1062,11 @@ static sc_status finish(sc_controller *c, const float *v, float u[SC_MAX_M]);
  * segment whose rows run out leaves the envelope (latched); past the last segment's rows, the terminal
  * behaviour. The cursor and the kappa its segment began at are updated even if the input then
  * overflows, as in Rust. */
-static sc_status step_exits(sc_controller *c, uint32_t t, const float *x, uint32_t n_x,
-                            float u[SC_MAX_M]) {
+static sc_status step_exits(sc_controller *c, uint32_t t, const float *x, float w[SC_MAX_M],
+                            int *law) {
     const sc_image *im = &c->image;
     uint32_t n = im->n, s0, count, last, s, i, j, local;
     uint64_t rec = 2ull * n + 3u;
-    float v[SC_MAX_M];
     sc_segment g;
     trajectory_segments(im, t, &s0, &count);
     last = s0 + count > 0 ? s0 + count - 1u : 0u;
@@ -893,23 +1103,25 @@ static sc_status step_exits(sc_controller *c, uint32_t t, const float *x, uint32
     }
     g = segment_at(im->segment, s);
     local = c->kappa >= c->seg_kappa ? c->kappa - c->seg_kappa : 0u;
+    *law = SC_LAW;
     if (local < g.len) {
-        ff_law(im, g.first_row + local, g.location, x, v);
+        ff_law(im, g.first_row + local, g.location, x, w);
     } else if (s < last) {
         /* A guard exit not seen within its rows: outside what was certified. */
         c->out_of_envelope = 1;
         return SC_OUT_OF_ENVELOPE;
     } else if (im->terminal == 0) {
-        ff_law(im, g.first_row + (g.len > 0 ? g.len - 1u : 0u), g.location, x, v);
+        ff_law(im, g.first_row + (g.len > 0 ? g.len - 1u : 0u), g.location, x, w);
     } else {
-        sc_fallback(c, x, n_x, c->last_u, v);
+        *law = SC_LAW_FALLBACK;
     }
-    return finish(c, v, u);
+    return SC_OK;
 }
 
-static sc_status finish(sc_controller *c, const float *v, float u[SC_MAX_M]) {
+/* Controller::accept: m input values v; not finite -> out of the envelope (kappa does not advance). */
+static sc_status finish(sc_controller *c, const float *v, uint32_t m, float u[SC_MAX_M]) {
     uint32_t j;
-    for (j = 0; j < c->image.m; j++)
+    for (j = 0; j < m && j < SC_MAX_M; j++)
         if (!finite_f32(v[j])) return SC_OUT_OF_ENVELOPE;
     if (c->kappa != 0xFFFFFFFFu) c->kappa++;
     for (j = 0; j < SC_MAX_M; j++) {
@@ -937,13 +1149,59 @@ sc_status sc_step(sc_controller *c, const float *x, uint32_t n_x, float u[SC_MAX
             for (i = 0; i < n; i++) s += f32_at(im->gain, ((uint64_t)part * m + j) * n + i) * x[i];
             v[j] = s + f32_at(im->offset, (uint64_t)part * m + j);
         }
-        return finish(c, v, u);
+        return finish(c, v, m, u);
     }
     if (im->mode != 1) return SC_IMAGE_REJECTED;
     /* Controller::step, feedforward */
     {
-        uint32_t t, start, len, k;
+        int law;
+        sc_status st;
         if (!state_ok(im, x, n_x)) return SC_BAD_FRAME;
+        st = feedforward(c, x, v, &law);
+        if (st != SC_OK) return st;
+        if (law == SC_LAW) return finish(c, v, im->m, u);
+        sc_fallback(c, x, n_x, c->last_u, v);
+        return finish(c, v, im->m_plant, u);
+    }
+}
+
+/* Controller::step_plant (step_maps with model maps). */
+sc_status sc_step_plant(sc_controller *c, const float *x, uint32_t n_x, float u[SC_MAX_M]) {
+    const sc_image *im = &c->image;
+    float xi[SC_MAX_N], w[SC_MAX_M], slots[SC_MAX_N + SC_MAX_M], v[SC_MAX_M];
+    uint32_t i, j, np = im->n_plant, m = im->m;
+    int law;
+    sc_status st;
+    if (im->mode != 1 || !im->has_maps) return sc_step(c, x, n_x, u);
+    if (x == 0 || n_x != np) return SC_BAD_FRAME;
+    for (i = 0; i < n_x; i++)
+        if (!finite_f32(x[i])) return SC_BAD_FRAME;
+    for (i = 0; i < SC_MAX_N; i++) xi[i] = 0.0f;
+    eval_program(&im->coords, x, xi);
+    for (i = 0; i < im->n; i++)
+        if (!finite_f32(xi[i])) return SC_OUT_OF_ENVELOPE;
+    st = feedforward(c, xi, w, &law);
+    if (st != SC_OK) return st;
+    if (law == SC_LAW_FALLBACK) {
+        sc_fallback(c, x, n_x, c->last_u, v);
+        return finish(c, v, im->m_plant, u);
+    }
+    for (j = 0; j < m; j++)
+        if (!finite_f32(w[j])) return SC_OUT_OF_ENVELOPE;
+    for (i = 0; i < np; i++) slots[i] = x[i];
+    for (j = 0; j < m; j++) slots[np + j] = w[j];
+    for (j = 0; j < SC_MAX_M; j++) v[j] = 0.0f;
+    eval_program(&im->input_map, slots, v);
+    return finish(c, v, im->m_plant, u);
+}
+
+/* The feedforward law of one step at the (finite, length-n) state x (Controller::feedforward): selection
+ * at kappa = 0 and its latch, the table row (or exits), the terminal behaviour; w receives the law's
+ * input when *law is SC_LAW. Does not advance kappa. */
+static sc_status feedforward(sc_controller *c, const float *x, float w[SC_MAX_M], int *law) {
+    const sc_image *im = &c->image;
+    {
+        uint32_t t, start, len, k;
         if (c->out_of_envelope) return SC_OUT_OF_ENVELOPE;
         if (c->has_active) {
             t = c->active;
@@ -960,16 +1218,17 @@ sc_status sc_step(sc_controller *c, const float *x, uint32_t n_x, float u[SC_MAX
             trajectory_segments(im, t, &s0, &count);
             c->segment = (uint16_t)s0;
         }
-        if (im->exits.len != 0) return step_exits(c, t, x, n_x, u);
+        if (im->exits.len != 0) return step_exits(c, t, x, w, law);
         trajectory_rows(im, t, &start, &len);
         k = c->kappa;
+        *law = SC_LAW;
         if (k < len || im->terminal == 0) {
             uint32_t row = start + (k < len ? k : (len > 0 ? len - 1u : 0u));
             uint32_t l = row_location(c, t, row);
-            ff_law(im, row, l, x, v);
+            ff_law(im, row, l, x, w);
         } else {
-            sc_fallback(c, x, n_x, c->last_u, v);
+            *law = SC_LAW_FALLBACK;
         }
-        return finish(c, v, u);
+        return SC_OK;
     }
 }

@@ -8,6 +8,7 @@
  *
  *     cc -std=c99 -O2 -ffp-contract=off -fno-fast-math -c controller.c controller_image.c
  *
+ * (linked with the C math library, -lm, for the functions of model programs) *
  * i.e. IEEE single precision with no fused multiply-add contraction and no fast-math reassociation
  * (on a Cortex-M4F: -mfpu=fpv4-sp-d16 -mfloat-abi=hard plus the same flags; FLT_EVAL_METHOD must be 0).
  *
@@ -32,6 +33,20 @@
  *     otherwise SC_OUT_OF_ENVELOPE for this step only.
  *   - a state of the wrong length or with a non-finite component -> SC_BAD_FRAME; a non-finite input
  *     -> SC_OUT_OF_ENVELOPE. Errors never advance kappa.
+ *   - model maps (optional section 10, feedforward only; a feedback-linearizable plant): the image's
+ *     law works on xi = coords(x) (n values) and gives w (m values); the plant has n_plant states and
+ *     m_plant inputs, u = input_map(x, w). sc_step_plant takes the plant's state: x must have n_plant
+ *     finite values (else SC_BAD_FRAME); xi = coords(x), SC_OUT_OF_ENVELOPE if not finite; the
+ *     feedforward law above on xi gives w (SC_OUT_OF_ENVELOPE if not finite); u = input_map(x, w),
+ *     SC_OUT_OF_ENVELOPE if not finite. Where the law applies the fallback, the fallback is applied to
+ *     the plant directly. The fallback and the input box then have m_plant values and a linear fallback
+ *     is refused. Without model maps sc_step_plant is sc_step. The programs are a stack bytecode
+ *     (shared-types/src/program.rs) interpreted with a fixed stack of SC_MAX_PROGRAM_STACK floats in one
+ *     pass over their code; sinf, cosf, tanf, expf, logf, atanf, tanhf and atan2f come from <math.h>
+ *     (sqrtf and fabsf are exact). The Rust evaluator uses the `libm` crate's functions: a program
+ *     without those six functions gives the same bits; with them the C library's results may differ
+ *     from Rust's in the last place or so (a conforming libm is faithful, within an ulp or two), which
+ *     the host's rounding analysis of a program already allows for (4 ulp per call).
  * On any status but SC_OK the firmware applies sc_fallback (the Rust firmware passes the last input it
  * applied as last_u).
  */
@@ -61,6 +76,12 @@ extern "C" {
 #define SC_MAX_LEAF_BALLS @MAX_LEAF_BALLS@
 /* Bytes of the optional spec fingerprint (shared-types/src/layout.rs). */
 #define SC_SPEC_FINGERPRINT_LEN @SPEC_FINGERPRINT_LEN@u
+#define SC_MAX_PROGRAM_LEN @MAX_PROGRAM_LEN@
+#define SC_MAX_PROGRAM_CONSTS @MAX_PROGRAM_CONSTS@
+#define SC_MAX_PROGRAM_INPUTS @MAX_PROGRAM_INPUTS@
+#define SC_MAX_PROGRAM_OUTPUTS @MAX_PROGRAM_OUTPUTS@
+#define SC_MAX_PROGRAM_STACK @MAX_PROGRAM_STACK@
+#define SC_MAX_PROGRAM_POWI @MAX_PROGRAM_POWI@
 
 /* Status of one step: the wire values of shared_types::eval::Status. */
 typedef enum {
@@ -92,14 +113,24 @@ typedef enum {
     SC_E_PWA = 17,             /* PWA laws, leaves, factors, balls, references */
     SC_E_TREE = 18,            /* PWA point-location tree */
     SC_E_ARGUMENT = 19,        /* a null pointer */
-    SC_E_EXIT = 20             /* segment exits: unknown kind, nonzero table record, guard exit with a
+    SC_E_EXIT = 20,            /* segment exits: unknown kind, nonzero table record, guard exit with a
                                   non-finite value, negative theta, or on a trajectory's last segment */
+    SC_E_MAPS = 21,            /* model maps section: plant dimensions, reserved or padding bytes,
+                                  lengths, a map's slots or outputs, or a linear fallback with maps */
+    SC_E_PROGRAM = 22          /* a model program: length, counts, constants, opcodes, operands, stack
+                                  depth, outputs stored once */
 } sc_error;
 
 typedef struct {
     const uint8_t *p;
     uint32_t len;
 } sc_bytes;
+
+/* A validated model program (shared_types::program::Program): views into the image. */
+typedef struct {
+    uint32_t n_inputs, n_outputs, max_stack;
+    sc_bytes consts, code;
+} sc_program;
 
 /* The validated image: views into the caller's array (which must outlive it). Read-only after sc_init. */
 typedef struct {
@@ -121,6 +152,10 @@ typedef struct {
     uint32_t n_nodes, n_leaves, n_balls;
     sc_bytes gain, offset, node, leaf_partition, leaf_end, ball_ref, R, ball_centre, ball_test,
         ball_location, ball_partition;
+    /* model maps (optional section 10) */
+    uint8_t has_maps;
+    uint32_t n_plant, m_plant; /* = n, m without maps */
+    sc_program coords, input_map;
 } sc_image;
 
 /* Controller state (shared_types::eval::Controller). */
@@ -147,14 +182,23 @@ void sc_reset(sc_controller *c);
  * otherwise leaves u untouched. */
 sc_status sc_step(sc_controller *c, const float *x, uint32_t n_x, float u[SC_MAX_M]);
 
-/* The image's fallback input for state x given the last applied input last_u (m values), written to
- * u[0..SC_MAX_M): hold, zero, constant, or K_fb (x - x_ref) + u_ref saturated to the input box. */
+/* One control period of the plant with its state x[0..n_x) (n_plant values): with model maps
+ * u = input_map(x, law(coords(x))) as above, without them sc_step. On SC_OK writes the plant's input to
+ * u[0..m_plant) (u[m_plant..SC_MAX_M) = 0); otherwise leaves u untouched. */
+sc_status sc_step_plant(sc_controller *c, const float *x, uint32_t n_x, float u[SC_MAX_M]);
+
+/* The image's fallback input for state x given the last applied input last_u (m_plant values), written
+ * to u[0..SC_MAX_M): hold, zero, constant, or K_fb (x - x_ref) + u_ref saturated to the input box. */
 void sc_fallback(const sc_controller *c, const float *x, uint32_t n_x, const float *last_u,
                  float u[SC_MAX_M]);
 
-/* State and input dimensions of the image. */
+/* State and input dimensions of the image (of its law: xi and w with model maps). */
 uint32_t sc_n(const sc_controller *c);
 uint32_t sc_m(const sc_controller *c);
+
+/* State and input dimensions of the plant (n_plant, m_plant; n, m without model maps). */
+uint32_t sc_plant_n(const sc_controller *c);
+uint32_t sc_plant_m(const sc_controller *c);
 
 #ifdef __cplusplus
 }

@@ -4,8 +4,9 @@
  *   'I' u32 len, len bytes  init from these bytes        -> u8 sc_error
  *   'E'                     init from the exported array -> u8 sc_error
  *   'R'                     reset (and forget the applied input)
- *   'S' u8 k, k f32         one period with a k-value state -> u8 status, SC_MAX_M f32: on SC_OK the
- *                           input, else sc_fallback at x with the last applied input (as the firmware)
+ *   'S' u8 k, k f32         one period (sc_step_plant: sc_step without model maps) with a k-value
+ *                           state -> u8 status, SC_MAX_M f32: on SC_OK the input, else sc_fallback at x
+ *                           with the last applied input (as the firmware)
  */
 #include <stdio.h>
 #include <string.h>
@@ -64,7 +65,7 @@ int main(void) {
                 memcpy(&x[i], &b, 4);
             }
             memset(u, 0, sizeof u);
-            s = sc_step(&c, x, k, u);
+            s = sc_step_plant(&c, x, k, u);
             if (s != SC_OK) sc_fallback(&c, x, k, applied, u);
             memcpy(applied, u, sizeof u);
             fputc((int)s, stdout);

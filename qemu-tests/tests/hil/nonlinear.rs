@@ -1,0 +1,61 @@
+//! A feedback-linearizable plant on the target (issue 13 item 7): the Example 4.9 image with model maps
+//! (`qemu_tests::images::fl_4_9`: ξ = coords(x), u = input_map(x, w) = R(θ)w) runs on the emulated
+//! Cortex-M4F against the plant's nonlinear equations integrated on the host with an adaptive
+//! Dormand–Prince solver (`qemu_tests::nonlinear`). Five runs of 400 steps from Init's corners and
+//! centre (`NonlinearImage::starts`, some with θ and θ̇ off zero): every reply is `Ok`,
+//! its input equals the host evaluator's `step_plant` bit for bit, and each run ends near the goal.
+
+use qemu_tests::closed_loop::{run_with, HostEvaluator};
+use qemu_tests::firmware::{self, FirmwareConfig};
+use qemu_tests::images::{fl_4_9, FL_TABLE_LEN};
+use qemu_tests::nonlinear::PlantFlow;
+use qemu_tests::qemu::Qemu;
+use shared_types::eval::Status;
+use std::time::Duration;
+
+const STEPS: usize = FL_TABLE_LEN + 100;
+
+#[test]
+fn fl_4_9_model_maps_run_on_the_target_bit_for_bit() {
+    let t = fl_4_9().unwrap_or_else(|e| panic!("{e}"));
+    let path = firmware::write_image("fl_4_9", &t.bytes).expect("image written");
+    let elf = firmware::build(
+        "fl_4_9",
+        &FirmwareConfig {
+            image: Some(path),
+            ..Default::default()
+        },
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    let img = shared_types::image::decode(&t.bytes).expect("the image decodes");
+    let starts = t.starts();
+    let mut worst = 0u32;
+    for (r, x0) in starts.iter().enumerate() {
+        let mut q = Qemu::launch(&elf, Duration::from_secs(120)).unwrap_or_else(|e| panic!("{e}"));
+        let mut host = HostEvaluator::new(img);
+        let trace = run_with(&mut q, &mut host, x0, 0, STEPS, |x, u| {
+            t.plant.flow(x, u, t.h)
+        })
+        .unwrap_or_else(|e| panic!("run {r} from {x0:?}: {e}"));
+        assert_eq!(trace.replies.len(), STEPS);
+        for (k, reply) in trace.replies.iter().enumerate() {
+            assert_eq!(reply.status, Status::Ok, "run {r}: step {k}");
+            assert_eq!(reply.u.len(), 2, "run {r}: step {k}");
+        }
+        worst = worst.max(trace.max_cost(Status::Ok).unwrap_or(0));
+        let end = trace.last_state();
+        assert!(
+            (end[0] - 2.0).abs() < 0.02 && end[2].abs() < 0.02,
+            "run {r} from {x0:?} ends at {end:?}"
+        );
+        let exit = q.shutdown().unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(exit.code, Some(0), "run {r}: firmware exit");
+    }
+    assert!(worst > 0);
+    println!(
+        "HIL fl-4-9 (model maps): {} runs of {STEPS} steps bit for bit; image {} bytes, model programs {} bytes, worst step cost {worst} instructions",
+        starts.len(),
+        t.bytes.len(),
+        t.program_bytes
+    );
+}
