@@ -74,6 +74,17 @@ pub fn run(a: &VerifyArgs) -> Outcome {
              Carlo of `verify` runs the plant itself"
         )));
     }
+    if let Some(maps) = task.plant.linearization() {
+        crate::verify::nonlinear::check_maps(maps, &img)
+            .map_err(|e| {
+                miette::miette!(
+                    "{} does not belong to {}: {e}",
+                    a.image.display(),
+                    a.spec.display()
+                )
+            })
+            .bad_input()?;
+    }
     let rc = crate::verify::feedforward::recheck(&judge, &img)
         .map_err(|e| miette::miette!("{}: {e}", a.image.display()))?;
     let seed = a.seed.unwrap_or(problem.seed ^ 0x7e51f1);

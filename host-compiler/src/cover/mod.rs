@@ -323,8 +323,20 @@ pub fn feedforward_image_of<'a>(
             location: vec![0; nominal.v.len()],
         });
     }
-    if let crate::spec::InputSet::Box { lo, hi } = &task.problem.input {
+    // A linearised plant's image carries its maps; its fallback and input box are the plant's (U, not
+    // the linear model's W).
+    let maps = plant.linearization();
+    let input = maps.map_or(&task.problem.input, |m| &m.input);
+    if let crate::spec::InputSet::Box { lo, hi } = input {
         b.input_box = Some((lo.clone(), hi.clone()));
+    }
+    if let Some(m) = maps {
+        b.model_maps = Some(crate::emit::ModelMapsSpec {
+            n_plant: m.n_plant,
+            m_plant: m.m_plant,
+            coords: m.coords.bytes.clone(),
+            input_map: m.input_map.bytes.clone(),
+        });
     }
     b.fallback = FallbackLaw::constant(&task.problem.fallback_input);
     b.fingerprint = Some(task.problem.fingerprint.as_bytes().to_vec());

@@ -1,6 +1,7 @@
 //! Monte Carlo of a feedback-linearizable task's image against the nonlinear plant itself (§3.1.2): every
-//! run starts from a plant state in Init, the controller measures the full state, maps it to ξ, runs the
-//! linear law and maps w back to u through the model programs in f32, exactly as the firmware does; the
+//! run starts from a plant state in Init, and the shared evaluator's `step_plant` (what the firmware runs)
+//! maps the measured state to ξ, runs the linear law and maps w back to u through the image's model
+//! programs in f32; the
 //! plant is flowed over each held period by the adaptive integrator (`model::nonlinear`, Dop853 at
 //! rtol 10⁻¹⁰), with Unsafe also checked at [`SUBSTEPS`] − 1 instants inside every period. Runs are
 //! judged as the linear Monte Carlo judges them (Goal reached within T, Unsafe never entered, every
@@ -16,31 +17,11 @@ use crate::task::Task;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
-use shared_types::eval::{Controller, Status};
+use shared_types::eval::Controller;
 use shared_types::image::Image;
 
 /// Sub-intervals per period at which Unsafe is checked between samples.
 pub const SUBSTEPS: usize = 8;
-
-/// One control period of the firmware on the plant's measured state: ξ = coords(x̂), w from the linear
-/// law on ξ, u = input_map(x̂, w), all in f32.
-pub fn plant_step(ctl: &mut Controller<'_>, maps: &FlMaps, x: &[f32]) -> Result<Vec<f32>, Status> {
-    let coords = maps.coords.program();
-    let mut xi = vec![0.0f32; coords.n_outputs()];
-    coords.eval(x, &mut xi).map_err(|_| Status::BadFrame)?;
-    if !xi.iter().all(|v| v.is_finite()) {
-        return Err(Status::OutOfEnvelope);
-    }
-    let w = ctl.step(&xi)?;
-    let map = maps.input_map.program();
-    let inputs: Vec<f32> = x.iter().chain(w.as_slice()).copied().collect();
-    let mut u = vec![0.0f32; map.n_outputs()];
-    map.eval(&inputs, &mut u).map_err(|_| Status::BadFrame)?;
-    if !u.iter().all(|v| v.is_finite()) {
-        return Err(Status::OutOfEnvelope);
-    }
-    Ok(u)
-}
 
 /// One closed-loop run from the plant state `x0` (module doc); margins recorded when asked.
 pub fn run_fl(
@@ -86,8 +67,8 @@ pub fn run_fl(
             break;
         }
         let xf: Vec<f32> = x.iter().map(|&v| v as f32).collect();
-        let u: Vec<f64> = match plant_step(&mut ctl, maps, &xf) {
-            Ok(u) => u.iter().map(|&v| v as f64).collect(),
+        let u: Vec<f64> = match ctl.step_plant(&xf) {
+            Ok(u) => u.as_slice().iter().map(|&v| v as f64).collect(),
             Err(_) => {
                 if k == 0 {
                     out.rejected = true;
@@ -120,6 +101,39 @@ pub fn run_fl(
         check(&x, &mut out, true);
     }
     out
+}
+
+/// Whether the image carries the task's model maps, byte for byte, and the plant's dimensions: an image
+/// made for another model (or without maps) is refused before any run.
+pub fn check_maps(maps: &FlMaps, image: &Image<'_>) -> Result<(), String> {
+    let Some(mm) = image.model_maps() else {
+        return Err(
+            "the image has no model maps section; a feedback-linearizable plant's image needs \
+                    its maps x ↦ ξ and (x, w) ↦ u"
+                .into(),
+        );
+    };
+    if (mm.n_plant(), mm.m_plant()) != (maps.n_plant, maps.m_plant) {
+        return Err(format!(
+            "the image's model maps are for a plant with n = {}, m = {}; the spec's has n = {}, m = {}",
+            mm.n_plant(),
+            mm.m_plant(),
+            maps.n_plant,
+            maps.m_plant
+        ));
+    }
+    if mm.coords_bytes() != maps.coords.bytes.as_slice() {
+        return Err(
+            "the image's coords program (x ↦ ξ) is not the one the spec's model gives".into(),
+        );
+    }
+    if mm.input_map_bytes() != maps.input_map.bytes.as_slice() {
+        return Err(
+            "the image's input map program ((x, w) ↦ u) is not the one the spec's model gives"
+                .into(),
+        );
+    }
+    Ok(())
 }
 
 /// Monte Carlo over the certified cover of a feedback-linearizable task: `interior` plant states drawn
