@@ -18,10 +18,10 @@
 //! section, the interpreter and the loop.
 #![allow(non_snake_case)]
 
-use crate::nonlinear::ControlAffine;
 use crate::plant::{double_integrator as double_integrator_plant, ContinuousPlant, DiscretePlant};
 use faer::Mat;
 use host_compiler::emit::{EmitError, FallbackLaw, ImageBuilder, ModelMapsSpec, Terminal};
+use host_compiler::model::nonlinear::NonlinearPlant;
 use host_compiler::model::ModelError;
 use shared_types::image;
 
@@ -194,7 +194,7 @@ pub struct NonlinearImage {
     /// The encoded image.
     pub bytes: Vec<u8>,
     /// The plant of the spec, `ẋ = f(x) + g(x)u`.
-    pub plant: ControlAffine,
+    pub plant: NonlinearPlant,
     /// Sample period, seconds.
     pub h: f64,
     /// Init's box (lo, hi) in the plant's state.
@@ -343,7 +343,7 @@ pub fn fl_4_9() -> Result<NonlinearImage, ImageBuildError> {
     let bytes = b.to_bytes()?;
     Ok(NonlinearImage {
         bytes,
-        plant: ControlAffine::from_spec(desc),
+        plant: NonlinearPlant::from_desc(desc),
         h,
         init: (lo, hi),
         table_len: FL_TABLE_LEN,
@@ -452,7 +452,7 @@ mod tests {
         let th: f64 = 0.4;
         let x0 = [0.05, 0.2, -0.03, 1.0, th, 0.0];
         let u = [0.7, 0.7];
-        let x1 = t.plant.flow(&x0, &u, t.h).unwrap();
+        let x1 = PlantFlow::flow(&t.plant, &x0, &u, t.h).unwrap();
         let w = [
             -th.sin() * u[0] + th.cos() * u[1],
             th.cos() * u[0] + th.sin() * u[1],
@@ -487,7 +487,7 @@ mod tests {
                     .step_plant(&xf)
                     .unwrap_or_else(|s| panic!("step {k} from {x0:?}: {s:?}"));
                 let u: Vec<f64> = u.as_slice().iter().map(|&v| v as f64).collect();
-                x = t.plant.flow(&x, &u, t.h).unwrap();
+                x = PlantFlow::flow(&t.plant, &x, &u, t.h).unwrap();
             }
             assert!(
                 (x[0] - 2.0).abs() < 0.02 && x[2].abs() < 0.02,

@@ -13,7 +13,7 @@
 //! **The law.** Where α_i is exactly affine in the ξ states, that affine part a_iᵀξ + c_i stays in the
 //! linear model (Example 4.9's drift 1 − X + 0.1Ẋ, so κ = 0 there as in the text) and α_res,i = 0;
 //! otherwise all of α_i is cancelled (α_res,i = α_i). The linear model is ξ̇ = A_ξ ξ + B_ξ w + c_ξ and the
-//! firmware applies u = λ(x)(w − α_res(x)), λ = Γ⁻¹ (symbolic, by cofactors, m ≤ 3): (3.17) with
+//! firmware applies u = λ(x)(w − α_res(x)), λ = Γ⁻¹ = adj(Γ)/det Γ (symbolic, m ≤ 3): (3.17) with
 //! κ = −λ α_res.
 //!
 //! **What is bounded, and how.** This module takes plants whose zero dynamics, λ and α_res depend only on
@@ -195,26 +195,20 @@ fn uses_other_state(e: &Expr, n: usize, allowed: &[usize]) -> Option<usize> {
     (0..n).find(|&s| !allowed.contains(&s) && e.uses(Var::State(s as u16)))
 }
 
-/// The symbolic inverse of a square matrix of expressions by cofactors (m ≤ 3).
-fn inverse(g: &[Vec<Expr>]) -> Result<Vec<Vec<Expr>>, FlError> {
+/// The symbolic adjugate and determinant of a square matrix of expressions (m ≤ 3): Γ⁻¹ = adj(Γ)/det.
+fn adjugate(g: &[Vec<Expr>]) -> Result<(Vec<Vec<Expr>>, Expr), FlError> {
     let m = g.len();
     let e = |i: usize, j: usize| g[i][j].clone();
     let det2 = |a: Expr, b: Expr, c: Expr, d: Expr| Expr::sub(Expr::mul(a, d), Expr::mul(b, c));
     match m {
-        1 => Ok(vec![vec![Expr::div(Expr::c(1.0), e(0, 0))]]),
-        2 => {
-            let det = det2(e(0, 0), e(0, 1), e(1, 0), e(1, 1));
-            Ok(vec![
-                vec![
-                    Expr::div(e(1, 1), det.clone()),
-                    Expr::div(Expr::neg(e(0, 1)), det.clone()),
-                ],
-                vec![
-                    Expr::div(Expr::neg(e(1, 0)), det.clone()),
-                    Expr::div(e(0, 0), det),
-                ],
-            ])
-        }
+        1 => Ok((vec![vec![Expr::c(1.0)]], e(0, 0))),
+        2 => Ok((
+            vec![
+                vec![e(1, 1), Expr::neg(e(0, 1))],
+                vec![Expr::neg(e(1, 0)), e(0, 0)],
+            ],
+            det2(e(0, 0), e(0, 1), e(1, 0), e(1, 1)),
+        )),
         3 => {
             // cof(i, j) = (−1)^{i+j} det of the minor without row i and column j.
             let cof = |i: usize, j: usize| {
@@ -230,10 +224,13 @@ fn inverse(g: &[Vec<Expr>]) -> Result<Vec<Vec<Expr>>, FlError> {
             let det = (0..3).fold(Expr::c(0.0), |acc, j| {
                 Expr::add(acc, Expr::mul(e(0, j), cof(0, j)))
             });
-            // λ = adj(Γ)/det, adj(Γ)_ij = cof(j, i).
-            Ok((0..3)
-                .map(|i| (0..3).map(|j| Expr::div(cof(j, i), det.clone())).collect())
-                .collect())
+            // adj(Γ)_ij = cof(j, i).
+            Ok((
+                (0..3)
+                    .map(|i| (0..3).map(|j| cof(j, i)).collect())
+                    .collect(),
+                det,
+            ))
         }
         _ => Err(FlError::TooManyInputs { m }),
     }
@@ -525,17 +522,27 @@ pub fn linearize(problem: &Problem) -> Result<(Problem, FlMaps), FlError> {
             check_zero(format!("g[{nm}][{}] (zero dynamics)", j + 1), e)?;
         }
     }
-    // 4. λ = Γ⁻¹ and the two programs.
-    let lambda = inverse(&gamma)?;
+    // 4. λ = Γ⁻¹ = adj(Γ)/det and the two programs; u_i = (Σ_j adj_ij (w_j − α_res,j)) / det, one
+    // division per input.
+    let (adj, det) = adjugate(&gamma)?;
+    let lambda: Vec<Vec<Expr>> = adj
+        .iter()
+        .map(|row| {
+            row.iter()
+                .map(|a| Expr::div(a.clone(), det.clone()))
+                .collect()
+        })
+        .collect();
     let w = |j: usize| Expr::var(Var::Input(j as u16));
     let input_exprs: Vec<Expr> = (0..m)
         .map(|i| {
-            (0..m).fold(Expr::c(0.0), |acc, j| {
+            let num = (0..m).fold(Expr::c(0.0), |acc, j| {
                 Expr::add(
                     acc,
-                    Expr::mul(lambda[i][j].clone(), Expr::sub(w(j), alpha_res[j].clone())),
+                    Expr::mul(adj[i][j].clone(), Expr::sub(w(j), alpha_res[j].clone())),
                 )
-            })
+            });
+            Expr::div(num, det.clone())
         })
         .collect();
     let coords_exprs: Vec<Expr> = xi_states

@@ -314,7 +314,9 @@ fn nonlinear_step_max() -> Result<(u32, u64, usize), Box<dyn std::error::Error>>
     let starts = t.starts();
     let steps = t.table_len + 100;
     for x0 in &starts {
-        let (m, s) = session(&elf, img, x0, steps, |x, u| t.plant.flow(x, u, t.h))?;
+        let (m, s) = session(&elf, img, x0, steps, |x, u| {
+            PlantFlow::flow(&t.plant, x, u, t.h)
+        })?;
         max = max.max(m);
         stack = stack.max(s);
     }

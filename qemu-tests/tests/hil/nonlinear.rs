@@ -4,12 +4,22 @@
 //! Dormand–Prince solver (`qemu_tests::nonlinear`). Five runs of 400 steps from Init's corners and
 //! centre (`NonlinearImage::starts`, some with θ and θ̇ off zero): every reply is `Ok`,
 //! its input equals the host evaluator's `step_plant` bit for bit, and each run ends near the goal.
+//!
+//! Then the certified image as `synth` makes it from `examples/fl-4-9.toml` (its maps derived by
+//! `model::feedback_linearizable`), from 50 seeded initial states in Init: every run meets the spec on the
+//! plant (Goal within T; Unsafe never entered and every input in ‖F‖ ≤ 2 before Goal), bit for bit with
+//! the host, and the worst step cost is printed.
 
+use host_compiler::property::input_bound;
+use host_compiler::synth::{synthesize, SynthOptions};
+use host_compiler::task::Task;
+use host_compiler::verify::input_slack;
 use qemu_tests::closed_loop::{run_with, HostEvaluator};
 use qemu_tests::firmware::{self, FirmwareConfig};
 use qemu_tests::images::{fl_4_9, FL_TABLE_LEN};
 use qemu_tests::nonlinear::PlantFlow;
 use qemu_tests::qemu::Qemu;
+use rand::{Rng, SeedableRng};
 use shared_types::eval::Status;
 use std::time::Duration;
 
@@ -34,7 +44,7 @@ fn fl_4_9_model_maps_run_on_the_target_bit_for_bit() {
         let mut q = Qemu::launch(&elf, Duration::from_secs(120)).unwrap_or_else(|e| panic!("{e}"));
         let mut host = HostEvaluator::new(img);
         let trace = run_with(&mut q, &mut host, x0, 0, STEPS, |x, u| {
-            t.plant.flow(x, u, t.h)
+            PlantFlow::flow(&t.plant, x, u, t.h)
         })
         .unwrap_or_else(|e| panic!("run {r} from {x0:?}: {e}"));
         assert_eq!(trace.replies.len(), STEPS);
@@ -57,5 +67,94 @@ fn fl_4_9_model_maps_run_on_the_target_bit_for_bit() {
         starts.len(),
         t.bytes.len(),
         t.program_bytes
+    );
+}
+
+#[test]
+fn fl_4_9_certified_image_meets_the_spec_from_50_starts() {
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../examples/fl-4-9.toml");
+    let task = Task::new(host_compiler::spec::load(path).expect("spec")).expect("task");
+    let opts = SynthOptions {
+        verify_interior: 64,
+        verify_per_ball: 2,
+        progress: false,
+        attack: None,
+        ..SynthOptions::default()
+    };
+    let s = synthesize(&task, &opts).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(s.verify.violations, 0);
+    let maps = task.plant.linearization().expect("a linearised plant");
+    let img = shared_types::image::decode(&s.image).expect("the image decodes");
+    let path = firmware::write_image("fl_4_9_certified", &s.image).expect("image written");
+    let elf = firmware::build(
+        "fl_4_9_certified",
+        &FirmwareConfig {
+            image: Some(path),
+            ..Default::default()
+        },
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    // 50 starts drawn in Init whose ξ the image's selection accepts.
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(4_9);
+    let ctl = shared_types::eval::Controller::new(img);
+    let mut starts = Vec::new();
+    while starts.len() < 50 {
+        let x: Vec<f64> = maps
+            .init
+            .lo
+            .iter()
+            .zip(&maps.init.hi)
+            .map(|(&l, &h)| if h > l { rng.random_range(l..=h) } else { l })
+            .collect();
+        let xi: Vec<f32> = maps.xi_of(&x).iter().map(|&v| v as f32).collect();
+        if ctl.select(&xi).is_some() {
+            starts.push(x);
+        }
+    }
+    let goal = task.property.goal.as_ref();
+    let unsafe_set = task
+        .property
+        .unsafe_region()
+        .expect("Ex 4.9 has an obstacle");
+    let input = input_bound(&maps.input);
+    let h = maps.plant.period();
+    let mut worst = 0u32;
+    for (r, x0) in starts.iter().enumerate() {
+        let mut q = Qemu::launch(&elf, Duration::from_secs(120)).unwrap_or_else(|e| panic!("{e}"));
+        let mut host = HostEvaluator::new(img);
+        let trace = run_with(&mut q, &mut host, x0, 0, task.steps, |x, u| {
+            PlantFlow::flow(&maps.plant, x, u, h)
+        })
+        .unwrap_or_else(|e| panic!("run {r} from {x0:?}: {e}"));
+        let goal_at = trace
+            .states
+            .iter()
+            .position(|x| goal.contains(&maps.xi_of(x)))
+            .unwrap_or_else(|| panic!("run {r} from {x0:?} never reaches Goal"));
+        for (k, x) in trace.states.iter().enumerate().take(goal_at + 1) {
+            assert!(
+                !unsafe_set.contains(&maps.xi_of(x)),
+                "run {r}: Unsafe at sample {k}"
+            );
+        }
+        for (k, reply) in trace.replies.iter().enumerate().take(goal_at) {
+            assert_eq!(reply.status, Status::Ok, "run {r}: step {k}");
+            let u: Vec<f64> = reply.u.as_slice().iter().map(|&v| v as f64).collect();
+            assert!(
+                input_slack(&input, &u) >= 0.0,
+                "run {r}: input {u:?} at step {k}"
+            );
+        }
+        worst = worst.max(trace.max_cost(Status::Ok).unwrap_or(0));
+        let exit = q.shutdown().unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(exit.code, Some(0), "run {r}: firmware exit");
+    }
+    assert!(worst > 0);
+    println!(
+        "HIL fl-4-9 certified image: 50 runs of {} steps met the spec, bit for bit; {} trajectories, \
+         image {} bytes, worst step cost {worst} instructions",
+        task.steps,
+        s.trajectories.len(),
+        s.image.len()
     );
 }
