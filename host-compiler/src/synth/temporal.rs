@@ -189,7 +189,7 @@ pub fn single_ball(
 }
 
 /// The generator's problem: the spec's Goal and Unsafe with the loop's tube constants.
-fn gen_problem<'a>(task: &'a Task, lp: &Loop<'a>, lc: &LoopConstants) -> GenProblem<'a> {
+pub fn gen_problem<'a>(task: &'a Task, lp: &Loop<'a>, lc: &LoopConstants) -> GenProblem<'a> {
     GenProblem {
         loc: 0,
         plant: &*task.plant,

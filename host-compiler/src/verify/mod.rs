@@ -374,7 +374,6 @@ pub fn monte_carlo(
 ) -> Result<VerifyReport, MonteCarloError> {
     check_runs("interior", interior, MAX_RUNS)?;
     check_runs("per_ball", per_ball, MAX_PER_BALL)?;
-    let n = image.n();
     let Pis = inverse_sqrt_metric(image)?;
     let ctl = Controller::new(*image);
     // Interior: rejection sampling against the evaluator's own selection.
@@ -400,16 +399,8 @@ pub fn monte_carlo(
     // Boundary: x = c + δ·P^{-1/2}w/‖w‖ for random directions w.
     let mut boundary: Vec<Vec<f64>> = Vec::new();
     for t in 0..image.n_trajectories() {
-        let c: Vec<f64> = (0..n).map(|i| image.centre(t, i) as f64).collect();
-        // A hair inside the stored radius, so that the f32 selection accepts nearly all of them.
-        let d = image.delta(t) as f64 * (1.0 - 1e-6);
         for _ in 0..per_ball {
-            let w: Vec<f64> = (0..n)
-                .map(|_| rng.sample::<f64, _>(rand_distr::StandardNormal))
-                .collect();
-            let wn = w.iter().map(|a| a * a).sum::<f64>().sqrt().max(1e-300);
-            let e = mat_vec(Pis.as_ref(), &w);
-            boundary.push((0..n).map(|i| c[i] + d * e[i] / wn).collect());
+            boundary.push(ball_boundary_point(image, Pis.as_ref(), t, &mut rng));
         }
     }
     let boundary_runs = boundary.len();
@@ -421,6 +412,26 @@ pub fn monte_carlo(
         .map(|(i, x0)| run(judge, image, x0, i % MARGIN_EVERY == 0))
         .collect();
     Ok(summarize(&outcomes, interior_runs, boundary_runs))
+}
+
+/// A point on the boundary of trajectory `t`'s ball, c + δ·P^{-1/2}w/‖w‖ for a random direction w, a
+/// hair inside the stored radius so that the f32 selection accepts nearly all of them (`Pis` = P^{-1/2}).
+pub(crate) fn ball_boundary_point(
+    image: &Image<'_>,
+    Pis: faer::MatRef<'_, f64>,
+    t: usize,
+    rng: &mut ChaCha8Rng,
+) -> Vec<f64> {
+    let n = image.n();
+    let d = image.delta(t) as f64 * (1.0 - 1e-6);
+    let w: Vec<f64> = (0..n)
+        .map(|_| rng.sample::<f64, _>(rand_distr::StandardNormal))
+        .collect();
+    let wn = w.iter().map(|a| a * a).sum::<f64>().sqrt().max(1e-300);
+    let e = mat_vec(Pis, &w);
+    (0..n)
+        .map(|i| image.centre(t, i) as f64 + d * e[i] / wn)
+        .collect()
 }
 
 /// The report of a Monte Carlo's runs: the first `interior_runs` drawn inside, the next `boundary_runs` on

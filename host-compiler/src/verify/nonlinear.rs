@@ -8,9 +8,8 @@
 //! applied input in the *plant's* input set, until the first sample in Goal), independently of how the
 //! certificate bounded the zero dynamics and the sampled-loop mismatch.
 
-use super::{check_runs, MonteCarloError, MAX_PER_BALL, MAX_RUNS};
+use super::{ball_boundary_point, check_runs, MonteCarloError, MAX_PER_BALL, MAX_RUNS};
 use super::{input_slack, inverse_sqrt_metric, summarize, RunOutcome, VerifyReport, MARGIN_EVERY};
-use crate::linalg::mat_vec;
 use crate::model::feedback_linearizable::FlMaps;
 use crate::property::input_bound;
 use crate::task::Task;
@@ -154,7 +153,6 @@ pub fn monte_carlo_fl(
         .linearization()
         .expect("monte_carlo_fl is called on a linearised task");
     let init = &maps.init;
-    let n = image.n();
     let Pis = inverse_sqrt_metric(image)?;
     let ctl = Controller::new(*image);
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
@@ -178,17 +176,11 @@ pub fn monte_carlo_fl(
     let interior_runs = starts.len();
     let mut boundary: Vec<Vec<f64>> = Vec::new();
     for t in 0..image.n_trajectories() {
-        let c: Vec<f64> = (0..n).map(|i| image.centre(t, i) as f64).collect();
-        let d = image.delta(t) as f64 * (1.0 - 1e-6);
         for _ in 0..per_ball {
-            let w: Vec<f64> = (0..n)
-                .map(|_| rng.sample::<f64, _>(rand_distr::StandardNormal))
-                .collect();
-            let wn = w.iter().map(|a| a * a).sum::<f64>().sqrt().max(1e-300);
-            let e = mat_vec(Pis.as_ref(), &w);
+            let xi = ball_boundary_point(image, Pis.as_ref(), t, &mut rng);
             let mut x = draw(&mut rng);
             for (j, &s) in maps.xi_states.iter().enumerate() {
-                x[s] = c[j] + d * e[j] / wn;
+                x[s] = xi[j];
             }
             boundary.push(x);
         }

@@ -2,9 +2,8 @@
 //! linear model in ξ with the sampled-loop mismatch, and its image run on the plant itself.
 
 use host_compiler::certify::{self, Loop, LoopConstants};
-use host_compiler::property::input_scale;
 use host_compiler::task::Task;
-use host_compiler::trajectory::generate::{generate, GenProblem, GenSettings};
+use host_compiler::trajectory::generate::{generate, GenSettings};
 
 fn ex49() -> Task {
     let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../examples/fl-4-9.toml");
@@ -17,19 +16,7 @@ fn a_generated_trajectory_of_example_4_9_is_certified_with_the_mismatch() {
     let design = host_compiler::caf::design(&task).expect("CAF");
     let lp = Loop::new(&task, &design);
     let lc = LoopConstants::new(&lp).expect("constants");
-    let gp = GenProblem {
-        loc: 0,
-        plant: &*task.plant,
-        K: lp.K,
-        P: lp.P,
-        property: &task.property,
-        convex: &task.convex,
-        steps: task.steps,
-        gamma: lc.gamma,
-        phi: lc.phi,
-        beta: lc.beta,
-        input_margin: 1e-5 * input_scale(&task.property.input),
-    };
+    let gp = host_compiler::synth::temporal::gen_problem(&task, &lp, &lc);
     let x0 = vec![0.0, 0.0, 0.0, 1.0];
     let g = generate(&gp, &x0, &GenSettings::default()).expect("generated");
     let (nom, cert) = certify::shipped(&lp, &lc, &x0, &g.nominal.v);
