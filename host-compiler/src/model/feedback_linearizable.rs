@@ -112,7 +112,6 @@ pub struct FlMaps {
     pub xi_states: Vec<usize>,
     /// The zero-dynamics states, in state order.
     pub zero_states: Vec<usize>,
-    pub relative_degree: Vec<usize>,
     /// x ↦ ξ (inputs: the n_plant states).
     pub coords: Compiled,
     /// (x, w) ↦ u (inputs: the n_plant states, then w).
@@ -412,24 +411,8 @@ pub fn linearize(problem: &Problem) -> Result<(Problem, FlMaps), FlError> {
     let p = names.param_values();
     let sys = &desc.system;
     let (n, m) = (sys.n(), sys.m());
-    let centre: Vec<f64> = problem
-        .init
-        .lo
-        .iter()
-        .zip(&problem.init.hi)
-        .map(|(l, h)| 0.5 * (l + h))
-        .collect();
-    let at = Point {
-        x: &centre,
-        u: &[],
-        p: &p,
-    };
-    let rd = sys
-        .relative_degree_at(&at, 1e-12)
-        .map_err(|e| FlError::Bound {
-            what: "the relative degree".into(),
-            why: e.to_string(),
-        })?;
+    // The spec loader's Lie derivatives and Γ (uniform over Init).
+    let rd = &desc.derivatives;
     // 1. ξ: every L_f^k h_i (k < r_i) must be a state.
     let mut xi_states = Vec::new();
     for (i, tower) in rd.lf.iter().enumerate() {
@@ -878,7 +861,6 @@ pub fn linearize(problem: &Problem) -> Result<(Problem, FlMaps), FlError> {
         m_plant: m,
         xi_states,
         zero_states,
-        relative_degree: rd.r.clone(),
         coords,
         input_map,
         input_exprs,

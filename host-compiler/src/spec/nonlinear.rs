@@ -44,7 +44,7 @@ use super::limits::{MAX_M, MAX_N};
 use super::raw::{Pairs, RawTime};
 use super::validate::{bounded, capacity, positive};
 use super::{InitBox, Matrix, Plant, TimeDomain};
-use crate::expr::diff::{lie, AffineSystem, RelativeDegreeError};
+use crate::expr::diff::{lie, AffineSystem, RelativeDegree, RelativeDegreeError};
 use crate::expr::interval::{certainly_regular, enclose_matrix, Interval, VarBox};
 use crate::expr::{self, Expr, ExprError, Names, Point, Var};
 
@@ -87,10 +87,18 @@ pub struct NonlinearDesc {
     pub names: Names,
     /// f, g, h (parameters as variables; `Expr::bind_params` with `names.param_values()` binds them).
     pub system: AffineSystem,
-    /// The vector relative degree over Init (Def 3.5).
-    pub relative_degree: Vec<usize>,
+    /// Def 3.5 at the centre of Init, checked uniform over Init: the vector relative degree, the Lie
+    /// derivatives L_f^k h_i (k ≤ r_i) and Γ, symbolically (parameters as variables).
+    pub derivatives: RelativeDegree,
     /// Sample period, s.
     pub period: f64,
+}
+
+impl NonlinearDesc {
+    /// The vector relative degree over Init (Def 3.5).
+    pub fn relative_degree(&self) -> &[usize] {
+        &self.derivatives.r
+    }
 }
 
 /// Whether the spec's `[plant]` has a `class` (then it is read by this module). A text that is not TOML
@@ -694,7 +702,7 @@ pub(crate) fn check(
             class: PlantClass::FeedbackLinearizable,
             names,
             system,
-            relative_degree: rd.r,
+            derivatives: rd,
             period,
         },
     ))
@@ -726,7 +734,7 @@ mod tests {
             spec::parse(&example(), "fl-4-9.toml").unwrap_or_else(|e| panic!("{}", e.headline()));
         let nl = p.nonlinear.as_ref().expect("a nonlinear plant");
         assert_eq!(nl.class, PlantClass::FeedbackLinearizable);
-        assert_eq!(nl.relative_degree, vec![2, 2]);
+        assert_eq!(nl.relative_degree(), &[2, 2]);
         assert_eq!((p.plant.n(), p.plant.m(), p.plant.p()), (6, 2, 2));
         // C selects (X, Y); at θ = 0, B's velocity rows are g(x) = [[0, 1], [1, 0]].
         assert_eq!(p.plant.C.row(0), &[1.0, 0.0, 0.0, 0.0, 0.0, 0.0]);
@@ -823,7 +831,7 @@ mod tests {
         let src = theta_free(&example());
         assert_ne!(src, example());
         let p = spec::parse(&src, "fl.toml").unwrap_or_else(|e| panic!("{}", e.headline()));
-        assert_eq!(p.nonlinear.unwrap().relative_degree, vec![2, 2]);
+        assert_eq!(p.nonlinear.unwrap().relative_degree(), &[2, 2]);
     }
 
     #[test]

@@ -121,7 +121,7 @@ pub fn check_matches(problem: &crate::spec::Problem, image: &Image<'_>) -> Resul
     let n = problem
         .nonlinear
         .as_ref()
-        .map_or(p.n(), |d| d.relative_degree.iter().sum());
+        .map_or(p.n(), |d| d.relative_degree().iter().sum());
     if image.n() != n {
         return Err(Mismatch::States {
             image: image.n(),
