@@ -77,13 +77,7 @@ fn fl_synth_then_verify() {
     assert_eq!(o.status.code(), Some(2), "{stderr}");
     assert!(stderr.contains("[plant]"), "{stderr}");
     // ... and without the fingerprint, because its larger mismatch does not certify the stored radii.
-    let bytes = std::fs::read(&img).unwrap();
-    let mut b = host_compiler::emit::ImageBuilder::from_image(
-        &shared_types::image::decode(&bytes).unwrap(),
-    );
-    b.fingerprint = None;
-    let bare = dir.join("bare.img");
-    std::fs::write(&bare, b.to_bytes().unwrap()).unwrap();
+    let bare = crate::spec_fingerprint::without_fingerprint(&img);
     let o = bin()
         .args(["verify", faster.to_str().unwrap(), bare.to_str().unwrap()])
         .args(["--runs", "100", "--per-ball", "4"])

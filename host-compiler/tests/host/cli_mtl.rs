@@ -90,13 +90,7 @@ fn mtl_synth_then_verify() {
     assert_eq!(o.status.code(), Some(2), "{stderr}");
     assert!(stderr.contains("[mtl] with [sets]"), "{stderr}");
     // ... and without the fingerprint, by the re-proof from the bytes (a failed check).
-    let bytes = std::fs::read(&img).unwrap();
-    let mut b = host_compiler::emit::ImageBuilder::from_image(
-        &shared_types::image::decode(&bytes).unwrap(),
-    );
-    b.fingerprint = None;
-    let bare = dir.join("bare.img");
-    std::fs::write(&bare, b.to_bytes().unwrap()).unwrap();
+    let bare = crate::spec_fingerprint::without_fingerprint(&img);
     let o = bin()
         .args(["verify", other.to_str().unwrap(), bare.to_str().unwrap()])
         .args(["--runs", "64", "--per-ball", "8"])

@@ -2,7 +2,8 @@
 //! order and the spelling of numbers and change with any value; `verify` and `simulate` refuse an image
 //! whose spec changed since synthesis (exit 2) naming each part, accept one without a fingerprint with a
 //! warning; the builders round-trip the section; `inspect` shows it. [`assert_stamped`] is called by the
-//! PWA, hybrid and MTL CLI tests on the images their `synth` writes.
+//! PWA, hybrid and MTL CLI tests on the images their `synth` writes; [`without_fingerprint`] gives the MTL
+//! and feedback-linearizable CLI tests an image for the re-proof alone.
 
 use crate::cli_exit::{base, bin, scratch};
 use host_compiler::emit::{ImageBuilder, PwaImageBuilder};
@@ -27,6 +28,17 @@ pub(crate) fn assert_stamped(img: &Path, spec: &Path) {
         img.display(),
         spec.display()
     );
+}
+
+/// A copy of the feedforward image at `img` without its fingerprint, written as `bare.img` beside it
+/// (what an image from before the fingerprint looks like: checked by the re-proof alone).
+pub(crate) fn without_fingerprint(img: &Path) -> std::path::PathBuf {
+    let bytes = std::fs::read(img).unwrap();
+    let mut b = ImageBuilder::from_image(&decode(&bytes).unwrap());
+    b.fingerprint = None;
+    let bare = img.with_file_name("bare.img");
+    std::fs::write(&bare, b.to_bytes().unwrap()).unwrap();
+    bare
 }
 
 #[test]
