@@ -42,6 +42,9 @@ use shared_types::image::{
 };
 use shared_types::maps;
 use shared_types::pwa::PwaTables;
+use shared_types::terminal::TerminalLaw;
+
+use crate::certify::terminal::StoredTerminal;
 
 pub use shared_types::image::Terminal;
 pub use shared_types::pwa::Child;
@@ -202,6 +205,8 @@ pub struct ImageBuilder {
     pub fingerprint: Option<Vec<u8>>,
     /// The model maps of a feedback-linearizable plant (section 10), if any.
     pub model_maps: Option<ModelMapsSpec>,
+    /// The certified terminal law (section 11), if any.
+    pub terminal_law: Option<StoredTerminal>,
 }
 
 /// The model maps of a feedback-linearizable plant (`shared_types::maps`): the plant's dimensions and
@@ -324,6 +329,7 @@ impl ImageBuilder {
             terminal: Terminal::HoldLast,
             exits: Vec::new(),
             fingerprint: None,
+            terminal_law: None,
             model_maps: None,
         }
     }
@@ -580,7 +586,8 @@ impl ImageBuilder {
             n_partitions: 0,
         };
         let img = Image::new_with_maps(Mode::Feedforward, dims, period, payload, maps.as_deref())?;
-        encode_to_vec(&with_fingerprint(img, &self.fingerprint)?)
+        let terminal = self.terminal_law.as_ref().map(TerminalBytes::of);
+        encode_to_vec(&with_optional(img, &self.fingerprint, terminal.as_ref())?)
     }
 
     /// [`ImageBuilder::to_bytes`], then writes the file.
@@ -633,6 +640,9 @@ impl ImageBuilder {
                 Vec::new()
             },
             fingerprint: img.fingerprint().map(<[u8]>::to_vec),
+            terminal_law: img
+                .terminal_law()
+                .map(|t| stored_terminal(&t, img.n(), img.m())),
             model_maps: img.model_maps().map(|mm| ModelMapsSpec {
                 n_plant: mm.n_plant(),
                 m_plant: mm.m_plant(),
@@ -743,6 +753,8 @@ pub struct PwaImageBuilder {
     pub input_box: Option<(Vec<f64>, Vec<f64>)>,
     /// The spec fingerprint to store (`crate::spec::SpecFingerprint`'s bytes), or none.
     pub fingerprint: Option<Vec<u8>>,
+    /// The certified terminal law (section 11), if any.
+    pub terminal_law: Option<StoredTerminal>,
 }
 
 fn invalid(what: String, reason: &'static str) -> EmitError {
@@ -851,6 +863,7 @@ impl PwaImageBuilder {
             fallback: FallbackLaw::Zero,
             input_box: None,
             fingerprint: None,
+            terminal_law: None,
         }
     }
 
@@ -1094,7 +1107,8 @@ impl PwaImageBuilder {
             n_partitions: self.laws.len(),
         };
         let img = Image::new_pwa(dims, period, payload)?;
-        encode_to_vec(&with_fingerprint(img, &self.fingerprint)?)
+        let terminal = self.terminal_law.as_ref().map(TerminalBytes::of);
+        encode_to_vec(&with_optional(img, &self.fingerprint, terminal.as_ref())?)
     }
 
     /// [`PwaImageBuilder::to_bytes`], then writes the file.
@@ -1166,15 +1180,74 @@ impl PwaImageBuilder {
             fallback: fallback_from_image(img),
             input_box: input_box_from_image(img),
             fingerprint: img.fingerprint().map(<[u8]>::to_vec),
+            terminal_law: img
+                .terminal_law()
+                .map(|t| stored_terminal(&t, img.n(), img.m())),
         })
     }
 }
 
-/// `img` with the spec fingerprint, if one is given (refused unless it has the stored length).
-fn with_fingerprint<'a>(img: Image<'a>, fp: &'a Option<Vec<u8>>) -> Result<Image<'a>, EmitError> {
+/// `img` with the terminal law and the spec fingerprint, each if given (validated by the image).
+fn with_optional<'a>(
+    img: Image<'a>,
+    fp: &'a Option<Vec<u8>>,
+    terminal: Option<&'a TerminalBytes>,
+) -> Result<Image<'a>, EmitError> {
+    let img = match terminal {
+        Some(t) => img.with_terminal_law(TerminalLaw {
+            x_e: &t.x_e,
+            K: &t.K,
+            v: &t.v,
+            P: &t.P,
+            radius: t.radius,
+        })?,
+        None => img,
+    };
     match fp {
         Some(f) => Ok(img.with_fingerprint(f)?),
         None => Ok(img),
+    }
+}
+
+/// A terminal law's f32 bytes, for [`with_optional`].
+struct TerminalBytes {
+    x_e: Vec<u8>,
+    K: Vec<u8>,
+    v: Vec<u8>,
+    P: Vec<u8>,
+    radius: f32,
+}
+
+impl TerminalBytes {
+    fn of(t: &StoredTerminal) -> Self {
+        let bytes = |it: &mut dyn Iterator<Item = f64>| -> Vec<u8> {
+            it.flat_map(|v| (v as f32).to_le_bytes()).collect()
+        };
+        let (m, n) = (t.K.nrows(), t.K.ncols());
+        TerminalBytes {
+            x_e: bytes(&mut t.x_e.iter().copied()),
+            K: bytes(&mut (0..m * n).map(|i| t.K[(i / n, i % n)])),
+            v: bytes(&mut t.v.iter().copied()),
+            P: bytes(&mut (0..n * n).map(|i| t.P[(i / n, i % n)])),
+            radius: t.radius,
+        }
+    }
+}
+
+/// The terminal law an image stores, each f32 widened exactly.
+pub fn stored_terminal(t: &TerminalLaw<'_>, n: usize, m: usize) -> StoredTerminal {
+    let f = |b: &[u8]| -> Vec<f64> {
+        b.chunks_exact(4)
+            .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]) as f64)
+            .collect()
+    };
+    let (K, P) = (f(t.K), f(t.P));
+    StoredTerminal {
+        x_e: f(t.x_e),
+        K: faer::Mat::from_fn(m, n, |i, j| K.get(i * n + j).copied().unwrap_or(0.0)),
+        v: f(t.v),
+        P: faer::Mat::from_fn(n, n, |i, j| P.get(i * n + j).copied().unwrap_or(0.0)),
+        radius: t.radius,
     }
 }
 

@@ -125,6 +125,14 @@ pub enum Field {
     Fingerprint,
     /// The model maps section as a whole (its header's program lengths against its size).
     ModelMaps,
+    /// The terminal law's equilibrium `x_e`.
+    TerminalCentre,
+    /// The terminal law's gain `K_t`.
+    TerminalK,
+    /// The terminal law's offset `v_t`.
+    TerminalV,
+    /// The terminal law's ellipsoid matrix `P_t`.
+    TerminalP,
 }
 
 /// Which program of the model maps section an error is about.
@@ -354,6 +362,11 @@ pub enum ImageError {
         /// The component.
         input: u16,
     },
+    /// The terminal law's `P_t` is not exactly symmetric or not positive definite, or its radius is
+    /// negative or not finite.
+    BadTerminalLaw,
+    /// A terminal law in an image with model maps (not certified for such plants).
+    TerminalWithModelMaps,
     /// The constant fallback input lies outside the stored input box in some component.
     FallbackOutsideBox {
         /// The component.
@@ -619,6 +632,10 @@ impl fmt::Display for Field {
             Field::ProgramConst => "program constants",
             Field::Fingerprint => "spec fingerprint",
             Field::ModelMaps => "model maps section",
+            Field::TerminalCentre => "terminal law x_e",
+            Field::TerminalK => "terminal law K_t",
+            Field::TerminalV => "terminal law v_t",
+            Field::TerminalP => "terminal law P_t",
         })
     }
 }
@@ -744,6 +761,12 @@ impl fmt::Display for ImageError {
                 "trajectory {trajectory} step {step}: location {value} is out of range"
             ),
             EmptyInputBox { input } => write!(f, "input box component {input}: lower bound above upper"),
+            BadTerminalLaw => f.write_str(
+                "terminal law: P_t is not symmetric positive definite, or the radius is negative or not finite",
+            ),
+            TerminalWithModelMaps => {
+                f.write_str("a terminal law in an image with model maps (not certified for such plants)")
+            }
             FallbackOutsideBox { input } => write!(
                 f,
                 "fallback input component {input}: outside the input box"

@@ -12,6 +12,10 @@
 //!    search over segments;
 //! 3. past the last row, the image's [`Terminal`] behaviour.
 //!
+//! Both modes: with a terminal law ([`crate::terminal`], section 11) every step first tests whether x lies
+//! in the law's certified ellipsoid in Goal; if so, the terminal law gives the input and the controller is
+//! in its terminal phase, where a state outside the ellipsoid is out of the envelope (this step only).
+//!
 //! PWA-feedback mode (Ch. 6, law (6.1)) is pure feedback: at every step, locate x (a bounded-depth tree
 //! walk, then the envelope test against the leaf's certified balls, see [`crate::pwa`]); inside a ball,
 //! `u = K_j x + θ0_j` with `K_j = K + θ_j` of that ball's partition j; otherwise [`Status::OutOfEnvelope`]
@@ -33,6 +37,7 @@ use crate::capacity::{MAX_M, MAX_N};
 use crate::image::{Exit, Fallback, Image, Mode, ModelMaps, Terminal};
 use crate::pwa::Region;
 use crate::raw::{f32_span, floats};
+use crate::terminal::TerminalLaw;
 
 /// The firmware's answer every period besides `Ok(u)`. Shared by firmware and host (wire value = `u8`).
 #[repr(u8)]
@@ -117,6 +122,11 @@ impl Input {
     pub fn values(&self) -> [f32; MAX_M] {
         self.u
     }
+
+    /// All [`MAX_M`] slots, to fill (for the laws of other modules of this crate).
+    pub(crate) fn values_mut(&mut self) -> &mut [f32; MAX_M] {
+        &mut self.u
+    }
 }
 
 /// The build-time fallback: the input the firmware applies when its image is rejected (zero, of dimension
@@ -136,6 +146,8 @@ pub struct Controller<'a> {
     /// κ at which the active segment began (images with segment exits).
     seg_kappa: u32,
     out_of_envelope: bool,
+    /// Whether the terminal law has taken over (images with a terminal law).
+    terminal: bool,
     last_u: Input,
 }
 
@@ -150,6 +162,7 @@ impl<'a> Controller<'a> {
             segment: 0,
             seg_kappa: 0,
             out_of_envelope: false,
+            terminal: false,
             last_u: Input::zero(m),
         }
     }
@@ -172,6 +185,11 @@ impl<'a> Controller<'a> {
     /// The trajectory selected at κ = 0, if any.
     pub fn active_trajectory(&self) -> Option<u16> {
         self.active
+    }
+
+    /// Whether the terminal law has taken over since reset ([`crate::terminal`]).
+    pub fn in_terminal_phase(&self) -> bool {
+        self.terminal
     }
 
     /// The last input returned by [`Controller::step`] (zero after reset).
@@ -276,9 +294,16 @@ impl<'a> Controller<'a> {
     /// returns `Err(OutOfEnvelope)` if no ball contained the state at κ = 0 (latched until reset). PWA:
     /// returns `Err(OutOfEnvelope)` for this step if the state is outside the certified envelope. Both:
     /// `Err(OutOfEnvelope)` if the input is not finite. On success κ advances and the input is remembered
-    /// for [`Fallback::Hold`]. This is the law in the image's own coordinates: for an image with model
-    /// maps, `x` is ξ and the answer is w; the plant's loop calls [`Controller::step_plant`].
+    /// for [`Fallback::Hold`]. With a terminal law, a state in its ellipsoid gets the terminal law's
+    /// input first, and in the terminal phase a state outside it is `Err(OutOfEnvelope)` (module doc).
+    /// This is the law in the image's own coordinates: for an image with model maps, `x` is ξ and the
+    /// answer is w; the plant's loop calls [`Controller::step_plant`].
     pub fn step(&mut self, x: &[f32]) -> Result<Input, Status> {
+        if let Some(law) = self.image.terminal_law() {
+            if let Some(answer) = self.step_terminal(&law, x) {
+                return answer;
+            }
+        }
         if self.image.mode() != Mode::Feedforward {
             return self.step_pwa(x);
         }
@@ -468,6 +493,23 @@ impl<'a> Controller<'a> {
             return fallback(self);
         };
         law(self, u)
+    }
+
+    /// The terminal law's part of a step: `Some(answer)` when it decides the step (a bad state, a state in
+    /// its ellipsoid, or the terminal phase), `None` to run the task's own law. Out of line, so that images
+    /// without a terminal law pay one test.
+    #[inline(never)]
+    fn step_terminal(&mut self, law: &TerminalLaw<'a>, x: &[f32]) -> Option<Result<Input, Status>> {
+        let (n, m) = (self.image.n(), self.image.m());
+        if x.len() != n || !x.iter().all(|v| v.is_finite()) {
+            return Some(Err(Status::BadFrame));
+        }
+        if law.accepts(x, n) {
+            self.terminal = true;
+            let u = law.law(x, n, m);
+            return Some(self.accept(u));
+        }
+        self.terminal.then_some(Err(Status::OutOfEnvelope))
     }
 
     /// The end of every step: a non-finite input is out of the envelope (κ does not advance); otherwise κ

@@ -40,6 +40,7 @@
 //! | 8   | `PwaBalls`              | [`crate::pwa::PwaBalls`]   | PWA         |
 //! | 9   | `SegmentExits`          | [`SegmentExitsSection`]    | feedforward, optional |
 //! | 10  | `ModelMaps`             | raw, [`crate::maps`]       | feedforward, optional |
+//! | 11  | `TerminalLaw`           | [`crate::terminal::TerminalLaw`] | both, optional, not with model maps |
 //! | 12  | `SpecFingerprint`       | [`SpecFingerprintSection`] | both, optional |
 //!
 //! Every section a mode lists is required, exactly once; a known section of the other mode is refused.
@@ -115,6 +116,7 @@ use crate::raw::{
     check_dim, check_finite, check_len, div, f32_at, f32_span, floats, positive_definite, rem,
     sat16, sat32, u16_le, u32_at_byte,
 };
+use crate::terminal::TerminalLaw;
 
 /// What the controller does once the active trajectory's table is exhausted.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -677,6 +679,8 @@ pub struct Image<'a> {
     /// The spec fingerprint's hashes, or empty when the image has none.
     pub(crate) fingerprint: &'a [u8],
     pub(crate) maps: Option<ModelMaps<'a>>,
+    /// The terminal law (section 11), if the image has one.
+    pub(crate) terminal_law: Option<TerminalLaw<'a>>,
 }
 
 impl<'a> Image<'a> {
@@ -718,6 +722,7 @@ impl<'a> Image<'a> {
             pwa: PwaTables::EMPTY,
             fingerprint: &[],
             maps,
+            terminal_law: None,
         })
     }
 
@@ -745,6 +750,7 @@ impl<'a> Image<'a> {
             pwa: payload.tables,
             fingerprint: &[],
             maps: None,
+            terminal_law: None,
         })
     }
 
@@ -755,6 +761,23 @@ impl<'a> Image<'a> {
         check_len(Field::Fingerprint, hash, SPEC_FINGERPRINT_LEN)?;
         self.fingerprint = hash;
         Ok(self)
+    }
+
+    /// This image with the terminal law `law` (section 11), validated against the dimensions
+    /// ([`TerminalLaw::validate`]); refused with [`ImageError::TerminalWithModelMaps`] for an image with
+    /// model maps.
+    pub fn with_terminal_law(mut self, law: TerminalLaw<'a>) -> Result<Self, ImageError> {
+        if self.maps.is_some() {
+            return Err(ImageError::TerminalWithModelMaps);
+        }
+        law.validate(self.dims.n, self.dims.m)?;
+        self.terminal_law = Some(law);
+        Ok(self)
+    }
+
+    /// The terminal law (section 11), if the image has one.
+    pub fn terminal_law(&self) -> Option<TerminalLaw<'a>> {
+        self.terminal_law
     }
 
     /// The spec fingerprint's hashes ([`SPEC_FINGERPRINT_LEN`] bytes, part `i` of [`SPEC_PARTS`] at
@@ -1055,6 +1078,16 @@ impl<'a> Image<'a> {
         let laws = PostcardSection::new(SectionKind::PwaLaws, laws);
         let tree = PostcardSection::new(SectionKind::PwaTree, tree);
         let balls = PostcardSection::new(SectionKind::PwaBalls, balls);
+        let terminal = PostcardSection::new(
+            SectionKind::TerminalLaw,
+            self.terminal_law.unwrap_or(TerminalLaw {
+                x_e: &[],
+                K: &[],
+                v: &[],
+                P: &[],
+                radius: 0.0,
+            }),
+        );
         let fingerprint = PostcardSection::new(
             SectionKind::SpecFingerprint,
             SpecFingerprintSection {
@@ -1067,13 +1100,15 @@ impl<'a> Image<'a> {
         let ff = self.mode == Mode::Feedforward;
         let base: &[&dyn SectionWrite] = if ff { &feedforward } else { &pwa };
         // The optional sections, in kind order, only when present.
-        let optional: [(bool, &dyn SectionWrite); 3] = [
+        let optional: [(bool, &dyn SectionWrite); 4] = [
             (ff && !p.exits.is_empty(), &exits),
             (ff && self.maps.is_some(), &maps),
+            (self.terminal_law.is_some(), &terminal),
             (!self.fingerprint.is_empty(), &fingerprint),
         ];
         let present = optional.iter().filter(|(on, _)| *on).map(|(_, s)| *s);
-        // At most 8 sections (feedforward with exits, maps and a fingerprint).
+        // At most 8 sections (feedforward with exits, maps or a terminal law (never both), and a
+        // fingerprint).
         let mut list: [&dyn SectionWrite; 8] = [&locations; 8];
         let mut count = 0;
         for (slot, s) in list.iter_mut().zip(base.iter().copied().chain(present)) {
@@ -1136,7 +1171,7 @@ pub fn decode(bytes: &[u8]) -> Result<Image<'_>, ImageError> {
                 exits: exits.exit,
             };
             let img = Image::new_with_maps(mode, d, h.period, payload, maps)?;
-            with_stored_fingerprint(&dir, img)
+            with_stored_optional(&dir, img)
         }
         Mode::PwaFeedback => {
             let laws: PwaLaws<'_> = parse_section(&dir, SectionKind::PwaLaws)?;
@@ -1150,16 +1185,21 @@ pub fn decode(bytes: &[u8]) -> Result<Image<'_>, ImageError> {
                 input_box: fallback.input_box,
             };
             let img = Image::new_pwa(d, h.period, payload)?;
-            with_stored_fingerprint(&dir, img)
+            with_stored_optional(&dir, img)
         }
     }
 }
 
-/// `img` with the directory's optional spec fingerprint, validated.
-fn with_stored_fingerprint<'a>(
-    dir: &Directory<'a>,
-    img: Image<'a>,
-) -> Result<Image<'a>, ImageError> {
+/// `img` with the directory's optional sections of both modes (terminal law, spec fingerprint),
+/// validated.
+fn with_stored_optional<'a>(dir: &Directory<'a>, img: Image<'a>) -> Result<Image<'a>, ImageError> {
+    let img = match dir.section(SectionKind::TerminalLaw) {
+        Some(_) => {
+            let law: TerminalLaw<'a> = parse_section(dir, SectionKind::TerminalLaw)?;
+            img.with_terminal_law(law)?
+        }
+        None => img,
+    };
     match dir.section(SectionKind::SpecFingerprint) {
         Some(_) => {
             let fp: SpecFingerprintSection<'a> = parse_section(dir, SectionKind::SpecFingerprint)?;

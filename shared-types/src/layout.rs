@@ -102,13 +102,16 @@ impl Mode {
     }
 
     /// Whether a section of `kind` belongs in an image of this mode: the required ones, the optional
-    /// segment exits and model maps of a feedforward image, and the optional spec fingerprint of either
-    /// mode.
+    /// segment exits and model maps of a feedforward image, and the optional terminal law and spec
+    /// fingerprint of either mode.
     pub fn admits(self, kind: SectionKind) -> bool {
         self.required_sections().contains(&kind)
             || (self == Mode::Feedforward
                 && matches!(kind, SectionKind::SegmentExits | SectionKind::ModelMaps))
-            || kind == SectionKind::SpecFingerprint
+            || matches!(
+                kind,
+                SectionKind::TerminalLaw | SectionKind::SpecFingerprint
+            )
     }
 }
 
@@ -161,15 +164,18 @@ pub enum SectionKind {
     /// Model maps (optional, feedforward only): the programs `coords: x ↦ ξ` and `input_map: (x, w) ↦ u`
     /// of a feedback-linearizable plant, whose controller runs the linear law in ξ ([`crate::image`]).
     ModelMaps = 10,
+    /// The terminal law (optional, both modes): a certified linear law and the invariant ellipsoid in
+    /// Goal it hands over on, for after the task ([`crate::terminal`]).
+    TerminalLaw = 11,
     /// The spec fingerprint (optional, both modes): [`SPEC_PARTS`] hashes of [`SPEC_HASH_LEN`] bytes of
     /// the spec the image was synthesised from, so that a tool can refuse an image whose spec changed
-    /// since. The evaluator does not read it. (Tag 11 is reserved.)
+    /// since. The evaluator does not read it.
     SpecFingerprint = 12,
 }
 
 impl SectionKind {
     /// Every kind this build knows, in tag order.
-    pub const ALL: [SectionKind; 11] = [
+    pub const ALL: [SectionKind; 12] = [
         SectionKind::Locations,
         SectionKind::Fallback,
         SectionKind::Trajectories,
@@ -180,6 +186,7 @@ impl SectionKind {
         SectionKind::PwaBalls,
         SectionKind::SegmentExits,
         SectionKind::ModelMaps,
+        SectionKind::TerminalLaw,
         SectionKind::SpecFingerprint,
     ];
 
@@ -196,6 +203,7 @@ impl SectionKind {
             8 => Some(SectionKind::PwaBalls),
             9 => Some(SectionKind::SegmentExits),
             10 => Some(SectionKind::ModelMaps),
+            11 => Some(SectionKind::TerminalLaw),
             12 => Some(SectionKind::SpecFingerprint),
             _ => None,
         }
@@ -226,6 +234,7 @@ impl SectionKind {
             SectionKind::PwaBalls => "pwa_balls",
             SectionKind::SegmentExits => "segment_exits",
             SectionKind::ModelMaps => "model_maps",
+            SectionKind::TerminalLaw => "terminal_law",
             SectionKind::SpecFingerprint => "spec_fingerprint",
         }
     }

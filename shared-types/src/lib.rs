@@ -12,6 +12,8 @@
 //! * [`program`]: model programs, the validated `f32` stack bytecode of a nonlinear plant's maps;
 //! * [`maps`]: the model maps section (`coords: x ↦ ξ`, `input_map: (x, w) ↦ u`) of a
 //!   feedback-linearizable plant's image;
+//! * [`terminal`]: the optional terminal law, a certified law with its invariant ellipsoid in Goal for
+//!   after the task;
 //! * [`protocol`]: the UART protocol between plant and firmware.
 #![no_std]
 
@@ -26,3 +28,4 @@ pub mod program;
 pub mod protocol;
 pub mod pwa;
 mod raw;
+pub mod terminal;

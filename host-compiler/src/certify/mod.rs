@@ -32,6 +32,7 @@ pub mod internal;
 pub mod pieces;
 pub mod pwa_ball;
 pub mod temporal;
+pub mod terminal;
 
 pub use forced::{certify_forced, ForcedCertificate, ForcedError, ForcedSegment};
 pub use pieces::Pieces;
@@ -415,7 +416,7 @@ impl std::fmt::Display for Binding {
 }
 
 /// Largest absolute state components over the tube of radius r around x̃(κ).
-fn tube_abs(x: &[f64], r: f64, axis: &[f64]) -> Vec<f64> {
+pub(crate) fn tube_abs(x: &[f64], r: f64, axis: &[f64]) -> Vec<f64> {
     x.iter()
         .zip(axis)
         .map(|(&xi, &a)| xi.abs() + r * a)
@@ -495,6 +496,30 @@ pub fn input_distance(
 /// Shrinking δ² by the factor (1 − γ_{n+4}κ)(1 − 2u) and subtracting the quantisation term keeps
 /// acceptance inside the ball. Returns the f32 value, rounded down.
 pub fn selection_radius(P: MatRef<'_, f64>, center: &[f64], delta: f64) -> f32 {
+    let Some((rel, quant)) = selection_rounding(P, center, delta) else {
+        return 0.0;
+    };
+    let d = (delta * ((1.0 - rel) * (1.0 - 2.0 * U32)).sqrt() - 2.0 * quant).max(0.0);
+    round_down_f32(d)
+}
+
+/// The other side of [`selection_radius`]: a radius ρ such that the f32 test with the stored radius `r̂`
+/// accepts every state within ρ of `center` in the P-metric, for states within `delta` of it (the
+/// quantisation term is taken at `delta`). The computed d² is at most (1 + rel)(‖e‖_P + quant)² and the
+/// f32 square of r̂ at least r̂²(1 − u), so ρ = r̂·sqrt((1 − 2u)/(1 + rel)) − 2·quant. 0 when the
+/// rounding analysis does not apply.
+pub fn selection_floor(P: MatRef<'_, f64>, center: &[f64], r_hat: f32, delta: f64) -> f64 {
+    let Some((rel, quant)) = selection_rounding(P, center, delta) else {
+        return 0.0;
+    };
+    (r_hat as f64 * ((1.0 - 2.0 * U32) / (1.0 + rel)).sqrt() - 2.0 * quant).max(0.0)
+}
+
+/// The two error terms of the f32 selection test for states within `delta` of `center` (see
+/// [`selection_radius`]): the relative error `γ_{n+4}·‖|P|‖₂/λ_min(P)` of the computed d² and the
+/// P-norm of the quantisation of x. `None` when P is not positive definite, `delta` not positive, or the
+/// relative error not below 1/2.
+fn selection_rounding(P: MatRef<'_, f64>, center: &[f64], delta: f64) -> Option<(f64, f64)> {
     let n = P.nrows();
     let absP = Mat::from_fn(n, n, |i, j| P[(i, j)].abs());
     let ev = sym_eigenvalues(P).unwrap_or_default();
@@ -503,18 +528,17 @@ pub fn selection_radius(P: MatRef<'_, f64>, center: &[f64], delta: f64) -> f32 {
         ev.last().copied().unwrap_or(f64::INFINITY),
     );
     if !(lmin > 0.0) || !(delta > 0.0) {
-        return 0.0;
+        return None;
     }
     let kappa = crate::linalg::spectral_norm(absP.as_ref()) / lmin;
     let rel = gamma_k(n + 4) * kappa;
     if rel >= 0.5 {
-        return 0.0;
+        return None;
     }
     // Quantisation of x: ‖x − x̂‖_P ≤ sqrt(λ_max)·u·(‖c‖∞ + δ·max axis) (per component bound, n of them).
     let xmax = center.iter().fold(0.0f64, |a, c| a.max(c.abs())) + delta / lmin.sqrt();
     let quant = lmax.sqrt() * (n as f64).sqrt() * (U32 * xmax + F32_ABS);
-    let d = (delta * ((1.0 - rel) * (1.0 - 2.0 * U32)).sqrt() - 2.0 * quant).max(0.0);
-    round_down_f32(d)
+    Some((rel, quant))
 }
 
 /// The largest f32 not above x (x ≥ 0).

@@ -201,6 +201,7 @@ pub fn run(a: &SynthArgs) -> Outcome {
             "source": t.source, "x0": t.nominal.x[0], "certificate": t.certificate,
         })).collect::<Vec<_>>(),
         "timings": s.timings,
+        "terminal": terminal_json(&s.terminal),
     });
     std::fs::write(
         a.out.join("certificate.json"),
@@ -245,6 +246,7 @@ pub fn run(a: &SynthArgs) -> Outcome {
             at.evaluations, at.worst_robustness, at.violations
         );
     }
+    print_terminal(&s.terminal, &s.verify);
     if s.verify.after_goal_input_excursions + s.verify.after_goal_unsafe > 0 {
         println!(
             "after Goal        {} runs left the input set, {} entered Unsafe under the terminal law (not judged: the task ends in Goal)",
@@ -292,6 +294,49 @@ pub fn run(a: &SynthArgs) -> Outcome {
         });
     }
     Ok(short_of_target(&s, problem.synthesis.coverage_target))
+}
+
+/// The terminal law for `certificate.json`: the stored values and the certificate, or why there is none.
+pub(crate) fn terminal_json(t: &crate::synth::TerminalOutcome) -> serde_json::Value {
+    use crate::synth::TerminalOutcome;
+    match t {
+        TerminalOutcome::Certified(d) => serde_json::json!({
+            "law": "invariant",
+            "x_e": d.stored.x_e,
+            "u_e": d.u_e,
+            "K": crate::linalg::to_rows(d.stored.K.as_ref()),
+            "v": d.stored.v,
+            "P": crate::linalg::to_rows(d.stored.P.as_ref()),
+            "acceptance_radius": d.stored.radius,
+            "contraction_target": d.rho,
+            "certificate": d.certificate,
+        }),
+        TerminalOutcome::None(e) => serde_json::json!({ "law": "none", "why": e.to_string() }),
+        TerminalOutcome::NotAsked => serde_json::json!({ "law": "none", "why": "not asked" }),
+    }
+}
+
+/// The terminal law's lines of the summary: what was certified (or why nothing was) and what the
+/// Monte Carlo saw after Goal.
+pub(crate) fn print_terminal(t: &crate::synth::TerminalOutcome, v: &crate::verify::VerifyReport) {
+    use crate::synth::TerminalOutcome;
+    match t {
+        TerminalOutcome::Certified(d) => {
+            let c = &d.certificate;
+            println!(
+                "terminal law      certified at x_e = {:?}, u_e = {:?}: invariant ellipsoid (contraction {:.4}, next sample within {:.4} of the accepted {:.4}), Goal depth {:.4} ≥ {:.4} between samples",
+                d.stored.x_e, d.u_e, c.contraction, c.theta, c.acceptance_floor, c.goal_depth, c.between_samples
+            );
+        }
+        TerminalOutcome::None(e) => println!("terminal law      none: {e}"),
+        TerminalOutcome::NotAsked => {
+            println!("terminal law      none (the spec's [synthesis] terminal)")
+        }
+    }
+    println!(
+        "after Goal        {} of the runs that reached Goal were outside it again within {} samples; {} were handed over to the terminal law",
+        v.runs_leaving_goal, v.run_steps, v.handed_over
+    );
 }
 
 /// [`Exit::Success`] when the cover met the coverage target, else [`Exit::ShortOfTarget`] with a line on
@@ -370,6 +415,7 @@ fn synth_failure(e: SynthError) -> Failure {
         }
         SynthError::Cover(GrowError::Recording { .. } | GrowError::Emit(_)) => Exit::BadInput,
         SynthError::Cover(GrowError::InterruptedEmpty) => Exit::Interrupted,
+        SynthError::Terminal(_) => Exit::BadInput,
         _ => Exit::Failed,
     };
     Failure {

@@ -56,7 +56,9 @@ pub use error::{ErrorKind, SpecError};
 pub use fingerprint::SpecFingerprint;
 pub use hybrid::{EdgeDesc, EdgeKindDesc, HybridDesc, LocationDesc, PolytopeDesc};
 pub use sets::{load_named_sets, parse_named_sets, Coords, SetDesc, Shape};
-pub use settings::{ControllerMode, SettingsError, SynthesisSettings, SynthesisSettingsBuilder};
+pub use settings::{
+    ControllerMode, SettingsError, SynthesisSettings, SynthesisSettingsBuilder, TerminalChoice,
+};
 
 /// The largest magnitude of any number in a spec. Far beyond any physical task in sensible units, and
 /// small enough that the widths of boxes, distances and their squares (and the f32 values an image

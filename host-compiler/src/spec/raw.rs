@@ -139,6 +139,7 @@ pub(crate) struct RawSynthesis {
     pub sigma_margin: Option<RawF>,
     pub min_robustness: Option<RawF>,
     pub reference_hold: Option<Spanned<i128>>,
+    pub terminal: Option<Spanned<String>>,
 }
 
 /// `[mtl]`.

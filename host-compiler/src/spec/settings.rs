@@ -34,6 +34,45 @@ impl ControllerMode {
     }
 }
 
+/// What the controller does after the task (issue 17): the `terminal` key of `[synthesis]`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum TerminalChoice {
+    /// A certified terminal law with its invariant ellipsoid in Goal where one exists
+    /// ([`crate::caf::terminal`]), else `Hold`, said at synthesis and in the report. TOML: `"auto"`.
+    #[default]
+    Auto,
+    /// The certified terminal law, required: synthesis fails (exit 2) when none exists. TOML:
+    /// `"invariant"`.
+    Invariant,
+    /// No terminal law; a feedforward image keeps its last row's law past the table. TOML: `"hold"`.
+    Hold,
+    /// No terminal law; a feedforward image applies its fallback past the table. TOML: `"fallback"`.
+    Fallback,
+}
+
+impl TerminalChoice {
+    /// Parse the TOML spelling.
+    pub fn from_name(s: &str) -> Option<Self> {
+        match s {
+            "auto" => Some(TerminalChoice::Auto),
+            "invariant" => Some(TerminalChoice::Invariant),
+            "hold" => Some(TerminalChoice::Hold),
+            "fallback" => Some(TerminalChoice::Fallback),
+            _ => None,
+        }
+    }
+
+    /// The TOML spelling.
+    pub fn name(self) -> &'static str {
+        match self {
+            TerminalChoice::Auto => "auto",
+            TerminalChoice::Invariant => "invariant",
+            TerminalChoice::Hold => "hold",
+            TerminalChoice::Fallback => "fallback",
+        }
+    }
+}
+
 /// Settings of the synthesis loop (Alg 1 with the coverage test of §2.5.2 and the automatic trajectory
 /// generation of Alg 4). Build with [`SynthesisSettings::builder`] or take [`Default`].
 #[derive(Clone, Debug, PartialEq)]
@@ -65,6 +104,9 @@ pub struct SynthesisSettings {
     /// about one partition per block instead of nearly one per sample (§6.2). Recorded (CSV) trajectories
     /// are used as recorded. ≥ 1. Default 1 (every sample free).
     pub reference_hold: usize,
+    /// After the task: a certified terminal law where one exists, or the image's behaviour past the table
+    /// ([`TerminalChoice`]). Default [`TerminalChoice::Auto`].
+    pub terminal: TerminalChoice,
 }
 
 impl Default for SynthesisSettings {
@@ -79,6 +121,7 @@ impl Default for SynthesisSettings {
             sigma_margin: 0.1,
             min_robustness: 1e-3,
             reference_hold: 1,
+            terminal: TerminalChoice::Auto,
         }
     }
 }

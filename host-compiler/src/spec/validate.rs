@@ -12,7 +12,7 @@ use super::hybrid;
 use super::limits::{self, MAX_M, MAX_N, MAX_STEPS, MAX_TRAJECTORIES};
 use super::raw::{RawF, RawInput, RawMat, RawSpec, RawSynthesis, RawTime, RawVec};
 use super::sets::{named_sets, set_from_raw, SetCtx};
-use super::settings::{ControllerMode, SynthesisSettings};
+use super::settings::{ControllerMode, SynthesisSettings, TerminalChoice};
 use super::{InitBox, InputSet, Matrix, Plant, Problem, TimeDomain, MAX_MAGNITUDE};
 
 /// An expected dimension and why it is expected (for messages). `n: None` = not fixed yet; the first
@@ -785,6 +785,18 @@ fn synthesis(r: &RawSynthesis, n_state: usize) -> Result<SynthesisSettings, Spec
                 ),
             )
             .at(v.span(), "unknown mode")
+        })?;
+    }
+    if let Some(v) = &r.terminal {
+        s.terminal = TerminalChoice::from_name(v.get_ref()).ok_or_else(|| {
+            SpecError::new(
+                ErrorKind::BadValue,
+                format!(
+                    "synthesis.terminal = \"{}\" is unknown; expected \"auto\", \"invariant\", \"hold\" or \"fallback\"",
+                    v.get_ref()
+                ),
+            )
+            .at(v.span(), "unknown terminal behaviour")
         })?;
     }
     let mut num = |field: &'static str, v: &Option<RawF>, dst: &mut f64| -> Result<(), SpecError> {

@@ -16,6 +16,7 @@
 pub mod hybrid;
 pub mod temporal;
 
+use crate::caf::terminal::{design_terminal, NoTerminal, TerminalDesign};
 use crate::certify::{self, Loop, LoopConstants};
 use crate::cover::{grow, Cover, CoverageEstimate, GrowError, GrowOptions};
 use crate::optimize::BundleSettings;
@@ -109,6 +110,60 @@ pub struct Synthesis {
     pub attack: Option<AttackReport>,
     pub timings: Vec<(String, f64)>,
     pub warnings: Vec<String>,
+    /// The terminal law in the image, or why there is none (issue 17).
+    pub terminal: TerminalOutcome,
+}
+
+/// What the image does after the task (the spec's `[synthesis] terminal`).
+#[derive(Clone, Debug)]
+pub enum TerminalOutcome {
+    /// A certified terminal law, stored in the image.
+    Certified(Box<TerminalDesign>),
+    /// None exists (the reason); the image keeps its behaviour past the table.
+    None(NoTerminal),
+    /// The spec asked for none (`"hold"` or `"fallback"`).
+    NotAsked,
+}
+
+impl TerminalOutcome {
+    /// The design, when certified.
+    pub fn design(&self) -> Option<&TerminalDesign> {
+        match self {
+            TerminalOutcome::Certified(d) => Some(d),
+            _ => None,
+        }
+    }
+}
+
+/// The terminal law the spec asks for: designed and certified where `auto` or `invariant` asks
+/// ([`crate::caf::terminal`]); `invariant` without one is an error, before any growth.
+pub fn terminal_for(task: &Task) -> Result<TerminalOutcome, SynthError> {
+    use crate::spec::TerminalChoice;
+    match task.settings().terminal {
+        TerminalChoice::Hold | TerminalChoice::Fallback => Ok(TerminalOutcome::NotAsked),
+        choice => match design_terminal(task) {
+            Ok(d) => Ok(TerminalOutcome::Certified(Box::new(d))),
+            Err(e) if choice == TerminalChoice::Invariant => Err(SynthError::Terminal(e)),
+            Err(e) => Ok(TerminalOutcome::None(e)),
+        },
+    }
+}
+
+/// A feedforward image's bytes with the terminal behaviour the spec chose: the certified law stored as
+/// section 11, and past the table `fallback` when the spec says so (else the last row's law).
+fn with_terminal(image: Vec<u8>, task: &Task, t: &TerminalOutcome) -> Result<Vec<u8>, SynthError> {
+    let fallback = task.settings().terminal == crate::spec::TerminalChoice::Fallback;
+    if t.design().is_none() && !fallback {
+        return Ok(image);
+    }
+    let img = shared_types::image::decode(&image).map_err(SynthError::ImageRejected)?;
+    let mut b = crate::emit::ImageBuilder::from_image(&img);
+    b.terminal_law = t.design().map(|d| d.stored.clone());
+    if fallback {
+        b.terminal = shared_types::image::Terminal::Fallback;
+    }
+    b.to_bytes()
+        .map_err(|e| SynthError::Cover(GrowError::Emit(e)))
 }
 
 /// Errors that end a run.
@@ -126,6 +181,8 @@ pub enum SynthError {
     Verify(#[from] crate::verify::MonteCarloError),
     #[error(transparent)]
     Attack(#[from] AttackError),
+    #[error("[synthesis] terminal = \"invariant\": {0}")]
+    Terminal(NoTerminal),
 }
 
 /// Run the whole pipeline.
@@ -141,6 +198,18 @@ pub fn synthesize(task: &Task, opts: &SynthOptions) -> Result<Synthesis, SynthEr
 
     let lp = Loop::new(task, &design);
     let lc = LoopConstants::new(&lp)?;
+    // The terminal law first: it does not depend on the cover, and a spec that requires one that does
+    // not exist fails here rather than after the growth.
+    let t_terminal = Instant::now();
+    let terminal = terminal_for(task)?;
+    timings.push((
+        "terminal law".to_string(),
+        t_terminal.elapsed().as_secs_f64(),
+    ));
+    match &terminal {
+        TerminalOutcome::None(e) => warnings.push(format!("no terminal law: {e}")),
+        TerminalOutcome::Certified(_) | TerminalOutcome::NotAsked => {}
+    }
 
     let t1 = Instant::now();
     let grown = grow(
@@ -159,8 +228,12 @@ pub fn synthesize(task: &Task, opts: &SynthOptions) -> Result<Synthesis, SynthEr
         },
     )?;
     warnings.extend(grown.warnings);
-    let (stop, coverage, uncovered, image) =
-        (grown.stop, grown.coverage, grown.uncovered, grown.image);
+    let (stop, coverage, uncovered) = (grown.stop, grown.coverage, grown.uncovered);
+    let image = if task.settings().mode == crate::spec::ControllerMode::Feedforward {
+        with_terminal(grown.image, task, &terminal)?
+    } else {
+        grown.image
+    };
     let Cover {
         trajectories: trajs,
         records,
@@ -254,5 +327,6 @@ pub fn synthesize(task: &Task, opts: &SynthOptions) -> Result<Synthesis, SynthEr
         attack,
         timings,
         warnings,
+        terminal,
     })
 }

@@ -210,6 +210,14 @@ pub struct RunOutcome {
     pub after_goal_input_excursion: bool,
     /// After Goal, the run entered Unsafe (reported, not a violation).
     pub after_goal_unsafe: bool,
+    /// After first reaching Goal, the run was outside Goal at a sample or between samples (within the
+    /// run's length: 2T for an image with a terminal law, else T).
+    pub left_goal: bool,
+    /// The terminal law took over (images with one).
+    pub handed_over: bool,
+    /// Under the terminal law the run left Goal, entered Unsafe, applied an input outside the set or was
+    /// refused by the evaluator: the terminal law's certificate is broken (a violation).
+    pub terminal_violation: bool,
 }
 
 impl RunOutcome {
@@ -229,6 +237,9 @@ impl RunOutcome {
             goal_step: None,
             after_goal_input_excursion: false,
             after_goal_unsafe: false,
+            left_goal: false,
+            handed_over: false,
+            terminal_violation: false,
         }
     }
 
@@ -237,7 +248,8 @@ impl RunOutcome {
             && (!self.reached_goal
                 || self.entered_unsafe
                 || self.input_violation
-                || self.evaluator_error)
+                || self.evaluator_error
+                || self.terminal_violation)
     }
 }
 
@@ -262,6 +274,12 @@ pub struct VerifyReport {
     /// judged: see the module doc).
     pub after_goal_input_excursions: usize,
     pub after_goal_unsafe: usize,
+    /// Runs that reached Goal and were outside it again before the end of the run (2T with a terminal
+    /// law, else T), and runs the terminal law took over (counted among the accepted runs).
+    pub runs_leaving_goal: usize,
+    pub handed_over: usize,
+    /// Samples each run lasts: the horizon, or twice it with a terminal law.
+    pub run_steps: usize,
 }
 
 /// How far `u` lies inside the input set (negative outside): the distance to the nearest box face, or
@@ -302,12 +320,18 @@ pub fn run_visiting(
     let mut ctl = Controller::new(*image);
     let mut x = x0.to_vec();
     let mut out = RunOutcome::new(x0);
-    // Judged until the first sample in Goal (module doc); after it, only recorded.
-    let check = |x: &[f64], out: &mut RunOutcome, sample: bool| {
+    // Judged until the first sample in Goal (module doc); after it, only recorded, except under a
+    // terminal law, whose certificate covers the rest of the run.
+    let check = |x: &[f64], out: &mut RunOutcome, sample: bool, terminal: bool| {
+        if out.goal_step.is_some() && !judge.goal().contains(x) {
+            out.left_goal = true;
+            out.terminal_violation |= terminal;
+        }
         if let Some(us) = judge.unsafe_set() {
             let inside = us.contains(x);
             if out.goal_step.is_some() {
                 out.after_goal_unsafe |= inside;
+                out.terminal_violation |= inside && terminal;
                 return;
             }
             out.entered_unsafe |= inside;
@@ -316,19 +340,20 @@ pub fn run_visiting(
             }
         }
     };
-    check(&x, &mut out, true);
-    for k in 0..=judge.steps {
+    check(&x, &mut out, true, false);
+    let last = run_steps(judge, image);
+    for k in 0..=last {
         visit(&x);
         if out.goal_step.is_none() && judge.goal().contains(&x) {
-            out.reached_goal = true;
+            out.reached_goal = k <= judge.steps;
             out.goal_step = Some(k);
         }
-        if margins {
+        if margins && k <= judge.steps {
             out.goal_margin = out
                 .goal_margin
                 .max(judge.goal().signed_dist(&x, &metric).value);
         }
-        if k == judge.steps {
+        if k == last || (k >= judge.steps && out.goal_step.is_none()) {
             break;
         }
         let xf: Vec<f32> = x.iter().map(|&v| v as f32).collect();
@@ -339,13 +364,18 @@ pub fn run_visiting(
                     out.rejected = true;
                 } else if out.goal_step.is_none() {
                     out.evaluator_error = true;
+                } else {
+                    out.terminal_violation |= ctl.in_terminal_phase();
                 }
                 return out;
             }
         };
+        let terminal = ctl.in_terminal_phase();
+        out.handed_over |= terminal;
         let s = input_slack(judge.input(), &u);
         if out.goal_step.is_some() {
             out.after_goal_input_excursion |= s < 0.0;
+            out.terminal_violation |= terminal && s < 0.0;
         } else {
             out.input_margin = out.input_margin.min(s);
             if s < 0.0 {
@@ -354,11 +384,21 @@ pub fn run_visiting(
         }
         judge
             .plant
-            .between_samples(0, &x, &u, &mut |xs| check(xs, &mut out, false));
+            .between_samples(0, &x, &u, &mut |xs| check(xs, &mut out, false, terminal));
         x = judge.plant.step(0, &x, &u);
-        check(&x, &mut out, true);
+        check(&x, &mut out, true, terminal);
     }
     out
+}
+
+/// Samples a run of `image` lasts: the horizon, or twice it when the image has a terminal law (whose
+/// certificate covers what comes after the task).
+pub fn run_steps(judge: &Judge<'_>, image: &Image<'_>) -> usize {
+    if image.terminal_law().is_some() {
+        2 * judge.steps
+    } else {
+        judge.steps
+    }
 }
 
 /// Monte Carlo over the certified cover: `interior` initial states drawn uniformly in Init and accepted by
@@ -411,7 +451,9 @@ pub fn monte_carlo(
         .enumerate()
         .map(|(i, x0)| run(judge, image, x0, i % MARGIN_EVERY == 0))
         .collect();
-    Ok(summarize(&outcomes, interior_runs, boundary_runs))
+    let mut report = summarize(&outcomes, interior_runs, boundary_runs);
+    report.run_steps = run_steps(judge, image);
+    Ok(report)
 }
 
 /// A point on the boundary of trajectory `t`'s ball, c + δ·P^{-1/2}w/‖w‖ for a random direction w, a
@@ -470,5 +512,8 @@ pub fn summarize(
             .filter(|o| o.after_goal_input_excursion)
             .count(),
         after_goal_unsafe: outcomes.iter().filter(|o| o.after_goal_unsafe).count(),
+        runs_leaving_goal: outcomes.iter().filter(|o| o.left_goal).count(),
+        handed_over: outcomes.iter().filter(|o| o.handed_over).count(),
+        run_steps: 0,
     }
 }

@@ -1,0 +1,115 @@
+//! The terminal law (section 11, optional, both modes): a certified linear law for after the task, with
+//! the invariant ellipsoid it is certified on (issue 17, item 2).
+//!
+//! A reach-avoid task ends when the run enters Goal (Problem 2.26); the feedforward table and the PWA
+//! envelope say nothing about afterwards. The host computes, where one exists, an equilibrium `x_e` in
+//! Goal with its input `u_e` in the input set, a gain `K_t` and an ellipsoid
+//! `E = {x : (x − x_e)ᵀ P_t (x − x_e) ≤ 1}` inside Goal and away from Unsafe, between samples too, that
+//! the sampled loop `u = K_t x + v_t` (`v_t = u_e − K_t x_e`) maps strictly into itself with every input in
+//! the input set, the evaluator's f32 rounding included. The section stores exactly what the evaluator
+//! runs: `x_e` (n), `K_t` (m×n row-major), `v_t` (m), `P_t` (n×n, symmetric positive definite) and the
+//! acceptance radius `r̂`, all little-endian `f32`.
+//!
+//! **Handover** ([`crate::eval::Controller::step`], both modes): before the task's own law, the evaluator
+//! tests `fl((x − x_e)ᵀ P_t (x − x_e)) ≤ r̂·r̂` with the same arithmetic as the feedforward ball selection,
+//! so that the host's rounding analysis of that test (every accepted state lies in `E`) applies unchanged.
+//! Accepted: `u = K_t x + v_t`, computed as the table law is, and the controller is in its terminal phase
+//! from then on. In that phase a state the test refuses is outside what was certified (the certificate
+//! maps `E` into the accepted set): the step answers out of envelope, for this step only.
+//!
+//! An image with model maps (a feedback-linearizable plant) carries no terminal law: the maps'
+//! zero-dynamics bounds hold over [0, T] only.
+#![allow(non_snake_case)]
+
+use serde::{Deserialize, Serialize};
+
+use crate::capacity::{MAX_M, MAX_N};
+use crate::error::{Field, ImageError, Pos};
+use crate::eval::Input;
+use crate::raw::{check_finite, check_len, div, f32_at, floats, positive_definite, rem, sat16};
+
+/// The `TerminalLaw` section's content (see the module doc).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TerminalLaw<'a> {
+    /// The equilibrium `x_e`, n values.
+    pub x_e: &'a [u8],
+    /// The gain `K_t`, m×n row-major.
+    pub K: &'a [u8],
+    /// The offset `v_t = u_e − K_t x_e`, m values.
+    pub v: &'a [u8],
+    /// The ellipsoid's matrix `P_t`, n×n, symmetric positive definite.
+    pub P: &'a [u8],
+    /// The acceptance radius `r̂ ≥ 0` of the handover test.
+    pub radius: f32,
+}
+
+impl<'a> TerminalLaw<'a> {
+    /// Checks the lengths against n and m, every float finite, `P_t` exactly symmetric and positive
+    /// definite, and `r̂ ≥ 0`.
+    pub fn validate(&self, n: usize, m: usize) -> Result<(), ImageError> {
+        let (n, m) = (n.clamp(1, MAX_N), m.clamp(1, MAX_M));
+        check_len(Field::TerminalCentre, self.x_e, 4 * n)?;
+        check_finite(Field::TerminalCentre, self.x_e, |i| Pos(sat16(i), 0, 0))?;
+        check_len(Field::TerminalK, self.K, 4 * m * n)?;
+        check_finite(Field::TerminalK, self.K, |i| {
+            Pos(sat16(div(i, n)), sat16(rem(i, n)), 0)
+        })?;
+        check_len(Field::TerminalV, self.v, 4 * m)?;
+        check_finite(Field::TerminalV, self.v, |i| Pos(sat16(i), 0, 0))?;
+        check_len(Field::TerminalP, self.P, 4 * n * n)?;
+        check_finite(Field::TerminalP, self.P, |i| {
+            Pos(sat16(div(i, n)), sat16(rem(i, n)), 0)
+        })?;
+        for r in 0..n {
+            for c in (r + 1)..n {
+                if f32_at(self.P, r * n + c).to_bits() != f32_at(self.P, c * n + r).to_bits() {
+                    return Err(ImageError::BadTerminalLaw);
+                }
+            }
+        }
+        if !positive_definite(self.P, n) || !(self.radius.is_finite() && self.radius >= 0.0) {
+            return Err(ImageError::BadTerminalLaw);
+        }
+        Ok(())
+    }
+
+    /// The handover test: `fl((x − x_e)ᵀ P_t (x − x_e)) ≤ r̂·r̂`, summed as the feedforward selection sums
+    /// (row by row, left to right, no fused multiply-add). `x` has n values (validated by the caller).
+    #[inline(always)]
+    pub fn accepts(&self, x: &[f32], n: usize) -> bool {
+        let n = n.clamp(1, MAX_N);
+        let mut e = [0.0f32; MAX_N];
+        for ((ei, &xi), ci) in e.iter_mut().zip(x).zip(floats(self.x_e)) {
+            *ei = xi - ci;
+        }
+        let mut d2 = 0.0f32;
+        for (row, &ei) in self.P.chunks_exact(4 * n).zip(&e) {
+            let mut s = 0.0f32;
+            for (pij, &ej) in floats(row).zip(&e) {
+                s += pij * ej;
+            }
+            d2 += ei * s;
+        }
+        d2 <= self.radius * self.radius
+    }
+
+    /// `u = K_t x + v_t`, summed as the table law `u = K_ℓ x + v` is.
+    #[inline(always)]
+    pub fn law(&self, x: &[f32], n: usize, m: usize) -> Input {
+        let (n, m) = (n.clamp(1, MAX_N), m.clamp(1, MAX_M));
+        let mut out = Input::zero(m);
+        for ((uj, krow), vj) in out
+            .values_mut()
+            .iter_mut()
+            .zip(self.K.chunks_exact(4 * n))
+            .zip(floats(self.v))
+        {
+            let mut s = 0.0f32;
+            for (kji, &xi) in floats(krow).zip(x) {
+                s += kji * xi;
+            }
+            *uj = s + vj;
+        }
+        out
+    }
+}
