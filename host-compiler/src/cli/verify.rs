@@ -87,6 +87,7 @@ pub fn run(a: &VerifyArgs) -> Outcome {
     }
     let rc = crate::verify::feedforward::recheck(&judge, &img)
         .map_err(|e| miette::miette!("{}: {e}", a.image.display()))?;
+    let terminal = terminal_recheck(&task, &img, &a.image)?;
     let seed = a.seed.unwrap_or(problem.seed ^ 0x7e51f1);
     let r = if linearized {
         crate::verify::nonlinear::monte_carlo_fl(&task, &img, runs, per_ball, seed)
@@ -106,7 +107,9 @@ pub fn run(a: &VerifyArgs) -> Outcome {
         None
     };
     if a.json {
-        let j = serde_json::json!({ "recheck": rc, "monte_carlo": r, "attack": attack });
+        let j = serde_json::json!({
+            "recheck": rc, "terminal": terminal, "monte_carlo": r, "attack": attack,
+        });
         println!("{}", serde_json::to_string_pretty(&j).into_diagnostic()?);
     } else {
         println!(
@@ -140,10 +143,7 @@ pub fn run(a: &VerifyArgs) -> Outcome {
         for v in &r.first_violations {
             println!("violation from x0 = {:?}: {v:?}", v.x0);
         }
-        println!(
-            "after Goal (not judged, the task has ended): {} runs left the input set, {} entered Unsafe",
-            r.after_goal_input_excursions, r.after_goal_unsafe
-        );
+        print_after_goal(&r);
         println!("violations {}", r.violations);
         if let Some(at) = &attack {
             println!(
@@ -189,6 +189,42 @@ pub fn run(a: &VerifyArgs) -> Outcome {
         .into());
     }
     Ok(Exit::Success)
+}
+
+/// The image's terminal law re-proved from its bytes, printed; a law the bytes do not certify is a failed
+/// check (exit 1) naming the condition.
+fn terminal_recheck(
+    task: &crate::task::Task,
+    img: &shared_types::image::Image<'_>,
+    path: &std::path::Path,
+) -> Result<Option<crate::certify::terminal::TerminalCertificate>, Failure> {
+    match crate::verify::recheck_terminal(task, img) {
+        None => {
+            println!("terminal law: none in the image");
+            Ok(None)
+        }
+        Some(Ok(c)) => {
+            println!(
+                "terminal law re-proved from the bytes: contraction {:.4}, next sample within {:.6} of the accepted {:.6}; Goal depth {:.4} ≥ {:.4}, Unsafe distance {:.4}, input distance {:.4} (ellipsoid metric)",
+                c.contraction, c.theta, c.acceptance_floor, c.goal_depth, c.between_samples, c.unsafe_distance, c.input_distance
+            );
+            Ok(Some(c))
+        }
+        Some(Err(e)) => Err(miette::miette!(
+            "{}: the terminal law is not certified by the image's own bytes: {e}",
+            path.display()
+        )
+        .into()),
+    }
+}
+
+/// What the runs did after Goal: under a terminal law this is judged (its violations are counted);
+/// without one it is reported only.
+fn print_after_goal(r: &crate::verify::VerifyReport) {
+    println!(
+        "after Goal: {} runs were outside Goal again within {} samples, {} were handed over to the terminal law; {} left the input set, {} entered Unsafe (judged only under the terminal law)",
+        r.runs_leaving_goal, r.run_steps, r.handed_over, r.after_goal_input_excursions, r.after_goal_unsafe
+    );
 }
 
 /// A worst margin for people: its value, or that no run recorded one (never `inf` as if it were a

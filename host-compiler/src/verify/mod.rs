@@ -28,6 +28,7 @@ pub const MAX_RUNS: u64 = 1_000_000;
 /// (`shared_types::capacity::MAX_TRAJECTORIES`), at most 1 048 576 boundary runs.
 pub const MAX_PER_BALL: u64 = 4_096;
 
+use crate::certify::terminal::{TerminalCertificate, TerminalRefusal};
 use crate::geometry::Region;
 use crate::linalg::mat_vec;
 use crate::model::{DiscretePlant, Plant};
@@ -389,6 +390,21 @@ pub fn run_visiting(
         check(&x, &mut out, true, terminal);
     }
     out
+}
+
+/// The terminal law of `image` (section 11) re-proved from its bytes against the task
+/// ([`crate::certify::terminal`]); `None` for an image without one.
+pub fn recheck_terminal(
+    task: &crate::task::Task,
+    image: &Image<'_>,
+) -> Option<Result<TerminalCertificate, TerminalRefusal>> {
+    let law = image.terminal_law()?;
+    let stored = crate::emit::stored_terminal(&law, image.n(), image.m());
+    Some(crate::certify::terminal::certify(
+        task.plant.as_ref(),
+        &task.property,
+        &stored,
+    ))
 }
 
 /// Samples a run of `image` lasts: the horizon, or twice it when the image has a terminal law (whose
