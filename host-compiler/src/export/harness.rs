@@ -1175,3 +1175,37 @@ pub fn maps_image(
     });
     b.to_bytes().expect("maps_image is valid")
 }
+
+/// `image` (feedforward without model maps, or PWA) with a seeded synthetic terminal law (section 11):
+/// its ellipsoid centred on the first ball's centre with a random metric and acceptance radius, so that
+/// the scenarios of [`scenario`] step in, out of and across it (the handover, the terminal phase and its
+/// out-of-envelope answers).
+pub fn with_terminal_law(image: &[u8], seed: u64) -> Vec<u8> {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let img = decode(image).expect("a valid image");
+    let (n, m) = (img.n(), img.m());
+    let centre: Vec<f64> = if img.mode() == Mode::Feedforward {
+        (0..n).map(|i| img.centre(0, i) as f64).collect()
+    } else {
+        (0..n).map(|i| img.ball_centre(0, i) as f64).collect()
+    };
+    let law = crate::certify::terminal::StoredTerminal {
+        x_e: centre.iter().map(|c| (*c as f32) as f64).collect(),
+        K: faer::Mat::from_fn(m, n, |_, _| (normal(&mut rng) as f32) as f64),
+        v: random_vec(&mut rng, m, 0.5),
+        P: {
+            let p = random_spd(&mut rng, n);
+            faer::Mat::from_fn(n, n, |i, j| p[i * n + j])
+        },
+        radius: rng.random_range(0.3f32..1.5),
+    };
+    if img.mode() == Mode::Feedforward {
+        let mut b = ImageBuilder::from_image(&img);
+        b.terminal_law = Some(law);
+        b.to_bytes().expect("a valid image with a terminal law")
+    } else {
+        let mut b = PwaImageBuilder::from_image(&img).expect("a PWA image");
+        b.terminal_law = Some(law);
+        b.to_bytes().expect("a valid PWA image with a terminal law")
+    }
+}

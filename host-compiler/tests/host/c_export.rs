@@ -14,8 +14,8 @@ use std::path::PathBuf;
 use std::process::Command;
 
 use host_compiler::export::harness::{
-    exits_image, exits_scenario, feedforward_image, maps_image, pwa_image, scenario, Answer,
-    CHarness, Comparison, ExitCoverage, Op,
+    exits_image, exits_scenario, feedforward_image, maps_image, pwa_image, scenario,
+    with_terminal_law, Answer, CHarness, Comparison, ExitCoverage, Op,
 };
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -449,6 +449,71 @@ fn pwa_matches_the_rust_evaluator_bit_for_bit() {
     assert!(states >= 100_000, "{states}");
 }
 
+/// Images with a terminal law (section 11), feedforward and PWA: the handover test, the terminal law
+/// and the terminal phase's out-of-envelope answers match bit for bit.
+#[test]
+fn terminal_laws_match_the_rust_evaluator_bit_for_bit() {
+    let cases = [
+        (
+            "feedforward_terminal",
+            with_terminal_law(
+                &feedforward_image(500, 3, 2, 2, 6, Terminal::HoldLast, 1),
+                1,
+            ),
+        ),
+        (
+            "feedforward_terminal_n12",
+            with_terminal_law(
+                &feedforward_image(501, 12, 6, 1, 4, Terminal::Fallback, 3),
+                2,
+            ),
+        ),
+        (
+            "pwa_terminal",
+            with_terminal_law(&pwa_image(502, 4, 2, 2, 4, 60, 2), 3),
+        ),
+    ];
+    let mut results = Vec::new();
+    for (i, (name, image)) in cases.iter().enumerate() {
+        let img = decode(image).expect("valid");
+        assert!(img.terminal_law().is_some(), "{name}");
+        // The scenario with a reset every 10 steps: the terminal phase lasts until a reset, and a PWA
+        // scenario resets rarely.
+        let mut ops = Vec::new();
+        for (k, op) in scenario(&img, 40 + i as u64, 35_000)
+            .into_iter()
+            .enumerate()
+        {
+            if k % 10 == 9 {
+                ops.push(Op::Reset);
+            }
+            ops.push(op);
+        }
+        let dir = scratch(name);
+        let h = CHarness::build(image, &dir).unwrap_or_else(|e| panic!("{name}: {e}"));
+        let c = h.compare(&ops).unwrap_or_else(|e| panic!("{name}: {e}"));
+        assert_eq!((c.inits, c.init_mismatches), (1, 0), "{name}");
+        results.push((*name, c));
+        // The scenario must reach the terminal phase, or the comparison says nothing of it.
+        let mut ctl = shared_types::eval::Controller::new(img);
+        let mut terminal_steps = 0;
+        for op in &ops {
+            match op {
+                Op::Reset => ctl.reset(),
+                Op::Step(x) => {
+                    let _ = ctl.step(x);
+                    terminal_steps += usize::from(ctl.in_terminal_phase());
+                }
+                _ => {}
+            }
+        }
+        eprintln!("{name}: {terminal_steps} steps in the terminal phase");
+        assert!(terminal_steps > 1_000, "{name}: {terminal_steps}");
+    }
+    let states = check_all("terminal", &results);
+    assert!(states >= 100_000, "{states}");
+}
+
 /// Random byte changes with the CRC repaired (so the content checks decide), byte flips without it, and
 /// truncations: the C init accepts exactly what `decode` accepts, and an accepted variant steps alike.
 #[test]
@@ -460,6 +525,13 @@ fn corrupted_arrays_are_refused_as_the_rust_decoder_refuses_them() {
         ),
         ("exits", exits_image(302, 3, 2, 3, 6, Terminal::HoldLast, 0)),
         ("pwa", pwa_image(301, 3, 2, 2, 3, 20, 3)),
+        (
+            "terminal",
+            with_terminal_law(
+                &feedforward_image(304, 3, 2, 1, 4, Terminal::HoldLast, 1),
+                4,
+            ),
+        ),
         (
             "fingerprint",
             with_section(
@@ -721,7 +793,7 @@ fn a_fingerprint_section_is_admitted_as_the_rust_decoder_admits_it() {
             false,
         ),
         (
-            "reserved tag 11",
+            "tag 11 (terminal law) with a fingerprint's body",
             with_section(&ff, 11, &postcard(&fp)),
             false,
         ),

@@ -10,3 +10,4 @@ mod maps;
 mod program;
 mod pwa_eval;
 mod pwa_format;
+mod terminal;

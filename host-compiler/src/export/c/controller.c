@@ -16,7 +16,8 @@
 #define SC_FORMAT_VERSION @FORMAT_VERSION@u
 #define SC_LEAF_BASE 0x8000u
 #define SC_OUTSIDE 0xFFFFu
-#define SC_N_KINDS 12u /* highest known tag; 11 is not known (reserved) */
+#define SC_N_KINDS 12u /* highest known tag */
+#define SC_KIND_TERMINAL_LAW 11u
 #define SC_KIND_SPEC_FINGERPRINT 12u
 #define SC_MAPS_HEADER_LEN 12u
 #define SC_PROGRAM_HEADER_LEN 8u
@@ -471,6 +472,34 @@ static sc_error parse_trajectories(sc_image *im, sc_bytes s) {
     return reader_done(&r) ? SC_E_NONE : SC_E_SECTION;
 }
 
+/* terminal::TerminalLaw: four byte strings and the radius (postcard f32: 4 little-endian bytes), then
+ * TerminalLaw::validate. */
+static sc_error parse_terminal(sc_image *im, sc_bytes s) {
+    sc_reader r = {0, 0, 0, 0};
+    uint32_t n = im->n, m = im->m, i, j, b = 0;
+    sc_error e;
+    r.p = s.p;
+    r.len = s.len;
+    im->t_x_e = take_bytes(&r);
+    im->t_K = take_bytes(&r);
+    im->t_v = take_bytes(&r);
+    im->t_P = take_bytes(&r);
+    for (i = 0; i < 4; i++) b |= (uint32_t)take_u8(&r) << (8 * i);
+    if (!reader_done(&r)) return SC_E_SECTION;
+    im->t_radius = bits_f32(b);
+    if ((e = check_floats(im->t_x_e, 4ull * n)) != SC_E_NONE) return e;
+    if ((e = check_floats(im->t_K, 4ull * m * n)) != SC_E_NONE) return e;
+    if ((e = check_floats(im->t_v, 4ull * m)) != SC_E_NONE) return e;
+    if ((e = check_floats(im->t_P, 4ull * n * n)) != SC_E_NONE) return e;
+    for (i = 0; i < n; i++)
+        for (j = i + 1; j < n; j++)
+            if (le32(im->t_P.p + 4u * (i * n + j)) != le32(im->t_P.p + 4u * (j * n + i)))
+                return SC_E_TERMINAL;
+    if (!positive_definite(im->t_P, n)) return SC_E_TERMINAL;
+    if (!(finite_f32(im->t_radius) && im->t_radius >= 0.0f)) return SC_E_TERMINAL;
+    return SC_E_NONE;
+}
+
 static sc_error parse_one_bytes(sc_bytes *out, sc_bytes s) {
     sc_reader r = {0, 0, 0, 0};
     r.p = s.p;
@@ -758,10 +787,11 @@ static sc_error decode(sc_image *im, const uint8_t *bytes, uint32_t len) {
         if (offset != next) return SC_E_DIRECTORY;
         if (slen > len - next) return SC_E_DIRECTORY;
         if (i > 0 && kind <= prev_kind) return SC_E_DIRECTORY;
-        if (kind < 1 || kind > SC_N_KINDS || kind == 11) return SC_E_DIRECTORY;
+        if (kind < 1 || kind > SC_N_KINDS) return SC_E_DIRECTORY;
         /* admitted by the mode (layout::Mode::admits): kinds 1-5, 9 (segment exits) and 10 (model
-         * maps), both optional, feedforward; 1, 2 and 6-8 PWA; 12 (spec fingerprint, optional) both */
-        if (kind != SC_KIND_SPEC_FINGERPRINT &&
+         * maps), both optional, feedforward; 1, 2 and 6-8 PWA; 11 (terminal law) and 12 (spec
+         * fingerprint), optional, both */
+        if (kind != SC_KIND_SPEC_FINGERPRINT && kind != SC_KIND_TERMINAL_LAW &&
             (im->mode == 1 ? (kind > 5 && kind < 9) : ((kind >= 3 && kind <= 5) || kind >= 9)))
             return SC_E_DIRECTORY;
         body[kind - 1].p = bytes + next;
@@ -799,11 +829,22 @@ static sc_error decode(sc_image *im, const uint8_t *bytes, uint32_t len) {
     if (im->mode == 1 && (present & (1u << 9)) && (e = parse_maps(im, body[9])) != SC_E_NONE)
         return e;
     if (!(finite_f32(im->period) && im->period > 0.0f)) return SC_E_PERIOD;
-    if (im->mode == 1) return validate_feedforward(im);
-    if ((e = validate_K_P(im)) != SC_E_NONE) return e;
-    if ((e = validate_pwa_tables(im)) != SC_E_NONE) return e;
+    if (im->mode == 1) {
+        if ((e = validate_feedforward(im)) != SC_E_NONE) return e;
+    } else {
+        if ((e = validate_K_P(im)) != SC_E_NONE) return e;
+        if ((e = validate_pwa_tables(im)) != SC_E_NONE) return e;
+        if ((e = validate_fallback_box(im)) != SC_E_NONE) return e;
+    }
     (void)k;
-    return validate_fallback_box(im);
+    /* the terminal law (optional, both modes; image::with_stored_optional) */
+    im->has_terminal = 0;
+    if (present & (1u << (SC_KIND_TERMINAL_LAW - 1u))) {
+        if (im->has_maps) return SC_E_TERMINAL;
+        if ((e = parse_terminal(im, body[SC_KIND_TERMINAL_LAW - 1u])) != SC_E_NONE) return e;
+        im->has_terminal = 1;
+    }
+    return SC_E_NONE;
 }
 
 /* ------------------------------------------------------------------------------------------------ */
@@ -822,6 +863,7 @@ void sc_reset(sc_controller *c) {
     c->segment = 0;
     c->seg_kappa = 0;
     c->out_of_envelope = 0;
+    c->terminal = 0;
     for (j = 0; j < SC_MAX_M; j++) c->last_u[j] = 0.0f;
 }
 
@@ -1131,10 +1173,49 @@ static sc_status finish(sc_controller *c, const float *v, uint32_t m, float u[SC
     return SC_OK;
 }
 
+/* Controller::step_terminal: 1 when the terminal law decides the step (*st holds the answer), 0 to run
+ * the task's own law. The handover test sums as ff_select does, the law as ff_law does. */
+static int step_terminal(sc_controller *c, const float *x, uint32_t n_x, float u[SC_MAX_M],
+                         sc_status *st) {
+    const sc_image *im = &c->image;
+    uint32_t n = im->n, m = im->m, r, j;
+    float e[SC_MAX_N], v[SC_MAX_M], d2 = 0.0f;
+    if (!state_ok(im, x, n_x)) {
+        *st = SC_BAD_FRAME;
+        return 1;
+    }
+    for (j = 0; j < n; j++) e[j] = x[j] - f32_at(im->t_x_e, j);
+    for (r = 0; r < n; r++) {
+        float s = 0.0f;
+        for (j = 0; j < n; j++) s += f32_at(im->t_P, (uint64_t)r * n + j) * e[j];
+        d2 += e[r] * s;
+    }
+    if (d2 <= im->t_radius * im->t_radius) {
+        c->terminal = 1;
+        for (j = 0; j < SC_MAX_M; j++) v[j] = 0.0f;
+        for (j = 0; j < m; j++) {
+            float s = 0.0f;
+            for (r = 0; r < n; r++) s += f32_at(im->t_K, (uint64_t)j * n + r) * x[r];
+            v[j] = s + f32_at(im->t_v, j);
+        }
+        *st = finish(c, v, m, u);
+        return 1;
+    }
+    if (c->terminal) {
+        *st = SC_OUT_OF_ENVELOPE;
+        return 1;
+    }
+    return 0;
+}
+
 sc_status sc_step(sc_controller *c, const float *x, uint32_t n_x, float u[SC_MAX_M]) {
     const sc_image *im = &c->image;
     float v[SC_MAX_M];
     uint32_t j;
+    if (im->has_terminal) {
+        sc_status st;
+        if (step_terminal(c, x, n_x, u, &st)) return st;
+    }
     if (im->mode == 2) {
         /* Controller::step_pwa */
         int32_t b;

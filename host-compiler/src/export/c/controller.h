@@ -117,8 +117,10 @@ typedef enum {
                                   non-finite value, negative theta, or on a trajectory's last segment */
     SC_E_MAPS = 21,            /* model maps section: plant dimensions, reserved or padding bytes,
                                   lengths, a map's slots or outputs, or a linear fallback with maps */
-    SC_E_PROGRAM = 22          /* a model program: length, counts, constants, opcodes, operands, stack
+    SC_E_PROGRAM = 22,         /* a model program: length, counts, constants, opcodes, operands, stack
                                   depth, outputs stored once */
+    SC_E_TERMINAL = 23         /* terminal law (section 11): P_t not symmetric positive definite, radius
+                                  negative or not finite, or with model maps */
 } sc_error;
 
 typedef struct {
@@ -156,6 +158,10 @@ typedef struct {
     uint8_t has_maps;
     uint32_t n_plant, m_plant; /* = n, m without maps */
     sc_program coords, input_map;
+    /* terminal law (optional section 11): x_e, K_t, v_t, P_t and the acceptance radius */
+    uint8_t has_terminal;
+    sc_bytes t_x_e, t_K, t_v, t_P;
+    float t_radius;
 } sc_image;
 
 /* Controller state (shared_types::eval::Controller). */
@@ -167,6 +173,7 @@ typedef struct {
     uint16_t segment;       /* segment cursor of the active trajectory */
     uint32_t seg_kappa;     /* kappa at which the active segment began (images with segment exits) */
     uint8_t out_of_envelope;
+    uint8_t terminal;       /* the terminal law has taken over (images with one) */
     float last_u[SC_MAX_M]; /* last input returned with SC_OK (zero after reset) */
 } sc_controller;
 
