@@ -130,11 +130,21 @@ pub fn run(a: &SynthArgs, task: &Task, s: &Synthesis) -> Outcome {
     println!("goal within T      {}", summary.recheck.liveness.describe());
     let mc = &summary.monte_carlo;
     println!(
-        "verification      {} runs from F ({} from the balls over Init), {} starts not accepted, {} violations, at most {} steps to Goal",
+        "verification      {} runs from F ({} from the balls over Init), {} starts not accepted, {} violations, runs of at most {} steps",
         mc.runs, mc.init_runs, mc.rejected, mc.violations, mc.max_steps
     );
     for v in &mc.first_violations {
         println!("violation from x0 = {:?}: {v:?}", v.x0);
+    }
+    match &s.terminal {
+        crate::synth::TerminalOutcome::Certified(_) => println!(
+            "terminal law      in the PWA image too; after Goal {} runs were outside Goal again, {} were handed over",
+            mc.runs_leaving_goal, mc.handed_over
+        ),
+        crate::synth::TerminalOutcome::None(e) => println!("terminal law      none: {e}"),
+        crate::synth::TerminalOutcome::NotAsked => {
+            println!("terminal law      none (the spec's [synthesis] terminal)")
+        }
     }
     println!("report            {}", report.display());
     if !certified {

@@ -65,7 +65,7 @@ pub fn run(a: &VerifyArgs) -> Outcome {
     let problem = &task.problem;
     let judge = Judge::new(&task);
     if pwa {
-        return run_pwa(a, runs, &judge, &img);
+        return run_pwa(a, runs, &task, &judge, &img);
     }
     let linearized = task.plant.linearization().is_some();
     if linearized && a.attack {
@@ -242,16 +242,18 @@ fn margin(v: f64) -> String {
 fn run_pwa(
     a: &VerifyArgs,
     runs: usize,
+    task: &crate::task::Task,
     judge: &Judge<'_>,
     img: &shared_types::image::Image<'_>,
 ) -> Outcome {
     let rc = crate::verify::pwa::recheck(judge, img).map_err(|e| miette::miette!(e))?;
+    let terminal = terminal_recheck(task, img, &a.image)?;
     // The image does not mark which balls start a trajectory: all runs start anywhere in F.
     let mc =
         crate::verify::pwa::monte_carlo_pwa(judge, img, &[], runs, a.seed.unwrap_or(0x7e51f1), 0)
             .into_diagnostic()?;
     if a.json {
-        let j = serde_json::json!({ "recheck": rc, "monte_carlo": mc });
+        let j = serde_json::json!({ "recheck": rc, "terminal": terminal, "monte_carlo": mc });
         println!("{}", serde_json::to_string_pretty(&j).into_diagnostic()?);
     } else {
         println!(
@@ -266,9 +268,17 @@ fn run_pwa(
         }
         println!("goal within T: {}", rc.liveness.describe());
         println!(
-            "runs {} from F ({} drawn starts not accepted), at most {} steps to Goal",
+            "runs {} from F ({} drawn starts not accepted), at most {} steps",
             mc.runs, mc.rejected, mc.max_steps
         );
+        if img.terminal_law().is_some() {
+            println!(
+                "after Goal (judged under the terminal law, to {} samples): {} runs were outside Goal again, {} were handed over",
+                crate::verify::run_steps(judge, img),
+                mc.runs_leaving_goal,
+                mc.handed_over
+            );
+        }
         for v in &mc.first_violations {
             println!("violation from x0 = {:?}: {v:?}", v.x0);
         }

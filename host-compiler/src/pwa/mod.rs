@@ -302,6 +302,8 @@ pub struct PwaContext {
     /// Contraction s asked of fitted laws in the fit's LMI: ‖A + BK_j‖_P ≤ √(1 − s).
     pub s_req: f64,
     pub settings: PwaSettings,
+    /// The synthesis's certified terminal law, which the PWA image carries too (section 11).
+    pub terminal: Option<crate::certify::terminal::StoredTerminal>,
 }
 
 impl PwaContext {
@@ -410,6 +412,7 @@ impl PwaContext {
         let eps2 = eps2 - gap.max(settings.fit_reserve * rho_min) / norm_B;
         let eps_fit = ((eps2 - 2.0 * eps_round) / (m as f64).sqrt()).max(0.0);
         Ok(Self {
+            terminal: syn.terminal.design().map(|d| d.stored.clone()),
             n,
             m,
             A: model.A.clone(),
@@ -622,6 +625,7 @@ pub fn build_pwa(
     }
     builder.fallback = crate::emit::FallbackLaw::constant(&task.problem.fallback_input);
     builder.fingerprint = Some(task.problem.fingerprint.as_bytes().to_vec());
+    builder.terminal_law = ctx.terminal.clone();
     let image = builder.to_bytes()?;
     let partition_seconds = t1.elapsed().as_secs_f64();
     Ok(PwaController {

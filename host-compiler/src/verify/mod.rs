@@ -317,6 +317,23 @@ pub fn run_visiting(
     margins: bool,
     visit: &mut dyn FnMut(&[f64]),
 ) -> RunOutcome {
+    run_until(judge, image, x0, margins, visit, run_steps(judge, image))
+}
+
+/// [`run`] for `last` samples (at least the horizon's): what a run does after the task, with or without
+/// a terminal law (the `terminal` bench's baseline runs an image without one to 2T).
+pub fn run_to(judge: &Judge<'_>, image: &Image<'_>, x0: &[f64], last: usize) -> RunOutcome {
+    run_until(judge, image, x0, false, &mut |_| {}, last.max(judge.steps))
+}
+
+fn run_until(
+    judge: &Judge<'_>,
+    image: &Image<'_>,
+    x0: &[f64],
+    margins: bool,
+    visit: &mut dyn FnMut(&[f64]),
+    last: usize,
+) -> RunOutcome {
     let metric = crate::geometry::Metric::euclidean(x0.len());
     let mut ctl = Controller::new(*image);
     let mut x = x0.to_vec();
@@ -342,7 +359,6 @@ pub fn run_visiting(
         }
     };
     check(&x, &mut out, true, false);
-    let last = run_steps(judge, image);
     for k in 0..=last {
         visit(&x);
         if out.goal_step.is_none() && judge.goal().contains(&x) {

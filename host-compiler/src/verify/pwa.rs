@@ -531,22 +531,34 @@ pub fn recheck(judge: &Judge<'_>, image: &Image<'_>) -> Result<PwaRecheck, Reche
     })
 }
 
-/// One closed-loop run of a PWA image from `x0`, terminating upon entering Goal (module doc).
+/// One closed-loop run of a PWA image from `x0`, terminating upon entering Goal (module doc); with a
+/// terminal law it goes on to twice the horizon, and what the run does under that law is judged
+/// ([`super::RunOutcome::terminal_violation`]).
 pub fn run_pwa(judge: &Judge<'_>, image: &Image<'_>, x0: &[f64]) -> (RunOutcome, Vec<Vec<f64>>) {
     let mut ctl = Controller::new(*image);
     let mut x = x0.to_vec();
     let mut path = vec![x.clone()];
-    // The run stops at Goal; nothing after it is simulated, so the after-Goal fields stay false.
     let mut out = RunOutcome::new(x0);
     let hit = |x: &[f64]| judge.unsafe_set().is_some_and(|us| us.contains(x));
+    // After Goal (terminal law only): outside Goal or in Unsafe, judged when the terminal law acts.
+    let after = |x: &[f64], out: &mut RunOutcome, terminal: bool| {
+        let outside = !judge.goal().contains(x);
+        let unsafe_ = hit(x);
+        out.left_goal |= outside;
+        out.after_goal_unsafe |= unsafe_;
+        out.terminal_violation |= terminal && (outside || unsafe_);
+    };
+    let last = super::run_steps(judge, image);
     out.entered_unsafe |= hit(&x);
-    for k in 0..=judge.steps {
-        if judge.goal().contains(&x) {
+    for k in 0..=last {
+        if out.goal_step.is_none() && judge.goal().contains(&x) {
             out.reached_goal = true;
             out.goal_step = Some(k);
-            break;
+            if image.terminal_law().is_none() {
+                break;
+            }
         }
-        if k == judge.steps {
+        if k == last || (k >= judge.steps && out.goal_step.is_none()) {
             break;
         }
         let xf: Vec<f32> = x.iter().map(|&v| v as f32).collect();
@@ -555,20 +567,34 @@ pub fn run_pwa(judge: &Judge<'_>, image: &Image<'_>, x0: &[f64]) -> (RunOutcome,
             Err(_) => {
                 if k == 0 {
                     out.rejected = true;
-                } else {
+                } else if out.goal_step.is_none() {
                     out.evaluator_error = true;
+                } else {
+                    out.terminal_violation |= ctl.in_terminal_phase();
                 }
                 break;
             }
         };
+        let terminal = ctl.in_terminal_phase();
+        out.handed_over |= terminal;
         let s = input_slack(judge.input(), &u);
-        out.input_margin = out.input_margin.min(s);
-        out.input_violation |= s < 0.0;
-        judge
-            .plant
-            .between_samples(0, &x, &u, &mut |xs| out.entered_unsafe |= hit(xs));
-        x = judge.plant.step(0, &x, &u);
-        out.entered_unsafe |= hit(&x);
+        if out.goal_step.is_some() {
+            out.after_goal_input_excursion |= s < 0.0;
+            out.terminal_violation |= terminal && s < 0.0;
+            judge
+                .plant
+                .between_samples(0, &x, &u, &mut |xs| after(xs, &mut out, terminal));
+            x = judge.plant.step(0, &x, &u);
+            after(&x, &mut out, terminal);
+        } else {
+            out.input_margin = out.input_margin.min(s);
+            out.input_violation |= s < 0.0;
+            judge
+                .plant
+                .between_samples(0, &x, &u, &mut |xs| out.entered_unsafe |= hit(xs));
+            x = judge.plant.step(0, &x, &u);
+            out.entered_unsafe |= hit(&x);
+        }
         path.push(x.clone());
     }
     (out, path)
@@ -585,8 +611,12 @@ pub struct PwaMonteCarlo {
     pub rejected: usize,
     pub violations: usize,
     pub first_violations: Vec<RunOutcome>,
-    /// Largest number of steps to Goal.
+    /// Largest number of steps a run lasted (to Goal; with a terminal law, to twice the horizon).
     pub max_steps: usize,
+    /// Runs outside Goal again after reaching it, and runs the terminal law took over (images with one;
+    /// runs last [`super::run_steps`] samples).
+    pub runs_leaving_goal: usize,
+    pub handed_over: usize,
     /// A few runs (sample paths), for the report.
     pub sample_paths: Vec<Vec<Vec<f64>>>,
 }
@@ -675,7 +705,11 @@ pub fn monte_carlo_pwa(
         .filter(|o| o.violated() || o.rejected)
         .collect();
     let max_steps = outcomes.iter().map(|o| o.2).max().unwrap_or(0);
+    let runs_leaving_goal = outcomes.iter().filter(|o| o.0.left_goal).count();
+    let handed_over = outcomes.iter().filter(|o| o.0.handed_over).count();
     Ok(PwaMonteCarlo {
+        runs_leaving_goal,
+        handed_over,
         runs: starts.len(),
         init_runs,
         rejected,
