@@ -25,6 +25,7 @@ mod cli_hybrid;
 mod cli_limits;
 mod cli_mtl;
 mod cli_synth;
+mod cli_terminal;
 mod csv_dialect;
 mod emit_image;
 mod emit_maps;
