@@ -130,8 +130,8 @@ pub fn run(a: &SynthArgs, task: &Task, s: &Synthesis) -> Outcome {
     println!("goal within T      {}", summary.recheck.liveness.describe());
     let mc = &summary.monte_carlo;
     println!(
-        "verification      {} runs from F ({} from the balls over Init), {} starts not accepted, {} violations, runs of at most {} steps",
-        mc.runs, mc.init_runs, mc.rejected, mc.violations, mc.max_steps
+        "verification      {} runs from F ({} from the balls over Init), {} starts not accepted, {} violations, at most {} steps to Goal",
+        mc.runs, mc.init_runs, mc.rejected, mc.violations, mc.max_steps_to_goal
     );
     for v in &mc.first_violations {
         println!("violation from x0 = {:?}: {v:?}", v.x0);

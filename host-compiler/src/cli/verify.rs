@@ -268,8 +268,8 @@ fn run_pwa(
         }
         println!("goal within T: {}", rc.liveness.describe());
         println!(
-            "runs {} from F ({} drawn starts not accepted), at most {} steps",
-            mc.runs, mc.rejected, mc.max_steps
+            "runs {} from F ({} drawn starts not accepted), at most {} steps to Goal",
+            mc.runs, mc.rejected, mc.max_steps_to_goal
         );
         if img.terminal_law().is_some() {
             println!(

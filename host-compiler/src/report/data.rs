@@ -71,6 +71,26 @@ pub struct VerifySummary {
     pub attack: Option<(usize, f64, usize)>,
 }
 
+/// What the controller does after the task (issue 17): the certified terminal law with its invariant
+/// ellipsoid, or why there is none, and what the Monte Carlo saw after Goal.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct TerminalReport {
+    /// "certified", or why there is none.
+    pub status: String,
+    /// Equilibrium, its input and the gain (empty without a law).
+    pub x_e: Vec<f64>,
+    pub u_e: Vec<f64>,
+    pub K: Vec<Vec<f64>>,
+    /// The certificate's figures as (name, value, note), computed from the stored f32 law.
+    pub figures: Vec<(String, f64, String)>,
+    /// The invariant ellipsoid's shadow in the workspace plane.
+    pub ellipse: Option<Ellipse2>,
+    /// Runs outside Goal again after reaching it, runs handed over, samples per run.
+    pub runs_leaving_goal: usize,
+    pub handed_over: usize,
+    pub run_steps: usize,
+}
+
 /// Everything `report.html` shows.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct ReportData {
@@ -118,4 +138,6 @@ pub struct ReportData {
     pub warnings: Vec<String>,
     /// PWA-feedback section (Ch. 6), for `mode = "pwa"`.
     pub pwa: Option<super::pwa::PwaReport>,
+    /// After the task: the terminal law or why there is none (`None`: not reported for this task).
+    pub terminal: Option<TerminalReport>,
 }

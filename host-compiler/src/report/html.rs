@@ -86,6 +86,9 @@ pub fn render_html(data: &ReportData) -> String {
     certificate(&mut h, data);
     image(&mut h, data);
     verification(&mut h, data.verify.as_ref());
+    if let Some(t) = &data.terminal {
+        terminal(&mut h, t);
+    }
     if let Some(p) = &data.pwa {
         super::pwa::section(&mut h, data, p);
     }
@@ -436,6 +439,57 @@ fn certificate(h: &mut String, data: &ReportData) {
                 ),
             ),
         ],
+    );
+    h.push_str("</section>\n");
+}
+
+fn terminal(h: &mut String, t: &super::data::TerminalReport) {
+    h.push_str("<section id=\"terminal\">\n<h2>After the task: terminal law</h2>\n");
+    if t.x_e.is_empty() {
+        let _ = writeln!(
+            h,
+            "<p>No terminal law: {}. Past the table the image keeps its behaviour (the last row's law or \
+             the fallback); what runs do after Goal is not certified.</p>",
+            escape(t.status.trim_start_matches("none: "))
+        );
+    } else {
+        let _ = writeln!(
+            h,
+            "<p>Certified: once the state lies in the invariant ellipsoid (drawn dark green in the \
+             workspace plot), u = u_e + K_t (x − x_e) keeps it in Goal, away from Unsafe and within the \
+             input bound for ever, between samples and with the evaluator's f32 rounding.</p>"
+        );
+        kv(
+            h,
+            &[
+                (
+                    "x_e",
+                    format!("{:?}", t.x_e.iter().map(|v| num(*v)).collect::<Vec<_>>()),
+                ),
+                (
+                    "u_e",
+                    format!("{:?}", t.u_e.iter().map(|v| num(*v)).collect::<Vec<_>>()),
+                ),
+            ],
+        );
+        matrix(h, "K_t", &t.K);
+        let rows: Vec<(&str, String)> = t
+            .figures
+            .iter()
+            .map(|(k, v, note)| {
+                (
+                    k.as_str(),
+                    format!("{} <span class=\"note\">({})</span>", num(*v), escape(note)),
+                )
+            })
+            .collect();
+        kv(h, &rows);
+    }
+    let _ = writeln!(
+        h,
+        "<p id=\"after-goal\">Monte Carlo, runs of {} samples: {} handed over to the terminal law; {} were \
+         outside Goal again after reaching it.</p>",
+        t.run_steps, t.handed_over, t.runs_leaving_goal
     );
     h.push_str("</section>\n");
 }

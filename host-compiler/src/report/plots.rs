@@ -29,6 +29,8 @@ const PALETTE: [RGBColor; 10] = [
 /// Colours of the sets (also used by the HTML legends).
 pub const INIT_COLOR: RGBColor = RGBColor(110, 110, 110);
 pub const GOAL_COLOR: RGBColor = RGBColor(46, 160, 67);
+/// The terminal law's invariant ellipsoid (a darker green, inside Goal).
+pub const TERMINAL_COLOR: RGBColor = RGBColor(20, 90, 40);
 pub const UNSAFE_COLOR: RGBColor = RGBColor(207, 34, 46);
 pub const BALL_COLOR: RGBColor = RGBColor(31, 119, 180);
 
@@ -305,6 +307,17 @@ fn draw_workspace(data: &ReportData) -> DynResult<String> {
                 GOAL_COLOR,
                 0.25,
                 0.9,
+            )?;
+        }
+        // The terminal law's invariant ellipsoid, darker, inside Goal.
+        if let Some(e) = data.terminal.as_ref().and_then(|t| t.ellipse.as_ref()) {
+            draw_region(
+                &mut chart,
+                &ellipse_points(e, 96),
+                &view,
+                TERMINAL_COLOR,
+                0.35,
+                1.0,
             )?;
         }
         let ts = sorted_trajectories(data);

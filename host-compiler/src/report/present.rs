@@ -1,7 +1,7 @@
 //! From a synthesis run to the plot-ready [`ReportData`]: projections of sets, tubes and balls onto the
 //! plotting planes.
 
-use super::data::{Ellipse2, ReportData, Shape2, TrajectoryReport, VerifySummary};
+use super::data::{Ellipse2, ReportData, Shape2, TerminalReport, TrajectoryReport, VerifySummary};
 use super::optimization::OptimizationReport;
 use crate::linalg::{spectral_norm, sym_fn, PdRoots};
 use crate::spec::sets::{Coords, SetDesc, Shape};
@@ -247,6 +247,92 @@ pub fn report_data(
         timings: s.timings.clone(),
         warnings,
         pwa: None,
+        terminal: Some(terminal_report(s, pl)),
+    }
+}
+
+/// The terminal law's section (issue 17): its ellipsoid {‖x − x_e‖_{P_t} ≤ 1} projected onto the plane
+/// `pl` (the 2×2 block of P_t⁻¹ there), the law and the certificate's figures; or why there is none.
+fn terminal_report(s: &Synthesis, pl: [usize; 2]) -> TerminalReport {
+    use crate::synth::TerminalOutcome;
+    let base = TerminalReport {
+        status: String::new(),
+        x_e: vec![],
+        u_e: vec![],
+        K: vec![],
+        figures: vec![],
+        ellipse: None,
+        runs_leaving_goal: s.verify.runs_leaving_goal,
+        handed_over: s.verify.handed_over,
+        run_steps: s.verify.run_steps,
+    };
+    match &s.terminal {
+        TerminalOutcome::Certified(d) => {
+            let st = &d.stored;
+            let c = &d.certificate;
+            let ellipse = PdRoots::new(st.P.as_ref()).map(|r| {
+                let sigma = Mat::from_fn(2, 2, |i, j| r.inv[(pl[i], pl[j])]);
+                Ellipse2 {
+                    center: [st.x_e[pl[0]], st.x_e[pl[1]]],
+                    M: root2(&sigma),
+                }
+            });
+            let f = |name: &str, v: f64, note: &str| (name.to_string(), v, note.to_string());
+            TerminalReport {
+                status: "certified".into(),
+                x_e: st.x_e.clone(),
+                u_e: d.u_e.clone(),
+                K: crate::linalg::to_rows(st.K.as_ref()),
+                figures: vec![
+                    f(
+                        "‖A + BK_t‖ in the ellipsoid's metric",
+                        c.contraction,
+                        "contraction per sample",
+                    ),
+                    f("θ", c.theta, "the next sample lies within θ of x_e"),
+                    f(
+                        "accepted within",
+                        c.acceptance_floor,
+                        "the f32 handover test accepts every state this close (> θ)",
+                    ),
+                    f(
+                        "between samples within",
+                        c.between_samples,
+                        "radius the run stays within between samples",
+                    ),
+                    f(
+                        "Goal depth of x_e",
+                        c.goal_depth,
+                        "≥ the radius between samples",
+                    ),
+                    f(
+                        "Unsafe distance of x_e",
+                        c.unsafe_distance,
+                        "> the radius between samples",
+                    ),
+                    f(
+                        "input distance",
+                        c.input_distance,
+                        "≥ 1: every input of the law lies in the input set",
+                    ),
+                    f(
+                        "ε_f32",
+                        c.rounding,
+                        "the evaluator's rounding over the ellipsoid (2-norm)",
+                    ),
+                ],
+                ellipse,
+                ..base
+            }
+        }
+        TerminalOutcome::None(e) => TerminalReport {
+            status: format!("none: {e}"),
+            ..base
+        },
+        TerminalOutcome::NotAsked => TerminalReport {
+            status: "none: the spec's [synthesis] terminal asks for none".into(),
+            ..base
+        },
     }
 }
 

@@ -225,7 +225,7 @@ pub fn section(h: &mut String, data: &ReportData, r: &PwaReport) {
         mc.runs,
         mc.init_runs,
         mc.violations,
-        mc.max_steps,
+        mc.max_steps_to_goal,
     );
     h.push_str("<figure id=\"pwa-plot\">\n");
     match plot(data, r) {

@@ -613,6 +613,8 @@ pub struct PwaMonteCarlo {
     pub first_violations: Vec<RunOutcome>,
     /// Largest number of steps a run lasted (to Goal; with a terminal law, to twice the horizon).
     pub max_steps: usize,
+    /// Largest number of steps a run took to reach Goal.
+    pub max_steps_to_goal: usize,
     /// Runs outside Goal again after reaching it, and runs the terminal law took over (images with one;
     /// runs last [`super::run_steps`] samples).
     pub runs_leaving_goal: usize,
@@ -705,9 +707,15 @@ pub fn monte_carlo_pwa(
         .filter(|o| o.violated() || o.rejected)
         .collect();
     let max_steps = outcomes.iter().map(|o| o.2).max().unwrap_or(0);
+    let max_steps_to_goal = outcomes
+        .iter()
+        .filter_map(|o| o.0.goal_step)
+        .max()
+        .unwrap_or(0);
     let runs_leaving_goal = outcomes.iter().filter(|o| o.0.left_goal).count();
     let handed_over = outcomes.iter().filter(|o| o.0.handed_over).count();
     Ok(PwaMonteCarlo {
+        max_steps_to_goal,
         runs_leaving_goal,
         handed_over,
         runs: starts.len(),

@@ -281,14 +281,18 @@ fn the_image_alone_rechecks_and_monte_carlo_from_f_finds_no_violation() {
     assert_eq!(mc.runs, 2_000);
     assert!(mc.init_runs >= 1_000);
     assert_eq!(mc.violations, 0, "{:?}", mc.first_violations);
-    assert!(mc.max_steps <= f.task.steps);
+    assert!(mc.max_steps_to_goal <= f.task.steps);
     // Goal within T, proved from the bytes; no sampled run takes longer than the proved bound.
     let bound = rc
         .liveness
         .max_steps_to_goal
         .unwrap_or_else(|| panic!("{:?}", rc.liveness.failure));
     assert!(bound <= f.task.steps, "{:?}", rc.liveness);
-    assert!(mc.max_steps <= bound, "{} > {bound}", mc.max_steps);
+    assert!(
+        mc.max_steps_to_goal <= bound,
+        "{} > {bound}",
+        mc.max_steps_to_goal
+    );
 }
 
 /// Goal within T depends on the order in which leaves list their balls (pwa module doc, "Reaching Goal

@@ -118,8 +118,8 @@ fn check(example: &str) {
     );
 }
 
-/// The format-v4 layout `inspect` reports: the section directory a mode requires and the spec fingerprint,
-/// in tag order, and for a
+/// The format-v4 layout `inspect` reports: the section directory a mode requires, the terminal law where
+/// one exists and the spec fingerprint, in tag order, and for a
 /// feedforward image of a one-location plant one segment per trajectory covering its rows.
 fn check_layout(example: &str, got: &Value) {
     let kinds: Vec<&str> = got["sections"]
@@ -129,7 +129,16 @@ fn check_layout(example: &str, got: &Value) {
         .map(|s| s["kind"].as_str().unwrap())
         .collect();
     let pwa = got.get("pwa").is_some();
-    // The spec fingerprint (optional, tag 12) last: `synth` always writes it.
+    // The terminal law (optional, tag 11) where the example's Goal holds an equilibrium within the input
+    // bound (the double integrator; Example 4.8's vehicle has none), then the spec fingerprint (optional,
+    // tag 12) last: `synth` always writes it.
+    let terminal = example == "double-integrator";
+    assert_eq!(
+        kinds.contains(&"terminal_law"),
+        terminal,
+        "{example}: terminal law section"
+    );
+    let kinds: Vec<&str> = kinds.into_iter().filter(|k| *k != "terminal_law").collect();
     let want: &[&str] = if pwa {
         &[
             "locations",

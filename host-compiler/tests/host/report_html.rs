@@ -162,6 +162,7 @@ fn sample() -> ReportData {
         ],
         warnings: vec!["δ of trajectory 7 shrank by 2 % for the f32 margin".into()],
         pwa: None,
+        terminal: None,
     }
 }
 
