@@ -28,13 +28,15 @@
 //!
 //! Distances are compared squared (`(x − c)ᵀP(x − c) ≤ δ²`), so no square root is needed. Arithmetic is
 //! plain f32 multiply and add in a fixed order, without fused multiply-add, so host and Cortex-M4F give the
-//! same bits. Every loop is bounded by the capacities in [`crate::capacity`]; nothing allocates or panics.
+//! same bits; the matrix–vector products (selection, law, PWA law, linear fallback) run on nalgebra views
+//! in the module `linalg`, whose doc states their summation order. Every loop is bounded by the capacities in [`crate::capacity`]; nothing allocates or panics.
 //!
 //! Errors never advance the step counter κ.
 #![allow(non_snake_case)]
 
 use crate::capacity::{MAX_M, MAX_N};
 use crate::image::{Exit, Fallback, Image, Mode, ModelMaps, Terminal};
+use crate::linalg;
 use crate::pwa::Region;
 use crate::raw::{f32_span, floats};
 use crate::terminal::TerminalLaw;
@@ -225,14 +227,7 @@ impl<'a> Controller<'a> {
                 img.segment(s0).map_or(0, |s| s.location)
             };
             let P = f32_span(p.P, l * n * n, n * n);
-            let mut d2 = 0.0f32;
-            for (row, &ei) in P.chunks_exact(4 * n).zip(&e) {
-                let mut s = 0.0f32;
-                for (pij, &ej) in floats(row).zip(&e) {
-                    s += pij * ej;
-                }
-                d2 += ei * s;
-            }
+            let d2 = linalg::quadratic_form(P, &e, n);
             let delta = img.delta(t);
             if d2 <= delta * delta && d2 < best_d2 {
                 best_d2 = d2;
@@ -280,13 +275,7 @@ impl<'a> Controller<'a> {
         let K = f32_span(p.K, l * m * n, m * n);
         let v = f32_span(p.v, row * m, m);
         let mut out = Input::zero(m);
-        for ((uj, krow), vj) in out.u.iter_mut().zip(K.chunks_exact(4 * n)).zip(floats(v)) {
-            let mut s = 0.0f32;
-            for (kji, &xi) in floats(krow).zip(x) {
-                s += kji * xi;
-            }
-            *uj = s + vj;
-        }
+        linalg::affine(K, x, v, n, m, &mut out.u);
         out
     }
 
@@ -541,18 +530,7 @@ impl<'a> Controller<'a> {
         let K = f32_span(t.gain, j * m * n, m * n);
         let theta0 = f32_span(t.offset, j * m, m);
         let mut u = Input::zero(m);
-        for ((uj, krow), oj) in
-            u.u.iter_mut()
-                // `.max(4)`: a chunk size the optimiser sees is non-zero (no panic path; n ≥ 1 already).
-                .zip(K.chunks_exact((4 * n).max(4)))
-                .zip(floats(theta0))
-        {
-            let mut s = 0.0f32;
-            for (kji, &xi) in floats(krow).zip(x) {
-                s += kji * xi;
-            }
-            *uj = s + oj;
-        }
+        linalg::affine(K, x, theta0, n, m, &mut u.u);
         self.accept(u)
     }
 
@@ -588,19 +566,7 @@ impl<'a> Controller<'a> {
                 for ((ei, &xi), ri) in e.iter_mut().zip(x).zip(floats(x_ref)) {
                     *ei = xi - ri;
                 }
-                for ((uj, krow), urj) in out
-                    .u
-                    .iter_mut()
-                    // `.max(4)`: as in `step_pwa`.
-                    .zip(K.chunks_exact((4 * n).max(4)))
-                    .zip(floats(u_ref))
-                {
-                    let mut s = 0.0f32;
-                    for (kji, &ei) in floats(krow).zip(&e) {
-                        s += kji * ei;
-                    }
-                    *uj = s + urj;
-                }
+                linalg::affine(K, &e, u_ref, n, m, &mut out.u);
                 if let Some(b) = img.payload().input_box {
                     for ((uj, lo), hi) in out.u.iter_mut().zip(floats(b.lo)).zip(floats(b.hi)) {
                         // max/min, not clamp: clamp panics on NaN bounds (validated away, but be total).

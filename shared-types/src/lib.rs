@@ -9,6 +9,7 @@
 //! * [`image`]: the content, [`image::encode`] and the validating zero-copy [`image::decode`];
 //! * [`pwa`]: the PWA-feedback tables (Ch. 6), their validation and bounded-depth point location;
 //! * [`eval`]: the f32 evaluator ([`eval::Controller`]), [`eval::Status`] and [`eval::Input`];
+//! * `linalg`: the evaluator's matrix–vector products on nalgebra views, and their summation order;
 //! * [`program`]: model programs, the validated `f32` stack bytecode of a nonlinear plant's maps;
 //! * [`maps`]: the model maps section (`coords: x ↦ ξ`, `input_map: (x, w) ↦ u`) of a
 //!   feedback-linearizable plant's image;
@@ -23,6 +24,7 @@ pub mod eval;
 pub mod header;
 pub mod image;
 pub mod layout;
+mod linalg;
 pub mod maps;
 pub mod program;
 pub mod protocol;
