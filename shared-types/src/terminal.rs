@@ -26,7 +26,8 @@ use serde::{Deserialize, Serialize};
 use crate::capacity::{MAX_M, MAX_N};
 use crate::error::{Field, ImageError, Pos};
 use crate::eval::Input;
-use crate::raw::{check_finite, check_len, div, f32_at, floats, positive_definite, rem, sat16};
+use crate::linalg::{affine, quadratic_form};
+use crate::raw::{check_finite, check_len, f32_at, floats, positive_definite, sat16};
 
 /// The `TerminalLaw` section's content (see the module doc).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -48,18 +49,15 @@ impl<'a> TerminalLaw<'a> {
     /// definite, and `r̂ ≥ 0`.
     pub fn validate(&self, n: usize, m: usize) -> Result<(), ImageError> {
         let (n, m) = (n.clamp(1, MAX_N), m.clamp(1, MAX_M));
-        check_len(Field::TerminalCentre, self.x_e, 4 * n)?;
-        check_finite(Field::TerminalCentre, self.x_e, |i| Pos(sat16(i), 0, 0))?;
-        check_len(Field::TerminalK, self.K, 4 * m * n)?;
-        check_finite(Field::TerminalK, self.K, |i| {
-            Pos(sat16(div(i, n)), sat16(rem(i, n)), 0)
-        })?;
-        check_len(Field::TerminalV, self.v, 4 * m)?;
-        check_finite(Field::TerminalV, self.v, |i| Pos(sat16(i), 0, 0))?;
-        check_len(Field::TerminalP, self.P, 4 * n * n)?;
-        check_finite(Field::TerminalP, self.P, |i| {
-            Pos(sat16(div(i, n)), sat16(rem(i, n)), 0)
-        })?;
+        for (field, bytes, len) in [
+            (Field::TerminalCentre, self.x_e, n),
+            (Field::TerminalK, self.K, m * n),
+            (Field::TerminalV, self.v, m),
+            (Field::TerminalP, self.P, n * n),
+        ] {
+            check_len(field, bytes, 4 * len)?;
+            check_finite(field, bytes, flat)?;
+        }
         for r in 0..n {
             for c in (r + 1)..n {
                 if f32_at(self.P, r * n + c).to_bits() != f32_at(self.P, c * n + r).to_bits() {
@@ -74,42 +72,28 @@ impl<'a> TerminalLaw<'a> {
     }
 
     /// The handover test: `fl((x − x_e)ᵀ P_t (x − x_e)) ≤ r̂·r̂`, summed as the feedforward selection sums
-    /// (row by row, left to right, no fused multiply-add). `x` has n values (validated by the caller).
+    /// ([`crate::linalg::quadratic_form`]). `x` has n values (validated by the caller).
     #[inline(always)]
     pub fn accepts(&self, x: &[f32], n: usize) -> bool {
-        let n = n.clamp(1, MAX_N);
         let mut e = [0.0f32; MAX_N];
         for ((ei, &xi), ci) in e.iter_mut().zip(x).zip(floats(self.x_e)) {
             *ei = xi - ci;
         }
-        let mut d2 = 0.0f32;
-        for (row, &ei) in self.P.chunks_exact(4 * n).zip(&e) {
-            let mut s = 0.0f32;
-            for (pij, &ej) in floats(row).zip(&e) {
-                s += pij * ej;
-            }
-            d2 += ei * s;
-        }
-        d2 <= self.radius * self.radius
+        quadratic_form(self.P, &e, n.clamp(1, MAX_N)) <= self.radius * self.radius
     }
 
-    /// `u = K_t x + v_t`, summed as the table law `u = K_ℓ x + v` is.
+    /// `u = K_t x + v_t`, summed as the table law `u = K_ℓ x + v` is ([`crate::linalg::affine`]).
     #[inline(always)]
     pub fn law(&self, x: &[f32], n: usize, m: usize) -> Input {
-        let (n, m) = (n.clamp(1, MAX_N), m.clamp(1, MAX_M));
+        let m = m.clamp(1, MAX_M);
         let mut out = Input::zero(m);
-        for ((uj, krow), vj) in out
-            .values_mut()
-            .iter_mut()
-            .zip(self.K.chunks_exact(4 * n))
-            .zip(floats(self.v))
-        {
-            let mut s = 0.0f32;
-            for (kji, &xi) in floats(krow).zip(x) {
-                s += kji * xi;
-            }
-            *uj = s + vj;
-        }
+        affine(self.K, x, self.v, n.clamp(1, MAX_N), m, out.values_mut());
         out
     }
+}
+
+/// Position of entry i of a flat array (one function for every field, so that `check_finite` is
+/// instantiated once here).
+fn flat(i: usize) -> Pos {
+    Pos(sat16(i), 0, 0)
 }
