@@ -210,21 +210,18 @@ pub fn synthesize(task: &Task, opts: &SynthOptions) -> Result<Synthesis, SynthEr
         ));
     }
     let attack = match &opts.attack {
-        Some(_) if linearized => {
-            warnings.push(
-                "the falsifier runs the linear model's loop only; it was skipped for this \
-                 feedback-linearizable plant (the Monte Carlo ran the plant itself)"
-                    .to_string(),
-            );
-            None
-        }
         Some(a) => {
             let t3 = Instant::now();
             let settings = AttackSettings {
                 seed: a.seed ^ problem.seed,
                 ..a.clone()
             };
-            let r = attack(&judge, &img, &settings)?;
+            // A linearised plant is attacked on the plant itself, as it is verified.
+            let r = if linearized {
+                crate::verify::attack::attack_fl(task, &img, &settings)?
+            } else {
+                attack(&judge, &img, &settings)?
+            };
             timings.push(("falsifier".to_string(), t3.elapsed().as_secs_f64()));
             if r.violations > 0 {
                 warnings.push(format!(

@@ -60,7 +60,11 @@ fn balls_enlarged_past_their_certificate_are_caught() {
         r.worst_robustness
     );
     assert!(!r.first_violations.is_empty());
-    assert!(r.first_violations.iter().all(|v| v.violated()));
+    // Each names its start (in the enlarged part of some ball) and what failed.
+    assert!(r
+        .first_violations
+        .iter()
+        .all(|v| v.x0.len() == img.n() && !v.what.is_empty()));
 }
 
 #[test]
@@ -129,4 +133,60 @@ fn monte_carlo_counts_are_bounded_in_the_library_too() {
         })
     ));
     assert!(monte_carlo(&judge, &img, 10, 1, 1).is_ok());
+}
+
+/// The falsifier's part of `verify --json` output.
+#[derive(Debug)]
+pub(crate) struct AttackSeen {
+    pub evaluations: u64,
+    /// `None` when the JSON holds no finite number (serde writes ±∞ as null).
+    pub worst_robustness: Option<f64>,
+    pub violations: u64,
+    pub first_violations: Vec<serde_json::Value>,
+}
+
+/// The `attack` object of a `verify --json` run's standard output.
+pub(crate) fn attack_of(o: &std::process::Output) -> AttackSeen {
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    let j: serde_json::Value = serde_json::from_str(&stdout).unwrap_or_else(|e| {
+        panic!(
+            "not JSON ({e}): {stdout}\n{}",
+            String::from_utf8_lossy(&o.stderr)
+        )
+    });
+    let at = &j["attack"];
+    AttackSeen {
+        evaluations: at["evaluations"].as_u64().expect("attack.evaluations"),
+        worst_robustness: at["worst_robustness"].as_f64(),
+        violations: at["violations"].as_u64().expect("attack.violations"),
+        first_violations: at["first_violations"]
+            .as_array()
+            .cloned()
+            .unwrap_or_default(),
+    }
+}
+
+/// What a passing `verify --attack --json` reported (checked by [`attack_json`]).
+#[derive(Debug)]
+pub(crate) struct Passed {
+    pub worst_robustness: f64,
+}
+
+/// The `attack` of a passing `verify --attack --json`, checked: exit 0, runs made, a finite least
+/// robustness, no violation.
+pub(crate) fn attack_json(o: &std::process::Output) -> Passed {
+    assert_eq!(
+        o.status.code(),
+        Some(0),
+        "{}\n{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let at = attack_of(o);
+    assert!(at.evaluations > 0, "{at:?}");
+    assert_eq!(at.violations, 0, "{at:?}");
+    let worst = at.worst_robustness.expect("a finite least robustness");
+    Passed {
+        worst_robustness: worst,
+    }
 }
