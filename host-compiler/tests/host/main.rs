@@ -36,6 +36,7 @@ mod geometry_ellipsoid;
 mod geometry_polytope;
 mod geometry_regions;
 mod image_exits;
+mod inspect_certificate;
 mod messages;
 mod model_hybrid;
 mod model_zoh;
