@@ -31,6 +31,7 @@ mod emit_maps;
 mod emit_pwa;
 mod fallback_input;
 mod fuzz_corpus;
+mod fuzz_smoke;
 mod geometry_common;
 mod geometry_ellipsoid;
 mod geometry_polytope;
