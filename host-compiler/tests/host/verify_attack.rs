@@ -1,6 +1,8 @@
 //! The falsifier (`verify::attack`, `verify --attack`): on a certified image it finds no violation and
 //! reports a positive least robustness; on an image whose balls were enlarged past what was certified
-//! (CRC recomputed, so only the search can tell) it finds runs that fail.
+//! (CRC recomputed, so only the search can tell) it finds runs that fail; the generic search
+//! (`verify::attack::falsify`) finds the failing part of a toy mode's ball. [`attack_json`] checks the
+//! falsifier's part of `verify --attack --json` for the CLI tests of every image mode.
 
 use crate::verify_refuses::{image, spec, text, verify, write_patched};
 use host_compiler::task::Task;
@@ -189,4 +191,56 @@ pub(crate) fn attack_json(o: &std::process::Output) -> Passed {
     Passed {
         worst_robustness: worst,
     }
+}
+
+/// The generic search ([`falsify`]) on a toy mode: a run from x0 in the unit ball of ℝ² fails when
+/// |x0| > 0.8 (robustness 0.8 − |x0|), and the evaluator refuses starts beyond the stored radius 1. The
+/// search finds failing starts (each reported with its start), its least robustness is that of a start
+/// inside the ball (≥ 0.8 − 1.0001), and refused starts are neither violations nor scored.
+#[test]
+fn the_generic_search_finds_a_failing_region_of_a_ball() {
+    use host_compiler::verify::attack::{falsify, Ball, Scored, Target};
+    struct Toy(Vec<Ball>);
+    impl Target for Toy {
+        fn balls(&self) -> &[Ball] {
+            &self.0
+        }
+        fn score(&self, x0: &[f64]) -> Scored {
+            let r = x0.iter().map(|v| v * v).sum::<f64>().sqrt();
+            if r > 1.0 {
+                return Scored::Refused;
+            }
+            Scored::Run {
+                robustness: 0.8 - r,
+                violation: (r > 0.8).then(|| format!("|x0| = {r}")),
+            }
+        }
+    }
+    let toy = Toy(vec![Ball {
+        centre: vec![0.0, 0.0],
+        pis: vec![1.0, 0.0, 0.0, 1.0],
+        reach: 1.0001,
+    }]);
+    let r = falsify(&toy, &AttackSettings::default()).unwrap();
+    assert!(r.violations > 0, "{r:?}");
+    assert!(
+        r.worst_robustness < 0.0 && r.worst_robustness >= 0.8 - 1.0001,
+        "{r:?}"
+    );
+    for v in &r.first_violations {
+        let norm = v.x0.iter().map(|a| a * a).sum::<f64>().sqrt();
+        assert!(norm > 0.8 && norm <= 1.0, "{v:?}");
+    }
+    // A ball whose runs all pass: no violation, a positive least robustness.
+    let small = Toy(vec![Ball {
+        centre: vec![0.0, 0.0],
+        pis: vec![1.0, 0.0, 0.0, 1.0],
+        reach: 0.5,
+    }]);
+    let r = falsify(&small, &AttackSettings::default()).unwrap();
+    assert_eq!(r.violations, 0, "{r:?}");
+    assert!(
+        r.worst_robustness >= 0.3 && r.worst_robustness < 0.35,
+        "{r:?}"
+    );
 }
