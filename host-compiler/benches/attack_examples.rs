@@ -122,7 +122,8 @@ fn main() {
             "{name:<28} {synth_s:>8.1} {balls:>10} {evals:>10} {:>12.0} {worst:>11.4e} {violations:>6}",
             evals / secs
         );
-        if o.status.code() != Some(0) || violations != 0.0 || !(worst > 0.0) {
+        // A least robustness that is NaN (no run scored) fails too.
+        if o.status.code() != Some(0) || violations != 0.0 || worst.is_nan() || worst <= 0.0 {
             println!(
                 "{name}: verify exited {:?}: {}",
                 o.status.code(),

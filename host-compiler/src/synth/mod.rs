@@ -57,8 +57,9 @@ pub struct SynthOptions {
     pub cancel: Arc<AtomicBool>,
     /// Called after each accepted trajectory (default none).
     pub on_accept: Option<AcceptHook>,
-    /// The falsifier run on the feedforward image after the Monte Carlo (default: one start of at most 40
-    /// runs per ball, seeded by the spec's seed); `None` skips it.
+    /// The falsifier run on the feedforward image after the Monte Carlo, on the plant itself for a
+    /// feedback-linearizable one (default: one start of at most 40 runs per ball, seeded by the spec's
+    /// seed); `None` skips it.
     pub attack: Option<AttackSettings>,
 }
 
