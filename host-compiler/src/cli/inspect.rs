@@ -11,6 +11,16 @@
 //! For an image with model maps (a feedback-linearizable plant, `shared_types::maps`) it adds the plant's
 //! dimensions and, per program (`coords`, `input_map`), its length, slots, outputs, constants, code length
 //! and stack depth; the fallback and the input box are then shown in the plant's input space.
+//!
+//! # For independent checkers
+//! With `--json` it also shows, under `"certificate"`, what an independent checker needs that the image
+//! does not store, read from the certificate `synth` wrote (`--certificate FILE`, by default
+//! `certificate.json` beside the image when there is one): the certified f64 δ, the f64 K and P (per
+//! location for a hybrid image), the Goal step of every trajectory, its nominal states and the f32
+//! rounding bound ε̄, and for a PWA image each ball's provenance (trajectory, κ) and its successor. The
+//! certificate must be this image's: `synth` records the image's SHA-256 in it (`"image"`), and a
+//! certificate of other bytes is refused (exit 2, naming both files). Without one, `"certificate"` says
+//! which items are missing and why.
 #![allow(non_snake_case)]
 
 use std::fmt::Write as _;
@@ -31,6 +41,11 @@ pub struct InspectArgs {
     /// Print the whole content as JSON.
     #[arg(long)]
     pub json: bool,
+    /// The certificate `synth` wrote for this image (default: `certificate.json` beside the image, when
+    /// there is one); with `--json`, its f64 δ, K and P, Goal steps, nominal states, f32 error bounds and
+    /// PWA ball provenance are added under `"certificate"`. A certificate of another image is refused.
+    #[arg(long, value_name = "FILE", requires = "json")]
+    pub certificate: Option<std::path::PathBuf>,
 }
 
 /// Why an image could not be inspected.
@@ -55,6 +70,21 @@ pub enum InspectError {
         #[help]
         header: Option<String>,
     },
+    /// The certificate could not be read or is not JSON.
+    #[error("cannot read the certificate {path}: {why}")]
+    Certificate {
+        /// File.
+        path: String,
+        /// Cause.
+        why: String,
+    },
+    /// The certificate was not written for this image.
+    #[error("{certificate} is not the certificate of {image}: {why}")]
+    CertificateMismatch {
+        certificate: String,
+        image: String,
+        why: String,
+    },
 }
 
 /// Entry point of the subcommand.
@@ -64,7 +94,16 @@ pub fn run(a: &InspectArgs) -> miette::Result<()> {
         path: path.clone(),
         source,
     })?;
-    let out = render(&bytes, &path, a.json)?;
+    let mut out = render(&bytes, &path, a.json)?;
+    if a.json {
+        let items = checker_items(&bytes, &a.image, a.certificate.as_deref())?;
+        // `render` printed a JSON object; the certificate's items join it.
+        if let Ok(serde_json::Value::Object(mut o)) = serde_json::from_str(&out) {
+            o.insert("certificate".into(), items);
+            out = serde_json::to_string_pretty(&o)
+                .unwrap_or_else(|e| format!("{{\"error\": \"{e}\"}}"));
+        }
+    }
     // Write, not println!: a closed pipe (`inspect x | head`) must end quietly, not panic.
     let mut stdout = std::io::stdout().lock();
     match writeln!(stdout, "{out}") {
@@ -823,4 +862,189 @@ fn pwa_summary(s: &mut String, p: &PwaJson) {
         );
     }
     more(s, p.ball_table.len(), "balls");
+}
+
+/// The items an independent checker needs from the certificate (module doc, "For independent
+/// checkers"), or which are missing and why. `explicit`: the `--certificate` flag; without it
+/// `certificate.json` beside the image is read when it exists and names this image's file.
+pub fn checker_items(
+    bytes: &[u8],
+    image: &std::path::Path,
+    explicit: Option<&std::path::Path>,
+) -> Result<serde_json::Value, InspectError> {
+    let path = match explicit {
+        Some(p) => p.to_path_buf(),
+        None => image
+            .parent()
+            .unwrap_or(std::path::Path::new("."))
+            .join("certificate.json"),
+    };
+    if explicit.is_none() && !path.is_file() {
+        return Ok(absent(format!(
+            "no --certificate was given and there is no {} beside the image",
+            path.display()
+        )));
+    }
+    let failed = |why: String| InspectError::Certificate {
+        path: path.display().to_string(),
+        why,
+    };
+    let text = std::fs::read_to_string(&path).map_err(|e| failed(e.to_string()))?;
+    let cert: serde_json::Value = serde_json::from_str(&text).map_err(|e| failed(e.to_string()))?;
+    let mismatch = |why: String| InspectError::CertificateMismatch {
+        certificate: path.display().to_string(),
+        image: image.display().to_string(),
+        why,
+    };
+    let sha = super::sha256_hex(bytes);
+    let id = &cert["image"];
+    let named = id["file"].as_str();
+    let this_file = image.file_name().map(|f| f.to_string_lossy().into_owned());
+    match id["sha256"].as_str() {
+        Some(h) if h == sha => Ok(present(&cert, &path, &sha, bytes)),
+        // The certificate beside the image is another file's (a PWA run's feedforward.img sits next to
+        // the certificate of controller.img): nothing of this image's, not an error.
+        _ if explicit.is_none() && named.is_some_and(|f| Some(f) != this_file.as_deref()) => {
+            Ok(absent(format!(
+                "{} beside the image is the certificate of {}, not of this file",
+                path.display(),
+                named.unwrap_or("?")
+            )))
+        }
+        // An older certificate beside the image (written before certificates named their image): it
+        // cannot be told to be this image's, so none of it is shown.
+        None if explicit.is_none() => Ok(absent(format!(
+            "{} beside the image records no image identity (written before certificates named their \
+             image): it cannot be told to belong to this image",
+            path.display()
+        ))),
+        Some(h) => Err(mismatch(format!(
+            "it was written for an image with SHA-256 {h}{}, but this image's is {sha} ({} bytes)",
+            id["bytes"]
+                .as_u64()
+                .map(|b| format!(" ({b} bytes)"))
+                .unwrap_or_default(),
+            bytes.len()
+        ))),
+        None => Err(mismatch(
+            "it records no image identity (\"image\": its SHA-256), so it cannot be told to belong to \
+             this image; synthesise again to get a certificate that does"
+                .into(),
+        )),
+    }
+}
+
+/// What a checker needs that only the certificate holds.
+const CHECKER_ITEMS: [&str; 6] = [
+    "delta (the certified f64 radius per trajectory)",
+    "K and P (f64)",
+    "goal_step (per trajectory)",
+    "nominal (the nominal states per trajectory)",
+    "f32_error_bound (per trajectory)",
+    "balls (a PWA ball's provenance and successor)",
+];
+
+fn absent(why: String) -> serde_json::Value {
+    serde_json::json!({ "status": "absent", "why": why, "missing": CHECKER_ITEMS })
+}
+
+/// The checker's items of a certificate that belongs to the image, in one shape for every task: per
+/// trajectory (per run for a hybrid image) its certified δ, stored radius, Goal step, f32 rounding
+/// bound and nominal states.
+fn present(
+    cert: &serde_json::Value,
+    path: &std::path::Path,
+    sha: &str,
+    bytes: &[u8],
+) -> serde_json::Value {
+    use serde_json::{json, Value};
+    let task = cert["task"].as_str().unwrap_or("reach_avoid");
+    let stored: Vec<f32> = decode(bytes)
+        .map(|img| {
+            if img.mode() == Mode::Feedforward {
+                (0..img.n_trajectories()).map(|t| img.delta(t)).collect()
+            } else {
+                Vec::new()
+            }
+        })
+        .unwrap_or_default();
+    let matches = |i: usize, c: &Value| -> Value {
+        match (stored.get(i), c["delta_stored"].as_f64()) {
+            (Some(&s), Some(d)) => json!(s == d as f32),
+            _ => Value::Null,
+        }
+    };
+    let mut out = json!({
+        "status": "present",
+        "file": path.display().to_string(),
+        "task": task,
+        "image_sha256": sha,
+    });
+    let trajectories: Vec<Value> =
+        if task == "hybrid" {
+            out["locations"] = cert["locations"].clone();
+            cert["runs"]
+            .as_array()
+            .map(Vec::as_slice)
+            .unwrap_or_default()
+            .iter()
+            .enumerate()
+            .map(|(i, r)| {
+                let c = &r["certificate"];
+                let segs = c["segments"].as_array().map(Vec::as_slice).unwrap_or_default();
+                let eps = segs
+                    .iter()
+                    .filter_map(|s| s["base"]["eps_f32"].as_f64())
+                    .fold(None, |m: Option<f64>, e| Some(m.map_or(e, |m| m.max(e))));
+                json!({
+                    "index": i,
+                    "delta": segs.first().map(|s| s["delta"].clone()),
+                    "delta_stored": c["delta_stored"],
+                    "stored_radius_matches_image": matches(i, c),
+                    // Σ κ_f + κ*: the last sample a run of this ball may take to reach Goal.
+                    "goal_step": segs.iter().map(|s| s["samples"].as_u64()).sum::<Option<u64>>(),
+                    "f32_error_bound": eps,
+                    "nominal_segments": r["nominal_segments"],
+                })
+            })
+            .collect()
+        } else {
+            out["K"] = cert["K"].clone();
+            out["P"] = cert["P"].clone();
+            cert["trajectories"]
+                .as_array()
+                .map(Vec::as_slice)
+                .unwrap_or_default()
+                .iter()
+                .enumerate()
+                .map(|(i, t)| {
+                    let c = &t["certificate"];
+                    json!({
+                        "index": i,
+                        "delta": c["delta"],
+                        "delta_stored": c["delta_stored"],
+                        "stored_radius_matches_image": matches(i, c),
+                        // An MTL task has no Goal step: its formula is judged over the whole run.
+                        "goal_step": if task == "mtl" { Value::Null } else { c["k_star"].clone() },
+                        "f32_error_bound": c["eps_f32"],
+                        "nominal": t["nominal"],
+                    })
+                })
+                .collect()
+        };
+    out["trajectories"] = Value::Array(trajectories);
+    if task == "pwa" {
+        out["balls"] = cert["balls"].clone();
+    }
+    // Items an older certificate does not hold (written before they were recorded).
+    let mut missing: Vec<&str> = Vec::new();
+    let first = &out["trajectories"][0];
+    if first["nominal"].is_null() && first["nominal_segments"].is_null() {
+        missing.push(CHECKER_ITEMS[3]);
+    }
+    if task == "pwa" && out["balls"].is_null() {
+        missing.push(CHECKER_ITEMS[5]);
+    }
+    out["missing"] = json!(missing);
+    out
 }

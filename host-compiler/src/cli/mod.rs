@@ -244,3 +244,23 @@ pub(crate) fn task_of(problem: crate::spec::Problem) -> Result<crate::task::Task
         .map_err(|e| miette::miette!("{e}"))
         .bad_input()
 }
+
+/// The identity of an image as `certificate.json` records it (key `"image"`): the file name it was
+/// written under, its size and its SHA-256, so that `inspect` can tell whether a certificate belongs to
+/// the image it is shown with ([`inspect`]).
+pub(crate) fn image_identity(file: &std::path::Path, bytes: &[u8]) -> serde_json::Value {
+    serde_json::json!({
+        "file": file.file_name().map(|f| f.to_string_lossy().into_owned()),
+        "bytes": bytes.len(),
+        "sha256": sha256_hex(bytes),
+    })
+}
+
+/// The SHA-256 of `bytes`, in lowercase hex.
+pub(crate) fn sha256_hex(bytes: &[u8]) -> String {
+    use sha2::{Digest, Sha256};
+    Sha256::digest(bytes)
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect()
+}

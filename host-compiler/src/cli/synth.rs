@@ -184,6 +184,8 @@ pub fn run(a: &SynthArgs) -> Outcome {
         .into_diagnostic()
         .wrap_err("writing the report")?;
     let cert = serde_json::json!({
+        "task": "reach_avoid",
+        "image": super::image_identity(&img_path, &s.image),
         "spec": a.spec.display().to_string(),
         "seed": problem.seed,
         "stop": s.stop.to_string(),
@@ -199,6 +201,7 @@ pub fn run(a: &SynthArgs) -> Outcome {
         })),
         "trajectories": s.trajectories.iter().map(|t| serde_json::json!({
             "source": t.source, "x0": t.nominal.x[0], "certificate": t.certificate,
+            "nominal": t.nominal.x,
         })).collect::<Vec<_>>(),
         "timings": s.timings,
         "terminal": terminal_json(&s.terminal),

@@ -67,6 +67,8 @@ pub fn run(a: &SynthArgs, problem: crate::spec::Problem) -> Outcome {
         write_atomic(&img_path, &s.image)?;
     }
     let cert = serde_json::json!({
+        "task": "hybrid",
+        "image": super::image_identity(&img_path, &s.image),
         "spec": a.spec.display().to_string(),
         "seed": task.problem.seed,
         "plant": "hybrid",
@@ -83,6 +85,7 @@ pub fn run(a: &SynthArgs, problem: crate::spec::Problem) -> Outcome {
         })).collect::<Vec<_>>(),
         "runs": s.runs.iter().map(|r| serde_json::json!({
             "x0": r.nominals[0].x[0], "certificate": r.certificate,
+            "nominal_segments": r.nominals.iter().map(|n| &n.x).collect::<Vec<_>>(),
         })).collect::<Vec<_>>(),
         "seconds": s.seconds,
     });

@@ -76,6 +76,8 @@ pub fn run(a: &SynthArgs, task: &Task, s: &Synthesis) -> Outcome {
         .into_diagnostic()
         .wrap_err("writing the report")?;
     let cert = serde_json::json!({
+        "task": "pwa",
+        "image": super::image_identity(&img_path, &pwa.image),
         "spec": a.spec.display().to_string(),
         "seed": problem.seed,
         "mode": "pwa",
@@ -87,7 +89,9 @@ pub fn run(a: &SynthArgs, task: &Task, s: &Synthesis) -> Outcome {
         "pwa": summary,
         "trajectories": s.trajectories.iter().map(|t| serde_json::json!({
             "source": t.source, "x0": t.nominal.x[0], "certificate": t.certificate,
+            "nominal": t.nominal.x,
         })).collect::<Vec<_>>(),
+        "balls": ball_provenance(&pwa, &img),
         "timings": s.timings,
     });
     std::fs::write(
@@ -175,4 +179,59 @@ pub fn run(a: &SynthArgs, task: &Task, s: &Synthesis) -> Outcome {
         });
     }
     Ok(short_of_target(s, problem.synthesis.coverage_target))
+}
+
+/// Each ball of the PWA image with its provenance, for independent checkers (`inspect --json`): the data
+/// point whose ball it stores (trajectory i and step κ of the cover, found by its f32 centre) and its
+/// successor: the image's ball of (i, κ + 1), or `"goal"` when κ + 1 = κ*_i (that ball lies in Goal,
+/// where the run ends), or `null` when the successor's ball is not in the image. A ball no data point
+/// has (none, by construction) has `null` provenance.
+fn ball_provenance(
+    pwa: &crate::pwa::PwaController,
+    img: &shared_types::image::Image<'_>,
+) -> Vec<serde_json::Value> {
+    use std::collections::HashMap;
+    let n = img.n();
+    let key = |x: &mut dyn Iterator<Item = f32>| -> Vec<u32> { x.map(f32::to_bits).collect() };
+    let by_centre: HashMap<Vec<u32>, usize> = pwa
+        .ctx
+        .points
+        .iter()
+        .enumerate()
+        .map(|(i, p)| (key(&mut p.x.iter().map(|&v| v as f32)), i))
+        .collect();
+    let point_of: Vec<Option<usize>> = (0..img.n_balls())
+        .map(|b| {
+            by_centre
+                .get(&key(&mut (0..n).map(|i| img.ball_centre(b, i))))
+                .copied()
+        })
+        .collect();
+    let ball_of: HashMap<(usize, usize), usize> = point_of
+        .iter()
+        .enumerate()
+        .filter_map(|(b, p)| p.map(|i| ((pwa.ctx.points[i].traj, pwa.ctx.points[i].kappa), b)))
+        .collect();
+    point_of
+        .iter()
+        .enumerate()
+        .map(|(b, p)| match p {
+            None => serde_json::json!({ "ball": b, "trajectory": null, "kappa": null, "successor": null }),
+            Some(i) => {
+                let d = &pwa.ctx.points[*i];
+                let successor = if d.to_go <= 1 {
+                    serde_json::json!("goal")
+                } else {
+                    serde_json::json!(ball_of.get(&(d.traj, d.kappa + 1)))
+                };
+                serde_json::json!({
+                    "ball": b,
+                    "trajectory": d.traj,
+                    "kappa": d.kappa,
+                    "to_go": d.to_go,
+                    "successor": successor,
+                })
+            }
+        })
+        .collect()
 }

@@ -92,6 +92,7 @@ pub fn run(a: &SynthArgs, problem: crate::spec::Problem) -> Outcome {
         "spec": a.spec.display().to_string(),
         "seed": task.problem.seed,
         "task": "mtl",
+        "image": super::image_identity(&img_path, &s.image),
         "formula": tt.written.source(),
         "stop": s.stop,
         "coverage": s.coverage,
@@ -103,6 +104,7 @@ pub fn run(a: &SynthArgs, problem: crate::spec::Problem) -> Outcome {
         "P": crate::linalg::to_rows(s.P.as_ref()),
         "trajectories": s.trajectories.iter().map(|t| serde_json::json!({
             "source": t.source, "x0": t.nominal.x[0], "certificate": t.certificate,
+            "nominal": t.nominal.x,
         })).collect::<Vec<_>>(),
         "seconds": s.seconds,
         "timings": s.timings,

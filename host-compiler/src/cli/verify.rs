@@ -1,10 +1,12 @@
 //! `host-compiler verify SPEC IMAGE`: an image against its spec: refused unless its dimensions and sample
 //! period are the spec's, its certificate re-proved from the bytes ([`crate::verify::feedforward`],
-//! [`crate::verify::pwa`]), then closed-loop Monte Carlo through the shared f32 evaluator.
+//! [`crate::verify::pwa`]), then closed-loop Monte Carlo through the shared f32 evaluator, and with
+//! `--attack` the falsifier ([`crate::verify::attack`]) for every image mode.
 
 use super::{
     decode_image, image_matches_spec, read_image, task_of, BadInput, Exit, Failure, Outcome,
 };
+use crate::verify::attack::{AttackError, AttackReport, AttackSettings};
 use crate::verify::{monte_carlo, Judge};
 use miette::IntoDiagnostic;
 use std::path::PathBuf;
@@ -29,9 +31,11 @@ pub struct VerifyArgs {
     /// Print the result as JSON.
     #[arg(long)]
     pub json: bool,
-    /// Also run the falsifier (feedforward images): multi-start Nelder–Mead over each ball, its shell and
-    /// its f32 neighbourhood for the start whose run has the least robustness
-    /// ([`crate::verify::attack`]); any violation it finds fails the verification.
+    /// Also run the falsifier (every image mode): multi-start Nelder–Mead over each ball, its shell and
+    /// its f32 neighbourhood for the start whose run has the least robustness against the task (the
+    /// formula's for MTL tasks; on the automaton's flow for hybrid images, on the plant itself for
+    /// feedback-linearizable plants; [`crate::verify::attack`]); any violation it finds fails the
+    /// verification.
     #[arg(long)]
     pub attack: bool,
     /// Closed-loop runs per Nelder–Mead start of the falsifier (two starts per ball); at least n + 2, at
@@ -65,15 +69,9 @@ pub fn run(a: &VerifyArgs) -> Outcome {
     let problem = &task.problem;
     let judge = Judge::new(&task);
     if pwa {
-        return run_pwa(a, runs, &task, &judge, &img);
+        return run_pwa(a, runs, &task, &judge, &img, problem.seed);
     }
     let linearized = task.plant.linearization().is_some();
-    if linearized && a.attack {
-        return Err(Failure::bad_input(miette::miette!(
-            "--attack runs the linear model's loop only, not a feedback-linearizable plant; the Monte \
-             Carlo of `verify` runs the plant itself"
-        )));
-    }
     if let Some(maps) = task.plant.linearization() {
         crate::verify::nonlinear::check_maps(maps, &img)
             .map_err(|e| {
@@ -95,16 +93,12 @@ pub fn run(a: &VerifyArgs) -> Outcome {
         monte_carlo(&judge, &img, runs, per_ball, seed)
     }
     .into_diagnostic()?;
-    let attack = if a.attack {
-        let settings = crate::verify::attack::AttackSettings::builder()
-            .evaluations_per_start(a.attack_evals as usize)
-            .seed(a.seed.unwrap_or(problem.seed ^ 0xa77ac))
-            .build()
-            .map_err(crate::verify::attack::AttackError::from)
-            .bad_input()?;
-        Some(crate::verify::attack::attack(&judge, &img, &settings).bad_input()?)
-    } else {
-        None
+    let attack = match attack_settings(a, problem.seed)? {
+        Some(s) if linearized => {
+            Some(crate::verify::attack::attack_fl(&task, &img, &s).bad_input()?)
+        }
+        Some(s) => Some(crate::verify::attack::attack(&judge, &img, &s).bad_input()?),
+        None => None,
     };
     if a.json {
         let j = serde_json::json!({
@@ -145,20 +139,7 @@ pub fn run(a: &VerifyArgs) -> Outcome {
         }
         print_after_goal(&r);
         println!("violations {}", r.violations);
-        if let Some(at) = &attack {
-            println!(
-                "attack: {} runs in {:.2} s ({:.0} runs/s); least robustness {} from x0 = {:?}; violations {}",
-                at.evaluations,
-                at.seconds,
-                at.evaluations as f64 / at.seconds.max(1e-9),
-                margin(at.worst_robustness),
-                at.worst_start,
-                at.violations
-            );
-            for v in &at.first_violations {
-                println!("attack violation from x0 = {:?}: {v:?}", v.x0);
-            }
-        }
+        print_attack(attack.as_ref());
     }
     if rc.failures > 0 {
         let first = rc
@@ -177,9 +158,7 @@ pub fn run(a: &VerifyArgs) -> Outcome {
     if r.violations > 0 {
         return Err(miette::miette!("{} violations", r.violations).into());
     }
-    if let Some(at) = attack.filter(|at| at.violations > 0) {
-        return Err(miette::miette!("the falsifier found {} violating runs", at.violations).into());
-    }
+    attack_verdict(attack.as_ref())?;
     if r.interior_runs < runs {
         return Err(miette::miette!(
             "only {} of {} initial states could be drawn in the certified cover",
@@ -227,6 +206,56 @@ fn print_after_goal(r: &crate::verify::VerifyReport) {
     );
 }
 
+/// The falsifier's settings from the flags (`None` without `--attack`), seeded by `--seed` or the spec's.
+fn attack_settings(a: &VerifyArgs, spec_seed: u64) -> Result<Option<AttackSettings>, Failure> {
+    if !a.attack {
+        return Ok(None);
+    }
+    let s = AttackSettings::builder()
+        .evaluations_per_start(a.attack_evals as usize)
+        .seed(a.seed.unwrap_or(spec_seed ^ 0xa77ac))
+        .build()
+        .map_err(AttackError::from)
+        .bad_input()?;
+    Ok(Some(s))
+}
+
+/// The falsifier's line (and its violations, each with its start), when it ran.
+fn print_attack(attack: Option<&AttackReport>) {
+    let Some(at) = attack else { return };
+    println!(
+        "attack: {} runs in {:.2} s ({:.0} runs/s); least robustness {} from x0 = {:?}; violations {}",
+        at.evaluations,
+        at.seconds,
+        at.evaluations as f64 / at.seconds.max(1e-9),
+        margin(at.worst_robustness),
+        at.worst_start,
+        at.violations
+    );
+    for v in &at.first_violations {
+        println!("attack violation from x0 = {:?}: {}", v.x0, v.what);
+    }
+}
+
+/// A failed check when the falsifier found a violating run (named with its start).
+fn attack_verdict(attack: Option<&AttackReport>) -> Result<(), Failure> {
+    match attack {
+        Some(at) if at.violations > 0 => {
+            let first = at
+                .first_violations
+                .first()
+                .map(|v| format!(" (first from x0 = {:?}: {})", v.x0, v.what))
+                .unwrap_or_default();
+            Err(miette::miette!(
+                "the falsifier found {} violating runs{first}",
+                at.violations
+            )
+            .into())
+        }
+        _ => Ok(()),
+    }
+}
+
 /// A worst margin for people: its value, or that no run recorded one (never `inf` as if it were a
 /// result).
 fn margin(v: f64) -> String {
@@ -245,6 +274,7 @@ fn run_pwa(
     task: &crate::task::Task,
     judge: &Judge<'_>,
     img: &shared_types::image::Image<'_>,
+    spec_seed: u64,
 ) -> Outcome {
     let rc = crate::verify::pwa::recheck(judge, img).map_err(|e| miette::miette!(e))?;
     let terminal = terminal_recheck(task, img, &a.image)?;
@@ -252,8 +282,14 @@ fn run_pwa(
     let mc =
         crate::verify::pwa::monte_carlo_pwa(judge, img, &[], runs, a.seed.unwrap_or(0x7e51f1), 0)
             .into_diagnostic()?;
+    let attack = match attack_settings(a, spec_seed)? {
+        Some(s) => Some(crate::verify::attack::attack_pwa(judge, img, &s).bad_input()?),
+        None => None,
+    };
     if a.json {
-        let j = serde_json::json!({ "recheck": rc, "terminal": terminal, "monte_carlo": mc });
+        let j = serde_json::json!({
+            "recheck": rc, "terminal": terminal, "monte_carlo": mc, "attack": attack,
+        });
         println!("{}", serde_json::to_string_pretty(&j).into_diagnostic()?);
     } else {
         println!(
@@ -283,6 +319,7 @@ fn run_pwa(
             println!("violation from x0 = {:?}: {v:?}", v.x0);
         }
         println!("violations {}", mc.violations);
+        print_attack(attack.as_ref());
     }
     if rc.failures > 0 || mc.violations > 0 {
         return Err(miette::miette!(
@@ -292,6 +329,7 @@ fn run_pwa(
         )
         .into());
     }
+    attack_verdict(attack.as_ref())?;
     if mc.runs < runs {
         return Err(miette::miette!(
             "only {} of {} initial states could be drawn in F",
@@ -314,11 +352,6 @@ fn run_temporal(
     bytes: &[u8],
 ) -> Outcome {
     use crate::verify::temporal::{monte_carlo_temporal, recheck};
-    if a.attack {
-        return Err(Failure::bad_input(miette::miette!(
-            "--attack is not built for MTL tasks yet: the falsifier scores reach-avoid"
-        )));
-    }
     let img = decode_image(bytes, &a.image)?;
     if img.mode() != shared_types::image::Mode::Feedforward || problem.hybrid.is_some() {
         return Err(Failure::bad_input(miette::miette!(
@@ -342,12 +375,18 @@ fn run_temporal(
         .map_err(|e| miette::miette!("{e}"))
         .bad_input()?;
     let r = monte_carlo_temporal(&task, &tt, &img, &starts).map_err(miette::Report::new)?;
+    let attack = match attack_settings(a, task.problem.seed)? {
+        Some(s) => Some(crate::verify::attack::attack_temporal(&task, &tt, &img, &s).bad_input()?),
+        None => None,
+    };
     let unproved: Vec<usize> = rc.iter().filter(|c| !c.ok).map(|c| c.trajectory).collect();
     if a.json {
         println!(
             "{}",
-            serde_json::to_string_pretty(&serde_json::json!({"recheck": rc, "monte_carlo": r}))
-                .into_diagnostic()?
+            serde_json::to_string_pretty(
+                &serde_json::json!({"recheck": rc, "monte_carlo": r, "attack": attack})
+            )
+            .into_diagnostic()?
         );
     } else {
         println!(
@@ -360,6 +399,7 @@ fn run_temporal(
             "monte carlo       {} runs judged by the formula at the samples and sampled 8× finer ({} starts refused by the f32 selection, not run), {} violations",
             r.runs, r.rejected, r.violations
         );
+        print_attack(attack.as_ref());
     }
     if let Some(t) = unproved.first() {
         return Err(miette::miette!(
@@ -376,6 +416,7 @@ fn run_temporal(
         )
         .into());
     }
+    attack_verdict(attack.as_ref())?;
     Ok(Exit::Success)
 }
 
@@ -391,11 +432,6 @@ fn run_hybrid(
 ) -> Outcome {
     use crate::verify::hybrid::{monte_carlo_hybrid, recheck, starts_from_image, HybridReport};
     use rayon::prelude::*;
-    if a.attack {
-        return Err(Failure::bad_input(miette::miette!(
-            "--attack is not built for hybrid images yet"
-        )));
-    }
     let task = crate::synth::hybrid::HybridTask::new(problem)
         .map_err(|e| miette::miette!("{e}"))
         .bad_input()?;
@@ -430,12 +466,18 @@ fn run_hybrid(
     for p in parts {
         r.merge(p.map_err(|e| miette::miette!("{e}"))?);
     }
+    let attack = match attack_settings(a, task.problem.seed)? {
+        Some(s) => Some(crate::verify::attack::attack_hybrid(&task, bytes, &s).bad_input()?),
+        None => None,
+    };
     let unproved: Vec<&str> = rc.iter().filter_map(|c| c.why.as_deref()).collect();
     if a.json {
         println!(
             "{}",
-            serde_json::to_string_pretty(&serde_json::json!({"recheck": rc, "monte_carlo": r}))
-                .into_diagnostic()?
+            serde_json::to_string_pretty(
+                &serde_json::json!({"recheck": rc, "monte_carlo": r, "attack": attack})
+            )
+            .into_diagnostic()?
         );
     } else {
         println!(
@@ -451,6 +493,7 @@ fn run_hybrid(
             r.rejected,
             r.violations
         );
+        print_attack(attack.as_ref());
     }
     if let Some(why) = unproved.first() {
         return Err(miette::miette!("{}: not re-proved: {why}", a.image.display()).into());
@@ -463,5 +506,6 @@ fn run_hybrid(
         )
         .into());
     }
+    attack_verdict(attack.as_ref())?;
     Ok(Exit::Success)
 }

@@ -58,8 +58,9 @@ pub struct SynthOptions {
     pub cancel: Arc<AtomicBool>,
     /// Called after each accepted trajectory (default none).
     pub on_accept: Option<AcceptHook>,
-    /// The falsifier run on the feedforward image after the Monte Carlo (default: one start of at most 40
-    /// runs per ball, seeded by the spec's seed); `None` skips it.
+    /// The falsifier run on the feedforward image after the Monte Carlo, on the plant itself for a
+    /// feedback-linearizable one (default: one start of at most 40 runs per ball, seeded by the spec's
+    /// seed); `None` skips it.
     pub attack: Option<AttackSettings>,
 }
 
@@ -283,21 +284,18 @@ pub fn synthesize(task: &Task, opts: &SynthOptions) -> Result<Synthesis, SynthEr
         ));
     }
     let attack = match &opts.attack {
-        Some(_) if linearized => {
-            warnings.push(
-                "the falsifier runs the linear model's loop only; it was skipped for this \
-                 feedback-linearizable plant (the Monte Carlo ran the plant itself)"
-                    .to_string(),
-            );
-            None
-        }
         Some(a) => {
             let t3 = Instant::now();
             let settings = AttackSettings {
                 seed: a.seed ^ problem.seed,
                 ..a.clone()
             };
-            let r = attack(&judge, &img, &settings)?;
+            // A linearised plant is attacked on the plant itself, as it is verified.
+            let r = if linearized {
+                crate::verify::attack::attack_fl(task, &img, &settings)?
+            } else {
+                attack(&judge, &img, &settings)?
+            };
             timings.push(("falsifier".to_string(), t3.elapsed().as_secs_f64()));
             if r.violations > 0 {
                 warnings.push(format!(

@@ -51,6 +51,105 @@ impl HybridReport {
     }
 }
 
+/// One run of a hybrid image ([`run_hybrid`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct HybridRun {
+    /// The evaluator did not accept x0 (not run, not judged).
+    pub rejected: bool,
+    /// Events taken.
+    pub events: usize,
+    /// The first sample in Goal.
+    pub goal_step: Option<usize>,
+    /// The least Euclidean distance to Unsafe at any sub-sample.
+    pub min_unsafe_distance: f64,
+    /// Why the run fails the task, when it does.
+    pub violation: Option<String>,
+}
+
+/// The run of `image` from `x0` in location `initial` for `steps` samples on `fine`, the automaton
+/// resampled at [`SUBSTEPS`] sub-periods per period (module doc); `visit` sees the state at every
+/// sample the run reaches (x0 first). A flow the automaton cannot continue fails the run.
+pub fn run_hybrid(
+    fine: &Hybrid,
+    property: &ReachAvoid,
+    initial: Location,
+    steps: usize,
+    image: &shared_types::image::Image<'_>,
+    x0: &[f64],
+    visit: &mut dyn FnMut(&[f64]),
+) -> HybridRun {
+    let euclid = crate::geometry::Metric::euclidean(x0.len());
+    let mut out = HybridRun {
+        rejected: false,
+        events: 0,
+        goal_step: None,
+        min_unsafe_distance: f64::INFINITY,
+        violation: None,
+    };
+    let mut ctl = Controller::new(*image);
+    let x32: Vec<f32> = x0.iter().map(|&v| v as f32).collect();
+    if ctl.select(&x32).is_none() {
+        out.rejected = true;
+        return out;
+    }
+    let (mut x, mut loc) = (x0.to_vec(), initial);
+    let mut why: Option<String> = None;
+    'run: for k in 0..=steps {
+        visit(&x);
+        if property.goal.contains(&x) {
+            out.goal_step = Some(k);
+            break;
+        }
+        if k == steps {
+            break;
+        }
+        let x32: Vec<f32> = x.iter().map(|&v| v as f32).collect();
+        let u = match ctl.step(&x32) {
+            Ok(u) => u,
+            Err(s) => {
+                why = Some(format!(
+                    "sample {k}: the evaluator answered {s:?} at x = {x:?}"
+                ));
+                break;
+            }
+        };
+        let u64s: Vec<f64> = u.as_slice().iter().map(|&v| v as f64).collect();
+        if super::input_slack(&property.input, &u64s) < 0.0 {
+            why = Some(format!(
+                "sample {k}: input {:?} outside the input set",
+                u.as_slice()
+            ));
+            break;
+        }
+        for _ in 0..SUBSTEPS {
+            let step = match fine.flow(loc, &x, &u64s) {
+                Ok(s) => s,
+                Err(e) => {
+                    let e: FlowError = e;
+                    why = Some(format!("sample {k}: the flow failed at x = {x:?}: {e}"));
+                    break 'run;
+                }
+            };
+            out.events += step.events.len();
+            x = step.x;
+            loc = step.loc;
+            if let Some(us) = property.unsafe_region() {
+                let d = us.dist(&x, &euclid).value;
+                out.min_unsafe_distance = out.min_unsafe_distance.min(d);
+                if us.contains(&x) {
+                    why = Some(format!("sample {k}: in Unsafe at x = {x:?}"));
+                    break 'run;
+                }
+            }
+        }
+    }
+    if why.is_none() && out.goal_step.is_none() {
+        why = Some(format!("Goal not reached within {steps} samples"));
+    }
+    out.violation = why;
+    out
+}
+
 /// Runs the image `bytes` from each start (in location `initial`) for `steps` samples (module doc). A
 /// start the evaluator does not select a ball for is counted as rejected, not run.
 pub fn monte_carlo_hybrid(
@@ -65,75 +164,26 @@ pub fn monte_carlo_hybrid(
     let fine = plant
         .resampled(plant.period() / SUBSTEPS as f64)
         .map_err(|e| e.to_string())?;
-    let euclid = crate::geometry::Metric::euclidean(plant.modes()[0].flow.n());
     let mut rep = HybridReport {
         min_unsafe_distance: f64::INFINITY,
         ..Default::default()
     };
     for x0 in starts {
         rep.runs += 1;
-        let mut ctl = Controller::new(image);
-        let x32: Vec<f32> = x0.iter().map(|&v| v as f32).collect();
-        if ctl.select(&x32).is_none() {
+        let r = run_hybrid(&fine, property, initial, steps, &image, x0, &mut |_| {});
+        if r.rejected {
             rep.rejected += 1;
             continue;
         }
-        let (mut x, mut loc) = (x0.clone(), initial);
-        let mut events = 0usize;
-        let mut why: Option<String> = None;
-        let mut reached = false;
-        'run: for k in 0..=steps {
-            if property.goal.contains(&x) {
-                rep.max_goal_step = rep.max_goal_step.max(k);
-                reached = true;
-                break;
-            }
-            if k == steps {
-                break;
-            }
-            let x32: Vec<f32> = x.iter().map(|&v| v as f32).collect();
-            let u = match ctl.step(&x32) {
-                Ok(u) => u,
-                Err(s) => {
-                    why = Some(format!(
-                        "sample {k}: the evaluator answered {s:?} at x = {x:?}"
-                    ));
-                    break;
-                }
-            };
-            let u64s: Vec<f64> = u.as_slice().iter().map(|&v| v as f64).collect();
-            if super::input_slack(&property.input, &u64s) < 0.0 {
-                why = Some(format!(
-                    "sample {k}: input {:?} outside the input set",
-                    u.as_slice()
-                ));
-                break;
-            }
-            for _ in 0..SUBSTEPS {
-                let step = fine
-                    .flow(loc, &x, &u64s)
-                    .map_err(|e: FlowError| e.to_string())?;
-                events += step.events.len();
-                x = step.x;
-                loc = step.loc;
-                if let Some(us) = property.unsafe_region() {
-                    let d = us.dist(&x, &euclid).value;
-                    rep.min_unsafe_distance = rep.min_unsafe_distance.min(d);
-                    if us.contains(&x) {
-                        why = Some(format!("sample {k}: in Unsafe at x = {x:?}"));
-                        break 'run;
-                    }
-                }
-            }
+        rep.min_unsafe_distance = rep.min_unsafe_distance.min(r.min_unsafe_distance);
+        if let Some(k) = r.goal_step {
+            rep.max_goal_step = rep.max_goal_step.max(k);
         }
-        if why.is_none() && !reached {
-            why = Some(format!("Goal not reached within {steps} samples"));
-        }
-        if events > 0 {
+        if r.events > 0 {
             rep.switched += 1;
         }
-        rep.max_events = rep.max_events.max(events);
-        if let Some(w) = why {
+        rep.max_events = rep.max_events.max(r.events);
+        if let Some(w) = r.violation {
             rep.violations += 1;
             if rep.first_violation.is_none() {
                 rep.first_violation = Some(format!("start {x0:?}: {w}"));

@@ -30,6 +30,29 @@ pub fn run_fl(
     x0: &[f64],
     margins: bool,
 ) -> RunOutcome {
+    run_fl_inner(task, maps, image, x0, margins, &mut |_| {})
+}
+
+/// [`run_fl`] without margins, showing `visit` ξ at every sample the run reaches (x0's first), in
+/// order (the falsifier scores these: [`super::attack::attack_fl`]).
+pub fn run_fl_visiting(
+    task: &Task,
+    maps: &FlMaps,
+    image: &Image<'_>,
+    x0: &[f64],
+    visit: &mut dyn FnMut(&[f64]),
+) -> RunOutcome {
+    run_fl_inner(task, maps, image, x0, false, visit)
+}
+
+fn run_fl_inner(
+    task: &Task,
+    maps: &FlMaps,
+    image: &Image<'_>,
+    x0: &[f64],
+    margins: bool,
+    visit: &mut dyn FnMut(&[f64]),
+) -> RunOutcome {
     let metric = crate::geometry::Metric::euclidean(maps.xi_states.len());
     let goal = task.property.goal.as_ref();
     let unsafe_set = task.property.unsafe_region();
@@ -55,6 +78,7 @@ pub fn run_fl(
     check(&x, &mut out, true);
     for k in 0..=task.steps {
         let xi = maps.xi_of(&x);
+        visit(&xi);
         if out.goal_step.is_none() && goal.contains(&xi) {
             out.reached_goal = true;
             out.goal_step = Some(k);

@@ -225,6 +225,16 @@ struct Verdict {
     slack: f64,
 }
 
+/// Which robustness a run computes besides its Boolean verdicts.
+#[derive(Clone, Copy)]
+enum Robust {
+    No,
+    /// At the samples (the Monte Carlo's report).
+    Samples,
+    /// On the run sampled finer (the falsifier's objective).
+    Fine,
+}
+
 /// One closed-loop run from `x0` judged by the formula (module doc). `None` when the evaluator refuses
 /// x0 (the state is outside the certified cover).
 fn run(
@@ -233,7 +243,7 @@ fn run(
     tt: &TemporalTask,
     image: &Image<'_>,
     x0: &[f64],
-    robust: bool,
+    robust: Robust,
 ) -> Option<Result<Verdict, String>> {
     let mut rec = RunRecord::new(x0, task.plant.period());
     let mut x = x0.to_vec();
@@ -262,15 +272,81 @@ fn run(
         Ok(Verdict {
             holds: judge(&tc, &judges.boolean)? > 0.0,
             holds_fine: judge(&tf, &judges.boolean)? > 0.0,
-            robustness: if robust {
-                Some(judge(&tc, &judges.robust)?)
-            } else {
-                None
+            robustness: match robust {
+                Robust::No => None,
+                Robust::Samples => Some(judge(&tc, &judges.robust)?),
+                Robust::Fine => Some(judge(&tf, &judges.robust)?),
             },
             slack,
         })
     })();
     Some(verdict.map_err(|e| format!("x0 = {x0:?}: {e}")))
+}
+
+impl Verdict {
+    /// Why the run fails the task, when it does: the formula false on either sampling, or an input
+    /// outside the input set.
+    fn violation(&self) -> Option<String> {
+        (!self.holds || !self.holds_fine || self.slack < 0.0).then(|| {
+            format!(
+                "the formula is {} at the samples and {} sampled finer; least input slack {:.3e}",
+                if self.holds { "true" } else { "FALSE" },
+                if self.holds_fine { "true" } else { "FALSE" },
+                self.slack
+            )
+        })
+    }
+}
+
+impl Judges {
+    /// The formula's sets in the Euclidean metric of `n` states, by membership and by distance.
+    fn new(tt: &TemporalTask, n: usize) -> Result<Self, crate::property::TemporalError> {
+        let euclidean = crate::geometry::Metric::euclidean(n);
+        Ok(Self {
+            boolean: tt
+                .sets(&euclidean)?
+                .into_iter()
+                .map(|s| NamedSet {
+                    region: Box::new(Membership(s.region)),
+                    ..s
+                })
+                .collect(),
+            robust: tt.sets(&euclidean)?,
+        })
+    }
+}
+
+/// The judge of single runs for the falsifier ([`super::attack::attack_temporal`]): each run is judged
+/// exactly as [`monte_carlo_temporal`] judges it, and scored by the formula's robustness (Euclidean
+/// signed distances) on the run sampled finer.
+pub struct TemporalJudge<'a> {
+    task: &'a Task,
+    tt: &'a TemporalTask,
+    judges: Judges,
+}
+
+impl<'a> TemporalJudge<'a> {
+    pub fn new(
+        task: &'a Task,
+        tt: &'a TemporalTask,
+    ) -> Result<Self, crate::property::TemporalError> {
+        Ok(Self {
+            task,
+            tt,
+            judges: Judges::new(tt, task.plant.n())?,
+        })
+    }
+
+    /// The run from `x0`: `None` when the evaluator refuses x0, else its robustness sampled finer (−∞
+    /// when it cannot be scored) and why it fails the task, when it does.
+    pub fn attack_run(&self, image: &Image<'_>, x0: &[f64]) -> Option<(f64, Option<String>)> {
+        Some(
+            match run(self.task, &self.judges, self.tt, image, x0, Robust::Fine)? {
+                Err(why) => (f64::NEG_INFINITY, Some(why)),
+                Ok(v) => (v.robustness.unwrap_or(f64::NEG_INFINITY), v.violation()),
+            },
+        )
+    }
 }
 
 /// Runs from every start (module doc), in parallel, in a fixed order.
@@ -280,26 +356,18 @@ pub fn monte_carlo_temporal(
     image: &Image<'_>,
     starts: &[Vec<f64>],
 ) -> Result<TemporalReport, crate::property::TemporalError> {
-    let n = task.plant.n();
-    let euclidean = crate::geometry::Metric::euclidean(n);
-    let judges = Judges {
-        boolean: tt
-            .sets(&euclidean)?
-            .into_iter()
-            .map(|s| NamedSet {
-                region: Box::new(Membership(s.region)),
-                ..s
-            })
-            .collect(),
-        robust: tt.sets(&euclidean)?,
-    };
+    let judges = Judges::new(tt, task.plant.n())?;
     let reports: Vec<TemporalReport> = starts
         .par_chunks(64)
         .enumerate()
         .map(|(c, chunk)| {
             let mut r = TemporalReport::empty();
             for (i, x0) in chunk.iter().enumerate() {
-                let robust = (c * 64 + i) % super::MARGIN_EVERY == 0;
+                let robust = if (c * 64 + i) % super::MARGIN_EVERY == 0 {
+                    Robust::Samples
+                } else {
+                    Robust::No
+                };
                 match run(task, &judges, tt, image, x0, robust) {
                     None => r.rejected += 1,
                     Some(Err(e)) => {
@@ -313,14 +381,10 @@ pub fn monte_carlo_temporal(
                             r.min_robustness = r.min_robustness.min(rho);
                         }
                         r.min_input_slack = r.min_input_slack.min(v.slack);
-                        if !v.holds || !v.holds_fine || v.slack < 0.0 {
+                        if let Some(why) = v.violation() {
                             r.violations += 1;
-                            r.first_violation.get_or_insert(format!(
-                                "x0 = {x0:?}: the formula is {} at the samples and {} sampled finer; least input slack {:.3e}",
-                                if v.holds { "true" } else { "FALSE" },
-                                if v.holds_fine { "true" } else { "FALSE" },
-                                v.slack
-                            ));
+                            r.first_violation
+                                .get_or_insert(format!("x0 = {x0:?}: {why}"));
                         }
                     }
                 }

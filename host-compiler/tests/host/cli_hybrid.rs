@@ -1,6 +1,7 @@
 //! `synth` and `verify` on a hybrid spec (Example 4.25 with a budget of one run): synth certifies,
 //! re-proves and verifies an image and exits 3 (short of the coverage target); verify re-proves the
-//! same image from its bytes and runs it against the exact hybrid flow (exit 0), and refuses an image
+//! same image from its bytes and runs it against the exact hybrid flow (exit 0), `--attack` searches its
+//! ball on that flow with no violation, and `verify` refuses an image
 //! whose stored radius was enlarged (exit 1).
 
 use std::process::Command;
@@ -58,6 +59,24 @@ fn hybrid_synth_then_verify() {
         String::from_utf8_lossy(&o.stderr)
     );
     assert!(stdout.contains("re-proved         1 of 1 runs"), "{stdout}");
+
+    // The falsifier on the exact hybrid flow: runs made, none violates.
+    let o = bin()
+        .args(["verify", spec.to_str().unwrap(), img.to_str().unwrap()])
+        .args([
+            "--runs",
+            "4",
+            "--per-ball",
+            "1",
+            "--attack",
+            "--attack-evals",
+            "12",
+        ])
+        .arg("--json")
+        .output()
+        .unwrap();
+    let at = crate::verify_attack::attack_json(&o);
+    assert!(at.worst_robustness > 0.0, "{at:?}");
 
     // The first run's stored radius enlarged by 1 %, the CRC made right again: not re-proved.
     let bytes = std::fs::read(&img).unwrap();

@@ -1,6 +1,7 @@
 //! `synth` and `verify` on MTL specs (`[mtl] formula`, Problem 2.28): the waypoint example with a budget of
 //! two balls certifies, re-proves and verifies an image and exits 3 (short of the coverage target);
-//! `verify` re-proves it from its bytes and judges runs by the formula (exit 0); the same image against
+//! `verify` re-proves it from its bytes and judges runs by the formula (exit 0), `--attack` finds no
+//! violation on it and finds some once its balls are enlarged 20×; the same image against
 //! another formula is refused (exit 1); a formula on a hybrid plant, and a predicate in time,
 //! are bad input (exit 2) with the reason.
 
@@ -69,6 +70,43 @@ fn mtl_synth_then_verify() {
         "{stdout}"
     );
     assert!(stdout.contains(", 0 violations"), "{stdout}");
+
+    // The falsifier, scoring runs by the formula's robustness sampled finer: runs made, none violates.
+    let attack = |img: &std::path::Path| {
+        bin()
+            .args(["verify", spec.to_str().unwrap(), img.to_str().unwrap()])
+            .args([
+                "--runs",
+                "8",
+                "--per-ball",
+                "1",
+                "--attack",
+                "--attack-evals",
+                "12",
+            ])
+            .arg("--json")
+            .output()
+            .unwrap()
+    };
+    let at = crate::verify_attack::attack_json(&attack(&img));
+    assert!(at.worst_robustness > 0.0, "{at:?}");
+    // Both balls enlarged 20× (CRC right): the falsifier finds runs that fail the formula, each with its
+    // start, and the verification fails.
+    let bytes = std::fs::read(&img).unwrap();
+    let mut b = host_compiler::emit::ImageBuilder::from_image(
+        &shared_types::image::decode(&bytes).unwrap(),
+    );
+    for t in &mut b.trajectories {
+        t.delta *= 20.0;
+    }
+    let big = dir.join("big.img");
+    std::fs::write(&big, b.to_bytes().unwrap()).unwrap();
+    let o = attack(&big);
+    assert_eq!(o.status.code(), Some(1));
+    let at = crate::verify_attack::attack_of(&o);
+    assert!(at.violations > 0, "{at:?}");
+    assert!(at.worst_robustness.is_none_or(|w| w < 0.0), "{at:?}");
+    assert_eq!(at.first_violations[0]["x0"].as_array().unwrap().len(), 4);
 
     // The same image against another formula (W2 first, within 1 s): its balls are not certified for it.
     let other = dir.join("other.toml");

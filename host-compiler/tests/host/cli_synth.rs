@@ -230,7 +230,7 @@ fn sigint_keeps_a_valid_verified_image() {
 
 /// `synth` on a spec with `mode = "pwa"` writes the PWA image (and the feedforward one it was learned from),
 /// a report with the PWA section and re-checks it; `verify` on the PWA image rechecks every partition and runs
-/// closed loops from F with 0 violations.
+/// closed loops from F with 0 violations, and `--attack` from every ball of F finds none.
 #[test]
 fn synth_and_verify_a_pwa_spec() {
     let base = std::fs::read_to_string(concat!(
@@ -287,5 +287,14 @@ fn synth_and_verify_a_pwa_spec() {
         "{stdout}"
     );
     assert!(stdout.contains("0 failing balls"), "{stdout}");
+    // The falsifier from every ball of F: runs made, none violates.
+    let o = bin()
+        .arg("verify")
+        .arg(&spec)
+        .arg(out.join("controller.img"))
+        .args(["--runs", "16", "--attack", "--attack-evals", "8", "--json"])
+        .output()
+        .unwrap();
+    crate::verify_attack::attack_json(&o);
     let _ = std::fs::remove_dir_all(&out);
 }

@@ -17,8 +17,9 @@ fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
 }
 
-/// Keys of `inspect --json` that describe the file, not what is certified.
-const FORMAT_KEYS: &[&str] = &["header"];
+/// Keys of `inspect --json` that describe the file, not what is certified; and `certificate`, read from
+/// the certificate.json beside the image (it names its own path), checked by [`check`] itself.
+const FORMAT_KEYS: &[&str] = &["header", "certificate"];
 
 /// Every place where `got` differs from `want`, by JSON path; keys only `got` has are not compared.
 fn differences(path: &str, want: &Value, got: &Value, out: &mut Vec<String>) {
@@ -100,6 +101,29 @@ fn check(example: &str) {
         std::fs::write(&fixture, &o.stdout).unwrap();
     }
     check_layout(example, &got);
+    // The certificate synth wrote beside the image names its bytes, so inspect adds its checker items.
+    let cert = &got["certificate"];
+    assert_eq!(cert["status"], "present", "{example}: {cert}");
+    assert!(
+        cert["trajectories"]
+            .as_array()
+            .is_some_and(|t| !t.is_empty() && t.iter().all(|t| t["delta"].as_f64() > Some(0.0))),
+        "{example}: {cert}"
+    );
+    if example.ends_with("pwa") {
+        // Every ball of F has its provenance and a successor (a ball, or Goal).
+        let balls = cert["balls"].as_array().expect("PWA provenance");
+        assert_eq!(
+            balls.len(),
+            got["pwa"]["ball_table"].as_array().unwrap().len()
+        );
+        assert!(
+            balls
+                .iter()
+                .all(|b| b["trajectory"].is_u64() && !b["successor"].is_null()),
+            "{example}: {balls:?}"
+        );
+    }
     let want: Value = serde_json::from_slice(&std::fs::read(&fixture).unwrap()).unwrap();
     let mut diffs = Vec::new();
     differences("", &want, &got, &mut diffs);

@@ -1,6 +1,8 @@
 //! The falsifier (`verify::attack`, `verify --attack`): on a certified image it finds no violation and
 //! reports a positive least robustness; on an image whose balls were enlarged past what was certified
-//! (CRC recomputed, so only the search can tell) it finds runs that fail.
+//! (CRC recomputed, so only the search can tell) it finds runs that fail; the generic search
+//! (`verify::attack::falsify`) finds the failing part of a toy mode's ball. [`attack_json`] checks the
+//! falsifier's part of `verify --attack --json` for the CLI tests of every image mode.
 
 use crate::verify_refuses::{image, spec, text, verify, write_patched};
 use host_compiler::task::Task;
@@ -60,7 +62,11 @@ fn balls_enlarged_past_their_certificate_are_caught() {
         r.worst_robustness
     );
     assert!(!r.first_violations.is_empty());
-    assert!(r.first_violations.iter().all(|v| v.violated()));
+    // Each names its start (in the enlarged part of some ball) and what failed.
+    assert!(r
+        .first_violations
+        .iter()
+        .all(|v| v.x0.len() == img.n() && !v.what.is_empty()));
 }
 
 #[test]
@@ -129,4 +135,112 @@ fn monte_carlo_counts_are_bounded_in_the_library_too() {
         })
     ));
     assert!(monte_carlo(&judge, &img, 10, 1, 1).is_ok());
+}
+
+/// The falsifier's part of `verify --json` output.
+#[derive(Debug)]
+pub(crate) struct AttackSeen {
+    pub evaluations: u64,
+    /// `None` when the JSON holds no finite number (serde writes ±∞ as null).
+    pub worst_robustness: Option<f64>,
+    pub violations: u64,
+    pub first_violations: Vec<serde_json::Value>,
+}
+
+/// The `attack` object of a `verify --json` run's standard output.
+pub(crate) fn attack_of(o: &std::process::Output) -> AttackSeen {
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    let j: serde_json::Value = serde_json::from_str(&stdout).unwrap_or_else(|e| {
+        panic!(
+            "not JSON ({e}): {stdout}\n{}",
+            String::from_utf8_lossy(&o.stderr)
+        )
+    });
+    let at = &j["attack"];
+    AttackSeen {
+        evaluations: at["evaluations"].as_u64().expect("attack.evaluations"),
+        worst_robustness: at["worst_robustness"].as_f64(),
+        violations: at["violations"].as_u64().expect("attack.violations"),
+        first_violations: at["first_violations"]
+            .as_array()
+            .cloned()
+            .unwrap_or_default(),
+    }
+}
+
+/// What a passing `verify --attack --json` reported (checked by [`attack_json`]).
+#[derive(Debug)]
+pub(crate) struct Passed {
+    pub worst_robustness: f64,
+}
+
+/// The `attack` of a passing `verify --attack --json`, checked: exit 0, runs made, a finite least
+/// robustness, no violation.
+pub(crate) fn attack_json(o: &std::process::Output) -> Passed {
+    assert_eq!(
+        o.status.code(),
+        Some(0),
+        "{}\n{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let at = attack_of(o);
+    assert!(at.evaluations > 0, "{at:?}");
+    assert_eq!(at.violations, 0, "{at:?}");
+    let worst = at.worst_robustness.expect("a finite least robustness");
+    Passed {
+        worst_robustness: worst,
+    }
+}
+
+/// The generic search ([`falsify`]) on a toy mode: a run from x0 in the unit ball of ℝ² fails when
+/// |x0| > 0.8 (robustness 0.8 − |x0|), and the evaluator refuses starts beyond the stored radius 1. The
+/// search finds failing starts (each reported with its start), its least robustness is that of a start
+/// inside the ball (≥ 0.8 − 1.0001), and refused starts are neither violations nor scored.
+#[test]
+fn the_generic_search_finds_a_failing_region_of_a_ball() {
+    use host_compiler::verify::attack::{falsify, Ball, Scored, Target};
+    struct Toy(Vec<Ball>);
+    impl Target for Toy {
+        fn balls(&self) -> &[Ball] {
+            &self.0
+        }
+        fn score(&self, x0: &[f64]) -> Scored {
+            let r = x0.iter().map(|v| v * v).sum::<f64>().sqrt();
+            if r > 1.0 {
+                return Scored::Refused;
+            }
+            Scored::Run {
+                robustness: 0.8 - r,
+                violation: (r > 0.8).then(|| format!("|x0| = {r}")),
+            }
+        }
+    }
+    let toy = Toy(vec![Ball {
+        centre: vec![0.0, 0.0],
+        pis: vec![1.0, 0.0, 0.0, 1.0],
+        reach: 1.0001,
+    }]);
+    let r = falsify(&toy, &AttackSettings::default()).unwrap();
+    assert!(r.violations > 0, "{r:?}");
+    assert!(
+        r.worst_robustness < 0.0 && r.worst_robustness >= 0.8 - 1.0001,
+        "{r:?}"
+    );
+    for v in &r.first_violations {
+        let norm = v.x0.iter().map(|a| a * a).sum::<f64>().sqrt();
+        assert!(norm > 0.8 && norm <= 1.0, "{v:?}");
+    }
+    // A ball whose runs all pass: no violation, a positive least robustness.
+    let small = Toy(vec![Ball {
+        centre: vec![0.0, 0.0],
+        pis: vec![1.0, 0.0, 0.0, 1.0],
+        reach: 0.5,
+    }]);
+    let r = falsify(&small, &AttackSettings::default()).unwrap();
+    assert_eq!(r.violations, 0, "{r:?}");
+    assert!(
+        r.worst_robustness >= 0.3 && r.worst_robustness < 0.35,
+        "{r:?}"
+    );
 }
