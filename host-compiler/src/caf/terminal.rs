@@ -157,7 +157,16 @@ fn equilibrium(task: &Task) -> Result<(Vec<f64>, Vec<f64>), NoTerminal> {
     }
     let z = equilibrium_program(task, goal_size, input_size.max(1e-12), true)
         .ok_or(NoTerminal::NoEquilibrium)?;
-    Ok((z[..n].to_vec(), z[n..n + m].to_vec()))
+    // The interior-point solver leaves round-off in components that are zero (e.g. 1e-18 for a velocity
+    // at rest); they are set to 0 so that the stored law does not carry solver noise. The certificate
+    // accounts for the equilibrium residual whatever it is.
+    let clean = |v: &[f64]| -> Vec<f64> {
+        let scale = v.iter().fold(1.0f64, |a, b| a.max(b.abs()));
+        v.iter()
+            .map(|&x| if x.abs() <= 1e-12 * scale { 0.0 } else { x })
+            .collect()
+    };
+    Ok((clean(&z[..n]), clean(&z[n..n + m])))
 }
 
 /// max τ over (x, u, τ) with the equilibrium equations, Goal depth ≥ τ·g and input depth ≥ τ·s

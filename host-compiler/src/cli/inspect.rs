@@ -480,6 +480,19 @@ struct Report {
     /// Feedback-linearizable plants only.
     #[serde(skip_serializing_if = "Option::is_none")]
     model_maps: Option<MapsJson>,
+    /// The terminal law (section 11; `null`: the image has none).
+    terminal_law: Option<TerminalLawJson>,
+}
+
+/// The terminal law as stored (f32 values): its equilibrium, law u = K_t x + v_t and the ellipsoid
+/// (x − x_e)ᵀP_t(x − x_e) ≤ radius² the evaluator hands over on.
+#[derive(Serialize)]
+struct TerminalLawJson {
+    x_e: Vec<f32>,
+    K: Vec<Vec<f32>>,
+    v: Vec<f32>,
+    P: Vec<Vec<f32>>,
+    radius: f32,
 }
 
 #[derive(Serialize)]
@@ -598,6 +611,21 @@ impl Report {
                 })
                 .collect(),
             pwa: (img.mode() == Mode::PwaFeedback).then(|| PwaJson::new(img)),
+            terminal_law: img.terminal_law().map(|t| {
+                let f = |b: &[u8]| -> Vec<f32> {
+                    b.chunks_exact(4)
+                        .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+                        .collect()
+                };
+                let (K, P) = (f(t.K), f(t.P));
+                TerminalLawJson {
+                    x_e: f(t.x_e),
+                    K: matrix(m, n, |r, c| K[r * n + c]),
+                    v: f(t.v),
+                    P: matrix(n, n, |r, c| P[r * n + c]),
+                    radius: t.radius,
+                }
+            }),
             model_maps: img.model_maps().map(|mm| MapsJson {
                 n_plant: mm.n_plant(),
                 m_plant: mm.m_plant(),
@@ -691,6 +719,13 @@ fn summary(r: &Report, path: &str) -> String {
                 p.bytes, p.inputs, p.outputs, p.consts, p.code_len, p.max_stack
             );
         }
+    }
+    if let Some(t) = &r.terminal_law {
+        let _ = writeln!(
+            s,
+            "terminal law (section 11): hands over where (x − x_e)ᵀP_t(x − x_e) ≤ {}², then u = K_t x + v_t\n  x_e = {:?}\n  K_t = {:?}\n  v_t = {:?}\n  P_t = {:?}",
+            t.radius, t.x_e, t.K, t.v, t.P
+        );
     }
     if let Some(t) = r.terminal {
         let _ = writeln!(
