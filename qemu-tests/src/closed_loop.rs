@@ -31,6 +31,11 @@ impl<'a> HostEvaluator<'a> {
         }
     }
 
+    /// Whether the image's terminal law has taken over (`Controller::in_terminal_phase`).
+    pub fn in_terminal_phase(&self) -> bool {
+        self.controller.in_terminal_phase()
+    }
+
     /// One accepted step: the status and the input the firmware must reply.
     pub fn step(&mut self, x: &[f32]) -> (Status, Input) {
         let (status, u) = match self.controller.step_plant(x) {

@@ -85,7 +85,7 @@ pub fn run(a: &VerifyArgs) -> Outcome {
     }
     let rc = crate::verify::feedforward::recheck(&judge, &img)
         .map_err(|e| miette::miette!("{}: {e}", a.image.display()))?;
-    let terminal = terminal_recheck(&task, &img, &a.image)?;
+    let terminal = terminal_recheck(&task, &img, &a.image, !a.json)?;
     let seed = a.seed.unwrap_or(problem.seed ^ 0x7e51f1);
     let r = if linearized {
         crate::verify::nonlinear::monte_carlo_fl(&task, &img, runs, per_ball, seed)
@@ -170,18 +170,22 @@ pub fn run(a: &VerifyArgs) -> Outcome {
     Ok(Exit::Success)
 }
 
-/// The image's terminal law re-proved from its bytes, printed; a law the bytes do not certify is a failed
-/// check (exit 1) naming the condition.
+/// The image's terminal law re-proved from its bytes, printed when `print` (not with `--json`, whose
+/// object holds it); a law the bytes do not certify is a failed check (exit 1) naming the condition.
 fn terminal_recheck(
     task: &crate::task::Task,
     img: &shared_types::image::Image<'_>,
     path: &std::path::Path,
+    print: bool,
 ) -> Result<Option<crate::certify::terminal::TerminalCertificate>, Failure> {
     match crate::verify::recheck_terminal(task, img) {
         None => {
-            println!("terminal law: none in the image");
+            if print {
+                println!("terminal law: none in the image");
+            }
             Ok(None)
         }
+        Some(Ok(c)) if !print => Ok(Some(c)),
         Some(Ok(c)) => {
             println!(
                 "terminal law re-proved from the bytes: contraction {:.4}, next sample within {:.6} of the accepted {:.6}; Goal depth {:.4} ≥ {:.4}, Unsafe distance {:.4}, input distance {:.4} (ellipsoid metric)",
@@ -277,7 +281,7 @@ fn run_pwa(
     spec_seed: u64,
 ) -> Outcome {
     let rc = crate::verify::pwa::recheck(judge, img).map_err(|e| miette::miette!(e))?;
-    let terminal = terminal_recheck(task, img, &a.image)?;
+    let terminal = terminal_recheck(task, img, &a.image, !a.json)?;
     // The image does not mark which balls start a trajectory: all runs start anywhere in F.
     let mc =
         crate::verify::pwa::monte_carlo_pwa(judge, img, &[], runs, a.seed.unwrap_or(0x7e51f1), 0)

@@ -5,7 +5,8 @@
 //! 50 initial states drawn uniformly in balls of the certified envelope F (half of them in the balls over
 //! Init). Every run must get `Ok` at every step until it enters Goal, within T, stay out of Unsafe at the
 //! samples, apply inputs inside the input set, and the firmware's inputs must equal the host evaluator's
-//! bit for bit.
+//! bit for bit. Where the image carries a terminal law (the double integrator's; issue 17), each run goes
+//! on to twice the horizon: every step `Ok`, every sample in Goal, every input in the input set.
 
 #![allow(non_snake_case)]
 
@@ -103,6 +104,8 @@ fn run(spec: &str, tag: &str, label: &str) {
         .expect("a recheck without failures proves a steps-to-Goal bound");
     let mut worst_cost = 0u32;
     let mut longest = 0usize;
+    let terminal = image.terminal_law().is_some();
+    let mut handed_over = 0usize;
     for run in 0..RUNS {
         let b = if run < RUNS / 2 {
             init_balls[rng.random_range(0..init_balls.len())]
@@ -119,16 +122,24 @@ fn run(spec: &str, tag: &str, label: &str) {
         let mut host = HostEvaluator::new(image);
         let mut x = x0.clone();
         let mut reached = None;
-        for k in 0..=steps {
+        let last = if terminal { 2 * steps } else { steps };
+        for k in 0..=last {
             assert!(
                 !unsafe_set.as_ref().is_some_and(|u| u.contains(&x)),
                 "run {run} from {x0:?}: in Unsafe at step {k}"
             );
-            if goal.contains(&x) {
+            if reached.is_none() && goal.contains(&x) {
                 reached = Some(k);
-                break;
+                if !terminal {
+                    break;
+                }
+            } else if reached.is_some() {
+                assert!(
+                    goal.contains(&x),
+                    "run {run} from {x0:?}: left Goal at step {k} ({x:?}) under the terminal law"
+                );
             }
-            if k == steps {
+            if k == last || (reached.is_none() && k == steps) {
                 break;
             }
             let reply = exchange(&mut q, k as u32, &x, |xf| host.step(xf))
@@ -136,8 +147,9 @@ fn run(spec: &str, tag: &str, label: &str) {
             assert_eq!(
                 reply.status,
                 Status::Ok,
-                "run {run} from {x0:?}: step {k} at {x:?} not Ok before Goal"
+                "run {run} from {x0:?}: step {k} at {x:?} not Ok"
             );
+            handed_over += usize::from(reached.is_some() && host.in_terminal_phase());
             worst_cost = worst_cost.max(reply.cost);
             let u: Vec<f64> = reply.u.as_slice().iter().map(|&v| v as f64).collect();
             let slack = host_compiler::verify::input_slack(input, &u);
@@ -158,8 +170,12 @@ fn run(spec: &str, tag: &str, label: &str) {
         let exit = q.shutdown().unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(exit.code, Some(0), "run {run}: firmware exit");
     }
+    if terminal {
+        assert!(handed_over > 0, "no step ran under the terminal law");
+    }
     println!(
-        "HIL PWA ({label}): {RUNS} runs met the spec (Goal within {longest} ≤ {proved} proved ≤ {steps} steps); {} partitions, tree depth {}, image {} bytes, worst step cost {worst_cost} instructions",
+        "HIL PWA ({label}): {RUNS} runs met the spec (Goal within {longest} ≤ {proved} proved ≤ {steps} steps; terminal law: {terminal}, {handed_over} steps after Goal under it, in Goal to {} steps); {} partitions, tree depth {}, image {} bytes, worst step cost {worst_cost} instructions",
+        if terminal { 2 * steps } else { steps },
         pwa.stats.partitions,
         pwa.stats.depth,
         pwa.image.len()
