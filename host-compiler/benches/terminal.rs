@@ -28,7 +28,7 @@ fn main() {
     // With a law.
     let di = task("double-integrator.toml");
     let t = Instant::now();
-    let design = host_compiler::caf::terminal::design_terminal(&di).expect("a terminal law");
+    let design = host_compiler::terminal::design_terminal(&di).expect("a terminal law");
     let design_ms = t.elapsed().as_secs_f64() * 1e3;
     let s = synthesize(&di, &opts).expect("synthesis");
     assert!(matches!(s.terminal, TerminalOutcome::Certified(_)));

@@ -30,6 +30,7 @@ pub mod solver;
 pub mod spec;
 pub mod synth;
 pub mod task;
+pub mod terminal;
 pub mod text;
 pub mod trajectory;
 pub mod verify;

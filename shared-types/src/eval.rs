@@ -124,11 +124,6 @@ impl Input {
     pub fn values(&self) -> [f32; MAX_M] {
         self.u
     }
-
-    /// All [`MAX_M`] slots, to fill (for the laws of other modules of this crate).
-    pub(crate) fn values_mut(&mut self) -> &mut [f32; MAX_M] {
-        &mut self.u
-    }
 }
 
 /// The build-time fallback: the input the firmware applies when its image is rejected (zero, of dimension
@@ -495,7 +490,8 @@ impl<'a> Controller<'a> {
         }
         if law.accepts(x, n) {
             self.terminal = true;
-            let u = law.law(x, n, m);
+            let mut u = Input::zero(m);
+            law.law(x, n, m, &mut u.u);
             return Some(self.accept(u));
         }
         self.terminal.then_some(Err(Status::OutOfEnvelope))

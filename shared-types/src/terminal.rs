@@ -10,7 +10,7 @@
 //! runs: `x_e` (n), `K_t` (m×n row-major), `v_t` (m), `P_t` (n×n, symmetric positive definite) and the
 //! acceptance radius `r̂`, all little-endian `f32`.
 //!
-//! **Handover** ([`crate::eval::Controller::step`], both modes): before the task's own law, the evaluator
+//! **Handover** (the evaluator's `Controller::step`, both modes): before the task's own law, the evaluator
 //! tests `fl((x − x_e)ᵀ P_t (x − x_e)) ≤ r̂·r̂` with the same arithmetic as the feedforward ball selection,
 //! so that the host's rounding analysis of that test (every accepted state lies in `E`) applies unchanged.
 //! Accepted: `u = K_t x + v_t`, computed as the table law is, and the controller is in its terminal phase
@@ -25,7 +25,6 @@ use serde::{Deserialize, Serialize};
 
 use crate::capacity::{MAX_M, MAX_N};
 use crate::error::{Field, ImageError, Pos};
-use crate::eval::Input;
 use crate::linalg::{affine, quadratic_form};
 use crate::raw::{check_finite, check_len, f32_at, floats, positive_definite, sat16};
 
@@ -82,13 +81,11 @@ impl<'a> TerminalLaw<'a> {
         quadratic_form(self.P, &e, n.clamp(1, MAX_N)) <= self.radius * self.radius
     }
 
-    /// `u = K_t x + v_t`, summed as the table law `u = K_ℓ x + v` is ([`crate::linalg::affine`]).
+    /// `u_j = (K_t x)_j + v_t,j` into `u[..m]`, summed as the table law `u = K_ℓ x + v` is
+    /// ([`crate::linalg::affine`]).
     #[inline(always)]
-    pub fn law(&self, x: &[f32], n: usize, m: usize) -> Input {
-        let m = m.clamp(1, MAX_M);
-        let mut out = Input::zero(m);
-        affine(self.K, x, self.v, n.clamp(1, MAX_N), m, out.values_mut());
-        out
+    pub fn law(&self, x: &[f32], n: usize, m: usize, u: &mut [f32; MAX_M]) {
+        affine(self.K, x, self.v, n.clamp(1, MAX_N), m.clamp(1, MAX_M), u);
     }
 }
 

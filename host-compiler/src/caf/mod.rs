@@ -52,7 +52,6 @@ mod rcrit;
 pub(crate) mod sdp;
 mod settings;
 mod synth;
-pub mod terminal;
 mod validate;
 
 pub use design::{design, design_location, design_locations, outcome_message, Design, DesignError};

@@ -471,7 +471,15 @@ fn run_hybrid(
         r.merge(p.map_err(|e| miette::miette!("{e}"))?);
     }
     let attack = match attack_settings(a, task.problem.seed)? {
-        Some(s) => Some(crate::verify::attack::attack_hybrid(&task, bytes, &s).bad_input()?),
+        Some(s) => {
+            let runs = crate::verify::attack::HybridRuns {
+                plant: &task.plant,
+                property: &task.property,
+                initial: task.initial,
+                steps: task.steps,
+            };
+            Some(crate::verify::attack::attack_hybrid(runs, bytes, &s).bad_input()?)
+        }
         None => None,
     };
     let unproved: Vec<&str> = rc.iter().filter_map(|c| c.why.as_deref()).collect();

@@ -38,7 +38,7 @@ impl ControllerMode {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub enum TerminalChoice {
     /// A certified terminal law with its invariant ellipsoid in Goal where one exists
-    /// ([`crate::caf::terminal`]), else `Hold`, said at synthesis and in the report. TOML: `"auto"`.
+    /// ([`crate::terminal`]), else `Hold`, said at synthesis and in the report. TOML: `"auto"`.
     #[default]
     Auto,
     /// The certified terminal law, required: synthesis fails (exit 2) when none exists. TOML:

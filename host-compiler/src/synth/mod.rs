@@ -16,11 +16,11 @@
 pub mod hybrid;
 pub mod temporal;
 
-use crate::caf::terminal::{design_terminal, NoTerminal, TerminalDesign};
 use crate::certify::{self, Loop, LoopConstants};
 use crate::cover::{grow, Cover, CoverageEstimate, GrowError, GrowOptions};
 use crate::optimize::BundleSettings;
 use crate::task::Task;
+use crate::terminal::{design_terminal, NoTerminal, TerminalDesign};
 use crate::verify::attack::{attack, AttackError, AttackReport, AttackSettings};
 use crate::verify::{monte_carlo, Judge, VerifyReport};
 use faer::Mat;
@@ -137,7 +137,7 @@ impl TerminalOutcome {
 }
 
 /// The terminal law the spec asks for: designed and certified where `auto` or `invariant` asks
-/// ([`crate::caf::terminal`]); `invariant` without one is an error, before any growth.
+/// ([`crate::terminal`]); `invariant` without one is an error, before any growth.
 pub fn terminal_for(task: &Task) -> Result<TerminalOutcome, SynthError> {
     use crate::spec::TerminalChoice;
     match task.settings().terminal {

@@ -501,10 +501,20 @@ pub fn attack_temporal(
     falsify(&target, settings)
 }
 
+/// What a hybrid run needs of its task: the automaton, the property, the initial location and the
+/// horizon in samples (a `synth::hybrid::HybridTask` lends them).
+#[derive(Clone, Copy)]
+pub struct HybridRuns<'a> {
+    pub plant: &'a crate::model::hybrid::Hybrid,
+    pub property: &'a crate::property::ReachAvoid,
+    pub initial: crate::model::Location,
+    pub steps: usize,
+}
+
 /// Hybrid images on the automaton's exact flow, from the initial location.
 struct HybridTarget<'a> {
     fine: crate::model::hybrid::Hybrid,
-    task: &'a crate::synth::hybrid::HybridTask,
+    task: HybridRuns<'a>,
     image: Image<'a>,
     balls: Vec<Ball>,
 }
@@ -514,7 +524,7 @@ impl Target for HybridTarget<'_> {
         &self.balls
     }
     fn score(&self, x0: &[f64]) -> Scored {
-        let t = self.task;
+        let t = &self.task;
         let mut samples = Vec::new();
         let run = super::hybrid::run_hybrid(
             &self.fine,
@@ -529,7 +539,7 @@ impl Target for HybridTarget<'_> {
             return Scored::Refused;
         }
         Scored::Run {
-            robustness: reach_avoid_robustness(&t.property, &samples, t.plant.period()),
+            robustness: reach_avoid_robustness(t.property, &samples, t.plant.period()),
             violation: run.violation,
         }
     }
@@ -538,7 +548,7 @@ impl Target for HybridTarget<'_> {
 /// Attacks every stored run's ball of a hybrid image (module doc); each ball in the metric of its first
 /// segment's location.
 pub fn attack_hybrid(
-    task: &crate::synth::hybrid::HybridTask,
+    task: HybridRuns<'_>,
     bytes: &[u8],
     settings: &AttackSettings,
 ) -> Result<AttackReport, AttackError> {

@@ -1,6 +1,7 @@
-//! The design of a terminal law (issue 17, item 2): an equilibrium in Goal, a gain and an invariant
-//! ellipsoid around it, for after the task. The certificate of what the image stores is
-//! [`crate::certify::terminal`]; this module only proposes candidates for it.
+//! The terminal law (issue 17, item 2): its design for after the task, an equilibrium in Goal, a gain and
+//! an invariant ellipsoid around it (LMIs in the manner of the CAF's, through `caf::sdp`). The
+//! certificate of what the image stores is [`crate::certify::terminal`]; this module only proposes
+//! candidates for it and keeps the certified one.
 //!
 //! 1. **Equilibrium** (a small conic program): (x_e, u_e) with A x_e + B u_e + c = 0 (continuous time) or
 //!    (A − I) x_e + B u_e + g = 0 (discrete time), x_e in Goal and u_e in the input set, the smaller of the
@@ -18,7 +19,7 @@
 //!    candidate fails only on Goal; each candidate is rounded to f32 and certified, and the certified one
 //!    of largest volume (log det Q) is kept.
 
-use super::sdp::{rect_from, sym_from, sym_index, Sdp};
+use crate::caf::sdp::{rect_from, sym_from, sym_index, Sdp};
 use crate::certify::selection_radius;
 use crate::certify::terminal::{certify, StoredTerminal, TerminalCertificate, TerminalRefusal};
 use crate::linalg::{mat_vec, round32, spectral_norm, sym_eigenvalues, PdRoots};
