@@ -586,7 +586,7 @@ impl ImageBuilder {
             n_partitions: 0,
         };
         let img = Image::new_with_maps(Mode::Feedforward, dims, period, payload, maps.as_deref())?;
-        let terminal = self.terminal_law.as_ref().map(TerminalBytes::of);
+        let terminal = self.terminal_law.as_ref().map(terminal_body);
         encode_to_vec(&with_optional(img, &self.fingerprint, terminal.as_ref())?)
     }
 
@@ -1107,7 +1107,7 @@ impl PwaImageBuilder {
             n_partitions: self.laws.len(),
         };
         let img = Image::new_pwa(dims, period, payload)?;
-        let terminal = self.terminal_law.as_ref().map(TerminalBytes::of);
+        let terminal = self.terminal_law.as_ref().map(terminal_body);
         encode_to_vec(&with_optional(img, &self.fingerprint, terminal.as_ref())?)
     }
 
@@ -1187,20 +1187,15 @@ impl PwaImageBuilder {
     }
 }
 
-/// `img` with the terminal law and the spec fingerprint, each if given (validated by the image).
+/// `img` with the terminal law's section body and the spec fingerprint, each if given (validated by the
+/// image).
 fn with_optional<'a>(
     img: Image<'a>,
     fp: &'a Option<Vec<u8>>,
-    terminal: Option<&'a TerminalBytes>,
+    terminal: Option<&'a Vec<u8>>,
 ) -> Result<Image<'a>, EmitError> {
     let img = match terminal {
-        Some(t) => img.with_terminal_law(TerminalLaw {
-            x_e: &t.x_e,
-            K: &t.K,
-            v: &t.v,
-            P: &t.P,
-            radius: t.radius,
-        })?,
+        Some(body) => img.with_terminal_law(body)?,
         None => img,
     };
     match fp {
@@ -1209,29 +1204,19 @@ fn with_optional<'a>(
     }
 }
 
-/// A terminal law's f32 bytes, for [`with_optional`].
-struct TerminalBytes {
-    x_e: Vec<u8>,
-    K: Vec<u8>,
-    v: Vec<u8>,
-    P: Vec<u8>,
-    radius: f32,
-}
-
-impl TerminalBytes {
-    fn of(t: &StoredTerminal) -> Self {
-        let bytes = |it: &mut dyn Iterator<Item = f64>| -> Vec<u8> {
-            it.flat_map(|v| (v as f32).to_le_bytes()).collect()
-        };
-        let (m, n) = (t.K.nrows(), t.K.ncols());
-        TerminalBytes {
-            x_e: bytes(&mut t.x_e.iter().copied()),
-            K: bytes(&mut (0..m * n).map(|i| t.K[(i / n, i % n)])),
-            v: bytes(&mut t.v.iter().copied()),
-            P: bytes(&mut (0..n * n).map(|i| t.P[(i / n, i % n)])),
-            radius: t.radius,
-        }
-    }
+/// A terminal law's section body (`shared_types::terminal`): its values as f32, in the stored order.
+fn terminal_body(t: &StoredTerminal) -> Vec<u8> {
+    let (m, n) = (t.K.nrows(), t.K.ncols());
+    let values = t
+        .x_e
+        .iter()
+        .copied()
+        .chain((0..m * n).map(|i| t.K[(i / n, i % n)]))
+        .chain(t.v.iter().copied())
+        .chain((0..n * n).map(|i| t.P[(i / n, i % n)]));
+    let mut out: Vec<u8> = values.flat_map(|v| (v as f32).to_le_bytes()).collect();
+    out.extend_from_slice(&t.radius.to_le_bytes());
+    out
 }
 
 /// The terminal law an image stores, each f32 widened exactly.

@@ -125,6 +125,8 @@ pub enum Field {
     Fingerprint,
     /// The model maps section as a whole (its header's program lengths against its size).
     ModelMaps,
+    /// The terminal law section as a whole (its length against n and m).
+    TerminalLaw,
     /// The terminal law's equilibrium `x_e`.
     TerminalCentre,
     /// The terminal law's gain `K_t`.
@@ -632,6 +634,7 @@ impl fmt::Display for Field {
             Field::ProgramConst => "program constants",
             Field::Fingerprint => "spec fingerprint",
             Field::ModelMaps => "model maps section",
+            Field::TerminalLaw => "terminal law section",
             Field::TerminalCentre => "terminal law x_e",
             Field::TerminalK => "terminal law K_t",
             Field::TerminalV => "terminal law v_t",

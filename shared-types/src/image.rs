@@ -40,13 +40,14 @@
 //! | 8   | `PwaBalls`              | [`crate::pwa::PwaBalls`]   | PWA         |
 //! | 9   | `SegmentExits`          | [`SegmentExitsSection`]    | feedforward, optional |
 //! | 10  | `ModelMaps`             | raw, [`crate::maps`]       | feedforward, optional |
-//! | 11  | `TerminalLaw`           | [`crate::terminal::TerminalLaw`] | both, optional, not with model maps |
+//! | 11  | `TerminalLaw`           | raw, [`crate::terminal`]   | both, optional, not with model maps |
 //! | 12  | `SpecFingerprint`       | [`SpecFingerprintSection`] | both, optional |
 //!
 //! Every section a mode lists is required, exactly once; a known section of the other mode is refused.
-//! The model maps section is the one body that is not postcard: its layout is [`crate::maps`]'s (two
-//! model programs, which must keep their constant pools aligned), and with it the fallback and the input
-//! box are in the plant's input space (`m_plant` values) and a linear fallback is refused.
+//! Two bodies are not postcard. The model maps section's layout is [`crate::maps`]'s (two model
+//! programs, which must keep their constant pools aligned), and with it the fallback and the input box are
+//! in the plant's input space (`m_plant` values) and a linear fallback is refused. The terminal law's is a
+//! fixed run of f32 values ([`crate::terminal`]), which decodes with one length check.
 //! The spec fingerprint is [`SPEC_FINGERPRINT_LEN`] bytes: per part of the spec ([`SPEC_PARTS`], in
 //! that order) a hash of [`SPEC_HASH_LEN`] bytes that the host computes; the firmware only checks its
 //! length.
@@ -679,8 +680,8 @@ pub struct Image<'a> {
     /// The spec fingerprint's hashes, or empty when the image has none.
     pub(crate) fingerprint: &'a [u8],
     pub(crate) maps: Option<ModelMaps<'a>>,
-    /// The terminal law (section 11), if the image has one.
-    pub(crate) terminal_law: Option<TerminalLaw<'a>>,
+    /// The terminal law (section 11) and its body, if the image has one.
+    pub(crate) terminal_law: Option<(TerminalLaw<'a>, &'a [u8])>,
 }
 
 impl<'a> Image<'a> {
@@ -763,21 +764,21 @@ impl<'a> Image<'a> {
         Ok(self)
     }
 
-    /// This image with the terminal law `law` (section 11), validated against the dimensions
-    /// ([`TerminalLaw::validate`]); refused with [`ImageError::TerminalWithModelMaps`] for an image with
-    /// model maps.
-    pub fn with_terminal_law(mut self, law: TerminalLaw<'a>) -> Result<Self, ImageError> {
+    /// This image with the terminal law whose section body is `body` (section 11), decoded and validated
+    /// against the dimensions ([`TerminalLaw::decode`]); refused with
+    /// [`ImageError::TerminalWithModelMaps`] for an image with model maps.
+    pub fn with_terminal_law(mut self, body: &'a [u8]) -> Result<Self, ImageError> {
         if self.maps.is_some() {
             return Err(ImageError::TerminalWithModelMaps);
         }
-        law.validate(self.dims.n, self.dims.m)?;
-        self.terminal_law = Some(law);
+        let law = TerminalLaw::decode(body, self.dims.n, self.dims.m)?;
+        self.terminal_law = Some((law, body));
         Ok(self)
     }
 
     /// The terminal law (section 11), if the image has one.
     pub fn terminal_law(&self) -> Option<TerminalLaw<'a>> {
-        self.terminal_law
+        self.terminal_law.map(|(law, _)| law)
     }
 
     /// The spec fingerprint's hashes ([`SPEC_FINGERPRINT_LEN`] bytes, part `i` of [`SPEC_PARTS`] at
@@ -1078,16 +1079,10 @@ impl<'a> Image<'a> {
         let laws = PostcardSection::new(SectionKind::PwaLaws, laws);
         let tree = PostcardSection::new(SectionKind::PwaTree, tree);
         let balls = PostcardSection::new(SectionKind::PwaBalls, balls);
-        let terminal = PostcardSection::new(
-            SectionKind::TerminalLaw,
-            self.terminal_law.unwrap_or(TerminalLaw {
-                x_e: &[],
-                K: &[],
-                v: &[],
-                P: &[],
-                radius: 0.0,
-            }),
-        );
+        let terminal = RawSection {
+            kind: SectionKind::TerminalLaw as u16,
+            body: self.terminal_law.map_or(&[][..], |(_, body)| body),
+        };
         let fingerprint = PostcardSection::new(
             SectionKind::SpecFingerprint,
             SpecFingerprintSection {
@@ -1194,10 +1189,7 @@ pub fn decode(bytes: &[u8]) -> Result<Image<'_>, ImageError> {
 /// validated.
 fn with_stored_optional<'a>(dir: &Directory<'a>, img: Image<'a>) -> Result<Image<'a>, ImageError> {
     let img = match dir.section(SectionKind::TerminalLaw) {
-        Some(_) => {
-            let law: TerminalLaw<'a> = parse_section(dir, SectionKind::TerminalLaw)?;
-            img.with_terminal_law(law)?
-        }
+        Some(body) => img.with_terminal_law(body)?,
         None => img,
     };
     match dir.section(SectionKind::SpecFingerprint) {

@@ -7,8 +7,16 @@
 //! `E = {x : (x − x_e)ᵀ P_t (x − x_e) ≤ 1}` inside Goal and away from Unsafe, between samples too, that
 //! the sampled loop `u = K_t x + v_t` (`v_t = u_e − K_t x_e`) maps strictly into itself with every input in
 //! the input set, the evaluator's f32 rounding included. The section stores exactly what the evaluator
-//! runs: `x_e` (n), `K_t` (m×n row-major), `v_t` (m), `P_t` (n×n, symmetric positive definite) and the
-//! acceptance radius `r̂`, all little-endian `f32`.
+//! runs, as one raw body of little-endian `f32` (not postcard: a fixed layout decodes with one length
+//! check, which keeps the firmware's decoder small), [`body_len`] bytes for n and m:
+//!
+//! | values | field |
+//! |--------|-------|
+//! | n      | the equilibrium `x_e` |
+//! | m·n    | the gain `K_t`, row-major |
+//! | m      | the offset `v_t = u_e − K_t x_e` |
+//! | n·n    | the ellipsoid's `P_t`, row-major, symmetric positive definite |
+//! | 1      | the acceptance radius `r̂ ≥ 0` |
 //!
 //! **Handover** (the evaluator's `Controller::step`, both modes): before the task's own law, the evaluator
 //! tests `fl((x − x_e)ᵀ P_t (x − x_e)) ≤ r̂·r̂` with the same arithmetic as the feedforward ball selection,
@@ -21,15 +29,18 @@
 //! zero-dynamics bounds hold over [0, T] only.
 #![allow(non_snake_case)]
 
-use serde::{Deserialize, Serialize};
-
 use crate::capacity::{MAX_M, MAX_N};
 use crate::error::{Field, ImageError, Pos};
 use crate::linalg::{affine, quadratic_form};
 use crate::raw::{check_finite, check_len, f32_at, floats, positive_definite, sat16};
 
-/// The `TerminalLaw` section's content (see the module doc).
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+/// Bytes of the section's body for state dimension n and input dimension m (module doc).
+pub const fn body_len(n: usize, m: usize) -> usize {
+    4 * (n + m * n + m + n * n + 1)
+}
+
+/// The `TerminalLaw` section's content (see the module doc), borrowed from its body.
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TerminalLaw<'a> {
     /// The equilibrium `x_e`, n values.
     pub x_e: &'a [u8],
@@ -44,6 +55,26 @@ pub struct TerminalLaw<'a> {
 }
 
 impl<'a> TerminalLaw<'a> {
+    /// The law a section body holds (module doc), validated ([`TerminalLaw::validate`]); a body of
+    /// another length is refused with [`ImageError::FieldLength`].
+    pub fn decode(body: &'a [u8], n: usize, m: usize) -> Result<Self, ImageError> {
+        let (n, m) = (n.clamp(1, MAX_N), m.clamp(1, MAX_M));
+        check_len(Field::TerminalLaw, body, body_len(n, m))?;
+        let (x_e, rest) = body.split_at_checked(4 * n).unwrap_or((&[], &[]));
+        let (K, rest) = rest.split_at_checked(4 * m * n).unwrap_or((&[], &[]));
+        let (v, rest) = rest.split_at_checked(4 * m).unwrap_or((&[], &[]));
+        let (P, rest) = rest.split_at_checked(4 * n * n).unwrap_or((&[], &[]));
+        let law = TerminalLaw {
+            x_e,
+            K,
+            v,
+            P,
+            radius: f32_at(rest, 0),
+        };
+        law.validate(n, m)?;
+        Ok(law)
+    }
+
     /// Checks the lengths against n and m, every float finite, `P_t` exactly symmetric and positive
     /// definite, and `r̂ ≥ 0`.
     pub fn validate(&self, n: usize, m: usize) -> Result<(), ImageError> {

@@ -472,21 +472,27 @@ static sc_error parse_trajectories(sc_image *im, sc_bytes s) {
     return reader_done(&r) ? SC_E_NONE : SC_E_SECTION;
 }
 
-/* terminal::TerminalLaw: four byte strings and the radius (postcard f32: 4 little-endian bytes), then
- * TerminalLaw::validate. */
+/* terminal::TerminalLaw::decode: a raw body of n + m*n + m + n*n + 1 little-endian f32 (x_e, K_t, v_t, P_t,
+ * the radius), then TerminalLaw::validate. */
 static sc_error parse_terminal(sc_image *im, sc_bytes s) {
-    sc_reader r = {0, 0, 0, 0};
-    uint32_t n = im->n, m = im->m, i, j, b = 0;
+    uint32_t n = im->n, m = im->m, i, j;
+    uint64_t at = 0;
     sc_error e;
-    r.p = s.p;
-    r.len = s.len;
-    im->t_x_e = take_bytes(&r);
-    im->t_K = take_bytes(&r);
-    im->t_v = take_bytes(&r);
-    im->t_P = take_bytes(&r);
-    for (i = 0; i < 4; i++) b |= (uint32_t)take_u8(&r) << (8 * i);
-    if (!reader_done(&r)) return SC_E_SECTION;
-    im->t_radius = bits_f32(b);
+    if ((uint64_t)s.len != 4ull * ((uint64_t)n + (uint64_t)m * n + m + (uint64_t)n * n + 1u))
+        return SC_E_LENGTH;
+    im->t_x_e.p = s.p;
+    im->t_x_e.len = 4u * n;
+    at += im->t_x_e.len;
+    im->t_K.p = s.p + at;
+    im->t_K.len = 4u * m * n;
+    at += im->t_K.len;
+    im->t_v.p = s.p + at;
+    im->t_v.len = 4u * m;
+    at += im->t_v.len;
+    im->t_P.p = s.p + at;
+    im->t_P.len = 4u * n * n;
+    at += im->t_P.len;
+    im->t_radius = bits_f32(le32(s.p + at));
     if ((e = check_floats(im->t_x_e, 4ull * n)) != SC_E_NONE) return e;
     if ((e = check_floats(im->t_K, 4ull * m * n)) != SC_E_NONE) return e;
     if ((e = check_floats(im->t_v, 4ull * m)) != SC_E_NONE) return e;
