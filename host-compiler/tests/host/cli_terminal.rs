@@ -4,6 +4,7 @@
 //! chooses: `"invariant"` on a plant without one is bad input before any growth (exit 2, with the
 //! figure), `"hold"` stores none, an unknown value is a spec diagnostic.
 
+use crate::spec_fingerprint::text;
 use host_compiler::emit::ImageBuilder;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -38,20 +39,6 @@ fn verify(spec: &Path, img: &Path) -> Output {
         .args(["--runs", "300", "--per-ball", "4"])
         .output()
         .unwrap()
-}
-
-/// Standard output and error, with miette's line wrapping undone (frame characters dropped, runs of
-/// white space made one space).
-fn text(o: &Output) -> String {
-    let raw = format!(
-        "{}\n{}",
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    );
-    raw.replace(['│', '×'], " ")
-        .split_whitespace()
-        .collect::<Vec<_>>()
-        .join(" ")
 }
 
 #[test]

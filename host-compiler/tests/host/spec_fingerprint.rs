@@ -203,8 +203,8 @@ fn run(args: &[&str], spec: &Path, img: &Path, extra: &[&str]) -> Output {
 }
 
 /// Standard output and error, with miette's line wrapping undone (frame characters dropped, runs of
-/// whitespace made one space).
-fn text(o: &Output) -> String {
+/// whitespace made one space). Shared with the other CLI tests that match wrapped messages.
+pub(crate) fn text(o: &Output) -> String {
     let raw = format!(
         "{}\n{}",
         String::from_utf8_lossy(&o.stdout),
