@@ -251,6 +251,12 @@ fn plots(h: &mut String, data: &ReportData) {
     if !data.unsafe_plane.is_empty() {
         legend.push_str(&swatch(&css_color(UNSAFE_COLOR), "Unsafe"));
     }
+    if data.terminal.as_ref().is_some_and(|t| t.ellipse.is_some()) {
+        legend.push_str(&swatch(
+            &css_color(super::plots::TERMINAL_COLOR),
+            "terminal law's invariant ellipsoid",
+        ));
+    }
     legend.push_str(&trajectory_keys(data));
     let _ = writeln!(
         h,

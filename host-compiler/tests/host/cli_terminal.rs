@@ -62,6 +62,12 @@ fn the_double_integrator_hands_over_and_verify_re_proves_the_law() {
         serde_json::from_str(&std::fs::read_to_string(out.join("certificate.json")).unwrap())
             .unwrap();
     assert_eq!(cert["terminal"]["law"], "invariant", "{cert}");
+    // The report shows the law and draws its ellipsoid in the workspace plot.
+    let report = std::fs::read_to_string(out.join("report.html")).unwrap();
+    assert!(report.contains("<h2>After the task: terminal law</h2>"));
+    assert!(report.contains("terminal law&#39;s invariant ellipsoid"));
+    assert!(report
+        .contains("handed over to the terminal law; 0 were outside Goal again after reaching it."));
     let img = out.join("controller.img");
     let bytes = std::fs::read(&img).unwrap();
     let decoded = shared_types::image::decode(&bytes).unwrap();
@@ -133,6 +139,8 @@ fn terminal_hold_stores_no_law_and_an_unknown_value_is_a_spec_error() {
         .unwrap()
         .terminal_law()
         .is_none());
+    let report = std::fs::read_to_string(out.join("report.html")).unwrap();
+    assert!(report.contains("No terminal law: the spec&#39;s [synthesis] terminal asks for none"));
 
     std::fs::write(
         &spec,
