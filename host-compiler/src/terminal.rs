@@ -19,6 +19,9 @@
 //!    candidate fails only on Goal; each candidate is rounded to f32 and certified, and the certified one
 //!    of largest volume (log det Q) is kept.
 
+// Negated comparisons (`!(x >= y)`) are deliberate: they reject NaN as well.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 use crate::caf::sdp::{rect_from, sym_from, sym_index, Sdp};
 use crate::certify::selection_radius;
 use crate::certify::terminal::{certify, StoredTerminal, TerminalCertificate, TerminalRefusal};

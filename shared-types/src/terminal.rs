@@ -95,7 +95,7 @@ impl<'a> TerminalLaw<'a> {
                 }
             }
         }
-        if !positive_definite(self.P, n) || !(self.radius.is_finite() && self.radius >= 0.0) {
+        if !positive_definite(self.P, n) || !self.radius.is_finite() || self.radius < 0.0 {
             return Err(ImageError::BadTerminalLaw);
         }
         Ok(())

@@ -27,6 +27,9 @@
 //! with every input in the input set. That is the reach-avoid property completed, so the handover may
 //! happen whenever the test accepts (before T as well).
 
+// Negated comparisons (`!(x >= y)`) are deliberate: they reject NaN as well.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 use super::{evaluator_error_bound, input_distance, selection_floor, selection_radius, tube_abs};
 use crate::geometry::Metric;
 use crate::linalg::{mat_vec, p_norm, PdRoots};

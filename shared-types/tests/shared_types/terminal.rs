@@ -1,6 +1,7 @@
 //! The optional terminal-law section (tag 11, `shared_types::terminal`): round trips in both modes, the
 //! evaluator's handover and terminal phase, and the decoder's refusals (lengths, a P_t that is not
 //! symmetric positive definite, a negative radius, a terminal law with model maps).
+#![allow(non_snake_case)]
 
 use crate::common::{random_content, sections_of, two_partitions, with_sections};
 use rand::SeedableRng;
