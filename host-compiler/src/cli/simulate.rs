@@ -4,6 +4,10 @@
 //! and a verdict on standard error: when Goal was first reached,
 //! the least distance to Unsafe before it, the steps out of the certified envelope, the inputs outside
 //! the input set, and the run's reach-avoid robustness ([`crate::property::Property`], Euclidean).
+//!
+//! A feedback-linearizable plant (§3.1.2) runs as `verify` runs it: the plant's state through the
+//! image's maps (`step_plant`), the plant flowed by Dop853, the verdict judged in ξ; its CSV has the
+//! plant's states and inputs and no reference columns (the law's w is not the plant's input).
 
 use super::{
     decode_image, image_matches_spec, read_image, task_of, BadInput, Exit, Failure, Outcome,
@@ -44,24 +48,10 @@ pub fn run(a: &SimulateArgs) -> Outcome {
     let bytes = read_image(&a.image)?;
     let img = decode_image(&bytes, &a.image)?;
     image_matches_spec(&problem, &img, &a.image, &a.spec)?;
-    if problem.nonlinear.is_some() {
-        return Err(Failure::bad_input(miette::miette!(
-            "simulate runs linear plants; for a feedback-linearizable plant, `verify` runs the image on \
-             the plant itself (adaptive integration)"
-        )));
-    }
-    let n = problem.plant.n();
-    if a.x0.len() != n {
-        return Err(Failure::bad_input(miette::miette!(
-            "--x0 has {} values; the spec has n = {n}",
-            a.x0.len()
-        )));
-    }
     let task = task_of(problem)?;
     let problem = &task.problem;
     // Within MAX_STEPS (clap checked), so the conversion is exact.
     let steps = a.steps.map_or(problem.horizon_steps(), |s| s as usize);
-    let mut ctl = Controller::new(img);
     let mut out: Box<dyn Write> = match &a.out {
         Some(p) => Box::new(
             std::fs::File::create(p)
@@ -71,55 +61,181 @@ pub fn run(a: &SimulateArgs) -> Outcome {
         ),
         None => Box::new(std::io::stdout().lock()),
     };
-    let m = problem.plant.m();
-    // The initial state, and per row the reference v = u − K̂ x of the image's gain (location 0): the
-    // file is then a recording `synth --import` reads as it is (`trajectory::csv`).
-    let x0: Vec<String> = a.x0.iter().map(|v| format!("{v}")).collect();
-    writeln!(out, "# x0 = {}", x0.join(", ")).into_diagnostic()?;
+    let run = match task.plant.linearization() {
+        None => {
+            let n = task.plant.n();
+            check_x0(&a.x0, n)?;
+            // Per row the reference v = u − K̂ x of the image's gain (location 0): the file is then a
+            // recording `synth --import` reads as it is (`trajectory::csv`).
+            let K: Vec<Vec<f64>> = (0..task.plant.m())
+                .map(|j| (0..n).map(|i| img.K(0, j, i) as f64).collect())
+                .collect();
+            let plant = task.plant.as_ref();
+            write_run(
+                &mut *out,
+                &img,
+                &a.x0,
+                steps,
+                problem.plant.period,
+                Some(&K),
+                &task.property.input,
+                false,
+                &mut |x, u| Ok(plant.step(0, x, u)),
+                &|x| x.to_vec(),
+            )?
+        }
+        Some(maps) => {
+            // A feedback-linearizable plant: the image's maps around the law (`step_plant`), the plant
+            // flowed by Dop853, judged in ξ; no reference column (the law's w is not the plant's input).
+            crate::verify::nonlinear::check_maps(maps, &img)
+                .map_err(|e| {
+                    miette::miette!(
+                        "{} does not belong to {}: {e}",
+                        a.image.display(),
+                        a.spec.display()
+                    )
+                })
+                .bad_input()?;
+            check_x0(&a.x0, maps.n_plant)?;
+            let input = crate::property::input_bound(&maps.input);
+            let h = maps.plant.period();
+            write_run(
+                &mut *out,
+                &img,
+                &a.x0,
+                steps,
+                h,
+                None,
+                &input,
+                true,
+                &mut |x, u| {
+                    maps.plant
+                        .flow(x, u, h, 1, &mut |_| {})
+                        .map_err(|e| e.to_string())
+                },
+                &|x| maps.xi_of(x),
+            )?
+        }
+    };
+    out.flush().into_diagnostic()?;
+    eprintln!(
+        "{}",
+        verdict(&task, &run.judged, run.outside, run.bad_inputs)
+    );
+    if let Some(e) = run.stopped {
+        return Err(miette::miette!(
+            "the plant's integration failed after {} steps: {e}",
+            run.judged.len() - 1
+        )
+        .into());
+    }
+    Ok(Exit::Success)
+}
+
+fn check_x0(x0: &[f64], n: usize) -> Result<(), Failure> {
+    if x0.len() != n {
+        return Err(Failure::bad_input(miette::miette!(
+            "--x0 has {} values; the plant has n = {n}",
+            x0.len()
+        )));
+    }
+    Ok(())
+}
+
+/// What [`write_run`] saw: the states in the task's coordinates (ξ for a feedback-linearizable plant),
+/// the steps out of the envelope, the inputs outside the input set, and why the run stopped early.
+struct Run {
+    judged: Vec<Vec<f64>>,
+    outside: usize,
+    bad_inputs: usize,
+    stopped: Option<String>,
+}
+
+/// The closed loop for `steps` steps from `x0`, one CSV row per sample (module doc): the evaluator's
+/// `step_plant` for a plant with model maps (`plant_step`), else `step`; `advance` the plant over one period, `judged` the state in the
+/// task's coordinates; `K` gives the reference columns when the plant's input is the law's.
+#[allow(clippy::too_many_arguments)]
+fn write_run(
+    out: &mut dyn Write,
+    img: &shared_types::image::Image<'_>,
+    x0: &[f64],
+    steps: usize,
+    period: f64,
+    K: Option<&Vec<Vec<f64>>>,
+    input: &crate::property::InputBound,
+    plant_step: bool,
+    advance: &mut dyn FnMut(&[f64], &[f64]) -> Result<Vec<f64>, String>,
+    judged: &dyn Fn(&[f64]) -> Vec<f64>,
+) -> Result<Run, Failure> {
+    let (n, m) = (x0.len(), img.plant_m());
+    let mut ctl = Controller::new(*img);
+    let names: Vec<String> = x0.iter().map(|v| format!("{v}")).collect();
+    writeln!(out, "# x0 = {}", names.join(", ")).into_diagnostic()?;
     let head: Vec<String> = std::iter::once("t".to_string())
         .chain((1..=n).map(|i| format!("x{i}")))
         .chain((1..=m).map(|i| format!("u{i}")))
-        .chain((1..=m).map(|i| format!("v{i}")))
+        .chain(K.into_iter().flat_map(|_| (1..=m).map(|i| format!("v{i}"))))
         .chain(std::iter::once(crate::csv::STATUS.to_string()))
         .collect();
     writeln!(out, "{}", head.join(",")).into_diagnostic()?;
-    let K: Vec<Vec<f64>> = (0..m)
-        .map(|j| (0..n).map(|i| img.K(0, j, i) as f64).collect())
-        .collect();
-    let mut x = a.x0.clone();
+    let mut x = x0.to_vec();
     let mut last = shared_types::eval::Input::zero(m);
-    let mut states: Vec<Vec<f64>> = Vec::with_capacity(steps + 1);
-    let (mut outside, mut bad_inputs) = (0usize, 0usize);
+    let mut run = Run {
+        judged: Vec::with_capacity(steps + 1),
+        outside: 0,
+        bad_inputs: 0,
+        stopped: None,
+    };
     for k in 0..=steps {
-        states.push(x.clone());
+        run.judged.push(judged(&x));
         let xf: Vec<f32> = x.iter().map(|&v| v as f32).collect();
-        let (u, status) = match ctl.step(&xf) {
+        let answer = if plant_step {
+            ctl.step_plant(&xf)
+        } else {
+            ctl.step(&xf)
+        };
+        let (u, status) = match answer {
             Ok(u) => (u, "ok".to_string()),
             Err(s) => {
-                outside += 1;
+                run.outside += 1;
                 (ctl.fallback(&xf, &last), format!("{s}"))
             }
         };
         last = u;
         let uf: Vec<f64> = u.as_slice().iter().map(|&v| v as f64).collect();
-        if crate::verify::input_slack(&task.property.input, &uf) < 0.0 {
-            bad_inputs += 1;
+        if crate::verify::input_slack(input, &uf) < 0.0 {
+            run.bad_inputs += 1;
         }
-        let row: Vec<String> = std::iter::once(format!("{}", k as f64 * problem.plant.period))
+        let refs: Vec<String> = K
+            .map(|K| {
+                K.iter()
+                    .zip(&uf)
+                    .map(|(k, u)| {
+                        let kx: f64 = k.iter().zip(&x).map(|(a, b)| a * b).sum();
+                        format!("{}", u - kx)
+                    })
+                    .collect()
+            })
+            .unwrap_or_default();
+        let row: Vec<String> = std::iter::once(format!("{}", k as f64 * period))
             .chain(x.iter().map(|v| format!("{v}")))
             .chain(uf.iter().map(|v| format!("{v}")))
-            .chain(K.iter().zip(&uf).map(|(k, u)| {
-                let kx: f64 = k.iter().zip(&x).map(|(a, b)| a * b).sum();
-                format!("{}", u - kx)
-            }))
+            .chain(refs)
             .chain(std::iter::once(status))
             .collect();
         writeln!(out, "{}", row.join(",")).into_diagnostic()?;
-        x = task.plant.step(0, &x, &uf);
+        if k == steps {
+            break;
+        }
+        match advance(&x, &uf) {
+            Ok(next) => x = next,
+            Err(e) => {
+                run.stopped = Some(e);
+                break;
+            }
+        }
     }
-    out.flush().into_diagnostic()?;
-    eprintln!("{}", verdict(&task, &states, outside, bad_inputs));
-    Ok(Exit::Success)
+    Ok(run)
 }
 
 /// The run's verdict, for people (module doc). Distances are Euclidean.

@@ -1,9 +1,9 @@
 //! `synth` and `verify` on a feedback-linearizable spec (Example 4.9, `examples/fl-4-9.toml`): synthesis
 //! covers Init, the image runs on the plant itself with no violation (exit 0), `verify` re-proves the radii
 //! from the bytes and runs the plant again (exit 0), `--attack` searches the balls on the plant itself
-//! with no violation; what is not built for this class (`simulate`, `--import`, PWA mode) is bad input
-//! (exit 2) with the reason, and the same image against a
-//! spec whose plant turns faster (a/I = b/I = 1, so its mismatch bound is larger) is refused (exit 1).
+//! with no violation, `simulate` runs the plant itself (CSV and verdict); what is not built for this
+//! class (`--import`, PWA mode) is bad input (exit 2) with the reason, and the same image against a spec
+//! whose plant turns faster (a/I = b/I = 1, so its mismatch bound is larger) is refused (exit 1).
 
 use std::process::Command;
 
@@ -94,13 +94,36 @@ fn fl_synth_then_verify() {
     );
     assert!(stdout.contains("certificate failure"), "{stdout}");
 
+    // `simulate` runs the plant itself through the image's maps: a CSV of the plant's states and
+    // inputs, and a verdict judged in ξ.
     let o = bin()
         .args(["simulate", spec.to_str().unwrap(), img.to_str().unwrap()])
         .args(["--x0", "0,0,0,1,0,0"])
         .output()
         .unwrap();
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(0), "{stderr}");
+    let mut lines = stdout.lines();
+    assert_eq!(lines.next(), Some("# x0 = 0, 0, 0, 1, 0, 0"));
+    assert_eq!(lines.next(), Some("t,x1,x2,x3,x4,x5,x6,u1,u2,status"));
+    assert!(lines.all(|l| l.ends_with(",ok")), "{stdout}");
+    assert!(stderr.contains("verdict: Goal reached at step"), "{stderr}");
+    assert!(
+        stderr.contains("0 steps out of the certified envelope"),
+        "{stderr}"
+    );
+    assert!(
+        stderr.contains("0 inputs outside the input set"),
+        "{stderr}"
+    );
+    let o = bin()
+        .args(["simulate", spec.to_str().unwrap(), img.to_str().unwrap()])
+        .args(["--x0", "0,0,0,1"])
+        .output()
+        .unwrap();
     assert_eq!(o.status.code(), Some(2));
-    assert!(String::from_utf8_lossy(&o.stderr).contains("verify"));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("the plant has n = 6"));
 
     let pwa = dir.join("pwa.toml");
     std::fs::write(
