@@ -209,9 +209,10 @@ fn equilibrium_program(task: &Task, g: f64, s: f64, balanced: bool) -> Option<Ve
             }
         }
         ConvexPiece::Ellipsoid { C, c, Q } => {
-            let S = PdRoots::new(Q.as_ref())?.sqrt * C;
+            let root = PdRoots::new(Q.as_ref())?.sqrt;
+            let S = &root * C;
             let k = spectral_norm(S.as_ref());
-            let Sc = mat_vec(PdRoots::new(Q.as_ref())?.sqrt.as_ref(), c);
+            let Sc = mat_vec(root.as_ref(), c);
             let pd = S.nrows();
             // [[1 − τ g k, wᵀ], [w, (1 − τ g k) I]] ⪰ 0 with w = S x − Q^{1/2} c.
             let constant = Mat::from_fn(pd + 1, pd + 1, |r, q| match (r, q) {

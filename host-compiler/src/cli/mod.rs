@@ -237,6 +237,25 @@ pub(crate) fn image_matches_spec(
     Ok(())
 }
 
+/// A feedback-linearizable task's model maps against the image's (`verify::nonlinear::check_maps`): an
+/// image made for another model, or without maps, is bad input naming both files.
+pub(crate) fn maps_match(
+    maps: &crate::model::feedback_linearizable::FlMaps,
+    img: &shared_types::image::Image<'_>,
+    image: &std::path::Path,
+    spec: &std::path::Path,
+) -> Result<(), Failure> {
+    crate::verify::nonlinear::check_maps(maps, img)
+        .map_err(|e| {
+            miette::miette!(
+                "{} does not belong to {}: {e}",
+                image.display(),
+                spec.display()
+            )
+        })
+        .bad_input()
+}
+
 /// The task of a validated spec; a spec that makes no task (its plant cannot be sampled, a set cannot be
 /// built) is bad input.
 pub(crate) fn task_of(problem: crate::spec::Problem) -> Result<crate::task::Task, Failure> {

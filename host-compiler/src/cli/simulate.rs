@@ -10,7 +10,8 @@
 //! plant's states and inputs and no reference columns (the law's w is not the plant's input).
 
 use super::{
-    decode_image, image_matches_spec, read_image, task_of, BadInput, Exit, Failure, Outcome,
+    decode_image, image_matches_spec, maps_match, read_image, task_of, BadInput, Exit, Failure,
+    Outcome,
 };
 use miette::IntoDiagnostic;
 use shared_types::eval::Controller;
@@ -87,15 +88,7 @@ pub fn run(a: &SimulateArgs) -> Outcome {
         Some(maps) => {
             // A feedback-linearizable plant: the image's maps around the law (`step_plant`), the plant
             // flowed by Dop853, judged in ξ; no reference column (the law's w is not the plant's input).
-            crate::verify::nonlinear::check_maps(maps, &img)
-                .map_err(|e| {
-                    miette::miette!(
-                        "{} does not belong to {}: {e}",
-                        a.image.display(),
-                        a.spec.display()
-                    )
-                })
-                .bad_input()?;
+            maps_match(maps, &img, &a.image, &a.spec)?;
             check_x0(&a.x0, maps.n_plant)?;
             let input = crate::property::input_bound(&maps.input);
             let h = maps.plant.period();

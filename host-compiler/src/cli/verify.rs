@@ -73,15 +73,7 @@ pub fn run(a: &VerifyArgs) -> Outcome {
     }
     let linearized = task.plant.linearization().is_some();
     if let Some(maps) = task.plant.linearization() {
-        crate::verify::nonlinear::check_maps(maps, &img)
-            .map_err(|e| {
-                miette::miette!(
-                    "{} does not belong to {}: {e}",
-                    a.image.display(),
-                    a.spec.display()
-                )
-            })
-            .bad_input()?;
+        super::maps_match(maps, &img, &a.image, &a.spec)?;
     }
     let rc = crate::verify::feedforward::recheck(&judge, &img)
         .map_err(|e| miette::miette!("{}: {e}", a.image.display()))?;

@@ -244,6 +244,19 @@ impl RunOutcome {
         }
     }
 
+    /// Records that the evaluator refused the state at sample `k`: at k = 0 the start lies outside the
+    /// cover (not a violation); before Goal an evaluator error; after Goal a violation of the terminal
+    /// law's certificate when that law was in charge (`terminal`), else nothing (the task has ended).
+    pub fn refused(&mut self, k: usize, terminal: bool) {
+        if k == 0 {
+            self.rejected = true;
+        } else if self.goal_step.is_none() {
+            self.evaluator_error = true;
+        } else {
+            self.terminal_violation |= terminal;
+        }
+    }
+
     pub fn violated(&self) -> bool {
         !self.rejected
             && (!self.reached_goal
@@ -361,8 +374,9 @@ fn run_until(
     check(&x, &mut out, true, false);
     for k in 0..=last {
         visit(&x);
+        // Only samples within the horizon get here before Goal (the loop ends at T without it).
         if out.goal_step.is_none() && judge.goal().contains(&x) {
-            out.reached_goal = k <= judge.steps;
+            out.reached_goal = true;
             out.goal_step = Some(k);
         }
         if margins && k <= judge.steps {
@@ -377,13 +391,7 @@ fn run_until(
         let u: Vec<f64> = match ctl.step(&xf) {
             Ok(u) => u.as_slice().iter().map(|&v| v as f64).collect(),
             Err(_) => {
-                if k == 0 {
-                    out.rejected = true;
-                } else if out.goal_step.is_none() {
-                    out.evaluator_error = true;
-                } else {
-                    out.terminal_violation |= ctl.in_terminal_phase();
-                }
+                out.refused(k, ctl.in_terminal_phase());
                 return out;
             }
         };

@@ -93,11 +93,8 @@ fn run_fl_inner(
         let u: Vec<f64> = match ctl.step_plant(&xf) {
             Ok(u) => u.as_slice().iter().map(|&v| v as f64).collect(),
             Err(_) => {
-                if k == 0 {
-                    out.rejected = true;
-                } else if out.goal_step.is_none() {
-                    out.evaluator_error = true;
-                }
+                // An image with model maps carries no terminal law.
+                out.refused(k, false);
                 return out;
             }
         };

@@ -565,13 +565,7 @@ pub fn run_pwa(judge: &Judge<'_>, image: &Image<'_>, x0: &[f64]) -> (RunOutcome,
         let u: Vec<f64> = match ctl.step(&xf) {
             Ok(u) => u.as_slice().iter().map(|&v| v as f64).collect(),
             Err(_) => {
-                if k == 0 {
-                    out.rejected = true;
-                } else if out.goal_step.is_none() {
-                    out.evaluator_error = true;
-                } else {
-                    out.terminal_violation |= ctl.in_terminal_phase();
-                }
+                out.refused(k, ctl.in_terminal_phase());
                 break;
             }
         };
