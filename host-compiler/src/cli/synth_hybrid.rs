@@ -1,7 +1,8 @@
 //! `synth` for a hybrid plant (`[[plant.location]]` in the spec): runs across internal edges, certified by
 //! `certify::internal`, grown over Init ([`crate::synth::hybrid::synthesize_hybrid`]), verified by Monte
 //! Carlo against the exact hybrid flow through the shared evaluator. Writes `controller.img` (only when
-//! the verification passed) and `certificate.json`; exit status as for `synth` ([`super::Exit`]).
+//! the verification passed), `certificate.json` and `report.html` ([`crate::report::hybrid`]); exit
+//! status as for `synth` ([`super::Exit`]).
 
 use super::synth::write_atomic;
 use super::{BadInput, Exit, Failure, Outcome, SynthArgs};
@@ -94,6 +95,8 @@ pub fn run(a: &SynthArgs, problem: crate::spec::Problem) -> Outcome {
         serde_json::to_string_pretty(&cert).into_diagnostic()?,
     )
     .into_diagnostic()?;
+    let page = crate::report::hybrid::render(&task, &a.spec.display().to_string(), &s);
+    std::fs::write(a.out.join("report.html"), page).into_diagnostic()?;
     let deltas: Vec<f64> = s.runs.iter().map(|r| r.delta()).collect();
     let (dmin, dmax) = deltas
         .iter()

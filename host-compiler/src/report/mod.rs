@@ -6,6 +6,7 @@
 pub mod data;
 pub mod format;
 pub mod html;
+pub mod hybrid;
 pub mod optimization;
 pub mod planar;
 pub mod plots;

@@ -10,7 +10,7 @@ use crate::synth::Synthesis;
 use faer::Mat;
 
 /// The 2×2 matrix M with M Mᵀ = S (symmetric PSD), as an ellipse generator.
-fn root2(S: &Mat<f64>) -> [[f64; 2]; 2] {
+pub(super) fn root2(S: &Mat<f64>) -> [[f64; 2]; 2] {
     let R = sym_fn(S.as_ref(), |l| l.max(0.0).sqrt()).unwrap_or_else(|| Mat::zeros(2, 2));
     [[R[(0, 0)], R[(0, 1)]], [R[(1, 0)], R[(1, 1)]]]
 }

@@ -27,8 +27,10 @@ use faer::Mat;
 /// tried (a deeper target makes the nominal cross the plane more steeply, so that the tube's crossing
 /// points spread less; a location may not reach the deeper ones).
 pub const GUARD_DEPTHS: [f64; 3] = [0.05, 0.2, 0.45];
-/// Segment durations tried, as fractions of the horizon T.
-pub const DURATIONS: [f64; 3] = [0.1, 0.2, 0.35];
+/// Segment durations tried, as fractions of the horizon T. The short ones matter where the location's
+/// own flow past the guard runs into Unsafe (Example 5.5: the left location's equilibria for |u| ≤ 3 lie
+/// inside the wall), so the extended segment must end soon after its crossing.
+pub const DURATIONS: [f64; 6] = [0.04, 0.05, 0.07, 0.1, 0.2, 0.35];
 /// The last segment's duration at most, as a fraction of T (what is left of T after the earlier
 /// segments, if less).
 pub const LAST_DURATION: f64 = 0.4;

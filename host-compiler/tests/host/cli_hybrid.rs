@@ -1,5 +1,5 @@
 //! `synth` and `verify` on a hybrid spec (Example 4.25 with a budget of one run): synth certifies,
-//! re-proves and verifies an image and exits 3 (short of the coverage target); verify re-proves the
+//! re-proves and verifies an image, writes its report, and exits 3 (short of the coverage target); verify re-proves the
 //! same image from its bytes and runs it against the exact hybrid flow (exit 0), `--attack` searches its
 //! ball on that flow with no violation, and `verify` refuses an image
 //! whose stored radius was enlarged (exit 1).
@@ -45,6 +45,31 @@ fn hybrid_synth_then_verify() {
         serde_json::from_str(&std::fs::read_to_string(out.join("certificate.json")).unwrap())
             .unwrap();
     assert_eq!(cert["runs"].as_array().unwrap().len(), 1);
+    // The report: the verdict, the automaton with its identity resets, a plane per other coordinate
+    // paired with the guard's x1, and the run's two segments with what binds each.
+    let page = std::fs::read_to_string(out.join("report.html")).unwrap();
+    assert!(
+        page.contains("<h1>Certified and verified</h1>"),
+        "{page:.400}"
+    );
+    assert!(page.contains("left → right") && page.contains("identity"));
+    assert_eq!(
+        page.matches("<svg").count(),
+        2,
+        "planes (x1, x2) and (x1, x3)"
+    );
+    assert!(page.contains(">x3<") || page.contains("x3</text>"));
+    let delta = cert["runs"][0]["certificate"]["segments"][0]["delta"]
+        .as_f64()
+        .unwrap();
+    assert!(
+        page.contains(&format!(
+            "<td>{}</td>",
+            host_compiler::report::format::num(delta)
+        )),
+        "the table shows segment 0's δ {delta}"
+    );
+    assert!(page.contains("Theorem 4.7 (Goal, Unsafe, Input)"));
 
     let o = bin()
         .args(["verify", spec.to_str().unwrap(), img.to_str().unwrap()])

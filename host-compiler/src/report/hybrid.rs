@@ -1,0 +1,432 @@
+//! `report.html` for a hybrid plant with internal switching (§4.2.2, Examples 4.25, 5.5, 5.6): the
+//! automaton, the verdict, and per plotting plane the nominal segments coloured by location, their tubes
+//! (the P_ℓ-balls of radius δᵢ around the samples, projected), the guard of the edge taken, the next
+//! segment's start ball that the landings must hit (the "hole" of Lemma 4.23's safe transition, drawn
+//! dashed: its section by the guard plane is the hole), and the cover of Init by the runs' first balls;
+//! then a table of every run's segments (δᵢ, what binds it, the event samples, the rows kept).
+//!
+//! The planes pair the guard's main coordinate (the largest component of the first edge's normal) with
+//! each other state coordinate, at most [`PLANES`] of them. Sets are projected: an ellipsoid or ball to
+//! its shadow ellipse, a box to its sides; a set that does not constrain both coordinates is not drawn.
+
+use super::format::{escape, num};
+use super::plots::{trajectory_color, DynResult, GOAL_COLOR, UNSAFE_COLOR};
+use super::present::root2;
+use crate::model::hybrid::EdgeKind;
+use crate::spec::sets::{Coords, SetDesc, Shape};
+use crate::synth::hybrid::{HybridSynthesis, HybridTask};
+use faer::Mat;
+use plotters::prelude::*;
+
+/// Most runs whose nominals and tubes are drawn (every run's first ball is drawn in the cover).
+const SHOWN: usize = 8;
+/// Most plotting planes.
+const PLANES: usize = 3;
+/// Tubes drawn per segment.
+const TUBES: usize = 10;
+
+/// Colour of location `loc`.
+fn location_color(loc: usize) -> RGBColor {
+    const PALETTE: [RGBColor; 8] = [
+        RGBColor(31, 119, 180),
+        RGBColor(255, 127, 14),
+        RGBColor(148, 103, 189),
+        RGBColor(140, 86, 75),
+        RGBColor(227, 119, 194),
+        RGBColor(23, 190, 207),
+        RGBColor(188, 189, 34),
+        RGBColor(127, 127, 127),
+    ];
+    PALETTE[loc % PALETTE.len()]
+}
+
+/// The page, self-contained (inline SVG).
+pub fn render(task: &HybridTask, spec: &str, s: &HybridSynthesis) -> String {
+    let problem = &task.problem;
+    let modes = task.plant.modes();
+    let mut h = String::new();
+    h.push_str(
+        "<!doctype html><html><head><meta charset=\"utf-8\"><title>Hybrid synthesis report</title>",
+    );
+    h.push_str("<style>body{font-family:sans-serif;max-width:1000px;margin:2em auto;color:#222}table{border-collapse:collapse;margin:0.5em 0}td,th{border:1px solid #ccc;padding:2px 8px;text-align:right}td.l{text-align:left}code{background:#f4f4f4;padding:1px 4px}.key{display:inline-block;width:1em;height:0.7em;margin:0 4px 0 12px}</style></head><body>");
+    let unproved = s.recheck.iter().filter(|c| !c.ok).count();
+    let ok = s.verify.violations == 0 && unproved == 0 && !s.runs.is_empty();
+    h.push_str(&format!(
+        "<h1>{}</h1><p>Spec <code>{}</code>: a hybrid automaton of {} locations and {} edges, reach-avoid on [0, {}] s sampled every {} s. Runs go {}.</p>",
+        if ok { "Certified and verified" } else { "NOT certified" },
+        escape(spec),
+        modes.len(),
+        task.plant.edges().len(),
+        num(problem.horizon),
+        num(task.plant.period()),
+        escape(&task.path.iter().map(|&l| modes[l].name.as_str()).collect::<Vec<_>>().join(" → ")),
+    ));
+    h.push_str(&format!(
+        "<p>{} runs ({} seeds tried, {} refused); coverage of Init {} (lower bound {} at {} confidence, {} samples); stop: {}; {} s.</p>",
+        s.runs.len(),
+        s.seeds_tried,
+        s.refused.len(),
+        num(s.coverage.mean),
+        num(s.coverage.lower),
+        num(s.coverage.confidence),
+        s.coverage.samples,
+        escape(&s.stop),
+        num(s.seconds),
+    ));
+    h.push_str(&format!(
+        "<p>Re-proved from the image bytes: {} of {} runs. Monte Carlo on the exact hybrid flow (events found between samples) through the shared evaluator: {} runs ({} switched, at most {} events; {} boundary starts refused by the f32 selection), <b>{} violations</b>; least distance to Unsafe {}.</p>",
+        s.recheck.len() - unproved,
+        s.recheck.len(),
+        s.verify.runs - s.verify.rejected,
+        s.verify.switched,
+        s.verify.max_events,
+        s.verify.rejected,
+        s.verify.violations,
+        num(s.verify.min_unsafe_distance),
+    ));
+    if let Some(v) = &s.verify.first_violation {
+        h.push_str(&format!("<p><b>First violation:</b> {}</p>", escape(v)));
+    }
+
+    h.push_str(
+        "<h2>Automaton</h2><table><tr><th>edge</th><th>kind</th><th>guard</th><th>reset</th></tr>",
+    );
+    for e in task.plant.edges() {
+        let guard = e
+            .guard
+            .a
+            .iter()
+            .zip(&e.guard.b)
+            .map(|(a, b)| format!("{} ≤ {}", linear_form(a), num(*b)))
+            .collect::<Vec<_>>()
+            .join(", ");
+        h.push_str(&format!(
+            "<tr><td class=l>{} → {}</td><td class=l>{}</td><td class=l>{}</td><td class=l>{}</td></tr>",
+            escape(&modes[e.from].name),
+            escape(&modes[e.to].name),
+            match e.kind {
+                EdgeKind::Internal => "internal (taken when the flow enters the guard)",
+                EdgeKind::Forced => "forced (the controller's choice)",
+            },
+            escape(&guard),
+            escape(&reset_text(&e.reset)),
+        ));
+    }
+    h.push_str("</table><p>");
+    for (l, m) in modes.iter().enumerate() {
+        let c = location_color(l);
+        h.push_str(&format!(
+            "<span class=key style=\"background:rgb({},{},{})\"></span>{}",
+            c.0,
+            c.1,
+            c.2,
+            escape(&m.name)
+        ));
+    }
+    h.push_str("</p>");
+
+    h.push_str("<h2>Runs in the state space</h2><p>Nominal segments in their location's colour, with tubes (the certified ball of each segment around its samples, projected); the guard of the edge taken (black line); the next segment's start ball, dashed: every run near the nominal lands inside it (Lemma 4.23; its section by the guard is the safe hole); the runs' first balls over Init (blue, the cover). Goal green, Unsafe red, Init grey.</p>");
+    for pl in planes(task) {
+        match plane_plot(task, s, pl) {
+            Ok(svg) => h.push_str(&svg),
+            Err(e) => h.push_str(&format!("<p>(plot failed: {})</p>", escape(&e.to_string()))),
+        }
+    }
+
+    h.push_str("<h2>Segments</h2><table><tr><th>run</th><th>x̃(0)</th><th>δ stored</th><th>segment</th><th>location</th><th>δᵢ</th><th>what binds δᵢ</th><th>events (samples)</th><th>rows</th></tr>");
+    for (i, r) in s.runs.iter().enumerate() {
+        for (j, (seg, &loc)) in r.certificate.segments.iter().zip(&task.path).enumerate() {
+            let head = if j == 0 {
+                format!(
+                    "<td>{}</td><td class=l>{}</td><td>{}</td>",
+                    i,
+                    escape(&super::format::vector(&r.nominals[0].x[0])),
+                    num(r.certificate.delta_stored as f64)
+                )
+            } else {
+                "<td></td><td></td><td></td>".to_string()
+            };
+            h.push_str(&format!(
+                "<tr>{head}<td>{j}</td><td class=l>{}</td><td>{}</td><td class=l>{}</td><td>{}</td><td>{}</td></tr>",
+                escape(&modes[loc].name),
+                num(seg.delta),
+                escape(seg.binding),
+                seg.events.map_or("—".to_string(), |(a, b)| format!("{a}–{b}")),
+                seg.rows,
+            ));
+        }
+    }
+    h.push_str("</table>");
+    if !s.refused.is_empty() {
+        h.push_str("<h2>Refused seeds</h2><table><tr><th>x0</th><th>why</th></tr>");
+        for (x, why) in s.refused.iter().take(20) {
+            h.push_str(&format!(
+                "<tr><td class=l>{}</td><td class=l>{}</td></tr>",
+                escape(&super::format::vector(x)),
+                escape(why)
+            ));
+        }
+        if s.refused.len() > 20 {
+            h.push_str(&format!(
+                "<tr><td class=l colspan=2>… and {} more</td></tr>",
+                s.refused.len() - 20
+            ));
+        }
+        h.push_str("</table>");
+    }
+    h.push_str("</body></html>");
+    h
+}
+
+/// `a₁x1 + a₂x2 …` with the zero terms left out.
+fn linear_form(a: &[f64]) -> String {
+    let terms: Vec<String> = a
+        .iter()
+        .enumerate()
+        .filter(|(_, v)| **v != 0.0)
+        .map(|(i, v)| match *v {
+            1.0 => format!("x{}", i + 1),
+            -1.0 => format!("−x{}", i + 1),
+            v => format!("{}·x{}", num(v), i + 1),
+        })
+        .collect();
+    if terms.is_empty() {
+        "0".into()
+    } else {
+        terms.join(" + ")
+    }
+}
+
+/// "identity", or x ↦ R x + r row by row.
+fn reset_text(r: &crate::model::hybrid::Reset) -> String {
+    let n = r.R.nrows();
+    let identity = r.r.iter().all(|&v| v == 0.0)
+        && (0..n).all(|i| (0..r.R.ncols()).all(|j| r.R[(i, j)] == if i == j { 1.0 } else { 0.0 }));
+    if identity {
+        return "identity".into();
+    }
+    (0..n)
+        .map(|i| {
+            let row: Vec<f64> = (0..r.R.ncols()).map(|j| r.R[(i, j)]).collect();
+            format!("x{}′ = {} + {}", i + 1, linear_form(&row), num(r.r[i]))
+        })
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// The plotting planes (module doc).
+fn planes(task: &HybridTask) -> Vec<[usize; 2]> {
+    let n = task.plant.modes()[0].flow.n();
+    if n < 2 {
+        return vec![];
+    }
+    let g = task
+        .edges
+        .first()
+        .and_then(|&e| task.plant.edges()[e].guard.a.first())
+        .map(|a| {
+            (0..n)
+                .max_by(|&i, &j| a[i].abs().total_cmp(&a[j].abs()))
+                .unwrap_or(0)
+        })
+        .unwrap_or(0);
+    (0..n)
+        .filter(|&j| j != g)
+        .take(PLANES)
+        .map(|j| [g, j])
+        .collect()
+}
+
+/// The shadow of `{x : (x − c)ᵀ E (x − c) ≤ r²}` on the plane `pl`: centre (c_i, c_j) and generator of
+/// r²·(E⁻¹)[pl, pl].
+fn shadow(E_inv: &Mat<f64>, c: &[f64], r: f64, pl: [usize; 2]) -> (Vec<(f64, f64)>, [f64; 2]) {
+    let S = Mat::from_fn(2, 2, |a, b| r * r * E_inv[(pl[a], pl[b])]);
+    let e = super::data::Ellipse2 {
+        center: [c[pl[0]], c[pl[1]]],
+        M: root2(&S),
+    };
+    let pts = super::planar::ellipse_points(&e, 64)
+        .into_iter()
+        .map(|p| (p[0], p[1]))
+        .collect();
+    (pts, e.center)
+}
+
+/// A spec set's shadow on the plane, as a polygon (`None` when it does not constrain both coordinates
+/// or is a polytope).
+fn set_shadow(d: &SetDesc, n: usize, pl: [usize; 2]) -> Option<Vec<(f64, f64)>> {
+    let idx: Vec<usize> = match &d.coords {
+        Coords::State => (0..n).collect(),
+        Coords::StateIndices(v) => v.clone(),
+        Coords::Output { .. } => return None,
+    };
+    let (a, b) = (
+        idx.iter().position(|&i| i == pl[0])?,
+        idx.iter().position(|&i| i == pl[1])?,
+    );
+    let d2 = idx.len();
+    match &d.shape {
+        Shape::Ball { center, radius } => {
+            let I = Mat::<f64>::identity(d2, d2);
+            Some(shadow(&I, center, *radius, [a, b]).0)
+        }
+        Shape::Ellipsoid { center, Q } => {
+            let Qm = Mat::from_fn(d2, d2, |i, j| Q.data[i * d2 + j]);
+            let Qi = crate::linalg::sym_fn(Qm.as_ref(), |l| if l > 0.0 { 1.0 / l } else { 0.0 })?;
+            Some(shadow(&Qi, center, 1.0, [a, b]).0)
+        }
+        Shape::Box { lo, hi } => Some(vec![
+            (lo[a], lo[b]),
+            (hi[a], lo[b]),
+            (hi[a], hi[b]),
+            (lo[a], hi[b]),
+        ]),
+        Shape::Polytope { .. } => None,
+    }
+}
+
+/// Init's box on the plane.
+fn init_box(b: &crate::spec::InitBox, pl: [usize; 2]) -> Vec<(f64, f64)> {
+    let (lo, hi) = (&b.lo, &b.hi);
+    vec![
+        (lo[pl[0]], lo[pl[1]]),
+        (hi[pl[0]], lo[pl[1]]),
+        (hi[pl[0]], hi[pl[1]]),
+        (lo[pl[0]], hi[pl[1]]),
+    ]
+}
+
+fn plane_plot(task: &HybridTask, s: &HybridSynthesis, pl: [usize; 2]) -> DynResult<String> {
+    let problem = &task.problem;
+    let n = task.plant.modes()[0].flow.n();
+    let inv: Vec<Mat<f64>> = task.constants.iter().map(|c| c.roots.inv.clone()).collect();
+    let shown = &s.runs[..s.runs.len().min(SHOWN)];
+    // Frame: the nominals, Init and Goal (Unsafe may be far larger; it is clipped).
+    let (mut xs, mut ys) = (Vec::new(), Vec::new());
+    for r in shown {
+        for nom in &r.nominals {
+            for x in &nom.x {
+                xs.push(x[pl[0]]);
+                ys.push(x[pl[1]]);
+            }
+        }
+    }
+    let init = init_box(&problem.init, pl);
+    for (x, y) in init
+        .iter()
+        .copied()
+        .chain(set_shadow(&problem.goal, n, pl).unwrap_or_default())
+    {
+        xs.push(x);
+        ys.push(y);
+    }
+    let span = |v: &[f64]| {
+        let (a, b) = v
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
+                (a.min(x), b.max(x))
+            });
+        if !a.is_finite() {
+            return (-1.0, 1.0);
+        }
+        let p = 0.08 * (b - a).max(1e-9);
+        (a - p, b + p)
+    };
+    let ((x0, x1), (y0, y1)) = (span(&xs), span(&ys));
+    let width = 900u32;
+    let height = ((width as f64) * (y1 - y0) / (x1 - x0)).clamp(300.0, 700.0) as u32;
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, (width, height)).into_drawing_area();
+        root.fill(&WHITE)?;
+        let mut chart = ChartBuilder::on(&root)
+            .margin(10)
+            .x_label_area_size(30)
+            .y_label_area_size(45)
+            .build_cartesian_2d(x0..x1, y0..y1)?;
+        chart
+            .configure_mesh()
+            .x_desc(format!("x{}", pl[0] + 1))
+            .y_desc(format!("x{}", pl[1] + 1))
+            .draw()?;
+        let grey = RGBColor(120, 120, 120);
+        chart.draw_series([Polygon::new(init, grey.mix(0.25).filled())])?;
+        for (d, color) in std::iter::once((&problem.goal, GOAL_COLOR))
+            .chain(problem.unsafe_sets.iter().map(|u| (u, UNSAFE_COLOR)))
+        {
+            if let Some(poly) = set_shadow(d, n, pl) {
+                chart.draw_series([Polygon::new(poly, color.mix(0.25).filled())])?;
+            }
+        }
+        // The cover: every run's first ball.
+        let cover = RGBColor(60, 110, 220);
+        for r in &s.runs {
+            let (poly, _) = shadow(
+                &inv[task.path[0]],
+                &r.nominals[0].x[0],
+                r.certificate.delta_stored as f64,
+                pl,
+            );
+            chart.draw_series([Polygon::new(poly, cover.mix(0.18).filled())])?;
+        }
+        // The guard of each edge taken, where its normal lies in the plane.
+        for &e in &task.edges {
+            for (a, &b) in task.plant.edges()[e]
+                .guard
+                .a
+                .iter()
+                .zip(&task.plant.edges()[e].guard.b)
+            {
+                let off: f64 = (0..n).filter(|i| !pl.contains(i)).map(|i| a[i].abs()).sum();
+                let (p, q) = (a[pl[0]], a[pl[1]]);
+                if off > 1e-12 || p.hypot(q) == 0.0 {
+                    continue;
+                }
+                let line: Vec<(f64, f64)> = if p.abs() >= q.abs() {
+                    vec![((b - q * y0) / p, y0), ((b - q * y1) / p, y1)]
+                } else {
+                    vec![(x0, (b - p * x0) / q), (x1, (b - p * x1) / q)]
+                };
+                chart.draw_series(LineSeries::new(line, BLACK.stroke_width(2)))?;
+            }
+        }
+        for (ri, r) in shown.iter().enumerate() {
+            for (j, (nom, seg)) in r.nominals.iter().zip(&r.certificate.segments).enumerate() {
+                let loc = task.path[j];
+                let color = location_color(loc);
+                let rows = seg.rows.clamp(1, nom.x.len());
+                // Tubes at evenly spaced samples of the kept rows.
+                for t in 0..TUBES {
+                    let k = t * (rows - 1) / (TUBES - 1).max(1);
+                    let (poly, _) = shadow(&inv[loc], &nom.x[k], seg.delta, pl);
+                    chart.draw_series([Polygon::new(poly, color.mix(0.10).filled())])?;
+                }
+                let pts: Vec<(f64, f64)> =
+                    nom.x[..rows].iter().map(|x| (x[pl[0]], x[pl[1]])).collect();
+                chart.draw_series(LineSeries::new(pts, color.stroke_width(2)))?;
+                // The next segment's start ball: where the landings must fall.
+                if let (Some(next), Some(nseg)) =
+                    (r.nominals.get(j + 1), r.certificate.segments.get(j + 1))
+                {
+                    let nloc = task.path[j + 1];
+                    let (mut poly, _) = shadow(&inv[nloc], &next.x[0], nseg.delta, pl);
+                    poly.push(poly[0]);
+                    chart.draw_series(DashedLineSeries::new(
+                        poly,
+                        5,
+                        3,
+                        location_color(nloc).stroke_width(2),
+                    ))?;
+                }
+            }
+            let x = &r.nominals[0].x[0];
+            chart.draw_series([Circle::new(
+                (x[pl[0]], x[pl[1]]),
+                3,
+                trajectory_color(ri).filled(),
+            )])?;
+        }
+        root.present()?;
+    }
+    Ok(svg)
+}
