@@ -26,12 +26,7 @@ pub fn run(a: &SynthArgs, task: &Task, s: &Synthesis) -> Outcome {
         .map_err(|e| miette::miette!("the emitted PWA image is rejected: {e:?}"))?;
     let judge = Judge::new(task);
     let rc = recheck(&judge, &img).map_err(|e| miette::miette!(e))?;
-    let init_centres: Vec<Vec<f64>> = s
-        .trajectories
-        .iter()
-        .filter(|t| t.certificate.is_certified())
-        .map(|t| t.nominal.x[0].clone())
-        .collect();
+    let init_centres = s.init_centres();
     let mc = monte_carlo_pwa(
         &judge,
         &img,

@@ -54,11 +54,17 @@
 //! * How much the law compresses depends on how fast ṽ = ũ − K x̃ changes per sample against the fitting
 //!   tolerance, which (6.5) makes proportional to the per-step contraction 1 − ‖A + BK‖_P. Sampled finely
 //!   (Example 4.8 at 0.01 s), ṽ moves by up to ~0.05 per step against a tolerance of ~1e-3, and 1 972 data
-//!   points need 517 laws (greedy search). Example 6.4's setting is sampled at 0.06 s (examples/planar-vehicle-pwa.toml
+//!   points need 517 laws (greedy search). Example 6.4's setting is sampled at 0.06 s (examples/planar-vehicle-pwa-4.toml
 //!   explains why): 332 data points, 52 laws. A held reference ([`crate::trajectory::hold`], spec key
 //!   `reference_hold`) makes the data piecewise constant, which θ_j = 0 laws fit exactly (§6.2's
 //!   piecewise-constant case): at 0.01 s with 20-sample blocks, 54 laws for 1 964 points, at a certified
 //!   radius of 0.030 instead of 0.109 (the input bound binds at the end of the first block).
+//! * How densely the balls overlap bounds the tree, since a leaf lists every ball that meets its cell:
+//!   a leaf over a state that k balls contain lists at least k (≤ `MAX_LEAF_BALLS`). Consecutive balls of
+//!   a trajectory overlap when δ_i is large against the step x̃_i(κ+1) − x̃_i(κ), and a cover of all of
+//!   Init ends many trajectories in the same Goal. The cut by laws ([`TreeSplit::Laws`]) then lists the
+//!   overlapping balls on both sides of every cut and outgrows `MAX_TREE_NODES`; the cut on the data alone
+//!   ([`TreeSplit::Balanced`]) fits as long as the overlap does (examples/planar-vehicle-pwa.toml).
 //! * The f32 ball test accepts only states within δ_i, and accepts every state within r_in: each ball's
 //!   stored radius ρ_i is its own [`crate::certify::pwa_ball_radius`] for (x̃_i(κ), δ_i), and r_in its
 //!   [`crate::certify::pwa_ball_complete_radius`], both derived from the evaluator's whitened test
