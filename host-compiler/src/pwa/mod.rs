@@ -120,9 +120,11 @@ pub struct PwaSettings {
     pub max_depth: usize,
     /// Show a progress bar over the data points while learning. Default false.
     pub progress: bool,
-    /// Target number of balls per leaf: a node with one verified law is still split while it holds more
-    /// and a cut makes progress, since every ball of a leaf may be tested in one control step (the
-    /// out-of-envelope answer tests them all). ≥ 1. Default 8.
+    /// Target number of balls per leaf of the cut by laws ([`TreeSplit::Laws`]): a node with one verified
+    /// law is still split while it holds more and a cut makes progress, since every ball of a leaf may be
+    /// tested in one control step (the out-of-envelope answer tests them all). The cut on the data
+    /// ([`TreeSplit::Balanced`]) fills its leaves up to `MAX_LEAF_BALLS` instead: below the number of balls
+    /// over one state no cut makes progress. ≥ 1. Default 8.
     pub leaf_balls: usize,
     /// How the tree chooses its cuts ([`TreeSplit`]). Default [`TreeSplit::Auto`].
     pub split: TreeSplit,
