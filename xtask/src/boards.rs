@@ -46,7 +46,7 @@ pub const SHIPPED_IMAGES: &[(&str, &str)] = &[
         "pwa_double_integrator",
         "examples/double-integrator.toml, PWA",
     ),
-    ("pwa_example_6_4", "examples/planar-vehicle-pwa.toml, PWA"),
+    ("pwa_example_6_4", "examples/planar-vehicle-pwa-4.toml, PWA"),
     ("hybrid_4_25", "examples/hybrid-internal-4-25.toml"),
     ("hybrid_bench", "examples/hybrid-internal-4-25.toml"),
 ];

@@ -44,6 +44,17 @@ pub fn samples_needed(target: f64, confidence: f64) -> usize {
     n
 }
 
+/// The fresh samples of a final coverage estimate: enough that a fully covered sample proves the spec's
+/// coverage target at its confidence, and at least the spec's tolerance asks for. A target of 1 asks for
+/// no more than the tolerance: a finite sample never proves 100 %.
+pub fn final_samples(s: &crate::spec::SynthesisSettings) -> usize {
+    s.coverage_samples().max(if s.coverage_target < 1.0 {
+        samples_needed(s.coverage_target, s.confidence)
+    } else {
+        0
+    })
+}
+
 /// A coverage estimate with its Chernoff bounds.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct CoverageEstimate {

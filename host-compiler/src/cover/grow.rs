@@ -360,19 +360,9 @@ pub fn grow(
             (h.0)(count);
         }
     };
-    // Enough fresh samples that a fully covered sample proves the target (and the spec's tolerance).
-    let n_final =
-        problem
-            .synthesis
-            .coverage_samples()
-            .max(if problem.synthesis.coverage_target < 1.0 {
-                estimate::samples_needed(
-                    problem.synthesis.coverage_target,
-                    problem.synthesis.confidence,
-                )
-            } else {
-                0 // a finite sample never proves 100 %: the loop stops on its budget and says so
-            });
+    // Enough fresh samples that a fully covered sample proves the target (and the spec's tolerance); for a
+    // target of 1 the loop stops on its budget and says so.
+    let n_final = estimate::final_samples(&problem.synthesis);
     // Final, independent estimate on fresh samples through the f32 selection of the image.
     let estimate = |trajs: &[CoverTrajectory], round: u64| -> Result<Estimate, GrowError> {
         let image = feedforward_image(task, K, P, trajs)?;

@@ -29,6 +29,7 @@ use crate::caf::sdp::Sdp;
 use crate::linalg::mat_vec;
 use clarabel::solver::{DefaultSettingsBuilder, SolverStatus};
 use faer::Mat;
+use rayon::prelude::*;
 
 /// One learned affine law with its cluster of data points.
 #[derive(Clone, Debug)]
@@ -283,14 +284,22 @@ pub fn learn_laws(ctx: &PwaContext) -> (Vec<LearnedLaw>, Vec<usize>) {
             break;
         }
         // Seeds spread evenly over the unmapped points (data order: trajectory, then time).
+        // The seeds' searches are independent and run in parallel; their results are compared in seed
+        // order, so the laws do not depend on the thread count.
         let s = ctx.settings.seeds.max(1).min(unmapped.len());
+        let found: Vec<(LearnedLaw, Option<LearnedLaw>)> = (0..s)
+            .into_par_iter()
+            .map(|q| {
+                let seed = unmapped[q * unmapped.len() / s];
+                let greedy = grow(ctx, &free, seed);
+                let relaxed = (ctx.settings.thermal_cycles > 0)
+                    .then(|| thermal(ctx, &free, seed, laws.len() as u64 * 1_000 + q as u64))
+                    .flatten();
+                (greedy, relaxed)
+            })
+            .collect();
         let mut best: Option<LearnedLaw> = None;
-        for q in 0..s {
-            let seed = unmapped[q * unmapped.len() / s];
-            let greedy = grow(ctx, &free, seed);
-            let relaxed = (ctx.settings.thermal_cycles > 0)
-                .then(|| thermal(ctx, &free, seed, laws.len() as u64 * 1_000 + q as u64))
-                .flatten();
+        for (greedy, relaxed) in found {
             for c in std::iter::once(greedy).chain(relaxed) {
                 if best
                     .as_ref()

@@ -54,11 +54,17 @@
 //! * How much the law compresses depends on how fast ṽ = ũ − K x̃ changes per sample against the fitting
 //!   tolerance, which (6.5) makes proportional to the per-step contraction 1 − ‖A + BK‖_P. Sampled finely
 //!   (Example 4.8 at 0.01 s), ṽ moves by up to ~0.05 per step against a tolerance of ~1e-3, and 1 972 data
-//!   points need 517 laws (greedy search). Example 6.4's setting is sampled at 0.06 s (examples/planar-vehicle-pwa.toml
+//!   points need 517 laws (greedy search). Example 6.4's setting is sampled at 0.06 s (examples/planar-vehicle-pwa-4.toml
 //!   explains why): 332 data points, 52 laws. A held reference ([`crate::trajectory::hold`], spec key
 //!   `reference_hold`) makes the data piecewise constant, which θ_j = 0 laws fit exactly (§6.2's
 //!   piecewise-constant case): at 0.01 s with 20-sample blocks, 54 laws for 1 964 points, at a certified
 //!   radius of 0.030 instead of 0.109 (the input bound binds at the end of the first block).
+//! * How densely the balls overlap bounds the tree, since a leaf lists every ball that meets its cell:
+//!   a leaf over a state that k balls contain lists at least k (≤ `MAX_LEAF_BALLS`). Consecutive balls of
+//!   a trajectory overlap when δ_i is large against the step x̃_i(κ+1) − x̃_i(κ), and a cover of all of
+//!   Init ends many trajectories in the same Goal. The cut by laws ([`TreeSplit::Laws`]) then lists the
+//!   overlapping balls on both sides of every cut and outgrows `MAX_TREE_NODES`; the cut on the data alone
+//!   ([`TreeSplit::Balanced`]) fits as long as the overlap does (examples/planar-vehicle-pwa.toml).
 //! * The f32 ball test accepts only states within δ_i, and accepts every state within r_in: each ball's
 //!   stored radius ρ_i is its own [`crate::certify::pwa_ball_radius`] for (x̃_i(κ), δ_i), and r_in its
 //!   [`crate::certify::pwa_ball_complete_radius`], both derived from the evaluator's whitened test
@@ -114,10 +120,33 @@ pub struct PwaSettings {
     pub max_depth: usize,
     /// Show a progress bar over the data points while learning. Default false.
     pub progress: bool,
-    /// Target number of balls per leaf: a node with one verified law is still split while it holds more
-    /// and a cut makes progress, since every ball of a leaf may be tested in one control step (the
-    /// out-of-envelope answer tests them all). ≥ 1. Default 8.
+    /// Target number of balls per leaf of the cut by laws ([`TreeSplit::Laws`]): a node with one verified
+    /// law is still split while it holds more and a cut makes progress, since every ball of a leaf may be
+    /// tested in one control step (the out-of-envelope answer tests them all). The cut on the data
+    /// ([`TreeSplit::Balanced`]) fills its leaves up to `MAX_LEAF_BALLS` instead: below the number of balls
+    /// over one state no cut makes progress. ≥ 1. Default 8.
     pub leaf_balls: usize,
+    /// How the tree chooses its cuts ([`TreeSplit`]). Default [`TreeSplit::Auto`].
+    pub split: TreeSplit,
+}
+
+/// How the point-location tree of [`partition`] cuts a node.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+pub enum TreeSplit {
+    /// Separate the node's most frequent law from the others (the robust LP of [192], §6.3), falling back
+    /// to the most balanced cut; a node whose balls share no verified law is cut down to small mixed
+    /// leaves, and a node with one law down to `leaf_balls` balls.
+    Laws,
+    /// Cut on the data alone: the most balanced cut until a node holds at most `MAX_LEAF_BALLS` balls,
+    /// whatever their laws. Every listed ball carries the law verified for it and the evaluator applies
+    /// that law, so a mixed leaf is as sound as a pure one; the tree then only routes, and its size follows
+    /// how many balls overlap rather than how many law boundaries there are. Where the balls of F overlap
+    /// densely (every ball meeting a cell must be listed by its leaf), cutting by laws duplicates the
+    /// overlapping balls into both children at every level and the tree outgrows `MAX_TREE_NODES`.
+    Balanced,
+    /// [`TreeSplit::Laws`], and [`TreeSplit::Balanced`] when that tree exceeds the image capacities.
+    #[default]
+    Auto,
 }
 
 impl Default for PwaSettings {
@@ -132,6 +161,7 @@ impl Default for PwaSettings {
             max_depth: shared_types::capacity::MAX_TREE_DEPTH,
             progress: false,
             leaf_balls: 8,
+            split: TreeSplit::Auto,
         }
     }
 }
@@ -171,6 +201,7 @@ settings_builder!(PwaSettings, PwaSettingsBuilder {
     max_depth: usize,
     progress: bool,
     leaf_balls: usize,
+    split: TreeSplit,
 });
 
 /// Why no PWA controller could be built.
@@ -638,6 +669,34 @@ pub fn build_pwa(
         stats,
         learn_seconds,
         partition_seconds,
+    })
+}
+
+/// Coverage of Init by the PWA image's envelope (§2.5.2): uniform samples of Init, each counted covered
+/// when the image's own f32 point location accepts it (a ball of F, through the tree), with the one-sided
+/// Chernoff bounds at the spec's confidence. As many samples as the cover's final estimate
+/// ([`crate::cover::estimate::final_samples`]), drawn from their own seeded stream, so a fully accepted
+/// sample proves the spec's coverage target for the PWA law itself, not only for the feedforward cover it
+/// was learned from (whose balls the image stores with radii rounded down to what its f32 test certifies).
+pub fn coverage(
+    image: &shared_types::image::Image<'_>,
+    problem: &crate::spec::Problem,
+) -> crate::cover::estimate::CoverageEstimate {
+    use crate::cover::estimate::{estimate, final_samples, SampleBox};
+    use rand::SeedableRng;
+    let init = SampleBox {
+        lo: problem.init.lo.clone(),
+        hi: problem.init.hi.clone(),
+    };
+    let ctl = shared_types::eval::Controller::new(*image);
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(problem.seed ^ 0x09a0_c0fe);
+    let s = &problem.synthesis;
+    estimate(&init, final_samples(s), s.confidence, &mut rng, |x| {
+        let xf: Vec<f32> = x.iter().map(|&v| v as f32).collect();
+        matches!(
+            ctl.locate(&xf),
+            Some(shared_types::pwa::Region::Inside { .. })
+        )
     })
 }
 

@@ -18,6 +18,12 @@
 //! full rather than mixed, the most balanced of the coordinate and principal-direction cuts at the
 //! quartiles is used. Children with no ball are "outside the envelope".
 //!
+//! With [`TreeSplit::Balanced`] (chosen by `Auto` when the tree above exceeds a capacity) the laws play no
+//! part in the cuts: every node is cut by the most balanced candidate until it holds at most
+//! `MAX_LEAF_BALLS` balls, and every leaf is a mixed leaf as below. Where many balls overlap, the cuts
+//! between laws list the overlapping balls on both sides level after level, and that tree outgrows the
+//! capacities long before the balanced one does.
+//!
 //! A mixed node (no single law verified for all its balls) that is small (≤ `MIXED_LEAF_BALLS`), at the
 //! depth limit, or that no hyperplane can split (its balls overlap) becomes a *mixed leaf*: it lists every
 //! ball with a law verified for it, and the evaluator applies the law of the ball that contains the state
@@ -25,7 +31,7 @@
 //! [`super`] ("Reaching Goal within T"). Only `MAX_LEAF_BALLS` can leave balls out; they are counted in
 //! [`PartitionStats::dropped`] and the build fails rather than shrink F silently.
 
-use super::{CapacityExceeded, LearnedLaw, PwaContext, PwaError};
+use super::{CapacityExceeded, LearnedLaw, PwaContext, PwaError, TreeSplit};
 use crate::emit::Child;
 use crate::emit::{CertifiedBall, PwaImageBuilder, PwaLaw, PwaLeaf, TreeNode};
 use crate::linalg::round32;
@@ -52,13 +58,20 @@ pub struct PartitionStats {
     pub dropped: usize,
     /// Most balls listed by one leaf (ball tests of the worst control step).
     pub max_leaf_balls: usize,
+    /// The cuts the tree was built with (`Laws` or `Balanced`).
+    pub split: TreeSplit,
 }
+
+/// A cut `aᵀx ≤ b` with the balls its left and right sides list.
+type Cut = (Vec<f64>, f64, Vec<usize>, Vec<usize>);
 
 /// Largest mixed set (balls of several laws) that becomes a leaf without further cuts.
 const MIXED_LEAF_BALLS: usize = 4;
 
 struct Tree<'a> {
     ctx: &'a PwaContext,
+    /// [`TreeSplit::Laws`] or [`TreeSplit::Balanced`] ([`build_image`] resolves `Auto`).
+    split: TreeSplit,
     assignment: &'a [usize],
     admissible: &'a [Vec<usize>],
     b: PwaImageBuilder,
@@ -160,7 +173,7 @@ impl Tree<'_> {
     /// The cut that best balances the two children: every coordinate and the principal direction of the
     /// centres (in P-scaled units), each at its quartiles and median; minimises the larger child, then the
     /// sum. `None` if no candidate makes both children smaller than `set`.
-    fn balanced_cut(&self, set: &[usize]) -> Option<(Vec<f64>, f64, Vec<usize>, Vec<usize>)> {
+    fn balanced_cut(&self, set: &[usize]) -> Option<Cut> {
         let n = self.ctx.n;
         let mut dirs: Vec<Vec<f64>> = (0..n)
             .map(|j| (0..n).map(|i| if i == j { 1.0 } else { 0.0 }).collect())
@@ -215,6 +228,17 @@ impl Tree<'_> {
             }
         }
         best.map(|b| (b.2, b.3, b.4, b.5))
+    }
+
+    /// The cut as the image stores it (f32 values) and the balls each side lists for it, if it still makes
+    /// progress on `set`.
+    fn stored_cut(&self, set: &[usize], cut: Option<Cut>) -> Option<Cut> {
+        let (a, b, _, _) = cut?;
+        let a: Vec<f64> = a.iter().map(|&v| round32(v)).collect();
+        let b = round32(b);
+        let (l, r) = self.split_set(set, &a, b);
+        (l.len() < set.len() && r.len() < set.len() && a.iter().any(|v| *v != 0.0))
+            .then_some((a, b, l, r))
     }
 
     fn ball(&mut self, k: usize, law: usize) -> usize {
@@ -291,6 +315,9 @@ impl Tree<'_> {
         if set.is_empty() {
             return Ok(Child::Outside);
         }
+        if self.split == TreeSplit::Balanced {
+            return self.balanced_node(set, depth);
+        }
         let common = self.common_law(&set);
         if let Some(j) = common {
             if set.len() <= self.ctx.settings.leaf_balls.min(MAX_LEAF_BALLS) {
@@ -332,15 +359,7 @@ impl Tree<'_> {
             }
         }
         // The hyperplane as the image stores it (f32), and the balls each side lists for it.
-        let cut = cut
-            .or_else(|| self.balanced_cut(&set))
-            .and_then(|(a, b, _, _)| {
-                let a: Vec<f64> = a.iter().map(|&v| round32(v)).collect();
-                let b = round32(b);
-                let (l, r) = self.split_set(&set, &a, b);
-                (l.len() < set.len() && r.len() < set.len() && a.iter().any(|v| *v != 0.0))
-                    .then_some((a, b, l, r))
-            });
+        let cut = self.stored_cut(&set, cut.or_else(|| self.balanced_cut(&set)));
         let (a, b, l, r) = match cut {
             Some(c) => c,
             None => {
@@ -349,6 +368,34 @@ impl Tree<'_> {
                 return Ok(self.leaf(&set, j));
             }
         };
+        self.split(a, b, l, r, depth)
+    }
+
+    /// A node of [`TreeSplit::Balanced`]: a leaf once the set holds at most `MAX_LEAF_BALLS` balls (or at
+    /// the depth limit, or when no cut makes progress), labelled with its most frequent law; otherwise the
+    /// most balanced cut.
+    fn balanced_node(&mut self, set: Vec<usize>, depth: usize) -> Result<Child, PwaError> {
+        let cut = (set.len() > MAX_LEAF_BALLS && depth < self.ctx.settings.max_depth)
+            .then(|| self.stored_cut(&set, self.balanced_cut(&set)))
+            .flatten();
+        match cut {
+            Some((a, b, l, r)) => self.split(a, b, l, r, depth),
+            None => {
+                let j = self.most_common(&set);
+                Ok(self.leaf(&set, j))
+            }
+        }
+    }
+
+    /// An internal node for the cut `aᵀx ≤ b` (f32 values) with the balls each side lists, and its children.
+    fn split(
+        &mut self,
+        a: Vec<f64>,
+        b: f64,
+        l: Vec<usize>,
+        r: Vec<usize>,
+        depth: usize,
+    ) -> Result<Child, PwaError> {
         if self.b.nodes.len() >= shared_types::capacity::MAX_TREE_NODES {
             return Err(PwaError::Capacity {
                 exceeded: CapacityExceeded::TreeNodes {
@@ -371,13 +418,34 @@ impl Tree<'_> {
     }
 }
 
-/// Builds the tree and the image content for the learned laws (module doc). `admissible[k]` lists the laws
-/// verified for the ball of data point k. The caller sets the period and input box.
+/// Builds the tree and the image content for the learned laws (module doc) with the cuts of the settings'
+/// [`TreeSplit`] (`Auto`: by laws, and on the data alone when that tree exceeds a capacity).
+/// `admissible[k]` lists the laws verified for the ball of data point k. The caller sets the period and
+/// input box.
 pub fn build_image(
     ctx: &PwaContext,
     laws: &[LearnedLaw],
     assignment: &[usize],
     admissible: &[Vec<usize>],
+) -> Result<(PwaImageBuilder, PartitionStats), PwaError> {
+    match ctx.settings.split {
+        TreeSplit::Auto => match build_tree(ctx, laws, assignment, admissible, TreeSplit::Laws) {
+            Err(PwaError::Capacity { .. }) => {
+                build_tree(ctx, laws, assignment, admissible, TreeSplit::Balanced)
+            }
+            r => r,
+        },
+        split => build_tree(ctx, laws, assignment, admissible, split),
+    }
+}
+
+/// [`build_image`] with the cuts of `split` (`Laws` or `Balanced`).
+fn build_tree(
+    ctx: &PwaContext,
+    laws: &[LearnedLaw],
+    assignment: &[usize],
+    admissible: &[Vec<usize>],
+    split: TreeSplit,
 ) -> Result<(PwaImageBuilder, PartitionStats), PwaError> {
     let mut b = PwaImageBuilder::new(ctx.n, ctx.m, 0.0);
     let K = crate::linalg::to_row_major(ctx.K.as_ref());
@@ -388,6 +456,7 @@ pub fn build_image(
     }
     let mut t = Tree {
         ctx,
+        split,
         assignment,
         admissible,
         b,
@@ -420,6 +489,7 @@ pub fn build_image(
         ball_refs: t.b.total_ball_refs(),
         dropped: t.dropped,
         max_leaf_balls: t.b.leaves.iter().map(|l| l.balls.len()).max().unwrap_or(0),
+        split,
     };
     Ok((t.b, stats))
 }

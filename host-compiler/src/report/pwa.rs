@@ -21,6 +21,8 @@ pub struct PwaSummary {
     pub feedforward_image_bytes: usize,
     pub recheck: crate::verify::pwa::PwaRecheck,
     pub monte_carlo: crate::verify::pwa::PwaMonteCarlo,
+    /// Coverage of Init by the PWA image's own envelope ([`crate::pwa::coverage`]).
+    pub coverage: crate::cover::estimate::CoverageEstimate,
 }
 
 /// Plot-ready PWA data.
@@ -193,6 +195,7 @@ pub fn section(h: &mut String, data: &ReportData, r: &PwaReport) {
          <tr><th>data points (x̃ᵢ(κ), ṽᵢ(κ))</th><td class=\"n\">{}</td></tr>\
          <tr><th>trajectories</th><td class=\"n\">{}</td></tr>\
          <tr><th>fitting tolerance ε_fit (§6.2, mod. 1)</th><td class=\"n\">{}</td></tr>\
+         <tr><th>coverage of Init by F (the image's point location)</th><td class=\"n\">{} (lower bound {} at {} confidence, {} samples)</td></tr>\
          <tr><th>partitions (laws)</th><td class=\"n\">{} (dissertation: 110; ratio {})</td></tr>\
          <tr><th>tree</th><td class=\"n\">{} nodes, {} leaves, {} balls, {} references</td></tr>\
          <tr><th>worst-case depth</th><td class=\"n\">{} hyperplane tests, then at most {} ball tests</td></tr>\
@@ -206,6 +209,10 @@ pub fn section(h: &mut String, data: &ReportData, r: &PwaReport) {
         s.data_points,
         s.trajectories,
         num(s.eps_fit),
+        num(s.coverage.mean),
+        num(s.coverage.lower),
+        num(s.coverage.confidence),
+        s.coverage.samples,
         st.partitions,
         num(st.partitions as f64 / 110.0),
         st.nodes,

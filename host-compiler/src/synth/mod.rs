@@ -115,6 +115,18 @@ pub struct Synthesis {
     pub terminal: TerminalOutcome,
 }
 
+impl Synthesis {
+    /// The initial states x̃_i(0) of the certified trajectories: the centres of the cover's balls over Init,
+    /// from which a PWA image's Monte Carlo draws half its runs.
+    pub fn init_centres(&self) -> Vec<Vec<f64>> {
+        self.trajectories
+            .iter()
+            .filter(|t| t.certificate.is_certified())
+            .map(|t| t.nominal.x[0].clone())
+            .collect()
+    }
+}
+
 /// What the image does after the task (the spec's `[synthesis] terminal`).
 #[derive(Clone, Debug)]
 pub enum TerminalOutcome {

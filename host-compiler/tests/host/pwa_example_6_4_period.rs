@@ -1,4 +1,4 @@
-//! Why examples/planar-vehicle-pwa.toml samples at 0.06 s: Example 6.4 states σ_min(P − ÃᵀPÃ) > 0.1 for the
+//! Why examples/planar-vehicle-pwa-4.toml samples at 0.06 s: Example 6.4 states σ_min(P − ÃᵀPÃ) > 0.1 for the
 //! P and K it prints, and that holds for the planar vehicle's exact zero-order-hold loop only when the sample
 //! period is at least about 0.058 s. Ã = e^{(A + BK)h} is computed with the crate's `expm`; per axis the
 //! state is (position, velocity), P = [7.03 5.17; 5.17 6.85] (the printed off-diagonal sign, −5.17, makes
@@ -31,10 +31,17 @@ fn the_texts_margin_needs_a_period_of_at_least_0_058_s() {
     assert!(sigma_min(5.17, 0.059) > 0.1);
     let spec = host_compiler::spec::load(concat!(
         env!("CARGO_MANIFEST_DIR"),
-        "/../examples/planar-vehicle-pwa.toml"
+        "/../examples/planar-vehicle-pwa-4.toml"
     ))
     .expect("the example parses");
     assert!(sigma_min(5.17, spec.plant.period) > 0.1);
+    // The PWA law over the whole of Init samples at a longer period, where the margin holds too.
+    let full = host_compiler::spec::load(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../examples/planar-vehicle-pwa.toml"
+    ))
+    .expect("the example parses");
+    assert!(full.plant.period > spec.plant.period && sigma_min(5.17, full.plant.period) > 0.1);
     // With the printed sign the matrix is indefinite at any period.
     for h in [0.01, 0.06, 0.1] {
         assert!(sigma_min(-5.17, h) < 0.0, "h = {h}");

@@ -425,3 +425,50 @@ fn every_leaf_lists_its_balls_by_increasing_time_to_go() {
         "no leaf with two balls: the check checked nothing"
     );
 }
+
+/// The tree cut on the data alone (`TreeSplit::Balanced`, what `Auto` falls back to when the cut by laws
+/// outgrows a capacity) routes the same laws over the same balls: its image rechecks from the bytes, runs
+/// without violation from F, and accepts exactly the states of Init the tree cut by laws accepts (both list
+/// every ball meeting a leaf's cell, so each accepts the union of the balls).
+#[test]
+fn a_tree_cut_on_the_data_alone_rechecks_and_accepts_what_the_tree_cut_by_laws_accepts() {
+    use host_compiler::pwa::{build_pwa, TreeSplit};
+    let f = fixture();
+    assert_eq!(f.pwa.stats.split, TreeSplit::Laws);
+    let mut ctx = f.pwa.ctx.clone();
+    ctx.settings = ctx
+        .settings
+        .clone()
+        .to_builder()
+        .split(TreeSplit::Balanced)
+        .build()
+        .unwrap();
+    let balanced = build_pwa(
+        &f.task,
+        ctx,
+        f.pwa.laws.clone(),
+        f.pwa.assignment.clone(),
+        0.0,
+    )
+    .unwrap();
+    assert_eq!(balanced.stats.split, TreeSplit::Balanced);
+    assert_eq!(balanced.stats.partitions, f.pwa.stats.partitions);
+    assert!(balanced.stats.max_leaf_balls <= shared_types::capacity::MAX_LEAF_BALLS);
+    let judge = Judge::new(&f.task);
+    let img = shared_types::image::decode(&balanced.image).unwrap();
+    let rc = host_compiler::verify::pwa::recheck(&judge, &img).unwrap();
+    assert_eq!(rc.failures, 0, "{rc:?}");
+    let x0s = f.syn.init_centres();
+    let mc = host_compiler::verify::pwa::monte_carlo_pwa(&judge, &img, &x0s, 2_000, 7, 0).unwrap();
+    assert_eq!(
+        (mc.runs, mc.violations),
+        (2_000, 0),
+        "{:?}",
+        mc.first_violations
+    );
+    let laws_img = shared_types::image::decode(&f.pwa.image).unwrap();
+    let by_laws = host_compiler::pwa::coverage(&laws_img, &f.task.problem);
+    let by_data = host_compiler::pwa::coverage(&img, &f.task.problem);
+    assert!(by_data.covered > 0);
+    assert_eq!(by_data, by_laws);
+}

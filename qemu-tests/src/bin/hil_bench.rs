@@ -7,7 +7,7 @@
 //! walk, envelope test against the leaf's balls, law — over closed loops from states in the envelope F and
 //! from outside it (where every ball of the leaf is tested before "out of envelope"), measured with
 //! `-icount`, from ball centres and from the costliest starts the host evaluator finds just outside the
-//! balls. The row is measured on the Example 6.4 image (examples/planar-vehicle-pwa.toml);
+//! balls. The row is measured on the Example 6.4 image (examples/planar-vehicle-pwa-4.toml);
 //! `pwa_step_instructions_max_double_integrator` is the same measurement on the double-integrator image.
 //!
 //! Flash and RAM come from the ELF's allocated sections ([`qemu_tests::elf_size`]); RAM is the static part
@@ -86,7 +86,7 @@ fn run() -> Result<(), Box<dyn std::error::Error>> {
     let (pwa_max, _, pwa_stack) = pwa_step_max(
         concat!(
             env!("CARGO_MANIFEST_DIR"),
-            "/../examples/planar-vehicle-pwa.toml"
+            "/../examples/planar-vehicle-pwa-4.toml"
         ),
         "pwa_example_6_4",
     )?;

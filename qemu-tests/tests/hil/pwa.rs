@@ -1,5 +1,5 @@
 //! The PWA-feedback image (Ch. 6) on the target, for two covers: the double integrator
-//! (examples/double-integrator.toml) and the setting of Example 6.4 (examples/planar-vehicle-pwa.toml, the
+//! (examples/double-integrator.toml) and the setting of Example 6.4 (examples/planar-vehicle-pwa-4.toml, the
 //! planar vehicle of Example 4.8). Each controller is learned from its certified feedforward cover,
 //! re-checked with `verify::pwa::recheck`, embedded in the firmware, and run on the emulated Cortex-M4F from
 //! 50 initial states drawn uniformly in balls of the certified envelope F (half of them in the balls over
@@ -41,7 +41,7 @@ fn pwa_controller_of_example_6_4_meets_the_spec_on_the_target_from_50_initial_st
     run(
         concat!(
             env!("CARGO_MANIFEST_DIR"),
-            "/../examples/planar-vehicle-pwa.toml"
+            "/../examples/planar-vehicle-pwa-4.toml"
         ),
         "pwa_example_6_4",
         "Example 6.4",
