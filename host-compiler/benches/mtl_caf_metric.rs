@@ -17,7 +17,10 @@ use std::hint::black_box;
 use std::time::{Duration, Instant};
 
 fn main() {
-    let path = format!("{}/../examples/planar-vehicle.toml", env!("CARGO_MANIFEST_DIR"));
+    let path = format!(
+        "{}/../examples/planar-vehicle.toml",
+        env!("CARGO_MANIFEST_DIR")
+    );
     let p = host_compiler::spec::load(&path).expect("the shipped example parses");
     let ol = OwnedLoop::from_problem(&p).unwrap();
     let lp = ol.lp();
