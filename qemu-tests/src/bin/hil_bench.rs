@@ -54,14 +54,7 @@ fn main() -> ExitCode {
 
 fn run() -> Result<(), Box<dyn std::error::Error>> {
     let img = images::double_integrator()?;
-    let path = firmware::write_image("double_integrator", &img.bytes)?;
-    let elf = firmware::build(
-        "double_integrator",
-        &FirmwareConfig {
-            image: Some(path),
-            ..Default::default()
-        },
-    )?;
+    let elf = firmware_with("double_integrator", &img.bytes)?;
     let plant = img.discrete_plant();
     let image = decode(&img.bytes).map_err(qemu_tests::HilError::Image)?;
     let mut starts: Vec<Vec<f64>> = Vec::new();
@@ -179,14 +172,7 @@ fn pwa_step_max(spec: &str, tag: &str) -> Result<(u32, String, u64), Box<dyn std
     let problem = &task.problem;
     let s = synthesize(&task, &opts)?;
     let pwa = learn_pwa(&task, &s, &PwaSettings::default())?;
-    let path = firmware::write_image(tag, &pwa.image)?;
-    let elf = firmware::build(
-        tag,
-        &FirmwareConfig {
-            image: Some(path),
-            ..Default::default()
-        },
-    )?;
+    let elf = firmware_with(tag, &pwa.image)?;
     let image = decode(&pwa.image).map_err(qemu_tests::HilError::Image)?;
     let plant = task.plant.error_dynamics(0);
     let n = image.n();
@@ -263,14 +249,7 @@ fn hybrid_step_max() -> Result<(u32, u64), Box<dyn std::error::Error>> {
     let task = HybridTask::new(problem)?;
     let run = plan_run(&task, &[-5.0, 1.0, 2.0])?;
     let bytes = image(&task, std::slice::from_ref(&run))?;
-    let path = firmware::write_image("hybrid_bench", &bytes)?;
-    let elf = firmware::build(
-        "hybrid_bench",
-        &FirmwareConfig {
-            image: Some(path),
-            ..Default::default()
-        },
-    )?;
+    let elf = firmware_with("hybrid_bench", &bytes)?;
     let img = decode(&bytes).map_err(qemu_tests::HilError::Image)?;
     let mut starts = vec![run.nominals[0].x[0].clone()];
     starts.extend(ball_starts(&task, &run, 3, 4, task.problem.seed ^ 0xbe4c));
@@ -315,14 +294,7 @@ fn nonlinear_step_max() -> Result<(u32, u32, u64, usize), Box<dyn std::error::Er
         .plant
         .linearization()
         .ok_or("Ex 4.9 is feedback linearizable")?;
-    let path = firmware::write_image("fl_4_9_certified_bench", &s.image)?;
-    let elf = firmware::build(
-        "fl_4_9_certified_bench",
-        &FirmwareConfig {
-            image: Some(path),
-            ..Default::default()
-        },
-    )?;
+    let elf = firmware_with("fl_4_9_certified_bench", &s.image)?;
     let img = decode(&s.image).map_err(qemu_tests::HilError::Image)?;
     let starts = images::accepted_starts(&task, img, 12, 4_9)?;
     let h = maps.plant.period();
@@ -342,14 +314,7 @@ fn nonlinear_step_max() -> Result<(u32, u32, u64, usize), Box<dyn std::error::Er
     );
 
     let t = images::fl_4_9()?;
-    let path = firmware::write_image("fl_4_9_bench", &t.bytes)?;
-    let elf = firmware::build(
-        "fl_4_9_bench",
-        &FirmwareConfig {
-            image: Some(path),
-            ..Default::default()
-        },
-    )?;
+    let elf = firmware_with("fl_4_9_bench", &t.bytes)?;
     let img = decode(&t.bytes).map_err(qemu_tests::HilError::Image)?;
     let mut hand = 0u32;
     let starts = t.starts();
@@ -367,6 +332,21 @@ fn nonlinear_step_max() -> Result<(u32, u32, u64, usize), Box<dyn std::error::Er
         t.program_bytes
     );
     Ok((certified, hand, stack, t.program_bytes))
+}
+
+/// The firmware built with `bytes` as its image; `tag` names the image file and the ELF copy.
+fn firmware_with(
+    tag: &str,
+    bytes: &[u8],
+) -> Result<std::path::PathBuf, Box<dyn std::error::Error>> {
+    let path = firmware::write_image(tag, bytes)?;
+    Ok(firmware::build(
+        tag,
+        &FirmwareConfig {
+            image: Some(path),
+            ..Default::default()
+        },
+    )?)
 }
 
 /// One closed-loop session: the firmware `elf` booted in QEMU, `steps` periods from `x0` against the host
