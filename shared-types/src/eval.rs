@@ -246,9 +246,7 @@ impl<'a> Controller<'a> {
     fn select_fixed<const N: usize>(&self, x: &[f32]) -> Option<u16> {
         let img = &self.image;
         let p = img.payload();
-        let Some(x) = x.get(..N) else {
-            return None;
-        };
+        let x = x.get(..N)?;
         let P = linalg::matrix_fixed::<N>(f32_span(p.P, 0, N * N));
         let mut best: Option<u16> = None;
         let mut best_d2 = f32::INFINITY;

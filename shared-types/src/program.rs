@@ -428,6 +428,8 @@ impl<'a> Program<'a> {
     /// Evaluates the program: `inputs` has [`Self::n_inputs`] values, `out` receives
     /// [`Self::n_outputs`]. Slices of other lengths are refused with [`ImageError::ProgramArity`].
     /// Non-finite inputs or results are not refused here: the caller judges the outputs.
+    // `tos = under + tos`, not `tos += under`: the operands stay in the table's order a ∘ b.
+    #[allow(clippy::assign_op_pattern)]
     pub fn eval(&self, inputs: &[f32], out: &mut [f32]) -> Result<(), ImageError> {
         if inputs.len() != self.n_inputs() {
             return Err(ImageError::ProgramArity {
