@@ -27,7 +27,7 @@ fn main() {
     let n_samples = 100_000;
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(2017);
     let mut x = [0.0f64; 4];
-    let mut cols = vec![Vec::with_capacity(n_samples); 4];
+    let mut cols: Vec<Vec<f64>> = (0..4).map(|_| Vec::with_capacity(n_samples)).collect();
     for _ in 0..n_samples {
         for (i, c) in cols.iter_mut().enumerate() {
             x[i] = 0.999 * x[i] + rng.random_range(-0.05..0.05);
