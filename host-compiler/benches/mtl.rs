@@ -6,12 +6,12 @@
 //! `mtl_eventually1000_samples_per_s`.
 
 use criterion::{criterion_group, Criterion};
-use host_compiler::benchkit::{write_rows, Row};
+use host_compiler::benchkit::{median_time, write_rows, Row};
 use host_compiler::robustness::mtl::{robustness_window_scan, Formula, Trace};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::hint::black_box;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 const N: usize = 1_000_000;
 
@@ -27,19 +27,6 @@ fn trace() -> Trace {
     let x2: Vec<f64> = (0..N).map(|_| rng.random_range(-3.0..3.0)).collect();
     let t: Vec<f64> = (0..N).map(|k| k as f64).collect();
     Trace::new(t, vec!["x1".into(), "x2".into()], vec![x1, x2]).unwrap()
-}
-
-/// Median wall time of one call over repeated runs lasting at least `budget` (at least `min_runs`).
-fn median_time(mut f: impl FnMut(), budget: Duration, min_runs: usize) -> f64 {
-    let start = Instant::now();
-    let mut times = Vec::new();
-    while start.elapsed() < budget || times.len() < min_runs {
-        let s = Instant::now();
-        f();
-        times.push(s.elapsed().as_secs_f64());
-    }
-    times.sort_by(|a, b| a.total_cmp(b));
-    times[times.len() / 2]
 }
 
 fn bench(c: &mut Criterion) {

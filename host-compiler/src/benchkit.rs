@@ -5,6 +5,7 @@
 
 use serde::Serialize;
 use std::path::PathBuf;
+use std::time::{Duration, Instant};
 
 /// One line of the bench table.
 #[derive(Clone, Debug, Serialize)]
@@ -66,6 +67,20 @@ pub fn write_rows(target: &str, rows: &[Row]) -> std::io::Result<PathBuf> {
         );
     }
     Ok(path)
+}
+
+/// Median wall time in seconds of one call of `f` over repeated calls lasting at least `budget`, and at
+/// least `min_runs` calls.
+pub fn median_time(mut f: impl FnMut(), budget: Duration, min_runs: usize) -> f64 {
+    let start = Instant::now();
+    let mut times = Vec::new();
+    while start.elapsed() < budget || times.len() < min_runs {
+        let s = Instant::now();
+        f();
+        times.push(s.elapsed().as_secs_f64());
+    }
+    times.sort_by(|a, b| a.total_cmp(b));
+    times[times.len() / 2]
 }
 
 /// One target's line of a fuzz campaign record (`fuzz/CAMPAIGN.md`).

@@ -15,7 +15,8 @@
 //! `ẍ = 1 − x + 0.1ẋ + w` ((3.28)), sampled exactly here. One nominal from Init's centre to the goal
 //! (2, 0) under a faster gain, tracked with `K` (both axes' poles at −2 s⁻¹); `P` is the Lyapunov metric
 //! of the sampled closed loop and the ball covers Init's corners. Not certified: it exercises the
-//! section, the interpreter and the loop.
+//! section, the interpreter and the loop. [`fl_4_9_certified`]: the certified image `synth` makes from
+//! the same spec, and [`accepted_starts`] for its runs.
 #![allow(non_snake_case)]
 
 use crate::plant::{double_integrator as double_integrator_plant, ContinuousPlant, DiscretePlant};
@@ -23,6 +24,8 @@ use faer::Mat;
 use host_compiler::emit::{EmitError, FallbackLaw, ImageBuilder, ModelMapsSpec, Terminal};
 use host_compiler::model::nonlinear::NonlinearPlant;
 use host_compiler::model::ModelError;
+use host_compiler::synth::{synthesize, SynthOptions, Synthesis};
+use host_compiler::task::Task;
 use shared_types::image;
 
 /// A test image with what the tests need to know about it.
@@ -86,6 +89,8 @@ pub enum ImageBuildError {
     Spec(String),
     #[error("a model map: {0}")]
     Expr(#[from] host_compiler::expr::ExprError),
+    #[error("the synthesis: {0}")]
+    Synth(String),
 }
 
 /// Tracking gain `K` (closed-loop poles of the sampled double integrator at 0.8, 0.8, h = 0.1).
@@ -349,6 +354,57 @@ pub fn fl_4_9() -> Result<NonlinearImage, ImageBuildError> {
         table_len: FL_TABLE_LEN,
         program_bytes: coords.bytes.len() + input_map.bytes.len(),
     })
+}
+
+/// The certified Example 4.9 image as `synth` makes it from `examples/fl-4-9.toml` (its maps derived by
+/// `model::feedback_linearizable`), with the task it was certified for; verified by Monte Carlo (64
+/// interior states and 2 per ball), without the falsifier.
+pub fn fl_4_9_certified() -> Result<(Task, Synthesis), ImageBuildError> {
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../examples/fl-4-9.toml");
+    let problem =
+        host_compiler::spec::load(path).map_err(|e| ImageBuildError::Spec(format!("{e:?}")))?;
+    let task = Task::new(problem).map_err(|e| ImageBuildError::Spec(e.to_string()))?;
+    let opts = SynthOptions {
+        verify_interior: 64,
+        verify_per_ball: 2,
+        progress: false,
+        attack: None,
+        ..SynthOptions::default()
+    };
+    let s = synthesize(&task, &opts).map_err(|e| ImageBuildError::Synth(e.to_string()))?;
+    Ok((task, s))
+}
+
+/// `count` initial plant states drawn in Init (seeded) whose ξ the image's selection accepts, for an image
+/// of a feedback-linearizable task.
+pub fn accepted_starts(
+    task: &Task,
+    image: image::Image<'_>,
+    count: usize,
+    seed: u64,
+) -> Result<Vec<Vec<f64>>, ImageBuildError> {
+    use rand::{Rng, SeedableRng};
+    let maps = task
+        .plant
+        .linearization()
+        .ok_or_else(|| ImageBuildError::Spec("not a feedback-linearizable task".into()))?;
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let ctl = shared_types::eval::Controller::new(image);
+    let mut starts = Vec::new();
+    while starts.len() < count {
+        let x: Vec<f64> = maps
+            .init
+            .lo
+            .iter()
+            .zip(&maps.init.hi)
+            .map(|(&l, &h)| if h > l { rng.random_range(l..=h) } else { l })
+            .collect();
+        let xi: Vec<f32> = maps.xi_of(&x).iter().map(|&v| v as f32).collect();
+        if ctl.select(&xi).is_some() {
+            starts.push(x);
+        }
+    }
+    Ok(starts)
 }
 
 /// A copy of `bytes` with one payload byte flipped: the CRC no longer matches, the header still parses.

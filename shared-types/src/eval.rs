@@ -204,6 +204,12 @@ impl<'a> Controller<'a> {
         if x.len() != n {
             return None;
         }
+        // One location, so one P for every ball: the fixed-size path for n = 4, the state dimension of the
+        // planar vehicles (Examples 4.8, 4.9 and their variants), whose images have the most balls. Each
+        // dimension so served costs its own unrolled copy in flash (about 500 bytes for n = 4).
+        if img.n_locations() == 1 && n == 4 {
+            return self.select_fixed::<4>(x);
+        }
         let p = img.payload();
         let mut best: Option<u16> = None;
         let mut best_d2 = f32::INFINITY;
@@ -224,6 +230,33 @@ impl<'a> Controller<'a> {
             let P = f32_span(p.P, l * n * n, n * n);
             let d2 = linalg::quadratic_form(P, &e, n);
             let delta = img.delta(t);
+            if d2 <= delta * delta && d2 < best_d2 {
+                best_d2 = d2;
+                best = Some(t as u16);
+            }
+        }
+        best
+    }
+
+    /// [`Controller::select`] for a one-location image of state dimension N (x has N values): P read from
+    /// the image once, then per ball e = x − c and the quadratic form unrolled, with P held in registers
+    /// across the balls. The same f32 operations in the same order as the general loop, so the same
+    /// answer; it only costs less per ball, and the selection tests every ball at κ = 0.
+    #[inline(never)]
+    fn select_fixed<const N: usize>(&self, x: &[f32]) -> Option<u16> {
+        let img = &self.image;
+        let p = img.payload();
+        let x = x.get(..N)?;
+        let P = linalg::matrix_fixed::<N>(f32_span(p.P, 0, N * N));
+        let mut best: Option<u16> = None;
+        let mut best_d2 = f32::INFINITY;
+        let balls = p.centre.chunks_exact(4 * N).zip(floats(p.delta));
+        for (t, (centre, delta)) in balls.take(img.n_trajectories()).enumerate() {
+            let mut e = [0.0f32; N];
+            for ((ei, &xi), ci) in e.iter_mut().zip(x).zip(floats(centre)) {
+                *ei = xi - ci;
+            }
+            let d2 = linalg::quadratic_form_fixed(&P, &e);
             if d2 <= delta * delta && d2 < best_d2 {
                 best_d2 = d2;
                 best = Some(t as u16);

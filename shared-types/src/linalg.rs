@@ -14,6 +14,10 @@
 //! is `((0 + e₀s₀) + e₁s₁) + …` with `sᵢ = (P e)ᵢ` in the row order above. The C export's evaluator
 //! (`host-compiler/src/export/c/`) performs the same operations in the same order.
 //!
+//! The selection of a one-location image of a small fixed dimension reads P once into f32 rows
+//! ([`matrix_fixed`]) and runs [`quadratic_form_fixed`] per ball: the same operations in the same order,
+//! unrolled, P held in registers across the balls.
+//!
 //! Why not nalgebra's `dot`/`gemv`: they need an f32 element type, so every row would first be copied
 //! out of the image into an aligned buffer. Measured under QEMU with that copy (hil-bench, worst step):
 //! the feedforward step 1280 → 2280 instructions (+78 %), the hybrid step 920 → 1320 (+43 %), the
@@ -67,6 +71,36 @@ pub(crate) fn quadratic_form(P: &[u8], e: &[f32; MAX_N], n: usize) -> f32 {
     let mut d2 = 0.0f32;
     for (row, &ei) in P.column_iter().zip(e) {
         d2 += ei * dot(&row, &ev);
+    }
+    d2
+}
+
+/// The row-major `N × N` matrix `P` (little-endian bytes) as f32 rows; zeros if `P` is too short (never
+/// for a validated image).
+#[inline(always)]
+pub(crate) fn matrix_fixed<const N: usize>(P: &[u8]) -> [[f32; N]; N] {
+    let mut out = [[0.0f32; N]; N];
+    if let Some(p) = words(P).get(..N * N) {
+        for (row, w) in out.iter_mut().zip(p.chunks_exact(N)) {
+            for (a, b) in row.iter_mut().zip(w) {
+                *a = f32::from_le_bytes(*b);
+            }
+        }
+    }
+    out
+}
+
+/// [`quadratic_form`] for a matrix already read ([`matrix_fixed`]) and a fixed dimension N: the same
+/// operations in the same order (module doc), unrolled, with P in registers across calls in a loop.
+#[inline(always)]
+pub(crate) fn quadratic_form_fixed<const N: usize>(P: &[[f32; N]; N], e: &[f32; N]) -> f32 {
+    let mut d2 = 0.0f32;
+    for (row, &ei) in P.iter().zip(e) {
+        let mut s = 0.0f32;
+        for (&a, &ej) in row.iter().zip(e) {
+            s += a * ej;
+        }
+        d2 += ei * s;
     }
     d2
 }

@@ -45,6 +45,9 @@ use crate::capacity::{
 use crate::error::{Dim, Field, ImageError, Pos};
 use crate::raw::{check_dim, check_finite, f32_at, sat16, sat32, u16_at};
 
+// The interpreter masks stack indices with the capacity ([`Program::eval`]).
+const _: () = assert!(MAX_PROGRAM_STACK.is_power_of_two());
+
 /// Bytes of a program's header.
 pub const PROGRAM_HEADER_LEN: usize = 8;
 
@@ -425,6 +428,8 @@ impl<'a> Program<'a> {
     /// Evaluates the program: `inputs` has [`Self::n_inputs`] values, `out` receives
     /// [`Self::n_outputs`]. Slices of other lengths are refused with [`ImageError::ProgramArity`].
     /// Non-finite inputs or results are not refused here: the caller judges the outputs.
+    // `tos = under + tos`, not `tos += under`: the operands stay in the table's order a ∘ b.
+    #[allow(clippy::assign_op_pattern)]
     pub fn eval(&self, inputs: &[f32], out: &mut [f32]) -> Result<(), ImageError> {
         if inputs.len() != self.n_inputs() {
             return Err(ImageError::ProgramArity {
@@ -438,99 +443,94 @@ impl<'a> Program<'a> {
                 found: sat16(out.len()),
             });
         }
+        // The top of the stack is kept in `tos`, the values under it in `stack[..sp]`: a push spills
+        // `tos`, a pop reloads it. Validation proved 0 ≤ sp ≤ MAX_PROGRAM_STACK at every instruction,
+        // so masking the index with the (power-of-two) capacity changes nothing; it only lets the
+        // compiler drop the bounds checks, and no path can panic. One dispatch on the opcode byte per
+        // instruction; the arithmetic is that of the instruction table, in code order.
+        const MASK: usize = MAX_PROGRAM_STACK - 1;
         let mut stack = [0.0f32; MAX_PROGRAM_STACK];
         let mut memo = Memo::new();
-        // `sp` is the number of values on the stack. Validation proved every access in range; the
-        // accessors still use `get` so that no path can panic.
         let mut sp = 0usize;
-        let top = |stack: &[f32; MAX_PROGRAM_STACK], sp: usize| {
-            stack.get(sp.wrapping_sub(1)).copied().unwrap_or(0.0)
-        };
+        let mut tos = 0.0f32;
+        let code = self.code;
         let mut pc = 0usize;
-        while let Some((op, len)) = fetch(self.code, pc) {
-            pc += len;
-            match op {
-                Op::Load(i) => {
-                    let v = inputs.get(usize::from(i)).copied().unwrap_or(0.0);
-                    if let Some(s) = stack.get_mut(sp) {
-                        *s = v;
-                    }
-                    sp += 1;
-                }
-                Op::Const(i) => {
-                    let v = self.constant(i.into());
-                    if let Some(s) = stack.get_mut(sp) {
-                        *s = v;
-                    }
-                    sp += 1;
-                }
-                Op::Store(i) => {
-                    let v = top(&stack, sp);
-                    if let Some(o) = out.get_mut(usize::from(i)) {
-                        *o = v;
-                    }
-                    sp = sp.saturating_sub(1);
-                }
-                Op::Add | Op::Sub | Op::Mul | Op::Div | Op::Atan2 => {
-                    let b = top(&stack, sp);
-                    sp = sp.saturating_sub(1);
-                    let a = top(&stack, sp);
-                    let v = match op {
-                        Op::Add => a + b,
-                        Op::Sub => a - b,
-                        Op::Mul => a * b,
-                        Op::Div => a / b,
-                        _ => libm::atan2f(a, b),
-                    };
-                    if let Some(s) = stack.get_mut(sp.wrapping_sub(1)) {
-                        *s = v;
-                    }
-                }
-                Op::Neg | Op::Powi(_) | Op::Func(_) => {
-                    let a = top(&stack, sp);
-                    let v = match op {
-                        Op::Neg => -a,
-                        Op::Powi(k) => powi(a, k),
-                        Op::Func(f @ (Func::Sqrt | Func::Abs)) => f.apply(a),
-                        Op::Func(f) => memo.apply(f, a),
-                        _ => a,
-                    };
-                    if let Some(s) = stack.get_mut(sp.wrapping_sub(1)) {
-                        *s = v;
-                    }
-                }
+        while let Some(&byte) = code.get(pc) {
+            let a = code.get(pc.wrapping_add(1)).copied().unwrap_or(0);
+            // Push `v`: spill the old top under it.
+            macro_rules! push {
+                ($v:expr) => {{
+                    let v = $v;
+                    stack[sp & MASK] = tos;
+                    sp = sp.wrapping_add(1);
+                    tos = v;
+                }};
             }
+            // Pop the value under the top (the left operand of a binary instruction).
+            macro_rules! pop_under {
+                () => {{
+                    sp = sp.wrapping_sub(1);
+                    stack[sp & MASK]
+                }};
+            }
+            pc += match byte {
+                opcode::LOAD => {
+                    push!(inputs.get(usize::from(a)).copied().unwrap_or(0.0));
+                    2
+                }
+                opcode::CONST => {
+                    let hi = code.get(pc.wrapping_add(2)).copied().unwrap_or(0);
+                    push!(self.constant(usize::from(u16::from_le_bytes([a, hi]))));
+                    3
+                }
+                opcode::STORE => {
+                    if let Some(o) = out.get_mut(usize::from(a)) {
+                        *o = tos;
+                    }
+                    tos = pop_under!();
+                    2
+                }
+                opcode::ADD => {
+                    tos = pop_under!() + tos;
+                    1
+                }
+                opcode::SUB => {
+                    tos = pop_under!() - tos;
+                    1
+                }
+                opcode::MUL => {
+                    tos = pop_under!() * tos;
+                    1
+                }
+                opcode::DIV => {
+                    tos = pop_under!() / tos;
+                    1
+                }
+                opcode::ATAN2 => {
+                    tos = libm::atan2f(pop_under!(), tos);
+                    1
+                }
+                opcode::NEG => {
+                    tos = -tos;
+                    1
+                }
+                opcode::POWI => {
+                    tos = powi(tos, a as i8);
+                    2
+                }
+                b => {
+                    match Func::ALL.get(usize::from(b.wrapping_sub(opcode::FUNC0))) {
+                        Some(&f @ (Func::Sqrt | Func::Abs)) => tos = f.apply(tos),
+                        Some(&f) => tos = memo.apply(f, tos),
+                        // Not an opcode (never in a validated program): stop.
+                        None => break,
+                    }
+                    1
+                }
+            };
         }
         Ok(())
     }
-}
-
-/// The instruction at `pc` of validated code and its length; `None` past the end (and, never for a
-/// validated program, at a byte that is not an opcode). [`decode_op`] without its checks and error
-/// values: the interpreter's fetch, once [`Program::decode`] has checked every instruction.
-#[inline(always)]
-fn fetch(code: &[u8], pc: usize) -> Option<(Op, usize)> {
-    let b = *code.get(pc)?;
-    let a = code.get(pc.wrapping_add(1)).copied().unwrap_or(0);
-    Some(match b {
-        opcode::LOAD => (Op::Load(a), 2),
-        opcode::STORE => (Op::Store(a), 2),
-        opcode::CONST => {
-            let hi = code.get(pc.wrapping_add(2)).copied().unwrap_or(0);
-            (Op::Const(u16::from_le_bytes([a, hi])), 3)
-        }
-        opcode::ADD => (Op::Add, 1),
-        opcode::SUB => (Op::Sub, 1),
-        opcode::MUL => (Op::Mul, 1),
-        opcode::DIV => (Op::Div, 1),
-        opcode::NEG => (Op::Neg, 1),
-        opcode::POWI => (Op::Powi(a as i8), 2),
-        opcode::ATAN2 => (Op::Atan2, 1),
-        b => (
-            Op::Func(*Func::ALL.get(usize::from(b.wrapping_sub(opcode::FUNC0)))?),
-            1,
-        ),
-    })
 }
 
 /// How many library calls one evaluation remembers ([`Memo`]).

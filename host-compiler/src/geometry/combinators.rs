@@ -3,7 +3,7 @@
 
 use super::cache::MetricCache;
 use super::linalg::{self, SymEig};
-use super::{check_query, GeometryError, Metric, Region, Witness};
+use super::{check_query, GeometryError, Metric, Region, SignedDistanceFn, Witness};
 
 /// A finite union S₁ ∪ … ∪ S_m of sets of the same dimension.
 ///
@@ -96,6 +96,9 @@ impl Region for Union {
     }
     fn try_depth(&self, x: &[f64], metric: &Metric) -> Result<Witness, GeometryError> {
         Ok(self.depth_bounds(x, metric)?.0)
+    }
+    fn compile(&self, metric: &Metric) -> Option<Box<dyn SignedDistanceFn + '_>> {
+        self.compiled(metric)
     }
 }
 
@@ -245,6 +248,9 @@ impl Region for Complement {
     }
     fn try_depth(&self, x: &[f64], metric: &Metric) -> Result<Witness, GeometryError> {
         self.inner.try_dist(x, metric)
+    }
+    fn compile(&self, metric: &Metric) -> Option<Box<dyn SignedDistanceFn + '_>> {
+        self.compiled(metric)
     }
 }
 
@@ -449,6 +455,9 @@ impl Region for InOutput {
         let y = self.output(x);
         let w = self.inner.try_depth(&y, &om.Ry)?;
         Ok(self.lift(x, &y, w, &om))
+    }
+    fn compile(&self, metric: &Metric) -> Option<Box<dyn SignedDistanceFn + '_>> {
+        self.compiled(metric)
     }
 }
 

@@ -6,7 +6,7 @@
 use super::cache::MetricCache;
 use super::ellipsoid_distance::EllipsoidBoundaryDistance;
 use super::linalg::{self, SymEig};
-use super::{check_query, GeometryError, Metric, Region, Witness};
+use super::{check_query, GeometryError, Metric, Region, SignedDistanceFn, Witness};
 use std::sync::Arc;
 
 /// {x ∈ ℝⁿ : (x − c)ᵀQ(x − c) ≤ 1}, Q symmetric PSD and nonzero.
@@ -135,6 +135,9 @@ impl Region for Ellipsoid {
         }
         self.boundary(x, metric)
     }
+    fn compile(&self, metric: &Metric) -> Option<Box<dyn SignedDistanceFn + '_>> {
+        self.compiled(metric)
+    }
     fn try_depth(&self, x: &[f64], metric: &Metric) -> Result<Witness, GeometryError> {
         check_query(self.dim(), x, metric)?;
         if !self.contains(x) {
@@ -217,6 +220,9 @@ impl Region for Ball {
     }
     fn depth(&self, x: &[f64], metric: &Metric) -> Witness {
         self.inner.depth(x, metric)
+    }
+    fn compile(&self, metric: &Metric) -> Option<Box<dyn SignedDistanceFn + '_>> {
+        self.inner.compiled(metric)
     }
     fn try_dist(&self, x: &[f64], metric: &Metric) -> Result<Witness, GeometryError> {
         self.inner.try_dist(x, metric)

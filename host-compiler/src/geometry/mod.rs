@@ -14,9 +14,12 @@
 //! - [`ellipsoid`]: [`Ellipsoid`] and CAF [`Ball`] regions built on it;
 //! - [`polytope`]: [`Polytope`] {x : Ax ≤ b}, distance by the QP (7.1), depth by facets;
 //! - [`combinators`]: [`Union`], [`Intersection`], [`Complement`], [`Empty`], [`InOutput`] (sets given
-//!   in output coordinates y = Cx).
+//!   in output coordinates y = Cx);
+//! - [`compiled`]: a set's signed distance in one metric, factored once for many points
+//!   ([`Region::compile`]), with the values of [`Region::signed_dist`].
 
 pub mod combinators;
+pub mod compiled;
 pub mod ellipsoid;
 pub mod ellipsoid_distance;
 pub mod polytope;
@@ -25,6 +28,7 @@ mod cache;
 pub(crate) mod linalg;
 
 pub use combinators::{Complement, Empty, InOutput, Intersection, Union};
+pub use compiled::{Signed, SignedDistanceFn};
 pub use ellipsoid::{Ball, Ellipsoid};
 pub use ellipsoid_distance::{
     BoundaryDistanceSettings, BoundarySolution, BoundaryWorkspace, EllipsoidBoundaryDistance,
@@ -196,6 +200,12 @@ pub trait Region: Send + Sync {
             w.value = -w.value;
             w
         }
+    }
+    /// [`Region::signed_dist`] in `metric` compiled for many points ([`compiled`]): the same values, bit
+    /// for bit, without the witness. `None` where the set has no compiled form or the metric does not
+    /// fit; callers then use [`Region::signed_dist`].
+    fn compile(&self, _metric: &Metric) -> Option<Box<dyn SignedDistanceFn + '_>> {
+        None
     }
     /// [`Region::dist`] with errors reported.
     fn try_dist(&self, x: &[f64], metric: &Metric) -> Result<Witness, GeometryError> {

@@ -1,8 +1,12 @@
 //! Property tests: the streaming MTL evaluator equals the direct transcription of Def 2.17 (full window
 //! scans) exactly, on random traces (uniform, dyadic and irregular sample times, with ties in the values)
-//! and random formulas over every operator; printing and re-parsing a formula preserves it.
+//! and random formulas over every operator, also with a set measured in a random ellipsoidal metric (the
+//! streaming evaluator through the set's compiled signed distance, the definition point by point);
+//! printing and re-parsing a formula preserves it.
 
-use host_compiler::geometry::{Metric, Region, Witness};
+use host_compiler::geometry::{
+    Ball, Complement, Ellipsoid, InOutput, Metric, Region, Union, Witness,
+};
 use host_compiler::robustness::mtl::{
     robustness_naive, robustness_window_scan, Formula, NamedSet, Trace,
 };
@@ -144,6 +148,45 @@ proptest! {
         // Only min, max and negation act on the atoms' values: agreement is exact.
         prop_assert_eq!(&fast, &naive, "formula {}", f);
         prop_assert_eq!(&scan, &naive, "formula {}", f);
+    }
+
+    #[test]
+    fn streaming_equals_definition_in_an_ellipsoidal_metric(
+        f in formula(),
+        tr in trace(),
+        a in proptest::collection::vec(-1.0..1.0f64, 9),
+        flip in any::<bool>(),
+    ) {
+        // r = AAᵀ + 0.1 I, the metric; S: a disc in (x1, x2) (measured in r's Schur complement) or an ellipsoid in
+        // all three signals, or the complement of that union.
+        let mut r = vec![0.0; 9];
+        for i in 0..3 {
+            for j in 0..3 {
+                r[i * 3 + j] = (0..3).map(|k| a[i * 3 + k] * a[j * 3 + k]).sum::<f64>()
+                    + if i == j { 0.1 } else { 0.0 };
+            }
+        }
+        let metric = Metric::new(3, r).unwrap();
+        let disc = Ball::new(vec![0.5, -0.5], vec![1.0, 0.0, 0.0, 1.0], 1.5).unwrap();
+        let members: Vec<Box<dyn Region>> = vec![
+            Box::new(InOutput::new(vec![1.0, 0.0, 0.0, 0.0, 1.0, 0.0], 2, Box::new(disc)).unwrap()),
+            Box::new(Ellipsoid::new(vec![-1.0, 1.0, 0.0], vec![0.5, 0.1, 0.0, 0.1, 0.8, 0.0, 0.0, 0.0, 0.3]).unwrap()),
+        ];
+        let union = Union::new(members).unwrap();
+        let region: Box<dyn Region> = if flip {
+            Box::new(Complement::new(Box::new(union)).unwrap())
+        } else {
+            Box::new(union)
+        };
+        prop_assert!(region.compile(&metric).is_some());
+        let sets = vec![NamedSet {
+            name: "S".into(),
+            signals: vec!["x1".into(), "x2".into(), "x3".into()],
+            region,
+            metric,
+        }];
+        let m = Formula::parse(&f).unwrap().bind(tr.names(), &sets).unwrap();
+        prop_assert_eq!(&m.robustness(&tr).unwrap(), &robustness_naive(&m, &tr).unwrap(), "formula {}", f);
     }
 
     #[test]

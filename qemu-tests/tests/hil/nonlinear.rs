@@ -11,15 +11,12 @@
 //! the host, and the worst step cost is printed.
 
 use host_compiler::property::input_bound;
-use host_compiler::synth::{synthesize, SynthOptions};
-use host_compiler::task::Task;
 use host_compiler::verify::input_slack;
 use qemu_tests::closed_loop::{run_with, HostEvaluator};
 use qemu_tests::firmware::{self, FirmwareConfig};
-use qemu_tests::images::{fl_4_9, FL_TABLE_LEN};
+use qemu_tests::images::{accepted_starts, fl_4_9, fl_4_9_certified, FL_TABLE_LEN};
 use qemu_tests::nonlinear::PlantFlow;
 use qemu_tests::qemu::Qemu;
-use rand::{Rng, SeedableRng};
 use shared_types::eval::Status;
 use std::time::Duration;
 
@@ -72,16 +69,7 @@ fn fl_4_9_model_maps_run_on_the_target_bit_for_bit() {
 
 #[test]
 fn fl_4_9_certified_image_meets_the_spec_from_50_starts() {
-    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../examples/fl-4-9.toml");
-    let task = Task::new(host_compiler::spec::load(path).expect("spec")).expect("task");
-    let opts = SynthOptions {
-        verify_interior: 64,
-        verify_per_ball: 2,
-        progress: false,
-        attack: None,
-        ..SynthOptions::default()
-    };
-    let s = synthesize(&task, &opts).unwrap_or_else(|e| panic!("{e}"));
+    let (task, s) = fl_4_9_certified().unwrap_or_else(|e| panic!("{e}"));
     assert_eq!(s.verify.violations, 0);
     let maps = task.plant.linearization().expect("a linearised plant");
     let img = shared_types::image::decode(&s.image).expect("the image decodes");
@@ -95,22 +83,7 @@ fn fl_4_9_certified_image_meets_the_spec_from_50_starts() {
     )
     .unwrap_or_else(|e| panic!("{e}"));
     // 50 starts drawn in Init whose ξ the image's selection accepts.
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(4_9);
-    let ctl = shared_types::eval::Controller::new(img);
-    let mut starts = Vec::new();
-    while starts.len() < 50 {
-        let x: Vec<f64> = maps
-            .init
-            .lo
-            .iter()
-            .zip(&maps.init.hi)
-            .map(|(&l, &h)| if h > l { rng.random_range(l..=h) } else { l })
-            .collect();
-        let xi: Vec<f32> = maps.xi_of(&x).iter().map(|&v| v as f32).collect();
-        if ctl.select(&xi).is_some() {
-            starts.push(x);
-        }
-    }
+    let starts = accepted_starts(&task, img, 50, 4_9).unwrap_or_else(|e| panic!("{e}"));
     let goal = task.property.goal.as_ref();
     let unsafe_set = task
         .property

@@ -367,3 +367,65 @@ fn f32_evaluator_matches_f64_reference_within_rounding_bound() {
         "only {compared_steps} steps compared"
     );
 }
+
+/// Algorithm 2's selection in f32 with the operations in the order `shared_types::linalg` states:
+/// e = x − c, sᵢ = ((0 + Pᵢ₀e₀) + Pᵢ₁e₁) + …, d² = ((0 + e₀s₀) + e₁s₁) + …, accepted when d² ≤ δ·δ,
+/// the least d² first and ties to the lowest index.
+fn f32_select(c: &Content, x: &[f32]) -> Option<u16> {
+    let n = c.n;
+    let (mut best, mut best_d2, mut start) = (None, f32::INFINITY, 0);
+    for (t, &len) in c.traj_len.iter().enumerate() {
+        let l = c.location[start] as usize;
+        let P = &c.P[l * n * n..(l + 1) * n * n];
+        let e: Vec<f32> = (0..n).map(|i| x[i] - c.centre[t * n + i]).collect();
+        let mut d2 = 0.0f32;
+        for i in 0..n {
+            let mut s = 0.0f32;
+            for j in 0..n {
+                s += P[i * n + j] * e[j];
+            }
+            d2 += e[i] * s;
+        }
+        let d = c.delta[t];
+        if d2 <= d * d && d2 < best_d2 {
+            best_d2 = d2;
+            best = Some(t as u16);
+        }
+        start += len;
+    }
+    best
+}
+
+/// The selection (the fixed-size path of one-location images of dimension 2 and 4, and the general loop
+/// otherwise) answers exactly what the documented f32 operations give, at states near the balls' centres
+/// and on their boundaries.
+#[test]
+fn selection_equals_the_documented_f32_operations() {
+    let mut rng = ChaCha8Rng::seed_from_u64(0x5e1);
+    for case in 0..600 {
+        let c = random_content(&mut rng, 5, 2, 16, 3);
+        let bytes = c.to_bytes().unwrap();
+        let img = decode(&bytes).unwrap();
+        let ctl = Controller::new(img);
+        let n = c.n;
+        for k in 0..20 {
+            let t = rng.random_range(0..c.traj_len.len());
+            let mut x: Vec<f32> = (0..n)
+                .map(|i| c.centre[t * n + i] + rng.random_range(-1.0f32..1.0))
+                .collect();
+            if k % 4 == 0 {
+                // Onto ball t's boundary along the first axis, where rounding decides.
+                let start: usize = c.traj_len[..t].iter().sum();
+                let l = c.location[start] as usize;
+                let p00 = c.P[l * n * n];
+                x = (0..n).map(|i| c.centre[t * n + i]).collect();
+                x[0] += c.delta[t] / p00.sqrt();
+            }
+            assert_eq!(
+                ctl.select(&x),
+                f32_select(&c, &x),
+                "case {case}, n {n}, x {x:?}"
+            );
+        }
+    }
+}

@@ -405,3 +405,96 @@ fn remembered_calls_give_the_bits_of_fresh_ones() {
         }
     }
 }
+
+/// The instruction table read literally: a stack machine over the decoded instructions ([`Program::ops`]),
+/// each library call made afresh.
+fn reference_eval(p: &Program<'_>, inputs: &[f32], out: &mut [f32]) {
+    let mut stack: Vec<f32> = Vec::new();
+    for (_, op) in p.ops() {
+        match op {
+            Op::Load(i) => stack.push(inputs[i as usize]),
+            Op::Const(i) => stack.push(p.constant(i as usize)),
+            Op::Store(i) => out[i as usize] = stack.pop().unwrap(),
+            Op::Add | Op::Sub | Op::Mul | Op::Div | Op::Atan2 => {
+                let b = stack.pop().unwrap();
+                let a = stack.pop().unwrap();
+                stack.push(match op {
+                    Op::Add => a + b,
+                    Op::Sub => a - b,
+                    Op::Mul => a * b,
+                    Op::Div => a / b,
+                    _ => libm::atan2f(a, b),
+                });
+            }
+            Op::Neg | Op::Powi(_) | Op::Func(_) => {
+                let a = stack.pop().unwrap();
+                stack.push(match op {
+                    Op::Neg => -a,
+                    Op::Powi(k) => powi(a, k),
+                    Op::Func(f) => f.apply(a),
+                    _ => unreachable!(),
+                });
+            }
+        }
+    }
+    assert!(stack.is_empty());
+}
+
+#[test]
+fn interpreter_equals_the_instruction_table_on_random_programs() {
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0x1e7);
+    for case in 0..3000 {
+        let (n_inputs, n_outputs, n_consts) = (
+            rng.random_range(1..6usize),
+            rng.random_range(1..5usize),
+            rng.random_range(1..4usize),
+        );
+        let consts: Vec<f32> = (0..n_consts).map(|_| rng.random_range(-3.0..3.0)).collect();
+        let mut ops = Vec::new();
+        let mut max_depth = 0usize;
+        for o in 0..n_outputs {
+            let mut depth = 0usize;
+            for _ in 0..rng.random_range(1..30) {
+                let choice = rng.random_range(0..10);
+                let op = if depth == 0 || (choice < 4 && depth < MAX_PROGRAM_STACK) {
+                    if rng.random_bool(0.7) {
+                        Op::Load(rng.random_range(0..n_inputs) as u8)
+                    } else {
+                        Op::Const(rng.random_range(0..n_consts) as u16)
+                    }
+                } else if choice < 7 || depth < 2 {
+                    match rng.random_range(0..3) {
+                        0 => Op::Neg,
+                        1 => Op::Powi(
+                            rng.random_range(1..4) * if rng.random_bool(0.3) { -1 } else { 1 },
+                        ),
+                        _ => Op::Func(Func::ALL[rng.random_range(0..Func::ALL.len())]),
+                    }
+                } else {
+                    [Op::Add, Op::Sub, Op::Mul, Op::Div, Op::Atan2][rng.random_range(0..5)]
+                };
+                let (pops, pushes) = op.arity();
+                depth = depth - pops + pushes;
+                max_depth = max_depth.max(depth);
+                ops.push(op);
+            }
+            while depth > 1 {
+                ops.push([Op::Add, Op::Mul, Op::Sub][rng.random_range(0..3)]);
+                depth -= 1;
+            }
+            ops.push(Op::Store(o as u8));
+        }
+        let bytes = assemble(n_inputs, n_outputs, &consts, &ops, max_depth);
+        let p = Program::decode(&bytes).unwrap_or_else(|e| panic!("case {case}: {e:?}"));
+        for _ in 0..4 {
+            let x: Vec<f32> = (0..n_inputs).map(|_| rng.random_range(-4.0..4.0)).collect();
+            let (mut got, mut want) = (vec![0.0f32; n_outputs], vec![0.0f32; n_outputs]);
+            p.eval(&x, &mut got).unwrap();
+            reference_eval(&p, &x, &mut want);
+            for (g, w) in got.iter().zip(&want) {
+                assert_eq!(g.to_bits(), w.to_bits(), "case {case}: {ops:?} at {x:?}");
+            }
+        }
+    }
+}

@@ -230,7 +230,7 @@ impl<'s> Monitor<'s> {
     fn eval(&self, node: &Node, t: &[f64], cols: &[&[f64]]) -> Result<Vec<f64>, MtlError> {
         Ok(match node {
             Node::Const(_) | Node::Linear { .. } | Node::Set { .. } => {
-                self.atom(node, t.len(), cols)?
+                self.atom(node, t.len(), cols, Atoms::Compiled)?
             }
             Node::Not(x) => {
                 let mut v = self.eval(x, t, cols)?;
@@ -260,13 +260,15 @@ impl<'s> Monitor<'s> {
         })
     }
 
-    /// The atomic propositions: constants (2.9), linear predicates and sets (2.10).
+    /// The atomic propositions: constants (2.9), linear predicates and sets (2.10); a set's signed
+    /// distances as `how` says (the same values either way).
     #[allow(clippy::needless_range_loop)]
     pub(crate) fn atom(
         &self,
         node: &Node,
         n: usize,
         cols: &[&[f64]],
+        how: Atoms,
     ) -> Result<Vec<f64>, MtlError> {
         Ok(match node {
             Node::Const(c) => vec![*c; n],
@@ -284,13 +286,20 @@ impl<'s> Monitor<'s> {
             }
             Node::Set { set, cols: idx } => {
                 let s = self.sets[*set];
+                let mut compiled = match how {
+                    Atoms::Compiled => s.region.compile(&s.metric),
+                    Atoms::Pointwise => None,
+                };
                 let mut x = vec![0.0; idx.len()];
                 let mut v = Vec::with_capacity(n);
                 for k in 0..n {
                     for (xi, &c) in x.iter_mut().zip(idx) {
                         *xi = cols[c][k];
                     }
-                    let r = s.region.signed_dist(&x, &s.metric).value;
+                    let r = match compiled.as_mut() {
+                        Some(f) => f.eval(&x).signed(),
+                        None => s.region.signed_dist(&x, &s.metric).value,
+                    };
                     if r.is_nan() {
                         return Err(MtlError::NaN {
                             set: s.name.clone(),
@@ -304,6 +313,15 @@ impl<'s> Monitor<'s> {
             _ => unreachable!("atom() is only called on atoms"),
         })
     }
+}
+
+/// How [`Monitor::atom`] measures a set: through its compiled signed distance
+/// ([`crate::geometry::Region::compile`]: factored once for the whole trace; where the set has none, as
+/// `Pointwise`), or point by point through [`crate::geometry::Region::signed_dist`] (the oracle's way).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Atoms {
+    Compiled,
+    Pointwise,
 }
 
 /// The pointwise `op` of the terms' signals (`start` for none): one loop over an n-ary node, so a long

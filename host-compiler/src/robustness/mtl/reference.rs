@@ -1,14 +1,15 @@
 //! A direct transcription of the discrete-time robust semantics (Def 2.17, windows as in
 //! [`super::eval`]): every temporal operator scans its window sample by sample, so it costs
 //! O(length × window) per operator. It shares nothing with the streaming evaluator except the atomic
-//! propositions, and serves as the test oracle and the bench baseline.
+//! propositions, whose sets it measures point by point through `Region::signed_dist` (the streaming
+//! evaluator through their compiled forms), and serves as the test oracle and the bench baseline.
 
 // Index loops on purpose: a literal transcription of the definition.
 #![allow(clippy::needless_range_loop)]
 // Formula errors carry their source text for miette; they are built once per failed parse.
 #![allow(clippy::result_large_err)]
 
-use super::eval::{columns, fold, Monitor, Node};
+use super::eval::{columns, fold, Atoms, Monitor, Node};
 use super::trace::Trace;
 use super::MtlError;
 
@@ -51,7 +52,9 @@ fn eval(
 ) -> Result<Vec<f64>, MtlError> {
     let n = t.len();
     Ok(match node {
-        Node::Const(_) | Node::Linear { .. } | Node::Set { .. } => m.atom(node, n, cols)?,
+        Node::Const(_) | Node::Linear { .. } | Node::Set { .. } => {
+            m.atom(node, n, cols, Atoms::Pointwise)?
+        }
         Node::Not(x) => eval(m, x, t, cols, scan)?.into_iter().map(|r| -r).collect(),
         Node::And(terms) => fold(
             terms,

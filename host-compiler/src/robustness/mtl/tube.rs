@@ -32,7 +32,7 @@
 //! ends move forward (a monotone deque, O(N) per operator); the until's lower bound is a scan per start
 //! with early exit, O(N·W) in the worst case.
 
-use super::eval::{Monitor, Node};
+use super::eval::{Atoms, Monitor, Node};
 use super::window::Wedge;
 use super::{MtlError, NamedSet};
 
@@ -404,7 +404,7 @@ fn collect_atoms(
     match node {
         Node::Const(_) => Ok(()),
         Node::Linear { .. } | Node::Set { .. } => {
-            out.push(monitor.atom(node, len, cols)?);
+            out.push(monitor.atom(node, len, cols, Atoms::Compiled)?);
             Ok(())
         }
         Node::Not(x) | Node::Eventually(_, x) | Node::Always(_, x) => {
