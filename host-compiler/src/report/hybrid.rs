@@ -10,7 +10,7 @@
 //! its shadow ellipse, a box to its sides; a set that does not constrain both coordinates is not drawn.
 
 use super::format::{escape, num};
-use super::plots::{trajectory_color, DynResult, GOAL_COLOR, UNSAFE_COLOR};
+use super::plots::{padded_span, trajectory_color, DynResult, GOAL_COLOR, UNSAFE_COLOR};
 use super::present::root2;
 use crate::model::hybrid::EdgeKind;
 use crate::spec::sets::{Coords, SetDesc, Shape};
@@ -25,19 +25,9 @@ const PLANES: usize = 3;
 /// Tubes drawn per segment.
 const TUBES: usize = 10;
 
-/// Colour of location `loc`.
+/// Colour of location `loc` (the trajectory palette; a run's start dot takes its rank's colour).
 fn location_color(loc: usize) -> RGBColor {
-    const PALETTE: [RGBColor; 8] = [
-        RGBColor(31, 119, 180),
-        RGBColor(255, 127, 14),
-        RGBColor(148, 103, 189),
-        RGBColor(140, 86, 75),
-        RGBColor(227, 119, 194),
-        RGBColor(23, 190, 207),
-        RGBColor(188, 189, 34),
-        RGBColor(127, 127, 127),
-    ];
-    PALETTE[loc % PALETTE.len()]
+    trajectory_color(loc)
 }
 
 /// The page, self-contained (inline SVG).
@@ -320,19 +310,7 @@ fn plane_plot(task: &HybridTask, s: &HybridSynthesis, pl: [usize; 2]) -> DynResu
         xs.push(x);
         ys.push(y);
     }
-    let span = |v: &[f64]| {
-        let (a, b) = v
-            .iter()
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
-                (a.min(x), b.max(x))
-            });
-        if !a.is_finite() {
-            return (-1.0, 1.0);
-        }
-        let p = 0.08 * (b - a).max(1e-9);
-        (a - p, b + p)
-    };
-    let ((x0, x1), (y0, y1)) = (span(&xs), span(&ys));
+    let ((x0, x1), (y0, y1)) = (padded_span(&xs, 0.08), padded_span(&ys, 0.08));
     let width = 900u32;
     let height = ((width as f64) * (y1 - y0) / (x1 - x0)).clamp(300.0, 700.0) as u32;
     let mut svg = String::new();

@@ -62,6 +62,21 @@ fn ellipse_vertices(count: usize) -> usize {
 const MANY_ELLIPSES: usize = 300;
 
 /// The colour of the `rank`-th trajectory (rank in the id-sorted order).
+/// The range of `v` padded by `frac` of its width on each side ((−1, 1) for no finite value).
+pub(super) fn padded_span(v: &[f64], frac: f64) -> (f64, f64) {
+    let (a, b) = v
+        .iter()
+        .filter(|x| x.is_finite())
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
+            (a.min(x), b.max(x))
+        });
+    if !a.is_finite() {
+        return (-1.0, 1.0);
+    }
+    let p = frac * (b - a).max(1e-9);
+    (a - p, b + p)
+}
+
 pub fn trajectory_color(rank: usize) -> RGBColor {
     PALETTE[rank % PALETTE.len()]
 }

@@ -5,7 +5,7 @@
 //! δ_Input, the stored radius).
 
 use super::format::{escape, num};
-use super::plots::{trajectory_color, DynResult, GOAL_COLOR, UNSAFE_COLOR};
+use super::plots::{padded_span, trajectory_color, DynResult, GOAL_COLOR, UNSAFE_COLOR};
 use crate::spec::{Coords, Problem, Shape};
 use crate::synth::temporal::TemporalSynthesis;
 use plotters::prelude::*;
@@ -194,16 +194,7 @@ fn path_plot(problem: &Problem, s: &TemporalSynthesis) -> DynResult<String> {
         xs.extend([c[0] - r, c[0] + r]);
         ys.extend([c[1] - r, c[1] + r]);
     }
-    let span = |v: &[f64]| {
-        let (a, b) = v
-            .iter()
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
-                (a.min(x), b.max(x))
-            });
-        let p = 0.05 * (b - a).max(1e-9);
-        (a - p, b + p)
-    };
-    let ((x0, x1), (y0, y1)) = (span(&xs), span(&ys));
+    let ((x0, x1), (y0, y1)) = (padded_span(&xs, 0.05), padded_span(&ys, 0.05));
     let width = 600u32;
     let height = ((width as f64) * (y1 - y0) / (x1 - x0)).clamp(200.0, 900.0) as u32;
     let mut svg = String::new();

@@ -58,7 +58,10 @@ fn hybrid_synth_then_verify() {
         2,
         "planes (x1, x2) and (x1, x3)"
     );
-    assert!(page.contains("\nx3\n</text>"), "the second plane's axis label");
+    assert!(
+        page.contains("\nx3\n</text>"),
+        "the second plane's axis label"
+    );
     let delta = cert["runs"][0]["certificate"]["segments"][0]["delta"]
         .as_f64()
         .unwrap();
