@@ -10,7 +10,7 @@
 //! its shadow ellipse, a box to its sides; a set that does not constrain both coordinates is not drawn.
 
 use super::format::{escape, num};
-use super::plots::{padded_span, trajectory_color, DynResult, GOAL_COLOR, UNSAFE_COLOR};
+use super::plots::{css_color, padded_span, trajectory_color, DynResult, GOAL_COLOR, UNSAFE_COLOR};
 use super::present::root2;
 use crate::model::hybrid::EdgeKind;
 use crate::spec::sets::{Coords, SetDesc, Shape};
@@ -104,12 +104,9 @@ pub fn render(task: &HybridTask, spec: &str, s: &HybridSynthesis) -> String {
     }
     h.push_str("</table><p>");
     for (l, m) in modes.iter().enumerate() {
-        let c = location_color(l);
         h.push_str(&format!(
-            "<span class=key style=\"background:rgb({},{},{})\"></span>{}",
-            c.0,
-            c.1,
-            c.2,
+            "<span class=key style=\"background:{}\"></span>{}",
+            css_color(location_color(l)),
             escape(&m.name)
         ));
     }
@@ -227,19 +224,18 @@ fn planes(task: &HybridTask) -> Vec<[usize; 2]> {
         .collect()
 }
 
-/// The shadow of `{x : (x − c)ᵀ E (x − c) ≤ r²}` on the plane `pl`: centre (c_i, c_j) and generator of
-/// r²·(E⁻¹)[pl, pl].
-fn shadow(E_inv: &Mat<f64>, c: &[f64], r: f64, pl: [usize; 2]) -> (Vec<(f64, f64)>, [f64; 2]) {
+/// The shadow of `{x : (x − c)ᵀ E (x − c) ≤ r²}` on the plane `pl`, as a polygon: the ellipse of centre
+/// (c_i, c_j) and shape r²·(E⁻¹)[pl, pl].
+fn shadow(E_inv: &Mat<f64>, c: &[f64], r: f64, pl: [usize; 2]) -> Vec<(f64, f64)> {
     let S = Mat::from_fn(2, 2, |a, b| r * r * E_inv[(pl[a], pl[b])]);
     let e = super::data::Ellipse2 {
         center: [c[pl[0]], c[pl[1]]],
         M: root2(&S),
     };
-    let pts = super::planar::ellipse_points(&e, 64)
+    super::planar::ellipse_points(&e, 64)
         .into_iter()
         .map(|p| (p[0], p[1]))
-        .collect();
-    (pts, e.center)
+        .collect()
 }
 
 /// A spec set's shadow on the plane, as a polygon (`None` when it does not constrain both coordinates
@@ -258,12 +254,12 @@ fn set_shadow(d: &SetDesc, n: usize, pl: [usize; 2]) -> Option<Vec<(f64, f64)>> 
     match &d.shape {
         Shape::Ball { center, radius } => {
             let I = Mat::<f64>::identity(d2, d2);
-            Some(shadow(&I, center, *radius, [a, b]).0)
+            Some(shadow(&I, center, *radius, [a, b]))
         }
         Shape::Ellipsoid { center, Q } => {
             let Qm = Mat::from_fn(d2, d2, |i, j| Q.data[i * d2 + j]);
             let Qi = crate::linalg::sym_fn(Qm.as_ref(), |l| if l > 0.0 { 1.0 / l } else { 0.0 })?;
-            Some(shadow(&Qi, center, 1.0, [a, b]).0)
+            Some(shadow(&Qi, center, 1.0, [a, b]))
         }
         Shape::Box { lo, hi } => Some(vec![
             (lo[a], lo[b]),
@@ -289,7 +285,7 @@ fn init_box(b: &crate::spec::InitBox, pl: [usize; 2]) -> Vec<(f64, f64)> {
 fn plane_plot(task: &HybridTask, s: &HybridSynthesis, pl: [usize; 2]) -> DynResult<String> {
     let problem = &task.problem;
     let n = task.plant.modes()[0].flow.n();
-    let inv: Vec<Mat<f64>> = task.constants.iter().map(|c| c.roots.inv.clone()).collect();
+    let inv = |loc: usize| &task.constants[loc].roots.inv;
     let shown = &s.runs[..s.runs.len().min(SHOWN)];
     // Frame: the nominals, Init and Goal (Unsafe may be far larger; it is clipped).
     let (mut xs, mut ys) = (Vec::new(), Vec::new());
@@ -339,8 +335,8 @@ fn plane_plot(task: &HybridTask, s: &HybridSynthesis, pl: [usize; 2]) -> DynResu
         // The cover: every run's first ball.
         let cover = RGBColor(60, 110, 220);
         for r in &s.runs {
-            let (poly, _) = shadow(
-                &inv[task.path[0]],
+            let poly = shadow(
+                inv(task.path[0]),
                 &r.nominals[0].x[0],
                 r.certificate.delta_stored as f64,
                 pl,
@@ -376,7 +372,7 @@ fn plane_plot(task: &HybridTask, s: &HybridSynthesis, pl: [usize; 2]) -> DynResu
                 // Tubes at evenly spaced samples of the kept rows.
                 for t in 0..TUBES {
                     let k = t * (rows - 1) / (TUBES - 1).max(1);
-                    let (poly, _) = shadow(&inv[loc], &nom.x[k], seg.delta, pl);
+                    let poly = shadow(inv(loc), &nom.x[k], seg.delta, pl);
                     chart.draw_series([Polygon::new(poly, color.mix(0.10).filled())])?;
                 }
                 let pts: Vec<(f64, f64)> =
@@ -387,7 +383,7 @@ fn plane_plot(task: &HybridTask, s: &HybridSynthesis, pl: [usize; 2]) -> DynResu
                     (r.nominals.get(j + 1), r.certificate.segments.get(j + 1))
                 {
                     let nloc = task.path[j + 1];
-                    let (mut poly, _) = shadow(&inv[nloc], &next.x[0], nseg.delta, pl);
+                    let mut poly = shadow(inv(nloc), &next.x[0], nseg.delta, pl);
                     poly.push(poly[0]);
                     chart.draw_series(DashedLineSeries::new(
                         poly,
