@@ -184,6 +184,18 @@ impl<'a> Controller<'a> {
         self.active
     }
 
+    /// The location of the segment the last step's row belongs to: the discrete input a plant with forced
+    /// switching takes (§4.2.1, the location by the table). 0 before a trajectory is selected, for
+    /// one-location images and for PWA images. Reads the segment cursor; the step does no extra work.
+    pub fn location(&self) -> usize {
+        if self.active.is_none() || self.image.mode() != Mode::Feedforward {
+            return 0;
+        }
+        self.image
+            .segment(self.segment as usize)
+            .map_or(0, |g| g.location)
+    }
+
     /// Whether the terminal law has taken over since reset ([`crate::terminal`]).
     pub fn in_terminal_phase(&self) -> bool {
         self.terminal

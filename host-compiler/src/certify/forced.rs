@@ -155,7 +155,7 @@ fn safe_transition(
     P: faer::MatRef<'_, f64>,
     c: &[f64],
     delta: f64,
-) -> Result<Intersection, ForcedError> {
+) -> Result<Box<dyn Region>, ForcedError> {
     let n = c.len();
     let geo = |source| ForcedError::Geometry { segment, source };
     let R = &edge.reset.R;
@@ -171,8 +171,14 @@ fn safe_transition(
     let Q = R.transpose() * P * R * (1.0 / (delta * delta));
     let ball =
         Ellipsoid::new(cp, to_row_major(crate::linalg::sym(Q.as_ref()).as_ref())).map_err(geo)?;
+    if edge.guard.a.is_empty() {
+        // A guard without rows is the whole space: the safe transition is the reset's preimage alone.
+        return Ok(Box::new(ball));
+    }
     let guard = region(&edge.guard, n).map_err(geo)?;
-    Intersection::new(vec![Box::new(guard), Box::new(ball)]).map_err(geo)
+    Ok(Box::new(
+        Intersection::new(vec![Box::new(guard), Box::new(ball)]).map_err(geo)?,
+    ))
 }
 
 /// Theorem 4.17 for a run of segments (module doc): checks that the run is a forced-switching run
@@ -271,13 +277,7 @@ pub fn certify_forced(segments: &[ForcedSegment<'_>]) -> Result<ForcedCertificat
         let edge = s.switch.expect("checked above");
         let n = s.lp.P.nrows();
         let target: Box<dyn Region> = if next_delta > 0.0 {
-            Box::new(safe_transition(
-                i,
-                edge,
-                next.lp.P,
-                &next.nominal.x[0],
-                next_delta,
-            )?)
+            safe_transition(i, edge, next.lp.P, &next.nominal.x[0], next_delta)?
         } else {
             Box::new(Empty(n))
         };

@@ -34,17 +34,12 @@ pub fn run(a: &SynthArgs, problem: crate::spec::Problem) -> Outcome {
             eprintln!("warning: Ctrl-C handler not installed: {e}");
         }
     }
-    let names: Vec<&str> = task
-        .path
-        .iter()
-        .map(|&l| task.plant.modes()[l].name.as_str())
-        .collect();
     if !a.quiet {
         eprintln!(
             "hybrid plant: {} locations, {} edges; runs go {}",
             task.plant.modes().len(),
             task.plant.edges().len(),
-            names.join(" → ")
+            task.route()
         );
     }
     let quiet = a.quiet;
@@ -73,7 +68,8 @@ pub fn run(a: &SynthArgs, problem: crate::spec::Problem) -> Outcome {
         "spec": a.spec.display().to_string(),
         "seed": task.problem.seed,
         "plant": "hybrid",
-        "path": names,
+        "switching": if task.forced { "forced" } else { "internal" },
+        "path": task.path.iter().map(|&l| &task.plant.modes()[l].name).collect::<Vec<_>>(),
         "edges": task.edges,
         "stop": s.stop,
         "coverage": s.coverage,
@@ -86,6 +82,7 @@ pub fn run(a: &SynthArgs, problem: crate::spec::Problem) -> Outcome {
         })).collect::<Vec<_>>(),
         "runs": s.runs.iter().map(|r| serde_json::json!({
             "x0": r.nominals[0].x[0], "certificate": r.certificate,
+            "locations": r.locations.iter().map(|&l| &task.plant.modes()[l].name).collect::<Vec<_>>(),
             "nominal_segments": r.nominals.iter().map(|n| &n.x).collect::<Vec<_>>(),
         })).collect::<Vec<_>>(),
         "seconds": s.seconds,

@@ -262,6 +262,7 @@ pub fn grow(
         phi: lc.phi,
         beta: lc.beta,
         input_margin: 1e-5 * input_scale(&task.property.input),
+        schedule: None,
     };
     let gs = GenSettings::default();
     let shipped =

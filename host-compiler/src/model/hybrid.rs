@@ -75,6 +75,13 @@ impl Reset {
             r: vec![0.0; n],
         }
     }
+    /// Whether this is exactly x ↦ x.
+    pub fn is_identity(&self) -> bool {
+        let n = self.R.nrows();
+        self.R.ncols() == n
+            && (0..n).all(|i| (0..n).all(|j| self.R[(i, j)] == if i == j { 1.0 } else { 0.0 }))
+            && self.r.iter().all(|&v| v == 0.0)
+    }
     pub fn apply(&self, x: &[f64]) -> Vec<f64> {
         (0..self.R.nrows())
             .map(|i| (0..x.len()).map(|j| self.R[(i, j)] * x[j]).sum::<f64>() + self.r[i])
@@ -127,6 +134,8 @@ pub struct Hybrid {
 pub enum HybridError {
     #[error("an automaton needs at least one location")]
     NoLocations,
+    #[error("internal edge {edge} has a guard without rows (the whole space): the flow would take it at once")]
+    EmptyInternalGuard { edge: usize },
     #[error(transparent)]
     Model(#[from] ModelError),
     #[error("location `{name}` has n = {n}, m = {m}; location `{first}` has n = {n0}, m = {m0}")]
@@ -276,6 +285,10 @@ impl Hybrid {
                 }
             }
             check_polytope(&edge.guard, n0, &format!("guard of edge {e}"))?;
+            // A forced edge's guard may be the whole space (no rows); an internal one would fire at once.
+            if edge.kind == EdgeKind::Internal && edge.guard.a.is_empty() {
+                return Err(HybridError::EmptyInternalGuard { edge: e });
+            }
             let R = &edge.reset.R;
             if R.nrows() != n0 || R.ncols() != n0 || edge.reset.r.len() != n0 {
                 return Err(HybridError::ResetShape { edge: e, n: n0 });

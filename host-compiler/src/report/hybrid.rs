@@ -49,7 +49,7 @@ pub fn render(task: &HybridTask, spec: &str, s: &HybridSynthesis) -> String {
         task.plant.edges().len(),
         num(problem.horizon),
         num(task.plant.period()),
-        escape(&task.path.iter().map(|&l| modes[l].name.as_str()).collect::<Vec<_>>().join(" → ")),
+        escape(&task.route()),
     ));
     h.push_str(&format!(
         "<p>{} runs ({} seeds tried, {} refused); coverage of Init {} (lower bound {} at {} confidence, {} samples); stop: {}; {} s.</p>",
@@ -82,7 +82,7 @@ pub fn render(task: &HybridTask, spec: &str, s: &HybridSynthesis) -> String {
         "<h2>Automaton</h2><table><tr><th>edge</th><th>kind</th><th>guard</th><th>reset</th></tr>",
     );
     for e in task.plant.edges() {
-        let guard = e
+        let mut guard = e
             .guard
             .a
             .iter()
@@ -90,6 +90,9 @@ pub fn render(task: &HybridTask, spec: &str, s: &HybridSynthesis) -> String {
             .map(|(a, b)| format!("{} ≤ {}", linear_form(a), num(*b)))
             .collect::<Vec<_>>()
             .join(", ");
+        if guard.is_empty() {
+            guard = "the whole space".into();
+        }
         h.push_str(&format!(
             "<tr><td class=l>{} → {}</td><td class=l>{}</td><td class=l>{}</td><td class=l>{}</td></tr>",
             escape(&modes[e.from].name),
@@ -122,7 +125,7 @@ pub fn render(task: &HybridTask, spec: &str, s: &HybridSynthesis) -> String {
 
     h.push_str("<h2>Segments</h2><table><tr><th>run</th><th>x̃(0)</th><th>δ stored</th><th>segment</th><th>location</th><th>δᵢ</th><th>what binds δᵢ</th><th>events (samples)</th><th>rows</th></tr>");
     for (i, r) in s.runs.iter().enumerate() {
-        for (j, (seg, &loc)) in r.certificate.segments.iter().zip(&task.path).enumerate() {
+        for (j, (seg, &loc)) in r.certificate.segments.iter().zip(&r.locations).enumerate() {
             let head = if j == 0 {
                 format!(
                     "<td>{}</td><td class=l>{}</td><td>{}</td>",
@@ -366,7 +369,7 @@ fn plane_plot(task: &HybridTask, s: &HybridSynthesis, pl: [usize; 2]) -> DynResu
         }
         for (ri, r) in shown.iter().enumerate() {
             for (j, (nom, seg)) in r.nominals.iter().zip(&r.certificate.segments).enumerate() {
-                let loc = task.path[j];
+                let loc = r.locations[j];
                 let color = location_color(loc);
                 let rows = seg.rows.clamp(1, nom.x.len());
                 // Tubes at evenly spaced samples of the kept rows.
@@ -382,7 +385,7 @@ fn plane_plot(task: &HybridTask, s: &HybridSynthesis, pl: [usize; 2]) -> DynResu
                 if let (Some(next), Some(nseg)) =
                     (r.nominals.get(j + 1), r.certificate.segments.get(j + 1))
                 {
-                    let nloc = task.path[j + 1];
+                    let nloc = r.locations[j + 1];
                     let mut poly = shadow(inv(nloc), &next.x[0], nseg.delta, pl);
                     poly.push(poly[0]);
                     chart.draw_series(DashedLineSeries::new(

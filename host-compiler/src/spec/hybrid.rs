@@ -19,7 +19,8 @@
 //! to = "right"
 //! kind = "internal"            # "internal": taken when the flow enters the guard (§4.2.2);
 //!                              # "forced": taken when the controller chooses (§4.2.1)
-//! guard = { A = [[-1, 0, 0]], b = [0] }      # polytope {x : A x ≤ b}
+//! guard = { A = [[-1, 0, 0]], b = [0] }      # polytope {x : A x ≤ b}; a forced edge may omit it
+//!                                            # (the whole state space, Example 4.20)
 //! reset = { R = [[...]], r = [...] }         # optional x ↦ R x + r (default: the identity)
 //! ```
 //!
@@ -56,7 +57,7 @@ pub(crate) struct RawEdge {
     pub from: Spanned<String>,
     pub to: Spanned<String>,
     pub kind: Spanned<String>,
-    pub guard: Spanned<RawPolytope>,
+    pub guard: Option<Spanned<RawPolytope>>,
     pub reset: Option<Spanned<RawReset>>,
 }
 
@@ -300,7 +301,29 @@ pub(crate) fn plant(
                 .help("internal: the flow takes the edge on entering the guard; forced: the controller does"))
             }
         };
-        let guard = polytope(&r.guard, &format!("{key}.guard"), n)?;
+        let guard = match (&r.guard, kind) {
+            (Some(g), _) => polytope(g, &format!("{key}.guard"), n)?,
+            // The controller may take the edge anywhere: no rows, the whole state space.
+            (None, EdgeKindDesc::Forced) => PolytopeDesc {
+                A: Matrix {
+                    rows: 0,
+                    cols: n,
+                    data: Vec::new(),
+                },
+                b: Vec::new(),
+            },
+            (None, EdgeKindDesc::Internal) => return Err(SpecError::new(
+                ErrorKind::MissingField,
+                format!(
+                    "{key} is internal and has no guard: the flow takes it on entering its guard"
+                ),
+            )
+            .at(
+                raw_edge.span(),
+                "add guard = { A = [[...]], b = [...] } here",
+            )
+            .help("only a forced edge (taken when the controller chooses) may omit its guard")),
+        };
         let (R, rr) = match &r.reset {
             None => (Matrix::identity(n), vec![0.0; n]),
             Some(reset) => {

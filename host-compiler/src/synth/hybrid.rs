@@ -23,6 +23,8 @@ use crate::trajectory::generate::{generate, GenProblem, GenSettings};
 use crate::trajectory::Nominal;
 use faer::Mat;
 
+pub mod forced;
+
 /// How far past a guard's plane (Euclidean) a non-last segment's generated nominal must end: each is
 /// tried (a deeper target makes the nominal cross the plane more steeply, so that the tube's crossing
 /// points spread less; a location may not reach the deeper ones).
@@ -47,9 +49,12 @@ pub struct HybridTask {
     pub constants: Vec<LoopConstants>,
     /// The initial location.
     pub initial: Location,
-    /// The location path and the edges between them.
+    /// The location path and the edges between them (internal switching); for forced switching the
+    /// initial location alone and no edges: each run chooses its own locations ([`forced`]).
     pub path: Vec<Location>,
     pub edges: Vec<usize>,
+    /// Whether the automaton's edges are forced (§4.2.1) rather than internal (§4.2.2).
+    pub forced: bool,
 }
 
 /// Why a hybrid task could not be built or a run planned.
@@ -71,6 +76,13 @@ pub enum HybridSynthError {
     Certify { loc: Location, reason: String },
     #[error("no chain of internal edges leads from the initial location {from} to a location whose invariant holds Goal's centre")]
     NoPath { from: String },
+    #[error("edges {internal} (internal) and {forced} (forced): an automaton with both kinds is not synthesised")]
+    MixedEdges { internal: usize, forced: usize },
+    #[error(
+        "forced edge {edge} has a reset other than the identity: the controller measures the state before \
+         the switch and would apply the next segment's law to the state before its reset"
+    )]
+    ForcedReset { edge: usize },
     #[error("{0}")]
     Run(String),
 }
@@ -101,12 +113,27 @@ impl HybridTask {
                 })?,
             );
         }
-        let (path, edges) =
+        let kind_of = |k: EdgeKind| plant.edges().iter().position(|e| e.kind == k);
+        let forced = match (kind_of(EdgeKind::Internal), kind_of(EdgeKind::Forced)) {
+            (Some(internal), Some(forced)) => {
+                return Err(HybridSynthError::MixedEdges { internal, forced })
+            }
+            (_, f) => f.is_some(),
+        };
+        if forced {
+            if let Some(edge) = plant.edges().iter().position(|e| !e.reset.is_identity()) {
+                return Err(HybridSynthError::ForcedReset { edge });
+            }
+        }
+        let (path, edges) = if forced {
+            (vec![initial], Vec::new())
+        } else {
             location_path(&plant, initial, goal_centre(&convex)).ok_or_else(|| {
                 HybridSynthError::NoPath {
                     from: plant.modes()[initial].name.clone(),
                 }
-            })?;
+            })?
+        };
         Ok(Self {
             problem,
             plant,
@@ -118,7 +145,23 @@ impl HybridTask {
             initial,
             path,
             edges,
+            forced,
         })
+    }
+
+    /// How runs switch, in words: the location path (internal switching), or the controller's choice
+    /// from the initial location (forced switching).
+    pub fn route(&self) -> String {
+        let name = |l: Location| self.plant.modes()[l].name.as_str();
+        if self.forced {
+            format!(
+                "from {} through the locations each run's schedule chooses (forced switching)",
+                name(self.initial)
+            )
+        } else {
+            let path: Vec<&str> = self.path.iter().map(|&l| name(l)).collect();
+            format!("{} (internal switching)", path.join(" → "))
+        }
     }
 
     /// The loop of location `loc` with the task's sets.
@@ -178,8 +221,11 @@ fn location_path(
 /// A planned, certified nominal run.
 #[derive(Clone, Debug)]
 pub struct HybridRun {
-    /// One nominal per segment (the location path's), the reference tables as shipped (f32 values).
+    /// One nominal per segment, the reference tables as shipped (f32 values).
     pub nominals: Vec<Nominal>,
+    /// The location of each segment (the task's path for internal switching; the run's own choice for
+    /// forced switching).
+    pub locations: Vec<Location>,
     pub certificate: InternalCertificate,
 }
 
@@ -284,6 +330,7 @@ fn gen_problem<'a>(
         phi: lc.phi,
         beta: lc.beta,
         input_margin: 1e-5 * input_scale(&task.property.input),
+        schedule: None,
     }
 }
 
@@ -357,6 +404,7 @@ pub fn plan_run(task: &HybridTask, x0: &[f64]) -> Result<HybridRun, String> {
         if best.as_ref().is_none_or(|b| cert.delta() > b.delta()) {
             best = Some(HybridRun {
                 nominals,
+                locations: task.path.clone(),
                 certificate: cert,
             });
         }
@@ -429,6 +477,7 @@ fn refine_landing(task: &HybridTask, run: &HybridRun) -> Option<HybridRun> {
     let certificate = certify_run(task, &nominals).ok()?;
     Some(HybridRun {
         nominals,
+        locations: task.path.clone(),
         certificate,
     })
 }
@@ -470,7 +519,7 @@ pub fn image(task: &HybridTask, runs: &[HybridRun]) -> Result<Vec<u8>, crate::em
             for row in &nom.v[..rows] {
                 v.extend_from_slice(row);
             }
-            location.extend(std::iter::repeat_n(task.path[i] as u8, rows));
+            location.extend(std::iter::repeat_n(run.locations[i] as u8, rows));
             exits.push(match &seg.exit {
                 Some(g) => SegmentExit::Guard {
                     a: g.a.clone(),
@@ -487,7 +536,10 @@ pub fn image(task: &HybridTask, runs: &[HybridRun]) -> Result<Vec<u8>, crate::em
             v,
             location,
         });
-        b.exits.push(exits);
+        // Forced switching ends every segment with its table: no exits section.
+        if !task.forced {
+            b.exits.push(exits);
+        }
     }
     b.fingerprint = Some(task.problem.fingerprint.as_bytes().to_vec());
     b.to_bytes()
@@ -665,8 +717,16 @@ pub fn synthesize_hybrid(
         }
         seeds_tried += seeds.len();
         let before = runs.len();
-        let planned: Vec<Result<HybridRun, String>> =
-            seeds.par_iter().map(|x| plan_run(task, x)).collect();
+        let planned: Vec<Result<HybridRun, String>> = seeds
+            .par_iter()
+            .map(|x| {
+                if task.forced {
+                    forced::plan_forced(task, x)
+                } else {
+                    plan_run(task, x)
+                }
+            })
+            .collect();
         for (x, r) in seeds.into_iter().zip(planned) {
             match r {
                 Ok(run)

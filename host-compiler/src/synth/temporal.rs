@@ -202,6 +202,7 @@ pub fn gen_problem<'a>(task: &'a Task, lp: &Loop<'a>, lc: &LoopConstants) -> Gen
         phi: lc.phi,
         beta: lc.beta,
         input_margin: 1e-5 * input_scale(&task.property.input),
+        schedule: None,
     }
 }
 

@@ -99,19 +99,93 @@ pub struct GenProblem<'a> {
     pub beta: f64,
     /// Margin subtracted from the input bounds (f32 rounding of the evaluator).
     pub input_margin: f64,
+    /// A forced-switching schedule ([`Schedule`]); `None`: every step in `loc` under `K` and `P`.
+    pub schedule: Option<&'a Schedule<'a>>,
+}
+
+/// A forced-switching schedule (§4.2.1): the location of every step κ < N and, per location, its gain
+/// and metric. Step κ is then simulated in `loc[κ]`'s sampled model under that location's gain, and
+/// sample κ's tube and input conditions are written in its metric (sample N in the last step's): the one
+/// radius δ is read in each location's metric. This only proposes a run; its certificate
+/// (`certify::forced`) accounts for the change of metric at each switch. γ, φ and β are then the
+/// largest over the locations the caller passes.
+pub struct Schedule<'a> {
+    pub loc: Vec<crate::model::Location>,
+    /// Gain and metric per location (index = location).
+    pub K: Vec<MatRef<'a, f64>>,
+    pub P: Vec<MatRef<'a, f64>>,
 }
 
 impl GenProblem<'_> {
-    fn model(&self) -> &DiscretePlant {
-        self.plant.error_dynamics(self.loc)
+    /// The location of step κ (the last step's for κ ≥ N).
+    fn loc_at(&self, k: usize) -> crate::model::Location {
+        match self.schedule {
+            None => self.loc,
+            Some(s) => s
+                .loc
+                .get(k.min(s.loc.len().saturating_sub(1)))
+                .copied()
+                .unwrap_or(self.loc),
+        }
     }
 
-    /// Inter-sample excursion ρ(x̃(κ), ũ(κ)) = φ(‖f‖_P + β·margin) of the nominal in the P-metric, f the
-    /// vector field at the sample (0 for discrete-time plants).
-    fn excursion(&self, x: &[f64], u: &[f64]) -> f64 {
-        match self.plant.vector_field(self.loc, x, u) {
+    fn model_at(&self, k: usize) -> &DiscretePlant {
+        self.plant.error_dynamics(self.loc_at(k))
+    }
+
+    fn K_at(&self, k: usize) -> MatRef<'_, f64> {
+        match self.schedule {
+            None => self.K,
+            Some(s) => s.K[self.loc_at(k)],
+        }
+    }
+
+    /// The metric of sample κ and its roots (index into `roots`).
+    fn metric_at(&self, k: usize) -> usize {
+        self.schedule.map_or(0, |_| self.loc_at(k))
+    }
+
+    /// Roots of every metric `metric_at` indexes, or `None` if one is not positive definite.
+    fn roots(&self) -> Option<Vec<PdRoots>> {
+        match self.schedule {
+            None => Some(vec![PdRoots::new(self.P)?]),
+            Some(s) => s.P.iter().map(|P| PdRoots::new(*P)).collect(),
+        }
+    }
+
+    /// The nominal from `x0` under `v`, each step in its location.
+    fn simulate(&self, x0: &[f64], v: &[Vec<f64>]) -> Nominal {
+        if self.schedule.is_none() {
+            return simulate(self.model_at(0), self.K, x0, v);
+        }
+        let mut nom = Nominal {
+            x: vec![x0.to_vec()],
+            v: v.to_vec(),
+            u: Vec::with_capacity(v.len()),
+        };
+        for (k, vk) in v.iter().enumerate() {
+            let step = simulate(
+                self.model_at(k),
+                self.K_at(k),
+                &nom.x[k],
+                std::slice::from_ref(vk),
+            );
+            nom.u.push(step.u[0].clone());
+            nom.x.push(step.x[1].clone());
+        }
+        nom
+    }
+
+    /// Inter-sample excursion ρ(x̃(κ), ũ(κ)) = φ(‖f‖_P + β·margin) of the nominal in the P-metric of
+    /// sample κ, f the vector field at the sample (0 for discrete-time plants).
+    fn excursion(&self, k: usize, x: &[f64], u: &[f64]) -> f64 {
+        let P = match self.schedule {
+            None => self.P,
+            Some(s) => s.P[self.loc_at(k)],
+        };
+        match self.plant.vector_field(self.loc_at(k), x, u) {
             None => 0.0,
-            Some(f) => self.phi * (p_norm(self.P, &f) + self.beta * self.input_margin),
+            Some(f) => self.phi * (p_norm(P, &f) + self.beta * self.input_margin),
         }
     }
 }
@@ -177,7 +251,7 @@ pub fn generate(
     settings: &GenSettings,
 ) -> Result<Generated, GenError> {
     settings.validate()?;
-    let model = prob.model();
+    let model = prob.model_at(0);
     let n = model.n();
     let m = model.m();
     if x0.len() != n || prob.K.nrows() != m || prob.K.ncols() != n {
@@ -189,14 +263,14 @@ pub fn generate(
             k_cols: prob.K.ncols(),
         });
     }
-    let roots = PdRoots::new(prob.P).ok_or(GenError::BadMetric)?;
+    let roots = prob.roots().ok_or(GenError::BadMetric)?;
     let mut best: Option<Generated> = None;
     let mut lin: Option<Nominal> = None;
     for it in 0..settings.max_iter.max(1) {
         let sol = solve_subproblem(prob, &roots, x0, lin.as_ref(), settings);
         match sol {
             Ok((v, delta)) => {
-                let nominal = simulate(model, prob.K, x0, &v);
+                let nominal = prob.simulate(x0, &v);
                 let improved = best
                     .as_ref()
                     .map(|b| delta - b.delta_lin)
@@ -260,15 +334,14 @@ impl Rows {
 /// One SOCP: returns v(0..N) and δ, or why it has none.
 fn solve_subproblem(
     prob: &GenProblem<'_>,
-    roots: &PdRoots,
+    roots_of: &[PdRoots],
     x0: &[f64],
     lin: Option<&Nominal>,
     settings: &GenSettings,
 ) -> Result<(Vec<Vec<f64>>, f64), SubproblemStatus> {
-    let model = prob.model();
-    let (A, B, K) = (model.A.as_ref(), model.B.as_ref(), prob.K);
-    let n = A.nrows();
-    let m = B.ncols();
+    let model = prob.model_at(0);
+    let n = model.A.nrows();
+    let m = model.B.ncols();
     let N = prob.steps;
     let xi = |k: usize, i: usize| k * n + i;
     let vi = |k: usize, i: usize| n * (N + 1) + k * m + i;
@@ -282,12 +355,14 @@ fn solve_subproblem(
         cones: vec![],
     };
 
-    // Equalities: x(0) = x0; x(κ+1) − A x(κ) − B v(κ) − B K x(κ) = g.
-    let Acl = A + B * K;
+    // Equalities: x(0) = x0; x(κ+1) − A x(κ) − B v(κ) − B K x(κ) = g (step κ's location).
     for i in 0..n {
         rows.row(&[(xi(0, i), 1.0)], x0[i]);
     }
     for k in 0..N {
+        let model = prob.model_at(k);
+        let B = model.B.as_ref();
+        let Acl = model.A.as_ref() + B * prob.K_at(k);
         for i in 0..n {
             let mut e = vec![(xi(k + 1, i), 1.0)];
             for j in 0..n {
@@ -315,7 +390,8 @@ fn solve_subproblem(
             } else {
                 nom.u[N - 1].clone()
             };
-            let rho = prob.excursion(xk, &uk);
+            let rho = prob.excursion(k, xk, &uk);
+            let roots = &roots_of[prob.metric_at(k)];
             for piece in &prob.convex.unsafe_pieces {
                 let (nrm, off) = supporting_halfspace(piece, xk);
                 // Keep nᵀx ≥ off + ‖n‖_{P⁻¹}(γδ + ρ):  −nᵀx + γ‖n‖δ + s = −off − ‖n‖ρ.
@@ -329,6 +405,7 @@ fn solve_subproblem(
     // Input box.
     if let InputBound::Box { lo, hi } = &prob.property.input {
         for k in 0..N {
+            let (K, roots) = (prob.K_at(k), &roots_of[prob.metric_at(k)]);
             for i in 0..m {
                 let Ki: Vec<f64> = (0..n).map(|j| K[(i, j)]).collect();
                 let s = roots.dual_norm(&Ki);
@@ -343,7 +420,8 @@ fn solve_subproblem(
             }
         }
     }
-    // Polytope goal.
+    // Polytope goal, in the metric of sample N.
+    let roots = &roots_of[prob.metric_at(N)];
     if let ConvexPiece::Polytope { H, b } = &prob.convex.goal {
         for r in 0..H.nrows() {
             let h: Vec<f64> = (0..n).map(|j| H[(r, j)]).collect();
@@ -357,8 +435,9 @@ fn solve_subproblem(
 
     // Second-order cones.
     if let InputBound::Norm2 { center, max } = &prob.property.input {
-        let sK = spectral_norm((K * &roots.inv_sqrt).as_ref());
         for k in 0..N {
+            let K = prob.K_at(k);
+            let sK = spectral_norm((K * &roots_of[prob.metric_at(k)].inv_sqrt).as_ref());
             rows.row(&[(d, sK)], max - prob.input_margin);
             for i in 0..m {
                 let mut e: Vec<(usize, f64)> = (0..n).map(|j| (xi(k, j), -K[(i, j)])).collect();
@@ -515,6 +594,7 @@ mod tests {
             phi: 0.0,
             beta: 0.0,
             input_margin: 0.0,
+            schedule: None,
         };
         generate(&prob, &[0.0, 0.0], &GenSettings::default())
     }

@@ -3,7 +3,9 @@
 //! applied), independent of how the certificate was made.
 //!
 //! Each run starts in the initial location and is stepped over the horizon: the evaluator's input for the
-//! measured state (rounded to f32), held for one period; the flow is taken in [`SUBSTEPS`] exact
+//! measured state (rounded to f32), held for one period; where the evaluator's row is in another location
+//! and a forced edge leads there (§4.2.1), the plant takes that edge first (its guard must hold the
+//! state, its reset is applied); the flow is taken in [`SUBSTEPS`] exact
 //! sub-periods, and Unsafe is checked at every sub-sample (so also shortly after each event). A run
 //! meets the task at its first sample in Goal if, up to then, it never was in Unsafe, every input was in
 //! the input set, and the evaluator never left its certified envelope.
@@ -113,6 +115,24 @@ pub fn run_hybrid(
                 break;
             }
         };
+        // Forced switching (§4.2.1): the location of the evaluator's row is the discrete input. A change
+        // takes the forced edge between the two locations, whose guard must hold the state.
+        let want = ctl.location();
+        if want != loc {
+            if let Some(e) = fine.edges().iter().find(|e| {
+                e.from == loc && e.to == want && e.kind == crate::model::hybrid::EdgeKind::Forced
+            }) {
+                if !e.guard.contains(&x) {
+                    why = Some(format!(
+                        "sample {k}: the controller switches to location {want}, but x = {x:?} is not in the edge's guard"
+                    ));
+                    break;
+                }
+                x = e.reset.apply(&x);
+                loc = want;
+                out.events += 1;
+            }
+        }
         let u64s: Vec<f64> = u.as_slice().iter().map(|&v| v as f64).collect();
         if super::input_slack(&property.input, &u64s) < 0.0 {
             why = Some(format!(
@@ -209,8 +229,10 @@ pub struct RunCheck {
 /// location the stored K̂ and P̂ (widened exactly); per run each segment's nominal re-simulated from its
 /// stored start (the ball's centre, then each guard exit's `next`) under its stored table; the edges
 /// between segments found in the automaton (the internal edge between the two locations whose guard,
-/// normalised and rounded, is the one stored); the run certified by the synthesiser's own code
-/// ([`crate::certify::internal::certify_internal`]). A run passes when the stored guard and threshold are
+/// normalised and rounded, is the one stored; for a segment that ends with its table, the forced edge
+/// between them, and the next segment then starts at the reset of this one's re-simulated end); the run
+/// certified by the synthesiser's own code ([`crate::certify::internal::certify_internal`], or
+/// [`crate::certify::forced::certify_forced`] for forced switching). A run passes when the stored guard and threshold are
 /// the ones the certificate gives, every guard segment's rows reach its κ_f, and the stored radius is at
 /// most the selection radius of the recomputed δ times 1 + 16uκ(P̂) (as for a single location,
 /// [`super::feedforward::tolerance`]).
@@ -220,6 +242,7 @@ pub fn recheck(
     steps: usize,
     bytes: &[u8],
 ) -> Result<Vec<RunCheck>, String> {
+    use crate::certify::forced::{certify_forced, ForcedSegment};
     use crate::certify::internal::{certify_internal, InternalSegment};
     use crate::certify::{selection_radius, Loop, LoopConstants};
     use faer::Mat;
@@ -273,6 +296,7 @@ pub fn recheck(
         let mut locs = Vec::new();
         let mut edges = Vec::new();
         let mut exits = Vec::new();
+        let mut forced = false;
         let mut start: Vec<f64> = (0..n).map(|i| img.centre(t, i) as f64).collect();
         let mut bad = None;
         for s in s0..s0 + count {
@@ -285,7 +309,9 @@ pub fn recheck(
                         .collect()
                 })
                 .collect();
-            noms.push(lp.simulate(&start, &v));
+            let nom = lp.simulate(&start, &v);
+            let end = nom.x.last().cloned().unwrap_or_default();
+            noms.push(nom);
             locs.push(g.location);
             let ex = img.exit(s);
             if let Exit::Guard { next, .. } = ex {
@@ -293,16 +319,28 @@ pub fn recheck(
             }
             exits.push(ex);
             if s + 1 < s0 + count {
+                // A segment ending with its table is a forced switch (§4.2.1): the next segment starts at
+                // the reset of this one's end; a guard exit is an internal one (§4.2.2).
+                let kind = match ex {
+                    Exit::Table => crate::model::hybrid::EdgeKind::Forced,
+                    Exit::Guard { .. } => crate::model::hybrid::EdgeKind::Internal,
+                };
                 let to = img.segment(s + 1).map_or(usize::MAX, |h| h.location);
-                match plant.edges().iter().position(|e| {
-                    e.from == g.location
-                        && e.to == to
-                        && e.kind == crate::model::hybrid::EdgeKind::Internal
-                }) {
-                    Some(e) => edges.push(e),
+                match plant
+                    .edges()
+                    .iter()
+                    .position(|e| e.from == g.location && e.to == to && e.kind == kind)
+                {
+                    Some(e) => {
+                        if kind == crate::model::hybrid::EdgeKind::Forced {
+                            forced = true;
+                            start = plant.edges()[e].reset.apply(&end);
+                        }
+                        edges.push(e)
+                    }
                     None => {
                         bad = Some(format!(
-                            "segment {s}: no internal edge {} → {to}",
+                            "segment {s}: no {kind:?} edge {} → {to}",
                             g.location
                         ))
                     }
@@ -317,20 +355,65 @@ pub fn recheck(
             out.push(fail("a location's stored K̂ and P̂ certify nothing".into()));
             continue;
         }
-        let segs: Vec<InternalSegment> = locs
-            .iter()
-            .zip(&noms)
-            .map(|(&l, nom)| InternalSegment {
-                lp: lps[l],
-                lc: lcs[l].as_ref().expect("checked"),
-                nominal: nom,
-            })
-            .collect();
-        let cert = match certify_internal(plant, &segs, &edges, steps) {
-            Ok(c) => c,
-            Err(e) => {
-                out.push(fail(e.to_string()));
-                continue;
+        if forced && exits.iter().any(|e| matches!(e, Exit::Guard { .. })) {
+            out.push(fail(
+                "the run mixes forced switches and guard exits, which no certificate covers".into(),
+            ));
+            continue;
+        }
+        let cert = if forced {
+            let segs: Vec<ForcedSegment> = locs
+                .iter()
+                .zip(&noms)
+                .enumerate()
+                .map(|(i, (&l, nom))| ForcedSegment {
+                    lp: lps[l],
+                    lc: lcs[l].as_ref().expect("checked"),
+                    nominal: nom,
+                    switch: edges.get(i).map(|&e| &plant.edges()[e]),
+                    invariant: plant.modes()[l].invariant.as_ref(),
+                })
+                .collect();
+            match certify_forced(&segs) {
+                Ok(c) => crate::certify::internal::InternalCertificate {
+                    segments: c
+                        .segments
+                        .iter()
+                        .zip(&noms)
+                        .map(|(c, nom)| crate::certify::internal::SegmentCertificate {
+                            base: c.clone(),
+                            delta: c.delta,
+                            rows: nom.steps(),
+                            samples: nom.steps(),
+                            exit: None,
+                            events: None,
+                            eta: 0.0,
+                            binding: "",
+                        })
+                        .collect(),
+                    delta_stored: c.segments.first().map_or(0.0, |c| c.delta_stored),
+                },
+                Err(e) => {
+                    out.push(fail(e.to_string()));
+                    continue;
+                }
+            }
+        } else {
+            let segs: Vec<InternalSegment> = locs
+                .iter()
+                .zip(&noms)
+                .map(|(&l, nom)| InternalSegment {
+                    lp: lps[l],
+                    lc: lcs[l].as_ref().expect("checked"),
+                    nominal: nom,
+                })
+                .collect();
+            match certify_internal(plant, &segs, &edges, steps) {
+                Ok(c) => c,
+                Err(e) => {
+                    out.push(fail(e.to_string()));
+                    continue;
+                }
             }
         };
         let mut why = None;

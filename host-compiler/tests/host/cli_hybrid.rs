@@ -123,3 +123,125 @@ fn hybrid_synth_then_verify() {
     assert!(stderr.contains("not re-proved"), "{stderr}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Forced switching (§4.2.1) on the cart example with a budget of one run: the run switches from
+/// `forward` to `backward` by its table, is re-proved from the bytes and verified on the automaton with
+/// the controller's location as its discrete input; `verify` and its falsifier agree; an enlarged radius
+/// is refused.
+#[test]
+fn hybrid_forced_synth_then_verify() {
+    let dir = std::env::temp_dir().join(format!("hc-cli-forced-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let src = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../examples/hybrid-forced-cart.toml"
+    ))
+    .unwrap()
+    .replace("max_trajectories = 8", "max_trajectories = 1");
+    let spec = dir.join("spec.toml");
+    std::fs::write(&spec, src).unwrap();
+    let out = dir.join("out");
+    let o = bin()
+        .args([
+            "synth",
+            spec.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ])
+        .args(["--verify-runs", "64", "--quiet"])
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(3), "{stdout}\n{stderr}");
+    assert!(stdout.contains("re-proved         1 of 1 runs"), "{stdout}");
+    assert!(stdout.contains(", 0 violations"), "{stdout}");
+    // Every Monte Carlo run took the forced switch.
+    let cert: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("certificate.json")).unwrap())
+            .unwrap();
+    assert_eq!(cert["switching"], "forced");
+    let run = &cert["runs"][0];
+    assert_eq!(run["locations"], serde_json::json!(["forward", "backward"]));
+    let segs = run["certificate"]["segments"].as_array().unwrap();
+    assert_eq!(segs.len(), 2);
+    assert!(segs[0]["delta"].as_f64().unwrap() > 0.0);
+    assert_eq!(
+        cert["verify"]["switched"], cert["verify"]["runs"],
+        "{}",
+        cert["verify"]
+    );
+    let page = std::fs::read_to_string(out.join("report.html")).unwrap();
+    assert!(page.contains("<h1>Certified and verified</h1>"));
+    assert!(page.contains("forced (the controller's choice)") && page.contains("the whole space"));
+    assert!(page.contains("Theorem 4.17"));
+
+    let img = out.join("controller.img");
+    let o = bin()
+        .args(["verify", spec.to_str().unwrap(), img.to_str().unwrap()])
+        .args(["--runs", "16", "--per-ball", "4"])
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert_eq!(
+        o.status.code(),
+        Some(0),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert!(stdout.contains("re-proved         1 of 1 runs"), "{stdout}");
+    let o = bin()
+        .args(["verify", spec.to_str().unwrap(), img.to_str().unwrap()])
+        .args([
+            "--runs",
+            "4",
+            "--per-ball",
+            "1",
+            "--attack",
+            "--attack-evals",
+            "12",
+        ])
+        .arg("--json")
+        .output()
+        .unwrap();
+    let at = crate::verify_attack::attack_json(&o);
+    assert!(at.worst_robustness > 0.0, "{at:?}");
+
+    // The run's stored radius enlarged by 1 %: not re-proved.
+    let bytes = std::fs::read(&img).unwrap();
+    let decoded = shared_types::image::decode(&bytes).unwrap();
+    let mut b = host_compiler::emit::ImageBuilder::from_image(&decoded);
+    b.trajectories[0].delta *= 1.01;
+    let big = dir.join("big.img");
+    std::fs::write(&big, b.to_bytes().unwrap()).unwrap();
+    let o = bin()
+        .args(["verify", spec.to_str().unwrap(), big.to_str().unwrap()])
+        .args(["--runs", "4", "--per-ball", "1"])
+        .output()
+        .unwrap();
+    assert_eq!(
+        o.status.code(),
+        Some(1),
+        "{}",
+        String::from_utf8_lossy(&o.stdout)
+    );
+    // The same image without its switch (every row in `forward`): the run no longer re-proves.
+    let mut b = host_compiler::emit::ImageBuilder::from_image(&decoded);
+    for l in b.trajectories[0].location.iter_mut() {
+        *l = 0;
+    }
+    let flat = dir.join("flat.img");
+    std::fs::write(&flat, b.to_bytes().unwrap()).unwrap();
+    let o = bin()
+        .args(["verify", spec.to_str().unwrap(), flat.to_str().unwrap()])
+        .args(["--runs", "16", "--per-ball", "1"])
+        .output()
+        .unwrap();
+    assert_ne!(
+        o.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&o.stdout)
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

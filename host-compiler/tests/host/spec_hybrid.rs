@@ -225,3 +225,69 @@ fn a_plant_with_one_location_still_needs_a_and_b() {
     let e = expect(&single, ErrorKind::MissingField, "[plant]", "[plant]");
     assert!(e.message().contains("`A`"), "{}", e.message());
 }
+
+#[test]
+fn an_internal_edge_without_a_guard() {
+    let src = edit("guard = { A = [[-1.0, 0.0]], b = [0.0] }\n", "");
+    let e = spec::parse(&src, "spec.toml").expect_err("an internal edge needs its guard");
+    assert_eq!(e.kind(), ErrorKind::MissingField, "{}", e.message());
+    assert!(
+        e.message()
+            .contains("plant.edge[0] is internal and has no guard"),
+        "{}",
+        e.message()
+    );
+    // The place is the edge's table.
+    let (line, _) = e.line_col().expect("a located diagnostic");
+    let edge_line = src
+        .lines()
+        .position(|l| l.starts_with("from = \"left\""))
+        .unwrap()
+        + 1;
+    assert!(
+        (edge_line - 1..=edge_line + 3).contains(&line),
+        "line {line}"
+    );
+}
+
+#[test]
+fn a_forced_edge_without_a_guard_may_be_taken_anywhere() {
+    let src = edit(
+        "kind = \"internal\"\nguard = { A = [[-1.0, 0.0]], b = [0.0] }\n",
+        "kind = \"forced\"\n",
+    );
+    let p = spec::parse(&src, "spec.toml").expect("a forced edge may omit its guard");
+    let h = p.hybrid.as_ref().unwrap();
+    assert_eq!(h.edges[0].kind, EdgeKindDesc::Forced);
+    assert_eq!(h.edges[0].guard.b.len(), 0, "no rows: the whole space");
+    let plant = Hybrid::from_spec(h, 0.1).unwrap();
+    let guard = &plant.edges()[0].guard;
+    assert!(guard.contains(&[-5.0, 3.0]) && guard.contains(&[7.0, -1.0]));
+}
+
+#[test]
+fn forced_synthesis_refuses_a_reset_the_controller_would_measure_before() {
+    use host_compiler::synth::hybrid::{HybridSynthError, HybridTask};
+    // BASE's edge resets ẋ to half: as a forced edge the controller would apply the next segment's
+    // law to the state before the reset.
+    let src = edit("kind = \"internal\"", "kind = \"forced\"");
+    let p = spec::parse(&src, "spec.toml").unwrap();
+    match HybridTask::new(p) {
+        Err(HybridSynthError::ForcedReset { edge: 0 }) => {}
+        Err(e) => panic!("wrong refusal: {e}"),
+        Ok(_) => panic!("a forced edge with a non-identity reset was accepted"),
+    }
+    // Both kinds in one automaton: refused by name.
+    let src = edit(
+        "[init]",
+        "[[plant.edge]]\nfrom = \"right\"\nto = \"left\"\nkind = \"forced\"\n\n[init]",
+    );
+    let p = spec::parse(&src, "spec.toml").unwrap();
+    match HybridTask::new(p) {
+        Err(e @ HybridSynthError::MixedEdges { .. }) => {
+            assert!(e.to_string().contains("both kinds"), "{e}")
+        }
+        Err(e) => panic!("wrong refusal: {e}"),
+        Ok(_) => panic!("an automaton with both kinds of edge was accepted"),
+    }
+}
