@@ -31,6 +31,11 @@ impl<'a> HostEvaluator<'a> {
         }
     }
 
+    /// The location of the evaluator's current row (`Controller::location`), as the reply carries it.
+    pub fn location(&self) -> u8 {
+        self.controller.location() as u8
+    }
+
     /// Whether the image's terminal law has taken over (`Controller::in_terminal_phase`).
     pub fn in_terminal_phase(&self) -> bool {
         self.controller.in_terminal_phase()

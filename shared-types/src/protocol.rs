@@ -1,5 +1,6 @@
 //! UART protocol between the plant (host) and the firmware: COBS-framed postcard messages carrying a
-//! sequence number and the state, answered by the input, a status and the step's cost.
+//! sequence number and the state, answered by the input, a status, the step's cost and the location the
+//! input belongs to.
 //!
 //! # Wire format
 //! Every message is one frame: the postcard encoding of a [`Request`] (host → firmware) or a [`Reply`]
@@ -178,6 +179,9 @@ pub struct Reply {
     pub u: InputVec,
     /// Cost of the evaluation in guest instructions (0 when nothing was evaluated).
     pub cost: u32,
+    /// The location of the table row the input came from (`Controller::location`): the discrete input
+    /// of a plant with forced switching (§4.2.1). 0 for one-location and PWA images.
+    pub location: u8,
 }
 
 /// [`Status`] on the wire: its `#[repr(u8)]` code.
@@ -201,8 +205,8 @@ mod status_code {
 const VARINT_U32_MAX: usize = 5;
 /// Largest postcard encoding of a [`Request`]: tag, seq, length (one byte while `MAX_N < 128`), elements.
 pub const MAX_REQUEST_LEN: usize = 1 + VARINT_U32_MAX + 1 + 4 * MAX_N;
-/// Largest postcard encoding of a [`Reply`]: seq, status, length, elements, cost.
-pub const MAX_REPLY_LEN: usize = VARINT_U32_MAX + 1 + 1 + 4 * MAX_M + VARINT_U32_MAX;
+/// Largest postcard encoding of a [`Reply`]: seq, status, length, elements, cost, location.
+pub const MAX_REPLY_LEN: usize = VARINT_U32_MAX + 1 + 1 + 4 * MAX_M + VARINT_U32_MAX + 1;
 const MAX_MESSAGE_LEN: usize = if MAX_REQUEST_LEN > MAX_REPLY_LEN {
     MAX_REQUEST_LEN
 } else {
@@ -379,6 +383,7 @@ mod tests {
             status: Status::ImageRejected,
             u,
             cost: u32::MAX,
+            location: 0,
         };
         let mut buf = [0u8; MAX_FRAME];
         assert!(encode_frame(&rep, &mut buf).is_ok());
@@ -405,6 +410,7 @@ mod tests {
             status: Status::OutOfEnvelope,
             u,
             cost: 1234,
+            location: 0,
         };
         let mut buf = [0u8; MAX_FRAME];
         let f = encode_frame(&rep, &mut buf).unwrap();
@@ -486,16 +492,17 @@ mod tests {
 
     #[test]
     fn unknown_status_code_is_malformed() {
-        // seq 1, status 3, u [], cost 0 is valid; status 9 is not.
+        // seq 1, status 3, u [], cost 0, location 0 is valid; status 9 is not.
         let ok = Reply {
             seq: 1,
             status: Status::ImageRejected,
             u: InputVec::new(),
             cost: 0,
+            location: 0,
         };
-        assert_eq!(decode_frame::<Reply>(&frame_raw(&[1, 3, 0, 0])), Ok(ok));
+        assert_eq!(decode_frame::<Reply>(&frame_raw(&[1, 3, 0, 0, 0])), Ok(ok));
         assert_eq!(
-            decode_frame::<Reply>(&frame_raw(&[1, 9, 0, 0])),
+            decode_frame::<Reply>(&frame_raw(&[1, 9, 0, 0, 0])),
             Err(FrameError::Malformed)
         );
     }

@@ -49,6 +49,7 @@ pub const SHIPPED_IMAGES: &[(&str, &str)] = &[
     ("pwa_example_6_4", "examples/planar-vehicle-pwa-4.toml, PWA"),
     ("hybrid_4_25", "examples/hybrid-internal-4-25.toml"),
     ("hybrid_bench", "examples/hybrid-internal-4-25.toml"),
+    ("hybrid_forced_cart", "examples/hybrid-forced-cart.toml"),
 ];
 
 /// A cargo command in a board's folder (cargo reads the `.cargo/config.toml` there and in `firmware/`),

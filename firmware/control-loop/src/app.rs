@@ -131,6 +131,15 @@ impl<'a> App<'a> {
         }
     }
 
+    /// The location of the evaluator's current row (the discrete input of forced switching); 0 when the
+    /// image was rejected.
+    fn location(&self) -> u8 {
+        match &self.engine {
+            Engine::Running(c) => c.location() as u8,
+            Engine::Rejected(_) => 0,
+        }
+    }
+
     fn bad_frame(&mut self, seq: u32) -> Action {
         self.stats.bad_frames = self.stats.bad_frames.saturating_add(1);
         let (status, u) = match &self.engine {
@@ -142,6 +151,7 @@ impl<'a> App<'a> {
             status,
             u: to_wire(&u),
             cost: 0,
+            location: self.location(),
         })
     }
 
@@ -190,6 +200,7 @@ impl<'a> App<'a> {
             status,
             u: to_wire(&u),
             cost,
+            location: self.location(),
         })
     }
 }

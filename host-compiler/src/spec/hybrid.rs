@@ -312,17 +312,19 @@ pub(crate) fn plant(
                 },
                 b: Vec::new(),
             },
-            (None, EdgeKindDesc::Internal) => return Err(SpecError::new(
-                ErrorKind::MissingField,
-                format!(
+            (None, EdgeKindDesc::Internal) => {
+                return Err(SpecError::new(
+                    ErrorKind::MissingField,
+                    format!(
                     "{key} is internal and has no guard: the flow takes it on entering its guard"
                 ),
-            )
-            .at(
-                raw_edge.span(),
-                "add guard = { A = [[...]], b = [...] } here",
-            )
-            .help("only a forced edge (taken when the controller chooses) may omit its guard")),
+                )
+                .at(
+                    raw_edge.span(),
+                    "add guard = { A = [[...]], b = [...] } here",
+                )
+                .help("only a forced edge (taken when the controller chooses) may omit its guard"))
+            }
         };
         let (R, rr) = match &r.reset {
             None => (Matrix::identity(n), vec![0.0; n]),

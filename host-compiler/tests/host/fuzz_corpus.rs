@@ -154,6 +154,7 @@ fn write_seeds() {
                     status: shared_types::eval::Status::Ok,
                     u: InputVec::from_slice(&[0.25, -0.5]).unwrap(),
                     cost: 1234,
+                    location: 0,
                 },
                 &mut buf,
             )
