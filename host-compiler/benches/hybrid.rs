@@ -1,8 +1,9 @@
-//! Hybrid plants with internal switching (§4.2.2): Example 5.5's certified δ from x0 = (−5, 1, 2) (one
+//! Hybrid plants with internal switching (§4.2.2) and forced switching (§4.2.1): Example 5.5's certified δ from x0 = (−5, 1, 2) (one
 //! run across x₁ = 0, before any §5.3 optimisation, which is not built for hybrid runs yet), and Example
 //! 5.6's cover grown over Init (Algorithm 1 over runs, δε = 0.4 as the text): the coverage lower bound at
 //! 99 % confidence, the trajectories, the wall time of the whole synthesis on this machine, and its Monte
-//! Carlo against the exact hybrid flow (which must find no violation).
+//! Carlo against the exact hybrid flow (which must find no violation); the same for the forced-switching
+//! Example 4.20 and the cart example (`coverage_hybrid_4_20`, `…_forced_cart`).
 //!
 //! A synthesis is seconds to minutes of deterministic (seeded) work, so it is timed directly.
 
@@ -46,10 +47,15 @@ fn main() {
     let d425 = plan_run(&t425, &[-5.0, 1.0, 2.0]).map_or(0.0, |r| r.delta());
     println!("Example 4.25 from (−5, 1, 2): δ = {d425:.4}");
     rows.push(Row::new("delta_hybrid_4_25", d425, "CAF metric"));
-    // Example 5.6: the cover (Example 5.5's task with δε = 0.4); and the same growth on Example 4.25.
+    // Example 5.6: the cover (Example 5.5's task with δε = 0.4); and the same growth on Example 4.25;
+    // forced switching: Example 4.20 and the cart.
+    let t420 = task("hybrid-forced-4-20.toml");
+    let tcart = task("hybrid-forced-cart.toml");
     for (name, task, tag) in [
         ("Example 5.6", &t55, "5_6"),
         ("Example 4.25", &t425, "4_25"),
+        ("Example 4.20", &t420, "4_20"),
+        ("The forced cart", &tcart, "forced_cart"),
     ] {
         let t = Instant::now();
         let s = match synthesize_hybrid(task, &HybridOptions::default()) {
