@@ -31,11 +31,11 @@ pub enum TaskError {
     Property(#[from] PropertyError),
     #[error("plant: {0}")]
     Hybrid(#[from] HybridError),
-    /// The spec's hybrid automaton is valid, but synthesis, verification and simulation of hybrid tasks
-    /// are not built yet (the certificate of forced switching is, `certify::forced`).
+    /// The spec's hybrid automaton is valid, but a one-location `Task` cannot hold it: hybrid tasks are
+    /// synthesised and verified through `synth::hybrid::HybridTask` (internal or forced switching).
     #[error(
         "the plant is a hybrid automaton ({locations} locations, {edges} edges); it is valid, but \
-         synthesis, verification and simulation do not take hybrid plants yet"
+         this path takes one-location plants (synth and verify take hybrid specs through synth::hybrid)"
     )]
     HybridNotSupported { locations: usize, edges: usize },
     /// A feedback-linearizable plant outside what this version linearises and bounds.

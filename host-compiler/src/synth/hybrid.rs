@@ -1,7 +1,8 @@
 //! Synthesis for hybrid plants with internal switching (§4.2.2, Examples 4.25, 5.5, 5.6): the task, the
 //! location path, nominal runs (one extended segment per location, Def 4.22), their certificate
 //! ([`crate::certify::internal`]) and the cover of Init by their balls (Algorithm 1 with the generator
-//! from uncovered samples).
+//! from uncovered samples). An automaton whose edges are all forced is planned by [`forced`] instead
+//! (§4.2.1: each run chooses its locations), through the same growth, image and verification.
 //!
 //! **A nominal run.** The path is the shortest chain of internal edges from the initial location to a
 //! location whose invariant holds Goal's centre. Each segment but the last is generated in its location
