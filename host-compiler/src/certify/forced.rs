@@ -24,6 +24,7 @@
 //! is uncertain. With identity resets and guards that are the whole space (Example 4.20) the depth is
 //! δᵢ₊₁/√λmax(Pᵢ⁻¹Pᵢ₊₁), the largest Pᵢ-ball inside the Pᵢ₊₁-ball; a test holds the recursion to it.
 
+use super::internal::{InternalCertificate, SegmentCertificate};
 use super::{certify_at, Certificate, GoalAt, Loop, LoopConstants};
 use crate::geometry::{
     Complement, Ellipsoid, Empty, GeometryError, Intersection, Metric, Polytope, Region, Witness,
@@ -64,6 +65,32 @@ impl ForcedCertificate {
     }
     pub fn is_certified(&self) -> bool {
         self.segments.first().is_some_and(|c| c.is_certified())
+    }
+
+    /// A forced-switching certificate in the form the hybrid pipeline (image, cover, report) reads: a
+    /// segment per location, each ending with its table (no guard exit, no event interval), every row kept.
+    pub fn as_segments(&self, nominals: &[Nominal]) -> InternalCertificate {
+        let last = self.segments.len().saturating_sub(1);
+        let segments = self
+            .segments
+            .iter()
+            .zip(nominals)
+            .enumerate()
+            .map(|(i, (c, nom))| SegmentCertificate {
+                base: c.clone(),
+                delta: c.delta,
+                rows: nom.steps(),
+                samples: nom.steps(),
+                exit: None,
+                events: None,
+                eta: 0.0,
+                binding: binding(c, i == last),
+            })
+            .collect();
+        InternalCertificate {
+            segments,
+            delta_stored: self.segments.first().map_or(0.0, |c| c.delta_stored),
+        }
     }
 }
 
@@ -289,4 +316,23 @@ pub fn certify_forced(segments: &[ForcedSegment<'_>]) -> Result<ForcedCertificat
     }
     certs.reverse();
     Ok(ForcedCertificate { segments: certs })
+}
+
+/// What limits a segment's δ, in words.
+fn binding(c: &Certificate, last: bool) -> &'static str {
+    let parts = [c.delta_goal, c.delta_unsafe_intersample, c.delta_input];
+    let least = parts.iter().copied().fold(f64::INFINITY, f64::min);
+    if c.delta <= 0.0 && least > 0.0 {
+        "the f32 rounding bound (r_crit)"
+    } else if least == c.delta_goal {
+        if last {
+            "Goal (Theorem 4.7)"
+        } else {
+            "the safe transition into the next segment's ball (Theorem 4.17)"
+        }
+    } else if least == c.delta_unsafe_intersample {
+        "Unsafe, between samples (Theorem 4.7)"
+    } else {
+        "the input set (Theorem 4.7)"
+    }
 }

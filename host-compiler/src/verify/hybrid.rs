@@ -375,24 +375,7 @@ pub fn recheck(
                 })
                 .collect();
             match certify_forced(&segs) {
-                Ok(c) => crate::certify::internal::InternalCertificate {
-                    segments: c
-                        .segments
-                        .iter()
-                        .zip(&noms)
-                        .map(|(c, nom)| crate::certify::internal::SegmentCertificate {
-                            base: c.clone(),
-                            delta: c.delta,
-                            rows: nom.steps(),
-                            samples: nom.steps(),
-                            exit: None,
-                            events: None,
-                            eta: 0.0,
-                            binding: "",
-                        })
-                        .collect(),
-                    delta_stored: c.segments.first().map_or(0.0, |c| c.delta_stored),
-                },
+                Ok(c) => c.as_segments(&noms),
                 Err(e) => {
                     out.push(fail(e.to_string()));
                     continue;

@@ -15,9 +15,8 @@
 //! shipped end, so the run is continuous across the switch as the certificate requires.
 
 use super::{gen_problem, shipped_nominal, HybridRun, HybridTask};
-use crate::certify::forced::{certify_forced, ForcedCertificate, ForcedSegment};
-use crate::certify::internal::{InternalCertificate, SegmentCertificate};
-use crate::certify::Certificate;
+use crate::certify::forced::{certify_forced, ForcedSegment};
+use crate::certify::internal::InternalCertificate;
 use crate::model::hybrid::EdgeKind;
 use crate::model::Location;
 use crate::trajectory::generate::{generate, GenSettings, Schedule};
@@ -127,7 +126,7 @@ fn plan_schedule(task: &HybridTask, x0: &[f64], c: &Candidate) -> Result<HybridR
 }
 
 /// Theorem 4.17 for a run of segments in `locations`, joined by `edges`, as the hybrid pipeline stores
-/// a run's certificate ([`as_segments`]).
+/// a run's certificate ([`ForcedCertificate::as_segments`]).
 pub fn certify_run(
     task: &HybridTask,
     locations: &[Location],
@@ -147,50 +146,5 @@ pub fn certify_run(
         })
         .collect();
     let cert = certify_forced(&segs).map_err(|e| e.to_string())?;
-    Ok(as_segments(&cert, nominals))
-}
-
-/// A forced-switching certificate in the form the hybrid pipeline (image, cover, report) reads: a
-/// segment per location, each ending with its table (no guard exit, no event interval), every row kept.
-pub fn as_segments(cert: &ForcedCertificate, nominals: &[Nominal]) -> InternalCertificate {
-    let last = cert.segments.len().saturating_sub(1);
-    let segments = cert
-        .segments
-        .iter()
-        .zip(nominals)
-        .enumerate()
-        .map(|(i, (c, nom))| SegmentCertificate {
-            base: c.clone(),
-            delta: c.delta,
-            rows: nom.steps(),
-            samples: nom.steps(),
-            exit: None,
-            events: None,
-            eta: 0.0,
-            binding: binding(c, i == last),
-        })
-        .collect();
-    InternalCertificate {
-        segments,
-        delta_stored: cert.segments.first().map_or(0.0, |c| c.delta_stored),
-    }
-}
-
-/// What limits a segment's δ, in words.
-fn binding(c: &Certificate, last: bool) -> &'static str {
-    let parts = [c.delta_goal, c.delta_unsafe_intersample, c.delta_input];
-    let least = parts.iter().copied().fold(f64::INFINITY, f64::min);
-    if c.delta <= 0.0 && least > 0.0 {
-        "the f32 rounding bound (r_crit)"
-    } else if least == c.delta_goal {
-        if last {
-            "Goal (Theorem 4.7)"
-        } else {
-            "the safe transition into the next segment's ball (Theorem 4.17)"
-        }
-    } else if least == c.delta_unsafe_intersample {
-        "Unsafe, between samples (Theorem 4.7)"
-    } else {
-        "the input set (Theorem 4.7)"
-    }
+    Ok(cert.as_segments(nominals))
 }
