@@ -213,12 +213,7 @@ impl Game {
         std::fs::create_dir_all(&settings.out)
             .map_err(|e| format!("cannot create {}: {e}", settings.out.display()))?;
         let init = played.init();
-        let base: Vec<f64> = init
-            .lo
-            .iter()
-            .zip(&init.hi)
-            .map(|(a, b)| 0.5 * (a + b))
-            .collect();
+        let base = init.centre();
         let mut rng = ChaCha8Rng::seed_from_u64(played.problem().seed ^ 0x91a7);
         let samples = crate::cover::SampleBox {
             lo: init.lo.clone(),

@@ -14,13 +14,13 @@ use crate::spec::{InitBox, Problem};
 use crate::synth::hybrid::{import, HybridRun, HybridTask};
 use crate::task::Task;
 use crate::trajectory::csv::Recording;
-use crate::trajectory::Nominal;
 use faer::MatRef;
 
 /// Probes of the exact hybrid flow per period at which a played run is checked against Unsafe.
 pub const HYBRID_PROBES: usize = 8;
 
-/// The task a game plays.
+/// The task a game plays (one per game, so the variants' sizes do not matter).
+#[allow(clippy::large_enum_variant)]
 pub enum Played {
     /// A one-location task with its CAF as `synth` designs it.
     One {
@@ -211,15 +211,10 @@ fn hybrid_path(task: &HybridTask, run: &HybridRun) -> Vec<Vec<f64>> {
         match task.edges.get(i) {
             Some(&e) => {
                 let guard = &task.plant.edges()[e].guard;
-                out.extend(segment_before(nom, |x| guard.contains(x)));
+                out.extend(nom.x.iter().take_while(|x| !guard.contains(x)).cloned());
             }
             None => out.extend(nom.x.iter().cloned()),
         }
     }
     out
-}
-
-/// The states of `nom` before the first one `inside` holds.
-fn segment_before(nom: &Nominal, inside: impl Fn(&[f64]) -> bool) -> Vec<Vec<f64>> {
-    nom.x.iter().take_while(|x| !inside(x)).cloned().collect()
 }

@@ -32,14 +32,7 @@ fn planned() -> &'static (HybridTask, HybridRun) {
     static RUN: OnceLock<(HybridTask, HybridRun)> = OnceLock::new();
     RUN.get_or_init(|| {
         let t = task();
-        let init = &t.problem.init;
-        let centre: Vec<f64> = init
-            .lo
-            .iter()
-            .zip(&init.hi)
-            .map(|(a, b)| 0.5 * (a + b))
-            .collect();
-        let run = plan_run(&t, &centre).unwrap();
+        let run = plan_run(&t, &t.problem.init.centre()).unwrap();
         assert!(run.certificate.is_certified(), "{:?}", run.certificate);
         (t, run)
     })

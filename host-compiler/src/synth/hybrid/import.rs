@@ -260,7 +260,7 @@ pub fn refusal(task: &HybridTask, c: &InternalCertificate) -> String {
     let cause = c
         .segments
         .iter()
-        .rposition(|s| !(s.delta > 0.0))
+        .rposition(|s| s.delta <= 0.0 || s.delta.is_nan())
         .unwrap_or(0);
     let Some(s) = c.segments.get(cause) else {
         return "the run has no segments".into();
