@@ -598,8 +598,9 @@ impl Game {
                 hit |= unsafe_set.is_some_and(|us| us.contains(y))
             });
             let Ok((loc, xn)) = advanced else {
-                // A flow that cannot be stepped (Zeno, undecided) ends the run where it is.
-                ending = Some(Ending::Unsafe);
+                // A period the exact flow cannot step (Zeno, undecided) is not played: the run ends at
+                // the last sample it reached and is certified as it is.
+                ending = Some(Ending::Finished);
                 break;
             };
             s.loc = loc;

@@ -28,7 +28,7 @@ fn task() -> HybridTask {
 }
 
 /// The run `plan_run` certifies from Init's centre, planned once for the module's tests.
-fn planned() -> &'static (HybridTask, HybridRun) {
+pub fn planned() -> &'static (HybridTask, HybridRun) {
     static RUN: OnceLock<(HybridTask, HybridRun)> = OnceLock::new();
     RUN.get_or_init(|| {
         let t = task();
