@@ -852,7 +852,7 @@ impl Game {
             let stride = r.path.len().div_ceil(STATE_PATH_POINTS).max(1);
             let mut thin: Vec<&Vec<f64>> = r.path.iter().step_by(stride).collect();
             if let Some(end) = r.path.last() {
-                if (r.path.len() - 1) % stride != 0 {
+                if !(r.path.len() - 1).is_multiple_of(stride) {
                     thin.push(end);
                 }
             }

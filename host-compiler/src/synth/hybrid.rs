@@ -598,7 +598,10 @@ pub fn admit(
     run: &HybridRun,
 ) -> Result<usize, String> {
     let s = &task.problem.synthesis;
-    if !(run.delta() >= s.min_robustness.max(f64::MIN_POSITIVE) && run.certificate.is_certified()) {
+    if !run.certificate.is_certified() {
+        return Err(import::refusal(task, &run.certificate));
+    }
+    if !(run.delta() >= s.min_robustness) {
         return Err(format!(
             "δ = {:.3e} is below min_robustness = {:.3e} ({})",
             run.delta(),

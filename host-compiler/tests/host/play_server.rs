@@ -42,7 +42,7 @@ fn scratch(name: &str) -> PathBuf {
 }
 
 fn game(out: &Path) -> Game {
-    let problem = host_compiler::spec::load(&spec_path()).unwrap();
+    let problem = host_compiler::spec::load(spec_path()).unwrap();
     let task = host_compiler::task::Task::new(problem).unwrap();
     Game::new(
         task,

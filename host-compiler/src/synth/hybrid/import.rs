@@ -151,8 +151,8 @@ pub fn replay(task: &HybridTask, rec: &Recording) -> Result<Replay, ImportError>
     for (i, &loc) in task.path.iter().enumerate() {
         if k0 >= rec.v.len() {
             return Err(ImportError::EndsAtSwitch {
-                segment: i - 1,
-                loc: name(task.path[i - 1]),
+                segment: i.saturating_sub(1),
+                loc: name(task.path[i.saturating_sub(1)]),
                 t: k0 as f64 * h,
             });
         }
