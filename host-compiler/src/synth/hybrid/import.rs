@@ -23,6 +23,13 @@
 //! A run that takes another edge than the path's, switches more than once in a period, or never
 //! switches, is refused, saying so.
 //!
+//! **Where the next segment starts.** The replayed state after the event is one landing; the certificate
+//! bounds every landing of runs near the nominal (item 4 of [`crate::certify::internal`]) against the
+//! next segment's start, which may be any state the image stores. So each split is also tried with the
+//! later segments restarted where `plan_run` starts them, at the centre of those landings
+//! ([`Replay::centred`]), under the same rows. Both are nominals of the same recorded inputs; the person's
+//! own run starts at the first ball's centre and is covered by whichever certifies the larger δ.
+//!
 //! **One accept path.** An accepted recording is a [`HybridRun`] like those `plan_run` makes; it joins a
 //! synthesis' runs through [`super::synthesize_hybrid`]'s accept test ([`super::admit`]) before the
 //! automatic growth, and `play`'s cover directly.
@@ -128,6 +135,30 @@ impl Replay {
     }
 }
 
+impl Replay {
+    /// The same split with every later segment restarted at the centre of the landings of runs near the
+    /// previous segment's nominal (`plan_run`'s start, rounded to f32), its rows unchanged; `None` if a
+    /// segment's nominal then does not switch by the path's edge.
+    pub fn centred(&self, task: &HybridTask) -> Option<Replay> {
+        let mut nominals: Vec<Nominal> = Vec::with_capacity(self.nominals.len());
+        for (i, nom) in self.nominals.iter().enumerate() {
+            let seg = match nominals.last() {
+                None => nom.clone(),
+                Some(prev) => {
+                    let l = super::landing(task, task.path[i - 1], prev, task.edges[i - 1])?;
+                    let x: Vec<f64> = l.iter().map(|&v| round32(v)).collect();
+                    shipped_nominal(task, task.path[i], &x, &nom.v)
+                }
+            };
+            nominals.push(seg);
+        }
+        Some(Replay {
+            nominals,
+            starts: self.starts.clone(),
+        })
+    }
+}
+
 /// The recording on the automaton (module doc): the segments, or why the run does not follow the path.
 pub fn replay(task: &HybridTask, rec: &Recording) -> Result<Replay, ImportError> {
     let plant = &task.plant;
@@ -224,14 +255,19 @@ pub fn replay(task: &HybridTask, rec: &Recording) -> Result<Replay, ImportError>
 /// positive, else why not (the replay's reason, or per segment what binds and by how much).
 pub fn certify_recording(task: &HybridTask, rec: &Recording) -> Result<HybridRun, ImportError> {
     let r = replay(task, rec)?;
-    let mut candidates: Vec<Vec<Nominal>> = super::GUARD_DEPTHS
-        .iter()
-        .filter_map(|&d| r.extended(task, d))
-        .collect();
+    let centred = r.centred(task);
+    let mut candidates: Vec<Vec<Nominal>> = Vec::new();
+    for split in std::iter::once(&r).chain(centred.as_ref()) {
+        candidates.extend(
+            super::GUARD_DEPTHS
+                .iter()
+                .filter_map(|&d| split.extended(task, d)),
+        );
+    }
     if candidates.is_empty() {
         candidates.push(r.nominals);
     }
-    // The largest δ; among refusals the shallowest extension's reason.
+    // The largest δ; among refusals the reason of the replayed landing's shallowest extension.
     let mut best: Option<HybridRun> = None;
     for nominals in candidates {
         let certificate = certify_run(task, &nominals).map_err(ImportError::Certificate)?;
