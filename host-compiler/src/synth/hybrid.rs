@@ -601,7 +601,8 @@ pub fn admit(
     if !run.certificate.is_certified() {
         return Err(import::refusal(task, &run.certificate));
     }
-    if !(run.delta() >= s.min_robustness) {
+    // δ > 0 and finite here (certified).
+    if run.delta() < s.min_robustness {
         return Err(format!(
             "δ = {:.3e} is below min_robustness = {:.3e} ({})",
             run.delta(),
