@@ -524,7 +524,8 @@ fn bisect(hi: f64, ok: impl Fn(f64) -> bool) -> f64 {
     lo
 }
 
-fn truncate(nom: &Nominal, rows: usize) -> Nominal {
+/// The first `rows` rows of a nominal and its states up to sample `rows` (all of it if shorter).
+pub fn truncate(nom: &Nominal, rows: usize) -> Nominal {
     let rows = rows.min(nom.steps());
     Nominal {
         x: nom.x[..=rows].to_vec(),

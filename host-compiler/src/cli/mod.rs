@@ -178,7 +178,8 @@ pub struct SynthArgs {
     /// A recorded trajectory to certify and use before any is generated (repeatable): CSV with a comment
     /// line `# x0 = …` giving the initial state, a header `t,v1,…,vm` and one row of reference inputs per
     /// sample period; at most as many rows as the spec's horizon has samples. A directory imports all its
-    /// `*.csv` files in sorted order (e.g. the runs `host-compiler play` wrote).
+    /// `*.csv` files in sorted order (e.g. the runs `host-compiler play` wrote). For a hybrid plant the
+    /// run is replayed on the automaton and split at its events into the location path's segments.
     #[arg(long = "import", value_name = "FILE.csv|DIR")]
     pub imports: Vec<PathBuf>,
     /// How trajectories after the first are made: `algorithm4` (§5.4: grow from the boundary of the

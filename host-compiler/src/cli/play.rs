@@ -1,5 +1,6 @@
 //! `host-compiler play SPEC`: serves the game (`crate::play`) on 127.0.0.1 and prints its address;
-//! accepted runs are written into `--out`, where `synth --import DIR` reads them.
+//! accepted runs are written into `--out`, where `synth --import DIR` reads them. A hybrid spec (internal
+//! switching) plays on its automaton and its runs are certified along its location path.
 
 use super::{task_of, BadInput, Exit, Outcome};
 use std::path::PathBuf;
@@ -33,15 +34,22 @@ pub fn run(a: &PlayArgs) -> Outcome {
         .transpose()
         .map_err(|e| miette::miette!("--projection: {e}"))
         .bad_input()?;
-    let task = task_of(problem)?;
     let settings = crate::play::PlaySettings {
         out: a.out.clone(),
         projection,
         slow: a.slow,
     };
-    let game = crate::play::Game::new(task, settings)
-        .map_err(|e| miette::miette!("{e}"))
-        .bad_input()?;
+    // A hybrid automaton plays through its own task (a CAF per location, the location path).
+    let game = if problem.hybrid.is_some() {
+        let task = crate::synth::hybrid::HybridTask::new(problem)
+            .map_err(|e| miette::miette!("{e}"))
+            .bad_input()?;
+        crate::play::Game::hybrid(task, settings)
+    } else {
+        crate::play::Game::new(task_of(problem)?, settings)
+    }
+    .map_err(|e| miette::miette!("{e}"))
+    .bad_input()?;
     let (accepted, coverage) = (game.accepted(), game.coverage());
     let addr = std::net::SocketAddr::from(([127, 0, 0, 1], a.port));
     let served = crate::play::serve(game, addr)

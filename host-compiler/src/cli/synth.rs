@@ -85,6 +85,36 @@ pub(crate) fn coverage_exit(
     }
 }
 
+/// The recordings `--import` names (a file, or a directory's `*.csv` in sorted order: `host-compiler
+/// play` writes its runs there), each at most the horizon long (which `spec::limits` keeps within the
+/// table capacity); a file that does not read is bad input.
+pub(crate) fn load_imports(
+    a: &SynthArgs,
+    problem: &crate::spec::Problem,
+) -> Result<Vec<(String, crate::trajectory::csv::Recording)>, Failure> {
+    let (n, m, h) = (problem.plant.n(), problem.plant.m(), problem.plant.period);
+    let max_rows = problem.horizon_steps();
+    let mut imports = Vec::new();
+    for dir in &a.imports {
+        let files = crate::trajectory::csv::recordings_in(dir)
+            .map_err(|e| miette::miette!("{e}"))
+            .bad_input()?;
+        if files.is_empty() {
+            return Err(Failure::bad_input(miette::miette!(
+                "--import {}: the directory holds no .csv recording",
+                dir.display()
+            )));
+        }
+        for p in files {
+            let rec = crate::trajectory::csv::load_recording(&p, n, m, h, max_rows)
+                .map_err(|e| miette::miette!("{e}"))
+                .bad_input()?;
+            imports.push((p.display().to_string(), rec));
+        }
+    }
+    Ok(imports)
+}
+
 pub fn run(a: &SynthArgs) -> Outcome {
     // First of all, even before the spec is read: whatever happens next, no earlier result is left.
     prepare_out(&a.out)?;
@@ -109,28 +139,7 @@ pub fn run(a: &SynthArgs) -> Outcome {
             return refuse("[synthesis] mode = \"pwa\"");
         }
     }
-    let (n, m, h) = (problem.plant.n(), problem.plant.m(), problem.plant.period);
-    // A recording is at most the horizon long (which `spec::limits` keeps within the table capacity).
-    let max_rows = problem.horizon_steps();
-    let mut imports = Vec::new();
-    // A directory stands for its CSV files, in sorted order (`host-compiler play` writes its runs there).
-    for dir in &a.imports {
-        let files = crate::trajectory::csv::recordings_in(dir)
-            .map_err(|e| miette::miette!("{e}"))
-            .bad_input()?;
-        if files.is_empty() {
-            return Err(Failure::bad_input(miette::miette!(
-                "--import {}: the directory holds no .csv recording",
-                dir.display()
-            )));
-        }
-        for p in files {
-            let rec = crate::trajectory::csv::load_recording(&p, n, m, h, max_rows)
-                .map_err(|e| miette::miette!("{e}"))
-                .bad_input()?;
-            imports.push((p.display().to_string(), rec));
-        }
-    }
+    let imports = load_imports(a, &problem)?;
     // Ctrl-C: the first stops the growth loop cleanly (what is certified so far is verified, written
     // and reported); a second one ends the process at once.
     let cancel = Arc::new(AtomicBool::new(false));

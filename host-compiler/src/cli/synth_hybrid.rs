@@ -3,6 +3,12 @@
 //! Carlo against the exact hybrid flow through the shared evaluator. Writes `controller.img` (only when
 //! the verification passed), `certificate.json` and `report.html` ([`crate::report::hybrid`]); exit
 //! status as for `synth` ([`super::Exit`]).
+//!
+//! `--import FILE|DIR` takes recordings (`host-compiler play` writes them): each is replayed on the
+//! automaton, split at its events into the path's segments and certified by the same certificate
+//! ([`crate::synth::hybrid::import`]); an accepted one joins the runs before the growth, a refused one
+//! is named on stderr with its reason (the segment, what binds, by how much) and in `certificate.json`'s
+//! `imported`. A file that does not read is bad input, as for `synth`.
 
 use super::synth::write_atomic;
 use super::{BadInput, Exit, Failure, Outcome, SynthArgs};
@@ -12,11 +18,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
 pub fn run(a: &SynthArgs, problem: crate::spec::Problem) -> Outcome {
-    if !a.imports.is_empty() {
-        return Err(Failure::bad_input(miette::miette!(
-            "--import is not taken for hybrid plants yet: a recording has no segments (issue #12)"
-        )));
-    }
+    let imports = super::synth::load_imports(a, &problem)?;
     let task = HybridTask::new(problem)
         .map_err(|e| miette::miette!("{e}"))
         .bad_input()?;
@@ -50,12 +52,19 @@ pub fn run(a: &SynthArgs, problem: crate::spec::Problem) -> Outcome {
             Arc::new(|count: usize, delta: f64| eprintln!("certified run {count} (δ = {delta:.4})"))
                 as Arc<dyn Fn(usize, f64) + Send + Sync>
         }),
+        imports,
         ..HybridOptions::default()
     };
     let s = synthesize_hybrid(&task, &opts).map_err(|e| Failure {
         exit: Exit::Failed,
         report: miette::miette!("{e}"),
     })?;
+    for (name, r) in &s.imported {
+        match r {
+            Ok(d) => eprintln!("{name}: imported, δ = {d:.4}"),
+            Err(why) => eprintln!("warning: {name}: not used: {why}"),
+        }
+    }
     let img_path = a.out.join("controller.img");
     let unproved: Vec<&str> = s.recheck.iter().filter_map(|r| r.why.as_deref()).collect();
     let verified = s.verify.violations == 0 && unproved.is_empty();
@@ -76,6 +85,10 @@ pub fn run(a: &SynthArgs, problem: crate::spec::Problem) -> Outcome {
         "verify": s.verify,
         "recheck": s.recheck,
         "seeds_tried": s.seeds_tried,
+        "imported": s.imported.iter().map(|(name, r)| match r {
+            Ok(d) => serde_json::json!({"file": name, "delta": d}),
+            Err(why) => serde_json::json!({"file": name, "why": why}),
+        }).collect::<Vec<_>>(),
         "refused": s.refused.iter().map(|(x, why)| serde_json::json!({"seed": x, "why": why})).collect::<Vec<_>>(),
         "locations": task.designs.iter().map(|d| serde_json::json!({
             "K": crate::linalg::to_rows(d.K.as_ref()), "P": crate::linalg::to_rows(d.P.as_ref()),

@@ -16,16 +16,20 @@
 //! already in that directory when the game starts are certified again and join the cover.
 //!
 //! # Plants
-//! The game asks only [`crate::model::Plant`] of the plant (its step, its states between samples, its
-//! locations), so any class the task builds plays. Each session keeps its location and the answers
-//! report it when the plant has more than one; `task::Task::new` does not build hybrid plants yet
-//! (issue #12), and their runs' certification (`certify::forced`) is not wired here.
+//! The game asks only [`Played`] of the task: a one-location task (any class `task::Task::new` builds;
+//! runs certified by Theorem 4.7 through [`crate::cover::certify_recording`]) or a hybrid automaton with
+//! internal switching (`synth::hybrid::HybridTask`, §4.2.2: the plant stepped by its exact flow across
+//! events, u = K_ℓ x + v with the gain of the location it is in; runs replayed, split at their events
+//! and certified along the task's location path by Theorem 4.24, the path `synth --import` takes for
+//! hybrid specs, [`crate::synth::hybrid::import`]). Each session keeps its location; the answers report
+//! it (index and name) when the plant has more than one. The balls over Init are in the initial
+//! location's metric; a hybrid run's tube is not drawn (its segments' metrics differ).
 
-use crate::caf::Design;
-use crate::certify::{Binding, Certificate, Loop, LoopConstants};
-use crate::cover::{certify_recording, CoverTrajectory};
+use super::played::Played;
+use crate::certify::{Binding, Certificate};
 use crate::geometry::Metric;
 use crate::property::InputBound;
+use crate::synth::hybrid::HybridTask;
 use crate::task::Task;
 use crate::trajectory::csv::{parse_recording, Recording};
 use rand::SeedableRng;
@@ -145,17 +149,21 @@ struct Run {
     path: Vec<Vec<f64>>,
 }
 
+/// An accepted run's ball over Init (the initial location's metric, the stored radius).
+struct Ball {
+    center: Vec<f64>,
+    delta_stored: f32,
+}
+
 /// The game (module doc).
 pub struct Game {
-    task: Task,
-    design: Design,
-    lc: LoopConstants,
+    played: Played,
     settings: PlaySettings,
     proj: [usize; 2],
     base: Vec<f64>,
     samples: Vec<Vec<f64>>,
     covered: Vec<bool>,
-    cover: Vec<CoverTrajectory>,
+    cover: Vec<Ball>,
     runs: Vec<Run>,
     sessions: BTreeMap<u64, Session>,
     next_session: u64,
@@ -167,18 +175,27 @@ impl Game {
     /// The game of a task: its CAF designed as `synth` designs it, the coverage samples drawn, and the
     /// runs already in the out directory certified again. Errors say what stops the game.
     pub fn new(task: Task, settings: PlaySettings) -> Result<Self, String> {
-        let n = task.plant.n();
+        Self::of(Played::one(task)?, settings)
+    }
+
+    /// The game of a hybrid task with internal switching (module doc, "Plants"), as [`Game::new`].
+    pub fn hybrid(task: HybridTask, settings: PlaySettings) -> Result<Self, String> {
+        Self::of(Played::hybrid(task)?, settings)
+    }
+
+    fn of(played: Played, settings: PlaySettings) -> Result<Self, String> {
+        let n = played.plant().n();
         if n < 2 {
             return Err(format!(
                 "the plant has n = {n} state coordinate; the game draws two"
             ));
         }
-        if task.plant.m() < 1 {
+        if played.plant().m() < 1 {
             return Err("the plant has no input".into());
         }
         let proj = match settings.projection {
             Some(p) => p,
-            None => default_projection(&task),
+            None => default_projection(played.problem()),
         };
         if proj[0] >= n || proj[1] >= n || proj[0] == proj[1] {
             return Err(format!(
@@ -195,16 +212,9 @@ impl Game {
         }
         std::fs::create_dir_all(&settings.out)
             .map_err(|e| format!("cannot create {}: {e}", settings.out.display()))?;
-        let design = crate::caf::design(&task).map_err(|e| format!("no CAF and feedback: {e}"))?;
-        let lc = LoopConstants::new(&Loop::new(&task, &design)).map_err(|e| e.to_string())?;
-        let init = task.init();
-        let base: Vec<f64> = init
-            .lo
-            .iter()
-            .zip(&init.hi)
-            .map(|(a, b)| 0.5 * (a + b))
-            .collect();
-        let mut rng = ChaCha8Rng::seed_from_u64(task.problem.seed ^ 0x91a7);
+        let init = played.init();
+        let base = init.centre();
+        let mut rng = ChaCha8Rng::seed_from_u64(played.problem().seed ^ 0x91a7);
         let samples = crate::cover::SampleBox {
             lo: init.lo.clone(),
             hi: init.hi.clone(),
@@ -212,9 +222,7 @@ impl Game {
         .samples(COVERAGE_SAMPLES, &mut rng);
         let covered = vec![false; samples.len()];
         let mut game = Self {
-            task,
-            design,
-            lc,
+            played,
             settings,
             proj,
             base,
@@ -232,13 +240,9 @@ impl Game {
         Ok(game)
     }
 
-    fn lp(&self) -> Loop<'_> {
-        Loop::new(&self.task, &self.design)
-    }
-
-    /// The task the game plays.
-    pub fn task(&self) -> &Task {
-        &self.task
+    /// The spec the game plays.
+    pub fn problem(&self) -> &crate::spec::Problem {
+        self.played.problem()
     }
 
     /// Accepted runs in the cover.
@@ -255,13 +259,10 @@ impl Game {
     fn load_out_dir(&mut self) -> Result<(), String> {
         let files =
             crate::trajectory::csv::recordings_in(&self.settings.out).map_err(|e| e.to_string())?;
-        let (n, m, h) = (
-            self.task.plant.n(),
-            self.task.plant.m(),
-            self.task.plant.period(),
-        );
+        let plant = self.played.plant();
+        let (n, m, h) = (plant.n(), plant.m(), plant.period());
         for f in files {
-            let rec = crate::trajectory::csv::load_recording(&f, n, m, h, self.task.steps)
+            let rec = crate::trajectory::csv::load_recording(&f, n, m, h, self.played.steps())
                 .map_err(|e| format!("{e} (a file in the out directory; move it away to play)"))?;
             let text = std::fs::read_to_string(&f).unwrap_or_default();
             let player = comment(&text, "player").unwrap_or_else(|| "?".into());
@@ -291,8 +292,9 @@ impl Game {
     }
 
     fn make_world(&self, proj: [usize; 2]) -> Value {
-        let t = &self.task;
-        let (n, m) = (t.plant.n(), t.plant.m());
+        let t = &self.played;
+        let (problem, property, plant) = (t.problem(), t.property(), t.plant());
+        let (n, m) = (plant.n(), plant.m());
         let [a, b] = proj;
         let init = t.init();
         // The view: Init and the sets' extents along the drawn coordinates, with a margin.
@@ -304,7 +306,7 @@ impl Game {
                 hi[i] = hi[i].max(p[i] + r);
             }
         };
-        for s in std::iter::once(&t.problem.goal).chain(&t.problem.unsafe_sets) {
+        for s in std::iter::once(&problem.goal).chain(&problem.unsafe_sets) {
             if let Some((c, r)) = extent(s, n, &self.base, proj) {
                 widen(c, r);
             }
@@ -336,41 +338,44 @@ impl Game {
                 })
                 .collect()
         };
-        let input = match &t.property.input {
+        let input = match &property.input {
             InputBound::Box { lo, hi } => json!({"kind": "box", "lo": lo, "hi": hi}),
             InputBound::Norm2 { center, max } => {
                 json!({"kind": "ball", "center": center, "radius": max})
             }
         };
-        let P = self.design.P.as_ref();
-        let Pinv = crate::linalg::to_rows(self.lc.roots.inv.as_ref());
+        let P = t.P();
+        let Pinv = crate::linalg::to_rows(t.roots().inv.as_ref());
         // The tube's cross-section: the projection of {e : ‖e‖_P ≤ 1} onto the drawn plane, as a factor
         // L with L Lᵀ = (P⁻¹) restricted to (a, b); the ball over Init: the slice through its centre,
         // L Lᵀ = (P restricted to (a, b))⁻¹.
         let proj_shape = chol2([[Pinv[a][a], Pinv[a][b]], [Pinv[b][a], Pinv[b][b]]]);
         let slice_shape = inv2([[P[(a, a)], P[(a, b)]], [P[(b, a)], P[(b, b)]]]).map(chol2);
+        let locations = plant.locations();
         json!({
-            "name": t.problem.name.clone().unwrap_or_default(),
+            "name": problem.name.clone().unwrap_or_default(),
             "n": n,
             "m": m,
-            "period": t.plant.period(),
-            "steps": t.steps,
-            "horizon": t.problem.horizon,
-            "locations": t.plant.locations(),
+            "period": plant.period(),
+            "steps": t.steps(),
+            "horizon": problem.horizon,
+            "locations": locations,
+            "location_names": (0..locations).map(|l| t.location_name(l)).collect::<Vec<_>>(),
+            "initial_location": t.initial(),
             "projection": [a, b],
             "labels": [format!("x{}", a + 1), format!("x{}", b + 1)],
             "view": view,
             "raster": RASTER,
-            "goal": raster(Some(t.property.goal.as_ref())),
-            "unsafe": raster(t.property.unsafe_region()),
+            "goal": raster(Some(property.goal.as_ref())),
+            "unsafe": raster(property.unsafe_region()),
             "init": {"lo": init.lo, "hi": init.hi, "center": self.base},
             "input": input,
-            "K": crate::linalg::to_rows(self.design.K.as_ref()),
-            "tube_shape": proj_shape,
+            "K": crate::linalg::to_rows(t.K(t.initial())),
+            "tube_shape": if t.one_metric() { proj_shape } else { None },
             "ball_shape": slice_shape.flatten(),
             "samples": self.samples,
             "slow": self.settings.slow,
-            "min_robustness": t.problem.synthesis.min_robustness,
+            "min_robustness": problem.synthesis.min_robustness,
         })
     }
 
@@ -387,10 +392,8 @@ impl Game {
             .values()
             .map(|s| {
                 let x = s.xs.last().expect("a session holds x0");
-                let mut p = json!({"player": s.player, "x": x, "t": s.v.len() as f64 * self.task.plant.period()});
-                if self.task.plant.locations() > 1 {
-                    p["location"] = json!(s.loc);
-                }
+                let mut p = json!({"player": s.player, "x": x, "t": s.v.len() as f64 * self.played.plant().period()});
+                self.locate(&mut p, s.loc);
                 p
             })
             .collect();
@@ -400,7 +403,7 @@ impl Game {
             "covered": covered,
             "runs": runs,
             "balls": self.cover.iter().map(|c| json!({
-                "center": c.nominal.x[0], "delta": c.certificate.delta_stored as f64,
+                "center": c.center, "delta": c.delta_stored as f64,
             })).collect::<Vec<_>>(),
             "players": players,
             "suggestion": self.suggestion(),
@@ -412,7 +415,7 @@ impl Game {
         let Some(v) = v else {
             return Ok(self.proj);
         };
-        let n = self.task.plant.n();
+        let n = self.played.plant().n();
         let ix: Option<Vec<usize>> = v
             .as_array()
             .map(|a| a.iter().map(|i| i.as_u64().map(|i| i as usize)).collect())
@@ -432,12 +435,18 @@ impl Game {
         if self.cover.is_empty() {
             return Some(self.base.clone());
         }
-        let P = self.design.P.as_ref();
+        let P = self.played.P();
         self.samples
             .iter()
             .zip(&self.covered)
             .filter(|(_, &c)| !c)
-            .filter_map(|(s, _)| crate::cover::alg4::gap(P, s, &self.cover).map(|(d, _)| (d, s)))
+            .filter_map(|(s, _)| {
+                self.cover
+                    .iter()
+                    .map(|b| crate::cover::alg4::dist(P, s, &b.center) - b.delta_stored as f64)
+                    .min_by(f64::total_cmp)
+                    .map(|d| (d, s))
+            })
             .max_by(|a, b| a.0.total_cmp(&b.0))
             .map(|(_, s)| s.clone())
     }
@@ -461,7 +470,7 @@ impl Game {
         if player.chars().any(char::is_control) {
             return Err(bad("`player` must not contain control characters"));
         }
-        let n = self.task.plant.n();
+        let n = self.played.plant().n();
         let x0 = match (obj.get("x0"), obj.get("at")) {
             (Some(x), None) => numbers(x, n, "x0")?,
             (None, Some(p)) => {
@@ -478,7 +487,7 @@ impl Game {
                 ))
             }
         };
-        let init = self.task.init();
+        let init = self.played.init();
         if let Some(i) =
             (0..n).find(|&i| !(x0[i] >= init.lo[i] - 1e-12 && x0[i] <= init.hi[i] + 1e-12))
         {
@@ -515,7 +524,7 @@ impl Game {
             id,
             Session {
                 player,
-                loc: 0,
+                loc: self.played.initial(),
                 x0: x0.clone(),
                 xs: vec![x0.clone()],
                 v: Vec::new(),
@@ -527,7 +536,7 @@ impl Game {
         Ok(json!({
             "session": id,
             "x0": x0,
-            "preview": self.preview(0, &x0, &vec![0.0; self.task.plant.m()]),
+            "preview": self.preview(self.played.initial(), &x0, &vec![0.0; self.played.plant().m()]),
         }))
     }
 
@@ -541,7 +550,7 @@ impl Game {
             .as_object()
             .ok_or_else(|| bad("the body must be a JSON object"))?;
         let id = session_id(obj)?;
-        let m = self.task.plant.m();
+        let m = self.played.plant().m();
         let v = numbers(
             obj.get("v")
                 .ok_or_else(|| bad("`v` (the reference input) is missing"))?,
@@ -552,20 +561,21 @@ impl Game {
             None => 1,
             Some(s) => s
                 .as_u64()
-                .filter(|&k| k >= 1 && k as usize <= self.task.steps)
+                .filter(|&k| k >= 1 && k as usize <= self.played.steps())
                 .ok_or_else(|| {
                     bad(format!(
                         "`steps` must be an integer from 1 to {} (the horizon in samples)",
-                        self.task.steps
+                        self.played.steps()
                     ))
                 })? as usize,
         };
         let finish = obj.get("finish").and_then(Value::as_bool).unwrap_or(false);
-        let horizon = self.task.steps;
-        let plant = &*self.task.plant;
-        let K = self.design.K.as_ref();
-        let goal = self.task.property.goal.as_ref();
-        let unsafe_set = self.task.property.unsafe_region();
+        let horizon = self.played.steps();
+        let played = &self.played;
+        let plant = played.plant();
+        let property = played.property();
+        let goal = property.goal.as_ref();
+        let unsafe_set = property.unsafe_region();
         let euclid = Metric::euclidean(plant.n());
         let s = self
             .sessions
@@ -581,13 +591,19 @@ impl Game {
                 break;
             }
             let x = s.xs.last().expect("a session holds x0").clone();
-            let (u, vv, c) = applied(K, &self.task.property.input, &x, &v);
+            let (u, vv, c) = applied(played.K(s.loc), &property.input, &x, &v);
             clipped |= c;
             let mut hit = false;
-            if let Some(us) = unsafe_set {
-                plant.between_samples(s.loc, &x, &u, &mut |y| hit |= us.contains(y));
-            }
-            let xn = plant.step(s.loc, &x, &u);
+            let advanced = played.advance(s.loc, &x, &u, &mut |y| {
+                hit |= unsafe_set.is_some_and(|us| us.contains(y))
+            });
+            let Ok((loc, xn)) = advanced else {
+                // A period the exact flow cannot step (Zeno, undecided) is not played: the run ends at
+                // the last sample it reached and is certified as it is.
+                ending = Some(Ending::Finished);
+                break;
+            };
+            s.loc = loc;
             hit |= unsafe_set.is_some_and(|us| us.contains(&xn));
             let depth = goal.contains(&xn).then(|| goal.depth(&xn, &euclid).value);
             s.v.push(vv);
@@ -633,9 +649,7 @@ impl Game {
             "x": x,
             "status": ending.map_or("running", Ending::name),
         });
-        if plant.locations() > 1 {
-            answer["location"] = json!(s.loc);
-        }
+        self.locate(&mut answer, s.loc);
         match ending {
             None => {
                 answer["preview"] = json!(self.preview(s.loc, &x, &v));
@@ -661,16 +675,30 @@ impl Game {
         Ok(json!({"session": id, "status": "finished", "result": result}))
     }
 
-    /// Where the held input leads from `x` ([`PREVIEW_STEPS`] samples, drawn coordinates).
+    /// The location in an answer (index and name), when the plant has more than one.
+    fn locate(&self, answer: &mut Value, loc: crate::model::Location) {
+        if self.played.plant().locations() > 1 {
+            answer["location"] = json!(loc);
+            answer["location_name"] = json!(self.played.location_name(loc));
+        }
+    }
+
+    /// Where the held input leads from `x` ([`PREVIEW_STEPS`] samples; across events for a hybrid plant).
     fn preview(&self, loc: usize, x: &[f64], v: &[f64]) -> Vec<Vec<f64>> {
-        let mut x = x.to_vec();
+        let (mut loc, mut x) = (loc, x.to_vec());
         let mut out = Vec::with_capacity(PREVIEW_STEPS);
+        let p = &self.played;
         for _ in 0..PREVIEW_STEPS {
-            let (u, _, _) = applied(self.design.K.as_ref(), &self.task.property.input, &x, v);
-            x = self.task.plant.step(loc, &x, &u);
-            if x.iter().any(|v| !v.is_finite()) {
+            let (u, _, _) = applied(p.K(loc), &p.property().input, &x, v);
+            let step = match p {
+                Played::Hybrid { task, .. } => task.plant.flow(loc, &x, &u).map(|s| (s.loc, s.x)),
+                Played::One { .. } => Ok((loc, p.plant().step(loc, &x, &u))),
+            };
+            let Ok((l, y)) = step else { break };
+            if y.iter().any(|v| !v.is_finite()) {
                 break;
             }
+            (loc, x) = (l, y);
             out.push(x.clone());
         }
         out
@@ -696,17 +724,18 @@ impl Game {
             ending,
             &s.x0,
             &s.v,
-            self.task.plant.period(),
+            self.played.plant().period(),
         );
         let file = format!("run-{number:04}-{}.csv", slug(&s.player));
         // The same parser and certification as `synth --import`.
+        let plant = self.played.plant();
         let rec = parse_recording(
             &text,
             &file,
-            self.task.plant.n(),
-            self.task.plant.m(),
-            self.task.plant.period(),
-            self.task.steps,
+            plant.n(),
+            plant.m(),
+            plant.period(),
+            self.played.steps(),
         )
         .map_err(|e| PlayError::Io(format!("the recording does not read back: {e}")))?;
         let mut run = self.judge(&rec, s.player.clone(), when, ending, number);
@@ -740,36 +769,43 @@ impl Game {
         ending: Ending,
         number: usize,
     ) -> Run {
-        let ended_at = rec.v.len() as f64 * self.task.plant.period();
-        let (nominal, cert) = certify_recording(&self.lp(), &self.lc, rec);
+        let h = self.played.plant().period();
+        let ended_at = rec.v.len() as f64 * h;
+        let j = self.played.judge(rec);
         let full = self.cover.len() >= MAX_RUNS;
-        let accepted = cert.is_certified() && !full;
-        let h = self.task.plant.period();
+        let certified = j.verdict.is_ok();
+        let accepted = certified && !full;
         let mut new_coverage = 0.0;
         if accepted {
-            let P = self.design.P.as_ref();
-            let r = cert.delta_stored as f64;
+            let P = self.played.P();
+            let r = j.delta_stored as f64;
             let mut fresh = 0usize;
             for (s, c) in self.samples.iter().zip(self.covered.iter_mut()) {
-                if !*c && crate::cover::alg4::dist(P, s, &nominal.x[0]) <= r {
+                if !*c && crate::cover::alg4::dist(P, s, &j.centre) <= r {
                     *c = true;
                     fresh += 1;
                 }
             }
             new_coverage = fresh as f64 / self.samples.len().max(1) as f64;
         }
-        let mut reason = reason(&cert, ending, ended_at, h);
-        if full && cert.is_certified() {
+        let mut reason = match (&j.certificate, &j.verdict) {
+            (Some(cert), _) => reason(cert, ending, ended_at, h),
+            (None, Ok(what)) => format!(
+                "{}certified δ = {:.3e}, limited by {what}",
+                ended(ending, ended_at),
+                j.delta
+            ),
+            (None, Err(why)) => format!("{}refused: {why}", ended(ending, ended_at)),
+        };
+        if full && certified {
             reason = format!(
                 "not added: the game keeps at most {MAX_RUNS} runs (run `synth --import` on the out directory); {reason}"
             );
         }
-        let path = nominal.x.clone();
         if accepted {
-            self.cover.push(CoverTrajectory {
-                source: format!("play:{player}"),
-                nominal,
-                certificate: cert.clone(),
+            self.cover.push(Ball {
+                center: j.centre.clone(),
+                delta_stored: j.delta_stored,
             });
         }
         Run {
@@ -778,11 +814,11 @@ impl Game {
             when,
             ending,
             accepted,
-            delta: if accepted { cert.delta } else { 0.0 },
+            delta: if accepted { j.delta } else { 0.0 },
             new_coverage,
             reason,
             file: None,
-            path,
+            path: j.path,
         }
     }
 
@@ -816,7 +852,7 @@ impl Game {
             let stride = r.path.len().div_ceil(STATE_PATH_POINTS).max(1);
             let mut thin: Vec<&Vec<f64>> = r.path.iter().step_by(stride).collect();
             if let Some(end) = r.path.last() {
-                if (r.path.len() - 1) % stride != 0 {
+                if !(r.path.len() - 1).is_multiple_of(stride) {
                     thin.push(end);
                 }
             }
@@ -913,12 +949,7 @@ fn reason(c: &Certificate, ending: Ending, ended_at: f64, h: f64) -> String {
             )
         }
     };
-    let ended = match ending {
-        Ending::Unsafe => format!("the run entered Unsafe at t = {ended_at:.2} s; "),
-        Ending::Timeout => format!("the horizon T ran out at t = {ended_at:.2} s; "),
-        Ending::Goal => format!("the run reached Goal (t = {ended_at:.2} s); "),
-        Ending::Finished => String::new(),
-    };
+    let ended = ended(ending, ended_at);
     if c.is_certified() {
         let what = match c.binding() {
             Binding::Goal(d) => goal(d),
@@ -942,6 +973,16 @@ fn reason(c: &Certificate, ending: Ending, ended_at: f64, h: f64) -> String {
         failing.push(c.binding().to_string());
     }
     format!("{ended}refused: {}", failing.join("; "))
+}
+
+/// How a played run ended and when, as a message's opening.
+fn ended(ending: Ending, ended_at: f64) -> String {
+    match ending {
+        Ending::Unsafe => format!("the run entered Unsafe at t = {ended_at:.2} s; "),
+        Ending::Timeout => format!("the horizon T ran out at t = {ended_at:.2} s; "),
+        Ending::Goal => format!("the run reached Goal (t = {ended_at:.2} s); "),
+        Ending::Finished => String::new(),
+    }
 }
 
 /// The recording as `synth --import` reads it, with the player and the time in comment lines.
@@ -1037,8 +1078,8 @@ fn numbers(v: &Value, len: usize, what: &str) -> Result<Vec<f64>, PlayError> {
 }
 
 /// Goal's two state coordinates when it names two, else x1, x2.
-fn default_projection(task: &Task) -> [usize; 2] {
-    match &task.problem.goal.coords {
+fn default_projection(problem: &crate::spec::Problem) -> [usize; 2] {
+    match &problem.goal.coords {
         crate::spec::Coords::StateIndices(ix) if ix.len() == 2 && ix[0] != ix[1] => [ix[0], ix[1]],
         _ => [0, 1],
     }

@@ -2,12 +2,16 @@
 //! game, issue #15).
 //!
 //! People steer the task's plant in a browser page; each finished run is certified at once by the same
-//! path as `synth --import` ([`crate::cover::certify_recording`]) and, when accepted, joins the cover and
+//! path as `synth --import` and, when accepted, joins the cover and
 //! is written into the out directory as a recording that `synth --import DIR` reads.
 //!
-//! * [`game`] owns the state: the task, its CAF design, the players' sessions (the plant stepped with
-//!   the same [`crate::model::Plant`] code as synthesis), the accepted runs, the coverage samples, and
-//!   the JSON each request answers. It knows nothing of HTTP.
+//! * [`game`] owns the state: the task, the players' sessions, the accepted runs, the coverage samples,
+//!   and the JSON each request answers. It knows nothing of HTTP.
+//! * `played` is what the game asks of the task: a one-location task with its CAF, or a hybrid automaton
+//!   with internal switching (a CAF per location, §4.2.2); how a period is stepped (the same
+//!   [`crate::model::Plant`] code as synthesis, the exact flow across events for a hybrid plant) and how a
+//!   finished run is certified (the import path of its class: [`crate::cover::certify_recording`] or
+//!   [`crate::synth::hybrid::import::certify_recording`]).
 //! * [`server`] owns the HTTP side: a small blocking server (`tiny_http`) with a few worker threads,
 //!   the routes, bounded request bodies, and the page embedded in the binary (`page/index.html`).
 //!
@@ -16,6 +20,7 @@
 //! in effect, so the recording's nominal is the run that was played.
 
 pub mod game;
+mod played;
 pub mod server;
 
 pub use game::{Game, PlayError, PlaySettings};

@@ -406,12 +406,7 @@ fn pivot_ratio(a: &[Vec<f64>]) -> f64 {
 /// The points of Init at which the equations and Γ are evaluated: the centre, the corners of the free
 /// coordinates (when there are at most 64), and seeded random points.
 fn sample_points(init: &InitBox) -> Vec<Vec<f64>> {
-    let centre: Vec<f64> = init
-        .lo
-        .iter()
-        .zip(&init.hi)
-        .map(|(l, h)| 0.5 * (l + h))
-        .collect();
+    let centre = init.centre();
     let free = init.free_coords();
     let mut pts = vec![centre.clone()];
     if free.len() <= 6 {

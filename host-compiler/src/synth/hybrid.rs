@@ -12,6 +12,11 @@
 //! across the event ([`Hybrid::flow`]), gives the next segment's start: the first sample after its own
 //! switch. The last segment is generated from there to Goal. Segment lengths are searched over a few
 //! durations; the run with the largest certified δ is kept.
+//!
+//! **Recorded runs.** A person's recording (`synth --import`, `host-compiler play`) is replayed on the
+//! automaton, split at its events into the path's segments and certified by the same [`certify_run`]
+//! ([`import`]); an accepted one joins the runs through the same accept test ([`admit`]) before the
+//! growth starts.
 
 use crate::caf::{design_locations, Design};
 use crate::certify::internal::{certify_internal, InternalCertificate, InternalSegment};
@@ -25,6 +30,7 @@ use crate::trajectory::Nominal;
 use faer::Mat;
 
 pub mod forced;
+pub mod import;
 
 /// How far past a guard's plane (Euclidean) a non-last segment's generated nominal must end: each is
 /// tried (a deeper target makes the nominal cross the plane more steeply, so that the tube's crossing
@@ -596,6 +602,9 @@ pub struct HybridOptions {
     pub cancel: std::sync::Arc<std::sync::atomic::AtomicBool>,
     /// Called with the count after each accepted run.
     pub on_accept: Option<std::sync::Arc<dyn Fn(usize, f64) + Send + Sync>>,
+    /// Recordings (name, recording) certified first ([`import::certify_recording`]); those accepted
+    /// join the runs before the growth (default none).
+    pub imports: Vec<(String, crate::trajectory::csv::Recording)>,
 }
 
 impl Default for HybridOptions {
@@ -607,6 +616,7 @@ impl Default for HybridOptions {
             batch: 4,
             cancel: Default::default(),
             on_accept: None,
+            imports: Vec::new(),
         }
     }
 }
@@ -617,6 +627,9 @@ pub struct HybridSynthesis {
     /// Seeds planned, and those that certified nothing (with the reason).
     pub seeds_tried: usize,
     pub refused: Vec<(Vec<f64>, String)>,
+    /// Each imported recording by name: the δ of its run (the first runs, in this order), or why it was
+    /// not used.
+    pub imported: Vec<(String, Result<f64, String>)>,
     pub coverage: crate::cover::CoverageEstimate,
     pub image: Vec<u8>,
     pub verify: crate::verify::hybrid::HybridReport,
@@ -625,6 +638,45 @@ pub struct HybridSynthesis {
     /// Why the growth stopped.
     pub stop: String,
     pub seconds: f64,
+}
+
+/// The one accept test of a certified run (planned or imported): its δ is at least the spec's
+/// `min_robustness` (and positive), the trajectory budget has room, and its kept rows fit the image's
+/// table with the `rows_used` so far. `Err` says why not.
+pub fn admit(
+    task: &HybridTask,
+    runs: &[HybridRun],
+    rows_used: usize,
+    run: &HybridRun,
+) -> Result<usize, String> {
+    let s = &task.problem.synthesis;
+    if !run.certificate.is_certified() {
+        return Err(import::refusal(task, &run.certificate));
+    }
+    // δ > 0 and finite here (certified).
+    if run.delta() < s.min_robustness {
+        return Err(format!(
+            "δ = {:.3e} is below min_robustness = {:.3e} ({})",
+            run.delta(),
+            s.min_robustness,
+            import::bindings(task, &run.certificate)
+        ));
+    }
+    let rows: usize = run.certificate.segments.iter().map(|c| c.rows).sum();
+    if runs.len() >= s.max_trajectories {
+        return Err(format!(
+            "the budget of {} trajectories is spent",
+            s.max_trajectories
+        ));
+    }
+    if rows_used + rows > shared_types::capacity::MAX_STEPS {
+        return Err(format!(
+            "its {rows} rows do not fit the image's table ({} of {} rows used)",
+            rows_used,
+            shared_types::capacity::MAX_STEPS
+        ));
+    }
+    Ok(rows)
 }
 
 /// Whether `x` is in the first ball of some run (the metric of the initial location, the stored radius).
@@ -671,6 +723,25 @@ pub fn synthesize_hybrid(
     let target = s.coverage_target + s.coverage_tolerance;
     let stop;
     let mut first = true;
+    // Recorded runs first, through the same accept test.
+    let mut imported = Vec::with_capacity(opts.imports.len());
+    for (name, rec) in &opts.imports {
+        let r = import::certify_recording(task, rec)
+            .map_err(|e| e.to_string())
+            .and_then(|run| admit(task, &runs, rows_used, &run).map(|rows| (run, rows)));
+        imported.push((
+            name.clone(),
+            r.map(|(run, rows)| {
+                rows_used += rows;
+                let d = run.delta();
+                runs.push(run);
+                if let Some(f) = &opts.on_accept {
+                    f(runs.len(), d);
+                }
+                d
+            }),
+        ));
+    }
     // Rounds in a row that certified nothing: after MAX_EMPTY_ROUNDS of them the growth stops and asks
     // for a new seed trajectory (planning a refused seed costs as much as an accepted one).
     let mut empty_rounds = 0usize;
@@ -689,10 +760,11 @@ pub fn synthesize_hybrid(
             stop = format!("the budget of {} trajectories is spent", s.max_trajectories);
             break;
         }
-        let seeds: Vec<Vec<f64>> = if first {
+        let seeds: Vec<Vec<f64>> = if first && !covered(task, &runs, &centre) {
             first = false;
             vec![centre.clone()]
         } else {
+            first = false;
             let mut out = Vec::new();
             for (i, x) in working.iter().enumerate() {
                 if out.len() == opts.batch.max(1) {
@@ -729,36 +801,14 @@ pub fn synthesize_hybrid(
             })
             .collect();
         for (x, r) in seeds.into_iter().zip(planned) {
-            match r {
-                Ok(run)
-                    if run.delta() >= s.min_robustness.max(f64::MIN_POSITIVE)
-                        && run.certificate.is_certified() =>
-                {
-                    let rows: usize = run.certificate.segments.iter().map(|c| c.rows).sum();
-                    if runs.len() >= s.max_trajectories
-                        || rows_used + rows > shared_types::capacity::MAX_STEPS
-                    {
-                        continue;
-                    }
+            match r.and_then(|run| admit(task, &runs, rows_used, &run).map(|rows| (run, rows))) {
+                Ok((run, rows)) => {
                     rows_used += rows;
                     runs.push(run);
                     if let Some(f) = &opts.on_accept {
                         f(runs.len(), runs.last().map_or(0.0, |r| r.delta()));
                     }
                 }
-                Ok(run) => refused.push((
-                    x,
-                    format!(
-                        "δ = {:.3e} ({})",
-                        run.delta(),
-                        run.certificate
-                            .segments
-                            .iter()
-                            .map(|c| c.binding)
-                            .collect::<Vec<_>>()
-                            .join("; ")
-                    ),
-                )),
                 Err(e) => refused.push((x, e)),
             }
         }
@@ -839,6 +889,7 @@ pub fn synthesize_hybrid(
         verify,
         recheck,
         stop,
+        imported,
         seconds: t0.elapsed().as_secs_f64(),
     })
 }

@@ -37,6 +37,7 @@ mod geometry_common;
 mod geometry_ellipsoid;
 mod geometry_polytope;
 mod geometry_regions;
+mod hybrid_import;
 mod image_exits;
 mod inspect_certificate;
 mod messages;

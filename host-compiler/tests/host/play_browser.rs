@@ -45,9 +45,13 @@ fn scratch(name: &str) -> PathBuf {
 }
 
 fn start(out: &std::path::Path) -> Server {
+    start_spec(&spec_path(), out)
+}
+
+fn start_spec(spec: &std::path::Path, out: &std::path::Path) -> Server {
     let mut child = Command::new(env!("CARGO_BIN_EXE_host-compiler"))
         .arg("play")
-        .arg(spec_path())
+        .arg(spec)
         .args(["--port", "0", "--out"])
         .arg(out)
         .stdout(Stdio::piped())
@@ -199,4 +203,35 @@ fn scripted_runs_in_headless_chromium_are_certified_or_refused_with_the_reason_s
     );
     let png = std::fs::read(&shot).unwrap();
     assert!(png.starts_with(b"\x89PNG"), "a PNG screenshot");
+}
+
+/// The hybrid game (Example 4.25) in the page: the planned run's rows played sample by sample from Init's
+/// centre (`start` gives x1, x2; x3 is the centre's) switch to the right location, and the run is
+/// certified through the hybrid import path and shown accepted.
+#[test]
+fn a_scripted_run_on_a_hybrid_spec_is_certified_in_headless_chromium() {
+    let (t, run) = crate::hybrid_import::planned();
+    let rec = crate::hybrid_import::recording_of(t, run);
+    let out = scratch("hybrid");
+    let srv = start_spec(&crate::hybrid_import::spec_path(), &out);
+    let script: Vec<String> = rec.v.iter().map(|v| format!("{}*1", v[0])).collect();
+    let url = format!(
+        "{}?name=bot&start={},{}&script={}",
+        srv.url,
+        rec.x0[0],
+        rec.x0[1],
+        script.join(";")
+    );
+    let dom = browse(&url, &["--dump-dom".to_string()]);
+    assert!(
+        dom.contains("data-script=\"done\""),
+        "the script did not finish: {dom}"
+    );
+    assert!(dom.contains("data-accepted=\"yes\""), "{dom}");
+    let shown = element_text(&dom, "result");
+    assert!(shown.starts_with("ACCEPTED: δ = "), "{shown}");
+    let st = get(&format!("{}api/state", srv.url));
+    assert_eq!(st["accepted"], 1, "{st}");
+    let reason = st["runs"][0]["reason"].as_str().unwrap();
+    assert!(reason.contains("segment 1 (right)"), "{reason}");
 }

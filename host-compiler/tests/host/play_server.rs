@@ -42,7 +42,7 @@ fn scratch(name: &str) -> PathBuf {
 }
 
 fn game(out: &Path) -> Game {
-    let problem = host_compiler::spec::load(&spec_path()).unwrap();
+    let problem = host_compiler::spec::load(spec_path()).unwrap();
     let task = host_compiler::task::Task::new(problem).unwrap();
     Game::new(
         task,
@@ -80,7 +80,7 @@ fn raw(addr: SocketAddr, request: &[u8]) -> (u16, String) {
     (code, body)
 }
 
-fn request(addr: SocketAddr, method: &str, path: &str, body: &str) -> (u16, Value) {
+pub fn request(addr: SocketAddr, method: &str, path: &str, body: &str) -> (u16, Value) {
     let req = format!(
         "{method} {path} HTTP/1.1\r\nHost: x\r\nConnection: close\r\nContent-Length: {}\r\n\r\n{body}",
         body.len()
@@ -90,7 +90,7 @@ fn request(addr: SocketAddr, method: &str, path: &str, body: &str) -> (u16, Valu
     (code, v)
 }
 
-fn post(addr: SocketAddr, path: &str, body: &Value) -> (u16, Value) {
+pub fn post(addr: SocketAddr, path: &str, body: &Value) -> (u16, Value) {
     request(addr, "POST", path, &body.to_string())
 }
 
