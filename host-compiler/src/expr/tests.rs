@@ -537,7 +537,14 @@ proptest! {
             // Only a stack beyond the capacity can refuse these; nothing to check then.
             return Ok(());
         };
-        let b = rounding_bound(&c, &bx, &[]).unwrap()[0];
+        // A bound may be refused where the f32 value's enclosure (the exact range widened by the
+        // rounding error) leaves a function's domain, e.g. log(1 + a²) with a huge a²: a refusal, which
+        // the spec reports, never a wrong bound. What is checked is every bound that is given.
+        let b = match rounding_bound(&c, &bx, &[]) {
+            Ok(b) => b[0],
+            Err(IntervalError::Domain { .. }) => return Ok(()),
+            Err(other) => panic!("{other}"),
+        };
         let enc = enclose(&e, &VarBox { x: &bx, u: &[], p: &[] }).unwrap();
         for s in &t {
             let x: Vec<f64> = (0..3).map(|i| bx[i].lo + s[i] * (bx[i].hi - bx[i].lo)).collect();
