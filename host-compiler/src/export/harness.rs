@@ -56,8 +56,9 @@ pub enum Op {
 pub enum Answer {
     /// Whether the image was accepted.
     Init(bool),
-    /// Status (wire value) and the bits of the `MAX_M` input values.
-    Step(u8, [u32; MAX_M]),
+    /// Status (wire value), the bits of the `MAX_M` input values, and the location of the row used
+    /// (`Controller::location`, forced switching's discrete input).
+    Step(u8, [u32; MAX_M], u8),
 }
 
 /// What a comparison found.
@@ -65,7 +66,7 @@ pub enum Answer {
 pub struct Comparison {
     /// Steps compared.
     pub states: usize,
-    /// Steps whose status or an input bit differed.
+    /// Steps whose status, an input bit or the location differed.
     pub mismatches: usize,
     /// Inits compared.
     pub inits: usize,
@@ -237,15 +238,15 @@ impl CHarness {
                     bytes = rest;
                 }
                 Op::Step(_) => {
-                    let rec = 1 + 4 * MAX_M;
+                    let rec = 1 + 4 * MAX_M + 1;
                     let (head, rest) = bytes
                         .split_at_checked(rec)
                         .ok_or_else(|| HarnessError::Driver("short answer".into()))?;
                     let mut u = [0u32; MAX_M];
-                    for (j, c) in head[1..].chunks_exact(4).enumerate() {
+                    for (j, c) in head[1..rec - 1].chunks_exact(4).enumerate() {
                         u[j] = u32::from_le_bytes([c[0], c[1], c[2], c[3]]);
                     }
-                    answers.push(Answer::Step(head[0], u));
+                    answers.push(Answer::Step(head[0], u, head[rec - 1]));
                     bytes = rest;
                 }
             }
@@ -291,7 +292,7 @@ impl CHarness {
                         });
                     }
                 }
-                (Answer::Step(sa, ua), Answer::Step(sb, ub)) => {
+                (Answer::Step(sa, ua, la), Answer::Step(sb, ub, lb)) => {
                     out.states += 1;
                     if let Some(k) = out.by_status.get_mut(*sb as usize) {
                         *k += 1;
@@ -308,11 +309,11 @@ impl CHarness {
                             out.inexact += 1;
                         }
                     }
-                    if sa != sb || d > ulps {
+                    if sa != sb || d > ulps || la != lb {
                         out.mismatches += 1;
                         out.first.get_or_insert_with(|| {
                             format!(
-                                "step {step} (answer {i}): C status {sa} u {:?}, Rust status {sb} u {:?}",
+                                "step {step} (answer {i}): C status {sa} u {:?} location {la}, Rust status {sb} u {:?} location {lb}",
                                 ua.map(f32::from_bits),
                                 ub.map(f32::from_bits)
                             )
@@ -358,7 +359,12 @@ pub fn reference(image: &[u8], ops: &[Op]) -> Vec<Answer> {
                     },
                 };
                 applied = u;
-                answers.push(Answer::Step(status as u8, u.values().map(f32::to_bits)));
+                let location = ctl.as_ref().map_or(0, |c| c.location() as u8);
+                answers.push(Answer::Step(
+                    status as u8,
+                    u.values().map(f32::to_bits),
+                    location,
+                ));
             }
         }
     }

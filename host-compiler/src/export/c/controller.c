@@ -908,6 +908,14 @@ static void trajectory_segments(const sc_image *im, uint32_t t, uint32_t *s0, ui
 
 static uint32_t n_segments(const sc_image *im) { return im->segment.len / SC_SEGMENT_RECORD_LEN; }
 
+/* Controller::location: the location of the active segment (the discrete input of forced switching);
+ * 0 before a trajectory is selected and for PWA images. */
+uint32_t sc_location(const sc_controller *c) {
+    const sc_image *im = &c->image;
+    if (!c->has_active || im->mode != 1 || c->segment >= n_segments(im)) return 0u;
+    return segment_at(im->segment, c->segment).location;
+}
+
 /* Image::trajectory_rows: first row and number of rows of trajectory t. */
 static void trajectory_rows(const sc_image *im, uint32_t t, uint32_t *start, uint32_t *len) {
     uint32_t s0, count;

@@ -199,6 +199,11 @@ sc_status sc_step_plant(sc_controller *c, const float *x, uint32_t n_x, float u[
 void sc_fallback(const sc_controller *c, const float *x, uint32_t n_x, const float *last_u,
                  float u[SC_MAX_M]);
 
+/* The location of the table row the last step used (the discrete input a plant with forced switching
+ * takes, shared_types::eval::Controller::location); 0 before a trajectory is selected, for one-location
+ * and for PWA images. */
+uint32_t sc_location(const sc_controller *c);
+
 /* State and input dimensions of the image (of its law: xi and w with model maps). */
 uint32_t sc_n(const sc_controller *c);
 uint32_t sc_m(const sc_controller *c);

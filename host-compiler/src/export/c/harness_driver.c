@@ -6,7 +6,7 @@
  *   'R'                     reset (and forget the applied input)
  *   'S' u8 k, k f32         one period (sc_step_plant: sc_step without model maps) with a k-value
  *                           state -> u8 status, SC_MAX_M f32: on SC_OK the input, else sc_fallback at x
- *                           with the last applied input (as the firmware)
+ *                           with the last applied input (as the firmware), then u8 sc_location
  */
 #include <stdio.h>
 #include <string.h>
@@ -73,6 +73,7 @@ int main(void) {
                 memcpy(&b, &u[i], 4);
                 put32(b);
             }
+            fputc((int)sc_location(&c), stdout);
         } else {
             return 2;
         }
