@@ -256,6 +256,15 @@ impl InitBox {
             .filter(|&i| self.lo[i] < self.hi[i])
             .collect()
     }
+
+    /// The box's centre, (lo + hi) / 2.
+    pub fn centre(&self) -> Vec<f64> {
+        self.lo
+            .iter()
+            .zip(&self.hi)
+            .map(|(l, h)| 0.5 * (l + h))
+            .collect()
+    }
 }
 
 /// A validated task: everything the synthesis needs, owned, with the dimensions checked.

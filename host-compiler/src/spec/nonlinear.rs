@@ -27,7 +27,7 @@
 //! vanish identically (so it is uniform over Init); f, g, h finite and Γ nonsingular at sample points of
 //! Init (the centre, the corners of its free coordinates when there are at most 64, and 64 seeded random
 //! points); and Γ nonsingular over all of Init, proved by interval enclosures of Γ on a bisection of Init
-//! into at most [`MAX_GAMMA_BOXES`] boxes (`expr::interval::certainly_regular`).
+//! (of the states Γ depends on) into at most [`MAX_GAMMA_BOXES`] boxes (`expr::interval::certainly_regular`).
 //!
 //! **The operating region.** A plant whose law depends on the linearised coordinates ξ (a pendulum's
 //! α = (g/l) sin θ) can only be bounded over a known range of ξ, and the certified tube's range is not
@@ -427,12 +427,7 @@ fn pivot_ratio(a: &[Vec<f64>]) -> f64 {
 /// The points of Init at which the equations and Γ are evaluated: the centre, the corners of the free
 /// coordinates (when there are at most 64), and seeded random points.
 fn sample_points(init: &InitBox) -> Vec<Vec<f64>> {
-    let centre: Vec<f64> = init
-        .lo
-        .iter()
-        .zip(&init.hi)
-        .map(|(l, h)| 0.5 * (l + h))
-        .collect();
+    let centre = init.centre();
     let free = init.free_coords();
     let mut pts = vec![centre.clone()];
     if free.len() <= 6 {
@@ -489,12 +484,7 @@ fn region(
         let below = init.lo[i] < lo[i];
         if below || init.hi[i] > hi[i] {
             // A point of Init outside the region: Init's centre with coordinate i at the offending bound.
-            let mut x: Vec<f64> = init
-                .lo
-                .iter()
-                .zip(&init.hi)
-                .map(|(l, h)| 0.5 * (l + h))
-                .collect();
+            let mut x = init.centre();
             x[i] = if below { init.lo[i] } else { init.hi[i] };
             let (span, label) = if below {
                 (rr.lo.get_ref()[i].span(), format!("lo[{i}] = {}", lo[i]))
@@ -665,6 +655,15 @@ pub(crate) fn check(
         .map(|(&l, &h)| Interval::new(l, h))
         .collect()];
     let mut boxes = 0usize;
+    // The states Γ depends on: splitting any other leaves its enclosure as it is.
+    let split: Vec<usize> = (0..n)
+        .filter(|&s| {
+            rd.gamma
+                .iter()
+                .flatten()
+                .any(|e| e.uses(Var::State(s as u16)))
+        })
+        .collect();
     while let Some(bx) = queue.pop() {
         boxes += 1;
         let enc = enclose_matrix(
@@ -679,7 +678,7 @@ pub(crate) fn check(
         if proved {
             continue;
         }
-        if boxes + queue.len() >= MAX_GAMMA_BOXES {
+        if boxes + queue.len() >= MAX_GAMMA_BOXES || split.is_empty() {
             let mid: Vec<f64> = bx.iter().map(|i| i.mid()).collect();
             let why = match enc {
                 Err(e) => format!("its enclosure fails: {e}"),
@@ -702,12 +701,11 @@ pub(crate) fn check(
                 "Γ may be singular or nearly so near that point; shrink Init or change the outputs"
             }));
         }
-        // Bisect the widest coordinate.
-        let (i, _) = bx
+        // Bisect the widest coordinate Γ depends on.
+        let i = *split
             .iter()
-            .enumerate()
-            .max_by(|a, b| (a.1.hi - a.1.lo).total_cmp(&(b.1.hi - b.1.lo)))
-            .expect("n ≥ 1");
+            .max_by(|&&a, &&b| (bx[a].hi - bx[a].lo).total_cmp(&(bx[b].hi - bx[b].lo)))
+            .expect("split is not empty");
         let mid = bx[i].mid();
         let mut left = bx.clone();
         let mut right = bx;
@@ -747,12 +745,7 @@ pub(crate) fn check(
     }
     let df = jac(&system.f)?;
     // The linearisation at Init's centre (whatever the domain of the checks above).
-    let centre: Vec<f64> = init
-        .lo
-        .iter()
-        .zip(&init.hi)
-        .map(|(l, h)| 0.5 * (l + h))
-        .collect();
+    let centre = init.centre();
     let cpt = point(&centre, &pv);
     let mut A = Matrix::zeros(n, n);
     let mut B = Matrix::zeros(n, m);
