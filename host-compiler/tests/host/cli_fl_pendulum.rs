@@ -82,7 +82,7 @@ fn a_law_on_xi_without_a_region_is_refused() {
 #[test]
 fn a_region_without_init_is_refused_naming_the_point() {
     let src = variant(REGION, "region = { lo = [-0.6, -1.8], hi = [3.1, 0.5] }");
-    let e = spec::parse(&src, "fl.toml").err().expect("refused");
+    let e = spec::parse(&src, "fl.toml").expect_err("refused");
     assert_eq!(e.kind(), ErrorKind::Model);
     let msg = e.message();
     assert!(
@@ -103,7 +103,7 @@ fn a_gamma_singular_in_the_region_is_refused() {
         r#"g = [["0"], ["1/(m*l^2)"]]"#,
         r#"g = [["0"], ["cos(th)"]]"#,
     );
-    let e = spec::parse(&src, "fl.toml").err().expect("refused");
+    let e = spec::parse(&src, "fl.toml").expect_err("refused");
     assert_eq!(e.kind(), ErrorKind::Model);
     let msg = e.message();
     assert!(
