@@ -16,7 +16,8 @@
 //! (2, 0) under a faster gain, tracked with `K` (both axes' poles at −2 s⁻¹); `P` is the Lyapunov metric
 //! of the sampled closed loop and the ball covers Init's corners. Not certified: it exercises the
 //! section, the interpreter and the loop. [`fl_4_9_certified`]: the certified image `synth` makes from
-//! the same spec, and [`accepted_starts`] for its runs.
+//! the same spec, [`fl_pendulum_certified`] the one of the torque-driven pendulum
+//! (`examples/fl-pendulum.toml`), and [`accepted_starts`] for their runs.
 #![allow(non_snake_case)]
 
 use crate::plant::{double_integrator as double_integrator_plant, ContinuousPlant, DiscretePlant};
@@ -360,7 +361,24 @@ pub fn fl_4_9() -> Result<NonlinearImage, ImageBuildError> {
 /// `model::feedback_linearizable`), with the task it was certified for; verified by Monte Carlo (64
 /// interior states and 2 per ball), without the falsifier.
 pub fn fl_4_9_certified() -> Result<(Task, Synthesis), ImageBuildError> {
-    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../examples/fl-4-9.toml");
+    fl_certified(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../examples/fl-4-9.toml"
+    ))
+}
+
+/// The certified image of the torque-driven pendulum (`examples/fl-pendulum.toml`: a law that depends on
+/// ξ, bounded over the spec's operating region), as [`fl_4_9_certified`] makes Example 4.9's.
+pub fn fl_pendulum_certified() -> Result<(Task, Synthesis), ImageBuildError> {
+    fl_certified(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../examples/fl-pendulum.toml"
+    ))
+}
+
+/// The certified image `synth` makes from a feedback-linearizable spec, with its task; verified by Monte
+/// Carlo (64 interior states and 2 per ball), without the falsifier.
+fn fl_certified(path: &str) -> Result<(Task, Synthesis), ImageBuildError> {
     let problem =
         host_compiler::spec::load(path).map_err(|e| ImageBuildError::Spec(format!("{e:?}")))?;
     let task = Task::new(problem).map_err(|e| ImageBuildError::Spec(e.to_string()))?;

@@ -269,6 +269,28 @@ impl Polytope {
         Ok(Witness { value, point })
     }
 
+    /// The distance from an outside point to a half-space {aᵀy ≤ b} (one row), in closed form: with
+    /// v = aᵀx − b > 0 the violation, minimise ‖d‖_R subject to aᵀd ≤ −v, the depth's derivation (module
+    /// doc) mirrored: 0 through a null-space component of R, else v / sqrt(aᵀR⁺a) at d = −v R⁺a/(aᵀR⁺a).
+    /// The QP (7.1) has this solution; solving it per point is what an operating region's half-spaces
+    /// (`model::feedback_linearizable`) cannot afford at every sample of every candidate.
+    fn dist_half_space(&self, x: &[f64], steps: &FacetSteps) -> Witness {
+        let v = linalg::dot(&self.A[..self.n], x) - self.b[0];
+        let (value, step) = match &steps.rows[0] {
+            FacetStep::Free(g) => (0.0, g),
+            FacetStep::Norm { dual, step } => (v / dual, step),
+            // Unreachable: construction guarantees a nonzero row.
+            FacetStep::Never => {
+                return Witness {
+                    value: f64::INFINITY,
+                    point: Vec::new(),
+                }
+            }
+        };
+        let point = x.iter().zip(step).map(|(a, g)| a - v * g).collect();
+        Witness { value, point }
+    }
+
     fn depth_inside(&self, x: &[f64], steps: &FacetSteps) -> Witness {
         let n = self.n;
         let slack: Vec<f64> = (0..self.k)
@@ -416,6 +438,9 @@ impl Region for Polytope {
                 point: x.to_vec(),
             });
         }
+        if self.k == 1 {
+            return Ok(self.dist_half_space(x, &steps));
+        }
         self.project(x, &steps.R)
     }
     fn try_depth(&self, x: &[f64], metric: &Metric) -> Result<Witness, GeometryError> {
@@ -488,6 +513,23 @@ mod tests {
         assert!((w.value - expect).abs() < 1e-15);
         assert!((w.point[0] + w.point[1] - 1.0).abs() < 1e-15);
         assert!((m.distance(&x, &w.point) - expect).abs() < 1e-15);
+    }
+
+    #[test]
+    fn half_space_distance_is_the_qp_answer_in_closed_form() {
+        // {2y₀ − y₁ ≤ 1} in a weighted metric, from an outside point: the closed form against the QP.
+        let h = Polytope::new(2, vec![2.0, -1.0], vec![1.0]).unwrap();
+        let m = Metric::new(2, vec![2.0, 0.5, 0.5, 1.0]).unwrap();
+        let x = [3.0, -1.0];
+        let steps = h.steps(&m).unwrap();
+        let closed = h.dist_half_space(&x, &steps);
+        let qp = h.project(&x, &steps.R).unwrap();
+        assert!(
+            (closed.value - qp.value).abs() < 1e-9,
+            "{closed:?} vs {qp:?}"
+        );
+        assert!(h.contains(&closed.point) || h.max_violation(&closed.point) < 1e-12);
+        assert_eq!(h.dist(&x, &m).value, closed.value);
     }
 
     #[test]

@@ -16,8 +16,18 @@
 //! firmware applies u = λ(x)(w − α_res(x)), λ = Γ⁻¹ = adj(Γ)/det Γ (symbolic, m ≤ 3): (3.17) with
 //! κ = −λ α_res.
 //!
-//! **What is bounded, and how.** This module takes plants whose zero dynamics, λ and α_res depend only on
-//! the zero-dynamics states (and u), so every bound below is independent of the nominal trajectory:
+//! **What is bounded, and how.** Without an operating region, this module takes plants whose zero
+//! dynamics, λ and α_res depend only on the zero-dynamics states (and u), so every bound below is
+//! independent of the nominal trajectory. With one (`plant.region`, a box over the plant's state that
+//! contains Init, `spec::nonlinear`), they may depend on any state: the ξ states then range over the
+//! region's box in every bound below, the zero-dynamics hull must lie in the region's zero part, and the
+//! task's Unsafe gains the region's complement in ξ (two closed half-spaces per ξ state). This is sound
+//! by a first-exit argument: let t* be the first time a run leaves the region. Up to t* every bound
+//! below holds, so the certificate's induction (Theorem 4.7 with D, Theorem 3.21) keeps the run in its
+//! tube, which stays a positive distance from Unsafe (sampled and between samples), hence inside the
+//! region, so the run is strictly inside at t* and t* cannot end before the run does. Certified runs thus
+//! never leave the region, and `verify::nonlinear` checks that on the plant, zero states included.
+//! Every bound is still independent of the nominal trajectory; the price is the region's size:
 //! 1. *Zero dynamics over [0, T]*: a validated first-order enclosure per sample period (Picard iteration
 //!    of Z_k + [0, h]·F(Z̃) ⊆ Z̃, F the interval field with u in the input set: runs in the certified tube
 //!    apply inputs in U, so this is an induction over samples), from Init's zero-dynamics box. Their hull
@@ -41,7 +51,7 @@ use crate::expr::compile::{compile, Compiled};
 use crate::expr::diff::{derivative, gradient, lie};
 use crate::expr::interval::{enclose, rounding_bound, Interval, IntervalError, VarBox};
 use crate::expr::{Expr, ExprError, Point, Var};
-use crate::spec::sets::Coords;
+use crate::spec::sets::{Coords, Shape};
 use crate::spec::{InitBox, InputSet, Matrix, Plant as SpecPlant, Problem, SetDesc, TimeDomain};
 use std::sync::Arc;
 
@@ -70,10 +80,24 @@ pub enum FlError {
         expr: String,
     },
     #[error(
-        "{what} depends on {state}, a state of the linearised coordinates ξ; this version bounds \
-             the law and the zero dynamics over the zero-dynamics states only"
+        "{what} depends on {state}, a state of the linearised coordinates ξ, and the spec declares no \
+         operating region: without one the law and the zero dynamics are bounded over the \
+         zero-dynamics states only; declare plant.region = {{ lo = [...], hi = [...] }} (a box over \
+         the state containing Init) to bound them there, leaving it then counts as Unsafe"
     )]
     DependsOnXi { what: String, state: String },
+    #[error(
+        "the zero dynamics leave the operating region: {state} may reach [{hull_lo:.6}, {hull_hi:.6}] \
+         within the horizon (a validated enclosure), but plant.region bounds it to [{lo}, {hi}]; widen \
+         the region's bounds on {state}"
+    )]
+    ZeroDynamicsLeaveRegion {
+        state: String,
+        hull_lo: f64,
+        hull_hi: f64,
+        lo: f64,
+        hi: f64,
+    },
     #[error("the decoupling matrix Γ is {m}×{m}; its symbolic inverse is built for m ≤ 3")]
     TooManyInputs { m: usize },
     #[error(
@@ -126,6 +150,9 @@ pub struct FlMaps {
     pub init: InitBox,
     /// The zero-dynamics hull Z over [0, T] (one interval per zero state).
     pub zero_hull: Vec<Interval>,
+    /// The spec's operating region (`plant.region`, module doc), a box over the plant's state; the
+    /// runs must stay inside it (its ξ part is in the task's Unsafe, its zero part contains Z).
+    pub region: Option<InitBox>,
     /// L ≥ sup ‖λ‖₂, A ≥ sup ‖α_res‖₂, G ≥ sup ‖Γ‖₂ over Z, and the input program's rounding bound.
     pub lambda_norm: f64,
     pub alpha_res_norm: f64,
@@ -306,13 +333,12 @@ impl UBound {
     }
 }
 
-/// The supremum of `f` over a grid of sub-boxes of `hull` (the coordinates in `dims` split evenly, at most
-/// [`MAX_PIECES`] boxes in all). `f` gets the full state box (ξ states unbounded is never asked: every
-/// bounded expression uses zero states only).
+/// The supremum of `f` over a grid of sub-boxes of the state box `base` (the state coordinates in
+/// `dims` split evenly, at most [`MAX_PIECES`] boxes in all). `base` holds, per state, the interval the
+/// bounds are taken over: the zero-dynamics hull, and the operating region's range of a ξ state (a point
+/// where there is no region: then no bounded expression uses a ξ state).
 fn sup_over_grid(
-    n: usize,
-    zero_states: &[usize],
-    hull: &[Interval],
+    base: &[Interval],
     dims: &[usize],
     f: &dyn Fn(&[Interval]) -> Result<f64, IntervalError>,
 ) -> Result<f64, IntervalError> {
@@ -324,16 +350,13 @@ fn sup_over_grid(
     };
     let total = per.pow(d as u32);
     let mut best = f64::NEG_INFINITY;
-    let mut x = vec![Interval::point(0.0); n];
+    let mut x = base.to_vec();
     for idx in 0..total {
         let mut rest = idx;
-        for (zi, &s) in zero_states.iter().enumerate() {
-            x[s] = hull[zi];
-        }
-        for &dz in dims {
+        for &s in dims {
             let k = rest % per;
             rest /= per;
-            let iv = hull[dz];
+            let iv = base[s];
             let w = (iv.hi - iv.lo) / per as f64;
             let lo = if k == 0 { iv.lo } else { iv.lo + w * k as f64 };
             let hi = if k + 1 == per {
@@ -341,21 +364,18 @@ fn sup_over_grid(
             } else {
                 iv.lo + w * (k + 1) as f64
             };
-            // Outward by a hair so that the pieces' union covers the hull despite rounding.
-            x[zero_states[dz]] = Interval::new(lo, hi).widen(1e-15 * (1.0 + iv.mag()));
+            // Outward by a hair so that the pieces' union covers the box despite rounding.
+            x[s] = Interval::new(lo, hi).widen(1e-15 * (1.0 + iv.mag()));
         }
         best = best.max(f(&x)?);
     }
     Ok(best)
 }
 
-/// The zero-dynamics coordinates (indices into `zero_states`) the expressions use.
-fn dims_used(es: &[&Expr], zero_states: &[usize]) -> Vec<usize> {
-    (0..zero_states.len())
-        .filter(|&zi| {
-            es.iter()
-                .any(|e| e.uses(Var::State(zero_states[zi] as u16)))
-        })
+/// The states the expressions use whose range in `base` is not a point (the coordinates worth splitting).
+fn dims_used(es: &[&Expr], base: &[Interval]) -> Vec<usize> {
+    (0..base.len())
+        .filter(|&s| base[s].hi > base[s].lo && es.iter().any(|e| e.uses(Var::State(s as u16))))
         .collect()
 }
 
@@ -471,9 +491,16 @@ pub fn linearize(problem: &Problem) -> Result<(Problem, FlMaps), FlError> {
             alpha_res.push(a.clone());
         }
     }
-    // 3. What the bounds need to depend on the zero dynamics only.
+    // 3. Without an operating region, what the bounds need must depend on the zero dynamics only; with
+    // one, the ξ states range over the region (module doc).
+    let region = desc.region.clone();
+    let allowed: Vec<usize> = if region.is_some() {
+        (0..n).collect()
+    } else {
+        zero_states.clone()
+    };
     let check_zero = |what: String, e: &Expr| -> Result<(), FlError> {
-        match uses_other_state(e, n, &zero_states) {
+        match uses_other_state(e, n, &allowed) {
             Some(s) => Err(FlError::DependsOnXi {
                 what,
                 state: state_name(names, s),
@@ -562,7 +589,12 @@ pub fn linearize(problem: &Problem) -> Result<(Problem, FlMaps), FlError> {
         .map(|&s| Interval::new(problem.init.lo[s], problem.init.hi[s]))
         .collect();
     let mut hull = zk.clone();
-    let mut xbox = vec![Interval::point(0.0); n];
+    // The ξ states over the region (when there is one; else nothing bounded here uses them).
+    let xi_range = |s: usize| match &region {
+        Some(r) => Interval::new(r.lo[s], r.hi[s]),
+        None => Interval::point(0.0),
+    };
+    let mut xbox: Vec<Interval> = (0..n).map(xi_range).collect();
     let field =
         |zb: &[Interval], xbox: &mut Vec<Interval>| -> Result<Vec<Interval>, IntervalError> {
             for (zi, &s) in zero_states.iter().enumerate() {
@@ -620,43 +652,48 @@ pub fn linearize(problem: &Problem) -> Result<(Problem, FlMaps), FlError> {
             *hz = hz.hull(*z);
         }
     }
-    // 7. The bounds over the hull.
+    // The hull must lie in the region's zero-dynamics part (the region is where the runs stay).
+    if let Some(r) = &region {
+        for (zi, &s) in zero_states.iter().enumerate() {
+            let z = hull[zi];
+            if z.lo < r.lo[s] || z.hi > r.hi[s] {
+                return Err(FlError::ZeroDynamicsLeaveRegion {
+                    state: state_name(names, s),
+                    hull_lo: z.lo,
+                    hull_hi: z.hi,
+                    lo: r.lo[s],
+                    hi: r.hi[s],
+                });
+            }
+        }
+    }
+    // 7. The bounds over the box of the ξ states' region and the zero-dynamics hull.
+    let mut base: Vec<Interval> = (0..n).map(xi_range).collect();
+    for (zi, &s) in zero_states.iter().enumerate() {
+        base[s] = hull[zi];
+    }
     let us: Vec<Interval> = vec![Interval::point(0.0); m];
     let lam_gram = gram(&lambda);
     let lam_refs: Vec<&Expr> = lambda.iter().flatten().collect();
-    let lambda_norm = sup_over_grid(
-        n,
-        &zero_states,
-        &hull,
-        &dims_used(&lam_refs, &zero_states),
-        &|x| norm2_bound(&lam_gram, &VarBox { x, u: &us, p: &[] }),
-    )
+    let lambda_norm = sup_over_grid(&base, &dims_used(&lam_refs, &base), &|x| {
+        norm2_bound(&lam_gram, &VarBox { x, u: &us, p: &[] })
+    })
     .map_err(bound_err("‖λ‖₂"))?;
     let ar_refs: Vec<&Expr> = alpha_res.iter().collect();
-    let alpha_res_norm = sup_over_grid(
-        n,
-        &zero_states,
-        &hull,
-        &dims_used(&ar_refs, &zero_states),
-        &|x| {
-            let b = VarBox { x, u: &us, p: &[] };
-            let mut s = 0.0;
-            for a in &alpha_res {
-                s += enclose(a, &b)?.mag().powi(2);
-            }
-            Ok(s.sqrt())
-        },
-    )
+    let alpha_res_norm = sup_over_grid(&base, &dims_used(&ar_refs, &base), &|x| {
+        let b = VarBox { x, u: &us, p: &[] };
+        let mut s = 0.0;
+        for a in &alpha_res {
+            s += enclose(a, &b)?.mag().powi(2);
+        }
+        Ok(s.sqrt())
+    })
     .map_err(bound_err("‖α_res‖₂"))?;
     let g_gram = gram(&gamma);
     let g_refs: Vec<&Expr> = gamma.iter().flatten().collect();
-    let gamma_norm = sup_over_grid(
-        n,
-        &zero_states,
-        &hull,
-        &dims_used(&g_refs, &zero_states),
-        &|x| norm2_bound(&g_gram, &VarBox { x, u: &us, p: &[] }),
-    )
+    let gamma_norm = sup_over_grid(&base, &dims_used(&g_refs, &base), &|x| {
+        norm2_bound(&g_gram, &VarBox { x, u: &us, p: &[] })
+    })
     .map_err(bound_err("‖Γ‖₂"))?;
     // W before the rounding shrink, then the program's rounding over that W (monotone in |w|).
     let w_set = |e_prog: f64| -> Result<InputSet, FlError> {
@@ -709,16 +746,10 @@ pub fn linearize(problem: &Problem) -> Result<(Problem, FlMaps), FlError> {
             .collect(),
     };
     let in_refs: Vec<&Expr> = input_exprs.iter().collect();
-    let e_prog = sup_over_grid(
-        n,
-        &zero_states,
-        &hull,
-        &dims_used(&in_refs, &zero_states),
-        &|x| {
-            let bounds = rounding_bound(&input_map, x, &w_box)?;
-            Ok(bounds.iter().map(|b| b.error * b.error).sum::<f64>().sqrt())
-        },
-    )
+    let e_prog = sup_over_grid(&base, &dims_used(&in_refs, &base), &|x| {
+        let bounds = rounding_bound(&input_map, x, &w_box)?;
+        Ok(bounds.iter().map(|b| b.error * b.error).sum::<f64>().sqrt())
+    })
     .map_err(bound_err("the input program's rounding"))?;
     let w_final = w_set(e_prog)?;
     // 8. The mismatch D: E = L_{f+g u} φ, φ = α_res + Γ u, a quadratic in u.
@@ -762,24 +793,18 @@ pub fn linearize(problem: &Problem) -> Result<(Problem, FlMaps), FlError> {
     e_refs.extend(mlin.iter().flatten());
     e_refs.extend(quad.iter().flatten());
     let r_u = ub.r_u;
-    let sup_e = sup_over_grid(
-        n,
-        &zero_states,
-        &hull,
-        &dims_used(&e_refs, &zero_states),
-        &|x| {
-            let b = VarBox { x, u: &us, p: &[] };
-            let mut n0 = 0.0;
-            for e in &e0 {
-                n0 += enclose(e, &b)?.mag().powi(2);
-            }
-            let mut nq = 0.0;
-            for q in quad.iter().flatten() {
-                nq += enclose(q, &b)?.mag().powi(2);
-            }
-            Ok(n0.sqrt() + norm2_bound(&m_gram, &b)? * r_u + 0.5 * nq.sqrt() * r_u * r_u)
-        },
-    )
+    let sup_e = sup_over_grid(&base, &dims_used(&e_refs, &base), &|x| {
+        let b = VarBox { x, u: &us, p: &[] };
+        let mut n0 = 0.0;
+        for e in &e0 {
+            n0 += enclose(e, &b)?.mag().powi(2);
+        }
+        let mut nq = 0.0;
+        for q in quad.iter().flatten() {
+            nq += enclose(q, &b)?.mag().powi(2);
+        }
+        Ok(n0.sqrt() + norm2_bound(&m_gram, &b)? * r_u + 0.5 * nq.sqrt() * r_u * r_u)
+    })
     .map_err(bound_err("the sampled-loop mismatch"))?;
     let mismatch_flow = h * sup_e;
     let mismatch = (mismatch_flow + gamma_norm * e_prog) * (1.0 + 1e-9);
@@ -849,6 +874,25 @@ pub fn linearize(problem: &Problem) -> Result<(Problem, FlMaps), FlError> {
         .iter()
         .map(|s| remap("Unsafe", s))
         .collect::<Result<_, _>>()?;
+    // Leaving the operating region is entering Unsafe: per ξ state s with region [lo, hi], the closed
+    // half-spaces {ξ_j ≤ lo} and {ξ_j ≥ hi} (one-row polytopes on that coordinate).
+    if let Some(r) = &region {
+        for (j, &s) in xi_states.iter().enumerate() {
+            for (a, b) in [(1.0, r.lo[s]), (-1.0, -r.hi[s])] {
+                xi.unsafe_sets.push(SetDesc {
+                    shape: Shape::Polytope {
+                        A: Matrix {
+                            rows: 1,
+                            cols: 1,
+                            data: vec![a],
+                        },
+                        b: vec![b],
+                    },
+                    coords: Coords::StateIndices(vec![j]),
+                });
+            }
+        }
+    }
     xi.sets = problem
         .sets
         .iter()
@@ -868,6 +912,7 @@ pub fn linearize(problem: &Problem) -> Result<(Problem, FlMaps), FlError> {
         input: problem.input.clone(),
         init: problem.init.clone(),
         zero_hull: hull,
+        region,
         lambda_norm,
         alpha_res_norm,
         gamma_norm,

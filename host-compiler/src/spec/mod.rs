@@ -256,7 +256,8 @@ impl InitBox {
             .filter(|&i| self.lo[i] < self.hi[i])
             .collect()
     }
-    /// The box's centre.
+
+    /// The box's centre, (lo + hi) / 2.
     pub fn centre(&self) -> Vec<f64> {
         self.lo
             .iter()

@@ -14,6 +14,7 @@
 //! f = ["Xd", "1 - X + 0.1*Xd", ...]       # n expressions over states and params
 //! g = [["0", "0"], ["-sin(th)", "cos(th)"], ...]   # n rows of m expressions
 //! h = ["X", "Y"]                          # m outputs, linear in the state (for now)
+//! region = { lo = [...], hi = [...] }     # optional: the operating region, a box over the state
 //! ```
 //!
 //! Expressions use `+ - * / ^` (integer powers), parentheses, numbers, `pi` and `sin cos tan exp log sqrt
@@ -26,7 +27,14 @@
 //! vanish identically (so it is uniform over Init); f, g, h finite and Γ nonsingular at sample points of
 //! Init (the centre, the corners of its free coordinates when there are at most 64, and 64 seeded random
 //! points); and Γ nonsingular over all of Init, proved by interval enclosures of Γ on a bisection of Init
-//! into at most [`MAX_GAMMA_BOXES`] boxes (`expr::interval::certainly_regular`).
+//! (of the states Γ depends on) into at most [`MAX_GAMMA_BOXES`] boxes (`expr::interval::certainly_regular`).
+//!
+//! **The operating region.** A plant whose law depends on the linearised coordinates ξ (a pendulum's
+//! α = (g/l) sin θ) can only be bounded over a known range of ξ, and the certified tube's range is not
+//! known when the task is built. `plant.region` declares that range: a box over the plant's state that
+//! must contain Init (a refusal names the state and a point of Init outside it). The checks above then
+//! run over the region instead of Init (Γ nonsingular over all of it), `model::feedback_linearizable`
+//! bounds every state-dependent term over it, and leaving it counts as entering Unsafe.
 //!
 //! The validated [`NonlinearDesc`] goes into `Problem::nonlinear`; `Problem::plant` is then the
 //! linearisation of f + g u at the centre of Init (u = 0) with C = ∂h/∂x, so that sets in output
@@ -41,8 +49,8 @@ use toml::Spanned;
 
 use super::error::{ErrorKind, SpecError};
 use super::limits::{MAX_M, MAX_N};
-use super::raw::{Pairs, RawTime};
-use super::validate::{bounded, capacity, positive};
+use super::raw::{Pairs, RawTime, RawVec};
+use super::validate::{bounded, capacity, check_box, positive, vector, Dim};
 use super::{InitBox, Matrix, Plant, TimeDomain};
 use crate::expr::diff::{lie, AffineSystem, RelativeDegree, RelativeDegreeError};
 use crate::expr::interval::{certainly_regular, enclose_matrix, Interval, VarBox};
@@ -70,6 +78,15 @@ pub(crate) struct RawFlPlant {
     pub f: Spanned<Vec<Spanned<String>>>,
     pub g: Spanned<Vec<Spanned<Vec<Spanned<String>>>>>,
     pub h: Spanned<Vec<Spanned<String>>>,
+    pub region: Option<Spanned<RawRegion>>,
+}
+
+/// `plant.region`: the operating region, a box over the plant's state.
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawRegion {
+    pub lo: RawVec,
+    pub hi: RawVec,
 }
 
 /// The class of a nonlinear plant.
@@ -92,6 +109,10 @@ pub struct NonlinearDesc {
     pub derivatives: RelativeDegree,
     /// Sample period, s.
     pub period: f64,
+    /// The operating region (`plant.region`), a box over the plant's state that contains Init: the
+    /// law's terms are bounded over it, and leaving it counts as entering Unsafe
+    /// (`model::feedback_linearizable`). `None`: the law may depend on the zero dynamics only.
+    pub region: Option<InitBox>,
 }
 
 impl NonlinearDesc {
@@ -440,6 +461,58 @@ fn point<'a>(x: &'a [f64], p: &'a [f64]) -> Point<'a> {
     Point { x, u: &[], p }
 }
 
+/// `plant.region`, validated: a box of n finite bounds, lo ≤ hi, that contains Init (a refusal names the
+/// state, both boxes' bounds and a point of Init outside the region).
+fn region(
+    raw: &Spanned<RawFlPlant>,
+    init: &InitBox,
+    names: &Names,
+) -> Result<Option<InitBox>, SpecError> {
+    let Some(r) = &raw.get_ref().region else {
+        return Ok(None);
+    };
+    let n = init.lo.len();
+    let mut d = Dim {
+        n: Some(n),
+        why: format!("the plant has {n} states"),
+    };
+    let rr = r.get_ref();
+    let lo = vector(&rr.lo, "plant.region.lo", &mut d)?;
+    let hi = vector(&rr.hi, "plant.region.hi", &mut d)?;
+    check_box(&lo, &hi, &rr.lo, &rr.hi, "plant.region")?;
+    for i in 0..n {
+        let below = init.lo[i] < lo[i];
+        if below || init.hi[i] > hi[i] {
+            // A point of Init outside the region: Init's centre with coordinate i at the offending bound.
+            let mut x = init.centre();
+            x[i] = if below { init.lo[i] } else { init.hi[i] };
+            let (span, label) = if below {
+                (rr.lo.get_ref()[i].span(), format!("lo[{i}] = {}", lo[i]))
+            } else {
+                (rr.hi.get_ref()[i].span(), format!("hi[{i}] = {}", hi[i]))
+            };
+            return Err(SpecError::new(
+                ErrorKind::Model,
+                format!(
+                    "plant.region does not contain Init: Init's {} ∈ [{}, {}] but the region's is \
+                     [{}, {}], so the point {} of Init lies outside it",
+                    names.states[i],
+                    init.lo[i],
+                    init.hi[i],
+                    lo[i],
+                    hi[i],
+                    fmt_point(names, &x)
+                ),
+            )
+            .at(span, label)
+            .help(
+                "the region is where the law's bounds hold; it must contain Init (and the runs)",
+            ));
+        }
+    }
+    Ok(Some(InitBox { lo, hi }))
+}
+
 /// The checks over Init (module docs), then the linearisation at Init's centre as the `Plant`.
 pub(crate) fn check(
     model: Model,
@@ -454,7 +527,13 @@ pub(crate) fn check(
     } = model;
     let (n, m) = (system.n(), system.m());
     let pv = names.param_values();
-    let pts = sample_points(init);
+    let region = region(raw, init, &names)?;
+    // Where Def 3.5 must hold: the operating region when there is one (it contains Init), else Init.
+    let (domain, within) = match &region {
+        Some(r) => (r, "the operating region (plant.region)"),
+        None => (init, "Init"),
+    };
+    let pts = sample_points(domain);
     let centre = pts[0].clone();
     let model_err = |msg: String, span: Range<usize>, label: &str| {
         SpecError::new(ErrorKind::Model, msg).at(span, label.to_string())
@@ -495,7 +574,7 @@ pub(crate) fn check(
             if !v.is_finite() {
                 return Err(model_err(
                     format!(
-                        "{what} is {v} at the point {} of Init",
+                        "{what} is {v} at the point {} of {within}",
                         fmt_point(&names, x)
                     ),
                     span,
@@ -515,8 +594,8 @@ pub(crate) fn check(
             }
             RelativeDegreeError::NoRelativeDegree { output, n } => model_err(
                 format!(
-                    "plant.h[{output}] has no relative degree at the centre {} of Init: no input \
-                     appears in its first {n} derivatives (L_g L_f^k h = 0 for k < {n}, Def 3.5)",
+                    "plant.h[{output}] has no relative degree at the centre {} of {within}: no \
+                     input appears in its first {n} derivatives (L_g L_f^k h = 0 for k < {n}, Def 3.5)",
                     fmt_point(&names, &centre)
                 ),
                 p.h.get_ref()[output].span(),
@@ -531,7 +610,7 @@ pub(crate) fn check(
                 if !term.is_zero() {
                     return Err(model_err(
                         format!(
-                            "the relative degree of plant.h[{i}] is not uniform over Init: \
+                            "the relative degree of plant.h[{i}] is not uniform over {within}: \
                              L_g{j} L_f^{k} h{i} = {} vanishes at the centre {} but not identically \
                              (Def 3.5 (3.18))",
                             term.display(&names),
@@ -556,8 +635,8 @@ pub(crate) fn check(
         if singular {
             return Err(model_err(
                 format!(
-                    "the decoupling matrix Γ (Def 3.5, (3.19)) is singular at the point {} of Init: \
-                     Γ = {g:?}; the plant is not input-output linearizable there",
+                    "the decoupling matrix Γ (Def 3.5, (3.19)) is singular at the point {} of \
+                     {within}: Γ = {g:?}; the plant is not input-output linearizable there",
                     fmt_point(&names, x)
                 ),
                 gamma_span.clone(),
@@ -569,13 +648,22 @@ pub(crate) fn check(
 
     // ---- Γ nonsingular over all of Init: interval enclosures on a bisection ----
     let params: Vec<Interval> = pv.iter().map(|&v| Interval::point(v)).collect();
-    let mut queue: Vec<Vec<Interval>> = vec![init
+    let mut queue: Vec<Vec<Interval>> = vec![domain
         .lo
         .iter()
-        .zip(&init.hi)
+        .zip(&domain.hi)
         .map(|(&l, &h)| Interval::new(l, h))
         .collect()];
     let mut boxes = 0usize;
+    // The states Γ depends on: splitting any other leaves its enclosure as it is.
+    let split: Vec<usize> = (0..n)
+        .filter(|&s| {
+            rd.gamma
+                .iter()
+                .flatten()
+                .any(|e| e.uses(Var::State(s as u16)))
+        })
+        .collect();
     while let Some(bx) = queue.pop() {
         boxes += 1;
         let enc = enclose_matrix(
@@ -590,7 +678,7 @@ pub(crate) fn check(
         if proved {
             continue;
         }
-        if boxes + queue.len() >= MAX_GAMMA_BOXES {
+        if boxes + queue.len() >= MAX_GAMMA_BOXES || split.is_empty() {
             let mid: Vec<f64> = bx.iter().map(|i| i.mid()).collect();
             let why = match enc {
                 Err(e) => format!("its enclosure fails: {e}"),
@@ -600,21 +688,24 @@ pub(crate) fn check(
             return Err(model_err(
                 format!(
                     "the decoupling matrix Γ (Def 3.5, (3.19)) could not be proved nonsingular over all \
-                     of Init: on the sub-box around {} ({why}) after {boxes} boxes",
+                     of {within}: on the sub-box around {} ({why}) after {boxes} boxes",
                     fmt_point(&names, &mid)
                 ),
                 gamma_span,
                 "g, with h, makes Γ",
             )
             .at(raw.span(), "this plant")
-            .help("Γ may be singular or nearly so near that point; shrink Init or change the outputs"));
+            .help(if region.is_some() {
+                "Γ may be singular or nearly so near that point; shrink plant.region or change the outputs"
+            } else {
+                "Γ may be singular or nearly so near that point; shrink Init or change the outputs"
+            }));
         }
-        // Bisect the widest coordinate.
-        let (i, _) = bx
+        // Bisect the widest coordinate Γ depends on.
+        let i = *split
             .iter()
-            .enumerate()
-            .max_by(|a, b| (a.1.hi - a.1.lo).total_cmp(&(b.1.hi - b.1.lo)))
-            .expect("n ≥ 1");
+            .max_by(|&&a, &&b| (bx[a].hi - bx[a].lo).total_cmp(&(bx[b].hi - bx[b].lo)))
+            .expect("split is not empty");
         let mid = bx[i].mid();
         let mut left = bx.clone();
         let mut right = bx;
@@ -653,6 +744,8 @@ pub(crate) fn check(
         }
     }
     let df = jac(&system.f)?;
+    // The linearisation at Init's centre (whatever the domain of the checks above).
+    let centre = init.centre();
     let cpt = point(&centre, &pv);
     let mut A = Matrix::zeros(n, n);
     let mut B = Matrix::zeros(n, m);
@@ -699,6 +792,7 @@ pub(crate) fn check(
             system,
             derivatives: rd,
             period,
+            region,
         },
     ))
 }

@@ -603,12 +603,7 @@ impl Target for FlTarget<'_> {
     fn start(&self, xi: Vec<f64>, extra: &[f64]) -> Vec<f64> {
         let init = &self.maps.init;
         // Zero-dynamics states at Init's centre unless searched; ξ from the ball.
-        let mut x: Vec<f64> = init
-            .lo
-            .iter()
-            .zip(&init.hi)
-            .map(|(l, h)| 0.5 * (l + h))
-            .collect();
+        let mut x = init.centre();
         for (&(s, lo, hi), &e) in self.free.iter().zip(extra) {
             x[s] = lo + (hi - lo) * 0.5 * (e + 1.0);
         }

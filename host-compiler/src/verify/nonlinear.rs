@@ -4,7 +4,8 @@
 //! programs in f32; the
 //! plant is flowed over each held period by the adaptive integrator (`model::nonlinear`, Dop853 at
 //! rtol 10⁻¹⁰), with Unsafe also checked at [`SUBSTEPS`] − 1 instants inside every period. Runs are
-//! judged as the linear Monte Carlo judges them (Goal reached within T, Unsafe never entered, every
+//! judged as the linear Monte Carlo judges them (Goal reached within T, Unsafe never entered (with an
+//! operating region, leaving it is entering Unsafe, checked on the plant's whole state), every
 //! applied input in the *plant's* input set, until the first sample in Goal), independently of how the
 //! certificate bounded the zero dynamics and the sampled-loop mismatch.
 
@@ -62,6 +63,18 @@ fn run_fl_inner(
     let mut x = x0.to_vec();
     let mut out = RunOutcome::new(x0);
     let check = |x: &[f64], out: &mut RunOutcome, sample: bool| {
+        // Outside the operating region (the plant's whole state, zero dynamics included) is Unsafe.
+        if let Some(r) = &maps.region {
+            let outside = x
+                .iter()
+                .zip(r.lo.iter().zip(&r.hi))
+                .any(|(v, (l, h))| !(l < v && v < h));
+            if out.goal_step.is_some() {
+                out.after_goal_unsafe |= outside;
+            } else {
+                out.entered_unsafe |= outside;
+            }
+        }
         if let Some(us) = unsafe_set {
             let xi = maps.xi_of(x);
             let inside = us.contains(&xi);

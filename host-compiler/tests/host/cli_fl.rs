@@ -19,12 +19,17 @@ fn example() -> String {
     .unwrap()
 }
 
-#[test]
-fn fl_synth_then_verify() {
-    let dir = std::env::temp_dir().join(format!("hc-cli-fl-{}", std::process::id()));
+/// `synth` of `spec_text` (written to `<tmp>/hc-cli-<tag>-<pid>/spec.toml`) covers Init with 0
+/// violations on the plant, and `verify` of its image re-proves the radii and runs the plant again with
+/// none: the directory, the spec's path and the image's path.
+pub(crate) fn synth_then_verify(
+    spec_text: &str,
+    tag: &str,
+) -> (std::path::PathBuf, std::path::PathBuf, std::path::PathBuf) {
+    let dir = std::env::temp_dir().join(format!("hc-cli-{tag}-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let spec = dir.join("spec.toml");
-    std::fs::write(&spec, example()).unwrap();
+    std::fs::write(&spec, spec_text).unwrap();
     let out = dir.join("out");
     let o = bin()
         .args(["synth", spec.to_str().unwrap(), "--out"])
@@ -39,16 +44,7 @@ fn fl_synth_then_verify() {
     assert!(stdout.contains(", 0 violations"), "{stdout}");
     let img = out.join("controller.img");
     assert!(img.exists());
-
-    let verify = |spec: &std::path::Path, extra: &[&str]| {
-        bin()
-            .args(["verify", spec.to_str().unwrap(), img.to_str().unwrap()])
-            .args(["--runs", "100", "--per-ball", "4"])
-            .args(extra)
-            .output()
-            .unwrap()
-    };
-    let o = verify(&spec, &[]);
+    let o = verify(&spec, &img, &[]);
     let stdout = String::from_utf8_lossy(&o.stdout);
     assert_eq!(
         o.status.code(),
@@ -58,6 +54,23 @@ fn fl_synth_then_verify() {
     );
     assert!(stdout.contains("0 failing"), "{stdout}");
     assert!(stdout.contains("violations 0"), "{stdout}");
+    (dir, spec, img)
+}
+
+/// `verify spec img --runs 100 --per-ball 4` and `extra`.
+fn verify(spec: &std::path::Path, img: &std::path::Path, extra: &[&str]) -> std::process::Output {
+    bin()
+        .args(["verify", spec.to_str().unwrap(), img.to_str().unwrap()])
+        .args(["--runs", "100", "--per-ball", "4"])
+        .args(extra)
+        .output()
+        .unwrap()
+}
+
+#[test]
+fn fl_synth_then_verify() {
+    let (dir, spec, img) = synth_then_verify(&example(), "fl");
+    let verify = |spec: &std::path::Path, extra: &[&str]| verify(spec, &img, extra);
 
     // The falsifier on the nonlinear plant itself: it ran, scored its runs and found nothing.
     let o = verify(&spec, &["--attack", "--attack-evals", "8", "--json"]);

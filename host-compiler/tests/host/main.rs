@@ -21,6 +21,7 @@ mod certify_internal;
 mod certify_temporal;
 mod cli_exit;
 mod cli_fl;
+mod cli_fl_pendulum;
 mod cli_hybrid;
 mod cli_limits;
 mod cli_mtl;

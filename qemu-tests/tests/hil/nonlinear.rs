@@ -8,13 +8,17 @@
 //! Then the certified image as `synth` makes it from `examples/fl-4-9.toml` (its maps derived by
 //! `model::feedback_linearizable`), from 50 seeded initial states in Init: every run meets the spec on the
 //! plant (Goal within T; Unsafe never entered and every input in ‖F‖ ≤ 2 before Goal), bit for bit with
-//! the host, and the worst step cost is printed.
+//! the host, and the worst step cost is printed. The same for the torque-driven pendulum
+//! (`examples/fl-pendulum.toml`, a law that depends on ξ, bounded over its operating region), whose runs
+//! must also stay inside that region.
 
 use host_compiler::property::input_bound;
 use host_compiler::verify::input_slack;
 use qemu_tests::closed_loop::{run_with, HostEvaluator};
 use qemu_tests::firmware::{self, FirmwareConfig};
-use qemu_tests::images::{accepted_starts, fl_4_9, fl_4_9_certified, FL_TABLE_LEN};
+use qemu_tests::images::{
+    accepted_starts, fl_4_9, fl_4_9_certified, fl_pendulum_certified, FL_TABLE_LEN,
+};
 use qemu_tests::nonlinear::PlantFlow;
 use qemu_tests::qemu::Qemu;
 use shared_types::eval::Status;
@@ -70,12 +74,41 @@ fn fl_4_9_model_maps_run_on_the_target_bit_for_bit() {
 #[test]
 fn fl_4_9_certified_image_meets_the_spec_from_50_starts() {
     let (task, s) = fl_4_9_certified().unwrap_or_else(|e| panic!("{e}"));
+    assert!(
+        task.property.unsafe_region().is_some(),
+        "Ex 4.9 has an obstacle"
+    );
+    certified_image_meets_the_spec_from_50_starts("fl_4_9_certified", &task, &s, 4_9);
+}
+
+/// The torque-driven pendulum (`examples/fl-pendulum.toml`): its law cancels (g/l) sin θ, a term in ξ
+/// bounded over the spec's operating region, whose complement is Unsafe.
+#[test]
+fn fl_pendulum_certified_image_meets_the_spec_from_50_starts() {
+    let (task, s) = fl_pendulum_certified().unwrap_or_else(|e| panic!("{e}"));
+    let maps = task.plant.linearization().expect("a linearised plant");
+    assert!(
+        maps.region.is_some(),
+        "the pendulum declares an operating region"
+    );
+    certified_image_meets_the_spec_from_50_starts("fl_pendulum_certified", &task, &s, 2026);
+}
+
+/// 50 seeded starts in Init that the image accepts, each run on the firmware against the plant's flow:
+/// Goal within T; before it, no sample in Unsafe or outside the operating region, every reply `Ok`
+/// with its input in the plant's input set, bit for bit with the host evaluator (`run_with`).
+fn certified_image_meets_the_spec_from_50_starts(
+    name: &str,
+    task: &host_compiler::task::Task,
+    s: &host_compiler::synth::Synthesis,
+    seed: u64,
+) {
     assert_eq!(s.verify.violations, 0);
     let maps = task.plant.linearization().expect("a linearised plant");
     let img = shared_types::image::decode(&s.image).expect("the image decodes");
-    let path = firmware::write_image("fl_4_9_certified", &s.image).expect("image written");
+    let path = firmware::write_image(name, &s.image).expect("image written");
     let elf = firmware::build(
-        "fl_4_9_certified",
+        name,
         &FirmwareConfig {
             image: Some(path),
             ..Default::default()
@@ -83,12 +116,16 @@ fn fl_4_9_certified_image_meets_the_spec_from_50_starts() {
     )
     .unwrap_or_else(|e| panic!("{e}"));
     // 50 starts drawn in Init whose ξ the image's selection accepts.
-    let starts = accepted_starts(&task, img, 50, 4_9).unwrap_or_else(|e| panic!("{e}"));
+    let starts = accepted_starts(task, img, 50, seed).unwrap_or_else(|e| panic!("{e}"));
     let goal = task.property.goal.as_ref();
-    let unsafe_set = task
-        .property
-        .unsafe_region()
-        .expect("Ex 4.9 has an obstacle");
+    let unsafe_set = task.property.unsafe_region();
+    let in_region = |x: &[f64]| {
+        maps.region.as_ref().is_none_or(|r| {
+            x.iter()
+                .zip(r.lo.iter().zip(&r.hi))
+                .all(|(v, (l, h))| l < v && v < h)
+        })
+    };
     let input = input_bound(&maps.input);
     let h = maps.plant.period();
     let mut worst = 0u32;
@@ -98,34 +135,38 @@ fn fl_4_9_certified_image_meets_the_spec_from_50_starts() {
         let trace = run_with(&mut q, &mut host, x0, 0, task.steps, |x, u| {
             PlantFlow::flow(&maps.plant, x, u, h)
         })
-        .unwrap_or_else(|e| panic!("run {r} from {x0:?}: {e}"));
+        .unwrap_or_else(|e| panic!("{name} run {r} from {x0:?}: {e}"));
         let goal_at = trace
             .states
             .iter()
             .position(|x| goal.contains(&maps.xi_of(x)))
-            .unwrap_or_else(|| panic!("run {r} from {x0:?} never reaches Goal"));
+            .unwrap_or_else(|| panic!("{name} run {r} from {x0:?} never reaches Goal"));
         for (k, x) in trace.states.iter().enumerate().take(goal_at + 1) {
             assert!(
-                !unsafe_set.contains(&maps.xi_of(x)),
-                "run {r}: Unsafe at sample {k}"
+                unsafe_set.is_none_or(|us| !us.contains(&maps.xi_of(x))),
+                "{name} run {r}: Unsafe at sample {k}"
+            );
+            assert!(
+                in_region(x),
+                "{name} run {r}: outside the operating region at sample {k}: {x:?}"
             );
         }
         for (k, reply) in trace.replies.iter().enumerate().take(goal_at) {
-            assert_eq!(reply.status, Status::Ok, "run {r}: step {k}");
+            assert_eq!(reply.status, Status::Ok, "{name} run {r}: step {k}");
             let u: Vec<f64> = reply.u.as_slice().iter().map(|&v| v as f64).collect();
             assert!(
                 input_slack(&input, &u) >= 0.0,
-                "run {r}: input {u:?} at step {k}"
+                "{name} run {r}: input {u:?} at step {k}"
             );
         }
         worst = worst.max(trace.max_cost(Status::Ok).unwrap_or(0));
         let exit = q.shutdown().unwrap_or_else(|e| panic!("{e}"));
-        assert_eq!(exit.code, Some(0), "run {r}: firmware exit");
+        assert_eq!(exit.code, Some(0), "{name} run {r}: firmware exit");
     }
     assert!(worst > 0);
     println!(
-        "HIL fl-4-9 certified image: 50 runs of {} steps met the spec, bit for bit; {} trajectories, \
-         image {} bytes, worst step cost {worst} instructions",
+        "HIL {name}: 50 runs of {} steps met the spec, bit for bit; {} trajectories, image {} bytes, \
+         worst step cost {worst} instructions",
         task.steps,
         s.trajectories.len(),
         s.image.len()
