@@ -1,4 +1,5 @@
-//! `synth` and `verify` on a hybrid spec (Example 4.25 with a budget of one run): synth certifies,
+//! `synth` and `verify` on hybrid specs (Example 4.25, internal switching, and the forced cart, each with a
+//! budget of one run): synth certifies,
 //! re-proves and verifies an image, writes its report, and exits 3 (short of the coverage target); verify re-proves the
 //! same image from its bytes and runs it against the exact hybrid flow (exit 0), `--attack` searches its
 //! ball on that flow with no violation, and `verify` refuses an image
@@ -74,53 +75,7 @@ fn hybrid_synth_then_verify() {
     );
     assert!(page.contains("Theorem 4.7 (Goal, Unsafe, Input)"));
 
-    let o = bin()
-        .args(["verify", spec.to_str().unwrap(), img.to_str().unwrap()])
-        .args(["--runs", "16", "--per-ball", "4"])
-        .output()
-        .unwrap();
-    let stdout = String::from_utf8_lossy(&o.stdout);
-    assert_eq!(
-        o.status.code(),
-        Some(0),
-        "{stdout}\n{}",
-        String::from_utf8_lossy(&o.stderr)
-    );
-    assert!(stdout.contains("re-proved         1 of 1 runs"), "{stdout}");
-
-    // The falsifier on the exact hybrid flow: runs made, none violates.
-    let o = bin()
-        .args(["verify", spec.to_str().unwrap(), img.to_str().unwrap()])
-        .args([
-            "--runs",
-            "4",
-            "--per-ball",
-            "1",
-            "--attack",
-            "--attack-evals",
-            "12",
-        ])
-        .arg("--json")
-        .output()
-        .unwrap();
-    let at = crate::verify_attack::attack_json(&o);
-    assert!(at.worst_robustness > 0.0, "{at:?}");
-
-    // The first run's stored radius enlarged by 1 %, the CRC made right again: not re-proved.
-    let bytes = std::fs::read(&img).unwrap();
-    let decoded = shared_types::image::decode(&bytes).unwrap();
-    let mut b = host_compiler::emit::ImageBuilder::from_image(&decoded);
-    b.trajectories[0].delta *= 1.01;
-    let big = dir.join("big.img");
-    std::fs::write(&big, b.to_bytes().unwrap()).unwrap();
-    let o = bin()
-        .args(["verify", spec.to_str().unwrap(), big.to_str().unwrap()])
-        .args(["--runs", "4", "--per-ball", "1"])
-        .output()
-        .unwrap();
-    let stderr = String::from_utf8_lossy(&o.stderr);
-    assert_eq!(o.status.code(), Some(1), "{stderr}");
-    assert!(stderr.contains("not re-proved"), "{stderr}");
+    verify_attack_and_enlarged_radius(&dir, &spec, &img);
     let _ = std::fs::remove_dir_all(&dir);
 }
 
@@ -177,6 +132,38 @@ fn hybrid_forced_synth_then_verify() {
     assert!(page.contains("Theorem 4.17"));
 
     let img = out.join("controller.img");
+    verify_attack_and_enlarged_radius(&dir, &spec, &img);
+    let bytes = std::fs::read(&img).unwrap();
+    let decoded = shared_types::image::decode(&bytes).unwrap();
+    // The same image without its switch (every row in `forward`): the run no longer re-proves.
+    let mut b = host_compiler::emit::ImageBuilder::from_image(&decoded);
+    for l in b.trajectories[0].location.iter_mut() {
+        *l = 0;
+    }
+    let flat = dir.join("flat.img");
+    std::fs::write(&flat, b.to_bytes().unwrap()).unwrap();
+    let o = bin()
+        .args(["verify", spec.to_str().unwrap(), flat.to_str().unwrap()])
+        .args(["--runs", "16", "--per-ball", "1"])
+        .output()
+        .unwrap();
+    assert_ne!(
+        o.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&o.stdout)
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// `verify` re-proves the image's one run from its bytes and runs it on the exact hybrid flow (exit 0);
+/// the falsifier on that flow finds no violation; the run's stored radius enlarged by 1 % (the CRC made
+/// right again) is not re-proved (exit 1).
+fn verify_attack_and_enlarged_radius(
+    dir: &std::path::Path,
+    spec: &std::path::Path,
+    img: &std::path::Path,
+) {
     let o = bin()
         .args(["verify", spec.to_str().unwrap(), img.to_str().unwrap()])
         .args(["--runs", "16", "--per-ball", "4"])
@@ -206,9 +193,7 @@ fn hybrid_forced_synth_then_verify() {
         .unwrap();
     let at = crate::verify_attack::attack_json(&o);
     assert!(at.worst_robustness > 0.0, "{at:?}");
-
-    // The run's stored radius enlarged by 1 %: not re-proved.
-    let bytes = std::fs::read(&img).unwrap();
+    let bytes = std::fs::read(img).unwrap();
     let decoded = shared_types::image::decode(&bytes).unwrap();
     let mut b = host_compiler::emit::ImageBuilder::from_image(&decoded);
     b.trajectories[0].delta *= 1.01;
@@ -219,29 +204,7 @@ fn hybrid_forced_synth_then_verify() {
         .args(["--runs", "4", "--per-ball", "1"])
         .output()
         .unwrap();
-    assert_eq!(
-        o.status.code(),
-        Some(1),
-        "{}",
-        String::from_utf8_lossy(&o.stdout)
-    );
-    // The same image without its switch (every row in `forward`): the run no longer re-proves.
-    let mut b = host_compiler::emit::ImageBuilder::from_image(&decoded);
-    for l in b.trajectories[0].location.iter_mut() {
-        *l = 0;
-    }
-    let flat = dir.join("flat.img");
-    std::fs::write(&flat, b.to_bytes().unwrap()).unwrap();
-    let o = bin()
-        .args(["verify", spec.to_str().unwrap(), flat.to_str().unwrap()])
-        .args(["--runs", "16", "--per-ball", "1"])
-        .output()
-        .unwrap();
-    assert_ne!(
-        o.status.code(),
-        Some(0),
-        "{}",
-        String::from_utf8_lossy(&o.stdout)
-    );
-    let _ = std::fs::remove_dir_all(&dir);
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("not re-proved"), "{stderr}");
 }
