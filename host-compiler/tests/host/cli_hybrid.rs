@@ -13,32 +13,7 @@ fn bin() -> Command {
 
 #[test]
 fn hybrid_synth_then_verify() {
-    let dir = std::env::temp_dir().join(format!("hc-cli-hybrid-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let src = std::fs::read_to_string(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../examples/hybrid-internal-4-25.toml"
-    ))
-    .unwrap()
-    .replace("max_trajectories = 32", "max_trajectories = 1");
-    let spec = dir.join("spec.toml");
-    std::fs::write(&spec, src).unwrap();
-    let out = dir.join("out");
-    let o = bin()
-        .args([
-            "synth",
-            spec.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-        ])
-        .args(["--verify-runs", "16", "--quiet"])
-        .output()
-        .unwrap();
-    let stdout = String::from_utf8_lossy(&o.stdout);
-    let stderr = String::from_utf8_lossy(&o.stderr);
-    assert_eq!(o.status.code(), Some(3), "{stdout}\n{stderr}");
-    assert!(stdout.contains("re-proved         1 of 1 runs"), "{stdout}");
-    assert!(stdout.contains(", 0 violations"), "{stdout}");
+    let (dir, spec, out) = synth_one_run("hybrid", "hybrid-internal-4-25.toml", 16);
     let img = out.join("controller.img");
     assert!(img.exists());
     crate::spec_fingerprint::assert_stamped(&img, &spec);
@@ -85,32 +60,7 @@ fn hybrid_synth_then_verify() {
 /// is refused.
 #[test]
 fn hybrid_forced_synth_then_verify() {
-    let dir = std::env::temp_dir().join(format!("hc-cli-forced-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let src = std::fs::read_to_string(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../examples/hybrid-forced-cart.toml"
-    ))
-    .unwrap()
-    .replace("max_trajectories = 8", "max_trajectories = 1");
-    let spec = dir.join("spec.toml");
-    std::fs::write(&spec, src).unwrap();
-    let out = dir.join("out");
-    let o = bin()
-        .args([
-            "synth",
-            spec.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-        ])
-        .args(["--verify-runs", "64", "--quiet"])
-        .output()
-        .unwrap();
-    let stdout = String::from_utf8_lossy(&o.stdout);
-    let stderr = String::from_utf8_lossy(&o.stderr);
-    assert_eq!(o.status.code(), Some(3), "{stdout}\n{stderr}");
-    assert!(stdout.contains("re-proved         1 of 1 runs"), "{stdout}");
-    assert!(stdout.contains(", 0 violations"), "{stdout}");
+    let (dir, spec, out) = synth_one_run("forced", "hybrid-forced-cart.toml", 64);
     // Every Monte Carlo run took the forced switch.
     let cert: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("certificate.json")).unwrap())
@@ -207,4 +157,42 @@ fn verify_attack_and_enlarged_radius(
     let stderr = String::from_utf8_lossy(&o.stderr);
     assert_eq!(o.status.code(), Some(1), "{stderr}");
     assert!(stderr.contains("not re-proved"), "{stderr}");
+}
+
+/// `synth` of the shipped `example` with a budget of one run into a fresh directory, with
+/// `verify_runs` Monte Carlo runs: exit 3 (short of the coverage target), the run re-proved from the
+/// bytes, 0 violations. Returns the directory, the spec written there and the out directory.
+fn synth_one_run(
+    tag: &str,
+    example: &str,
+    verify_runs: usize,
+) -> (std::path::PathBuf, std::path::PathBuf, std::path::PathBuf) {
+    let dir = std::env::temp_dir().join(format!("hc-cli-{tag}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = format!("{}/../examples/{example}", env!("CARGO_MANIFEST_DIR"));
+    let src = std::fs::read_to_string(path).unwrap();
+    let budget = src
+        .lines()
+        .find(|l| l.starts_with("max_trajectories"))
+        .expect("the example states its budget")
+        .to_string();
+    let spec = dir.join("spec.toml");
+    std::fs::write(&spec, src.replace(&budget, "max_trajectories = 1")).unwrap();
+    let out = dir.join("out");
+    let o = bin()
+        .args([
+            "synth",
+            spec.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ])
+        .args(["--verify-runs", &verify_runs.to_string(), "--quiet"])
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(3), "{stdout}\n{stderr}");
+    assert!(stdout.contains("re-proved         1 of 1 runs"), "{stdout}");
+    assert!(stdout.contains(", 0 violations"), "{stdout}");
+    (dir, spec, out)
 }
