@@ -310,6 +310,13 @@ impl Hybrid {
         })
     }
 
+    /// The forced edge `from` → `to`, the one a controller that moves to location `to` takes (§4.2.1).
+    pub fn forced_edge(&self, from: Location, to: Location) -> Option<&Edge> {
+        self.edges
+            .iter()
+            .find(|e| e.from == from && e.to == to && e.kind == EdgeKind::Forced)
+    }
+
     pub fn modes(&self) -> &[Mode] {
         &self.modes
     }

@@ -140,6 +140,13 @@ impl GenProblem<'_> {
         }
     }
 
+    fn P_at(&self, k: usize) -> MatRef<'_, f64> {
+        match self.schedule {
+            None => self.P,
+            Some(s) => s.P[self.loc_at(k)],
+        }
+    }
+
     /// The metric of sample κ and its roots (index into `roots`).
     fn metric_at(&self, k: usize) -> usize {
         self.schedule.map_or(0, |_| self.loc_at(k))
@@ -179,13 +186,9 @@ impl GenProblem<'_> {
     /// Inter-sample excursion ρ(x̃(κ), ũ(κ)) = φ(‖f‖_P + β·margin) of the nominal in the P-metric of
     /// sample κ, f the vector field at the sample (0 for discrete-time plants).
     fn excursion(&self, k: usize, x: &[f64], u: &[f64]) -> f64 {
-        let P = match self.schedule {
-            None => self.P,
-            Some(s) => s.P[self.loc_at(k)],
-        };
         match self.plant.vector_field(self.loc_at(k), x, u) {
             None => 0.0,
-            Some(f) => self.phi * (p_norm(P, &f) + self.beta * self.input_margin),
+            Some(f) => self.phi * (p_norm(self.P_at(k), &f) + self.beta * self.input_margin),
         }
     }
 }

@@ -119,9 +119,7 @@ pub fn run_hybrid(
         // takes the forced edge between the two locations, whose guard must hold the state.
         let want = ctl.location();
         if want != loc {
-            if let Some(e) = fine.edges().iter().find(|e| {
-                e.from == loc && e.to == want && e.kind == crate::model::hybrid::EdgeKind::Forced
-            }) {
+            if let Some(e) = fine.forced_edge(loc, want) {
                 if !e.guard.contains(&x) {
                     why = Some(format!(
                         "sample {k}: the controller switches to location {want}, but x = {x:?} is not in the edge's guard"

@@ -7,7 +7,6 @@
 //! sub-samples of each period) and apply only inputs within the bound, with the firmware's inputs (and
 //! the location its reply carries) equal to the host evaluator's bit for bit.
 
-use host_compiler::model::hybrid::EdgeKind;
 use host_compiler::synth::hybrid::forced::plan_forced;
 use host_compiler::synth::hybrid::{ball_starts, image, plan_run, HybridRun, HybridTask};
 use qemu_tests::closed_loop::{exchange, HostEvaluator};
@@ -183,9 +182,7 @@ fn hybrid_forced_cart_meets_the_spec_on_the_target_from_50_initial_states() {
             }
             let edge = task
                 .plant
-                .edges()
-                .iter()
-                .find(|e| e.from == *loc && e.to == want && e.kind == EdgeKind::Forced)
+                .forced_edge(*loc, want)
                 .unwrap_or_else(|| panic!("run {r}: no forced edge {loc} → {want}"));
             assert!(
                 edge.guard.contains(x),
