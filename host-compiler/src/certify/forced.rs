@@ -131,6 +131,8 @@ pub enum ForcedError {
         "segment {segment}'s reset matrix is singular: its preimage of a ball is not an ellipsoid"
     )]
     SingularReset { segment: usize },
+    #[error("the formula: {0}")]
+    Formula(String),
     #[error("segment {segment}'s safe transition: {source}")]
     Geometry {
         segment: usize,
@@ -212,6 +214,246 @@ fn safe_transition(
 /// (edges forced, locations chained, the nominal continuous across each reset), then certifies the
 /// segments backwards.
 pub fn certify_forced(segments: &[ForcedSegment<'_>]) -> Result<ForcedCertificate, ForcedError> {
+    let last = check_chain(segments)?;
+    let guarded = guarded_unsafe(segments)?;
+    let lp_of = |i: usize| lp_with_invariant(segments, &guarded, i);
+    let mut certs: Vec<Certificate> = Vec::with_capacity(segments.len());
+    let last_cert = certify_at(
+        &lp_of(last),
+        segments[last].lc,
+        segments[last].nominal,
+        GoalAt::Best,
+    );
+    certs.push(last_cert);
+    for i in (0..last).rev() {
+        let next_delta = certs.last().expect("one per later segment").delta;
+        certs.push(certify_switching(segments, &lp_of(i), i, next_delta)?);
+    }
+    certs.reverse();
+    Ok(ForcedCertificate { segments: certs })
+}
+
+/// The certificate of a forced-switching run for an MTL task (Def 4.18, Theorem 4.19), sampled and in
+/// f32 ([`certify_forced_formula`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ForcedFormulaCertificate {
+    /// Each segment's certificate with its radius rᵢ as `delta` (the first one's stored radius is the
+    /// ball's).
+    pub base: ForcedCertificate,
+    /// ρ(0) of the whole nominal run at the samples, every atom in the first segment's metric.
+    pub delta_samples: f64,
+    /// The largest bound t the formula admits: rᵢ = min(t, the segment's own δ).
+    pub t: f64,
+    /// Whether each segment's radius is the formula's bound t rather than its own parts.
+    pub formula_bound: Vec<bool>,
+    /// ρ(κ) of the whole run at every sample, and where ρ(0) comes from (set, sample, negated).
+    pub signal: Vec<f64>,
+    pub critical: Option<(String, usize, bool)>,
+}
+
+/// Grid of the formula bound t over (0, ρ(0)] before the bisection ([`certify_forced_formula`]).
+const FORMULA_GRID: usize = 32;
+/// Bisection steps after the grid.
+const FORMULA_BISECTION: usize = 40;
+
+/// Def 4.18 and Theorem 4.19 for the sampled f32 loop: a forced-switching run certified for an MTL
+/// formula.
+///
+/// The text sets δ⁽ᴺ⁾ = δ_φ and δ⁽ⁱ⁾ = min(δ_φ, δ_Guard⁽ⁱ⁾), with the atoms of δ_φ measured in each
+/// segment's own metric ψᵢ. Here the atoms are measured in one metric, the first segment's P₀ (bound once,
+/// as [`crate::certify::temporal`] does for one location), and the segments' tubes are carried into it:
+/// ‖e‖_{P₀} ≤ cᵢ‖e‖_{Pᵢ} with cᵢ = ‖P₀^{1/2}Pᵢ^{-1/2}‖₂. For a bound t, the radii are chosen backwards:
+/// the last segment's rᴺ = min(t, its Unsafe (invariant included) and input parts, above r_crit)
+/// ([`GoalAt::Free`]), and each earlier rᵢ = min(t, its certificate against the safe transition into the
+/// ball of radius rᵢ₊₁), so Lemma 4.16's chain holds as in [`certify_forced`]. Every run from the first
+/// ball then stays, at the samples of segment i, within cᵢrᵢ of the nominal in P₀, and between samples
+/// within cᵢ(γᵢrᵢ + φᵢ‖fₖ‖_{Pᵢ} + φᵢβᵢε̄ᵢ) of the sample before; the formula holds for it when ρ(0) of the
+/// concatenated nominal exceeds maxᵢ cᵢrᵢ (the samples) and the tube's lower bound
+/// ([`crate::robustness::mtl::TubeFormula`]) with those margins is positive (between samples). Both are
+/// monotone in t; the largest admissible t is found on a grid and refined by bisection, and the run is
+/// certified from the ball of radius r₀. The input set is each segment's Theorem 4.7 part (4.15).
+pub fn certify_forced_formula(
+    segments: &[ForcedSegment<'_>],
+    task: &crate::property::TemporalTask,
+) -> Result<ForcedFormulaCertificate, ForcedError> {
+    use crate::robustness::mtl::{Margins, Trace, TubeFormula};
+    let formula = |e: String| ForcedError::Formula(e);
+    let last = check_chain(segments)?;
+    let guarded = guarded_unsafe(segments)?;
+    let lp_of = |i: usize| lp_with_invariant(segments, &guarded, i);
+    let tl = crate::certify::temporal::TemporalLoop::new(task, &segments[0].lp)
+        .map_err(|e| formula(e.to_string()))?;
+    // The concatenated run: every segment's samples but its last (the next segment starts there, reset by
+    // the identity), then the whole last segment; `at[k]` = (segment, its own sample).
+    let mut at: Vec<(usize, usize)> = Vec::new();
+    for (i, s) in segments.iter().enumerate() {
+        let take = s.nominal.x.len() - usize::from(i != last);
+        at.extend((0..take).map(|k| (i, k)));
+    }
+    let h = segments[0].lp.plant.period();
+    let n = segments[0].lp.P.nrows();
+    let times: Vec<f64> = (0..at.len()).map(|k| k as f64 * h).collect();
+    let cols: Vec<Vec<f64>> = (0..n)
+        .map(|j| {
+            at.iter()
+                .map(|&(i, k)| segments[i].nominal.x[k][j])
+                .collect()
+        })
+        .collect();
+    let trace =
+        Trace::new(times, tl.signals().to_vec(), cols).map_err(|e| formula(e.to_string()))?;
+    let monitor = tl.monitor().map_err(|e| formula(e.to_string()))?;
+    let signal = monitor
+        .robustness(&trace)
+        .map_err(|e| formula(e.to_string()))?;
+    let tube = TubeFormula::new(&monitor, &trace).map_err(|e| formula(e.to_string()))?;
+    let rho0 = signal[0];
+    let critical = tube
+        .critical(rho0)
+        .first()
+        .map(|(s, k, neg)| (s.name.clone(), *k, *neg));
+    // cᵢ, rounded up.
+    let c: Vec<f64> = segments
+        .iter()
+        .map(|s| segments[0].lc.roots.norm_into(s.lc.roots.inv_sqrt.as_ref()) * (1.0 + 1e-9))
+        .collect();
+    // φᵢ‖fₖ‖_{Pᵢ} at every sample that applies an input (none for discrete-time plants).
+    let continuous = segments.iter().all(|s| s.lp.continuous().is_some());
+    let drift: Vec<f64> = at[..at.len() - 1]
+        .iter()
+        .map(|&(i, k)| {
+            let s = &segments[i];
+            let f =
+                s.lp.plant
+                    .vector_field(s.lp.loc, &s.nominal.x[k], &s.nominal.u[k])
+                    .unwrap_or_else(|| vec![f64::INFINITY; n]);
+            s.lc.phi * crate::linalg::p_norm(s.lp.P, &f)
+        })
+        .collect();
+    // The radii for a bound t, backwards, with each segment's certificate.
+    let radii = |t: f64| -> Result<(Vec<f64>, Vec<Certificate>), ForcedError> {
+        let mut r = vec![0.0; segments.len()];
+        let mut certs = Vec::with_capacity(segments.len());
+        let s = &segments[last];
+        let cert = certify_at(&lp_of(last), s.lc, s.nominal, GoalAt::Free(t));
+        r[last] = cert.delta;
+        certs.push(cert);
+        for i in (0..last).rev() {
+            let cert = certify_switching(segments, &lp_of(i), i, r[i + 1])?;
+            let ri = cert.delta.min(t);
+            r[i] = if ri > 0.0 && ri > cert.r_crit {
+                ri
+            } else {
+                0.0
+            };
+            certs.push(cert);
+        }
+        certs.reverse();
+        Ok((r, certs))
+    };
+    let admits = |r: &[f64], certs: &[Certificate]| -> bool {
+        if !(r[0] > 0.0) {
+            return false;
+        }
+        let reach = r.iter().zip(&c).map(|(r, c)| r * c).fold(0.0, f64::max);
+        if !(rho0 > reach * (1.0 + 1e-9)) {
+            return false;
+        }
+        if !continuous {
+            return true;
+        }
+        let between: Vec<f64> = at[..at.len() - 1]
+            .iter()
+            .zip(&drift)
+            .map(|(&(i, _), d)| {
+                let lc = segments[i].lc;
+                c[i] * (lc.gamma * r[i] + d + lc.held_disturbance(certs[i].eps_f32))
+            })
+            .collect();
+        tube.lower_at_start(&Margins {
+            r: reach,
+            between: &between,
+        }) > 0.0
+    };
+    let mut best: Option<(f64, Vec<f64>, Vec<Certificate>)> = None;
+    if rho0 > 0.0 && rho0.is_finite() {
+        let mut infeasible = f64::NAN;
+        for j in (1..=FORMULA_GRID).rev() {
+            let t = rho0 * j as f64 / FORMULA_GRID as f64;
+            let (r, certs) = radii(t)?;
+            if admits(&r, &certs) {
+                best = Some((t, r, certs));
+                break;
+            }
+            infeasible = t;
+        }
+        if let Some((lo, ..)) = &best {
+            let (mut lo, mut hi) = (*lo, infeasible);
+            if hi.is_finite() {
+                for _ in 0..FORMULA_BISECTION {
+                    let mid = 0.5 * (lo + hi);
+                    let (r, certs) = radii(mid)?;
+                    if admits(&r, &certs) {
+                        lo = mid;
+                        best = Some((mid, r, certs));
+                    } else {
+                        hi = mid;
+                    }
+                }
+            }
+        }
+    }
+    let (t, r, mut certs) = match best {
+        Some(b) => b,
+        None => {
+            let (_, certs) = radii(rho0.max(0.0))?;
+            (0.0, vec![0.0; segments.len()], certs)
+        }
+    };
+    let formula_bound = r
+        .iter()
+        .map(|&ri| ri > 0.0 && ri >= t * (1.0 - 1e-8))
+        .collect();
+    for ((cert, &ri), s) in certs.iter_mut().zip(&r).zip(segments) {
+        cert.delta = ri;
+        cert.delta_stored = crate::certify::selection_radius(s.lp.P, &s.nominal.x[0], ri);
+    }
+    Ok(ForcedFormulaCertificate {
+        base: ForcedCertificate { segments: certs },
+        delta_samples: rho0,
+        t,
+        formula_bound,
+        signal,
+        critical,
+    })
+}
+
+/// Segment `i < last` certified against its safe transition into the next segment's ball of radius
+/// `next_delta`, judged at its last sample (an empty target when that ball is empty).
+fn certify_switching(
+    segments: &[ForcedSegment<'_>],
+    lp: &Loop<'_>,
+    i: usize,
+    next_delta: f64,
+) -> Result<Certificate, ForcedError> {
+    let s = &segments[i];
+    let next = &segments[i + 1];
+    let edge = s.switch.expect("checked by check_chain");
+    let target: Box<dyn Region> = if next_delta > 0.0 {
+        safe_transition(i, edge, next.lp.P, &next.nominal.x[0], next_delta)?
+    } else {
+        Box::new(Empty(s.lp.P.nrows()))
+    };
+    let lp = Loop {
+        goal: target.as_ref(),
+        ..*lp
+    };
+    Ok(certify_at(&lp, s.lc, s.nominal, GoalAt::Last))
+}
+
+/// Checks that the segments are a forced-switching run (edges forced, locations chained, the nominal
+/// continuous across each reset); the index of the last segment.
+fn check_chain(segments: &[ForcedSegment<'_>]) -> Result<usize, ForcedError> {
     let last = segments.len().checked_sub(1).ok_or(ForcedError::Empty)?;
     for (i, s) in segments.iter().enumerate() {
         if s.nominal.x.is_empty() {
@@ -260,8 +502,14 @@ pub fn certify_forced(segments: &[ForcedSegment<'_>]) -> Result<ForcedCertificat
             }
         }
     }
-    // Each segment's Unsafe, with the outside of its location's invariant added.
-    let guarded: Vec<Option<UnsafeOrOutside>> = segments
+    Ok(last)
+}
+
+/// Each segment's Unsafe, with the outside of its location's invariant added.
+fn guarded_unsafe<'a>(
+    segments: &[ForcedSegment<'a>],
+) -> Result<Vec<Option<UnsafeOrOutside<'a>>>, ForcedError> {
+    segments
         .iter()
         .enumerate()
         .map(|(i, s)| {
@@ -279,43 +527,22 @@ pub fn certify_forced(segments: &[ForcedSegment<'_>]) -> Result<ForcedCertificat
                 })
                 .transpose()
         })
-        .collect::<Result<_, ForcedError>>()?;
-    let lp_of = |i: usize| -> Loop<'_> {
-        match &guarded[i] {
-            Some(g) => Loop {
-                unsafe_set: Some(g as &dyn Region),
-                ..segments[i].lp
-            },
-            None => segments[i].lp,
-        }
-    };
-    let mut certs: Vec<Certificate> = Vec::with_capacity(segments.len());
-    let last_cert = certify_at(
-        &lp_of(last),
-        segments[last].lc,
-        segments[last].nominal,
-        GoalAt::Best,
-    );
-    certs.push(last_cert);
-    for i in (0..last).rev() {
-        let s = &segments[i];
-        let next = &segments[i + 1];
-        let next_delta = certs.last().expect("one per later segment").delta;
-        let edge = s.switch.expect("checked above");
-        let n = s.lp.P.nrows();
-        let target: Box<dyn Region> = if next_delta > 0.0 {
-            safe_transition(i, edge, next.lp.P, &next.nominal.x[0], next_delta)?
-        } else {
-            Box::new(Empty(n))
-        };
-        let lp = Loop {
-            goal: target.as_ref(),
-            ..lp_of(i)
-        };
-        certs.push(certify_at(&lp, s.lc, s.nominal, GoalAt::Last));
+        .collect()
+}
+
+/// Segment `i`'s loop with its Unsafe widened by the outside of its invariant.
+fn lp_with_invariant<'s>(
+    segments: &[ForcedSegment<'s>],
+    guarded: &'s [Option<UnsafeOrOutside<'s>>],
+    i: usize,
+) -> Loop<'s> {
+    match &guarded[i] {
+        Some(g) => Loop {
+            unsafe_set: Some(g as &dyn Region),
+            ..segments[i].lp
+        },
+        None => segments[i].lp,
     }
-    certs.reverse();
-    Ok(ForcedCertificate { segments: certs })
 }
 
 /// What limits a segment's δ, in words.

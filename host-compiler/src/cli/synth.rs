@@ -119,11 +119,12 @@ pub fn run(a: &SynthArgs) -> Outcome {
     // First of all, even before the spec is read: whatever happens next, no earlier result is left.
     prepare_out(&a.out)?;
     let problem = crate::spec::load(&a.spec).bad_input()?;
-    if problem.mtl.is_some() {
-        return crate::cli::synth_temporal::run(a, problem);
-    }
+    // A hybrid plant first: its task takes an [mtl] formula with forced switching (Def 4.18).
     if problem.hybrid.is_some() {
         return crate::cli::synth_hybrid::run(a, problem);
+    }
+    if problem.mtl.is_some() {
+        return crate::cli::synth_temporal::run(a, problem);
     }
     if problem.nonlinear.is_some() {
         let refuse = |what: &str| {

@@ -78,6 +78,7 @@ pub fn run(a: &SynthArgs, problem: crate::spec::Problem) -> Outcome {
         "seed": task.problem.seed,
         "plant": "hybrid",
         "switching": if task.forced { "forced" } else { "internal" },
+        "formula": task.problem.mtl,
         "path": task.path.iter().map(|&l| &task.plant.modes()[l].name).collect::<Vec<_>>(),
         "edges": task.edges,
         "stop": s.stop,

@@ -14,13 +14,6 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
 pub fn run(a: &SynthArgs, problem: crate::spec::Problem) -> Outcome {
-    if problem.hybrid.is_some() {
-        return Err(Failure::bad_input(miette::miette!(
-            "an [mtl] formula on a hybrid plant is not synthesised: with internal switching the text leaves \
-             MTL open (§4.2.2), and forced switching (Def 4.18) is not built yet; drop [mtl] to synthesise \
-             the reach-avoid task"
-        )));
-    }
     if !a.imports.is_empty() {
         return Err(Failure::bad_input(miette::miette!(
             "--import is not taken for MTL tasks yet: recordings are certified for reach-avoid"

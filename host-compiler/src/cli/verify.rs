@@ -431,9 +431,15 @@ fn run_hybrid(
     let task = crate::synth::hybrid::HybridTask::new(problem)
         .map_err(|e| miette::miette!("{e}"))
         .bad_input()?;
-    let rc = recheck(&task.plant, &task.property, task.steps, bytes)
-        .map_err(|e| miette::miette!("{}: {e}", a.image.display()))
-        .bad_input()?;
+    let rc = recheck(
+        &task.plant,
+        &task.property,
+        task.formula.as_ref(),
+        task.steps,
+        bytes,
+    )
+    .map_err(|e| miette::miette!("{}: {e}", a.image.display()))
+    .bad_input()?;
     let init = crate::cover::estimate::SampleBox {
         lo: task.problem.init.lo.clone(),
         hi: task.problem.init.hi.clone(),
@@ -448,6 +454,7 @@ fn run_hybrid(
             monte_carlo_hybrid(
                 &task.plant,
                 &task.property,
+                task.formula.as_ref(),
                 task.initial,
                 task.steps,
                 bytes,
@@ -467,6 +474,7 @@ fn run_hybrid(
             let runs = crate::verify::attack::HybridRuns {
                 plant: &task.plant,
                 property: &task.property,
+                formula: task.formula.as_ref(),
                 initial: task.initial,
                 steps: task.steps,
             };

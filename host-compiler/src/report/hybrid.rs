@@ -1,5 +1,5 @@
-//! `report.html` for a hybrid plant with internal switching (§4.2.2, Examples 4.25, 5.5, 5.6): the
-//! automaton, the verdict, and per plotting plane the nominal segments coloured by location, their tubes
+//! `report.html` for a hybrid plant with internal switching (§4.2.2, Examples 4.25, 5.5, 5.6) or forced
+//! switching (§4.2.1; the task reach-avoid, or an MTL formula, Def 4.18): the automaton, the verdict, and per plotting plane the nominal segments coloured by location, their tubes
 //! (the P_ℓ-balls of radius δᵢ around the samples, projected), the guard of the edge taken, the next
 //! segment's start ball that the landings must hit (the "hole" of Lemma 4.23's safe transition, drawn
 //! dashed: its section by the guard plane is the hole), and the cover of Init by the runs' first balls;
@@ -42,11 +42,18 @@ pub fn render(task: &HybridTask, spec: &str, s: &HybridSynthesis) -> String {
     let unproved = s.recheck.iter().filter(|c| !c.ok).count();
     let ok = s.verify.violations == 0 && unproved == 0 && !s.runs.is_empty();
     h.push_str(&format!(
-        "<h1>{}</h1><p>Spec <code>{}</code>: a hybrid automaton of {} locations and {} edges, reach-avoid on [0, {}] s sampled every {} s. Runs go {}.</p>",
+        "<h1>{}</h1><p>Spec <code>{}</code>: a hybrid automaton of {} locations and {} edges, {} on [0, {}] s sampled every {} s. Runs go {}.</p>",
         if ok { "Certified and verified" } else { "NOT certified" },
         escape(spec),
         modes.len(),
         task.plant.edges().len(),
+        match (&task.formula, &problem.mtl) {
+            (Some(_), Some(f)) => format!(
+                "the MTL formula <code>{}</code> (Def 4.18: every run certified for the formula, its atoms in the initial location's CAF metric; the Monte Carlo judges each run by the formula as written, at the samples and between them)",
+                escape(f)
+            ),
+            _ => "reach-avoid".to_string(),
+        },
         num(problem.horizon),
         num(task.plant.period()),
         escape(&task.route()),
@@ -64,7 +71,7 @@ pub fn render(task: &HybridTask, spec: &str, s: &HybridSynthesis) -> String {
         num(s.seconds),
     ));
     h.push_str(&format!(
-        "<p>Re-proved from the image bytes: {} of {} runs. Monte Carlo on the exact hybrid flow (events found between samples) through the shared evaluator: {} runs ({} switched, at most {} events; {} boundary starts refused by the f32 selection), <b>{} violations</b>; least distance to Unsafe {}.</p>",
+        "<p>Re-proved from the image bytes: {} of {} runs. Monte Carlo on the exact hybrid flow (events found between samples) through the shared evaluator: {} runs ({} switched, at most {} events; {} boundary starts refused by the f32 selection), <b>{} violations</b>{}.</p>",
         s.recheck.len() - unproved,
         s.recheck.len(),
         s.verify.runs - s.verify.rejected,
@@ -72,7 +79,12 @@ pub fn render(task: &HybridTask, spec: &str, s: &HybridSynthesis) -> String {
         s.verify.max_events,
         s.verify.rejected,
         s.verify.violations,
-        num(s.verify.min_unsafe_distance),
+        // A formula's runs are judged by the formula, which measures no distance to Unsafe.
+        if task.formula.is_some() {
+            String::new()
+        } else {
+            format!("; least distance to Unsafe {}", num(s.verify.min_unsafe_distance))
+        },
     ));
     if let Some(v) = &s.verify.first_violation {
         h.push_str(&format!("<p><b>First violation:</b> {}</p>", escape(v)));
@@ -115,7 +127,11 @@ pub fn render(task: &HybridTask, spec: &str, s: &HybridSynthesis) -> String {
     }
     h.push_str("</p>");
 
-    h.push_str("<h2>Runs in the state space</h2><p>Nominal segments in their location's colour, with tubes (the certified ball of each segment around its samples, projected); the guard of the edge taken (black line); the next segment's start ball, dashed: every run near the nominal lands inside it (Lemma 4.23; its section by the guard is the safe hole); the runs' first balls over Init (blue, the cover). Goal green, Unsafe red, Init grey.</p>");
+    h.push_str(if task.forced {
+        "<h2>Runs in the state space</h2><p>Nominal segments in their location's colour, with tubes (the certified ball of each segment around its samples, projected); the next segment's start ball, dashed: the controller switches by its table, and every run near the nominal is, at the switching sample, inside the edge's guard and within that ball (the safe transition, Theorem 4.17); the runs' first balls over Init (blue, the cover). Goal green, Unsafe red, Init grey.</p>"
+    } else {
+        "<h2>Runs in the state space</h2><p>Nominal segments in their location's colour, with tubes (the certified ball of each segment around its samples, projected); the guard of the edge taken (black line); the next segment's start ball, dashed: every run near the nominal lands inside it (Lemma 4.23; its section by the guard is the safe hole); the runs' first balls over Init (blue, the cover). Goal green, Unsafe red, Init grey.</p>"
+    });
     for pl in planes(task) {
         match plane_plot(task, s, pl) {
             Ok(svg) => h.push_str(&svg),

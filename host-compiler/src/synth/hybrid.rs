@@ -62,6 +62,9 @@ pub struct HybridTask {
     pub edges: Vec<usize>,
     /// Whether the automaton's edges are forced (§4.2.1) rather than internal (§4.2.2).
     pub forced: bool,
+    /// The spec's `[mtl]` formula, when the task is one (Problem 2.28): forced runs are then certified
+    /// for it (Def 4.18, [`crate::certify::forced::certify_forced_formula`]) and judged by it.
+    pub formula: Option<crate::property::TemporalTask>,
 }
 
 /// Why a hybrid task could not be built or a run planned.
@@ -90,6 +93,14 @@ pub enum HybridSynthError {
          the switch and would apply the next segment's law to the state before its reset"
     )]
     ForcedReset { edge: usize },
+    #[error(
+        "an [mtl] formula on an automaton with internal switching is not synthesised: the text leaves MTL \
+         with general switching open (§4.2.2); forced switching (Def 4.18) is, and reach-avoid without \
+         [mtl] is"
+    )]
+    FormulaWithInternal,
+    #[error("[mtl]: {0}")]
+    Formula(#[from] crate::property::TemporalError),
     #[error("{0}")]
     Run(String),
 }
@@ -132,6 +143,11 @@ impl HybridTask {
                 return Err(HybridSynthError::ForcedReset { edge });
             }
         }
+        let formula = match (&problem.mtl, forced) {
+            (None, _) => None,
+            (Some(_), false) => return Err(HybridSynthError::FormulaWithInternal),
+            (Some(_), true) => Some(crate::property::TemporalTask::from_problem(&problem)?),
+        };
         let (path, edges) = if forced {
             (vec![initial], Vec::new())
         } else {
@@ -153,6 +169,7 @@ impl HybridTask {
             path,
             edges,
             forced,
+            formula,
         })
     }
 
@@ -826,7 +843,13 @@ pub fn synthesize_hybrid(
         ));
     }
     let image = image(task, &runs).map_err(|e| format!("image: {e}"))?;
-    let recheck = crate::verify::hybrid::recheck(&task.plant, &task.property, task.steps, &image)?;
+    let recheck = crate::verify::hybrid::recheck(
+        &task.plant,
+        &task.property,
+        task.formula.as_ref(),
+        task.steps,
+        &image,
+    )?;
     // Coverage (§2.5.2) from fresh samples: a sample is covered when the image's f32 selection accepts it
     // (what it accepts lies in a certified ball; near a ball's boundary it may refuse a state the f64 test
     // would count).
@@ -866,6 +889,7 @@ pub fn synthesize_hybrid(
             crate::verify::hybrid::monte_carlo_hybrid(
                 &task.plant,
                 &task.property,
+                task.formula.as_ref(),
                 task.initial,
                 task.steps,
                 &image,

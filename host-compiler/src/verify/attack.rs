@@ -507,6 +507,9 @@ pub fn attack_temporal(
 pub struct HybridRuns<'a> {
     pub plant: &'a crate::model::hybrid::Hybrid,
     pub property: &'a crate::property::ReachAvoid,
+    /// The MTL formula when the task is one (forced switching, Def 4.18): runs are then scored by its
+    /// robustness sampled finer, as [`super::temporal`] scores a one-location run.
+    pub formula: Option<&'a crate::property::TemporalTask>,
     pub initial: crate::model::Location,
     pub steps: usize,
 }
@@ -515,6 +518,7 @@ pub struct HybridRuns<'a> {
 struct HybridTarget<'a> {
     fine: crate::model::hybrid::Hybrid,
     task: HybridRuns<'a>,
+    judges: Option<super::temporal::Judges>,
     image: Image<'a>,
     balls: Vec<Ball>,
 }
@@ -526,20 +530,33 @@ impl Target for HybridTarget<'_> {
     fn score(&self, x0: &[f64]) -> Scored {
         let t = &self.task;
         let mut samples = Vec::new();
-        let run = super::hybrid::run_hybrid(
+        let judging = match (t.formula, &self.judges) {
+            (Some(task), Some(judges)) => super::hybrid::Judging::Formula {
+                task,
+                judges,
+                robust: true,
+            },
+            _ => super::hybrid::Judging::ReachAvoid,
+        };
+        let run = super::hybrid::run_judged(
             &self.fine,
-            &t.property,
+            t.property,
             t.initial,
             t.steps,
             &self.image,
             x0,
+            judging,
             &mut |x| samples.push(x.to_vec()),
         );
         if run.rejected {
             return Scored::Refused;
         }
+        let robustness = match t.formula {
+            Some(_) => run.robustness.unwrap_or(f64::NEG_INFINITY),
+            None => reach_avoid_robustness(t.property, &samples, t.plant.period()),
+        };
         Scored::Run {
-            robustness: reach_avoid_robustness(t.property, &samples, t.plant.period()),
+            robustness,
             violation: run.violation,
         }
     }
@@ -573,9 +590,15 @@ pub fn attack_hybrid(
             reach: image.delta(t) as f64 * (1.0 + 1e-4),
         });
     }
+    let judges = task
+        .formula
+        .map(|tt| super::temporal::Judges::new(tt, n))
+        .transpose()
+        .map_err(|e| AttackError::Judge(e.to_string()))?;
     let target = HybridTarget {
         fine,
         task,
+        judges,
         image,
         balls,
     };

@@ -8,7 +8,10 @@
 //! state, its reset is applied); the flow is taken in [`SUBSTEPS`] exact
 //! sub-periods, and Unsafe is checked at every sub-sample (so also shortly after each event). A run
 //! meets the task at its first sample in Goal if, up to then, it never was in Unsafe, every input was in
-//! the input set, and the evaluator never left its certified envelope.
+//! the input set, and the evaluator never left its certified envelope. For an MTL task (forced switching,
+//! Def 4.18) a run goes the whole horizon and meets the task when the formula as written holds on it at
+//! the samples and at every sub-sample (Boolean semantics), every input was in the input set and the
+//! evaluator never left its envelope ([`Judging`]).
 
 use crate::model::hybrid::{FlowError, Hybrid};
 use crate::model::Location;
@@ -66,6 +69,23 @@ pub struct HybridRun {
     pub min_unsafe_distance: f64,
     /// Why the run fails the task, when it does.
     pub violation: Option<String>,
+    /// A formula task's robustness of the run sampled finer, when it was asked for ([`Judging`]).
+    pub robustness: Option<f64>,
+}
+
+/// How a run is judged.
+#[derive(Clone, Copy)]
+pub enum Judging<'a> {
+    /// Reach-avoid: the run ends at its first sample in Goal; Unsafe is checked at every sub-sample.
+    ReachAvoid,
+    /// An MTL task (forced switching, Def 4.18): the run goes the whole horizon and is judged by the
+    /// formula as written, at the samples and at every sub-sample (Boolean semantics), as
+    /// [`super::temporal`] judges a one-location run; `robust` also scores it (the falsifier's objective).
+    Formula {
+        task: &'a crate::property::TemporalTask,
+        judges: &'a super::temporal::Judges,
+        robust: bool,
+    },
 }
 
 /// The run of `image` from `x0` in location `initial` for `steps` samples on `fine`, the automaton
@@ -80,6 +100,33 @@ pub fn run_hybrid(
     x0: &[f64],
     visit: &mut dyn FnMut(&[f64]),
 ) -> HybridRun {
+    run_judged(
+        fine,
+        property,
+        initial,
+        steps,
+        image,
+        x0,
+        Judging::ReachAvoid,
+        visit,
+    )
+}
+
+/// [`run_hybrid`], judged as `judging` says.
+#[allow(clippy::too_many_arguments)]
+pub fn run_judged(
+    fine: &Hybrid,
+    property: &ReachAvoid,
+    initial: Location,
+    steps: usize,
+    image: &shared_types::image::Image<'_>,
+    x0: &[f64],
+    judging: Judging<'_>,
+    visit: &mut dyn FnMut(&[f64]),
+) -> HybridRun {
+    let formula = matches!(judging, Judging::Formula { .. });
+    let h = fine.period() * SUBSTEPS as f64;
+    let mut record = super::temporal::RunRecord::new(x0, h);
     let euclid = crate::geometry::Metric::euclidean(x0.len());
     let mut out = HybridRun {
         rejected: false,
@@ -87,6 +134,7 @@ pub fn run_hybrid(
         goal_step: None,
         min_unsafe_distance: f64::INFINITY,
         violation: None,
+        robustness: None,
     };
     let mut ctl = Controller::new(*image);
     let x32: Vec<f32> = x0.iter().map(|&v| v as f32).collect();
@@ -98,7 +146,7 @@ pub fn run_hybrid(
     let mut why: Option<String> = None;
     'run: for k in 0..=steps {
         visit(&x);
-        if property.goal.contains(&x) {
+        if !formula && property.goal.contains(&x) {
             out.goal_step = Some(k);
             break;
         }
@@ -139,7 +187,7 @@ pub fn run_hybrid(
             ));
             break;
         }
-        for _ in 0..SUBSTEPS {
+        for sub in 0..SUBSTEPS {
             let step = match fine.flow(loc, &x, &u64s) {
                 Ok(s) => s,
                 Err(e) => {
@@ -151,6 +199,14 @@ pub fn run_hybrid(
             out.events += step.events.len();
             x = step.x;
             loc = step.loc;
+            if formula {
+                if sub + 1 < SUBSTEPS {
+                    record.push_between((sub + 1) as f64 * fine.period(), &x);
+                } else {
+                    record.push_sample(&x);
+                }
+                continue;
+            }
             if let Some(us) = property.unsafe_region() {
                 let d = us.dist(&x, &euclid).value;
                 out.min_unsafe_distance = out.min_unsafe_distance.min(d);
@@ -161,8 +217,30 @@ pub fn run_hybrid(
             }
         }
     }
-    if why.is_none() && out.goal_step.is_none() {
-        why = Some(format!("Goal not reached within {steps} samples"));
+    match judging {
+        Judging::Formula {
+            task,
+            judges,
+            robust,
+        } if why.is_none() => match judges.judge(task, &record, robust) {
+            Ok((holds, holds_fine, robustness)) => {
+                out.robustness = robustness;
+                if !holds || !holds_fine {
+                    why = Some(format!(
+                        "the formula is {} at the samples and {} sampled finer",
+                        if holds { "true" } else { "FALSE" },
+                        if holds_fine { "true" } else { "FALSE" },
+                    ));
+                }
+            }
+            Err(e) => why = Some(format!("the run cannot be judged by the formula: {e}")),
+        },
+        Judging::Formula { .. } => {}
+        Judging::ReachAvoid => {
+            if why.is_none() && out.goal_step.is_none() {
+                why = Some(format!("Goal not reached within {steps} samples"));
+            }
+        }
     }
     out.violation = why;
     out
@@ -173,11 +251,24 @@ pub fn run_hybrid(
 pub fn monte_carlo_hybrid(
     plant: &Hybrid,
     property: &ReachAvoid,
+    formula: Option<&crate::property::TemporalTask>,
     initial: Location,
     steps: usize,
     bytes: &[u8],
     starts: &[Vec<f64>],
 ) -> Result<HybridReport, String> {
+    let judges = formula
+        .map(|tt| super::temporal::Judges::new(tt, crate::model::Plant::n(plant)))
+        .transpose()
+        .map_err(|e| e.to_string())?;
+    let judging = match (formula, &judges) {
+        (Some(task), Some(judges)) => Judging::Formula {
+            task,
+            judges,
+            robust: false,
+        },
+        _ => Judging::ReachAvoid,
+    };
     let image = shared_types::image::decode(bytes).map_err(|e| format!("image: {e}"))?;
     let fine = plant
         .resampled(plant.period() / SUBSTEPS as f64)
@@ -188,7 +279,16 @@ pub fn monte_carlo_hybrid(
     };
     for x0 in starts {
         rep.runs += 1;
-        let r = run_hybrid(&fine, property, initial, steps, &image, x0, &mut |_| {});
+        let r = run_judged(
+            &fine,
+            property,
+            initial,
+            steps,
+            &image,
+            x0,
+            judging,
+            &mut |_| {},
+        );
         if r.rejected {
             rep.rejected += 1;
             continue;
@@ -230,17 +330,19 @@ pub struct RunCheck {
 /// normalised and rounded, is the one stored; for a segment that ends with its table, the forced edge
 /// between them, and the next segment then starts at the reset of this one's re-simulated end); the run
 /// certified by the synthesiser's own code ([`crate::certify::internal::certify_internal`], or
-/// [`crate::certify::forced::certify_forced`] for forced switching). A run passes when the stored guard and threshold are
+/// [`crate::certify::forced::certify_forced`] for forced switching, or
+/// [`crate::certify::forced::certify_forced_formula`] when the task is the MTL `formula`). A run passes when the stored guard and threshold are
 /// the ones the certificate gives, every guard segment's rows reach its κ_f, and the stored radius is at
 /// most the selection radius of the recomputed δ times 1 + 16uκ(P̂) (as for a single location,
 /// [`super::feedforward::tolerance`]).
 pub fn recheck(
     plant: &Hybrid,
     property: &ReachAvoid,
+    formula: Option<&crate::property::TemporalTask>,
     steps: usize,
     bytes: &[u8],
 ) -> Result<Vec<RunCheck>, String> {
-    use crate::certify::forced::{certify_forced, ForcedSegment};
+    use crate::certify::forced::{certify_forced, certify_forced_formula, ForcedSegment};
     use crate::certify::internal::{certify_internal, InternalSegment};
     use crate::certify::{selection_radius, Loop, LoopConstants};
     use faer::Mat;
@@ -372,7 +474,11 @@ pub fn recheck(
                     invariant: plant.modes()[l].invariant.as_ref(),
                 })
                 .collect();
-            match certify_forced(&segs) {
+            let cert = match formula {
+                Some(tt) => certify_forced_formula(&segs, tt).map(|c| c.base),
+                None => certify_forced(&segs),
+            };
+            match cert {
                 Ok(c) => c.as_segments(&noms),
                 Err(e) => {
                     out.push(fail(e.to_string()));

@@ -154,6 +154,18 @@ impl RunRecord {
         self.fine.push(((k + 1) as f64 * self.h, next.clone()));
         next
     }
+    /// Records a state between samples, `tau` into the current period (a run stepped elsewhere, as
+    /// [`super::hybrid`] steps an automaton's flow).
+    pub fn push_between(&mut self, tau: f64, x: &[f64]) {
+        let k = self.coarse.len() - 1;
+        self.fine.push((k as f64 * self.h + tau, x.to_vec()));
+    }
+    /// Records the next sample's state.
+    pub fn push_sample(&mut self, x: &[f64]) {
+        let k = self.coarse.len();
+        self.coarse.push(x.to_vec());
+        self.fine.push((k as f64 * self.h, x.to_vec()));
+    }
     /// The run as traces over x1 … xn: at the samples, and sampled finer.
     pub fn traces(&self) -> Result<(Trace, Trace), crate::robustness::mtl::TraceError> {
         let n = self.coarse[0].len();
@@ -211,7 +223,7 @@ impl crate::geometry::Region for Membership {
 }
 
 /// The sets a run is judged with: by membership (every run) and by Euclidean signed distance (reported).
-struct Judges {
+pub struct Judges {
     boolean: Vec<NamedSet>,
     robust: Vec<NamedSet>,
 }
@@ -299,8 +311,29 @@ impl Verdict {
 }
 
 impl Judges {
+    /// A recorded run judged by the formula as written: whether it holds at the samples and sampled
+    /// finer (Boolean semantics), and, when `robust`, its robustness sampled finer (Euclidean signed
+    /// distances).
+    pub fn judge(
+        &self,
+        tt: &TemporalTask,
+        rec: &RunRecord,
+        robust: bool,
+    ) -> Result<(bool, bool, Option<f64>), String> {
+        let (tc, tf) = rec.traces().map_err(|e| e.to_string())?;
+        Ok((
+            formula_value(tt, &self.boolean, &tc)? > 0.0,
+            formula_value(tt, &self.boolean, &tf)? > 0.0,
+            if robust {
+                Some(formula_value(tt, &self.robust, &tf)?)
+            } else {
+                None
+            },
+        ))
+    }
+
     /// The formula's sets in the Euclidean metric of `n` states, by membership and by distance.
-    fn new(tt: &TemporalTask, n: usize) -> Result<Self, crate::property::TemporalError> {
+    pub fn new(tt: &TemporalTask, n: usize) -> Result<Self, crate::property::TemporalError> {
         let euclidean = crate::geometry::Metric::euclidean(n);
         Ok(Self {
             boolean: tt

@@ -377,3 +377,41 @@ fn a_location_invariant_is_kept_like_unsafe() {
     assert!(kept.segments[0].delta <= free.segments[0].delta);
     assert!(kept.is_certified());
 }
+
+/// Def 4.18 on the forced cart (`examples/hybrid-forced-cart-mtl.toml`): the planned run from Init's
+/// centre is certified for the formula with a radius below ρ(0) and below the formula's bound; the same
+/// segments under a speed limit the nominal breaks (forward settles at 2..4 m/s, the limit is 1 m/s)
+/// certify nothing, and neither does a formula about a set the run never visits.
+#[test]
+fn forced_run_certified_for_a_formula_and_refused_when_the_nominal_breaks_it() {
+    use host_compiler::synth::hybrid::{forced, HybridTask};
+    let path = format!(
+        "{}/../examples/hybrid-forced-cart-mtl.toml",
+        env!("CARGO_MANIFEST_DIR")
+    );
+    let src = std::fs::read_to_string(&path).unwrap();
+    let task =
+        |src: &str| HybridTask::new(host_compiler::spec::parse(src, "cart-mtl").unwrap()).unwrap();
+    let good = task(&src);
+    let run = forced::plan_forced(&good, &[0.0, 0.0]).expect("the centre's run is certified");
+    assert_eq!(run.locations.len(), 2);
+    let (l0, l1) = (run.locations[0], run.locations[1]);
+    let edges = vec![good
+        .plant
+        .edges()
+        .iter()
+        .position(|e| e.from == l0 && e.to == l1)
+        .expect("a forced edge forward → backward")];
+    let again = forced::certify_run(&good, &run.locations, &edges, &run.nominals).unwrap();
+    assert!(again.is_certified());
+    assert_eq!(again.delta_stored, run.certificate.delta_stored);
+    for src in [
+        src.replace("(x2 <= 3.5)", "(x2 <= 1.0)"),
+        src.replace("(x2 <= 3.5)", "F[0,8] (x1 <= -5)"),
+    ] {
+        let bad = task(&src);
+        let c = forced::certify_run(&bad, &run.locations, &edges, &run.nominals).unwrap();
+        assert!(!c.is_certified(), "{src}");
+        assert_eq!(c.delta_stored, 0.0);
+    }
+}

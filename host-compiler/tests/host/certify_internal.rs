@@ -24,8 +24,8 @@ fn example_4_25_run_is_certified() {
     // interior and boundary: every run switches once and meets the task.
     let bytes = image(&t, std::slice::from_ref(&run)).unwrap();
     // Re-proved from the bytes alone.
-    let rc =
-        host_compiler::verify::hybrid::recheck(&t.plant, &t.property, t.steps, &bytes).unwrap();
+    let rc = host_compiler::verify::hybrid::recheck(&t.plant, &t.property, None, t.steps, &bytes)
+        .unwrap();
     eprintln!("{rc:?}");
     assert!(rc.iter().all(|r| r.ok), "{rc:?}");
     // An enlarged stored radius is refused.
@@ -33,11 +33,20 @@ fn example_4_25_run_is_certified() {
     big.certificate.delta_stored *= 1.01;
     let bytes_big = image(&t, std::slice::from_ref(&big)).unwrap();
     let rc_big =
-        host_compiler::verify::hybrid::recheck(&t.plant, &t.property, t.steps, &bytes_big).unwrap();
+        host_compiler::verify::hybrid::recheck(&t.plant, &t.property, None, t.steps, &bytes_big)
+            .unwrap();
     assert!(!rc_big[0].ok, "{rc_big:?}");
     let starts = ball_starts(&t, &run, 40, 40, 7);
-    let rep =
-        monte_carlo_hybrid(&t.plant, &t.property, t.initial, t.steps, &bytes, &starts).unwrap();
+    let rep = monte_carlo_hybrid(
+        &t.plant,
+        &t.property,
+        None,
+        t.initial,
+        t.steps,
+        &bytes,
+        &starts,
+    )
+    .unwrap();
     eprintln!("{rep:?}");
     assert_eq!(rep.violations, 0, "{:?}", rep.first_violation);
     // Boundary starts are 1e-6 inside the stored radius: the f32 selection may refuse a few.

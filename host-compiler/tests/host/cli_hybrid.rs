@@ -106,6 +106,30 @@ fn hybrid_forced_synth_then_verify() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// An MTL task with forced switching (Def 4.18) on the cart: the run is certified for the formula (its
+/// segments bound by it), re-proved from the bytes by the same certificate and verified by the formula as
+/// written; `verify` and its falsifier agree; an enlarged radius is refused.
+#[test]
+fn hybrid_forced_mtl_synth_then_verify() {
+    let (dir, spec, out) = synth_one_run("forced-mtl", "hybrid-forced-cart-mtl.toml", 64);
+    let cert: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("certificate.json")).unwrap())
+            .unwrap();
+    assert_eq!(cert["switching"], "forced");
+    let segs = cert["runs"][0]["certificate"]["segments"]
+        .as_array()
+        .unwrap();
+    assert!(
+        segs.iter()
+            .any(|s| s["binding"] == "the formula (Def 4.18)"),
+        "{segs:?}"
+    );
+    assert_eq!(cert["verify"]["violations"], 0, "{}", cert["verify"]);
+    let img = out.join("controller.img");
+    verify_attack_and_enlarged_radius(&dir, &spec, &img);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 /// `verify` re-proves the image's one run from its bytes and runs it on the exact hybrid flow (exit 0);
 /// the falsifier on that flow finds no violation; the run's stored radius enlarged by 1 % (the CRC made
 /// right again) is not re-proved (exit 1).

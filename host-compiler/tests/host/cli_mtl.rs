@@ -145,8 +145,9 @@ fn mtl_refusals_name_the_reason() {
     std::fs::create_dir_all(&dir).unwrap();
     let cases = [
         (
+            // General switching with MTL is open in the text (§4.2.2); forced switching is synthesised.
             example("hybrid-internal-4-25.toml") + "\n[mtl]\nformula = \"F Goal\"\n",
-            "hybrid plant",
+            "internal switching",
         ),
         (
             example("planar-vehicle-waypoints.toml").replace(

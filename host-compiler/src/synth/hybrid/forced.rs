@@ -15,7 +15,7 @@
 //! shipped end, so the run is continuous across the switch as the certificate requires.
 
 use super::{gen_problem, shipped_nominal, HybridRun, HybridTask};
-use crate::certify::forced::{certify_forced, ForcedSegment};
+use crate::certify::forced::{certify_forced, certify_forced_formula, ForcedSegment};
 use crate::certify::internal::InternalCertificate;
 use crate::model::hybrid::EdgeKind;
 use crate::model::Location;
@@ -43,6 +43,10 @@ pub fn plan_forced(task: &HybridTask, x0: &[f64]) -> Result<HybridRun, String> {
     let h = task.plant.period();
     let mut cands = Vec::new();
     for f in HORIZONS {
+        // An MTL task is judged over the whole horizon, so its runs' tables cover all of T.
+        if task.formula.is_some() && f < 1.0 {
+            continue;
+        }
         let total = ((f * task.problem.horizon / h).round() as usize).clamp(2, task.steps);
         cands.push(Candidate {
             locations: vec![l0],
@@ -125,8 +129,8 @@ fn plan_schedule(task: &HybridTask, x0: &[f64], c: &Candidate) -> Result<HybridR
     })
 }
 
-/// Theorem 4.17 for a run of segments in `locations`, joined by `edges`, as the hybrid pipeline stores
-/// a run's certificate ([`ForcedCertificate::as_segments`]).
+/// Theorem 4.17 for a run of segments in `locations`, joined by `edges` (Def 4.18 when the task is an MTL
+/// formula), as the hybrid pipeline stores a run's certificate ([`ForcedCertificate::as_segments`]).
 pub fn certify_run(
     task: &HybridTask,
     locations: &[Location],
@@ -145,6 +149,17 @@ pub fn certify_run(
             invariant: task.plant.modes()[l].invariant.as_ref(),
         })
         .collect();
-    let cert = certify_forced(&segs).map_err(|e| e.to_string())?;
-    Ok(cert.as_segments(nominals))
+    let Some(tt) = &task.formula else {
+        let cert = certify_forced(&segs).map_err(|e| e.to_string())?;
+        return Ok(cert.as_segments(nominals));
+    };
+    // An MTL task (Def 4.18): each segment's radius is min(t, its own δ); name the formula where it binds.
+    let cert = certify_forced_formula(&segs, tt).map_err(|e| e.to_string())?;
+    let mut out = cert.base.as_segments(nominals);
+    for (seg, &bound) in out.segments.iter_mut().zip(&cert.formula_bound) {
+        if bound {
+            seg.binding = "the formula (Def 4.18)";
+        }
+    }
+    Ok(out)
 }
