@@ -1,6 +1,7 @@
 //! Hybrid runs on the target. Example 4.25 (§4.2.2): a run across the internal edge x₁ = 0, certified
 //! by `certify::internal`, in an image with a guard exit. The forced cart (§4.2.1): a run that switches
-//! from `forward` to `backward` by its table, certified by `certify::forced`. The emulated Cortex-M4F
+//! from `forward` to `backward` by its table, certified by `certify::forced`, and the same cart with an
+//! MTL task (Def 4.18, `certify::forced::certify_forced_formula`). The emulated Cortex-M4F
 //! runs each from 50 initial states in the run's ball, against the hybrid plant simulated on the host
 //! with its exact flow (events found between samples, [`host_compiler::model::hybrid::Hybrid::flow`]).
 //! Every run must switch once, reach Goal within T, never enter Unsafe (at every sample and at 8
@@ -54,7 +55,8 @@ fn setup(
 }
 
 /// Runs the image on the target from each of 50 starts in the run's ball (seeded by `salt`): per
-/// sample Goal first, then the exchange (status Ok, inputs bit for bit with the host evaluator, the
+/// sample Goal first (for a reach-avoid task; an MTL task's runs go the whole horizon and are judged by
+/// the formula as written at the end, at the samples and the sub-samples), then the exchange (status Ok, inputs bit for bit with the host evaluator, the
 /// reply's location the host evaluator's), `switch` with the reply (a forced switch it applies to the
 /// state and location), |u| ≤ `u_max`, and the exact flow over [`SUBSTEPS`] sub-periods with Unsafe
 /// checked. `switch` gets the run index and sample.
@@ -74,6 +76,10 @@ fn run_on_target(
         .expect("the automaton at a finer period");
     let goal = &task.property.goal;
     let unsafe_set = task.property.unsafe_region().expect("Unsafe");
+    let formula = task.formula.as_ref();
+    let judges = formula.map(|tt| {
+        host_compiler::verify::temporal::Judges::new(tt, x0_dim(task)).expect("the formula's sets")
+    });
     let starts = ball_starts(
         task,
         run,
@@ -87,8 +93,9 @@ fn run_on_target(
         let mut host = HostEvaluator::new(img);
         let (mut x, mut loc) = (x0.clone(), task.initial);
         let (mut events, mut cost, mut reached) = (0usize, 0u32, None);
+        let mut record = host_compiler::verify::temporal::RunRecord::new(x0, task.plant.period());
         for k in 0..=task.steps {
-            if goal.contains(&x) {
+            if formula.is_none() && goal.contains(&x) {
                 reached = Some(k);
                 break;
             }
@@ -114,26 +121,50 @@ fn run_on_target(
                 u.iter().all(|v| v.abs() <= u_max),
                 "run {r}: u = {u:?} beyond {u_max} at step {k}"
             );
-            for _ in 0..SUBSTEPS {
+            for sub in 0..SUBSTEPS {
                 let step = fine
                     .flow(loc, &x, &u)
                     .unwrap_or_else(|e| panic!("run {r}: {e}"));
                 events += step.events.len();
                 x = step.x;
                 loc = step.loc;
+                if formula.is_some() {
+                    if sub + 1 < SUBSTEPS {
+                        record.push_between((sub + 1) as f64 * fine.period(), &x);
+                    } else {
+                        record.push_sample(&x);
+                    }
+                    continue;
+                }
                 assert!(
                     !unsafe_set.contains(&x),
                     "run {r}: in Unsafe after step {k}: {x:?}"
                 );
             }
         }
-        let goal = reached
-            .unwrap_or_else(|| panic!("run {r} from {x0:?} never reached Goal; ends at {x:?}"));
+        let goal = match (formula, &judges) {
+            (Some(tt), Some(j)) => {
+                let (holds, holds_fine, _) =
+                    j.judge(tt, &record, false).expect("the run is judged");
+                assert!(
+                    holds && holds_fine,
+                    "run {r} from {x0:?}: the formula is {holds} at the samples and {holds_fine} sampled finer"
+                );
+                task.steps
+            }
+            _ => reached
+                .unwrap_or_else(|| panic!("run {r} from {x0:?} never reached Goal; ends at {x:?}")),
+        };
         let exit = q.shutdown().unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(exit.code, Some(0), "run {r}: firmware exit");
         out.push(TargetRun { goal, events, cost });
     }
     out
+}
+
+/// The state dimension of the task's automaton.
+fn x0_dim(task: &HybridTask) -> usize {
+    host_compiler::model::Plant::n(&task.plant)
 }
 
 #[test]
@@ -162,7 +193,23 @@ fn hybrid_example_4_25_meets_the_spec_on_the_target_from_50_initial_states() {
 /// event by itself.
 #[test]
 fn hybrid_forced_cart_meets_the_spec_on_the_target_from_50_initial_states() {
-    let (task, run, bytes, elf) = setup("hybrid-forced-cart.toml", "hybrid_forced_cart", |task| {
+    forced_cart_on_target("hybrid-forced-cart.toml", "hybrid_forced_cart", 0x420);
+}
+
+/// The same cart with its task an MTL formula (Def 4.18): every run is judged by the formula as
+/// written over the whole horizon, at the samples and the sub-samples.
+#[test]
+fn hybrid_forced_cart_mtl_meets_the_formula_on_the_target_from_50_initial_states() {
+    forced_cart_on_target(
+        "hybrid-forced-cart-mtl.toml",
+        "hybrid_forced_cart_mtl",
+        0x418,
+    );
+}
+
+/// A forced-switching cart example planned from Init's centre and run on the target from 50 starts.
+fn forced_cart_on_target(example: &str, tag: &str, salt: u64) {
+    let (task, run, bytes, elf) = setup(example, tag, |task| {
         plan_forced(task, &[0.0, 0.0]).expect("a run from Init's centre")
     });
     assert_eq!(run.locations.len(), 2, "the run switches once");
@@ -173,7 +220,7 @@ fn hybrid_forced_cart_meets_the_spec_on_the_target_from_50_initial_states() {
         &run,
         &bytes,
         &elf,
-        0x420,
+        salt,
         0.5,
         |r, k, reply, x, loc| {
             let want = reply.location as usize;
@@ -201,9 +248,16 @@ fn hybrid_forced_cart_meets_the_spec_on_the_target_from_50_initial_states() {
         assert_eq!(switched[r], vec![switch_at], "run {r}: switches");
     }
     println!(
-        "HIL forced cart: {RUNS} runs switched at sample {switch_at} and met the spec (Goal by sample {} of {}); δ = {:.4}, image {} bytes",
-        runs.iter().map(|t| t.goal).max().unwrap_or(0),
-        task.steps,
+        "HIL {tag}: {RUNS} runs switched at sample {switch_at} and met the task ({}); δ = {:.4}, image {} bytes",
+        if task.formula.is_some() {
+            format!("the formula over all {} samples", task.steps)
+        } else {
+            format!(
+                "Goal by sample {} of {}",
+                runs.iter().map(|t| t.goal).max().unwrap_or(0),
+                task.steps
+            )
+        },
         run.delta(),
         bytes.len()
     );

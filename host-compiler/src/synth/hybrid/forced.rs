@@ -6,7 +6,8 @@
 //! ℓ₀, and for every forced edge ℓ₀ → ℓ₁ (whose guard holds the switching state) and every switching
 //! fraction of [`SWITCH_FRACTIONS`], the run that switches at that sample. Each is generated over the
 //! whole schedule at once by the SCP generator ([`crate::trajectory::generate::Schedule`]: the dynamics, the
-//! gain and the tube metric of each step's location) over the horizons of [`HORIZONS`], split into its
+//! gain and the tube metric of each step's location) over the horizons of [`HORIZONS`] (for an MTL task
+//! the whole horizon only: the formula is judged over all of T, so the table must cover it), split into its
 //! segments (the next segment starts at the reset of the last state, the identity for the resets the task
 //! accepts) and certified backwards by [`crate::certify::forced`]. The run with the largest certified δ
 //! is kept.
