@@ -50,6 +50,10 @@ pub const SHIPPED_IMAGES: &[(&str, &str)] = &[
     ("hybrid_4_25", "examples/hybrid-internal-4-25.toml"),
     ("hybrid_bench", "examples/hybrid-internal-4-25.toml"),
     ("hybrid_forced_cart", "examples/hybrid-forced-cart.toml"),
+    (
+        "hybrid_forced_cart_mtl",
+        "examples/hybrid-forced-cart-mtl.toml",
+    ),
 ];
 
 /// A cargo command in a board's folder (cargo reads the `.cargo/config.toml` there and in `firmware/`),

@@ -538,7 +538,7 @@ impl Target for HybridTarget<'_> {
             },
             _ => super::hybrid::Judging::ReachAvoid,
         };
-        let run = super::hybrid::run_judged(
+        let run = super::hybrid::run_hybrid(
             &self.fine,
             t.property,
             t.initial,

@@ -89,32 +89,11 @@ pub enum Judging<'a> {
 }
 
 /// The run of `image` from `x0` in location `initial` for `steps` samples on `fine`, the automaton
-/// resampled at [`SUBSTEPS`] sub-periods per period (module doc); `visit` sees the state at every
-/// sample the run reaches (x0 first). A flow the automaton cannot continue fails the run.
-pub fn run_hybrid(
-    fine: &Hybrid,
-    property: &ReachAvoid,
-    initial: Location,
-    steps: usize,
-    image: &shared_types::image::Image<'_>,
-    x0: &[f64],
-    visit: &mut dyn FnMut(&[f64]),
-) -> HybridRun {
-    run_judged(
-        fine,
-        property,
-        initial,
-        steps,
-        image,
-        x0,
-        Judging::ReachAvoid,
-        visit,
-    )
-}
-
-/// [`run_hybrid`], judged as `judging` says.
+/// resampled at [`SUBSTEPS`] sub-periods per period, judged as `judging` says (module doc); `visit` sees
+/// the state at every sample the run reaches (x0 first). A flow the automaton cannot continue fails the
+/// run.
 #[allow(clippy::too_many_arguments)]
-pub fn run_judged(
+pub fn run_hybrid(
     fine: &Hybrid,
     property: &ReachAvoid,
     initial: Location,
@@ -279,7 +258,7 @@ pub fn monte_carlo_hybrid(
     };
     for x0 in starts {
         rep.runs += 1;
-        let r = run_judged(
+        let r = run_hybrid(
             &fine,
             property,
             initial,
