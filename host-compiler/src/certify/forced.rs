@@ -269,9 +269,11 @@ const FORMULA_BISECTION: usize = 40;
 /// ball then stays, at the samples of segment i, within cᵢrᵢ of the nominal in P₀, and between samples
 /// within cᵢ(γᵢrᵢ + φᵢ‖fₖ‖_{Pᵢ} + φᵢβᵢε̄ᵢ) of the sample before; the formula holds for it when ρ(0) of the
 /// concatenated nominal exceeds maxᵢ cᵢrᵢ (the samples) and the tube's lower bound
-/// ([`crate::robustness::mtl::TubeFormula`]) with those margins is positive (between samples). Both are
-/// monotone in t; the largest admissible t is found on a grid and refined by bisection, and the run is
-/// certified from the ball of radius r₀. The input set is each segment's Theorem 4.7 part (4.15).
+/// ([`crate::robustness::mtl::TubeFormula`]) with those margins is positive (between samples). Both
+/// margins grow with t; the largest admitted t is sought on a grid and refined by bisection, keeping only
+/// admitted points, and the run is certified from the ball of radius r₀. The input set is each segment's
+/// Theorem 4.7 part (4.15). The concatenated run puts the switching sample in the next segment, which is
+/// the state itself only for identity resets: an edge with another reset is refused.
 pub fn certify_forced_formula(
     segments: &[ForcedSegment<'_>],
     task: &crate::property::TemporalTask,
@@ -279,6 +281,15 @@ pub fn certify_forced_formula(
     use crate::robustness::mtl::{Margins, Trace, TubeFormula};
     let formula = |e: String| ForcedError::Formula(e);
     let last = check_chain(segments)?;
+    if let Some(i) = segments
+        .iter()
+        .position(|s| s.switch.is_some_and(|e| !e.reset.is_identity()))
+    {
+        return Err(formula(format!(
+            "segment {i}'s edge resets the state: the formula is judged on one state trajectory, so only \
+             identity resets are taken"
+        )));
+    }
     let guarded = guarded_unsafe(segments)?;
     let lp_of = |i: usize| lp_with_invariant(segments, &guarded, i);
     let tl = crate::certify::temporal::TemporalLoop::new(task, &segments[0].lp)
