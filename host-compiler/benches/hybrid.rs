@@ -3,7 +3,8 @@
 //! 5.6's cover grown over Init (Algorithm 1 over runs, δε = 0.4 as the text): the coverage lower bound at
 //! 99 % confidence, the trajectories, the wall time of the whole synthesis on this machine, and its Monte
 //! Carlo against the exact hybrid flow (which must find no violation); the same for the forced-switching
-//! Example 4.20 and the cart example (`coverage_hybrid_4_20`, `…_forced_cart`).
+//! Example 4.20 and the cart example (`coverage_hybrid_4_20`, `…_forced_cart`), and the cart with its task
+//! an MTL formula (Def 4.18, `…_forced_cart_mtl`; its Monte Carlo judges the formula).
 //!
 //! A synthesis is seconds to minutes of deterministic (seeded) work, so it is timed directly.
 
@@ -51,11 +52,17 @@ fn main() {
     // forced switching: Example 4.20 and the cart.
     let t420 = task("hybrid-forced-4-20.toml");
     let tcart = task("hybrid-forced-cart.toml");
+    let tmtl = task("hybrid-forced-cart-mtl.toml");
     for (name, task, tag) in [
         ("Example 5.6", &t55, "5_6"),
         ("Example 4.25", &t425, "4_25"),
         ("Example 4.20", &t420, "4_20"),
         ("The forced cart", &tcart, "forced_cart"),
+        (
+            "The forced cart with its MTL task",
+            &tmtl,
+            "forced_cart_mtl",
+        ),
     ] {
         let t = Instant::now();
         let s = match synthesize_hybrid(task, &HybridOptions::default()) {
