@@ -369,10 +369,13 @@ impl Certificate {
         if d.is_nan() {
             return Binding::NotComputed;
         }
-        if d > 0.0 && (self.r_crit >= d || self.r_crit.is_nan()) {
+        // With a sampled-loop mismatch, δ = d − `accumulated` stands in for r_crit when it is positive.
+        let by_sum = self.accumulated > 0.0 && d > self.accumulated;
+        if d > 0.0 && (self.r_crit >= d || self.r_crit.is_nan()) && !by_sum {
             return Binding::RCrit {
                 r_crit: self.r_crit,
                 parts_min: d,
+                accumulated: self.accumulated,
             };
         }
         if self.delta_goal == d {
@@ -394,8 +397,14 @@ pub enum Binding {
     Unsafe(f64),
     /// δ_Input (4.15) with the rounding margin.
     Input(f64),
-    /// The three parts are positive, but the critical radius r_crit (3.83) is not below their minimum.
-    RCrit { r_crit: f64, parts_min: f64 },
+    /// The three parts are positive, but the critical radius r_crit (3.83) is not below their minimum,
+    /// nor (with a sampled-loop mismatch) is the disturbance accumulated over the table
+    /// ([`Certificate::accumulated`], 0 without one).
+    RCrit {
+        r_crit: f64,
+        parts_min: f64,
+        accumulated: f64,
+    },
     /// A part could not be computed (a non-finite distance on the nominal).
     NotComputed,
 }
@@ -406,7 +415,19 @@ impl std::fmt::Display for Binding {
             Binding::Goal(v) => write!(f, "δ_Goal = {v:.3e}"),
             Binding::Unsafe(v) => write!(f, "δ_Unsafe = {v:.3e} (between samples)"),
             Binding::Input(v) => write!(f, "δ_Input = {v:.3e}"),
-            Binding::RCrit { r_crit, parts_min } => write!(
+            Binding::RCrit {
+                r_crit,
+                parts_min,
+                accumulated,
+            } if *accumulated > 0.0 => write!(
+                f,
+                "min(δ_Goal, δ_Unsafe, δ_Input) = {parts_min:.3e} is not above the disturbance the \
+                 sampled loop accumulates over the table, {accumulated:.3e}, nor above r_crit = \
+                 {r_crit:.3e}"
+            ),
+            Binding::RCrit {
+                r_crit, parts_min, ..
+            } => write!(
                 f,
                 "r_crit = {r_crit:.3e}, not below min(δ_Goal, δ_Unsafe, δ_Input) = {parts_min:.3e}"
             ),

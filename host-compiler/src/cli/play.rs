@@ -1,6 +1,7 @@
 //! `host-compiler play SPEC`: serves the game (`crate::play`) on 127.0.0.1 and prints its address;
-//! accepted runs are written into `--out`, where `synth --import DIR` reads them. A hybrid spec (internal
-//! switching) plays on its automaton and its runs are certified along its location path.
+//! accepted runs are written into `--out`, where `synth --import DIR` reads them. A hybrid spec plays on
+//! its automaton (with forced switching the player chooses the location); a feedback-linearizable spec
+//! plays the nonlinear plant under the linearising law (`crate::play::played`).
 
 use super::{task_of, BadInput, Exit, Outcome};
 use std::path::PathBuf;

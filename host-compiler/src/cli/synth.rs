@@ -133,14 +133,14 @@ pub fn run(a: &SynthArgs) -> Outcome {
                  generated trajectories is)"
             )))
         };
-        if !a.imports.is_empty() {
-            return refuse("--import");
-        }
         if problem.synthesis.mode == crate::spec::ControllerMode::Pwa {
             return refuse("[synthesis] mode = \"pwa\"");
         }
     }
-    let imports = load_imports(a, &problem)?;
+    // A feedback-linearizable plant's task is the linear model in ξ; its recordings are in the task's
+    // coordinates (x0 = ξ(0), rows the reference of w = K ξ + v), which `play` writes.
+    let task = task_of(problem)?;
+    let imports = load_imports(a, &task.problem)?;
     // Ctrl-C: the first stops the growth loop cleanly (what is certified so far is verified, written
     // and reported); a second one ends the process at once.
     let cancel = Arc::new(AtomicBool::new(false));
@@ -171,7 +171,6 @@ pub fn run(a: &SynthArgs) -> Outcome {
         }),
         ..SynthOptions::default()
     };
-    let task = task_of(problem)?;
     let problem = &task.problem;
     let s = synthesize(&task, &opts).map_err(synth_failure)?;
     if problem.synthesis.mode == crate::spec::ControllerMode::Pwa {

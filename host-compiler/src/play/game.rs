@@ -16,14 +16,15 @@
 //! already in that directory when the game starts are certified again and join the cover.
 //!
 //! # Plants
-//! The game asks only [`Played`] of the task: a one-location task (any class `task::Task::new` builds;
-//! runs certified by Theorem 4.7 through [`crate::cover::certify_recording`]) or a hybrid automaton with
-//! internal switching (`synth::hybrid::HybridTask`, §4.2.2: the plant stepped by its exact flow across
-//! events, u = K_ℓ x + v with the gain of the location it is in; runs replayed, split at their events
-//! and certified along the task's location path by Theorem 4.24, the path `synth --import` takes for
-//! hybrid specs, [`crate::synth::hybrid::import`]). Each session keeps its location; the answers report
-//! it (index and name) when the plant has more than one. The balls over Init are in the initial
-//! location's metric; a hybrid run's tube is not drawn (its segments' metrics differ).
+//! The game asks only [`Played`] of the task (its module doc says, per plant class, how a period is
+//! stepped and how a run is certified): a one-location task, linear affine or feedback linearizable
+//! (the page draws ξ, the server flows the nonlinear plant); a hybrid automaton with internal switching
+//! (runs split at their events and certified along the task's location path, Theorem 4.24); or one with
+//! forced switching, where the player chooses the location (`"location"` in a step) and each row is
+//! recorded with it (Theorem 4.17, Def 4.18 for a formula, whose runs go on to T). Each session keeps its
+//! location; the answers report it (index and name) when the plant has more than one. The balls over
+//! Init are in the initial location's metric; a hybrid run's tube is not drawn (its segments' metrics
+//! differ).
 
 use super::played::Played;
 use crate::certify::{Binding, Certificate};
@@ -125,7 +126,13 @@ struct Session {
     player: String,
     loc: crate::model::Location,
     x0: Vec<f64>,
+    /// The states at the samples in the task's coordinates (ξ for a feedback-linearizable plant).
     xs: Vec<Vec<f64>>,
+    /// The plant's own state now (the last of `xs` but for a feedback-linearizable plant, whose
+    /// zero-dynamics states the task does not track).
+    plant_x: Vec<f64>,
+    /// The location of each row (forced switching records it).
+    locs: Vec<crate::model::Location>,
     v: Vec<Vec<f64>>,
     u: Vec<Vec<f64>>,
     /// Euclidean depth in Goal at the last sample, once Goal is entered.
@@ -362,8 +369,23 @@ impl Game {
             "locations": locations,
             "location_names": (0..locations).map(|l| t.location_name(l)).collect::<Vec<_>>(),
             "initial_location": t.initial(),
+            // Forced switching: the edges the player can take (a key per target location).
+            "switches": t.switches().iter().map(|&(f, to)| json!({
+                "from": f, "to": to, "from_name": t.location_name(f), "to_name": t.location_name(to),
+            })).collect::<Vec<_>>(),
+            "formula": problem.mtl.clone(),
+            "law": if t.maps().is_some() {
+                "w = Kξ + v, u = λ(x)(w − α(x)) on the nonlinear plant (feedback linearised)"
+            } else {
+                "u = K̂x + v"
+            },
             "projection": [a, b],
-            "labels": [format!("x{}", a + 1), format!("x{}", b + 1)],
+            // A feedback-linearizable task's coordinates are ξ (the plant's states `FlMaps::xi_states`).
+            "labels": if t.maps().is_some() {
+                [format!("ξ{}", a + 1), format!("ξ{}", b + 1)]
+            } else {
+                [format!("x{}", a + 1), format!("x{}", b + 1)]
+            },
             "view": view,
             "raster": RASTER,
             "goal": raster(Some(property.goal.as_ref())),
@@ -520,6 +542,12 @@ impl Game {
         }
         let id = self.next_session;
         self.next_session += 1;
+        let plant_x = self.played.plant_start(&x0);
+        let preview = self.preview(
+            self.played.initial(),
+            &plant_x,
+            &vec![0.0; self.played.plant().m()],
+        );
         self.sessions.insert(
             id,
             Session {
@@ -527,6 +555,8 @@ impl Game {
                 loc: self.played.initial(),
                 x0: x0.clone(),
                 xs: vec![x0.clone()],
+                plant_x,
+                locs: Vec::new(),
                 v: Vec::new(),
                 u: Vec::new(),
                 goal_depth: None,
@@ -536,7 +566,7 @@ impl Game {
         Ok(json!({
             "session": id,
             "x0": x0,
-            "preview": self.preview(self.played.initial(), &x0, &vec![0.0; self.played.plant().m()]),
+            "preview": preview,
         }))
     }
 
@@ -545,6 +575,10 @@ impl Game {
     /// answer has the new states (whole state vectors), the last applied input and reference, whether the
     /// input was clipped, the location when the plant has several, the run's status, the held-input
     /// preview, and, when the run ended, its certificate.
+    ///
+    /// For an automaton with forced switching, `"location": name` asks for that location from this
+    /// sample on: the switch is taken when the state is in the forced edge's guard, and otherwise the
+    /// answer's `switch` says why it waits (the run goes on in its location).
     pub fn step(&mut self, body: &Value) -> Result<Value, PlayError> {
         let obj = body
             .as_object()
@@ -570,7 +604,26 @@ impl Game {
                 })? as usize,
         };
         let finish = obj.get("finish").and_then(Value::as_bool).unwrap_or(false);
+        let want =
+            match obj.get("location") {
+                None | Some(Value::Null) => None,
+                Some(Value::String(name)) if self.played.forced() => Some(name.clone()),
+                Some(Value::String(_)) => return Err(bad(
+                    "`location` is the discrete input of an automaton with forced switching; this \
+                     plant's location is not the player's to choose",
+                )),
+                Some(_) => return Err(bad("`location` must be a location's name (a string)")),
+            };
+        if let Some(name) = &want {
+            if !(0..self.played.plant().locations()).any(|l| self.played.location_name(l) == name) {
+                return Err(bad(format!(
+                    "`location`: `{}` is not a location of the automaton",
+                    crate::text::excerpt(name)
+                )));
+            }
+        }
         let horizon = self.played.steps();
+        let formula = self.played.formula();
         let played = &self.played;
         let plant = played.plant();
         let property = played.property();
@@ -585,6 +638,18 @@ impl Game {
         let first = s.xs.len();
         let mut clipped = false;
         let mut ending = None;
+        // A forced switch asked for: taken now when the state is in the edge's guard.
+        let mut switch = Value::Null;
+        if let Some(name) = want.filter(|n| played.location_name(s.loc) != n) {
+            let x = s.xs.last().expect("a session holds x0");
+            switch = match played.switch(s.loc, &name, x) {
+                Ok(l) => {
+                    s.loc = l;
+                    json!({"done": true, "to": name, "t": s.v.len() as f64 * plant.period()})
+                }
+                Err(why) => json!({"done": false, "to": name, "reason": why}),
+            };
+        }
         for _ in 0..steps {
             if s.v.len() >= horizon {
                 ending = Some(Ending::Timeout);
@@ -594,16 +659,22 @@ impl Game {
             let (u, vv, c) = applied(played.K(s.loc), &property.input, &x, &v);
             clipped |= c;
             let mut hit = false;
-            let advanced = played.advance(s.loc, &x, &u, &mut |y| {
-                hit |= unsafe_set.is_some_and(|us| us.contains(y))
-            });
-            let Ok((loc, xn)) = advanced else {
+            let advanced = played.advance(
+                s.loc,
+                &s.plant_x,
+                &u,
+                Some(&mut |y| hit |= unsafe_set.is_some_and(|us| us.contains(y))),
+            );
+            let Ok((loc, pxn)) = advanced else {
                 // A period the exact flow cannot step (Zeno, undecided) is not played: the run ends at
                 // the last sample it reached and is certified as it is.
                 ending = Some(Ending::Finished);
                 break;
             };
+            s.locs.push(s.loc);
             s.loc = loc;
+            let xn = played.observe(&pxn);
+            s.plant_x = pxn;
             hit |= unsafe_set.is_some_and(|us| us.contains(&xn));
             let depth = goal.contains(&xn).then(|| goal.depth(&xn, &euclid).value);
             s.v.push(vv);
@@ -618,6 +689,8 @@ impl Game {
                 break;
             }
             match (depth, s.goal_depth) {
+                // A formula is judged over the whole horizon: its runs do not stop in Goal.
+                _ if formula => {}
                 (Some(d), Some(prev)) if d <= prev => {
                     ending = Some(Ending::Goal);
                     break;
@@ -650,9 +723,12 @@ impl Game {
             "status": ending.map_or("running", Ending::name),
         });
         self.locate(&mut answer, s.loc);
+        if !switch.is_null() {
+            answer["switch"] = switch;
+        }
         match ending {
             None => {
-                answer["preview"] = json!(self.preview(s.loc, &x, &v));
+                answer["preview"] = json!(self.preview(s.loc, &s.plant_x, &v));
             }
             Some(e) => {
                 let result = self.end(id, e)?;
@@ -683,23 +759,23 @@ impl Game {
         }
     }
 
-    /// Where the held input leads from `x` ([`PREVIEW_STEPS`] samples; across events for a hybrid plant).
+    /// Where the held input leads from the plant state `x` ([`PREVIEW_STEPS`] samples, in the task's
+    /// coordinates; across events for a hybrid plant).
     fn preview(&self, loc: usize, x: &[f64], v: &[f64]) -> Vec<Vec<f64>> {
         let (mut loc, mut x) = (loc, x.to_vec());
         let mut out = Vec::with_capacity(PREVIEW_STEPS);
         let p = &self.played;
         for _ in 0..PREVIEW_STEPS {
-            let (u, _, _) = applied(p.K(loc), &p.property().input, &x, v);
-            let step = match p {
-                Played::Hybrid { task, .. } => task.plant.flow(loc, &x, &u).map(|s| (s.loc, s.x)),
-                Played::One { .. } => Ok((loc, p.plant().step(loc, &x, &u))),
+            let seen = p.observe(&x);
+            let (u, _, _) = applied(p.K(loc), &p.property().input, &seen, v);
+            let Ok((l, y)) = p.advance(loc, &x, &u, None) else {
+                break;
             };
-            let Ok((l, y)) = step else { break };
             if y.iter().any(|v| !v.is_finite()) {
                 break;
             }
             (loc, x) = (l, y);
-            out.push(x.clone());
+            out.push(p.observe(&x));
         }
         out
     }
@@ -718,12 +794,20 @@ impl Game {
         }
         let number = self.next_number;
         self.next_number += 1;
+        // A forced run records each row's location (the discrete input the player chose).
+        let names: Option<Vec<&str>> = self.played.forced().then(|| {
+            s.locs
+                .iter()
+                .map(|&l| self.played.location_name(l))
+                .collect()
+        });
         let text = recording_text(
             &s.player,
             &when,
             ending,
             &s.x0,
             &s.v,
+            names.as_deref(),
             self.played.plant().period(),
         );
         let file = format!("run-{number:04}-{}.csv", slug(&s.player));
@@ -970,7 +1054,16 @@ fn reason(c: &Certificate, ending: Ending, ended_at: f64, h: f64) -> String {
         failing.push(input(c.delta_input));
     }
     if failing.is_empty() {
-        failing.push(c.binding().to_string());
+        failing.push(format!(
+            "{} (δ_Goal = {:.3e} at {}, δ_Unsafe = {:.3e} at {}, δ_Input = {:.3e} at {})",
+            c.binding(),
+            c.delta_goal,
+            at(c.k_star),
+            c.delta_unsafe_intersample,
+            at(c.k_unsafe),
+            c.delta_input,
+            at(c.k_input)
+        ));
     }
     format!("{ended}refused: {}", failing.join("; "))
 }
@@ -992,6 +1085,7 @@ fn recording_text(
     ending: Ending,
     x0: &[f64],
     v: &[Vec<f64>],
+    locations: Option<&[&str]>,
     h: f64,
 ) -> String {
     use std::fmt::Write;
@@ -1005,10 +1099,14 @@ fn recording_text(
     let head: Vec<String> = (1..=v.first().map_or(0, Vec::len))
         .map(|i| format!("v{i}"))
         .collect();
-    let _ = writeln!(s, "t,{}", head.join(","));
+    let loc_col = locations.map_or(String::new(), |_| {
+        format!(",{}", crate::trajectory::csv::LOCATION)
+    });
+    let _ = writeln!(s, "t,{}{loc_col}", head.join(","));
     for (k, r) in v.iter().enumerate() {
         let r: Vec<String> = r.iter().map(|a| format!("{a:?}")).collect();
-        let _ = writeln!(s, "{:?},{}", k as f64 * h, r.join(","));
+        let loc = locations.map_or(String::new(), |l| format!(",{}", l.get(k).unwrap_or(&"")));
+        let _ = writeln!(s, "{:?},{}{loc}", k as f64 * h, r.join(","));
     }
     s
 }
@@ -1195,11 +1293,14 @@ mod tests {
             Ending::Goal,
             &[0.1, -0.2],
             &[vec![1.5], vec![-0.25]],
+            None,
             0.01,
         );
         let rec = parse_recording(&text, "r.csv", 2, 1, 0.01, 10).unwrap();
         assert_eq!(rec.x0, vec![0.1, -0.2]);
         assert_eq!(rec.v, vec![vec![1.5], vec![-0.25]]);
+        assert_eq!(rec.locations, None);
+
         assert_eq!(comment(&text, "player").as_deref(), Some("Ann"));
         assert_eq!(
             comment(&text, "ending").and_then(|e| Ending::parse(&e)),
@@ -1208,6 +1309,22 @@ mod tests {
         assert_eq!(
             comment(&text, "played").as_deref(),
             Some("2026-01-01T00:00:00Z")
+        );
+        // A forced run's rows carry their locations, which read back.
+        let text = recording_text(
+            "Ann",
+            "2026-01-01T00:00:00Z",
+            Ending::Timeout,
+            &[0.1, -0.2],
+            &[vec![1.5], vec![-0.25], vec![0.0]],
+            Some(&["fwd", "fwd", "back"]),
+            0.01,
+        );
+        let rec = parse_recording(&text, "r.csv", 2, 1, 0.01, 10).unwrap();
+        assert_eq!(rec.v, vec![vec![1.5], vec![-0.25], vec![0.0]]);
+        assert_eq!(
+            rec.locations,
+            Some(vec!["fwd".to_string(), "fwd".into(), "back".into()])
         );
     }
 

@@ -1,13 +1,28 @@
-//! What the game plays (§1.1.3; §4.2.2 for hybrid plants): a one-location task with its CAF, or a hybrid
-//! automaton with internal switching with a CAF per location, and for each how a period is stepped and
-//! how a finished run is certified: the one-location import path ([`crate::cover::certify_recording`],
-//! Theorem 4.7) or the hybrid one ([`crate::synth::hybrid::import::certify_recording`], Theorem 4.24
-//! along the task's location path). The game asks only this of the task.
+//! What the game plays (§1.1.3): the task's plant, for each class how a period is stepped and how a
+//! finished run is certified. The game asks only this of the task.
+//!
+//! * **One location** (linear affine): the plant's exact step; the one-location import path
+//!   ([`crate::cover::certify_recording`], Theorem 4.7).
+//! * **Feedback linearizable** (§3.1.2): the task is the linear model in ξ and the page draws ξ, but the
+//!   server flows the *nonlinear plant* (`model::nonlinear`, Dop853) under the law the firmware runs:
+//!   w = K ξ(x) + v clipped to the task's input set W, u = λ(x)(w − α_res(x)) (the model's f64 expressions;
+//!   W is pulled back so that u is in the plant's input set). A run starts at the player's ξ with the
+//!   zero-dynamics states at the centre of the plant's Init. Its recording is in the task's coordinates
+//!   (x0 = ξ(0), rows the reference v) and is certified by the one-location path on the ξ model with the
+//!   sampled-loop mismatch D (Theorem 3.21), exactly as `synth --import` certifies it; the certified
+//!   nominal is the ξ model's run under the played v, which the played plant follows within the tube.
+//! * **Hybrid, internal switching** (§4.2.2): the automaton's exact flow across events; runs certified
+//!   along the task's location path by Theorem 4.24 ([`crate::synth::hybrid::import::certify_recording`]).
+//! * **Hybrid, forced switching** (§4.2.1): the player is the discrete input. A switch to a location by a
+//!   forced edge is taken at a sample whose state is in the edge's guard (the resets the task accepts are
+//!   the identity); each row is recorded with its location, and the run is certified by Theorem 4.17 (Def
+//!   4.18 when the task is a formula, which is then judged over the whole horizon, so the run goes on to T).
 
 use crate::caf::Design;
 use crate::certify::{Certificate, Loop, LoopConstants};
 use crate::linalg::PdRoots;
-use crate::model::hybrid::Hybrid;
+use crate::model::feedback_linearizable::FlMaps;
+use crate::model::hybrid::{EdgeKind, Hybrid};
 use crate::model::{Location, Plant};
 use crate::property::ReachAvoid;
 use crate::spec::{InitBox, Problem};
@@ -19,6 +34,9 @@ use faer::MatRef;
 /// Probes of the exact hybrid flow per period at which a played run is checked against Unsafe.
 pub const HYBRID_PROBES: usize = 8;
 
+/// Where [`Played::advance`] shows the states it looks at between samples (none: not looked at).
+pub type Visit<'a> = Option<&'a mut dyn FnMut(&[f64])>;
+
 /// The task a game plays (one per game, so the variants' sizes do not matter).
 #[allow(clippy::large_enum_variant)]
 pub enum Played {
@@ -28,8 +46,8 @@ pub enum Played {
         design: Design,
         lc: LoopConstants,
     },
-    /// A hybrid task with internal switching; `fine` is its automaton sampled at h / [`HYBRID_PROBES`],
-    /// to look between samples across events.
+    /// A hybrid task (internal or forced switching); `fine` is its automaton sampled at
+    /// h / [`HYBRID_PROBES`], to look between samples across events.
     Hybrid { task: HybridTask, fine: Hybrid },
 }
 
@@ -48,8 +66,17 @@ pub struct Judged {
 }
 
 impl Played {
-    /// A one-location task with its CAF designed as `synth` designs it.
+    /// A one-location task with its CAF designed as `synth` designs it. A task whose spec is an MTL
+    /// formula is refused: this path certifies reach-avoid runs (Theorem 4.7).
     pub fn one(task: Task) -> Result<Self, String> {
+        if task.problem.mtl.is_some() {
+            return Err(
+                "the spec's task is an [mtl] formula; play certifies the runs of reach-avoid tasks and of \
+                 forced-switching automata with a formula, and a one-location formula task's runs are \
+                 made by synth (the formula's certificate, Theorem 4.2)"
+                    .into(),
+            );
+        }
         let design = crate::caf::design(&task).map_err(|e| format!("no CAF and feedback: {e}"))?;
         let lc = LoopConstants::new(&Loop::new(&task, &design)).map_err(|e| e.to_string())?;
         Ok(Played::One { task, design, lc })
@@ -133,23 +160,132 @@ impl Played {
         matches!(self, Played::One { .. })
     }
 
-    /// One period from (`loc`, `x`) with `u` held: the location and state at the next sample, every
-    /// state looked at between the samples passed to `visit`. A one-location plant: its step and states
-    /// between samples; a hybrid one: the exact flow across events ([`Hybrid::flow`]), looked at
-    /// [`HYBRID_PROBES`] times in the period. `Err`: the flow cannot be stepped (Zeno, undecided).
+    /// A feedback-linearizable plant's maps (module doc), when the task is one.
+    pub fn maps(&self) -> Option<&FlMaps> {
+        match self {
+            Played::One { task, .. } => task.plant.linearization(),
+            Played::Hybrid { .. } => None,
+        }
+    }
+
+    /// Whether the automaton's edges are forced (the player chooses the location).
+    pub fn forced(&self) -> bool {
+        matches!(self, Played::Hybrid { task, .. } if task.forced)
+    }
+
+    /// Whether the task is a formula (judged over the whole horizon: a run ends only at T, in Unsafe, or
+    /// when the player finishes it).
+    pub fn formula(&self) -> bool {
+        matches!(self, Played::Hybrid { task, .. } if task.formula.is_some())
+    }
+
+    /// The forced edges (from, to) the player can take, in the automaton's order.
+    pub fn switches(&self) -> Vec<(Location, Location)> {
+        match self {
+            Played::Hybrid { task, .. } if task.forced => task
+                .plant
+                .edges()
+                .iter()
+                .filter(|e| e.kind == EdgeKind::Forced && e.from != e.to)
+                .map(|e| (e.from, e.to))
+                .collect(),
+            _ => Vec::new(),
+        }
+    }
+
+    /// The location a forced switch from `from` to the location named `to` lands in, when the state `x`
+    /// is in the edge's guard; otherwise why not.
+    pub fn switch(&self, from: Location, to: &str, x: &[f64]) -> Result<Location, String> {
+        let Played::Hybrid { task, .. } = self else {
+            return Err("the plant has one location".into());
+        };
+        if !task.forced {
+            return Err("the automaton switches by itself (internal edges)".into());
+        }
+        let modes = task.plant.modes();
+        let l = modes
+            .iter()
+            .position(|m| m.name == to)
+            .ok_or_else(|| format!("`{to}` is not a location of the automaton"))?;
+        if l == from {
+            return Ok(l);
+        }
+        let e = task.plant.forced_edge(from, l).ok_or_else(|| {
+            format!(
+                "no forced edge leads from {} to {}",
+                modes[from].name, modes[l].name
+            )
+        })?;
+        let m = e.guard.margin(x);
+        if m > 0.0 {
+            return Err(format!(
+                "the state is not in the guard of {} → {} (outside one of its faces by {m:.3e}); the switch \
+                 waits",
+                modes[from].name, modes[l].name
+            ));
+        }
+        Ok(l)
+    }
+
+    /// The plant's own state at the start of a run from `x0` in the task's coordinates: for a
+    /// feedback-linearizable plant ξ's states from `x0`, the zero-dynamics states at Init's centre.
+    pub fn plant_start(&self, x0: &[f64]) -> Vec<f64> {
+        let Some(maps) = self.maps() else {
+            return x0.to_vec();
+        };
+        let mut x = maps.init.centre();
+        for (j, &s) in maps.xi_states.iter().enumerate() {
+            x[s] = x0[j];
+        }
+        x
+    }
+
+    /// The task's coordinates of a plant state (ξ for a feedback-linearizable plant).
+    pub fn observe(&self, plant_x: &[f64]) -> Vec<f64> {
+        match self.maps() {
+            Some(maps) => maps.xi_of(plant_x),
+            None => plant_x.to_vec(),
+        }
+    }
+
+    /// One period from (`loc`, the plant state `x`) with the task's input `u` held: the location and the
+    /// plant state at the next sample. With `visit`, every state looked at between the samples is passed
+    /// to it in the task's coordinates: a one-location plant's states between samples; a hybrid one's
+    /// exact flow across events ([`Hybrid::flow`]) looked at [`HYBRID_PROBES`] times in the period; a
+    /// feedback-linearizable plant's integrated flow at as many instants. `Err`: the flow cannot be
+    /// stepped (Zeno, undecided, the integrator failed).
     pub fn advance(
         &self,
         loc: Location,
         x: &[f64],
         u: &[f64],
-        visit: &mut dyn FnMut(&[f64]),
+        visit: Visit<'_>,
     ) -> Result<(Location, Vec<f64>), String> {
-        match self {
-            Played::One { task, .. } => {
-                task.plant.between_samples(loc, x, u, visit);
+        if let Some(maps) = self.maps() {
+            let uu = self.plant_input(maps, x, u);
+            let h = maps.plant.period();
+            let (sub, mut visit) = match visit {
+                Some(v) => (HYBRID_PROBES, Some(v)),
+                None => (1, None),
+            };
+            let next = maps
+                .plant
+                .flow(x, &uu, h, sub, &mut |y| {
+                    if let Some(v) = visit.as_mut() {
+                        v(&maps.xi_of(y))
+                    }
+                })
+                .map_err(|e| e.to_string())?;
+            return Ok((loc, next));
+        }
+        match (self, visit) {
+            (Played::One { task, .. }, visit) => {
+                if let Some(v) = visit {
+                    task.plant.between_samples(loc, x, u, v);
+                }
                 Ok((loc, task.plant.step(loc, x, u)))
             }
-            Played::Hybrid { task, fine } => {
+            (Played::Hybrid { task, fine }, Some(visit)) => {
                 let (mut l, mut y) = (loc, x.to_vec());
                 for _ in 0..HYBRID_PROBES {
                     let s = fine.flow(l, &y, u).map_err(|e| e.to_string())?;
@@ -159,7 +295,18 @@ impl Played {
                 let s = task.plant.flow(loc, x, u).map_err(|e| e.to_string())?;
                 Ok((s.loc, s.x))
             }
+            (Played::Hybrid { task, .. }, None) => {
+                let s = task.plant.flow(loc, x, u).map_err(|e| e.to_string())?;
+                Ok((s.loc, s.x))
+            }
         }
+    }
+
+    /// The plant's input of a feedback-linearizable plant at `x` for the linear law's output `w`:
+    /// u = λ(x)(w − α_res(x)) in f64 (the model's expressions).
+    pub fn plant_input(&self, maps: &FlMaps, x: &[f64], w: &[f64]) -> Vec<f64> {
+        let at = crate::expr::Point { x, u: w, p: &[] };
+        maps.input_exprs.iter().map(|e| e.eval(&at)).collect()
     }
 
     /// A finished run's recording certified by the import path of its class (module doc).
@@ -182,12 +329,25 @@ impl Played {
                 }
             }
             Played::Hybrid { task, .. } => match import::certify_recording(task, rec) {
+                // A forced run's map path is its segments' states (each ends where the next begins).
+                Ok(run) if task.forced => Judged {
+                    centre: run.nominals[0].x[0].clone(),
+                    delta: run.delta(),
+                    delta_stored: run.certificate.delta_stored,
+                    path: run
+                        .nominals
+                        .iter()
+                        .flat_map(|n| n.x.iter().cloned())
+                        .collect(),
+                    verdict: Ok(import::bindings(task, &run.locations, &run.certificate)),
+                    certificate: None,
+                },
                 Ok(run) => Judged {
                     centre: run.nominals[0].x[0].clone(),
                     delta: run.delta(),
                     delta_stored: run.certificate.delta_stored,
                     path: hybrid_path(task, &run),
-                    verdict: Ok(import::bindings(task, &run.certificate)),
+                    verdict: Ok(import::bindings(task, &run.locations, &run.certificate)),
                     certificate: None,
                 },
                 Err(e) => Judged {
@@ -195,7 +355,11 @@ impl Played {
                     delta: 0.0,
                     delta_stored: 0.0,
                     path: Vec::new(),
-                    verdict: Err(e.to_string()),
+                    // The game says "refused" itself.
+                    verdict: Err(match e {
+                        import::ImportError::Refused(why) => why,
+                        e => e.to_string(),
+                    }),
                     certificate: None,
                 },
             },

@@ -668,7 +668,7 @@ pub fn admit(
 ) -> Result<usize, String> {
     let s = &task.problem.synthesis;
     if !run.certificate.is_certified() {
-        return Err(import::refusal(task, &run.certificate));
+        return Err(import::refusal(task, &run.locations, &run.certificate));
     }
     // δ > 0 and finite here (certified).
     if run.delta() < s.min_robustness {
@@ -676,7 +676,7 @@ pub fn admit(
             "δ = {:.3e} is below min_robustness = {:.3e} ({})",
             run.delta(),
             s.min_robustness,
-            import::bindings(task, &run.certificate)
+            import::bindings(task, &run.locations, &run.certificate)
         ));
     }
     let rows: usize = run.certificate.segments.iter().map(|c| c.rows).sum();

@@ -8,6 +8,10 @@
 //! states `x1…xn`, the applied inputs `u1…um`, the references `v1…vm`, `status`) is a recording as it is:
 //! its last row is the final state, whose input no step applies, and is not read.
 //!
+//! A recording of a hybrid plant with forced switching (§4.2.1) also names, per row, the location the
+//! controller chose for that sample: a column [`LOCATION`] of location names (`host-compiler play` writes
+//! it). A change of location between two rows is a switch at the later row's sample.
+//!
 //! # Bounds
 //! The caller gives the most rows it can use (for an import, the samples in the spec's horizon, at most
 //! the image's table capacity): a longer recording is refused at its first extra row, and a file larger
@@ -79,6 +83,15 @@ pub enum CsvError {
         max_rows: usize,
         limit: u64,
     },
+    #[error(
+        "{path}:{line}:{col}: `{field}` is not a location name (1 to {MAX_LOCATION_NAME} characters)"
+    )]
+    Location {
+        path: String,
+        line: usize,
+        col: usize,
+        field: String,
+    },
     #[error("{path}:{line}: the initial state line `# x0 = …` {reason}")]
     X0 {
         path: String,
@@ -87,10 +100,17 @@ pub enum CsvError {
     },
 }
 
+/// The column that names each row's location (forced switching, module doc).
+pub const LOCATION: &str = "location";
+/// Longest location name a recording's row may give (characters).
+pub const MAX_LOCATION_NAME: usize = 64;
+
 /// Where a file's reference inputs are: the field index of `v1…vm`, and whether the file is a run.
 struct Layout {
     /// Field index of each input, in input order.
     inputs: Vec<usize>,
+    /// Field index of the [`LOCATION`] column, when the header has one.
+    location: Option<usize>,
     /// The header names the state columns `x1…xn` (a run `simulate` wrote): its last row is the final
     /// state, whose input no step applies.
     run: bool,
@@ -102,6 +122,7 @@ impl Layout {
     /// [`crate::csv::STATUS`], which must be m. `None`: neither (or a run without `v1…vm`).
     fn of(header: &[(usize, &str)], m: usize) -> Option<Layout> {
         let run = header.iter().any(|&(_, h)| h == "x1");
+        let location = header.iter().position(|&(_, h)| h == LOCATION);
         let named: Option<Vec<usize>> = (1..=m)
             .map(|j| {
                 let name = format!("v{j}");
@@ -109,16 +130,28 @@ impl Layout {
             })
             .collect();
         if let Some(inputs) = named {
-            return Some(Layout { inputs, run });
+            return Some(Layout {
+                inputs,
+                location,
+                run,
+            });
         }
         // A run without its references: its columns are states and applied inputs, none of them v.
         if run {
             return None;
         }
         let inputs: Vec<usize> = (1..header.len())
-            .filter(|&i| header.get(i).is_some_and(|&(_, h)| h != crate::csv::STATUS))
+            .filter(|&i| {
+                header
+                    .get(i)
+                    .is_some_and(|&(_, h)| h != crate::csv::STATUS && h != LOCATION)
+            })
             .collect();
-        (inputs.len() == m).then_some(Layout { inputs, run })
+        (inputs.len() == m).then_some(Layout {
+            inputs,
+            location,
+            run,
+        })
     }
 }
 
@@ -132,6 +165,17 @@ pub fn parse_inputs(
     period: f64,
     max_rows: usize,
 ) -> Result<Vec<Vec<f64>>, CsvError> {
+    parse_rows(text, path, m, period, max_rows).map(|(v, _)| v)
+}
+
+/// [`parse_inputs`], and the [`LOCATION`] column's names when the header has one.
+fn parse_rows(
+    text: &str,
+    path: &str,
+    m: usize,
+    period: f64,
+    max_rows: usize,
+) -> Result<(Vec<Vec<f64>>, Option<Vec<String>>), CsvError> {
     let mut lines = crate::csv::data_lines(text);
     let (_, header) = lines
         .next()
@@ -143,9 +187,10 @@ pub fn parse_inputs(
         found: cols
             .iter()
             .skip(1)
-            .filter(|&&(_, h)| h != crate::csv::STATUS)
+            .filter(|&&(_, h)| h != crate::csv::STATUS && h != LOCATION)
             .count(),
     })?;
+    let mut locations = layout.location.map(|_| Vec::new());
     // A run has one row more than inputs: its final state.
     let limit = max_rows.saturating_add(usize::from(layout.run));
     let mut out = Vec::new();
@@ -194,6 +239,18 @@ pub fn parse_inputs(
             }
         }
         prev_t = Some(t);
+        if let (Some(i), Some(names)) = (layout.location, locations.as_mut()) {
+            let (col, f) = fields.get(i).copied().unwrap_or((1, ""));
+            if f.is_empty() || f.chars().count() > MAX_LOCATION_NAME {
+                return Err(CsvError::Location {
+                    path: path.into(),
+                    line: lineno,
+                    col,
+                    field: crate::text::excerpt(f),
+                });
+            }
+            names.push(f.to_string());
+        }
         out.push(
             layout
                 .inputs
@@ -204,18 +261,24 @@ pub fn parse_inputs(
     }
     if layout.run {
         out.pop();
+        if let Some(names) = locations.as_mut() {
+            names.pop();
+        }
     }
     if out.is_empty() {
         return Err(CsvError::NoRows { path: path.into() });
     }
-    Ok(out)
+    Ok((out, locations))
 }
 
-/// A recording: the initial state and the reference inputs.
+/// A recording: the initial state and the reference inputs, and for forced switching the location of
+/// each row (module doc).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Recording {
     pub x0: Vec<f64>,
     pub v: Vec<Vec<f64>>,
+    /// The [`LOCATION`] column, one name per row of `v`, when the file has it.
+    pub locations: Option<Vec<String>>,
 }
 
 /// Parse a recording: the `# x0 = …` comment (n values) and the input rows.
@@ -253,10 +316,8 @@ pub fn parse_recording(
         line: 1,
         reason: "is missing".into(),
     })?;
-    Ok(Recording {
-        x0,
-        v: parse_inputs(text, path, m, period, max_rows)?,
-    })
+    let (v, locations) = parse_rows(text, path, m, period, max_rows)?;
+    Ok(Recording { x0, v, locations })
 }
 
 /// Read and parse a recording of at most `max_rows` rows.
@@ -363,6 +424,33 @@ mod tests {
             e.to_string().contains("must give 2 finite values, found 1"),
             "{e}"
         );
+    }
+
+    #[test]
+    fn a_forced_recording_names_each_rows_location() {
+        // Unnamed inputs: the location column is not one of them.
+        let r = parse_recording(
+            "# x0 = 0, 0\nt,a,location\n0,1,fwd\n0.5,2,back\n",
+            "r.csv",
+            2,
+            1,
+            0.5,
+            usize::MAX,
+        )
+        .unwrap();
+        assert_eq!(r.v, vec![vec![1.0], vec![2.0]]);
+        assert_eq!(r.locations, Some(vec!["fwd".into(), "back".into()]));
+        let e = parse_recording(
+            "# x0 = 0, 0\nt,v1,location\n0,1,fwd\n0.5,2,\n",
+            "r.csv",
+            2,
+            1,
+            0.5,
+            usize::MAX,
+        )
+        .unwrap_err();
+        assert!(matches!(e, CsvError::Location { line: 4, .. }), "{e}");
+        assert!(e.to_string().contains("is not a location name"), "{e}");
     }
 
     /// A run as `simulate` writes it: the `# x0` line, states, applied inputs, references, status.

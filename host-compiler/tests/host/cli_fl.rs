@@ -2,7 +2,8 @@
 //! covers Init, the image runs on the plant itself with no violation (exit 0), `verify` re-proves the radii
 //! from the bytes and runs the plant again (exit 0), `--attack` searches the balls on the plant itself
 //! with no violation, `simulate` runs the plant itself (CSV and verdict); what is not built for this
-//! class (`--import`, PWA mode) is bad input (exit 2) with the reason, and the same image against a spec
+//! class (PWA mode) is bad input (exit 2) with the reason (`--import` is tested with the game,
+//! `play_plants`), and the same image against a spec
 //! whose plant turns faster (a/I = b/I = 1, so its mismatch bound is larger) is refused (exit 1).
 
 use std::process::Command;

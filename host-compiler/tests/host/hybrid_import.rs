@@ -61,6 +61,7 @@ pub fn recording_of(t: &HybridTask, run: &HybridRun) -> Recording {
     Recording {
         x0: run.nominals[0].x[0].clone(),
         v,
+        locations: None,
     }
 }
 
@@ -139,7 +140,7 @@ fn a_recorded_certified_run_is_accepted_with_the_synth_paths_certificate() {
         "planned δ = {:.4e}, imported δ = {:.4e} ({})",
         run.delta(),
         got.delta(),
-        import::bindings(t, &got.certificate)
+        import::bindings(t, &got.locations, &got.certificate)
     );
 }
 
@@ -151,6 +152,7 @@ fn recordings_that_do_not_cross_or_cross_into_unsafe_are_refused_with_the_reason
     let short = Recording {
         x0: rec.x0.clone(),
         v: rec.v[..20].to_vec(),
+        locations: None,
     };
     let e = import::certify_recording(t, &short).unwrap_err();
     assert!(
@@ -174,6 +176,7 @@ fn recordings_that_do_not_cross_or_cross_into_unsafe_are_refused_with_the_reason
     let cut = Recording {
         x0: rec.x0.clone(),
         v: rec.v[..=ke].to_vec(),
+        locations: None,
     };
     let e = import::certify_recording(t, &cut).unwrap_err();
     assert!(
@@ -184,6 +187,7 @@ fn recordings_that_do_not_cross_or_cross_into_unsafe_are_refused_with_the_reason
     let bad = Recording {
         x0: vec![0.0; 2],
         v: rec.v.clone(),
+        locations: None,
     };
     assert!(matches!(
         import::certify_recording(t, &bad),
@@ -193,6 +197,7 @@ fn recordings_that_do_not_cross_or_cross_into_unsafe_are_refused_with_the_reason
     let into = Recording {
         x0: UNSAFE_X0.to_vec(),
         v: rec.v.clone(),
+        locations: None,
     };
     let landed = &import::replay(t, &into).unwrap().nominals[1].x[0];
     assert!(
@@ -246,6 +251,7 @@ fn synth_import_takes_a_hybrid_spec() {
     let far = Recording {
         x0: rec.x0.clone(),
         v: rec.v[..20].to_vec(),
+        locations: None,
     };
     std::fs::write(dir.join("b.csv"), csv_of(&far, t.plant.period())).unwrap();
     let src = std::fs::read_to_string(spec_path())

@@ -55,6 +55,7 @@ mod optimize_delta;
 mod optimize_gradient;
 mod optimize_potential;
 mod play_browser;
+mod play_plants;
 mod play_server;
 mod property_semantics;
 mod pwa_example_6_4_period;

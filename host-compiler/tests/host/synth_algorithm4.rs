@@ -120,6 +120,7 @@ fn unreachable_floor_asks_for_a_new_seed_trajectory() {
     let rec = host_compiler::trajectory::csv::Recording {
         x0: t.nominal.x[0].clone(),
         v: t.nominal.v.clone(),
+        locations: None,
     };
     p.synthesis.min_robustness = 10.0;
     let opts = SynthOptions {

@@ -1,4 +1,4 @@
-//! Person-made runs on a hybrid plant with internal switching (§1.1.3 and §4.2.2: Def 4.22, Lemma 4.23,
+//! Person-made runs on a hybrid plant (§1.1.3; internal switching, §4.2.2: Def 4.22, Lemma 4.23,
 //! Theorem 4.24): a recording (`synth --import`, `host-compiler play`) replayed on the automaton, split at
 //! its events into the segments of the task's location path, and certified by the certificate the synth
 //! path uses ([`super::certify_run`], [`crate::certify::internal`]).
@@ -30,6 +30,15 @@
 //! ([`Replay::centred`]), under the same rows. Both are nominals of the same recorded inputs; the person's
 //! own run starts at the first ball's centre and is covered by whichever certifies the larger δ.
 //!
+//! **Forced switching** (§4.2.1, Theorem 4.17; Def 4.18 for a formula task). The controller chooses the
+//! location, so the recording says which: its [`crate::trajectory::csv::LOCATION`] column names the
+//! location of every row, the first the task's initial location. Rows in one location make a segment; a
+//! change of location between rows κ − 1 and κ is a switch at sample κ by the forced edge between the
+//! two (which must exist). The segments are simulated as `plan_forced` simulates its own
+//! ([`super::shipped_nominal`], each from the previous one's end, the resets being the identity) and
+//! certified by the same [`super::forced::certify_run`]. A recording without the column is refused by
+//! name: reference inputs alone do not say when the controller switches.
+//!
 //! **One accept path.** An accepted recording is a [`HybridRun`] like those `plan_run` makes; it joins a
 //! synthesis' runs through [`super::synthesize_hybrid`]'s accept test ([`super::admit`]) before the
 //! automatic growth, and `play`'s cover directly.
@@ -54,10 +63,31 @@ pub enum ImportError {
     #[error("the recording has no rows")]
     Empty,
     #[error(
-        "the automaton's edges are forced: a recording of reference inputs does not say when the controller \
-         switches, so it is not imported (forced runs are planned by synth)"
+        "the automaton's edges are forced: the recording has no `location` column, and reference inputs \
+         alone do not say when the controller switches (give each row's location, as `play` writes it)"
     )]
     Forced,
+    #[error("row {row} (t = {t:.2} s): `{name}` is not a location of the automaton (its locations: {known})")]
+    UnknownLocation {
+        row: usize,
+        t: f64,
+        name: String,
+        known: String,
+    },
+    #[error("the run starts in {found}; the task's initial location is {initial}")]
+    NotInitial { found: String, initial: String },
+    #[error(
+        "row {row} (t = {t:.2} s): the run switches {from} → {to}, but no forced edge leads from {from} \
+         to {to}"
+    )]
+    NoForcedEdge {
+        row: usize,
+        t: f64,
+        from: String,
+        to: String,
+    },
+    #[error("the automaton's edges are internal: a recording's `location` column is for forced switching")]
+    LocationsWithInternal,
     #[error(
         "segment {segment} ({from}): the run never takes the path's edge {edge} ({from} → {to}); it stays \
          in {from} for the {rows} samples it has from t = {t:.2} s on"
@@ -169,6 +199,9 @@ pub fn replay(task: &HybridTask, rec: &Recording) -> Result<Replay, ImportError>
     if task.forced {
         return Err(ImportError::Forced);
     }
+    if rec.locations.is_some() {
+        return Err(ImportError::LocationsWithInternal);
+    }
     let plant = &task.plant;
     let (n, m) = (crate::model::Plant::n(plant), crate::model::Plant::m(plant));
     if rec.x0.len() != n || rec.v.iter().any(|r| r.len() != m) {
@@ -262,6 +295,9 @@ pub fn replay(task: &HybridTask, rec: &Recording) -> Result<Replay, ImportError>
 /// A recording certified as a run of the task's path (module doc): the run when its certificate is
 /// positive, else why not (the replay's reason, or per segment what binds and by how much).
 pub fn certify_recording(task: &HybridTask, rec: &Recording) -> Result<HybridRun, ImportError> {
+    if task.forced {
+        return certify_forced_recording(task, rec);
+    }
     let r = replay(task, rec)?;
     let centred = r.centred(task);
     let mut candidates: Vec<Vec<Nominal>> = Vec::new();
@@ -292,15 +328,108 @@ pub fn certify_recording(task: &HybridTask, rec: &Recording) -> Result<HybridRun
     }
     match best {
         Some(run) if run.certificate.is_certified() => Ok(run),
-        Some(run) => Err(ImportError::Refused(refusal(task, &run.certificate))),
+        Some(run) => Err(ImportError::Refused(refusal(
+            task,
+            &run.locations,
+            &run.certificate,
+        ))),
         None => Err(ImportError::Empty),
     }
+}
+
+/// A forced-switching recording certified (module doc, "Forced switching").
+fn certify_forced_recording(task: &HybridTask, rec: &Recording) -> Result<HybridRun, ImportError> {
+    let plant = &task.plant;
+    let (n, m) = (crate::model::Plant::n(plant), crate::model::Plant::m(plant));
+    if rec.x0.len() != n || rec.v.iter().any(|r| r.len() != m) {
+        return Err(ImportError::Shape {
+            x0: rec.x0.len(),
+            m_rec: rec.v.first().map_or(0, Vec::len),
+            n,
+            m,
+        });
+    }
+    if rec.v.is_empty() {
+        return Err(ImportError::Empty);
+    }
+    let names = rec.locations.as_ref().ok_or(ImportError::Forced)?;
+    let modes = plant.modes();
+    let h = plant.period();
+    // Each row's location, then the segments: (location, first row, rows).
+    let mut rows_loc = Vec::with_capacity(names.len());
+    for (row, name) in names.iter().enumerate() {
+        let l = modes
+            .iter()
+            .position(|md| &md.name == name)
+            .ok_or_else(|| ImportError::UnknownLocation {
+                row,
+                t: row as f64 * h,
+                name: name.clone(),
+                known: modes
+                    .iter()
+                    .map(|md| md.name.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", "),
+            })?;
+        rows_loc.push(l);
+    }
+    if rows_loc[0] != task.initial {
+        return Err(ImportError::NotInitial {
+            found: modes[rows_loc[0]].name.clone(),
+            initial: modes[task.initial].name.clone(),
+        });
+    }
+    let (mut locations, mut edges, mut starts) = (vec![rows_loc[0]], Vec::new(), vec![0usize]);
+    for row in 1..rows_loc.len() {
+        let (from, to) = (rows_loc[row - 1], rows_loc[row]);
+        if from == to {
+            continue;
+        }
+        let e = plant
+            .edges()
+            .iter()
+            .position(|e| {
+                e.from == from && e.to == to && e.kind == crate::model::hybrid::EdgeKind::Forced
+            })
+            .ok_or_else(|| ImportError::NoForcedEdge {
+                row,
+                t: row as f64 * h,
+                from: modes[from].name.clone(),
+                to: modes[to].name.clone(),
+            })?;
+        locations.push(to);
+        edges.push(e);
+        starts.push(row);
+    }
+    starts.push(rec.v.len());
+    // The segments as `plan_forced` simulates them: the f32 start, each from the previous one's end.
+    let mut nominals = Vec::with_capacity(locations.len());
+    let mut start: Vec<f64> = rec.x0.iter().map(|&v| round32(v)).collect();
+    for (i, &l) in locations.iter().enumerate() {
+        let nom = shipped_nominal(task, l, &start, &rec.v[starts[i]..starts[i + 1]]);
+        start = nom.x.last().cloned().unwrap_or_default();
+        nominals.push(nom);
+    }
+    let certificate = super::forced::certify_run(task, &locations, &edges, &nominals)
+        .map_err(ImportError::Certificate)?;
+    if !certificate.is_certified() {
+        return Err(ImportError::Refused(refusal(
+            task,
+            &locations,
+            &certificate,
+        )));
+    }
+    Ok(HybridRun {
+        nominals,
+        locations,
+        certificate,
+    })
 }
 
 /// Why a run's certificate is not positive: the segment that fails first when the certificate is built
 /// backwards (the last one with δ = 0; earlier ones fail because it does), what binds it, and Theorem
 /// 4.7's parts over its kept rows with their samples.
-pub fn refusal(task: &HybridTask, c: &InternalCertificate) -> String {
+pub fn refusal(task: &HybridTask, locations: &[Location], c: &InternalCertificate) -> String {
     let h = task.plant.period();
     let cause = c
         .segments
@@ -310,7 +439,7 @@ pub fn refusal(task: &HybridTask, c: &InternalCertificate) -> String {
     let Some(s) = c.segments.get(cause) else {
         return "the run has no segments".into();
     };
-    let loc = task.path.get(cause).copied().unwrap_or(0);
+    let loc = locations.get(cause).copied().unwrap_or(0);
     let b = &s.base;
     let at = |k: usize| format!("t = {:.2} s", k as f64 * h);
     let mut parts = vec![
@@ -345,12 +474,12 @@ pub fn refusal(task: &HybridTask, c: &InternalCertificate) -> String {
 }
 
 /// What an accepted run's δ is limited by, per segment (for messages).
-pub fn bindings(task: &HybridTask, c: &InternalCertificate) -> String {
+pub fn bindings(task: &HybridTask, locations: &[Location], c: &InternalCertificate) -> String {
     c.segments
         .iter()
         .enumerate()
         .map(|(i, s)| {
-            let loc = task.path.get(i).copied().unwrap_or(0);
+            let loc = locations.get(i).copied().unwrap_or(0);
             format!(
                 "segment {i} ({}): δ = {:.3e}, {}",
                 task.plant.modes()[loc].name,
