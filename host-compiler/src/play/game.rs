@@ -374,6 +374,10 @@ impl Game {
                 "from": f, "to": to, "from_name": t.location_name(f), "to_name": t.location_name(to),
             })).collect::<Vec<_>>(),
             "formula": problem.mtl.clone(),
+            // The names of the drawn state's and the input's coordinates (the task's: ξ and w for a
+            // feedback-linearizable plant).
+            "symbol": if t.maps().is_some() { "ξ" } else { "x" },
+            "input_symbol": if t.maps().is_some() { "w" } else { "u" },
             "law": if t.maps().is_some() {
                 "w = Kξ + v, u = λ(x)(w − α(x)) on the nonlinear plant (feedback linearised)"
             } else {

@@ -235,3 +235,49 @@ fn a_scripted_run_on_a_hybrid_spec_is_certified_in_headless_chromium() {
     let reason = st["runs"][0]["reason"].as_str().unwrap();
     assert!(reason.contains("segment 1 (right)"), "{reason}");
 }
+
+#[test]
+fn a_scripted_forced_run_switches_on_the_page_and_is_certified_in_headless_chromium() {
+    use host_compiler::synth::hybrid::{forced::plan_forced, HybridTask};
+    let spec = std::path::PathBuf::from(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../examples/hybrid-forced-cart.toml"
+    ));
+    let t = HybridTask::new(host_compiler::spec::load(&spec).unwrap()).unwrap();
+    let run = plan_forced(&t, &[0.0, 0.0]).unwrap();
+    assert_eq!(run.locations, vec![0, 1]);
+    let out = scratch("forced");
+    let srv = start_spec(&spec, &out);
+    // The planned rows, one per sample; the first row of segment 1 asks for `backward` (the page keeps
+    // asking until the server takes the switch).
+    let switch = run.nominals[0].v.len();
+    let script: Vec<String> = run
+        .nominals
+        .iter()
+        .flat_map(|n| n.v.iter())
+        .enumerate()
+        .map(|(k, v)| {
+            let at = if k == switch { "@backward" } else { "" };
+            format!("{}*1{at}", v[0])
+        })
+        .collect();
+    let url = format!("{}?name=bot&start=0,0&script={}", srv.url, script.join(";"));
+    let dom = browse(&url, &["--dump-dom".to_string()]);
+    assert!(
+        dom.contains("data-script=\"done\""),
+        "the script did not finish: {dom}"
+    );
+    let msg = element_text(&dom, "switchmsg");
+    assert_eq!(
+        msg,
+        format!("switched to backward at t = {:.2} s", switch as f64 * 0.1),
+        "{dom}"
+    );
+    assert!(dom.contains("data-accepted=\"yes\""), "{dom}");
+    let shown = element_text(&dom, "result");
+    assert!(shown.starts_with("ACCEPTED: δ = "), "{shown}");
+    let st = get(&format!("{}api/state", srv.url));
+    assert_eq!(st["accepted"], 1, "{st}");
+    let reason = st["runs"][0]["reason"].as_str().unwrap();
+    assert!(reason.contains("segment 1 (backward)"), "{reason}");
+}
