@@ -3,7 +3,8 @@
 //! * forced switching (§4.2.1, the forced cart `examples/hybrid-forced-cart.toml`): a planned run written
 //!   as a recording with its `location` column certifies through the import path to the planned δ; a
 //!   recording without the column, one that starts elsewhere, names an unknown location or switches by
-//!   an edge the automaton lacks is refused, saying so; in the game the player switches by `"location"`,
+//!   an edge the automaton lacks, or (for a formula task) is shorter than the horizon, is refused, saying
+//!   so; in the game the player switches by `"location"`,
 //!   a switch outside the edge's guard waits with the reason, and a played run is certified, written with
 //!   its locations and reads back to the same δ;
 //! * feedback linearizable (§3.1.2, Example 4.9 `examples/fl-4-9.toml`): the game flows the nonlinear
@@ -116,6 +117,23 @@ fn a_forced_recording_with_its_locations_certifies_as_planned_and_bad_ones_are_r
     assert!(
         matches!(e, import::ImportError::Refused(_)) && e.to_string().contains("segment"),
         "{e}"
+    );
+
+    // With a formula as the task (the cart's MTL example), a recording must cover the horizon.
+    let tf = forced_task(&example("hybrid-forced-cart-mtl.toml"));
+    assert!(tf.formula.is_some());
+    let short = Recording {
+        x0: rec.x0.clone(),
+        v: rec.v[..10].to_vec(),
+        locations: Some(rec.locations.clone().unwrap()[..10].to_vec()),
+    };
+    let e = import::certify_recording(&tf, &short).unwrap_err();
+    assert_eq!(
+        e,
+        import::ImportError::ShortForFormula {
+            rows: 10,
+            steps: tf.steps
+        }
     );
 
     // Without the edge backward → forward, a run that switches back is refused by name.

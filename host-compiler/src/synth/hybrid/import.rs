@@ -37,7 +37,8 @@
 //! two (which must exist). The segments are simulated as `plan_forced` simulates its own
 //! ([`super::shipped_nominal`], each from the previous one's end, the resets being the identity) and
 //! certified by the same [`super::forced::certify_run`]. A recording without the column is refused by
-//! name: reference inputs alone do not say when the controller switches.
+//! name: reference inputs alone do not say when the controller switches. For a formula task the
+//! recording must cover the whole horizon, over which the formula is judged.
 //!
 //! **One accept path.** An accepted recording is a [`HybridRun`] like those `plan_run` makes; it joins a
 //! synthesis' runs through [`super::synthesize_hybrid`]'s accept test ([`super::admit`]) before the
@@ -86,6 +87,11 @@ pub enum ImportError {
         from: String,
         to: String,
     },
+    #[error(
+        "the task is a formula, judged over the whole horizon of {steps} samples; the recording has \
+         {rows} rows, and its tables must cover the horizon"
+    )]
+    ShortForFormula { rows: usize, steps: usize },
     #[error("the automaton's edges are internal: a recording's `location` column is for forced switching")]
     LocationsWithInternal,
     #[error(
@@ -351,6 +357,13 @@ fn certify_forced_recording(task: &HybridTask, rec: &Recording) -> Result<Hybrid
     }
     if rec.v.is_empty() {
         return Err(ImportError::Empty);
+    }
+    // A formula's windows past the run's end would be judged on nothing (Def 4.18 is over all of T).
+    if task.formula.is_some() && rec.v.len() < task.steps {
+        return Err(ImportError::ShortForFormula {
+            rows: rec.v.len(),
+            steps: task.steps,
+        });
     }
     let names = rec.locations.as_ref().ok_or(ImportError::Forced)?;
     let modes = plant.modes();
