@@ -1,5 +1,6 @@
-//! `synth` for an MTL task (a spec with `[mtl] formula`, Problem 2.28) on a one-location plant: balls
-//! certified for the formula (`certify::temporal`), grown over Init
+//! `synth` for an MTL task (a spec with `[mtl] formula`, Problem 2.28) on a one-location plant: recorded
+//! runs (`--import`, e.g. from `play`) certified first, then balls certified for the formula
+//! (`certify::temporal`), grown over Init
 //! ([`crate::synth::temporal::synthesize_temporal`]), re-proved from the image bytes and verified by
 //! Monte Carlo against the formula as written. Writes `controller.img` (only when both passed),
 //! `certificate.json` and `report.html` ([`crate::report::temporal`]); exit status as for `synth`
@@ -14,11 +15,6 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
 pub fn run(a: &SynthArgs, problem: crate::spec::Problem) -> Outcome {
-    if !a.imports.is_empty() {
-        return Err(Failure::bad_input(miette::miette!(
-            "--import is not taken for MTL tasks yet: recordings are certified for reach-avoid"
-        )));
-    }
     if problem.synthesis.mode == crate::spec::ControllerMode::Pwa {
         return Err(Failure::bad_input(miette::miette!(
             "mode = \"pwa\" is not built for MTL tasks: the PWA law is certified for reach-avoid; use \
@@ -29,6 +25,8 @@ pub fn run(a: &SynthArgs, problem: crate::spec::Problem) -> Outcome {
         .map_err(miette::Report::new)
         .bad_input()?;
     let task = task_of(problem)?;
+    // Recordings in the task's coordinates, each the whole horizon long (the formula is judged over T).
+    let imports = super::synth::load_imports(a, &task.problem)?;
     let cancel = Arc::new(AtomicBool::new(false));
     {
         let cancel = cancel.clone();
@@ -59,12 +57,19 @@ pub fn run(a: &SynthArgs, problem: crate::spec::Problem) -> Outcome {
                 eprintln!("certified ball {count} (δ = {delta:.4})")
             }) as Arc<dyn Fn(usize, f64) + Send + Sync>
         }),
+        imports,
         ..TemporalOptions::default()
     };
     let s = synthesize_temporal(&task, &tt, &opts).map_err(|e| Failure {
         exit: Exit::Failed,
         report: miette::miette!("{e}"),
     })?;
+    for (name, r) in &s.imported {
+        match r {
+            Ok(d) => eprintln!("{name}: imported, δ = {d:.4}"),
+            Err(why) => eprintln!("warning: {name}: not used: {why}"),
+        }
+    }
     let img_path = a.out.join("controller.img");
     let unproved: Vec<String> = s
         .recheck
@@ -92,6 +97,10 @@ pub fn run(a: &SynthArgs, problem: crate::spec::Problem) -> Outcome {
         "verify": s.verify,
         "recheck": s.recheck,
         "seeds_tried": s.seeds_tried,
+        "imported": s.imported.iter().map(|(name, r)| match r {
+            Ok(d) => serde_json::json!({"file": name, "delta": d}),
+            Err(why) => serde_json::json!({"file": name, "why": why}),
+        }).collect::<Vec<_>>(),
         "refused": s.refused.iter().map(|(x, why)| serde_json::json!({"seed": x, "why": why})).collect::<Vec<_>>(),
         "K": crate::linalg::to_rows(s.K.as_ref()),
         "P": crate::linalg::to_rows(s.P.as_ref()),

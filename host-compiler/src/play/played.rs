@@ -2,7 +2,9 @@
 //! finished run is certified. The game asks only this of the task.
 //!
 //! * **One location** (linear affine): the plant's exact step; the one-location import path
-//!   ([`crate::cover::certify_recording`], Theorem 4.7).
+//!   ([`crate::cover::certify_recording`], Theorem 4.7), or for an `[mtl]` task its formula's
+//!   ([`crate::synth::temporal::certify_recording`], Theorem 4.2), judged over the whole horizon (a run goes
+//!   on to T).
 //! * **Feedback linearizable** (§3.1.2): the task is the linear model in ξ and the page draws ξ, but the
 //!   server flows the *nonlinear plant* (`model::nonlinear`, Dop853) under the law the firmware runs:
 //!   w = K ξ(x) + v clipped to the task's input set W, u = λ(x)(w − α_res(x)) (the model's f64 expressions;
@@ -19,12 +21,13 @@
 //!   4.18 when the task is a formula, which is then judged over the whole horizon, so the run goes on to T).
 
 use crate::caf::Design;
+use crate::certify::temporal::TemporalLoop;
 use crate::certify::{Certificate, Loop, LoopConstants};
 use crate::linalg::PdRoots;
 use crate::model::feedback_linearizable::FlMaps;
 use crate::model::hybrid::{EdgeKind, Hybrid};
 use crate::model::{Location, Plant};
-use crate::property::ReachAvoid;
+use crate::property::{ReachAvoid, TemporalTask};
 use crate::spec::{InitBox, Problem};
 use crate::synth::hybrid::{import, HybridRun, HybridTask};
 use crate::task::Task;
@@ -45,6 +48,8 @@ pub enum Played {
         task: Task,
         design: Design,
         lc: LoopConstants,
+        /// The task's formula, when the spec's task is one (runs certified by Theorem 4.2).
+        temporal: Option<TemporalTask>,
     },
     /// A hybrid task (internal or forced switching); `fine` is its automaton sampled at
     /// h / [`HYBRID_PROBES`], to look between samples across events.
@@ -69,17 +74,18 @@ impl Played {
     /// A one-location task with its CAF designed as `synth` designs it. A task whose spec is an MTL
     /// formula is refused: this path certifies reach-avoid runs (Theorem 4.7).
     pub fn one(task: Task) -> Result<Self, String> {
-        if task.problem.mtl.is_some() {
-            return Err(
-                "the spec's task is an [mtl] formula; play certifies the runs of reach-avoid tasks and of \
-                 forced-switching automata with a formula, and a one-location formula task's runs are \
-                 made by synth (the formula's certificate, Theorem 4.2)"
-                    .into(),
-            );
-        }
+        let temporal = match task.problem.mtl {
+            Some(_) => Some(TemporalTask::from_problem(&task.problem).map_err(|e| e.to_string())?),
+            None => None,
+        };
         let design = crate::caf::design(&task).map_err(|e| format!("no CAF and feedback: {e}"))?;
         let lc = LoopConstants::new(&Loop::new(&task, &design)).map_err(|e| e.to_string())?;
-        Ok(Played::One { task, design, lc })
+        Ok(Played::One {
+            task,
+            design,
+            lc,
+            temporal,
+        })
     }
 
     /// A hybrid task (its CAFs and path built by [`HybridTask::new`]).
@@ -176,7 +182,10 @@ impl Played {
     /// Whether the task is a formula (judged over the whole horizon: a run ends only at T, in Unsafe, or
     /// when the player finishes it).
     pub fn formula(&self) -> bool {
-        matches!(self, Played::Hybrid { task, .. } if task.formula.is_some())
+        match self {
+            Played::One { temporal, .. } => temporal.is_some(),
+            Played::Hybrid { task, .. } => task.formula.is_some(),
+        }
     }
 
     /// The forced edges (from, to) the player can take, in the automaton's order.
@@ -312,7 +321,51 @@ impl Played {
     /// A finished run's recording certified by the import path of its class (module doc).
     pub fn judge(&self, rec: &Recording) -> Judged {
         match self {
-            Played::One { task, design, lc } => {
+            Played::One {
+                task,
+                design,
+                lc,
+                temporal: Some(tt),
+            } => {
+                let lp = Loop::new(task, design);
+                let h = task.plant.period();
+                let judged = TemporalLoop::new(tt, &lp)
+                    .map_err(|e| e.to_string())
+                    .and_then(|tl| {
+                        crate::synth::temporal::certify_recording(&lp, lc, &tl, task.steps, rec)
+                    });
+                match judged {
+                    Ok((nominal, c)) => Judged {
+                        centre: nominal.x[0].clone(),
+                        delta: c.delta,
+                        delta_stored: c.delta_stored,
+                        path: nominal.x,
+                        verdict: if c.is_certified() {
+                            Ok(format!(
+                                "the formula (Theorem 4.2): {}",
+                                crate::synth::temporal::certificate_text(&c, h)
+                            ))
+                        } else {
+                            Err(format!(
+                                "the formula certifies no radius (Theorem 4.2): {}",
+                                crate::synth::temporal::certificate_text(&c, h)
+                            ))
+                        },
+                        certificate: None,
+                    },
+                    Err(why) => Judged {
+                        centre: rec.x0.clone(),
+                        delta: 0.0,
+                        delta_stored: 0.0,
+                        path: Vec::new(),
+                        verdict: Err(why),
+                        certificate: None,
+                    },
+                }
+            }
+            Played::One {
+                task, design, lc, ..
+            } => {
                 let (nominal, cert) =
                     crate::cover::certify_recording(&Loop::new(task, design), lc, rec);
                 Judged {

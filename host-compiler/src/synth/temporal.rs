@@ -20,6 +20,7 @@ use crate::cover::estimate::{estimate, CoverageEstimate, SampleBox};
 use crate::optimize::temporal::{maximize_temporal, AscentSettings};
 use crate::property::{input_scale, TemporalTask};
 use crate::task::Task;
+use crate::trajectory::csv::Recording;
 use crate::trajectory::generate::{generate, GenProblem, GenSettings};
 use crate::trajectory::Nominal;
 use crate::verify::temporal::{monte_carlo_temporal, recheck, TemporalCheck, TemporalReport};
@@ -48,6 +49,9 @@ pub struct TemporalOptions {
     pub cancel: Arc<AtomicBool>,
     /// Called with the number of balls and the new ball's δ after each acceptance.
     pub on_accept: Option<Arc<dyn Fn(usize, f64) + Send + Sync>>,
+    /// Recordings (name, recording) certified first ([`certify_recording`]); those certified at least
+    /// `min_robustness` join the balls before any seed is planned (default none).
+    pub imports: Vec<(String, Recording)>,
 }
 
 impl Default for TemporalOptions {
@@ -60,6 +64,7 @@ impl Default for TemporalOptions {
             iterations: None,
             cancel: Arc::new(AtomicBool::new(false)),
             on_accept: None,
+            imports: Vec::new(),
         }
     }
 }
@@ -87,8 +92,63 @@ pub struct TemporalSynthesis {
     pub verify: TemporalReport,
     pub stop: String,
     pub seconds: f64,
+    /// Each import: its name and δ, or why it was not used.
+    pub imported: Vec<(String, Result<f64, String>)>,
     /// Wall time per stage (growth, re-proof, coverage, Monte Carlo), seconds.
     pub timings: Vec<(String, f64)>,
+}
+
+/// A person's recording (`synth --import`, `host-compiler play`) certified for the formula: the nominal
+/// of the shipped loop from the recorded x0 and reference inputs, both as f32 (what the image stores),
+/// and Theorem 4.2's certificate of it. The formula is judged over the whole horizon of `steps` samples,
+/// so a recording must have that many rows: a shorter one would leave windows judged on nothing.
+pub fn certify_recording(
+    lp: &Loop<'_>,
+    lc: &LoopConstants,
+    tl: &TemporalLoop,
+    steps: usize,
+    rec: &Recording,
+) -> Result<(Nominal, TemporalCertificate), String> {
+    let (n, m) = (lp.P.nrows(), lp.K.nrows());
+    if rec.x0.len() != n || rec.v.iter().any(|r| r.len() != m) {
+        return Err(format!(
+            "the recording's x0 has {} values and its rows {} inputs; the plant has n = {n}, m = {m}",
+            rec.x0.len(),
+            rec.v.first().map_or(0, Vec::len)
+        ));
+    }
+    if rec.v.len() != steps {
+        return Err(format!(
+            "the task is a formula, judged over the whole horizon of {steps} samples; the recording \
+             has {} rows",
+            rec.v.len()
+        ));
+    }
+    let f32s = |r: &[f64]| -> Vec<f64> { r.iter().map(|&a| a as f32 as f64).collect() };
+    let v: Vec<Vec<f64>> = rec.v.iter().map(|r| f32s(r)).collect();
+    let nominal = lp.simulate(&f32s(&rec.x0), &v);
+    let certificate = crate::certify::temporal::certify_temporal(lp, lc, tl, &nominal);
+    Ok((nominal, certificate))
+}
+
+/// What limits a temporal certificate, or why it certifies nothing (for messages).
+pub fn certificate_text(c: &TemporalCertificate, h: f64) -> String {
+    let critical = c.critical.as_ref().map_or(String::new(), |(set, k, neg)| {
+        format!(
+            ", critical atom {}{set} at t = {:.2} s",
+            if *neg { "¬" } else { "" },
+            *k as f64 * h
+        )
+    });
+    format!(
+        "ρ(0) = {:.3e} at the samples{critical}, {:.3e} between them, δ_Input = {:.3e} at t = {:.2} s, \
+         r_crit = {:.3e}",
+        c.delta_samples,
+        c.delta_continuous,
+        c.delta_input,
+        c.k_input as f64 * h,
+        c.r_crit
+    )
 }
 
 /// What planning a seed borrows from the run.
@@ -273,6 +333,37 @@ pub fn synthesize_temporal(
             })
             .min_by(|a, b| a.1.total_cmp(&b.1))
     };
+    // Recorded trajectories first, through the same accept test as planned ones.
+    let mut imported = Vec::with_capacity(opts.imports.len());
+    for (name, rec) in &opts.imports {
+        let r = certify_recording(&lp, &lc, &tl, task.steps, rec).and_then(|(nominal, c)| {
+            if !c.is_certified() {
+                Err(format!(
+                    "not certified: {}",
+                    certificate_text(&c, task.plant.period())
+                ))
+            } else if c.delta < s.min_robustness {
+                Err(format!(
+                    "δ = {:.3e} below min_robustness {:.3e}",
+                    c.delta, s.min_robustness
+                ))
+            } else if balls.len() >= budget {
+                Err(format!("the budget of {budget} trajectories is spent"))
+            } else {
+                let d = c.delta;
+                balls.push(TemporalTrajectory {
+                    source: format!("csv:{name}"),
+                    nominal,
+                    certificate: c,
+                });
+                if let Some(f) = &opts.on_accept {
+                    f(balls.len(), d);
+                }
+                Ok(d)
+            }
+        });
+        imported.push((name.clone(), r));
+    }
     let stop = loop {
         if opts.cancel.load(Ordering::Relaxed) {
             break "interrupted".to_string();
@@ -406,6 +497,7 @@ pub fn synthesize_temporal(
         trajectories: balls,
         seeds_tried,
         refused,
+        imported,
         coverage,
         image,
         recheck,

@@ -10,7 +10,10 @@
 //! * feedback linearizable (§3.1.2, Example 4.9 `examples/fl-4-9.toml`): the game flows the nonlinear
 //!   plant (its ξ leaves the linear model's prediction), a tracking bot's run is accepted, its recording
 //!   (in ξ) certifies again to the same δ through `cover::certify_recording`, and `synth --import` takes
-//!   it.
+//!   it;
+//! * an MTL task on one location (`examples/planar-vehicle-waypoints.toml`): a run finished before T is
+//!   refused (the formula is judged over the horizon), a planned ball's rows played to T certify to its δ
+//!   by Theorem 4.2, and `synth --import` on the formula task takes the run.
 
 use host_compiler::play::{Game, PlaySettings};
 use host_compiler::synth::hybrid::{forced::plan_forced, import, HybridRun, HybridTask};
@@ -366,4 +369,100 @@ fn the_game_flows_a_feedback_linearizable_plant_and_its_runs_import() {
         .as_f64()
         .unwrap();
     assert!(d >= delta, "the imported run, then §5.3: {d} vs {delta}");
+}
+
+#[test]
+fn a_formula_task_plays_to_the_horizon_and_its_runs_import() {
+    use host_compiler::property::TemporalTask;
+    let spec = example("planar-vehicle-waypoints.toml");
+    let problem = host_compiler::spec::load(&spec).unwrap();
+    let tt = TemporalTask::from_problem(&problem).unwrap();
+    let task = host_compiler::task::Task::new(problem).unwrap();
+    let centre = task.problem.init.centre();
+    let (ball, _) = host_compiler::synth::temporal::single_ball(&task, &tt, &centre).unwrap();
+    assert!(ball.certificate.is_certified());
+    let out = scratch("mtl-game");
+    let mut game = Game::new(task, settings(&out)).unwrap();
+    let world = game.world(None).unwrap();
+    assert!(world["formula"].as_str().is_some(), "{world}");
+    let x0 = ball.nominal.x[0].clone();
+
+    // Finished before T: refused, the formula being judged over the whole horizon.
+    let s = game.start(&json!({"player": "Ann", "x0": x0})).unwrap();
+    let id = s["session"].as_u64().unwrap();
+    let r = step(
+        &mut game,
+        json!({"session": id, "v": ball.nominal.v[0], "steps": 10, "finish": true}),
+    );
+    assert_eq!(r["result"]["accepted"], false, "{r}");
+    assert!(
+        r["result"]["reason"]
+            .as_str()
+            .unwrap()
+            .contains("judged over the whole horizon"),
+        "{r}"
+    );
+
+    // The ball's rows played sample by sample: the run does not stop in Goal, it goes on to T, and is
+    // certified by the formula to the ball's δ (the game steps the same exact ZOH as the nominal).
+    let s = game.start(&json!({"player": "Ann", "x0": x0})).unwrap();
+    let id = s["session"].as_u64().unwrap();
+    let mut last = Value::Null;
+    for (k, v) in ball.nominal.v.iter().enumerate() {
+        last = step(&mut game, json!({"session": id, "v": v}));
+        if last["status"] != "running" {
+            assert_eq!(k + 1, ball.nominal.v.len(), "{last}");
+            break;
+        }
+    }
+    assert_eq!(last["status"], "timeout", "{last}");
+    let result = &last["result"];
+    assert_eq!(result["accepted"], true, "{last}");
+    let d = result["delta"].as_f64().unwrap();
+    let want = ball.certificate.delta;
+    assert!(
+        (d - want).abs() <= 1e-6 * want,
+        "played {d}, planned {want}"
+    );
+    assert!(
+        result["reason"]
+            .as_str()
+            .unwrap()
+            .contains("the formula (Theorem 4.2): ρ(0)"),
+        "{last}"
+    );
+
+    // `synth --import` on the formula task takes it (a budget of one ball: the imported one).
+    let dir = scratch("mtl-import");
+    let one = dir.join("waypoints.toml");
+    let text = std::fs::read_to_string(&spec)
+        .unwrap()
+        .replace("max_trajectories = 64\n", "max_trajectories = 1\n");
+    assert!(text.contains("max_trajectories = 1\n"));
+    std::fs::write(&one, text).unwrap();
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_host-compiler"))
+        .args([
+            "synth",
+            one.to_str().unwrap(),
+            "--quiet",
+            "--verify-runs",
+            "200",
+        ])
+        .arg("--import")
+        .arg(&out)
+        .arg("--out")
+        .arg(dir.join("out"))
+        .output()
+        .unwrap();
+    let (so, se) = (
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr),
+    );
+    assert_eq!(o.status.code(), Some(3), "{so}\n{se}");
+    assert!(se.contains(": imported, δ = "), "{so}\n{se}");
+    assert!(
+        so.contains("trajectories      1 (0 seeds tried)"),
+        "{so}\n{se}"
+    );
+    assert!(so.contains(", 0 violations"), "{so}\n{se}");
 }
