@@ -226,7 +226,7 @@ fn fl_pendulum_mtl_holds_on_the_target_from_50_initial_states() {
     let mut draws = 0usize;
     while starts.len() < RUNS && draws < 100 * RUNS {
         draws += 1;
-        let radius = if starts.len() % 2 == 0 {
+        let radius = if starts.len().is_multiple_of(2) {
             d
         } else {
             d * rng.random::<f64>().powf(1.0 / n as f64)
