@@ -380,12 +380,9 @@ fn run_temporal(
         monte_carlo_temporal(&task, &tt, &img, &starts).map_err(miette::Report::new)?
     };
     let attack = match attack_settings(a, task.problem.seed)? {
-        Some(_) if linearized => {
-            return Err(Failure::bad_input(miette::miette!(
-                "--attack is not built for MTL tasks on feedback-linearizable plants yet: the \
-                 falsifier's MTL target runs the linear model; verify without --attack (the Monte \
-                 Carlo runs on the nonlinear plant)"
-            )))
+        // On the nonlinear plant too.
+        Some(s) if linearized => {
+            Some(crate::verify::attack::attack_temporal_fl(&task, &tt, &img, &s).bad_input()?)
         }
         Some(s) => Some(crate::verify::attack::attack_temporal(&task, &tt, &img, &s).bad_input()?),
         None => None,

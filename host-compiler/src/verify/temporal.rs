@@ -385,6 +385,34 @@ impl<'a> TemporalJudge<'a> {
     }
 }
 
+impl TemporalJudge<'_> {
+    /// [`Self::attack_run`] for a feedback-linearizable task: the run from the *plant* state `x0` on the
+    /// nonlinear plant, judged as [`monte_carlo_temporal_fl`] judges it, scored by the formula's
+    /// robustness on the run sampled finer (ξ, Euclidean). `None` when the evaluator refuses x0.
+    pub fn attack_run_fl(&self, image: &Image<'_>, x0: &[f64]) -> Option<(f64, Option<String>)> {
+        let Some(maps) = self.task.plant.linearization() else {
+            return Some((
+                f64::NEG_INFINITY,
+                Some("the task's plant is not feedback-linearizable".into()),
+            ));
+        };
+        Some(
+            match run_fl(
+                self.task,
+                maps,
+                &self.judges,
+                self.tt,
+                image,
+                x0,
+                Robust::Fine,
+            )? {
+                Err(why) => (f64::NEG_INFINITY, Some(why)),
+                Ok(v) => (v.robustness.unwrap_or(f64::NEG_INFINITY), v.violation()),
+            },
+        )
+    }
+}
+
 /// Runs from every start (module doc), in parallel, in a fixed order.
 pub fn monte_carlo_temporal(
     task: &Task,
@@ -444,7 +472,7 @@ fn run_fl(
     tt: &TemporalTask,
     image: &Image<'_>,
     x0: &[f64],
-    robust: bool,
+    robust: Robust,
 ) -> Option<Result<Verdict, String>> {
     use super::nonlinear::SUBSTEPS;
     let h = maps.plant.period();
@@ -503,11 +531,16 @@ fn run_fl(
         judges
             .judge(tt, &rec, false)
             .and_then(|(holds, holds_fine, _)| {
-                let robustness = if robust {
-                    let (tc, _) = rec.traces().map_err(|e| e.to_string())?;
-                    Some(formula_value(tt, &judges.robust, &tc)?)
-                } else {
-                    None
+                let robustness = match robust {
+                    Robust::No => None,
+                    Robust::Samples => {
+                        let (tc, _) = rec.traces().map_err(|e| e.to_string())?;
+                        Some(formula_value(tt, &judges.robust, &tc)?)
+                    }
+                    Robust::Fine => {
+                        let (_, tf) = rec.traces().map_err(|e| e.to_string())?;
+                        Some(formula_value(tt, &judges.robust, &tf)?)
+                    }
                 };
                 Ok(Verdict {
                     holds,
@@ -568,7 +601,11 @@ pub fn monte_carlo_temporal_fl(
         .map(|(c, chunk)| {
             let mut r = TemporalReport::empty();
             for (i, x0) in chunk.iter().enumerate() {
-                let robust = (c * 64 + i) % super::MARGIN_EVERY == 0;
+                let robust = if (c * 64 + i) % super::MARGIN_EVERY == 0 {
+                    Robust::Samples
+                } else {
+                    Robust::No
+                };
                 match run_fl(task, maps, &judges, tt, image, x0, robust) {
                     None => r.rejected += 1,
                     Some(Err(e)) => {

@@ -1,8 +1,9 @@
 //! MTL tasks on feedback-linearizable plants (issue #14; Problem 2.28, Theorem 4.2 with the sampled-loop
 //! mismatch D of §3.1.2 / Theorem 3.21): the pendulum's swing-up profile (`examples/fl-pendulum-mtl.toml`)
 //! is synthesised in ξ, every ball is re-proved from the image bytes, and the image run on the nonlinear
-//! pendulum is judged by the formula with 0 violations; the same image judged by a stricter speed limit
-//! fails (the judge can fail); a predicate or a set on a zero-dynamics state is refused naming it.
+//! pendulum is judged by the formula with 0 violations, and the falsifier on the plant finds nothing; the
+//! same image judged by a stricter speed limit fails, in the Monte Carlo and in the falsifier (the judges
+//! can fail); a predicate on a zero-dynamics state is refused naming it.
 
 use host_compiler::property::TemporalTask;
 use host_compiler::spec;
@@ -53,6 +54,21 @@ fn fl_pendulum_mtl_synthesises_and_verifies_on_the_plant() {
     assert_eq!(s.verify.violations, 0, "{:?}", s.verify.first_violation);
     assert!(s.coverage.mean > 0.5, "{:?}", s.coverage);
 
+    // The falsifier on the plant itself, scored by the formula: it ran and found nothing.
+    let settings = host_compiler::verify::attack::AttackSettings {
+        starts_per_ball: 1,
+        evaluations_per_start: 8,
+        ..Default::default()
+    };
+    let img0 = shared_types::image::decode(&s.image).expect("decodes");
+    let at = host_compiler::verify::attack::attack_temporal_fl(&task, &tt, &img0, &settings)
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert!(at.evaluations > 0 && at.violations == 0, "{at:?}");
+    assert!(
+        at.worst_robustness > 0.0 && at.worst_robustness.is_finite(),
+        "{at:?}"
+    );
+
     // The same image judged by a formula it does not meet (no faster than 0.5 rad/s, which a 4 s raise
     // through π cannot keep): the runs on the plant violate it.
     let strict = text.replace("(x2 >= -1.6)", "(x2 >= -0.5)");
@@ -71,6 +87,10 @@ fn fl_pendulum_mtl_synthesises_and_verifies_on_the_plant() {
     .expect("starts");
     let r = monte_carlo_temporal_fl(&task2, &tt2, &img, &starts, 7).expect("runs");
     assert!(r.runs > 0 && r.violations == r.runs, "{r:?}");
+    // ... and the falsifier finds it too.
+    let at = host_compiler::verify::attack::attack_temporal_fl(&task2, &tt2, &img, &settings)
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert!(at.violations > 0 && at.worst_robustness < 0.0, "{at:?}");
 }
 
 #[test]
