@@ -18,6 +18,15 @@
 //! δ_φ is the least of 1–3 (times 1 − 10⁻⁹ for the strict inequalities), stored through the f32
 //! selection radius as for reach-avoid. For a discrete-time plant there is nothing between samples and
 //! part 2 is skipped.
+//!
+//! **A plant's sampled-loop mismatch D** (a feedback-linearizable plant's w-channel disturbance,
+//! `model::feedback_linearizable`, Theorem 3.21 with a second disturbance). It enters r_crit and the
+//! inter-sample margin (`LoopConstants::r_crit`, `held_disturbance`), as for reach-avoid; and, as
+//! Theorem 4.7's certificate does, the radius may instead be the tube bound less what the disturbances
+//! can add over the table: a run from the δ-ball stays within δ + S_N·(‖P^{1/2}B‖ε̄ + φβD) of the nominal
+//! at every sample (‖Ã^j‖_P ≤ 1, `LoopConstants::accumulation`), and parts 1–3 are bounds on that sample
+//! deviation (part 2 takes it as its r), so every part holds for δ = min(1–3) − S_N·(…), without r_crit.
+//! δ_φ is the larger of the two.
 
 use super::{rounding_over_table, selection_radius, Loop, LoopConstants, Pieces};
 use crate::geometry::Metric;
@@ -74,6 +83,9 @@ pub struct TemporalCertificate {
     pub eps_components: Vec<f64>,
     pub eps_f32: f64,
     pub r_crit: f64,
+    /// With a sampled-loop mismatch D > 0: S_N·(‖P^{1/2}B‖ε̄ + φβD), how far the disturbances can move a
+    /// run from the undisturbed tube over the table (module doc); 0 otherwise.
+    pub accumulated: f64,
     /// The certified radius (0 if none) and the radius stored in the image.
     pub delta: f64,
     pub delta_stored: f32,
@@ -98,6 +110,7 @@ impl TemporalCertificate {
             eps_components: vec![f64::NAN; m],
             eps_f32: f64::NAN,
             r_crit: f64::NAN,
+            accumulated: 0.0,
             delta: 0.0,
             delta_stored: 0.0,
             signal: Vec::new(),
@@ -212,11 +225,19 @@ pub fn try_certify(
     };
     let r_crit = lc.r_crit(eps_f32);
     let d = rho0.min(delta_continuous).min(delta_input);
-    let delta = if d > 0.0 && r_crit < d {
+    let mut delta = if d > 0.0 && r_crit < d {
         d * (1.0 - 1e-9)
     } else {
         0.0
     };
+    // The disturbances summed over the table (module doc): every part bounds the sample deviation, which
+    // stays below δ + `accumulated`.
+    let mut accumulated = 0.0;
+    if lc.mismatch > 0.0 && d > 0.0 {
+        let per_step = lc.roots.norm_into(lc.B.as_ref()) * eps_f32 + lc.phi * lc.beta * lc.mismatch;
+        accumulated = lc.accumulation(N) * per_step * (1.0 + 1e-9);
+        delta = delta.max((d - accumulated) * (1.0 - 1e-9));
+    }
     Ok(TemporalCertificate {
         delta_samples: rho0,
         delta_continuous,
@@ -226,6 +247,7 @@ pub fn try_certify(
         eps_components,
         eps_f32,
         r_crit,
+        accumulated,
         delta,
         signal,
         critical,

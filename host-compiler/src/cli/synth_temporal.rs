@@ -14,6 +14,27 @@ use miette::IntoDiagnostic;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
+/// The task of an MTL spec and its formula over the task's coordinates. The formula is bound first on
+/// the spec as written (so that its errors point into the text); a feedback-linearizable plant's task is
+/// in ξ, and so is its formula (rewritten by `model::feedback_linearizable::formula_in_xi`).
+pub(crate) fn temporal_task(
+    problem: crate::spec::Problem,
+) -> Result<(TemporalTask, crate::task::Task), Failure> {
+    let tt = TemporalTask::from_problem(&problem)
+        .map_err(miette::Report::new)
+        .bad_input()?;
+    let linearized = problem.nonlinear.is_some();
+    let task = task_of(problem)?;
+    let tt = if linearized {
+        TemporalTask::from_problem(&task.problem)
+            .map_err(miette::Report::new)
+            .bad_input()?
+    } else {
+        tt
+    };
+    Ok((tt, task))
+}
+
 pub fn run(a: &SynthArgs, problem: crate::spec::Problem) -> Outcome {
     if problem.synthesis.mode == crate::spec::ControllerMode::Pwa {
         return Err(Failure::bad_input(miette::miette!(
@@ -21,10 +42,7 @@ pub fn run(a: &SynthArgs, problem: crate::spec::Problem) -> Outcome {
              mode = \"feedforward\""
         )));
     }
-    let tt = TemporalTask::from_problem(&problem)
-        .map_err(miette::Report::new)
-        .bad_input()?;
-    let task = task_of(problem)?;
+    let (tt, task) = temporal_task(problem)?;
     // Recordings in the task's coordinates, each the whole horizon long (the formula is judged over T).
     let imports = super::synth::load_imports(a, &task.problem)?;
     let cancel = Arc::new(AtomicBool::new(false));

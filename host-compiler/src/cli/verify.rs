@@ -355,10 +355,10 @@ fn run_temporal(
             a.image.display()
         )));
     }
-    let tt = crate::property::TemporalTask::from_problem(&problem)
-        .map_err(miette::Report::new)
-        .bad_input()?;
-    let task = task_of(problem)?;
+    let (tt, task) = super::synth_temporal::temporal_task(problem)?;
+    if let Some(maps) = task.plant.linearization() {
+        super::maps_match(maps, &img, &a.image, &a.spec)?;
+    }
     let rc = recheck(&task, &tt, &img)
         .map_err(|e| miette::miette!("{}: {e}", a.image.display()))
         .bad_input()?;
@@ -370,8 +370,20 @@ fn run_temporal(
     let starts = crate::verify::hybrid::starts_from_image(bytes, &init, runs, per_ball, seed)
         .map_err(|e| miette::miette!("{e}"))
         .bad_input()?;
-    let r = monte_carlo_temporal(&task, &tt, &img, &starts).map_err(miette::Report::new)?;
+    let linearized = task.plant.linearization().is_some();
+    let r = if linearized {
+        // On the nonlinear plant, the zero states drawn in Init.
+        crate::verify::temporal::monte_carlo_temporal_fl(&task, &tt, &img, &starts, seed ^ 0x2e10)
+            .map_err(|e| miette::miette!("{}: {e}", a.image.display()))
+            .bad_input()?
+    } else {
+        monte_carlo_temporal(&task, &tt, &img, &starts).map_err(miette::Report::new)?
+    };
     let attack = match attack_settings(a, task.problem.seed)? {
+        // On the nonlinear plant too.
+        Some(s) if linearized => {
+            Some(crate::verify::attack::attack_temporal_fl(&task, &tt, &img, &s).bad_input()?)
+        }
         Some(s) => Some(crate::verify::attack::attack_temporal(&task, &tt, &img, &s).bad_input()?),
         None => None,
     };

@@ -43,6 +43,25 @@
 //!    2 in u bounded as ‖e₀‖ + ‖M‖₂R_u + ½‖Q‖R_u² over Z × U. The input program's rounding enters the same
 //!    channel through Γ: D = h·sup‖E‖ + sup‖Γ‖₂·e_prog. The certificate takes D as a w-channel disturbance
 //!    that varies within the period (`certify::LoopConstants::mismatch`).
+//!
+//! **MTL tasks** (Problem 2.28, Theorem 4.2; issue #14). An `[mtl] formula` is the task on the linear
+//! model in ξ exactly as for a linear plant (`certify::temporal`), with D the same w-channel disturbance
+//! as for reach-avoid: r_crit and the inter-sample margin take it (`LoopConstants::r_crit`,
+//! `held_disturbance`), and the radius left after summing it over the table, δ = (the formula's tube
+//! bound) − S_N·(‖P^{1/2}B‖ε̄ + φβD), is the alternative Theorem 4.7's certificate also takes. The formula
+//! is rewritten into ξ ([`formula_in_xi`]): its predicates' signals `x1 … xn` name the *plant's* states
+//! and become the ξ index of that state; a predicate weighing a zero-dynamics state is refused
+//! ([`FlError::PredicateOnZeroDynamics`]), as a named set on one is ([`FlError::SetOnZeroDynamics`]), since
+//! the certificate does not track those states. The bounds above hold only while the run stays in the
+//! operating region, which the formula need not mention; so with a region the task is
+//! `φ ∧ G[0,T] (ξ in the region's ξ box)`: the simplest sound choice. A certified run's tube then has
+//! positive depth in that box at every sample and between samples, so the first-exit argument above goes
+//! through unchanged (the conjunct plays the part of the region's complement in Unsafe), and a run that
+//! satisfies the rewritten formula satisfies φ. The price is that the formula's robustness is at most the
+//! nominal's depth in the region, which a region chosen for the task leaves ample. Without a region no
+//! conjunct is needed (every bound holds over all ξ). `verify::temporal::monte_carlo_temporal_fl` judges
+//! the image on the nonlinear plant by the formula as rewritten, and counts leaving the region (zero
+//! states included) as a violation.
 
 use super::linear::{ContinuousPlant, DiscretePlant, LinearAffine};
 use super::nonlinear::NonlinearPlant;
@@ -122,8 +141,13 @@ pub enum FlError {
         alpha: f64,
         e_prog: f64,
     },
-    #[error("an MTL formula over a feedback-linearizable plant is not synthesised yet")]
-    Mtl,
+    #[error("the [mtl] formula does not parse: {0}")]
+    Formula(String),
+    #[error(
+        "the [mtl] formula's predicate `{predicate}` constrains {state}, a state of the zero dynamics; \
+         predicates may only constrain the linearised coordinates ξ (the outputs and their derivatives)"
+    )]
+    PredicateOnZeroDynamics { predicate: String, state: String },
 }
 
 /// The maps and bounds of a linearised plant (module doc).
@@ -424,9 +448,6 @@ pub fn linearize(problem: &Problem) -> Result<(Problem, FlMaps), FlError> {
         .nonlinear
         .as_ref()
         .expect("linearize is called on a nonlinear problem");
-    if problem.mtl.is_some() {
-        return Err(FlError::Mtl);
-    }
     let names = &desc.names;
     let p = names.param_values();
     let sys = &desc.system;
@@ -898,6 +919,17 @@ pub fn linearize(problem: &Problem) -> Result<(Problem, FlMaps), FlError> {
         .iter()
         .map(|(k, s)| Ok((k.clone(), remap(&format!("[sets.{k}]"), s)?)))
         .collect::<Result<_, FlError>>()?;
+    xi.mtl = match &problem.mtl {
+        None => None,
+        Some(src) => Some(formula_in_xi(
+            src,
+            n,
+            &xi_states,
+            names,
+            region.as_ref(),
+            problem.horizon,
+        )?),
+    };
     xi.input = w_final;
     xi.nonlinear = None;
     let maps = FlMaps {
@@ -921,6 +953,100 @@ pub fn linearize(problem: &Problem) -> Result<(Problem, FlMaps), FlError> {
         mismatch_flow,
     };
     Ok((xi, maps))
+}
+
+/// The `[mtl]` formula of a plant-coordinate spec rewritten over ξ (module doc, *MTL tasks*): every
+/// predicate's plant signal `x<s+1>` (state s) renamed `x<j+1>` (ξ_j = state s), a predicate that weighs a
+/// zero-dynamics state refused; names that are not state signals are left as written (binding the task
+/// reports them). With an operating region the formula becomes `(φ) & G[0,T] (ξ inside the region's ξ
+/// box)`. The result is the fully parenthesised print of the rewritten tree (it parses back to it).
+pub fn formula_in_xi(
+    src: &str,
+    n: usize,
+    xi_states: &[usize],
+    names: &crate::expr::Names,
+    region: Option<&InitBox>,
+    horizon: f64,
+) -> Result<String, FlError> {
+    use crate::robustness::mtl::{Expr as M, Interval as TI, LinearPredicate, Span};
+    let parsed = crate::robustness::mtl::parse(src).map_err(|e| FlError::Formula(e.to_string()))?;
+    let plant_signals = crate::property::state_signals(n);
+    fn walk(
+        e: &M,
+        plant_signals: &[String],
+        xi_states: &[usize],
+        names: &crate::expr::Names,
+    ) -> Result<M, FlError> {
+        let go = |x: &M| walk(x, plant_signals, xi_states, names);
+        Ok(match e {
+            M::True | M::False | M::Set { .. } => e.clone(),
+            M::Linear(p) => {
+                let mut q = p.clone();
+                for (name, c, _) in q.terms.iter_mut() {
+                    let Some(s) = plant_signals.iter().position(|v| v == name) else {
+                        continue;
+                    };
+                    match xi_states.iter().position(|&q| q == s) {
+                        Some(j) => *name = format!("x{}", j + 1),
+                        None if *c != 0.0 => {
+                            return Err(FlError::PredicateOnZeroDynamics {
+                                predicate: p.to_string(),
+                                state: format!("{name} ({})", state_name(names, s)),
+                            })
+                        }
+                        // A zero coefficient weighs nothing: the term is dropped below.
+                        None => name.clear(),
+                    }
+                }
+                q.terms.retain(|(name, _, _)| !name.is_empty());
+                if q.terms.is_empty() {
+                    // 0 ≤ b: a constant.
+                    if 0.0 <= p.b {
+                        M::True
+                    } else {
+                        M::False
+                    }
+                } else {
+                    M::Linear(q)
+                }
+            }
+            M::Not(x) => M::Not(Box::new(go(x)?)),
+            M::And(v) => M::And(v.iter().map(go).collect::<Result<_, _>>()?),
+            M::Or(v) => M::Or(v.iter().map(go).collect::<Result<_, _>>()?),
+            M::Implies(l, r) => M::Implies(Box::new(go(l)?), Box::new(go(r)?)),
+            M::Eventually(i, x) => M::Eventually(*i, Box::new(go(x)?)),
+            M::Always(i, x) => M::Always(*i, Box::new(go(x)?)),
+            M::Until(i, l, r) => M::Until(*i, Box::new(go(l)?), Box::new(go(r)?)),
+            M::Release(i, l, r) => M::Release(*i, Box::new(go(l)?), Box::new(go(r)?)),
+        })
+    }
+    let mut out = walk(&parsed, &plant_signals, xi_states, names)?;
+    if let Some(r) = region {
+        // G[0,T] (lo_s ≤ ξ_j ≤ hi_s for every ξ state): its robustness is the depth in the region's ξ box,
+        // so a certified run's tube stays strictly inside (the first-exit argument of the module doc).
+        let span = Span::new(0, 0);
+        let mut keep = Vec::with_capacity(2 * xi_states.len());
+        for (j, &s) in xi_states.iter().enumerate() {
+            let name = format!("x{}", j + 1);
+            for (a, b) in [(1.0, r.hi[s]), (-1.0, -r.lo[s])] {
+                keep.push(M::Linear(LinearPredicate {
+                    terms: vec![(name.clone(), a, span)],
+                    b,
+                    span,
+                }));
+            }
+        }
+        let within = match keep.len() {
+            0 => M::True,
+            1 => keep.pop().expect("one"),
+            _ => M::And(keep),
+        };
+        let t = TI::new(0.0, horizon).ok_or_else(|| {
+            FlError::Formula(format!("the horizon {horizon} is not a time bound"))
+        })?;
+        out = M::And(vec![out, M::Always(t, Box::new(within))]);
+    }
+    Ok(out.to_string())
 }
 
 /// The task's plant of a linearised spec.

@@ -9,7 +9,8 @@
 //! ([`crate::optimize::temporal`]) climbs the formula's robustness; the result is re-certified from the
 //! f32 table. The image is Algorithm 2's feedforward image, the firmware runs it unchanged; it is
 //! re-proved from its bytes and verified by Monte Carlo against the formula as written
-//! ([`crate::verify::temporal`]).
+//! ([`crate::verify::temporal`]; a feedback-linearizable task's image on the nonlinear plant,
+//! `monte_carlo_temporal_fl`).
 //!
 //! Everything random is drawn from a ChaCha stream seeded by the spec's seed, and each round's seeds are
 //! collected in order, so the image does not depend on the number of threads.
@@ -23,7 +24,9 @@ use crate::task::Task;
 use crate::trajectory::csv::Recording;
 use crate::trajectory::generate::{generate, GenProblem, GenSettings};
 use crate::trajectory::Nominal;
-use crate::verify::temporal::{monte_carlo_temporal, recheck, TemporalCheck, TemporalReport};
+use crate::verify::temporal::{
+    monte_carlo_temporal, monte_carlo_temporal_fl, recheck, TemporalCheck, TemporalReport,
+};
 use faer::Mat;
 use rand::SeedableRng;
 use rayon::prelude::*;
@@ -489,7 +492,12 @@ pub fn synthesize_temporal(
         opts.verify_per_ball,
         task.problem.seed ^ 0x7e51f1,
     )?;
-    let verify = monte_carlo_temporal(task, tt, &decoded, &starts).map_err(|e| e.to_string())?;
+    // A feedback-linearizable task's image runs on the nonlinear plant (its zero states drawn in Init).
+    let verify = if task.plant.linearization().is_some() {
+        monte_carlo_temporal_fl(task, tt, &decoded, &starts, task.problem.seed ^ 0x2e10)?
+    } else {
+        monte_carlo_temporal(task, tt, &decoded, &starts).map_err(|e| e.to_string())?
+    };
     mark("monte carlo", &mut timings);
     Ok(TemporalSynthesis {
         K,

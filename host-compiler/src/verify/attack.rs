@@ -21,6 +21,9 @@
 //!   scored by the reach-avoid robustness of its samples;
 //! * [`attack_fl`] (feedback-linearizable plants): [`super::nonlinear::run_fl_visiting`] on the
 //!   nonlinear plant, scored by the reach-avoid robustness of its ξ samples;
+//! * [`attack_temporal_fl`] (MTL tasks on feedback-linearizable plants): the same starts, each run on the
+//!   nonlinear plant judged as `verify`'s FL MTL Monte Carlo judges it and scored by the formula's
+//!   robustness on the run sampled finer (`TemporalJudge::attack_run_fl`);
 //! * [`attack_pwa`] (PWA images): [`super::pwa::run_pwa`] from every ball of F, scored likewise.
 
 use super::{run_visiting, Judge, RunOutcome};
@@ -644,6 +647,67 @@ impl Target for FlTarget<'_> {
         let rho = reach_avoid_robustness(&self.task.property, &xis, self.maps.plant.period());
         scored(out, rho)
     }
+}
+
+/// Feedback-linearizable plants with an MTL task: the starts as [`FlTarget`]'s (ξ in the ball, the
+/// zero-dynamics states over Init), each run on the nonlinear plant judged and scored by the formula
+/// ([`super::temporal::TemporalJudge::attack_run_fl`]).
+struct FlTemporalTarget<'a> {
+    fl: FlTarget<'a>,
+    judge: super::temporal::TemporalJudge<'a>,
+}
+
+impl Target for FlTemporalTarget<'_> {
+    fn balls(&self) -> &[Ball] {
+        self.fl.balls()
+    }
+    fn extra_dims(&self) -> usize {
+        self.fl.extra_dims()
+    }
+    fn start(&self, xi: Vec<f64>, extra: &[f64]) -> Vec<f64> {
+        self.fl.start(xi, extra)
+    }
+    fn score(&self, x0: &[f64]) -> Scored {
+        match self.judge.attack_run_fl(self.fl.image, x0) {
+            None => Scored::Refused,
+            Some((robustness, violation)) => Scored::Run {
+                robustness,
+                violation,
+            },
+        }
+    }
+}
+
+/// Attacks every ball of a feedback-linearizable task's image for its MTL formula on the nonlinear plant.
+pub fn attack_temporal_fl(
+    task: &crate::task::Task,
+    tt: &crate::property::TemporalTask,
+    image: &Image<'_>,
+    settings: &AttackSettings,
+) -> Result<AttackReport, AttackError> {
+    let maps = task.plant.linearization().ok_or_else(|| {
+        AttackError::Judge("the task's plant is not feedback-linearizable".into())
+    })?;
+    let init = &maps.init;
+    let free = maps
+        .zero_states
+        .iter()
+        .filter(|&&s| init.hi[s] > init.lo[s])
+        .map(|&s| (s, init.lo[s], init.hi[s]))
+        .collect();
+    let judge = super::temporal::TemporalJudge::new(task, tt)
+        .map_err(|e| AttackError::Judge(e.to_string()))?;
+    let target = FlTemporalTarget {
+        fl: FlTarget {
+            task,
+            maps,
+            image,
+            balls: image_balls(image, false)?,
+            free,
+        },
+        judge,
+    };
+    falsify(&target, settings)
 }
 
 /// Attacks every ball of a feedback-linearizable task's image on the nonlinear plant (module doc).

@@ -11,7 +11,10 @@
 //!   sampling (its Boolean semantics: each atom ±1 by set membership, closed sets, so a run on a set's
 //!   boundary is in it), an input leaves the input set, or the evaluator refuses a state after accepting
 //!   the first. The robustness itself (signed Euclidean distances) is computed on the samples of every
-//!   [`super::MARGIN_EVERY`]-th run, for the report.
+//!   [`super::MARGIN_EVERY`]-th run, for the report;
+//! * [`monte_carlo_temporal_fl`]: the same judgement for a feedback-linearizable task's image, run on the
+//!   nonlinear plant itself (the image's model programs, the adaptive integrator of `verify::nonlinear`),
+//!   leaving the operating region counted as a violation.
 
 use crate::certify::temporal::{certify_temporal, TemporalLoop};
 use crate::certify::{selection_radius, CertifyError, Loop, LoopConstants};
@@ -382,6 +385,34 @@ impl<'a> TemporalJudge<'a> {
     }
 }
 
+impl TemporalJudge<'_> {
+    /// [`Self::attack_run`] for a feedback-linearizable task: the run from the *plant* state `x0` on the
+    /// nonlinear plant, judged as [`monte_carlo_temporal_fl`] judges it, scored by the formula's
+    /// robustness on the run sampled finer (ξ, Euclidean). `None` when the evaluator refuses x0.
+    pub fn attack_run_fl(&self, image: &Image<'_>, x0: &[f64]) -> Option<(f64, Option<String>)> {
+        let Some(maps) = self.task.plant.linearization() else {
+            return Some((
+                f64::NEG_INFINITY,
+                Some("the task's plant is not feedback-linearizable".into()),
+            ));
+        };
+        Some(
+            match run_fl(
+                self.task,
+                maps,
+                &self.judges,
+                self.tt,
+                image,
+                x0,
+                Robust::Fine,
+            )? {
+                Err(why) => (f64::NEG_INFINITY, Some(why)),
+                Ok(v) => (v.robustness.unwrap_or(f64::NEG_INFINITY), v.violation()),
+            },
+        )
+    }
+}
+
 /// Runs from every start (module doc), in parallel, in a fixed order.
 pub fn monte_carlo_temporal(
     task: &Task,
@@ -402,6 +433,180 @@ pub fn monte_carlo_temporal(
                     Robust::No
                 };
                 match run(task, &judges, tt, image, x0, robust) {
+                    None => r.rejected += 1,
+                    Some(Err(e)) => {
+                        r.runs += 1;
+                        r.violations += 1;
+                        r.first_violation.get_or_insert(e);
+                    }
+                    Some(Ok(v)) => {
+                        r.runs += 1;
+                        if let Some(rho) = v.robustness {
+                            r.min_robustness = r.min_robustness.min(rho);
+                        }
+                        r.min_input_slack = r.min_input_slack.min(v.slack);
+                        if let Some(why) = v.violation() {
+                            r.violations += 1;
+                            r.first_violation
+                                .get_or_insert(format!("x0 = {x0:?}: {why}"));
+                        }
+                    }
+                }
+            }
+            r
+        })
+        .collect();
+    let mut out = TemporalReport::empty();
+    for r in reports {
+        out.merge(r);
+    }
+    Ok(out)
+}
+
+/// One closed-loop run of a feedback-linearizable task's image on the nonlinear plant from the plant
+/// state `x0` (module doc of [`monte_carlo_temporal_fl`]). `None` when the evaluator refuses x0's ξ.
+fn run_fl(
+    task: &Task,
+    maps: &crate::model::feedback_linearizable::FlMaps,
+    judges: &Judges,
+    tt: &TemporalTask,
+    image: &Image<'_>,
+    x0: &[f64],
+    robust: Robust,
+) -> Option<Result<Verdict, String>> {
+    use super::nonlinear::SUBSTEPS;
+    let h = maps.plant.period();
+    let input = crate::property::input_bound(&maps.input);
+    let outside = |x: &[f64]| {
+        maps.region.as_ref().is_some_and(|r| {
+            x.iter()
+                .zip(r.lo.iter().zip(&r.hi))
+                .any(|(v, (l, h))| !(l < v && v < h))
+        })
+    };
+    let mut rec = RunRecord::new(&maps.xi_of(x0), h);
+    let mut x = x0.to_vec();
+    let mut ctl = Controller::new(*image);
+    let mut slack = f64::INFINITY;
+    let mut left: Option<(usize, Vec<f64>)> = outside(x0).then(|| (0, x0.to_vec()));
+    for k in 0..task.steps {
+        let xf: Vec<f32> = x.iter().map(|&v| v as f32).collect();
+        let u: Vec<f64> = match ctl.step_plant(&xf) {
+            Ok(u) => u.as_slice().iter().map(|&v| v as f64).collect(),
+            Err(_) if k == 0 => return None,
+            Err(e) => {
+                return Some(Err(format!(
+                    "x0 = {x0:?}: the evaluator refused the state at step {k} ({e:?})"
+                )))
+            }
+        };
+        slack = slack.min(super::input_slack(&input, &u));
+        let mut i = 0usize;
+        let next = maps.plant.flow(&x, &u, h, SUBSTEPS, &mut |xs| {
+            i += 1;
+            if left.is_none() && outside(xs) {
+                left = Some((k, xs.to_vec()));
+            }
+            rec.push_between(i as f64 * h / SUBSTEPS as f64, &maps.xi_of(xs));
+        });
+        x = match next {
+            Ok(x) => x,
+            Err(e) => {
+                return Some(Err(format!(
+                    "x0 = {x0:?}: the plant's flow failed in period {k} ({e})"
+                )))
+            }
+        };
+        if left.is_none() && outside(&x) {
+            left = Some((k + 1, x.clone()));
+        }
+        rec.push_sample(&maps.xi_of(&x));
+    }
+    if let Some((k, xs)) = left {
+        return Some(Err(format!(
+            "x0 = {x0:?}: the run leaves the operating region in period {k} (at {xs:?})"
+        )));
+    }
+    Some(
+        judges
+            .judge(tt, &rec, false)
+            .and_then(|(holds, holds_fine, _)| {
+                let robustness = match robust {
+                    Robust::No => None,
+                    Robust::Samples => {
+                        let (tc, _) = rec.traces().map_err(|e| e.to_string())?;
+                        Some(formula_value(tt, &judges.robust, &tc)?)
+                    }
+                    Robust::Fine => {
+                        let (_, tf) = rec.traces().map_err(|e| e.to_string())?;
+                        Some(formula_value(tt, &judges.robust, &tf)?)
+                    }
+                };
+                Ok(Verdict {
+                    holds,
+                    holds_fine,
+                    robustness,
+                    slack,
+                })
+            })
+            .map_err(|e| format!("x0 = {x0:?}: {e}")),
+    )
+}
+
+/// Monte Carlo of a feedback-linearizable task's image for its MTL formula on the nonlinear plant itself
+/// (§3.1.2, Theorem 4.2 with the mismatch D; `model::feedback_linearizable`, *MTL tasks*): each start in
+/// ξ (`starts`, as [`crate::verify::hybrid::starts_from_image`] draws them) is lifted to a plant state
+/// with its zero-dynamics states drawn uniformly in Init (seeded by `seed`); the shared evaluator's
+/// `step_plant` maps the state to ξ and w back to u through the image's model programs in f32, the plant
+/// is flowed by the adaptive integrator (Dop853, `model::nonlinear`) with
+/// [`super::nonlinear::SUBSTEPS`] − 1 states recorded inside every period. A run violates the task when
+/// the formula as rewritten into ξ is false on the samples or on the finer sampling (Boolean semantics,
+/// as [`monte_carlo_temporal`]), an input leaves the *plant's* input set, the run leaves the operating
+/// region (the plant's whole state, zero states included, at the samples and between them), the
+/// evaluator refuses a state after accepting the first, or the integrator fails.
+pub fn monte_carlo_temporal_fl(
+    task: &Task,
+    tt: &TemporalTask,
+    image: &Image<'_>,
+    starts: &[Vec<f64>],
+    seed: u64,
+) -> Result<TemporalReport, String> {
+    use rand::{Rng, SeedableRng};
+    let maps = task
+        .plant
+        .linearization()
+        .ok_or("monte_carlo_temporal_fl takes a feedback-linearizable task")?;
+    super::nonlinear::check_maps(maps, image)?;
+    let judges = Judges::new(tt, task.plant.n()).map_err(|e| e.to_string())?;
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let init = &maps.init;
+    let lifted: Vec<Vec<f64>> = starts
+        .iter()
+        .map(|xi| {
+            let mut x: Vec<f64> = init
+                .lo
+                .iter()
+                .zip(&init.hi)
+                .map(|(&l, &h)| if h > l { rng.random_range(l..=h) } else { l })
+                .collect();
+            for (j, &s) in maps.xi_states.iter().enumerate() {
+                x[s] = xi[j];
+            }
+            x
+        })
+        .collect();
+    let reports: Vec<TemporalReport> = lifted
+        .par_chunks(64)
+        .enumerate()
+        .map(|(c, chunk)| {
+            let mut r = TemporalReport::empty();
+            for (i, x0) in chunk.iter().enumerate() {
+                let robust = if (c * 64 + i) % super::MARGIN_EVERY == 0 {
+                    Robust::Samples
+                } else {
+                    Robust::No
+                };
+                match run_fl(task, maps, &judges, tt, image, x0, robust) {
                     None => r.rejected += 1,
                     Some(Err(e)) => {
                         r.runs += 1;

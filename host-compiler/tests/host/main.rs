@@ -73,6 +73,7 @@ mod spec_limits;
 mod spec_parse;
 mod synth_algorithm4;
 mod synth_end_to_end;
+mod synth_fl_mtl;
 mod synth_import_dir;
 mod verify_attack;
 mod verify_refuses;
