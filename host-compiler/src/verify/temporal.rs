@@ -421,46 +421,9 @@ pub fn monte_carlo_temporal(
     starts: &[Vec<f64>],
 ) -> Result<TemporalReport, crate::property::TemporalError> {
     let judges = Judges::new(tt, task.plant.n())?;
-    let reports: Vec<TemporalReport> = starts
-        .par_chunks(64)
-        .enumerate()
-        .map(|(c, chunk)| {
-            let mut r = TemporalReport::empty();
-            for (i, x0) in chunk.iter().enumerate() {
-                let robust = if (c * 64 + i) % super::MARGIN_EVERY == 0 {
-                    Robust::Samples
-                } else {
-                    Robust::No
-                };
-                match run(task, &judges, tt, image, x0, robust) {
-                    None => r.rejected += 1,
-                    Some(Err(e)) => {
-                        r.runs += 1;
-                        r.violations += 1;
-                        r.first_violation.get_or_insert(e);
-                    }
-                    Some(Ok(v)) => {
-                        r.runs += 1;
-                        if let Some(rho) = v.robustness {
-                            r.min_robustness = r.min_robustness.min(rho);
-                        }
-                        r.min_input_slack = r.min_input_slack.min(v.slack);
-                        if let Some(why) = v.violation() {
-                            r.violations += 1;
-                            r.first_violation
-                                .get_or_insert(format!("x0 = {x0:?}: {why}"));
-                        }
-                    }
-                }
-            }
-            r
-        })
-        .collect();
-    let mut out = TemporalReport::empty();
-    for r in reports {
-        out.merge(r);
-    }
-    Ok(out)
+    Ok(judge_runs(starts, &|x0, robust| {
+        run(task, &judges, tt, image, x0, robust)
+    }))
 }
 
 /// One closed-loop run of a feedback-linearizable task's image on the nonlinear plant from the plant
@@ -595,7 +558,18 @@ pub fn monte_carlo_temporal_fl(
             x
         })
         .collect();
-    let reports: Vec<TemporalReport> = lifted
+    Ok(judge_runs(&lifted, &|x0, robust| {
+        run_fl(task, maps, &judges, tt, image, x0, robust)
+    }))
+}
+
+/// Every start run by `run` (`None`: the evaluator refused it) in parallel chunks of a fixed order,
+/// the robustness recorded on every [`super::MARGIN_EVERY`]th run, merged into one report.
+fn judge_runs(
+    starts: &[Vec<f64>],
+    run: &(dyn Fn(&[f64], Robust) -> Option<Result<Verdict, String>> + Sync),
+) -> TemporalReport {
+    let reports: Vec<TemporalReport> = starts
         .par_chunks(64)
         .enumerate()
         .map(|(c, chunk)| {
@@ -606,7 +580,7 @@ pub fn monte_carlo_temporal_fl(
                 } else {
                     Robust::No
                 };
-                match run_fl(task, maps, &judges, tt, image, x0, robust) {
+                match run(x0, robust) {
                     None => r.rejected += 1,
                     Some(Err(e)) => {
                         r.runs += 1;
@@ -634,5 +608,5 @@ pub fn monte_carlo_temporal_fl(
     for r in reports {
         out.merge(r);
     }
-    Ok(out)
+    out
 }

@@ -164,6 +164,26 @@ fn a_forced_recording_with_its_locations_certifies_as_planned_and_bad_ones_are_r
     );
 }
 
+/// `synth SPEC --import DIR` with a budget of one trajectory (the spec's): exit 3 (Init not covered), its
+/// stdout and stderr.
+fn synth_importing(spec: &Path, dir: &Path, out: &Path) -> (String, String) {
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_host-compiler"))
+        .arg("synth")
+        .arg(spec)
+        .args(["--quiet", "--verify-runs", "200", "--import"])
+        .arg(dir)
+        .arg("--out")
+        .arg(out)
+        .output()
+        .unwrap();
+    let (so, se) = (
+        String::from_utf8_lossy(&o.stdout).into_owned(),
+        String::from_utf8_lossy(&o.stderr).into_owned(),
+    );
+    assert_eq!(o.status.code(), Some(3), "{so}\n{se}");
+    (so, se)
+}
+
 /// `game.step` with `body`, which must be accepted.
 fn step(game: &mut Game, body: Value) -> Value {
     game.step(&body).unwrap_or_else(|e| panic!("{body}: {e}"))
@@ -341,25 +361,7 @@ fn the_game_flows_a_feedback_linearizable_plant_and_its_runs_import() {
         .unwrap()
         .replace("[synthesis]\n", "[synthesis]\nmax_trajectories = 1\n");
     std::fs::write(&one, text).unwrap();
-    let o = std::process::Command::new(env!("CARGO_BIN_EXE_host-compiler"))
-        .args([
-            "synth",
-            one.to_str().unwrap(),
-            "--quiet",
-            "--verify-runs",
-            "200",
-        ])
-        .arg("--import")
-        .arg(&out)
-        .arg("--out")
-        .arg(dir.join("out"))
-        .output()
-        .unwrap();
-    let (so, se) = (
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr),
-    );
-    assert_eq!(o.status.code(), Some(3), "{so}\n{se}");
+    let (so, se) = synth_importing(&one, &out, &dir.join("out"));
     assert!(so.contains("trajectories      1"), "{so}\n{se}");
     assert!(so.contains(", 0 violations"), "{so}\n{se}");
     let cert: Value =
@@ -440,25 +442,7 @@ fn a_formula_task_plays_to_the_horizon_and_its_runs_import() {
         .replace("max_trajectories = 64\n", "max_trajectories = 1\n");
     assert!(text.contains("max_trajectories = 1\n"));
     std::fs::write(&one, text).unwrap();
-    let o = std::process::Command::new(env!("CARGO_BIN_EXE_host-compiler"))
-        .args([
-            "synth",
-            one.to_str().unwrap(),
-            "--quiet",
-            "--verify-runs",
-            "200",
-        ])
-        .arg("--import")
-        .arg(&out)
-        .arg("--out")
-        .arg(dir.join("out"))
-        .output()
-        .unwrap();
-    let (so, se) = (
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr),
-    );
-    assert_eq!(o.status.code(), Some(3), "{so}\n{se}");
+    let (so, se) = synth_importing(&one, &out, &dir.join("out"));
     assert!(se.contains(": imported, δ = "), "{so}\n{se}");
     assert!(
         so.contains("trajectories      1 (0 seeds tried)"),
