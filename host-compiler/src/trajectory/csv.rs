@@ -168,6 +168,9 @@ pub fn parse_inputs(
     parse_rows(text, path, m, period, max_rows).map(|(v, _)| v)
 }
 
+/// The reference inputs of a file's rows, and their [`LOCATION`] names when the header has the column.
+type Rows = (Vec<Vec<f64>>, Option<Vec<String>>);
+
 /// [`parse_inputs`], and the [`LOCATION`] column's names when the header has one.
 fn parse_rows(
     text: &str,
@@ -175,7 +178,7 @@ fn parse_rows(
     m: usize,
     period: f64,
     max_rows: usize,
-) -> Result<(Vec<Vec<f64>>, Option<Vec<String>>), CsvError> {
+) -> Result<Rows, CsvError> {
     let mut lines = crate::csv::data_lines(text);
     let (_, header) = lines
         .next()

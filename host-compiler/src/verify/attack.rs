@@ -195,6 +195,20 @@ pub enum Scored {
     },
 }
 
+impl Scored {
+    /// A run the formula's judge scored: `None` when the evaluator refused the start, else its
+    /// robustness and violation.
+    fn of_judged(run: Option<(f64, Option<String>)>) -> Self {
+        match run {
+            None => Scored::Refused,
+            Some((robustness, violation)) => Scored::Run {
+                robustness,
+                violation,
+            },
+        }
+    }
+}
+
 /// One image mode as the falsifier sees it (module doc).
 pub trait Target: Sync {
     /// The balls searched.
@@ -477,13 +491,7 @@ impl Target for TemporalTarget<'_> {
         &self.balls
     }
     fn score(&self, x0: &[f64]) -> Scored {
-        match self.judge.attack_run(self.image, x0) {
-            None => Scored::Refused,
-            Some((robustness, violation)) => Scored::Run {
-                robustness,
-                violation,
-            },
-        }
+        Scored::of_judged(self.judge.attack_run(self.image, x0))
     }
 }
 
@@ -668,13 +676,7 @@ impl Target for FlTemporalTarget<'_> {
         self.fl.start(xi, extra)
     }
     fn score(&self, x0: &[f64]) -> Scored {
-        match self.judge.attack_run_fl(self.fl.image, x0) {
-            None => Scored::Refused,
-            Some((robustness, violation)) => Scored::Run {
-                robustness,
-                violation,
-            },
-        }
+        Scored::of_judged(self.judge.attack_run_fl(self.fl.image, x0))
     }
 }
 

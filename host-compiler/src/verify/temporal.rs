@@ -563,12 +563,12 @@ pub fn monte_carlo_temporal_fl(
     }))
 }
 
+/// One judged run from a start at the robustness asked (`None`: the evaluator refused the start).
+type RunFrom<'a> = dyn Fn(&[f64], Robust) -> Option<Result<Verdict, String>> + Sync + 'a;
+
 /// Every start run by `run` (`None`: the evaluator refused it) in parallel chunks of a fixed order,
 /// the robustness recorded on every [`super::MARGIN_EVERY`]th run, merged into one report.
-fn judge_runs(
-    starts: &[Vec<f64>],
-    run: &(dyn Fn(&[f64], Robust) -> Option<Result<Verdict, String>> + Sync),
-) -> TemporalReport {
+fn judge_runs(starts: &[Vec<f64>], run: &RunFrom<'_>) -> TemporalReport {
     let reports: Vec<TemporalReport> = starts
         .par_chunks(64)
         .enumerate()
