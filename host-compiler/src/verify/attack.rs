@@ -627,6 +627,29 @@ struct FlTarget<'a> {
     free: Vec<(usize, f64, f64)>,
 }
 
+impl<'a> FlTarget<'a> {
+    /// The image's balls, and the zero-dynamics states Init leaves free, of a feedback-linearizable task.
+    fn new(task: &'a crate::task::Task, image: &'a Image<'a>) -> Result<Self, AttackError> {
+        let maps = task.plant.linearization().ok_or_else(|| {
+            AttackError::Judge("the task's plant is not feedback-linearizable".into())
+        })?;
+        let init = &maps.init;
+        let free = maps
+            .zero_states
+            .iter()
+            .filter(|&&s| init.hi[s] > init.lo[s])
+            .map(|&s| (s, init.lo[s], init.hi[s]))
+            .collect();
+        Ok(Self {
+            task,
+            maps,
+            image,
+            balls: image_balls(image, false)?,
+            free,
+        })
+    }
+}
+
 impl Target for FlTarget<'_> {
     fn balls(&self) -> &[Ball] {
         &self.balls
@@ -687,28 +710,10 @@ pub fn attack_temporal_fl(
     image: &Image<'_>,
     settings: &AttackSettings,
 ) -> Result<AttackReport, AttackError> {
-    let maps = task.plant.linearization().ok_or_else(|| {
-        AttackError::Judge("the task's plant is not feedback-linearizable".into())
-    })?;
-    let init = &maps.init;
-    let free = maps
-        .zero_states
-        .iter()
-        .filter(|&&s| init.hi[s] > init.lo[s])
-        .map(|&s| (s, init.lo[s], init.hi[s]))
-        .collect();
+    let fl = FlTarget::new(task, image)?;
     let judge = super::temporal::TemporalJudge::new(task, tt)
         .map_err(|e| AttackError::Judge(e.to_string()))?;
-    let target = FlTemporalTarget {
-        fl: FlTarget {
-            task,
-            maps,
-            image,
-            balls: image_balls(image, false)?,
-            free,
-        },
-        judge,
-    };
+    let target = FlTemporalTarget { fl, judge };
     falsify(&target, settings)
 }
 
@@ -718,22 +723,6 @@ pub fn attack_fl(
     image: &Image<'_>,
     settings: &AttackSettings,
 ) -> Result<AttackReport, AttackError> {
-    let maps = task.plant.linearization().ok_or_else(|| {
-        AttackError::Judge("the task's plant is not feedback-linearizable".into())
-    })?;
-    let init = &maps.init;
-    let free = maps
-        .zero_states
-        .iter()
-        .filter(|&&s| init.hi[s] > init.lo[s])
-        .map(|&s| (s, init.lo[s], init.hi[s]))
-        .collect();
-    let target = FlTarget {
-        task,
-        maps,
-        image,
-        balls: image_balls(image, false)?,
-        free,
-    };
+    let target = FlTarget::new(task, image)?;
     falsify(&target, settings)
 }
