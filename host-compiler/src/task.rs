@@ -38,6 +38,16 @@ pub enum TaskError {
          this path takes one-location plants (synth and verify take hybrid specs through synth::hybrid)"
     )]
     HybridNotSupported { locations: usize, edges: usize },
+    /// A differentially flat plant, checked and bounded, whose image this version cannot make: the
+    /// controller's states of its dynamic extension have no place in the image yet.
+    #[error(
+        "the differentially flat plant is checked (Ξ and Υ reproduce f, Γ nonsingular over the region) \
+         and bounded (a chain in the {n_flat} flat coordinates, flat input W = {w}, sampled-loop \
+         mismatch D = {d:.4e}), but this version does not synthesise it yet: the firmware's image has no \
+         place for the controller's own states (the dynamic extension), so no certified controller \
+         could run"
+    )]
+    FlatNotSynthesised { n_flat: usize, w: String, d: f64 },
     /// A feedback-linearizable plant outside what this version linearises and bounds.
     #[error("plant: {0}")]
     Linearize(#[from] FlError),
@@ -59,6 +69,26 @@ impl Task {
         }
         if problem.nonlinear.is_some() {
             // Every stage works on the linear model in ξ; the plant carries the maps and bounds.
+            let flat = problem.nonlinear.as_ref().is_some_and(|d| d.flat.is_some());
+            if flat {
+                // The model, its bounds and the certificate's terms are built (`model::flat`), but the
+                // image cannot yet carry the controller's own states, so nothing certified could run.
+                let (q, maps) = crate::model::flat::flatten(&problem)?;
+                let w = match &q.input {
+                    crate::spec::InputSet::Box { lo, hi } => lo
+                        .iter()
+                        .zip(hi)
+                        .map(|(l, h)| format!("[{l}, {h}]"))
+                        .collect::<Vec<_>>()
+                        .join(" × "),
+                    other => format!("{other:?}"),
+                };
+                return Err(TaskError::FlatNotSynthesised {
+                    n_flat: q.plant.n(),
+                    w,
+                    d: maps.mismatch,
+                });
+            }
             let (xi, maps) = feedback_linearizable::linearize(&problem)?;
             let plant: Box<dyn Plant> = Box::new(feedback_linearizable::plant(&xi, maps)?);
             return Self::with_plant(xi, plant);

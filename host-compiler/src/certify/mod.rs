@@ -203,6 +203,10 @@ pub struct LoopConstants {
     /// φβD in the P-metric (the inter-sample bound's own argument), which r_crit and the inter-sample
     /// margin take with the rounding ([`LoopConstants::held_disturbance`]).
     pub mismatch: f64,
+    /// A differentially flat plant's disturbances outside the w channel (`model::flat`, items 3–4): how
+    /// far they move the state per period in the P-metric, φ Σ_j b_j √P_jj + Σ_j J_j √P_jj (a
+    /// disturbance d_j e_j has P-norm |d_j|√P_jj); 0 for every other plant.
+    pub state_step: f64,
     /// Prefix sums of ‖Ã^j‖_P ([`LoopConstants::accumulation`]), computed once when first asked.
     accumulated: std::sync::OnceLock<Vec<f64>>,
 }
@@ -254,6 +258,20 @@ impl LoopConstants {
         let n = lp.P.nrows();
         let axis = (0..n).map(|j| roots.inv[(j, j)].max(0.0).sqrt()).collect();
         let mismatch = lp.plant.model_mismatch();
+        let state_step = match lp.plant.linearization().and_then(|m| m.flat.as_ref()) {
+            None => 0.0,
+            Some(fc) => {
+                let sq = |j: usize| lp.P[(j, j)].max(0.0).sqrt();
+                let rate: f64 = fc
+                    .state_rate
+                    .iter()
+                    .enumerate()
+                    .map(|(j, b)| b * sq(j))
+                    .sum();
+                let jump: f64 = fc.jump.iter().enumerate().map(|(j, b)| b * sq(j)).sum();
+                (phi * rate + jump) * (1.0 + 1e-9)
+            }
+        };
         Ok(Self {
             roots,
             sigma_min,
@@ -265,6 +283,7 @@ impl LoopConstants {
             beta,
             axis,
             mismatch,
+            state_step,
             accumulated: std::sync::OnceLock::new(),
         })
     }
@@ -297,14 +316,20 @@ impl LoopConstants {
     /// How far the held input's disturbances move the state within one period, in the P-metric: φβ(ε̄ + D)
     /// for the evaluator's rounding ε̄ and the plant's mismatch D (0 for discrete-time plants).
     pub fn held_disturbance(&self, eps_f32: f64) -> f64 {
-        self.phi * self.beta * (eps_f32 + self.mismatch)
+        self.phi * self.beta * (eps_f32 + self.mismatch) + self.state_step
+    }
+
+    /// How far the plant's mismatch moves the state per period in the P-metric: φβD, plus a flat plant's
+    /// state-channel disturbances ([`LoopConstants::state_step`]).
+    pub fn mismatch_step(&self) -> f64 {
+        self.phi * self.beta * self.mismatch + self.state_step
     }
 
     /// r_crit of Theorem 3.21, (3.83)–(3.87), for a disturbance bound ε̄ (2-norm per step) entering through B
     /// and the plant's mismatch φβD on the state ([`crate::caf::r_crit_mixed`], with its validated,
     /// rounding-guarded norms); ∞ when it does not exist.
     pub fn r_crit(&self, eps: f64) -> f64 {
-        let z = self.phi * self.beta * self.mismatch;
+        let z = self.mismatch_step();
         crate::caf::r_crit_mixed(self.At.as_ref(), self.P.as_ref(), self.B.as_ref(), eps, z)
             .map(|r| r.r_crit)
             .unwrap_or(f64::INFINITY)
@@ -702,8 +727,8 @@ pub fn certify_at(lp: &Loop<'_>, lc: &LoopConstants, nom: &Nominal, at: GoalAt) 
     // summing the disturbances over the table: a run from the δ-ball stays within δ + `accumulated` of
     // the nominal at every sample (‖Ã^j‖_P ≤ 1), so every part holds for δ = d47 − `accumulated`.
     let mut accumulated = 0.0;
-    if lc.mismatch > 0.0 && d47 > 0.0 {
-        let per_step = lc.roots.norm_into(lc.B.as_ref()) * eps_f32 + lc.phi * lc.beta * lc.mismatch;
+    if lc.mismatch_step() > 0.0 && d47 > 0.0 {
+        let per_step = lc.roots.norm_into(lc.B.as_ref()) * eps_f32 + lc.mismatch_step();
         accumulated = lc.accumulation(N) * per_step * (1.0 + 1e-9);
         delta = delta.max((d47 - accumulated) * (1.0 - 1e-9));
     }

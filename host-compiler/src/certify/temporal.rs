@@ -233,8 +233,8 @@ pub fn try_certify(
     // The disturbances summed over the table (module doc): every part bounds the sample deviation, which
     // stays below δ + `accumulated`.
     let mut accumulated = 0.0;
-    if lc.mismatch > 0.0 && d > 0.0 {
-        let per_step = lc.roots.norm_into(lc.B.as_ref()) * eps_f32 + lc.phi * lc.beta * lc.mismatch;
+    if lc.mismatch_step() > 0.0 && d > 0.0 {
+        let per_step = lc.roots.norm_into(lc.B.as_ref()) * eps_f32 + lc.mismatch_step();
         accumulated = lc.accumulation(N) * per_step * (1.0 + 1e-9);
         delta = delta.max((d - accumulated) * (1.0 - 1e-9));
     }

@@ -148,6 +148,38 @@ pub enum FlError {
          predicates may only constrain the linearised coordinates ξ (the outputs and their derivatives)"
     )]
     PredicateOnZeroDynamics { predicate: String, state: String },
+    #[error(
+        "an [mtl] task on a differentially flat plant is not built yet (issue #14); reach-avoid is"
+    )]
+    FlatMtl,
+    #[error(
+        "a differentially flat plant's input set must be a box (kind = \"box\"): an extended \
+         input is bounded by the operating region, the others by a box of the flat input"
+    )]
+    FlatInputBall,
+    #[error(
+        "the extended input {input} (a controller state) ranges over [{lo:.4}, {hi:.4}] on the \
+         operating region, outside the input set's [{ulo}, {uhi}]; shrink plant.region's bounds on \
+         the flat coordinates it depends on"
+    )]
+    FlatExtendedInput {
+        input: String,
+        lo: f64,
+        hi: f64,
+        ulo: f64,
+        uhi: f64,
+    },
+    #[error(
+        "the plant's inputs leave the input set over the operating region by {excess:.4e} with this \
+         flat input (a box W = plant.flat_input, or w = 0 when none is set): shrink plant.region's \
+         bounds (the higher derivatives bind first) or plant.flat_input, or widen [input]"
+    )]
+    FlatInputTooLarge { excess: f64 },
+    #[error(
+        "{what}: a differentially flat plant's sets are over the plant's states that are flat \
+         coordinates (coords = [\"x1\", …]), as a box, polytope or ball"
+    )]
+    FlatSetCoords { what: String },
 }
 
 /// The maps and bounds of a linearised plant (module doc).
@@ -164,7 +196,8 @@ pub struct FlMaps {
     pub coords: Compiled,
     /// (x, w) ↦ u (inputs: the n_plant states, then w).
     pub input_map: Compiled,
-    /// u_i(x, w) as expressions (parameters bound), the f64 reference of `input_map`.
+    /// u_i(x, w) as expressions (parameters bound), the f64 reference of `input_map` (a flat plant's over
+    /// the extended state (x, ζ) and w).
     pub input_exprs: Vec<Expr>,
     /// The plant in f64 (for verification).
     pub plant: NonlinearPlant,
@@ -185,12 +218,74 @@ pub struct FlMaps {
     /// D: the w-channel disturbance of the sampled loop (module doc, item 3), and its parts.
     pub mismatch: f64,
     pub mismatch_flow: f64,
+    /// A differentially flat plant's coordinates (`model::flat`): ξ is then its flat state q, a function
+    /// of the plant's state and the controller's own states, and `xi_states` is empty.
+    pub flat: Option<FlatCoords>,
+}
+
+/// The flat state of a differentially flat plant (`model::flat`) and the disturbances its sampled loop
+/// adds outside the w channel.
+#[derive(Clone, Debug)]
+pub struct FlatCoords {
+    /// q(x, ζ) (parameters bound): the expressions the `coords` program computes.
+    pub coords_exprs: Vec<Expr>,
+    /// The controller states' initial values ζ0.
+    pub ext_init: Vec<f64>,
+    /// q_j is the plant's state s.
+    pub q_states: Vec<Option<usize>>,
+    /// The operating region, a box over q: leaving it is entering Unsafe.
+    pub region: InitBox,
+    /// Per q coordinate, bounds on a disturbance rate entering that coordinate's derivative (the held
+    /// input the plant applies against the extension's model of it), and on a jump per period (the f32
+    /// rounding of the stored controller states and of q).
+    pub state_rate: Vec<f64>,
+    pub jump: Vec<f64>,
 }
 
 impl FlMaps {
-    /// ξ of a plant state.
+    /// ξ of a plant state (a flat plant's controller states at their initial values).
     pub fn xi_of(&self, x: &[f64]) -> Vec<f64> {
-        self.xi_states.iter().map(|&s| x[s]).collect()
+        match &self.flat {
+            Some(fc) => self.xi_at(x, &fc.ext_init),
+            None => self.xi_states.iter().map(|&s| x[s]).collect(),
+        }
+    }
+
+    /// ξ of a plant state with the controller states `ext` (ignored when the plant has none).
+    pub fn xi_at(&self, x: &[f64], ext: &[f64]) -> Vec<f64> {
+        match &self.flat {
+            Some(fc) => {
+                let xe: Vec<f64> = x.iter().chain(ext).copied().collect();
+                let at = Point {
+                    x: &xe,
+                    u: &[],
+                    p: &[],
+                };
+                fc.coords_exprs.iter().map(|e| e.eval(&at)).collect()
+            }
+            None => self.xi_states.iter().map(|&s| x[s]).collect(),
+        }
+    }
+
+    /// The dimension of ξ.
+    pub fn n_xi(&self) -> usize {
+        match &self.flat {
+            Some(fc) => fc.coords_exprs.len(),
+            None => self.xi_states.len(),
+        }
+    }
+
+    /// The pairs (j, s) with ξ_j the plant's state s.
+    pub fn state_coords(&self) -> Vec<(usize, usize)> {
+        match &self.flat {
+            Some(fc) => fc
+                .q_states
+                .iter()
+                .enumerate()
+                .filter_map(|(j, s)| s.map(|s| (j, s)))
+                .collect(),
+            None => self.xi_states.iter().copied().enumerate().collect(),
+        }
     }
 }
 
@@ -232,7 +327,7 @@ impl Plant for FeedbackLinearized {
     }
 }
 
-fn state_name(problem_names: &crate::expr::Names, s: usize) -> String {
+pub(super) fn state_name(problem_names: &crate::expr::Names, s: usize) -> String {
     problem_names
         .states
         .get(s)
@@ -246,7 +341,7 @@ fn uses_other_state(e: &Expr, n: usize, allowed: &[usize]) -> Option<usize> {
 }
 
 /// The symbolic adjugate and determinant of a square matrix of expressions (m ≤ 3): Γ⁻¹ = adj(Γ)/det.
-fn adjugate(g: &[Vec<Expr>]) -> Result<(Vec<Vec<Expr>>, Expr), FlError> {
+pub(super) fn adjugate(g: &[Vec<Expr>]) -> Result<(Vec<Vec<Expr>>, Expr), FlError> {
     let m = g.len();
     let e = |i: usize, j: usize| g[i][j].clone();
     let det2 = |a: Expr, b: Expr, c: Expr, d: Expr| Expr::sub(Expr::mul(a, d), Expr::mul(b, c));
@@ -287,7 +382,7 @@ fn adjugate(g: &[Vec<Expr>]) -> Result<(Vec<Vec<Expr>>, Expr), FlError> {
 }
 
 /// The interval [0, h]·a.
-fn times_period(a: Interval, h: f64) -> Interval {
+pub(super) fn times_period(a: Interval, h: f64) -> Interval {
     a.mul(Interval::new(0.0, h))
 }
 
@@ -361,7 +456,7 @@ impl UBound {
 /// `dims` split evenly, at most [`MAX_PIECES`] boxes in all). `base` holds, per state, the interval the
 /// bounds are taken over: the zero-dynamics hull, and the operating region's range of a ξ state (a point
 /// where there is no region: then no bounded expression uses a ξ state).
-fn sup_over_grid(
+pub(super) fn sup_over_grid(
     base: &[Interval],
     dims: &[usize],
     f: &dyn Fn(&[Interval]) -> Result<f64, IntervalError>,
@@ -397,7 +492,7 @@ fn sup_over_grid(
 }
 
 /// The states the expressions use whose range in `base` is not a point (the coordinates worth splitting).
-fn dims_used(es: &[&Expr], base: &[Interval]) -> Vec<usize> {
+pub(super) fn dims_used(es: &[&Expr], base: &[Interval]) -> Vec<usize> {
     (0..base.len())
         .filter(|&s| base[s].hi > base[s].lo && es.iter().any(|e| e.uses(Var::State(s as u16))))
         .collect()
@@ -405,7 +500,7 @@ fn dims_used(es: &[&Expr], base: &[Interval]) -> Vec<usize> {
 
 /// Upper bound of ‖M‖₂ for an interval matrix given as expressions: sqrt of the largest absolute row
 /// sum of the enclosure of MᵀM (built symbolically, so that the entries of a rotation collapse).
-fn norm2_bound(mtm: &[Vec<Expr>], b: &VarBox<'_>) -> Result<f64, IntervalError> {
+pub(super) fn norm2_bound(mtm: &[Vec<Expr>], b: &VarBox<'_>) -> Result<f64, IntervalError> {
     let mut worst = 0.0f64;
     for row in mtm {
         let mut s = 0.0;
@@ -418,7 +513,7 @@ fn norm2_bound(mtm: &[Vec<Expr>], b: &VarBox<'_>) -> Result<f64, IntervalError> 
 }
 
 /// MᵀM symbolically.
-fn gram(m: &[Vec<Expr>]) -> Vec<Vec<Expr>> {
+pub(super) fn gram(m: &[Vec<Expr>]) -> Vec<Vec<Expr>> {
     let cols = m.first().map_or(0, |r| r.len());
     (0..cols)
         .map(|a| {
@@ -433,7 +528,7 @@ fn gram(m: &[Vec<Expr>]) -> Vec<Vec<Expr>> {
         .collect()
 }
 
-fn bound_err(what: &str) -> impl Fn(IntervalError) -> FlError + '_ {
+pub(super) fn bound_err(what: &str) -> impl Fn(IntervalError) -> FlError + '_ {
     move |e| FlError::Bound {
         what: what.to_string(),
         why: e.to_string(),
@@ -951,6 +1046,7 @@ pub fn linearize(problem: &Problem) -> Result<(Problem, FlMaps), FlError> {
         e_prog,
         mismatch,
         mismatch_flow,
+        flat: None,
     };
     Ok((xi, maps))
 }

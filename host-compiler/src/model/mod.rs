@@ -13,6 +13,7 @@
 
 mod expm;
 pub mod feedback_linearizable;
+pub mod flat;
 pub mod hybrid;
 mod intersample;
 mod linear;

@@ -44,6 +44,7 @@
 pub mod checks;
 pub mod error;
 pub mod fingerprint;
+pub mod flat;
 pub mod hybrid;
 pub mod limits;
 pub mod nonlinear;

@@ -79,6 +79,12 @@ pub(crate) struct RawFlPlant {
     pub g: Spanned<Vec<Spanned<Vec<Spanned<String>>>>>,
     pub h: Spanned<Vec<Spanned<String>>>,
     pub region: Option<Spanned<RawRegion>>,
+    /// The differentially flat class's keys (`spec::flat`).
+    pub flat: Option<Spanned<Vec<Spanned<String>>>>,
+    pub extension: Option<Spanned<Vec<Spanned<super::flat::RawExtension>>>>,
+    pub state_of_flat: Option<Spanned<Vec<Spanned<String>>>>,
+    pub input_of_flat: Option<Spanned<Vec<Spanned<String>>>>,
+    pub flat_input: Option<Spanned<RawRegion>>,
 }
 
 /// `plant.region`: the operating region, a box over the plant's state.
@@ -94,6 +100,8 @@ pub(crate) struct RawRegion {
 pub enum PlantClass {
     /// Input-output linearizable by u = κ(x) + λ(x)w (§3.1.2).
     FeedbackLinearizable,
+    /// Differentially flat (§3.1.3), with the flat maps Ξ, Υ and controller states (`spec::flat`).
+    DifferentiallyFlat,
 }
 
 /// A validated nonlinear plant.
@@ -113,6 +121,8 @@ pub struct NonlinearDesc {
     /// law's terms are bounded over it, and leaving it counts as entering Unsafe
     /// (`model::feedback_linearizable`). `None`: the law may depend on the zero dynamics only.
     pub region: Option<InitBox>,
+    /// The differentially flat class's data (`spec::flat`); `derivatives` is then the extended system's.
+    pub flat: Option<Box<super::flat::FlatDesc>>,
 }
 
 impl NonlinearDesc {
@@ -133,9 +143,10 @@ pub(crate) fn has_class(src: &str) -> bool {
 
 /// A plant read and parsed, before the checks that need Init.
 pub(crate) struct Model {
-    names: Names,
-    system: AffineSystem,
+    pub(super) names: Names,
+    pub(super) system: AffineSystem,
     pub period: f64,
+    pub(super) class: PlantClass,
 }
 
 impl Model {
@@ -167,7 +178,7 @@ fn inner_span(s: &Spanned<String>, src: &str, inner: Range<usize>) -> Range<usiz
 }
 
 /// An expression error as a spec diagnostic at its place in the file.
-fn expr_error(e: ExprError, s: &Spanned<String>, src: &str, what: &str) -> SpecError {
+pub(super) fn expr_error(e: ExprError, s: &Spanned<String>, src: &str, what: &str) -> SpecError {
     let span = e
         .span()
         .map(|r| inner_span(s, src, r))
@@ -192,29 +203,27 @@ fn expr_error(e: ExprError, s: &Spanned<String>, src: &str, what: &str) -> SpecE
 /// Reads and parses the plant: class, time, period, names, dimensions, expressions.
 pub(crate) fn model(raw: &Spanned<RawFlPlant>, src: &str) -> Result<Model, SpecError> {
     let p = raw.get_ref();
-    match p.class.get_ref().as_str() {
-        "feedback_linearizable" => {}
-        "differentially_flat" => {
-            return Err(SpecError::new(
-                ErrorKind::BadValue,
-                "plant.class = \"differentially_flat\" is not built yet",
-            )
-            .at(p.class.span(), "not built yet")
-            .help("the classes are: feedback_linearizable (omit `class` for a linear plant)"))
-        }
-        other => {
-            return Err(SpecError::new(
+    let class =
+        match p.class.get_ref().as_str() {
+            "feedback_linearizable" => {
+                super::flat::refuse_flat_keys(p)?;
+                PlantClass::FeedbackLinearizable
+            }
+            "differentially_flat" => PlantClass::DifferentiallyFlat,
+            other => return Err(SpecError::new(
                 ErrorKind::BadValue,
                 format!("plant.class = \"{other}\" is not a plant class"),
             )
             .at(p.class.span(), "unknown class")
-            .help("the classes are: feedback_linearizable (omit `class` for a linear plant)"))
-        }
-    }
+            .help(
+                "the classes are: feedback_linearizable, differentially_flat (omit `class` for a \
+                 linear plant)",
+            )),
+        };
     if *p.time.get_ref() != RawTime::Continuous {
         return Err(SpecError::new(
             ErrorKind::BadValue,
-            "a feedback-linearizable plant is stated in continuous time (ẋ = f(x) + g(x)u)",
+            "a nonlinear plant is stated in continuous time (ẋ = f(x) + g(x)u)",
         )
         .at(p.time.span(), "use time = \"continuous\""));
     }
@@ -379,11 +388,12 @@ pub(crate) fn model(raw: &Spanned<RawFlPlant>, src: &str) -> Result<Model, SpecE
         names,
         system: AffineSystem { f, g, h },
         period,
+        class,
     })
 }
 
 /// `(X = 0.1, Y = −0.05, …)`.
-fn fmt_point(names: &Names, x: &[f64]) -> String {
+pub(super) fn fmt_point(names: &Names, x: &[f64]) -> String {
     let parts: Vec<String> = names
         .states
         .iter()
@@ -396,7 +406,7 @@ fn fmt_point(names: &Names, x: &[f64]) -> String {
 /// The smallest pivot of Gaussian elimination with partial pivoting, relative to the largest entry (0
 /// for a singular or non-finite matrix).
 #[allow(clippy::needless_range_loop)]
-fn pivot_ratio(a: &[Vec<f64>]) -> f64 {
+pub(super) fn pivot_ratio(a: &[Vec<f64>]) -> f64 {
     let m = a.len();
     let scale = a.iter().flatten().fold(0.0f64, |s, v| s.max(v.abs()));
     if !(scale.is_finite() && scale > 0.0) {
@@ -426,7 +436,7 @@ fn pivot_ratio(a: &[Vec<f64>]) -> f64 {
 
 /// The points of Init at which the equations and Γ are evaluated: the centre, the corners of the free
 /// coordinates (when there are at most 64), and seeded random points.
-fn sample_points(init: &InitBox) -> Vec<Vec<f64>> {
+pub(super) fn sample_points(init: &InitBox) -> Vec<Vec<f64>> {
     let centre = init.centre();
     let free = init.free_coords();
     let mut pts = vec![centre.clone()];
@@ -457,7 +467,7 @@ fn sample_points(init: &InitBox) -> Vec<Vec<f64>> {
 }
 
 /// A point of the state space (no inputs: f, g and h do not use them).
-fn point<'a>(x: &'a [f64], p: &'a [f64]) -> Point<'a> {
+pub(super) fn point<'a>(x: &'a [f64], p: &'a [f64]) -> Point<'a> {
     Point { x, u: &[], p }
 }
 
@@ -518,14 +528,19 @@ pub(crate) fn check(
     model: Model,
     init: &InitBox,
     raw: &Spanned<RawFlPlant>,
+    src: &str,
 ) -> Result<(Plant, NonlinearDesc), SpecError> {
     let p = raw.get_ref();
+    if model.class == PlantClass::DifferentiallyFlat {
+        return super::flat::check(model, init, raw, src);
+    }
     let Model {
         names,
         system,
         period,
+        class: _,
     } = model;
-    let (n, m) = (system.n(), system.m());
+    let m = system.m();
     let pv = names.param_values();
     let region = region(raw, init, &names)?;
     // Where Def 3.5 must hold: the operating region when there is one (it contains Init), else Init.
@@ -648,74 +663,61 @@ pub(crate) fn check(
 
     // ---- Γ nonsingular over all of Init: interval enclosures on a bisection ----
     let params: Vec<Interval> = pv.iter().map(|&v| Interval::point(v)).collect();
-    let mut queue: Vec<Vec<Interval>> = vec![domain
+    let whole: Vec<Interval> = domain
         .lo
         .iter()
         .zip(&domain.hi)
         .map(|(&l, &h)| Interval::new(l, h))
-        .collect()];
-    let mut boxes = 0usize;
-    // The states Γ depends on: splitting any other leaves its enclosure as it is.
-    let split: Vec<usize> = (0..n)
-        .filter(|&s| {
-            rd.gamma
-                .iter()
-                .flatten()
-                .any(|e| e.uses(Var::State(s as u16)))
-        })
         .collect();
-    while let Some(bx) = queue.pop() {
-        boxes += 1;
-        let enc = enclose_matrix(
-            &rd.gamma,
-            &VarBox {
-                x: &bx,
-                u: &[],
-                p: &params,
-            },
-        );
-        let proved = matches!(&enc, Ok(g) if certainly_regular(g));
-        if proved {
-            continue;
-        }
-        if boxes + queue.len() >= MAX_GAMMA_BOXES || split.is_empty() {
-            let mid: Vec<f64> = bx.iter().map(|i| i.mid()).collect();
-            let why = match enc {
-                Err(e) => format!("its enclosure fails: {e}"),
-                Ok(_) => "its interval enclosure contains matrices that are not proved nonsingular"
-                    .into(),
-            };
-            return Err(model_err(
-                format!(
-                    "the decoupling matrix Γ (Def 3.5, (3.19)) could not be proved nonsingular over all \
-                     of {within}: on the sub-box around {} ({why}) after {boxes} boxes",
-                    fmt_point(&names, &mid)
-                ),
-                gamma_span,
-                "g, with h, makes Γ",
-            )
-            .at(raw.span(), "this plant")
-            .help(if region.is_some() {
-                "Γ may be singular or nearly so near that point; shrink plant.region or change the outputs"
-            } else {
-                "Γ may be singular or nearly so near that point; shrink Init or change the outputs"
-            }));
-        }
-        // Bisect the widest coordinate Γ depends on.
-        let i = *split
-            .iter()
-            .max_by(|&&a, &&b| (bx[a].hi - bx[a].lo).total_cmp(&(bx[b].hi - bx[b].lo)))
-            .expect("split is not empty");
-        let mid = bx[i].mid();
-        let mut left = bx.clone();
-        let mut right = bx;
-        left[i].hi = mid;
-        right[i].lo = mid;
-        queue.push(left);
-        queue.push(right);
+    if let Err((mid, why, boxes)) = prove_regular(&rd.gamma, whole, &params) {
+        return Err(model_err(
+            format!(
+                "the decoupling matrix Γ (Def 3.5, (3.19)) could not be proved nonsingular over all \
+                 of {within}: on the sub-box around {} ({why}) after {boxes} boxes",
+                fmt_point(&names, &mid)
+            ),
+            gamma_span,
+            "g, with h, makes Γ",
+        )
+        .at(raw.span(), "this plant")
+        .help(if region.is_some() {
+            "Γ may be singular or nearly so near that point; shrink plant.region or change the outputs"
+        } else {
+            "Γ may be singular or nearly so near that point; shrink Init or change the outputs"
+        }));
     }
 
-    // ---- the linearisation at the centre, and a linear output map ----
+    let plant = linearisation(&system, &names, &pv, init, period, raw)?;
+    Ok((
+        plant,
+        NonlinearDesc {
+            class: PlantClass::FeedbackLinearizable,
+            names,
+            system,
+            derivatives: rd,
+            period,
+            region,
+            flat: None,
+        },
+    ))
+}
+
+/// The plant's linearisation at the centre of Init (u = 0) with C = ∂h/∂x, which must be constant (outputs
+/// linear in the state, so that sets in output coordinates mean what they say): `Problem::plant` of a
+/// nonlinear spec, which the size checks and output-coordinate sets read.
+pub(super) fn linearisation(
+    system: &AffineSystem,
+    names: &Names,
+    pv: &[f64],
+    init: &InitBox,
+    period: f64,
+    raw: &Spanned<RawFlPlant>,
+) -> Result<Plant, SpecError> {
+    let p = raw.get_ref();
+    let (n, m) = (system.n(), system.m());
+    let model_err = |msg: String, span: Range<usize>, label: &str| {
+        SpecError::new(ErrorKind::Model, msg).at(span, label.to_string())
+    };
     let jac = |es: &[Expr]| {
         crate::expr::diff::jacobian(
             es,
@@ -727,14 +729,14 @@ pub(crate) fn check(
     let mut C = Matrix::zeros(m, n);
     for (i, row) in dh.iter().enumerate() {
         for (j, e) in row.iter().enumerate() {
-            let Some(v) = e.bind_params(&pv).as_const() else {
+            let Some(v) = e.bind_params(pv).as_const() else {
                 return Err(model_err(
                     format!(
                         "plant.h[{i}] is not linear in the state (∂h{i}/∂{} = {}): outputs of a \
                          feedback-linearizable plant are linear for now, so that sets in output \
                          coordinates mean what they say",
                         names.states[j],
-                        e.display(&names)
+                        e.display(names)
                     ),
                     p.h.get_ref()[i].span(),
                     "not linear",
@@ -746,7 +748,7 @@ pub(crate) fn check(
     let df = jac(&system.f)?;
     // The linearisation at Init's centre (whatever the domain of the checks above).
     let centre = init.centre();
-    let cpt = point(&centre, &pv);
+    let cpt = point(&centre, pv);
     let mut A = Matrix::zeros(n, n);
     let mut B = Matrix::zeros(n, m);
     let mut offset = vec![0.0; n];
@@ -770,31 +772,76 @@ pub(crate) fn check(
         return Err(model_err(
             format!(
                 "the linearisation of the plant at the centre {} of Init is not finite",
-                fmt_point(&names, &centre)
+                fmt_point(names, &centre)
             ),
             p.f.span(),
             "these equations",
         ));
     }
-    let plant = Plant {
+    Ok(Plant {
         time: TimeDomain::Continuous,
         A,
         B,
         offset,
         period,
         C,
-    };
-    Ok((
-        plant,
-        NonlinearDesc {
-            class: PlantClass::FeedbackLinearizable,
-            names,
-            system,
-            derivatives: rd,
-            period,
-            region,
-        },
-    ))
+    })
+}
+
+/// Proves the square matrix of expressions `m` nonsingular at every point of the box `whole` (one
+/// interval per state variable) by interval enclosures (`expr::interval::certainly_regular`) on a
+/// bisection of the states `m` uses, into at most [`MAX_GAMMA_BOXES`] boxes. On failure: the centre of the
+/// sub-box where the proof stopped, why, and how many boxes were tried.
+pub(super) fn prove_regular(
+    m: &[Vec<Expr>],
+    whole: Vec<Interval>,
+    params: &[Interval],
+) -> Result<(), (Vec<f64>, String, usize)> {
+    let n = whole.len();
+    // The states m depends on: splitting any other leaves its enclosure as it is.
+    let split: Vec<usize> = (0..n)
+        .filter(|&s| m.iter().flatten().any(|e| e.uses(Var::State(s as u16))))
+        .collect();
+    let mut queue: Vec<Vec<Interval>> = vec![whole];
+    let mut boxes = 0usize;
+    while let Some(bx) = queue.pop() {
+        boxes += 1;
+        let enc = enclose_matrix(
+            m,
+            &VarBox {
+                x: &bx,
+                u: &[],
+                p: params,
+            },
+        );
+        if matches!(&enc, Ok(g) if certainly_regular(g)) {
+            continue;
+        }
+        if boxes + queue.len() >= MAX_GAMMA_BOXES || split.is_empty() {
+            let mid: Vec<f64> = bx.iter().map(|i| i.mid()).collect();
+            let why = match enc {
+                Err(e) => format!("its enclosure fails: {e}"),
+                Ok(_) => "its interval enclosure contains matrices that are not proved nonsingular"
+                    .into(),
+            };
+            return Err((mid, why, boxes));
+        }
+        // Bisect the widest coordinate m depends on.
+        let Some(&i) = split
+            .iter()
+            .max_by(|&&a, &&b| (bx[a].hi - bx[a].lo).total_cmp(&(bx[b].hi - bx[b].lo)))
+        else {
+            continue;
+        };
+        let mid = bx[i].mid();
+        let mut left = bx.clone();
+        let mut right = bx;
+        left[i].hi = mid;
+        right[i].lo = mid;
+        queue.push(left);
+        queue.push(right);
+    }
+    Ok(())
 }
 
 #[cfg(test)]

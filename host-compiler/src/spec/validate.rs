@@ -350,7 +350,7 @@ fn problem_of(src: &str) -> Result<Problem, SpecError> {
         let model = super::nonlinear::model(&raw.plant, src)?;
         let (horizon, seed) = horizon_seed(&raw, model.period, raw.plant.get_ref().period.span())?;
         let init = init_box(&raw, model.n())?;
-        let (plant, desc) = super::nonlinear::check(model, &init, &raw.plant)?;
+        let (plant, desc) = super::nonlinear::check(model, &init, &raw.plant, src)?;
         return problem_sets(raw, plant, None, Some(desc), horizon, seed, init);
     }
     let raw: RawSpec = toml::from_str(src).map_err(|e| SpecError::from_toml(&e))?;

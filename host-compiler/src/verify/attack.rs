@@ -664,7 +664,10 @@ impl Target for FlTarget<'_> {
         for (&(s, lo, hi), &e) in self.free.iter().zip(extra) {
             x[s] = lo + (hi - lo) * 0.5 * (e + 1.0);
         }
-        for (j, &s) in self.maps.xi_states.iter().enumerate() {
+        // A flat plant's flat coordinates that are not plant states follow from Init and the
+        // controller's initial states, so only the others are set (a start the selection then refuses
+        // scores as refused, never as a violation).
+        for (j, s) in self.maps.state_coords() {
             x[s] = xi[j];
         }
         x

@@ -552,7 +552,7 @@ pub fn monte_carlo_temporal_fl(
                 .zip(&init.hi)
                 .map(|(&l, &h)| if h > l { rng.random_range(l..=h) } else { l })
                 .collect();
-            for (j, &s) in maps.xi_states.iter().enumerate() {
+            for (j, s) in maps.state_coords() {
                 x[s] = xi[j];
             }
             x
