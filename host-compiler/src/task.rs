@@ -137,4 +137,22 @@ mod tests {
         let maps = task.plant.linearization().expect("maps");
         assert_eq!(maps.n_plant, 6);
     }
+
+    /// A differentially flat spec is checked and bounded, then refused with the figures: its image has no
+    /// place for the controller's states yet.
+    #[test]
+    fn a_differentially_flat_task_is_refused_until_the_image_carries_controller_states() {
+        let path = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../examples/flat-quadrotor.toml"
+        );
+        let problem = crate::spec::load(path).expect("the shipped example");
+        let Err(e) = Task::new(problem) else {
+            panic!("a flat task is refused")
+        };
+        let msg = e.to_string();
+        assert!(msg.contains("does not synthesise it yet"), "{msg}");
+        assert!(msg.contains("8 flat coordinates"), "{msg}");
+        assert!(msg.contains("[-10, 10] × [-10, 10]"), "{msg}");
+    }
 }

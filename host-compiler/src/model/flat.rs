@@ -704,12 +704,4 @@ mod tests {
         };
         assert!(matches!(e, FlError::FlatInputTooLarge { .. }), "{e}");
     }
-
-    #[test]
-    fn a_differentially_flat_task_is_refused_until_the_image_carries_controller_states() {
-        let e = crate::task::Task::new(quadrotor()).err().expect("refused");
-        let msg = e.to_string();
-        assert!(msg.contains("does not synthesise it yet"), "{msg}");
-        assert!(msg.contains("8 flat coordinates"), "{msg}");
-    }
 }
