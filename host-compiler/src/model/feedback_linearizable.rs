@@ -535,6 +535,22 @@ pub(super) fn bound_err(what: &str) -> impl Fn(IntervalError) -> FlError + '_ {
     }
 }
 
+/// The two closed half-spaces {ξ_j ≤ lo} and {ξ_j ≥ hi} (one-row polytopes on coordinate j): leaving
+/// an operating region's interval on that coordinate.
+pub(super) fn outside_interval(j: usize, lo: f64, hi: f64) -> [SetDesc; 2] {
+    [(1.0, lo), (-1.0, -hi)].map(|(a, b)| SetDesc {
+        shape: Shape::Polytope {
+            A: Matrix {
+                rows: 1,
+                cols: 1,
+                data: vec![a],
+            },
+            b: vec![b],
+        },
+        coords: Coords::StateIndices(vec![j]),
+    })
+}
+
 /// The linearised task of a validated feedback-linearizable spec: the spec in ξ coordinates (its plant
 /// the linear model, Init, Goal and Unsafe on the ξ states, its input set W) and the maps with their
 /// bounds (module doc).
@@ -994,19 +1010,7 @@ pub fn linearize(problem: &Problem) -> Result<(Problem, FlMaps), FlError> {
     // half-spaces {ξ_j ≤ lo} and {ξ_j ≥ hi} (one-row polytopes on that coordinate).
     if let Some(r) = &region {
         for (j, &s) in xi_states.iter().enumerate() {
-            for (a, b) in [(1.0, r.lo[s]), (-1.0, -r.hi[s])] {
-                xi.unsafe_sets.push(SetDesc {
-                    shape: Shape::Polytope {
-                        A: Matrix {
-                            rows: 1,
-                            cols: 1,
-                            data: vec![a],
-                        },
-                        b: vec![b],
-                    },
-                    coords: Coords::StateIndices(vec![j]),
-                });
-            }
+            xi.unsafe_sets.extend(outside_interval(j, r.lo[s], r.hi[s]));
         }
     }
     xi.sets = problem

@@ -43,7 +43,8 @@
 //! are the ones the certificate will take.
 
 use super::feedback_linearizable::{
-    adjugate, bound_err, dims_used, gram, norm2_bound, sup_over_grid, FlError, FlMaps, FlatCoords,
+    adjugate, bound_err, dims_used, gram, norm2_bound, outside_interval, sup_over_grid, FlError,
+    FlMaps, FlatCoords,
 };
 use super::nonlinear::NonlinearPlant;
 use crate::expr::compile::compile;
@@ -546,19 +547,8 @@ pub fn flatten(problem: &Problem) -> Result<(Problem, FlMaps), FlError> {
         .map(|s| remap("Unsafe", s, true))
         .collect::<Result<_, _>>()?;
     for (j, e) in e_q.iter().enumerate() {
-        for (a, b) in [(1.0, region.lo[j] + e), (-1.0, -(region.hi[j] - e))] {
-            q.unsafe_sets.push(SetDesc {
-                shape: Shape::Polytope {
-                    A: Matrix {
-                        rows: 1,
-                        cols: 1,
-                        data: vec![a],
-                    },
-                    b: vec![b],
-                },
-                coords: Coords::StateIndices(vec![j]),
-            });
-        }
+        q.unsafe_sets
+            .extend(outside_interval(j, region.lo[j] + e, region.hi[j] - e));
     }
     q.sets = problem
         .sets

@@ -842,18 +842,11 @@ mod tests {
     use crate::spec::{self, ErrorKind};
 
     fn example() -> String {
-        std::fs::read_to_string(concat!(
-            env!("CARGO_MANIFEST_DIR"),
-            "/../examples/flat-quadrotor.toml"
-        ))
-        .expect("the shipped example")
+        spec::example_text("flat-quadrotor.toml")
     }
 
-    /// The example with `from` (which must occur once) replaced by `to`, parsed.
     fn variant(from: &str, to: &str) -> Result<spec::Problem, spec::SpecError> {
-        let src = example();
-        assert_eq!(src.matches(from).count(), 1, "`{from}` must occur once");
-        spec::parse(&src.replace(from, to), "flat.toml")
+        spec::example_variant("flat-quadrotor.toml", from, to)
     }
 
     #[test]

@@ -346,3 +346,22 @@ pub fn load(path: impl AsRef<std::path::Path>) -> Result<Problem, SpecError> {
     let text = std::fs::read_to_string(path).map_err(|e| SpecError::io(path, e))?;
     parse(&text, &path.display().to_string())
 }
+
+/// A shipped example's text (tests).
+#[cfg(test)]
+pub(crate) fn example_text(file: &str) -> String {
+    std::fs::read_to_string(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../examples")
+            .join(file),
+    )
+    .expect("the shipped example")
+}
+
+/// A shipped example with `from` (which must occur once) replaced by `to`, parsed (tests).
+#[cfg(test)]
+pub(crate) fn example_variant(file: &str, from: &str, to: &str) -> Result<Problem, SpecError> {
+    let src = example_text(file);
+    assert_eq!(src.matches(from).count(), 1, "`{from}` must occur once");
+    parse(&src.replace(from, to), file)
+}
