@@ -529,8 +529,13 @@ pub(crate) fn check(
                     "this input's Υ",
                 ));
             }
-            ext_of_flat.push(d.clone());
-            d = lie(&d, &chain).map_err(|e| capacity_err(e, ui_span(0)))?;
+            if k + 1 < e.order {
+                let next = lie(&d, &chain).map_err(|err| capacity_err(err, ui_span(e.input)))?;
+                ext_of_flat.push(std::mem::replace(&mut d, next));
+            } else {
+                ext_of_flat.push(d);
+                break;
+            }
         }
     }
 
