@@ -381,6 +381,24 @@ pub(super) fn adjugate(g: &[Vec<Expr>]) -> Result<(Vec<Vec<Expr>>, Expr), FlErro
     }
 }
 
+/// The law u = Γ⁻¹(w − α) with Γ⁻¹ = adj/det, one division per input: u_i = (Σ_j adj_ij (w_j − α_j)) / det,
+/// w the expressions' inputs.
+pub(super) fn cancelling_law(adj: &[Vec<Expr>], det: &Expr, alpha: &[Expr]) -> Vec<Expr> {
+    let w = |j: usize| Expr::var(Var::Input(j as u16));
+    adj.iter()
+        .map(|row| {
+            let num = row
+                .iter()
+                .zip(alpha)
+                .enumerate()
+                .fold(Expr::c(0.0), |acc, (j, (a, al))| {
+                    Expr::add(acc, Expr::mul(a.clone(), Expr::sub(w(j), al.clone())))
+                });
+            Expr::div(num, det.clone())
+        })
+        .collect()
+}
+
 /// The interval [0, h]·a.
 pub(super) fn times_period(a: Interval, h: f64) -> Interval {
     a.mul(Interval::new(0.0, h))
@@ -675,18 +693,7 @@ pub fn linearize(problem: &Problem) -> Result<(Problem, FlMaps), FlError> {
                 .collect()
         })
         .collect();
-    let w = |j: usize| Expr::var(Var::Input(j as u16));
-    let input_exprs: Vec<Expr> = (0..m)
-        .map(|i| {
-            let num = (0..m).fold(Expr::c(0.0), |acc, j| {
-                Expr::add(
-                    acc,
-                    Expr::mul(adj[i][j].clone(), Expr::sub(w(j), alpha_res[j].clone())),
-                )
-            });
-            Expr::div(num, det.clone())
-        })
-        .collect();
+    let input_exprs = cancelling_law(&adj, &det, &alpha_res);
     let coords_exprs: Vec<Expr> = xi_states
         .iter()
         .map(|&s| Expr::var(Var::State(s as u16)))

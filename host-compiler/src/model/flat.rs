@@ -43,8 +43,8 @@
 //! are the ones the certificate will take.
 
 use super::feedback_linearizable::{
-    adjugate, bound_err, dims_used, gram, norm2_bound, outside_interval, sup_over_grid, FlError,
-    FlMaps, FlatCoords,
+    adjugate, bound_err, cancelling_law, dims_used, gram, norm2_bound, outside_interval,
+    sup_over_grid, FlError, FlMaps, FlatCoords,
 };
 use super::nonlinear::NonlinearPlant;
 use crate::expr::compile::compile;
@@ -101,17 +101,7 @@ pub fn flatten(problem: &Problem) -> Result<(Problem, FlMaps), FlError> {
         .collect();
     let (adj, det) = adjugate(&gamma)?;
     let w = |j: usize| Expr::var(Var::Input(j as u16));
-    let ue: Vec<Expr> = (0..m)
-        .map(|i| {
-            let num = (0..m).fold(Expr::c(0.0), |acc, j| {
-                Expr::add(
-                    acc,
-                    Expr::mul(adj[i][j].clone(), Expr::sub(w(j), alpha[j].clone())),
-                )
-            });
-            Expr::div(num, det.clone())
-        })
-        .collect();
+    let ue = cancelling_law(&adj, &det, &alpha);
     let state = |s: usize| Expr::var(Var::State(s as u16));
     let mut outputs: Vec<Expr> = (0..m)
         .map(|j| match first[j] {
