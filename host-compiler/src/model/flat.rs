@@ -147,12 +147,7 @@ pub fn flatten(problem: &Problem) -> Result<(Problem, FlMaps), FlError> {
         })
     };
     let region = &fd.region;
-    let base: Vec<Interval> = region
-        .lo
-        .iter()
-        .zip(&region.hi)
-        .map(|(&l, &h)| Interval::new(l, h))
-        .collect();
+    let base: Vec<Interval> = region.intervals();
     let xe_box = |q: &[Interval]| -> Result<Vec<Interval>, IntervalError> {
         let b = VarBox {
             x: q,

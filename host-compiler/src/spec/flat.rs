@@ -567,12 +567,7 @@ pub(crate) fn check(
             _ => None,
         })
         .collect();
-    let mut init_ext: Vec<Interval> = init
-        .lo
-        .iter()
-        .zip(&init.hi)
-        .map(|(&l, &h)| Interval::new(l, h))
-        .collect();
+    let mut init_ext: Vec<Interval> = init.intervals();
     for e in &extension {
         init_ext.extend(e.init.iter().map(|&v| Interval::point(v)));
     }
@@ -794,12 +789,7 @@ pub(crate) fn check(
                 .collect()
         })
         .collect();
-    let whole: Vec<Interval> = region
-        .lo
-        .iter()
-        .zip(&region.hi)
-        .map(|(&l, &h)| Interval::new(l, h))
-        .collect();
+    let whole: Vec<Interval> = region.intervals();
     if let Err((mid, why, boxes)) = prove_regular(&gamma_q, whole, &[]) {
         return Err(model_err(
             format!(

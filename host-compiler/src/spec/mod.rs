@@ -258,6 +258,15 @@ impl InitBox {
             .collect()
     }
 
+    /// The box as one interval per coordinate (for interval enclosures over it).
+    pub fn intervals(&self) -> Vec<crate::expr::interval::Interval> {
+        self.lo
+            .iter()
+            .zip(&self.hi)
+            .map(|(&l, &h)| crate::expr::interval::Interval::new(l, h))
+            .collect()
+    }
+
     /// The box's centre, (lo + hi) / 2.
     pub fn centre(&self) -> Vec<f64> {
         self.lo

@@ -663,12 +663,7 @@ pub(crate) fn check(
 
     // ---- Γ nonsingular over all of Init: interval enclosures on a bisection ----
     let params: Vec<Interval> = pv.iter().map(|&v| Interval::point(v)).collect();
-    let whole: Vec<Interval> = domain
-        .lo
-        .iter()
-        .zip(&domain.hi)
-        .map(|(&l, &h)| Interval::new(l, h))
-        .collect();
+    let whole: Vec<Interval> = domain.intervals();
     if let Err((mid, why, boxes)) = prove_regular(&rd.gamma, whole, &params) {
         return Err(model_err(
             format!(
