@@ -15,6 +15,8 @@
 //! * A model program ([`crate::program`]): one pass over at most [`MAX_PROGRAM_LEN`] bytes of code, one
 //!   instruction per 1–3 bytes, each an f32 operation, a `libm` call or (for `x^k`) at most
 //!   [`MAX_PROGRAM_POWI`] multiplications and a division.
+//! * Model maps ([`crate::maps`]): the two programs above around the feedforward law, plus copies of at
+//!   most [`MAX_N`] + [`MAX_EXT`] + [`MAX_M`] slots and [`MAX_M`] + [`MAX_EXT`] outputs.
 
 /// Largest state dimension `n`.
 pub const MAX_N: usize = 12;
