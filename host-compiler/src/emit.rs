@@ -15,7 +15,9 @@
 //! A feedback-linearizable plant's image also carries its model maps ([`ModelMapsSpec`]: the programs
 //! `coords: x ↦ ξ` and `input_map: (x, w) ↦ u`, section 10, layout in `shared_types::maps`): the table,
 //! balls, `K` and `P` are then in ξ (dims n, m), while the fallback and the input box are in the plant's
-//! input space (`m_plant` values) and a linear fallback is refused.
+//! input space (`m_plant` values) and a linear fallback is refused. A differentially flat plant's maps
+//! also carry the controller's own states (`ext_init`: ζ0 of at most `MAX_EXT` states, which the programs
+//! read after x and `input_map` advances); with none the section is the feedback-linearizable one.
 //!
 //! [`PwaImageBuilder`] is its sibling for the PWA-feedback image of Ch. 6 (layout and rationale in
 //! `shared_types::pwa`): per partition j the law `u = K_j x + θ0_j` with the full gain `K_j = K + θ_j`
@@ -33,7 +35,7 @@
 use std::path::Path;
 
 use shared_types::capacity::{
-    MAX_BALLS, MAX_BALL_REFS, MAX_LEAF_BALLS, MAX_LEAVES, MAX_LOCATIONS, MAX_M, MAX_N,
+    MAX_BALLS, MAX_BALL_REFS, MAX_EXT, MAX_LEAF_BALLS, MAX_LEAVES, MAX_LOCATIONS, MAX_M, MAX_N,
     MAX_PARTITIONS, MAX_SEGMENTS, MAX_STEPS, MAX_TRAJECTORIES, MAX_TREE_DEPTH, MAX_TREE_NODES,
 };
 use shared_types::image::{
@@ -209,17 +211,24 @@ pub struct ImageBuilder {
     pub terminal_law: Option<StoredTerminal>,
 }
 
-/// The model maps of a feedback-linearizable plant (`shared_types::maps`): the plant's dimensions and
-/// the two program bodies as `crate::expr::compile::compile` produces them (`.bytes`).
-#[derive(Clone, Debug, PartialEq, Eq)]
+/// The model maps of a feedback-linearizable or differentially flat plant (`shared_types::maps`): the
+/// plant's dimensions, the initial values of the controller's own states (a dynamic extension; none for
+/// a feedback-linearizable plant) and the two program bodies as `crate::expr::compile::compile` produces
+/// them (`.bytes`).
+#[derive(Clone, Debug, PartialEq)]
 pub struct ModelMapsSpec {
-    /// The plant's state dimension (the slots of `coords`, the first slots of `input_map`).
+    /// The plant's state dimension (the first slots of `coords` and of `input_map`).
     pub n_plant: usize,
-    /// The plant's input dimension (the outputs of `input_map`).
+    /// The plant's input dimension (the first outputs of `input_map`).
     pub m_plant: usize,
-    /// `coords: x ↦ ξ`: `n_plant` inputs, n outputs.
+    /// ζ0: the initial values of the controller states, `n_ext = ext_init.len() ≤ MAX_EXT` of them
+    /// (stored as f32; each must be finite and within the f32 range). Empty: no dynamic extension, and
+    /// the section's bytes are those of a feedback-linearizable plant.
+    pub ext_init: Vec<f32>,
+    /// `coords: (x, ζ) ↦ ξ`: `n_plant + n_ext` inputs (x, then ζ), n outputs.
     pub coords: Vec<u8>,
-    /// `input_map: (x, w) ↦ u`: `n_plant + m` inputs (x, then w), `m_plant` outputs.
+    /// `input_map: (x, ζ, w) ↦ (u, ζ⁺)`: `n_plant + n_ext + m` inputs (x, then ζ, then w),
+    /// `m_plant + n_ext` outputs (u, then ζ⁺).
     pub input_map: Vec<u8>,
 }
 
@@ -551,14 +560,36 @@ impl ImageBuilder {
             Some(mm) => {
                 capacity("plant state dimension n_plant", mm.n_plant, 1, MAX_N)?;
                 capacity("plant input dimension m_plant", mm.m_plant, 1, MAX_M)?;
+                capacity(
+                    "number of controller states n_ext",
+                    mm.ext_init.len(),
+                    0,
+                    MAX_EXT,
+                )?;
+                for (i, &z) in mm.ext_init.iter().enumerate() {
+                    if !z.is_finite() {
+                        return Err(EmitError::NonFinite {
+                            what: format!("controller state {i}: initial value"),
+                            value: z as f64,
+                        });
+                    }
+                }
                 if matches!(self.fallback, FallbackLaw::Linear { .. }) {
                     return Err(invalid(
                         "a linear fallback".into(),
                         "cannot go with model maps (its gain would act on the linear coordinates)",
                     ));
                 }
-                let mut body = vec![0u8; maps::body_len(mm.coords.len(), mm.input_map.len())];
-                maps::write_body(&mut body, mm.n_plant, mm.m_plant, &mm.coords, &mm.input_map)?;
+                let len = maps::body_len(mm.ext_init.len(), mm.coords.len(), mm.input_map.len());
+                let mut body = vec![0u8; len];
+                maps::write_body(
+                    &mut body,
+                    mm.n_plant,
+                    mm.m_plant,
+                    &mm.ext_init,
+                    &mm.coords,
+                    &mm.input_map,
+                )?;
                 Some(body)
             }
             None => None,
@@ -646,6 +677,7 @@ impl ImageBuilder {
             model_maps: img.model_maps().map(|mm| ModelMapsSpec {
                 n_plant: mm.n_plant(),
                 m_plant: mm.m_plant(),
+                ext_init: mm.ext_inits().collect(),
                 coords: mm.coords_bytes().to_vec(),
                 input_map: mm.input_map_bytes().to_vec(),
             }),

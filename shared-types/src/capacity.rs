@@ -15,6 +15,8 @@
 //! * A model program ([`crate::program`]): one pass over at most [`MAX_PROGRAM_LEN`] bytes of code, one
 //!   instruction per 1–3 bytes, each an f32 operation, a `libm` call or (for `x^k`) at most
 //!   [`MAX_PROGRAM_POWI`] multiplications and a division.
+//! * Model maps ([`crate::maps`]): the two programs above around the feedforward law, plus copies of at
+//!   most [`MAX_N`] + [`MAX_EXT`] + [`MAX_M`] slots and [`MAX_M`] + [`MAX_EXT`] outputs.
 
 /// Largest state dimension `n`.
 pub const MAX_N: usize = 12;
@@ -63,6 +65,10 @@ pub const MAX_PROGRAM_STACK: usize = 32;
 /// Largest magnitude of an integer power `x^k` in a model program; the evaluator multiplies `|k| − 1`
 /// times (and divides once for `k < 0`).
 pub const MAX_PROGRAM_POWI: i8 = 16;
+/// Largest number of controller states `n_ext` of the model maps section ([`crate::maps`]): a dynamic
+/// extension the controller keeps between periods (a flat plant's thrust and its derivatives). The
+/// evaluator keeps them in a `[f32; MAX_EXT]`, and a step copies at most this many values.
+pub const MAX_EXT: usize = 4;
 
 /// Worst-case multiply-adds of one PWA control step at capacity (see the module docs): tree, whitening
 /// before every ball (the worst case of alternating locations), ball tests, law.
@@ -91,8 +97,9 @@ const FEEDFORWARD_PAYLOAD_LEN: usize = COMMON_PAYLOAD_LEN
     + 4 * MAX_SEGMENTS * (2 * MAX_N + 3) // segment exits
     + MAX_MAPS_LEN; // model maps
 
-/// Largest model maps section body ([`crate::maps`]): its header and two programs, each padded to 4 bytes.
-const MAX_MAPS_LEN: usize = 12 + 2 * (MAX_PROGRAM_LEN + 3);
+/// Largest model maps section body ([`crate::maps`]): its header, the controller states' initial values
+/// and two programs, each padded to 4 bytes.
+const MAX_MAPS_LEN: usize = 12 + 4 * MAX_EXT + 2 * (MAX_PROGRAM_LEN + 3);
 
 /// Largest PWA-feedback payload.
 const PWA_PAYLOAD_LEN: usize = COMMON_PAYLOAD_LEN

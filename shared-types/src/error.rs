@@ -52,6 +52,8 @@ pub enum Dim {
     PlantN,
     /// The plant's input dimension `m_plant` of the model maps section.
     PlantM,
+    /// The number of controller states `n_ext` (a dynamic extension) of the model maps section.
+    ExtStates,
 }
 
 /// Which payload field an error is about.
@@ -125,6 +127,8 @@ pub enum Field {
     Fingerprint,
     /// The model maps section as a whole (its header's program lengths against its size).
     ModelMaps,
+    /// The initial values ζ0 of the controller states of the model maps section.
+    ExtInit,
     /// The terminal law section as a whole (its length against n and m).
     TerminalLaw,
     /// The terminal law's equilibrium `x_e`.
@@ -540,7 +544,7 @@ pub enum ImageError {
         offset: u32,
     },
     /// A model map reads another number of input slots than the image's dimensions give it
-    /// (`coords`: `n_plant`; `input_map`: `n_plant + m`).
+    /// (`coords`: `n_plant + n_ext`; `input_map`: `n_plant + n_ext + m`).
     MapInputs {
         /// The map.
         map: ModelMap,
@@ -550,7 +554,7 @@ pub enum ImageError {
         found: u16,
     },
     /// A model map stores another number of outputs than the image's dimensions need (`coords`: `n`;
-    /// `input_map`: `m_plant`).
+    /// `input_map`: `m_plant + n_ext`).
     MapOutputs {
         /// The map.
         map: ModelMap,
@@ -594,6 +598,7 @@ impl fmt::Display for Dim {
             Dim::ProgramStack => "program stack depth",
             Dim::PlantN => "plant state dimension n_plant",
             Dim::PlantM => "plant input dimension m_plant",
+            Dim::ExtStates => "number of controller states n_ext",
         })
     }
 }
@@ -634,6 +639,7 @@ impl fmt::Display for Field {
             Field::ProgramConst => "program constants",
             Field::Fingerprint => "spec fingerprint",
             Field::ModelMaps => "model maps section",
+            Field::ExtInit => "controller states' initial values",
             Field::TerminalLaw => "terminal law section",
             Field::TerminalCentre => "terminal law x_e",
             Field::TerminalK => "terminal law K_t",
@@ -745,6 +751,7 @@ impl fmt::Display for ImageError {
                 Field::BallCentre => write!(f, "ball {a}: centre[{b}] is not finite"),
                 Field::BallCentreZ => write!(f, "ball {a}: whitened centre[{b}] is not finite"),
                 Field::BallThreshold => write!(f, "ball {a}: threshold is not finite"),
+                Field::ExtInit => write!(f, "controller state {a}: initial value is not finite"),
                 _ => write!(f, "{field}[{a}] is not finite"),
             },
             NotSymmetric { location, row, col } => write!(

@@ -21,20 +21,24 @@
 //! `u = K_j x + θ0_j` with `K_j = K + θ_j` of that ball's partition j; otherwise [`Status::OutOfEnvelope`]
 //! for this step only (nothing is latched, and there is no default region).
 //!
-//! With model maps ([`crate::maps`], a feedback-linearizable plant, §3.1.2), [`Controller::step_plant`]
-//! wraps the feedforward law: ξ = coords(x), the feedforward law above on ξ gives w, and u = input_map(x,
-//! w); where the law would apply the fallback, the image's fallback (in the plant's input space) is applied
-//! without running `input_map`. Without model maps `step_plant` is `step`.
+//! With model maps ([`crate::maps`], a feedback-linearizable or differentially flat plant, §3.1.2),
+//! [`Controller::step_plant`] wraps the feedforward law: ξ = coords(x, ζ), the feedforward law above on ξ
+//! gives w, and (u, ζ⁺) = input_map(x, ζ, w); where the law would apply the fallback, the image's fallback
+//! (in the plant's input space) is applied without running `input_map`. ζ are the controller's own states
+//! (a dynamic extension, `n_ext ≤ MAX_EXT` of them, none for a feedback-linearizable plant): ζ0 (stored in
+//! the section) at [`Controller::new`] and [`Controller::reset`], ζ ← ζ⁺ when a step that ran `input_map`
+//! is accepted, unchanged by an error and by the fallback ([`Controller::extension`] reads them). Without
+//! model maps `step_plant` is `step`.
 //!
 //! Distances are compared squared (`(x − c)ᵀP(x − c) ≤ δ²`), so no square root is needed. Arithmetic is
 //! plain f32 multiply and add in a fixed order, without fused multiply-add, so host and Cortex-M4F give the
 //! same bits; the matrix–vector products (selection, law, PWA law, linear fallback) run on nalgebra views
 //! in the module `linalg`, whose doc states their summation order. Every loop is bounded by the capacities in [`crate::capacity`]; nothing allocates or panics.
 //!
-//! Errors never advance the step counter κ.
+//! Errors never advance the step counter κ, nor change the controller states ζ.
 #![allow(non_snake_case)]
 
-use crate::capacity::{MAX_M, MAX_N};
+use crate::capacity::{MAX_EXT, MAX_M, MAX_N};
 use crate::image::{Exit, Fallback, Image, Mode, ModelMaps, Terminal};
 use crate::linalg;
 use crate::pwa::Region;
@@ -146,12 +150,21 @@ pub struct Controller<'a> {
     /// Whether the terminal law has taken over (images with a terminal law).
     terminal: bool,
     last_u: Input,
+    /// The controller's own states ζ (model maps with a dynamic extension; the first `n_ext` are used):
+    /// ζ0 at reset, ζ⁺ of `input_map` after every accepted step that ran it.
+    ext: [f32; MAX_EXT],
 }
 
 impl<'a> Controller<'a> {
-    /// A controller at κ = 0 with no trajectory selected.
+    /// A controller at κ = 0 with no trajectory selected and its controller states (if any) at ζ0.
     pub fn new(image: Image<'a>) -> Controller<'a> {
         let m = image.plant_m();
+        let mut ext = [0.0f32; MAX_EXT];
+        if let Some(maps) = image.maps.as_ref() {
+            for (e, v) in ext.iter_mut().zip(maps.ext_inits()) {
+                *e = v;
+            }
+        }
         Controller {
             image,
             kappa: 0,
@@ -161,6 +174,7 @@ impl<'a> Controller<'a> {
             out_of_envelope: false,
             terminal: false,
             last_u: Input::zero(m),
+            ext,
         }
     }
 
@@ -169,7 +183,8 @@ impl<'a> Controller<'a> {
         &self.image
     }
 
-    /// Back to κ = 0: forget the selected trajectory, the out-of-envelope latch and the last input.
+    /// Back to κ = 0: forget the selected trajectory, the out-of-envelope latch and the last input, and
+    /// put the controller states back to ζ0.
     pub fn reset(&mut self) {
         *self = Controller::new(self.image);
     }
@@ -199,6 +214,13 @@ impl<'a> Controller<'a> {
     /// Whether the terminal law has taken over since reset ([`crate::terminal`]).
     pub fn in_terminal_phase(&self) -> bool {
         self.terminal
+    }
+
+    /// The controller's own states ζ (the first `n_ext` values; empty without a dynamic extension): ζ0
+    /// after reset, then ζ⁺ of the last accepted step that ran `input_map` ([`Controller::step_plant`]).
+    pub fn extension(&self) -> &[f32] {
+        let ne = self.image.maps.as_ref().map_or(0, ModelMaps::n_ext);
+        self.ext.get(..ne).unwrap_or(&[])
     }
 
     /// The last input returned by [`Controller::step`] (zero after reset).
@@ -352,10 +374,11 @@ impl<'a> Controller<'a> {
     /// One control period of the plant: `x` is the plant's state ([`Image::plant_n`] values) and the
     /// answer the plant's input ([`Image::plant_m`] values). Without model maps exactly
     /// [`Controller::step`]. With them: `x` must have `n_plant` finite values, else `Err(BadFrame)`;
-    /// ξ = coords(x), `Err(OutOfEnvelope)` if not finite; the feedforward law of `step` on ξ gives w
-    /// (`Err(OutOfEnvelope)` if not finite); u = input_map(x, w), `Err(OutOfEnvelope)` if not finite.
-    /// Where the law applies the fallback, the image's fallback is applied to the plant directly. κ and
-    /// the remembered input as for `step`.
+    /// ξ = coords(x, ζ), `Err(OutOfEnvelope)` if not finite; the feedforward law of `step` on ξ gives w
+    /// (`Err(OutOfEnvelope)` if not finite); (u, ζ⁺) = input_map(x, ζ, w), `Err(OutOfEnvelope)` if any
+    /// value is not finite; otherwise ζ ← ζ⁺ and u is the answer. Where the law applies the fallback, the
+    /// image's fallback is applied to the plant directly and ζ is left as it is. κ and the remembered
+    /// input as for `step`; an error changes neither κ nor ζ.
     pub fn step_plant(&mut self, x: &[f32]) -> Result<Input, Status> {
         match self.image.maps {
             None => self.step(x),
@@ -370,18 +393,32 @@ impl<'a> Controller<'a> {
             self.image.n().clamp(1, MAX_N),
             self.image.m().clamp(1, MAX_M),
         );
-        let (np, mp) = (
+        let (np, mp, ne) = (
             maps.n_plant().clamp(1, MAX_N),
             maps.m_plant().clamp(1, MAX_M),
+            maps.n_ext().min(MAX_EXT),
         );
         if x.len() != np || !x.iter().all(|v| v.is_finite()) {
             return Err(Status::BadFrame);
         }
+        // The controller's states ζ as this step reads them (a copy: ζ changes only once u is accepted).
+        let ext = self.ext;
+        let zeta = ext.get(..ne).unwrap_or(&[]);
         let mut xi_buf = [0.0f32; MAX_N];
         let Some(xi) = xi_buf.get_mut(..n) else {
             return Err(Status::OutOfEnvelope);
         };
-        if maps.coords().eval(x, xi).is_err() || !xi.iter().all(|v| v.is_finite()) {
+        // The slots of coords: x, then ζ (x itself without controller states).
+        let mut coords_slots = [0.0f32; MAX_N + MAX_EXT];
+        let coords_in: &[f32] = if ne == 0 {
+            x
+        } else {
+            for (s, &v) in coords_slots.iter_mut().zip(x.iter().chain(zeta)) {
+                *s = v;
+            }
+            coords_slots.get(..np + ne).unwrap_or(&[])
+        };
+        if maps.coords().eval(coords_in, xi).is_err() || !xi.iter().all(|v| v.is_finite()) {
             return Err(Status::OutOfEnvelope);
         }
         let input_map = maps.input_map();
@@ -391,19 +428,39 @@ impl<'a> Controller<'a> {
                 if !w.as_slice().iter().all(|v| v.is_finite()) {
                     return Err(Status::OutOfEnvelope);
                 }
-                // The slots of input_map: x, then w.
-                let mut slots = [0.0f32; MAX_N + MAX_M];
-                for (s, &v) in slots.iter_mut().zip(x.iter().chain(w.as_slice())) {
+                // The slots of input_map: x, then ζ, then w.
+                let mut slots = [0.0f32; MAX_N + MAX_EXT + MAX_M];
+                for (s, &v) in slots
+                    .iter_mut()
+                    .zip(x.iter().chain(zeta).chain(w.as_slice()))
+                {
                     *s = v;
                 }
-                let mut u = Input::zero(mp);
-                let (Some(inputs), Some(out)) = (slots.get(..np + m), u.u.get_mut(..mp)) else {
+                // Its outputs: u, then ζ⁺.
+                let mut outputs = [0.0f32; MAX_M + MAX_EXT];
+                let (Some(inputs), Some(out)) =
+                    (slots.get(..np + ne + m), outputs.get_mut(..mp + ne))
+                else {
                     return Err(Status::OutOfEnvelope);
                 };
                 if input_map.eval(inputs, out).is_err() {
                     return Err(Status::OutOfEnvelope);
                 }
-                c.accept(u)
+                let Some((u_out, next)) = out.split_at_checked(mp) else {
+                    return Err(Status::OutOfEnvelope);
+                };
+                if !next.iter().all(|v| v.is_finite()) {
+                    return Err(Status::OutOfEnvelope);
+                }
+                let mut u = Input::zero(mp);
+                for (o, &v) in u.u.iter_mut().zip(u_out) {
+                    *o = v;
+                }
+                let u = c.accept(u)?;
+                for (e, &v) in c.ext.iter_mut().zip(next) {
+                    *e = v;
+                }
+                Ok(u)
             },
             |c| {
                 let u = c.fallback(x, &c.last_u);

@@ -334,6 +334,7 @@ pub fn feedforward_image_of<'a>(
         b.model_maps = Some(crate::emit::ModelMapsSpec {
             n_plant: m.n_plant,
             m_plant: m.m_plant,
+            ext_init: Vec::new(),
             coords: m.coords.bytes.clone(),
             input_map: m.input_map.bytes.clone(),
         });

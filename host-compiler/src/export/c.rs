@@ -61,7 +61,7 @@ pub struct CFile {
 
 /// The template with every `@NAME@` placeholder replaced.
 fn fill(template: &str) -> String {
-    let values: [(&str, usize); 22] = [
+    let values: [(&str, usize); 23] = [
         ("FORMAT_VERSION", FORMAT_VERSION as usize),
         ("MAX_N", capacity::MAX_N),
         ("MAX_M", capacity::MAX_M),
@@ -86,6 +86,7 @@ fn fill(template: &str) -> String {
         ("MAX_PROGRAM_INPUTS", capacity::MAX_PROGRAM_INPUTS),
         ("MAX_PROGRAM_OUTPUTS", capacity::MAX_PROGRAM_OUTPUTS),
         ("MAX_PROGRAM_STACK", capacity::MAX_PROGRAM_STACK),
+        ("MAX_EXT", capacity::MAX_EXT),
         (
             "MAX_PROGRAM_POWI",
             capacity::MAX_PROGRAM_POWI.unsigned_abs() as usize,
@@ -116,9 +117,13 @@ pub fn files(image: &[u8]) -> Result<Vec<CFile>, ExportError> {
     };
     let maps = match img.model_maps() {
         Some(mm) => format!(
-            ", model maps (plant n = {}, m = {})",
+            ", model maps (plant n = {}, m = {}{})",
             mm.n_plant(),
-            mm.m_plant()
+            mm.m_plant(),
+            match mm.n_ext() {
+                0 => String::new(),
+                k => format!(", {k} controller state(s)"),
+            }
         ),
         None => String::new(),
     };

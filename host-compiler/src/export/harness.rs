@@ -3,7 +3,8 @@
 //! compares every answer with the Rust evaluator (`shared_types::eval::Controller`) bit for bit; plus the
 //! seeded scenarios ([`scenario`], [`exits_scenario`]) and synthetic images of every mode
 //! ([`feedforward_image`], [`exits_image`]: feedforward with segment exits, [`pwa_image`], [`maps_image`]:
-//! feedforward with model maps) the tests and the `c_export` bench run it on. Not used by the pipeline.
+//! feedforward with model maps, [`ext_image`]: model maps with controller states) the tests and the
+//! `c_export` bench run it on. Not used by the pipeline.
 //!
 //! Model programs that call `sin`, `cos`, `tan`, `exp`, `log`, `atan`, `tanh` or `atan2` run the C
 //! library's functions in C and the `libm` crate's in Rust, which may differ in the last place:
@@ -453,12 +454,22 @@ fn start_near_ball(image: &Image<'_>, rng: &mut ChaCha8Rng) -> (usize, Vec<f32>)
 /// the others, which only the input map reads, at scales up to 10⁵ so that the functions' argument
 /// reduction is exercised), x_i = ξ_i − h_i(z) with h(z) = coords(0, z) as the target computes it. `xi`
 /// itself without model maps, or if it has another length than n (then z is appended, and the state
-/// has a wrong length as `xi` had).
+/// has a wrong length as `xi` had). For an image with controller states ([`ext_image`], whose coords are
+/// ξ = (x, ζ)), the first `n_plant` components of `xi`.
 fn lift(image: &Image<'_>, rng: &mut ChaCha8Rng, xi: Vec<f32>) -> Vec<f32> {
     let Some(maps) = image.model_maps() else {
         return xi;
     };
     let (n, np) = (image.n(), maps.n_plant());
+    if maps.n_ext() > 0 {
+        // An [`ext_image`]: ξ = (x, ζ), and ζ is the controller's, so the plant's state is the first
+        // n_plant components.
+        return if xi.len() == n {
+            xi[..np.min(n)].to_vec()
+        } else {
+            xi
+        };
+    }
     let z: Vec<f32> = (n..np)
         .map(|k| {
             let scale = if k == n {
@@ -1176,10 +1187,68 @@ pub fn maps_image(
     b.model_maps(ModelMapsSpec {
         n_plant,
         m_plant,
+        ext_init: Vec::new(),
         coords: program(&coords, 0),
         input_map: program(&input_map, m),
     });
     b.to_bytes().expect("maps_image is valid")
+}
+
+/// A seeded synthetic feedforward image with model maps whose controller keeps states of its own (a
+/// dynamic extension, `n_ext = 2`): a double integrator (x = (p, v), `n_plant = 2`) whose input, like a
+/// flat plant's thrust, is a controller state, u = ζ0, with ζ̇0 = ζ1 and ζ̇1 = w (the law's input, m =
+/// 1). The law is a one-location [`feedforward_image`] in ξ = (x, ζ) (n = 4, `trajectories` balls, the
+/// given terminal behaviour) whose balls are all centred at ζ = ζ0 in their last two components, ζ0 the
+/// stored initial values; the fallback `fallback` (0 hold, 1 zero, 3 constant) with the input box
+/// `[-1, 1]`; the maps compiled from expressions with `crate::expr`:
+/// * coords: ξ = (x0, x1, ζ0, ζ1);
+/// * input_map: u = ζ0, ζ0⁺ = ζ0 + h·ζ1 + h²/2·w0, ζ1⁺ = ζ1 + h·w0 (the exact ZOH of the chain over the
+///   period h), arithmetic only (the C and Rust sides agree bit for bit).
+pub fn ext_image(seed: u64, trajectories: usize, terminal: Terminal, fallback: usize) -> Vec<u8> {
+    use crate::emit::ModelMapsSpec;
+    use crate::expr::{compile::compile, parse, Names};
+    let (n_plant, m_plant, n_ext, n, m) = (2, 1, 2, 4, 1);
+    let base = feedforward_image(seed, n, m, 1, trajectories, terminal, 1);
+    let img = decode(&base).expect("feedforward_image is valid");
+    let mut b = ImageBuilder::from_image(&img);
+    let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x7a65_7461);
+    let ext_init: Vec<f32> = (0..n_ext).map(|_| rng.random_range(-0.5f32..0.5)).collect();
+    for t in &mut b.trajectories {
+        for (c, &z) in t.x0[n_plant..].iter_mut().zip(&ext_init) {
+            *c = z as f64;
+        }
+    }
+    b.fallback = fallback_law(&mut rng, fallback, n_plant, m_plant);
+    b.input_box = Some((vec![-1.0; m_plant], vec![1.0; m_plant]));
+    let h = b.period;
+    let names = Names {
+        states: vec!["x0".into(), "x1".into(), "z0".into(), "z1".into()],
+        inputs: vec!["w0".into()],
+        params: vec![],
+    };
+    let program = |texts: &[String], inputs: usize| {
+        let exprs: Vec<_> = texts
+            .iter()
+            .map(|t| parse(t, &names).expect("the harness's expressions parse"))
+            .collect();
+        compile(&exprs, n_plant + n_ext, inputs, &[])
+            .expect("the harness's expressions compile")
+            .bytes
+    };
+    let coords: Vec<String> = ["x0", "x1", "z0", "z1"].map(String::from).to_vec();
+    let input_map = vec![
+        "z0".to_string(),
+        format!("z0 + {h}*z1 + {}*w0", h * h / 2.0),
+        format!("z1 + {h}*w0"),
+    ];
+    b.model_maps(ModelMapsSpec {
+        n_plant,
+        m_plant,
+        ext_init,
+        coords: program(&coords, 0),
+        input_map: program(&input_map, m),
+    });
+    b.to_bytes().expect("ext_image is valid")
 }
 
 /// `image` (feedforward without model maps, or PWA) with a seeded synthetic terminal law (section 11):

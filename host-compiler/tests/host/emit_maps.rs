@@ -32,6 +32,7 @@ fn maps() -> ModelMapsSpec {
     ModelMapsSpec {
         n_plant: 3,
         m_plant: 2,
+        ext_init: Vec::new(),
         coords: program(&["x", "y"], &s, &[]),
         input_map: program(&["cos(th)*w0 + sin(th)*w1", "w1 - w0"], &s, &["w0", "w1"]),
     }
@@ -125,6 +126,75 @@ fn maps_refusals_name_what_is_wrong() {
     m.m_plant = 9;
     b.model_maps(m);
     assert!(matches!(b.to_bytes(), Err(EmitError::Capacity { .. })));
+}
+
+/// The unicycle with a controller state s (its speed, kept by the controller): ξ = (x, y),
+/// u = (s, w1 − w0), s⁺ = s + 0.1·w0.
+fn ext_maps(ext_init: Vec<f32>) -> ModelMapsSpec {
+    let s = ["x", "y", "th", "s"];
+    ModelMapsSpec {
+        n_plant: 3,
+        m_plant: 2,
+        ext_init,
+        coords: program(&["x", "y"], &s, &[]),
+        input_map: program(&["s", "w1 - w0", "s + 0.1*w0"], &s, &["w0", "w1"]),
+    }
+}
+
+#[test]
+fn controller_states_round_trip_and_are_refused_beyond_capacity() {
+    let mut b = builder();
+    b.model_maps(ext_maps(vec![0.5]));
+    let bytes = b.to_bytes().unwrap();
+    let img = decode(&bytes).unwrap();
+    let mm = img.model_maps().unwrap();
+    assert_eq!((mm.n_plant(), mm.m_plant(), mm.n_ext()), (3, 2, 1));
+    assert_eq!(mm.ext_init(0), 0.5);
+    let back = ImageBuilder::from_image(&img);
+    assert_eq!(back.model_maps, b.model_maps);
+    assert_eq!(back.to_bytes().unwrap(), bytes);
+    // The controller starts from ζ0, u0 = s, and s advances by 0.1·w0 (w0 = −0.25 + 0.5 at row 0).
+    let mut c = Controller::new(img);
+    assert_eq!(c.extension(), &[0.5]);
+    let u = c.step_plant(&[0.25, -0.5, 0.75]).unwrap();
+    assert_eq!(u.as_slice()[0], 0.5);
+    assert_eq!(c.extension(), &[0.5f32 + 0.1 * (-0.25f32 + 0.5)]);
+    c.reset();
+    assert_eq!(c.extension(), &[0.5]);
+    // Without controller states the section is the feedback-linearizable one.
+    assert_eq!(
+        decode(&builder().to_bytes().unwrap())
+            .unwrap()
+            .model_maps()
+            .unwrap()
+            .n_ext(),
+        0
+    );
+    // More than MAX_EXT states, a non-finite ζ0, programs that do not read ζ.
+    let mut b = builder();
+    b.model_maps(ext_maps(vec![0.0; shared_types::capacity::MAX_EXT + 1]));
+    assert!(matches!(
+        b.to_bytes(),
+        Err(EmitError::Capacity {
+            what: "number of controller states n_ext",
+            ..
+        })
+    ));
+    let mut b = builder();
+    b.model_maps(ext_maps(vec![f32::NAN]));
+    assert!(matches!(b.to_bytes(), Err(EmitError::NonFinite { .. })));
+    let mut b = builder();
+    let mut m = maps();
+    m.ext_init = vec![0.0];
+    b.model_maps(m);
+    assert!(matches!(
+        b.to_bytes(),
+        Err(EmitError::Rejected(ImageError::MapInputs {
+            map: ModelMap::Coords,
+            expected: 4,
+            found: 3
+        }))
+    ));
 }
 
 #[test]

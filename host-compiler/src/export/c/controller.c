@@ -709,37 +709,47 @@ static void eval_program(const sc_program *pr, const float *inputs, float *out) 
     }
 }
 
-/* maps::ModelMaps::decode: the section body of an image of dimensions n (xi) and m (w). */
+/* maps::ModelMaps::decode: the section body of an image of dimensions n (xi) and m (w). The header,
+ * then n_ext controller states' initial values (f32, each finite), then the two programs, each padded
+ * with zeros to a multiple of 4. */
 static sc_error parse_maps(sc_image *im, sc_bytes s) {
-    uint32_t coords_len, input_map_len, c0 = SC_MAPS_HEADER_LEN, i0, i;
+    uint32_t coords_len, input_map_len, c0, i0, i;
     uint64_t pc, pi, expected;
     sc_bytes c, p;
     sc_error e;
     if (s.len < SC_MAPS_HEADER_LEN) return SC_E_MAPS;
     im->n_plant = s.p[0];
     im->m_plant = s.p[1];
+    im->n_ext = s.p[2];
     if (im->n_plant < 1 || im->n_plant > SC_MAX_N || im->m_plant < 1 || im->m_plant > SC_MAX_M)
         return SC_E_MAPS;
-    if (s.p[2] != 0 || s.p[3] != 0) return SC_E_MAPS;
+    if (im->n_ext > SC_MAX_EXT) return SC_E_MAPS;
+    if (s.p[3] != 0) return SC_E_MAPS;
     coords_len = le32(s.p + 4);
     input_map_len = le32(s.p + 8);
     pc = ((uint64_t)coords_len + 3u) & ~(uint64_t)3u;
     pi = ((uint64_t)input_map_len + 3u) & ~(uint64_t)3u;
-    expected = SC_MAPS_HEADER_LEN + pc + pi;
+    expected = SC_MAPS_HEADER_LEN + 4u * (uint64_t)im->n_ext + pc + pi;
     if (expected != (uint64_t)s.len) return SC_E_MAPS;
+    c0 = SC_MAPS_HEADER_LEN + 4u * im->n_ext;
     i0 = c0 + (uint32_t)pc;
     for (i = c0 + coords_len; i < i0; i++)
         if (s.p[i] != 0) return SC_E_MAPS;
     for (i = i0 + input_map_len; i < s.len; i++)
         if (s.p[i] != 0) return SC_E_MAPS;
+    im->ext_init.p = s.p + SC_MAPS_HEADER_LEN;
+    im->ext_init.len = 4u * im->n_ext;
+    if (!all_finite(im->ext_init)) return SC_E_MAPS;
     c.p = s.p + c0;
     c.len = coords_len;
     p.p = s.p + i0;
     p.len = input_map_len;
     if ((e = decode_program(&im->coords, c)) != SC_E_NONE) return e;
     if ((e = decode_program(&im->input_map, p)) != SC_E_NONE) return e;
-    if (im->coords.n_inputs != im->n_plant || im->coords.n_outputs != im->n) return SC_E_MAPS;
-    if (im->input_map.n_inputs != im->n_plant + im->m || im->input_map.n_outputs != im->m_plant)
+    if (im->coords.n_inputs != im->n_plant + im->n_ext || im->coords.n_outputs != im->n)
+        return SC_E_MAPS;
+    if (im->input_map.n_inputs != im->n_plant + im->n_ext + im->m ||
+        im->input_map.n_outputs != im->m_plant + im->n_ext)
         return SC_E_MAPS;
     im->has_maps = 1;
     return SC_E_NONE;
@@ -871,6 +881,15 @@ void sc_reset(sc_controller *c) {
     c->out_of_envelope = 0;
     c->terminal = 0;
     for (j = 0; j < SC_MAX_M; j++) c->last_u[j] = 0.0f;
+    /* The controller states back to zeta0 (none without a dynamic extension). */
+    for (j = 0; j < SC_MAX_EXT; j++)
+        c->ext[j] = j < c->image.n_ext ? f32_at(c->image.ext_init, j) : 0.0f;
+}
+
+uint32_t sc_extension(const sc_controller *c, float ext[SC_MAX_EXT]) {
+    uint32_t j, ne = c->image.n_ext <= SC_MAX_EXT ? c->image.n_ext : SC_MAX_EXT;
+    for (j = 0; j < SC_MAX_EXT; j++) ext[j] = j < ne ? c->ext[j] : 0.0f;
+    return ne;
 }
 
 sc_error sc_init(sc_controller *c, const uint8_t *image, uint32_t len) {
@@ -1260,34 +1279,45 @@ sc_status sc_step(sc_controller *c, const float *x, uint32_t n_x, float u[SC_MAX
     }
 }
 
-/* Controller::step_plant (step_maps with model maps). */
+/* Controller::step_plant (step_maps with model maps): coords reads (x, zeta), input_map reads
+ * (x, zeta, w) and gives (u, zeta+); zeta <- zeta+ only when the step is accepted. */
 sc_status sc_step_plant(sc_controller *c, const float *x, uint32_t n_x, float u[SC_MAX_M]) {
     const sc_image *im = &c->image;
-    float xi[SC_MAX_N], w[SC_MAX_M], slots[SC_MAX_N + SC_MAX_M], v[SC_MAX_M];
-    uint32_t i, j, np = im->n_plant, m = im->m;
+    float xi[SC_MAX_N], w[SC_MAX_M], slots[SC_MAX_N + SC_MAX_EXT + SC_MAX_M],
+        out[SC_MAX_M + SC_MAX_EXT], v[SC_MAX_M];
+    uint32_t i, j, np = im->n_plant, mp = im->m_plant, m = im->m, ne = im->n_ext;
     int law;
     sc_status st;
     if (im->mode != 1 || !im->has_maps) return sc_step(c, x, n_x, u);
     if (x == 0 || n_x != np) return SC_BAD_FRAME;
     for (i = 0; i < n_x; i++)
         if (!finite_f32(x[i])) return SC_BAD_FRAME;
+    if (ne > SC_MAX_EXT) return SC_OUT_OF_ENVELOPE;
+    for (i = 0; i < SC_MAX_N + SC_MAX_EXT + SC_MAX_M; i++) slots[i] = 0.0f;
+    for (i = 0; i < np; i++) slots[i] = x[i];
+    for (i = 0; i < ne; i++) slots[np + i] = c->ext[i];
     for (i = 0; i < SC_MAX_N; i++) xi[i] = 0.0f;
-    eval_program(&im->coords, x, xi);
+    eval_program(&im->coords, slots, xi);
     for (i = 0; i < im->n; i++)
         if (!finite_f32(xi[i])) return SC_OUT_OF_ENVELOPE;
     st = feedforward(c, xi, w, &law);
     if (st != SC_OK) return st;
     if (law == SC_LAW_FALLBACK) {
         sc_fallback(c, x, n_x, c->last_u, v);
-        return finish(c, v, im->m_plant, u);
+        return finish(c, v, mp, u);
     }
     for (j = 0; j < m; j++)
         if (!finite_f32(w[j])) return SC_OUT_OF_ENVELOPE;
-    for (i = 0; i < np; i++) slots[i] = x[i];
-    for (j = 0; j < m; j++) slots[np + j] = w[j];
-    for (j = 0; j < SC_MAX_M; j++) v[j] = 0.0f;
-    eval_program(&im->input_map, slots, v);
-    return finish(c, v, im->m_plant, u);
+    for (j = 0; j < m; j++) slots[np + ne + j] = w[j];
+    for (j = 0; j < SC_MAX_M + SC_MAX_EXT; j++) out[j] = 0.0f;
+    eval_program(&im->input_map, slots, out);
+    for (i = 0; i < ne; i++)
+        if (!finite_f32(out[mp + i])) return SC_OUT_OF_ENVELOPE;
+    for (j = 0; j < SC_MAX_M; j++) v[j] = j < mp ? out[j] : 0.0f;
+    st = finish(c, v, mp, u);
+    if (st == SC_OK)
+        for (i = 0; i < ne; i++) c->ext[i] = out[mp + i];
+    return st;
 }
 
 /* The feedforward law of one step at the (finite, length-n) state x (Controller::feedforward): selection

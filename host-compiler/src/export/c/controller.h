@@ -40,7 +40,12 @@
  *     feedforward law above on xi gives w (SC_OUT_OF_ENVELOPE if not finite); u = input_map(x, w),
  *     SC_OUT_OF_ENVELOPE if not finite. Where the law applies the fallback, the fallback is applied to
  *     the plant directly. The fallback and the input box then have m_plant values and a linear fallback
- *     is refused. Without model maps sc_step_plant is sc_step. The programs are a stack bytecode
+ *     is refused. Without model maps sc_step_plant is sc_step.
+ *     A differentially flat plant's controller keeps n_ext (<= SC_MAX_EXT) states zeta of its own (a
+ *     dynamic extension, stored initial values zeta0 after the section's header): coords reads
+ *     (x, zeta), input_map reads (x, zeta, w) and stores (u, zeta+); zeta <- zeta+ when the step is
+ *     accepted (every value finite, else SC_OUT_OF_ENVELOPE and zeta unchanged); the fallback and every
+ *     error leave zeta; sc_init and sc_reset set zeta0. n_ext = 0 for a feedback-linearizable plant. The programs are a stack bytecode
  *     (shared-types/src/program.rs) interpreted with a fixed stack of SC_MAX_PROGRAM_STACK floats in one
  *     pass over their code; sinf, cosf, tanf, expf, logf, atanf, tanhf and atan2f come from <math.h>
  *     (sqrtf and fabsf are exact). The Rust evaluator uses the `libm` crate's functions: a program
@@ -82,6 +87,7 @@ extern "C" {
 #define SC_MAX_PROGRAM_OUTPUTS @MAX_PROGRAM_OUTPUTS@
 #define SC_MAX_PROGRAM_STACK @MAX_PROGRAM_STACK@
 #define SC_MAX_PROGRAM_POWI @MAX_PROGRAM_POWI@
+#define SC_MAX_EXT @MAX_EXT@
 
 /* Status of one step: the wire values of shared_types::eval::Status. */
 typedef enum {
@@ -115,8 +121,9 @@ typedef enum {
     SC_E_ARGUMENT = 19,        /* a null pointer */
     SC_E_EXIT = 20,            /* segment exits: unknown kind, nonzero table record, guard exit with a
                                   non-finite value, negative theta, or on a trajectory's last segment */
-    SC_E_MAPS = 21,            /* model maps section: plant dimensions, reserved or padding bytes,
-                                  lengths, a map's slots or outputs, or a linear fallback with maps */
+    SC_E_MAPS = 21,            /* model maps section: plant dimensions, number of controller states,
+                                  reserved or padding bytes, lengths, a non-finite initial controller
+                                  state, a map's slots or outputs, or a linear fallback with maps */
     SC_E_PROGRAM = 22,         /* a model program: length, counts, constants, opcodes, operands, stack
                                   depth, outputs stored once */
     SC_E_TERMINAL = 23         /* terminal law (section 11): P_t not symmetric positive definite, radius
@@ -157,6 +164,8 @@ typedef struct {
     /* model maps (optional section 10) */
     uint8_t has_maps;
     uint32_t n_plant, m_plant; /* = n, m without maps */
+    uint32_t n_ext;            /* controller states (a dynamic extension), 0..SC_MAX_EXT; 0 without */
+    sc_bytes ext_init;         /* their initial values zeta0 (n_ext f32) */
     sc_program coords, input_map;
     /* terminal law (optional section 11): x_e, K_t, v_t, P_t and the acceptance radius */
     uint8_t has_terminal;
@@ -175,6 +184,7 @@ typedef struct {
     uint8_t out_of_envelope;
     uint8_t terminal;       /* the terminal law has taken over (images with one) */
     float last_u[SC_MAX_M]; /* last input returned with SC_OK (zero after reset) */
+    float ext[SC_MAX_EXT];  /* controller states zeta (the first n_ext): zeta0 after reset */
 } sc_controller;
 
 /* Decodes and validates `len` bytes of `image` and resets the controller. Returns SC_E_NONE (0) or the
@@ -182,7 +192,8 @@ typedef struct {
  * fallback, e.g. zero input, and report SC_IMAGE_REJECTED). */
 sc_error sc_init(sc_controller *c, const uint8_t *image, uint32_t len);
 
-/* Back to kappa = 0: forgets the selected trajectory, the out-of-envelope latch and the last input. */
+/* Back to kappa = 0: forgets the selected trajectory, the out-of-envelope latch and the last input, and
+ * puts the controller states back to zeta0. */
 void sc_reset(sc_controller *c);
 
 /* One control period with state x[0..n_x). On SC_OK writes the input to u[0..m) (u[m..SC_MAX_M) = 0);
@@ -190,7 +201,7 @@ void sc_reset(sc_controller *c);
 sc_status sc_step(sc_controller *c, const float *x, uint32_t n_x, float u[SC_MAX_M]);
 
 /* One control period of the plant with its state x[0..n_x) (n_plant values): with model maps
- * u = input_map(x, law(coords(x))) as above, without them sc_step. On SC_OK writes the plant's input to
+ * (u, zeta+) = input_map(x, zeta, law(coords(x, zeta))) as above, without them sc_step. On SC_OK writes the plant's input to
  * u[0..m_plant) (u[m_plant..SC_MAX_M) = 0); otherwise leaves u untouched. */
 sc_status sc_step_plant(sc_controller *c, const float *x, uint32_t n_x, float u[SC_MAX_M]);
 
@@ -203,6 +214,10 @@ void sc_fallback(const sc_controller *c, const float *x, uint32_t n_x, const flo
  * takes, shared_types::eval::Controller::location); 0 before a trajectory is selected, for one-location
  * and for PWA images. */
 uint32_t sc_location(const sc_controller *c);
+
+/* The controller states zeta (Controller::extension): writes the first n_ext to ext[0..n_ext) (the
+ * rest 0) and returns n_ext (0 without a dynamic extension). */
+uint32_t sc_extension(const sc_controller *c, float ext[SC_MAX_EXT]);
 
 /* State and input dimensions of the image (of its law: xi and w with model maps). */
 uint32_t sc_n(const sc_controller *c);
