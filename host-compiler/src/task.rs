@@ -38,14 +38,14 @@ pub enum TaskError {
          this path takes one-location plants (synth and verify take hybrid specs through synth::hybrid)"
     )]
     HybridNotSupported { locations: usize, edges: usize },
-    /// A differentially flat plant, checked and bounded, whose image this version cannot make: the
-    /// controller's states of its dynamic extension have no place in the image yet.
+    /// A differentially flat plant, checked and bounded, that this version does not synthesise: the image
+    /// carries the dynamic extension's states, but the closed-loop checks do not yet run them.
     #[error(
         "the differentially flat plant is checked (Ξ and Υ reproduce f, Γ nonsingular over the region) \
          and bounded (a chain in the {n_flat} flat coordinates, flat input W = {w}, sampled-loop \
-         mismatch D = {d:.4e}), but this version does not synthesise it yet: the firmware's image has no \
-         place for the controller's own states (the dynamic extension), so no certified controller \
-         could run"
+         mismatch D = {d:.4e}), but this version does not synthesise it yet: the image can carry the \
+         controller's own states (the dynamic extension), but the Monte Carlo that re-checks every \
+         certificate does not yet run them against the plant, so nothing could be called certified"
     )]
     FlatNotSynthesised { n_flat: usize, w: String, d: f64 },
     /// A feedback-linearizable plant outside what this version linearises and bounds.
@@ -141,7 +141,7 @@ mod tests {
     /// A differentially flat spec is checked and bounded, then refused with the figures: its image has no
     /// place for the controller's states yet.
     #[test]
-    fn a_differentially_flat_task_is_refused_until_the_image_carries_controller_states() {
+    fn a_differentially_flat_task_is_refused_until_its_runs_are_rechecked() {
         let path = concat!(
             env!("CARGO_MANIFEST_DIR"),
             "/../examples/flat-quadrotor.toml"

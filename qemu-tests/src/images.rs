@@ -343,6 +343,7 @@ pub fn fl_4_9() -> Result<NonlinearImage, ImageBuildError> {
     b.model_maps(ModelMapsSpec {
         n_plant,
         m_plant: names.inputs.len(),
+        ext_init: Vec::new(),
         coords: coords.bytes.clone(),
         input_map: input_map.bytes.clone(),
     });

@@ -38,9 +38,10 @@
 //! (φ Σ b_j √P_jj + Σ J_j √P_jj), next to φβD.
 //!
 //! **Not yet synthesised.** `task::Task::new` builds all of this and then refuses the task
-//! (`TaskError::FlatNotSynthesised`): the image has no place for the controller's states ζ, which the
-//! firmware must keep between periods, so no certified controller could run. The bounds it reports (W, D)
-//! are the ones the certificate will take.
+//! (`TaskError::FlatNotSynthesised`). The image carries the controller's states ζ (ζ0 in the model maps
+//! section, ζ⁺ from the input map on every accepted step), but the closed-loop Monte Carlo, `simulate`
+//! and `play` still judge a plant state without them, so no certificate could be re-checked. The bounds
+//! it reports (W, D) are the ones the certificate will take.
 
 use super::feedback_linearizable::{
     adjugate, bound_err, cancelling_law, dims_used, gram, norm2_bound, outside_interval,
