@@ -138,8 +138,8 @@ mod tests {
         assert_eq!(maps.n_plant, 6);
     }
 
-    /// A differentially flat spec is checked and bounded, then refused with the figures: its image has no
-    /// place for the controller's states yet.
+    /// A differentially flat spec is checked and bounded, then refused with the figures: its runs with
+    /// the controller's states are not re-checked yet.
     #[test]
     fn a_differentially_flat_task_is_refused_until_its_runs_are_rechecked() {
         let path = concat!(
