@@ -14,15 +14,33 @@ use miette::IntoDiagnostic;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
+/// The task of an MTL spec, its formula over the task's coordinates and the formula as written.
+pub(crate) struct TemporalSpec {
+    /// The formula the task is judged by, over the task's coordinates.
+    pub tt: TemporalTask,
+    pub task: crate::task::Task,
+    /// The formula as the user wrote it (over the plant's states), which the certificate and report
+    /// state; for a feedback-linearizable plant `tt` is its rewriting into ξ.
+    pub written: String,
+}
+
+impl TemporalSpec {
+    /// The formula over the task's coordinates when it is not the one written (a feedback-linearizable
+    /// plant's, in ξ).
+    pub fn rewritten(&self) -> Option<&str> {
+        let src = self.tt.written.source();
+        (src != self.written).then_some(src)
+    }
+}
+
 /// The task of an MTL spec and its formula over the task's coordinates. The formula is bound first on
 /// the spec as written (so that its errors point into the text); a feedback-linearizable plant's task is
 /// in ξ, and so is its formula (rewritten by `model::feedback_linearizable::formula_in_xi`).
-pub(crate) fn temporal_task(
-    problem: crate::spec::Problem,
-) -> Result<(TemporalTask, crate::task::Task), Failure> {
+pub(crate) fn temporal_task(problem: crate::spec::Problem) -> Result<TemporalSpec, Failure> {
     let tt = TemporalTask::from_problem(&problem)
         .map_err(miette::Report::new)
         .bad_input()?;
+    let written = tt.written.source().to_string();
     let linearized = problem.nonlinear.is_some();
     let task = task_of(problem)?;
     let tt = if linearized {
@@ -32,7 +50,7 @@ pub(crate) fn temporal_task(
     } else {
         tt
     };
-    Ok((tt, task))
+    Ok(TemporalSpec { tt, task, written })
 }
 
 pub fn run(a: &SynthArgs, problem: crate::spec::Problem) -> Outcome {
@@ -42,7 +60,8 @@ pub fn run(a: &SynthArgs, problem: crate::spec::Problem) -> Outcome {
              mode = \"feedforward\""
         )));
     }
-    let (tt, task) = temporal_task(problem)?;
+    let ts = temporal_task(problem)?;
+    let (tt, task) = (&ts.tt, &ts.task);
     // Recordings in the task's coordinates, each the whole horizon long (the formula is judged over T).
     let imports = super::synth::load_imports(a, &task.problem)?;
     let cancel = Arc::new(AtomicBool::new(false));
@@ -62,9 +81,11 @@ pub fn run(a: &SynthArgs, problem: crate::spec::Problem) -> Outcome {
     if !a.quiet {
         eprintln!(
             "MTL task: {} (judged on [0, {}] s, atoms in the CAF metric)",
-            tt.written.source(),
-            task.problem.horizon
+            ts.written, task.problem.horizon
         );
+        if let Some(xi) = ts.rewritten() {
+            eprintln!("          in the task's coordinates: {xi}");
+        }
     }
     let quiet = a.quiet;
     let opts = TemporalOptions {
@@ -78,7 +99,7 @@ pub fn run(a: &SynthArgs, problem: crate::spec::Problem) -> Outcome {
         imports,
         ..TemporalOptions::default()
     };
-    let s = synthesize_temporal(&task, &tt, &opts).map_err(|e| Failure {
+    let s = synthesize_temporal(task, tt, &opts).map_err(|e| Failure {
         exit: Exit::Failed,
         report: miette::miette!("{e}"),
     })?;
@@ -109,7 +130,8 @@ pub fn run(a: &SynthArgs, problem: crate::spec::Problem) -> Outcome {
         "seed": task.problem.seed,
         "task": "mtl",
         "image": super::image_identity(&img_path, &s.image),
-        "formula": tt.written.source(),
+        "formula": ts.written,
+        "formula_in_task_coordinates": ts.rewritten(),
         "stop": s.stop,
         "coverage": s.coverage,
         "verify": s.verify,
@@ -137,7 +159,8 @@ pub fn run(a: &SynthArgs, problem: crate::spec::Problem) -> Outcome {
     let page = crate::report::temporal::render(
         &task.problem,
         &a.spec.display().to_string(),
-        tt.written.source(),
+        &ts.written,
+        ts.rewritten(),
         &s,
     );
     std::fs::write(a.out.join("report.html"), page).into_diagnostic()?;
@@ -200,4 +223,30 @@ pub fn run(a: &SynthArgs, problem: crate::spec::Problem) -> Outcome {
         &s.stop,
         "balls",
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn load(name: &str) -> crate::spec::Problem {
+        crate::spec::load(format!("{}/../examples/{name}", env!("CARGO_MANIFEST_DIR")))
+            .unwrap_or_else(|e| panic!("{e:?}"))
+    }
+
+    /// The certificate and report state the formula as written; a feedback-linearizable plant's rewriting
+    /// into ξ (with the operating region's conjunct) is stated beside it, and a linear plant has none.
+    #[test]
+    fn the_formula_as_written_is_kept_beside_its_rewriting_into_xi() {
+        let p = load("fl-pendulum-mtl.toml");
+        let src = p.mtl.clone().expect("a formula");
+        let ts = temporal_task(p).unwrap_or_else(|e| panic!("{:?}", e.report));
+        assert_eq!(ts.written, src);
+        let xi = ts.rewritten().expect("rewritten into ξ");
+        assert!(xi != src && xi.contains("G[0.0,4.0]"), "{xi}");
+        let p = load("planar-vehicle-waypoints.toml");
+        let src = p.mtl.clone().expect("a formula");
+        let ts = temporal_task(p).unwrap_or_else(|e| panic!("{:?}", e.report));
+        assert_eq!((ts.written.as_str(), ts.rewritten()), (src.as_str(), None));
+    }
 }

@@ -355,11 +355,12 @@ fn run_temporal(
             a.image.display()
         )));
     }
-    let (tt, task) = super::synth_temporal::temporal_task(problem)?;
+    let ts = super::synth_temporal::temporal_task(problem)?;
+    let (tt, task) = (&ts.tt, &ts.task);
     if let Some(maps) = task.plant.linearization() {
         super::maps_match(maps, &img, &a.image, &a.spec)?;
     }
-    let rc = recheck(&task, &tt, &img)
+    let rc = recheck(task, tt, &img)
         .map_err(|e| miette::miette!("{}: {e}", a.image.display()))
         .bad_input()?;
     let init = crate::cover::estimate::SampleBox {
@@ -373,18 +374,18 @@ fn run_temporal(
     let linearized = task.plant.linearization().is_some();
     let r = if linearized {
         // On the nonlinear plant, the zero states drawn in Init.
-        crate::verify::temporal::monte_carlo_temporal_fl(&task, &tt, &img, &starts, seed ^ 0x2e10)
+        crate::verify::temporal::monte_carlo_temporal_fl(task, tt, &img, &starts, seed ^ 0x2e10)
             .map_err(|e| miette::miette!("{}: {e}", a.image.display()))
             .bad_input()?
     } else {
-        monte_carlo_temporal(&task, &tt, &img, &starts).map_err(miette::Report::new)?
+        monte_carlo_temporal(task, tt, &img, &starts).map_err(miette::Report::new)?
     };
     let attack = match attack_settings(a, task.problem.seed)? {
         // On the nonlinear plant too.
         Some(s) if linearized => {
-            Some(crate::verify::attack::attack_temporal_fl(&task, &tt, &img, &s).bad_input()?)
+            Some(crate::verify::attack::attack_temporal_fl(task, tt, &img, &s).bad_input()?)
         }
-        Some(s) => Some(crate::verify::attack::attack_temporal(&task, &tt, &img, &s).bad_input()?),
+        Some(s) => Some(crate::verify::attack::attack_temporal(task, tt, &img, &s).bad_input()?),
         None => None,
     };
     let unproved: Vec<usize> = rc.iter().filter(|c| !c.ok).map(|c| c.trajectory).collect();
@@ -398,10 +399,12 @@ fn run_temporal(
         );
     } else {
         println!(
-            "re-proved         {} of {} balls from the image bytes, for `{}`",
+            "re-proved         {} of {} balls from the image bytes, for `{}`{}",
             rc.len() - unproved.len(),
             rc.len(),
-            tt.written.source()
+            ts.written,
+            ts.rewritten()
+                .map_or(String::new(), |xi| format!(" (in ξ: `{xi}`)"))
         );
         println!(
             "monte carlo       {} runs judged by the formula at the samples and sampled 8× finer ({} starts refused by the f32 selection, not run), {} violations",

@@ -14,7 +14,15 @@ use plotters::prelude::*;
 const SHOWN: usize = 12;
 
 /// The page, self-contained (inline SVG).
-pub fn render(problem: &Problem, spec: &str, formula: &str, s: &TemporalSynthesis) -> String {
+/// `formula` is the user's text; `in_task`, when given, the same formula over the task's coordinates
+/// (a feedback-linearizable plant's ξ), which is what the atoms measure.
+pub fn render(
+    problem: &Problem,
+    spec: &str,
+    formula: &str,
+    in_task: Option<&str>,
+    s: &TemporalSynthesis,
+) -> String {
     let mut h = String::new();
     h.push_str(
         "<!doctype html><html><head><meta charset=\"utf-8\"><title>MTL synthesis report</title>",
@@ -22,7 +30,7 @@ pub fn render(problem: &Problem, spec: &str, formula: &str, s: &TemporalSynthesi
     h.push_str("<style>body{font-family:sans-serif;max-width:960px;margin:2em auto;color:#222}table{border-collapse:collapse}td,th{border:1px solid #ccc;padding:2px 8px;text-align:right}code{background:#f4f4f4;padding:1px 4px}</style></head><body>");
     let ok = s.verify.violations == 0 && s.recheck.iter().all(|c| c.ok);
     h.push_str(&format!(
-        "<h1>{}</h1><p>Spec <code>{}</code>. Task: <code>{}</code> on [0, {}] s, atoms in the CAF metric.</p>",
+        "<h1>{}</h1><p>Spec <code>{}</code>. Task: <code>{}</code> on [0, {}] s, atoms in the CAF metric.{}</p>",
         if ok {
             "Certified and verified"
         } else {
@@ -30,7 +38,11 @@ pub fn render(problem: &Problem, spec: &str, formula: &str, s: &TemporalSynthesi
         },
         escape(spec),
         escape(formula),
-        num(problem.horizon)
+        num(problem.horizon),
+        in_task.map_or(String::new(), |f| format!(
+            " Over the linearizing coordinates ξ (the task's state) it reads <code>{}</code>.",
+            escape(f)
+        ))
     ));
     h.push_str(&format!(
         "<p>{} balls ({} seeds tried); coverage of Init {} (lower bound {} at {} confidence, {} samples); stop: {}.</p>",
