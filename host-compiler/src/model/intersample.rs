@@ -14,6 +14,17 @@
 //!
 //! For two runs under the same reference v with u = K x + v at the samples, e = x − x̃ obeys
 //! ė = A e + B K e_κ, so e(τ) = e_κ + Φ(τ)(A + BK) e_κ and ‖e(κh+τ)‖₂ ≤ (1 + γ(h)‖A + BK‖₂) ‖e_κ‖₂.
+//!
+//! **Along one direction** ([`drift_against`]). A norm bound counts every coordinate's rate against every
+//! constraint: a vehicle's speed against a limit on its acceleration, or a stiff metric's fast coordinates
+//! against an obstacle's face. Along a direction n, Φ(τ) = τI + τ²A/2 + R₃(τ) with
+//! ‖R₃(τ)‖_P ≤ ∫₀^τ (e^{as} − 1 − as) ds = (e^{aτ} − 1 − aτ − (aτ)²/2)/a =: χ₃(τ), a = ‖A‖_P (the series of
+//! e^{As} term by term), so for τ ∈ [0, h]
+//!
+//!   −nᵀd(τ) ≤ h·max(0, −nᵀf) + (h²/2)·max(0, −nᵀAf) + ‖n‖_{P⁻¹}‖f‖_P·χ₃(h),
+//!
+//! each term being largest at τ = h. The first two are exact for a chain of integrators' leading terms;
+//! the last is third order in h.
 
 use super::{check_finite, check_len, ContinuousPlant, ModelError};
 use faer::{Mat, MatRef, Side};
@@ -94,5 +105,87 @@ impl ContinuousPlant {
     /// The inter-sample excursion bound for period `h`; see [`InterSampleBound`].
     pub fn inter_sample_bound(&self, h: f64) -> Result<InterSampleBound, ModelError> {
         InterSampleBound::new(self, h)
+    }
+}
+
+/// The directional bound of the module doc: an upper bound on sup_{τ∈[0,h]} −nᵀd(τ), how far the held
+/// plant moves against `n` within one period, for the vector field `f` at the sample and `a_f` = A f.
+/// `n_dual` = ‖n‖_{P⁻¹}, `f_p` = ‖f‖_P and `a_p` = ‖A‖_P (the induced norm) in the caller's metric. Each
+/// term is rounded up by a relative 10⁻⁹.
+pub fn drift_against(
+    n: &[f64],
+    f: &[f64],
+    a_f: &[f64],
+    h: f64,
+    n_dual: f64,
+    f_p: f64,
+    a_p: f64,
+) -> f64 {
+    let dot = |x: &[f64]| -> f64 { n.iter().zip(x).map(|(a, b)| a * b).sum() };
+    let t = a_p * h;
+    // χ₃(h) = h (e^t − 1 − t − t²/2)/t, by its series where the subtraction would cancel.
+    let chi3 = if t < 1e-2 {
+        h * t * t / 6.0 * (1.0 + t / 4.0 + t * t / 20.0 + t * t * t / 100.0)
+    } else {
+        h * (t.exp_m1() - t - 0.5 * t * t) / t
+    };
+    (h * (-dot(f)).max(0.0) + 0.5 * h * h * (-dot(a_f)).max(0.0) + n_dual * f_p * chi3)
+        * (1.0 + 1e-9)
+}
+
+#[cfg(test)]
+mod directional_tests {
+    use super::*;
+    use crate::model::expm::expm;
+
+    /// Against the exact excursion of an anti-damped oscillator and a chain, on a fine grid of τ: the
+    /// bound holds in every direction tried.
+    #[test]
+    fn the_directional_drift_bounds_the_exact_excursion() {
+        let h = 0.1;
+        for A in [
+            faer::mat![[0.0, 1.0], [-2.0, 0.1]],
+            faer::mat![[0.0, 1.0], [0.0, 0.0]],
+        ] {
+            let P = faer::mat![[3.0, 0.5], [0.5, 1.0]];
+            let roots = crate::linalg::PdRoots::new(P.as_ref()).unwrap();
+            let a_p = roots.induced_norm(A.as_ref());
+            for (f, n) in [
+                ([2.0, -1.0], [1.0, 0.0]),
+                ([-3.0, 0.5], [0.3, -1.0]),
+                ([0.0, 4.0], [-1.0, 0.2]),
+                ([1.0, 1.0], [0.0, -1.0]),
+            ] {
+                let a_f = [
+                    A[(0, 0)] * f[0] + A[(0, 1)] * f[1],
+                    A[(1, 0)] * f[0] + A[(1, 1)] * f[1],
+                ];
+                let bound = drift_against(
+                    &n,
+                    &f,
+                    &a_f,
+                    h,
+                    roots.dual_norm(&n),
+                    crate::linalg::p_norm(P.as_ref(), &f),
+                    a_p,
+                );
+                // d(τ) = Φ(τ) f with Φ(τ) the (1,2) block of expm([[A, I], [0, 0]] τ).
+                let mut worst = f64::NEG_INFINITY;
+                for i in 0..=200 {
+                    let tau = h * i as f64 / 200.0;
+                    let M = faer::Mat::<f64>::from_fn(4, 4, |r, c| match (r < 2, c < 2) {
+                        (true, true) => A[(r, c)] * tau,
+                        (true, false) => f64::from(u8::from(r == c - 2)) * tau,
+                        _ => 0.0,
+                    });
+                    let E = expm(M.as_ref()).unwrap();
+                    let d: Vec<f64> = (0..2)
+                        .map(|r| E[(r, 2)] * f[0] + E[(r, 3)] * f[1])
+                        .collect();
+                    worst = worst.max(-(n[0] * d[0] + n[1] * d[1]));
+                }
+                assert!(worst <= bound, "{A:?} f {f:?} n {n:?}: {worst} > {bound}");
+            }
+        }
     }
 }

@@ -13,7 +13,16 @@
 //! * Input (4.15): u = K(x̃ + e) + ṽ for ‖e‖_P ≤ δ stays in the input set shrunk by the rounding margin.
 //!
 //! Because every half-space contains its piece, each iterate is feasible for the true problem; iterating
-//! (sequential convex programming) moves the linearisation points with the trajectory. Each subproblem is a
+//! (sequential convex programming) moves the linearisation points with the trajectory. The first iterate
+//! ignores Unsafe, so it may run straight through a piece; the half-spaces at the nearest boundary points
+//! of the samples inside it then push the samples before the piece's centre out one side and those after
+//! it out the other, which no input within the bounds may achieve. And a fast run is held off every face
+//! by the isotropic inter-sample excursion, its speed along the face counted against it (Example 4.20's
+//! discs, passed at 8 m/s, are kept 1–2 m further off than the run can move towards them in a period).
+//! When the iteration fails, it is run again with one half-space per crossing, on the side the crossing
+//! already passes ([`crossing_halfspace`]), and with the drift against each half-space's normal
+//! ([`crate::model::drift_against`]) where it is smaller. The first pass is kept as it is so that what it
+//! proposes does not change. Each subproblem is a
 //! second-order cone program solved with clarabel. The certified δ is computed afterwards, independently,
 //! by the robustness library; this module only proposes trajectories.
 
@@ -183,13 +192,61 @@ impl GenProblem<'_> {
         nom
     }
 
-    /// Inter-sample excursion ρ(x̃(κ), ũ(κ)) = φ(‖f‖_P + β·margin) of the nominal in the P-metric of
-    /// sample κ, f the vector field at the sample (0 for discrete-time plants).
-    fn excursion(&self, k: usize, x: &[f64], u: &[f64]) -> f64 {
-        match self.plant.vector_field(self.loc_at(k), x, u) {
-            None => 0.0,
-            Some(f) => self.phi * (p_norm(self.P_at(k), &f) + self.beta * self.input_margin),
+    /// The nominal's drift over the period after sample κ ([`Drift`]), in the metric of sample κ; with
+    /// `directional` false only the isotropic bound is taken.
+    fn drift(&self, k: usize, x: &[f64], u: &[f64], roots: &PdRoots, directional: bool) -> Drift {
+        let loc = self.loc_at(k);
+        let (Some(f), Some(cp)) = (
+            self.plant.vector_field(loc, x, u),
+            self.plant.continuous(loc),
+        ) else {
+            return Drift::default();
+        };
+        let f_p = p_norm(self.P_at(k), &f);
+        Drift {
+            a_f: mat_vec(cp.A.as_ref(), &f),
+            f,
+            f_p,
+            a_p: roots.induced_norm(cp.A.as_ref()),
+            h: self.plant.period(),
+            phi: self.phi,
+            held: self.phi * self.beta * self.input_margin,
+            directional,
         }
+    }
+}
+
+/// The nominal's motion within one period after a sample (continuous-time plants; zero for discrete-time
+/// ones): the vector field f at the sample, A f, their norms, and the held input's margin φβ·margin.
+#[derive(Default)]
+struct Drift {
+    f: Vec<f64>,
+    a_f: Vec<f64>,
+    f_p: f64,
+    a_p: f64,
+    h: f64,
+    phi: f64,
+    held: f64,
+    directional: bool,
+}
+
+impl Drift {
+    /// How far it moves the state against the direction `n` (‖n‖_{P⁻¹} = `dn`), in units of nᵀx: the
+    /// isotropic bound ‖n‖_{P⁻¹}φ‖f‖_P, or the smaller of it and the directional one
+    /// ([`crate::model::drift_against`]), plus the held input's margin.
+    fn against(&self, n: &[f64], dn: f64) -> f64 {
+        if self.f.is_empty() {
+            return 0.0;
+        }
+        let isotropic = dn * self.phi * self.f_p;
+        let moved = if self.directional {
+            isotropic.min(crate::model::drift_against(
+                n, &self.f, &self.a_f, self.h, dn, self.f_p, self.a_p,
+            ))
+        } else {
+            isotropic
+        };
+        moved + dn * self.held
     }
 }
 
@@ -267,10 +324,44 @@ pub fn generate(
         });
     }
     let roots = prob.roots().ok_or(GenError::BadMetric)?;
+    match iterate(prob, &roots, x0, settings, Sides::Nearest) {
+        Err(e) if !prob.convex.unsafe_pieces.is_empty() => {
+            // A first iterate through Unsafe can get half-spaces that exclude each other (module doc):
+            // the second pass takes one side per crossing. Tried only when the first fails, so every
+            // trajectory the first pass finds is proposed as before.
+            iterate(prob, &roots, x0, settings, Sides::PerCrossing).map_err(|_| e)
+        }
+        r => r,
+    }
+}
+
+/// How the Unsafe rows of a subproblem are written from an iterate (module doc).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Sides {
+    /// Each sample's half-space at the boundary point nearest it, kept clear by the isotropic
+    /// inter-sample excursion ‖n‖_{P⁻¹}φ‖f‖_P.
+    Nearest,
+    /// Outside the piece as `Nearest`; the samples of one crossing (a maximal run of consecutive samples
+    /// inside the piece) share one half-space, on the side of the piece the crossing passes. The
+    /// excursion is the smaller of the isotropic one and the drift against the half-space's normal
+    /// ([`crate::model::drift_against`]), so a fast run is not held off every face by its speed along
+    /// the others.
+    PerCrossing,
+}
+
+/// The sequential convex iteration of [`generate`] with one rule for the Unsafe half-spaces.
+fn iterate(
+    prob: &GenProblem<'_>,
+    roots: &[PdRoots],
+    x0: &[f64],
+    settings: &GenSettings,
+    sides: Sides,
+) -> Result<Generated, GenError> {
     let mut best: Option<Generated> = None;
     let mut lin: Option<Nominal> = None;
     for it in 0..settings.max_iter.max(1) {
-        let sol = solve_subproblem(prob, &roots, x0, lin.as_ref(), settings);
+        let sol = solve_subproblem(prob, roots, x0, lin.as_ref(), settings, sides);
+
         match sol {
             Ok((v, delta)) => {
                 let nominal = prob.simulate(x0, &v);
@@ -341,6 +432,7 @@ fn solve_subproblem(
     x0: &[f64],
     lin: Option<&Nominal>,
     settings: &GenSettings,
+    sides: Sides,
 ) -> Result<(Vec<Vec<f64>>, f64), SubproblemStatus> {
     let model = prob.model_at(0);
     let n = model.A.nrows();
@@ -386,6 +478,12 @@ fn solve_subproblem(
     rows.row(&[(d, 1.0)], settings.delta_max); // δ ≤ δmax
                                                // Unsafe: supporting half-spaces at the previous iterate.
     if let Some(nom) = lin {
+        let planes: Vec<Vec<(Vec<f64>, f64)>> = prob
+            .convex
+            .unsafe_pieces
+            .iter()
+            .map(|piece| halfspaces(piece, &nom.x, sides))
+            .collect();
         for k in 0..=N {
             let xk = &nom.x[k];
             let uk = if k < N {
@@ -393,15 +491,15 @@ fn solve_subproblem(
             } else {
                 nom.u[N - 1].clone()
             };
-            let rho = prob.excursion(k, xk, &uk);
             let roots = &roots_of[prob.metric_at(k)];
-            for piece in &prob.convex.unsafe_pieces {
-                let (nrm, off) = supporting_halfspace(piece, xk);
-                // Keep nᵀx ≥ off + ‖n‖_{P⁻¹}(γδ + ρ):  −nᵀx + γ‖n‖δ + s = −off − ‖n‖ρ.
-                let dn = roots.dual_norm(&nrm);
+            let drift = prob.drift(k, xk, &uk, roots, sides == Sides::PerCrossing);
+            for plane in &planes {
+                let (nrm, off) = &plane[k];
+                let dn = roots.dual_norm(nrm);
+                // Keep nᵀx ≥ off + γ‖n‖_{P⁻¹}δ + (how far the period's drift moves the state against n).
                 let mut e: Vec<(usize, f64)> = (0..n).map(|i| (xi(k, i), -nrm[i])).collect();
                 e.push((d, prob.gamma * dn));
-                rows.row(&e, -off - dn * rho);
+                rows.row(&e, -*off - drift.against(nrm, dn));
             }
         }
     }
@@ -505,6 +603,109 @@ fn solve_subproblem(
     Ok((v, z[d].max(0.0)))
 }
 
+/// The supporting half-space of `piece` for every sample of an iterate `xs`, by the rule `sides`.
+fn halfspaces(piece: &ConvexPiece, xs: &[Vec<f64>], sides: Sides) -> Vec<(Vec<f64>, f64)> {
+    let mut out: Vec<(Vec<f64>, f64)> = xs.iter().map(|x| supporting_halfspace(piece, x)).collect();
+    if sides == Sides::Nearest {
+        return out;
+    }
+    let mut k = 0;
+    while k < xs.len() {
+        if !piece_contains(piece, &xs[k]) {
+            k += 1;
+            continue;
+        }
+        let first = k;
+        while k < xs.len() && piece_contains(piece, &xs[k]) {
+            k += 1;
+        }
+        // The crossing enters after sample a and leaves before sample b (the run's ends when it starts at
+        // the first sample or ends at the last).
+        let a = &xs[first.saturating_sub(1)];
+        let b = &xs[k.min(xs.len() - 1)];
+        let plane = crossing_halfspace(piece, a, b, &xs[first..k]);
+        for o in &mut out[first..k] {
+            *o = plane.clone();
+        }
+    }
+    out
+}
+
+/// One supporting half-space for a crossing of `piece` from `a` to `b` through the samples `inside`.
+/// An ellipsoid {(Cx − c)ᵀQ(Cx − c) ≤ 1}: tangent where the ray from its centre through the point of the
+/// chord [Ca, Cb] nearest the centre meets the boundary, so the crossing is pushed out on the side it
+/// already passes (perpendicular to the chord, deterministically, when the chord meets the centre). A
+/// polytope: the facet least penetrated by the crossing's mean point.
+fn crossing_halfspace(
+    piece: &ConvexPiece,
+    a: &[f64],
+    b: &[f64],
+    inside: &[Vec<f64>],
+) -> (Vec<f64>, f64) {
+    match piece {
+        ConvexPiece::Ellipsoid { C, c, .. } => {
+            let ya = mat_vec(C.as_ref(), a);
+            let yb = mat_vec(C.as_ref(), b);
+            let p = c.len();
+            let dir: Vec<f64> = (0..p).map(|i| yb[i] - ya[i]).collect();
+            let dd: f64 = dir.iter().map(|v| v * v).sum();
+            let t = if dd > 0.0 {
+                ((0..p).map(|i| (c[i] - ya[i]) * dir[i]).sum::<f64>() / dd).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+            let mut off: Vec<f64> = (0..p).map(|i| ya[i] + t * dir[i] - c[i]).collect();
+            let scale = c.iter().chain(&ya).fold(1.0f64, |s, v| s.max(v.abs()));
+            if off.iter().map(|v| v * v).sum::<f64>().sqrt() <= 1e-9 * scale && p >= 2 {
+                // Through the centre: the chord's perpendicular in the first two coordinates.
+                off = vec![0.0; p];
+                (off[0], off[1]) = (-dir[1], dir[0]);
+            }
+            // A point of y-space on that ray, lifted to x by least change from a (only C x matters).
+            let target: Vec<f64> = (0..p).map(|i| c[i] + off[i]).collect();
+            supporting_halfspace(piece, &lift(C.as_ref(), a, &ya, &target))
+        }
+        ConvexPiece::Polytope { .. } => {
+            let n = a.len();
+            let mean: Vec<f64> = (0..n)
+                .map(|j| inside.iter().map(|x| x[j]).sum::<f64>() / inside.len().max(1) as f64)
+                .collect();
+            supporting_halfspace(piece, &mean)
+        }
+    }
+}
+
+/// A state x with C x = `target`, found as x = a + Cᵀ z with C Cᵀ z = target − C a (C has full row rank
+/// for the sets the spec builds: coordinate selections).
+fn lift(C: MatRef<'_, f64>, a: &[f64], ya: &[f64], target: &[f64]) -> Vec<f64> {
+    let p = C.nrows();
+    let CCt = C * C.transpose();
+    let rhs = faer::Mat::<f64>::from_fn(p, 1, |i, _| target[i] - ya[i]);
+    let z = faer::prelude::Solve::solve(&CCt.as_ref().partial_piv_lu(), &rhs);
+    (0..a.len())
+        .map(|j| a[j] + (0..p).map(|i| C[(i, j)] * z[(i, 0)]).sum::<f64>())
+        .collect()
+}
+
+/// Whether `x` lies in `piece` (boundary included).
+fn piece_contains(piece: &ConvexPiece, x: &[f64]) -> bool {
+    match piece {
+        ConvexPiece::Polytope { H, b } => {
+            (0..H.nrows()).all(|r| (0..x.len()).map(|j| H[(r, j)] * x[j]).sum::<f64>() <= b[r])
+        }
+        ConvexPiece::Ellipsoid { C, c, Q } => {
+            let p = C.nrows();
+            let y: Vec<f64> = (0..p)
+                .map(|i| (0..x.len()).map(|j| C[(i, j)] * x[j]).sum::<f64>() - c[i])
+                .collect();
+            (0..p)
+                .map(|i| (0..p).map(|j| y[i] * Q[(i, j)] * y[j]).sum::<f64>())
+                .sum::<f64>()
+                <= 1.0
+        }
+    }
+}
+
 /// A half-space {x : nᵀx ≤ off} containing `piece`, supporting it at a boundary point chosen from `x`:
 /// for an ellipsoid the radial projection of C x onto its boundary (the tangent plane there); for a polytope
 /// the facet that `x` is farthest outside of (or least inside of).
@@ -567,6 +768,18 @@ mod tests {
         input: InputBound,
         steps: usize,
     ) -> Result<Generated, GenError> {
+        solve_with(goal, goal_at, unsafe_pieces, input, steps, None)
+    }
+
+    /// [`solve`] by [`generate`] (`sides` None), or by one pass of [`iterate`] with that rule.
+    fn solve_with(
+        goal: ConvexPiece,
+        goal_at: [f64; 3],
+        unsafe_pieces: Vec<ConvexPiece>,
+        input: InputBound,
+        steps: usize,
+        sides: Option<Sides>,
+    ) -> Result<Generated, GenError> {
         let A = from_row_major(2, 2, &[0.9, 0.0, 0.0, 0.9]);
         let plant = LinearAffine::discrete(
             DiscretePlant::new(A, Mat::identity(2, 2), vec![0.0, 0.0], 0.1).unwrap(),
@@ -599,7 +812,59 @@ mod tests {
             input_margin: 0.0,
             schedule: None,
         };
-        generate(&prob, &[0.0, 0.0], &GenSettings::default())
+        match sides {
+            None => generate(&prob, &[0.0, 0.0], &GenSettings::default()),
+            Some(sides) => iterate(
+                &prob,
+                &prob.roots().unwrap(),
+                &[0.0, 0.0],
+                &GenSettings::default(),
+                sides,
+            ),
+        }
+    }
+
+    /// A disc centred on the straight path to Goal: the first iterate runs through it, and the nearest
+    /// boundary points push its samples out on both sides. One side per crossing clears it; `generate`
+    /// falls back to that rule, and its trajectory keeps the tube out of the disc.
+    #[test]
+    fn a_crossing_through_a_disc_gets_one_side_and_clears_it() {
+        let input = InputBound::Box {
+            lo: vec![-0.4, -0.4],
+            hi: vec![0.4, 0.4],
+        };
+        let obstacle = || vec![disc(1.0, 0.0, 0.3)];
+        let run = |sides| {
+            solve_with(
+                disc(2.0, 0.0, 0.3),
+                [2.0, 0.0, 0.3],
+                obstacle(),
+                input.clone(),
+                30,
+                sides,
+            )
+        };
+        let nearest = run(Some(Sides::Nearest));
+        let crossing = run(Some(Sides::PerCrossing)).expect("one side per crossing");
+        let fallback = run(None).expect("generate falls back");
+        assert!(
+            matches!(
+                nearest,
+                Err(GenError::Infeasible {
+                    status: SubproblemStatus::Solver(SolverStatus::PrimalInfeasible),
+                    ..
+                })
+            ),
+            "{:?}",
+            nearest.map(|g| g.delta_lin)
+        );
+        assert_eq!(fallback.delta_lin, crossing.delta_lin);
+        let d = crossing.delta_lin;
+        assert!(d > 0.0, "delta {d}");
+        for xk in &crossing.nominal.x {
+            let gap = (xk[0] - 1.0).hypot(xk[1]) - 0.3;
+            assert!(gap >= d - 1e-6, "{xk:?} is {gap} from the disc, δ = {d}");
+        }
     }
 
     fn disc(cx: f64, cy: f64, r: f64) -> ConvexPiece {
