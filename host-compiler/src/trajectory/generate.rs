@@ -210,14 +210,14 @@ impl GenProblem<'_> {
             a_p: roots.induced_norm(cp.A.as_ref()),
             h: self.plant.period(),
             phi: self.phi,
-            held: self.phi * self.beta * self.input_margin,
+            beta_margin: self.beta * self.input_margin,
             directional,
         }
     }
 }
 
 /// The nominal's motion within one period after a sample (continuous-time plants; zero for discrete-time
-/// ones): the vector field f at the sample, A f, their norms, and the held input's margin φβ·margin.
+/// ones): the vector field f at the sample, A f, their norms, and the held input's margin.
 #[derive(Default)]
 struct Drift {
     f: Vec<f64>,
@@ -226,7 +226,8 @@ struct Drift {
     a_p: f64,
     h: f64,
     phi: f64,
-    held: f64,
+    /// β·margin: the held input's rounding margin through B_c.
+    beta_margin: f64,
     directional: bool,
 }
 
@@ -238,15 +239,14 @@ impl Drift {
         if self.f.is_empty() {
             return 0.0;
         }
+        if !self.directional {
+            // ‖n‖_{P⁻¹}ρ with ρ = φ(‖f‖_P + β·margin), evaluated as the first pass always has.
+            return dn * (self.phi * (self.f_p + self.beta_margin));
+        }
         let isotropic = dn * self.phi * self.f_p;
-        let moved = if self.directional {
-            isotropic.min(crate::model::drift_against(
-                n, &self.f, &self.a_f, self.h, dn, self.f_p, self.a_p,
-            ))
-        } else {
-            isotropic
-        };
-        moved + dn * self.held
+        isotropic.min(crate::model::drift_against(
+            n, &self.f, &self.a_f, self.h, dn, self.f_p, self.a_p,
+        )) + dn * self.phi * self.beta_margin
     }
 }
 
