@@ -207,6 +207,12 @@ pub struct LoopConstants {
     /// far they move the state per period in the P-metric, φ Σ_j b_j √P_jj + Σ_j J_j √P_jj (a
     /// disturbance d_j e_j has P-norm |d_j|√P_jj); 0 for every other plant.
     pub state_step: f64,
+    /// Whether the Unsafe piece between samples also takes the drift against each convex piece of Unsafe
+    /// ([`Pieces::unsafe_margin`]). Off by default: hybrid plants turn it on
+    /// ([`LoopConstants::with_directional_unsafe`]); a one-location task keeps the isotropic margin until
+    /// the MTL tube (Remark 2.29's embedding must certify the same δ) and the optimiser's gradient carry
+    /// the directional one too.
+    pub directional_unsafe: bool,
     /// Prefix sums of ‖Ã^j‖_P ([`LoopConstants::accumulation`]), computed once when first asked.
     accumulated: std::sync::OnceLock<Vec<f64>>,
 }
@@ -284,8 +290,18 @@ impl LoopConstants {
             axis,
             mismatch,
             state_step,
+            directional_unsafe: false,
             accumulated: std::sync::OnceLock::new(),
         })
+    }
+
+    /// These constants with the directional Unsafe margin between samples on
+    /// ([`LoopConstants::directional_unsafe`]).
+    pub fn with_directional_unsafe(self) -> Self {
+        Self {
+            directional_unsafe: true,
+            ..self
+        }
     }
 
     /// S_k = Σ_{j<k} ‖Ã^j‖_P (the P-induced norms of the closed loop's powers, each rounded up by a

@@ -137,15 +137,88 @@ impl<'a, 'b> Pieces<'a, 'b> {
     }
 
     /// The Unsafe piece at sample k from its distance d at the sample: (d − φ‖f‖_P − φβ(ε̄ + D))/γ between
-    /// samples, d at the last sample and for discrete-time plants.
+    /// samples, or the directional margin ([`Pieces::directional_margin`]) where it is larger; d at the
+    /// last sample and for discrete-time plants.
     pub fn unsafe_margin(&self, nom: &Nominal, k: usize, d: f64, eps_f32: f64) -> f64 {
         match self.excursion(nom, k) {
             Some(f) => {
-                let rho = self.lc.phi * p_norm(self.lp.P, &f);
-                (d - rho - self.lc.held_disturbance(eps_f32)) / self.lc.gamma
+                let f_p = p_norm(self.lp.P, &f);
+                let rho = self.lc.phi * f_p;
+                let held = self.lc.held_disturbance(eps_f32);
+                let isotropic = (d - rho - held) / self.lc.gamma;
+                match self.directional_margin(nom, k, &f, f_p, held) {
+                    Some(m) if m > isotropic => m,
+                    _ => isotropic,
+                }
             }
             None => d,
         }
+    }
+
+    /// The Unsafe piece between samples κ and κ+1 by the drift against each convex piece of Unsafe
+    /// (`None` when the constants leave it off ([`super::LoopConstants::directional_unsafe`]), Unsafe is
+    /// not known as a union of convex pieces, or the sample touches one).
+    ///
+    /// For a piece at P-distance d_j from x̃(κ), with witness p and the unit (‖n‖_{P⁻¹} = 1) normal
+    /// n = P(x̃ − p)/‖·‖, the piece lies in {z : nᵀ(z − x̃) ≤ −d_j} when p is its nearest point. A run
+    /// from the r-ball moves against n by at most γr + (held disturbances) + drift_n within the period
+    /// (drift_n: [`crate::model::drift_against`] of the nominal's f; the deviation and the disturbances
+    /// are bounded in norm as in the isotropic margin). A witness that is not exactly the nearest point q
+    /// tilts n: with p′ the point of the piece nearest p (ε_p from p), Pythagoras for the projection on a
+    /// convex set gives ‖q − p′‖_P² ≤ ‖x̃ − p′‖_P² − d_j², so ‖n − n_q‖_{P⁻¹} ≤ c_w =
+    /// 2(√((g + ε_p)² − d_j²) + ε_p)/min(g, d_j), g = ‖x̃ − p‖_P, and that tilt costs at most c_w times the
+    /// run's whole excursion ‖z − x̃‖_P ≤ γr + φ‖f‖_P + held. The piece is then missed for
+    ///   r < (d_j − drift_n − held − c_w(φ‖f‖_P + held)) / (γ(1 + c_w)),
+    /// and Unsafe for r below the least of these over its pieces.
+    fn directional_margin(
+        &self,
+        nom: &Nominal,
+        k: usize,
+        f: &[f64],
+        f_p: f64,
+        held: f64,
+    ) -> Option<f64> {
+        if !self.lc.directional_unsafe {
+            return None;
+        }
+        let pieces = self.lp.unsafe_set()?.convex_pieces()?;
+        let cp = self.lp.continuous()?;
+        let x = &nom.x[k];
+        let a_f = mat_vec(cp.A.as_ref(), f);
+        let a_p = self.lc.roots.induced_norm(cp.A.as_ref());
+        let h = self.lp.plant.period();
+        let mut least = f64::INFINITY;
+        for piece in pieces {
+            let w = piece.try_dist(x, &self.metric).ok()?;
+            let dj = w.value;
+            if !(dj > 0.0 && dj.is_finite()) || w.point.len() != x.len() {
+                return None;
+            }
+            let e: Vec<f64> = x.iter().zip(&w.point).map(|(a, b)| a - b).collect();
+            let g = p_norm(self.lp.P, &e);
+            let pe = mat_vec(self.lp.P, &e);
+            let dn = self.lc.roots.dual_norm(&pe);
+            if !(g > 0.0 && dn > 0.0) {
+                return None;
+            }
+            let n: Vec<f64> = pe.iter().map(|v| v / dn).collect();
+            let eps_p = if piece.contains(&w.point) {
+                0.0
+            } else {
+                piece.try_dist(&w.point, &self.metric).ok()?.value
+            };
+            if !eps_p.is_finite() {
+                return None;
+            }
+            let tilt = ((g + eps_p).powi(2) - dj * dj).max(0.0).sqrt();
+            let c_w = 2.0 * (tilt + eps_p) / g.min(dj) * (1.0 + 1e-9);
+            let n_dual = self.lc.roots.dual_norm(&n);
+            let drift = crate::model::drift_against(&n, f, &a_f, h, n_dual, f_p, a_p);
+            let m = (dj - drift - held - c_w * (self.lc.phi * f_p + held))
+                / (self.lc.gamma * (1.0 + c_w) * n_dual.max(1.0));
+            least = least.min(m);
+        }
+        Some(least - least.abs() * 1e-9)
     }
 
     /// Unsafe piece at every sample (+∞ without Unsafe).

@@ -97,6 +97,13 @@ impl Region for Union {
     fn try_depth(&self, x: &[f64], metric: &Metric) -> Result<Witness, GeometryError> {
         Ok(self.depth_bounds(x, metric)?.0)
     }
+    fn convex_pieces(&self) -> Option<Vec<&dyn Region>> {
+        let mut out = Vec::new();
+        for m in &self.members {
+            out.extend(m.convex_pieces()?);
+        }
+        Some(out)
+    }
     fn compile(&self, metric: &Metric) -> Option<Box<dyn SignedDistanceFn + '_>> {
         self.compiled(metric)
     }
@@ -143,6 +150,9 @@ impl Region for Empty {
             value: 0.0,
             point: Vec::new(),
         }
+    }
+    fn convex_pieces(&self) -> Option<Vec<&dyn Region>> {
+        Some(Vec::new())
     }
 }
 
@@ -458,6 +468,14 @@ impl Region for InOutput {
     }
     fn compile(&self, metric: &Metric) -> Option<Box<dyn SignedDistanceFn + '_>> {
         self.compiled(metric)
+    }
+    /// {x : Cx ∈ S_y} is convex when S_y is, and its witness is the nearest point (the lift of the
+    /// output-metric witness by the least change).
+    fn convex_pieces(&self) -> Option<Vec<&dyn Region>> {
+        match self.inner.convex_pieces()?.len() {
+            1 => Some(vec![self as &dyn Region]),
+            _ => None,
+        }
     }
 }
 

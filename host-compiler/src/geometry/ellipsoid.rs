@@ -138,6 +138,9 @@ impl Region for Ellipsoid {
     fn compile(&self, metric: &Metric) -> Option<Box<dyn SignedDistanceFn + '_>> {
         self.compiled(metric)
     }
+    fn convex_pieces(&self) -> Option<Vec<&dyn Region>> {
+        Some(vec![self])
+    }
     fn try_depth(&self, x: &[f64], metric: &Metric) -> Result<Witness, GeometryError> {
         check_query(self.dim(), x, metric)?;
         if !self.contains(x) {
@@ -229,6 +232,9 @@ impl Region for Ball {
     }
     fn try_depth(&self, x: &[f64], metric: &Metric) -> Result<Witness, GeometryError> {
         self.inner.try_depth(x, metric)
+    }
+    fn convex_pieces(&self) -> Option<Vec<&dyn Region>> {
+        Some(vec![self])
     }
 }
 

@@ -207,6 +207,12 @@ pub trait Region: Send + Sync {
     fn compile(&self, _metric: &Metric) -> Option<Box<dyn SignedDistanceFn + '_>> {
         None
     }
+    /// The set as a finite union of convex sets whose [`Region::dist`] witnesses are their nearest
+    /// points in the metric (so that the witness gives a supporting half-space: the directional
+    /// inter-sample bound of `certify` needs one per piece); `None` when it is not known to be one.
+    fn convex_pieces(&self) -> Option<Vec<&dyn Region>> {
+        None
+    }
     /// [`Region::dist`] with errors reported.
     fn try_dist(&self, x: &[f64], metric: &Metric) -> Result<Witness, GeometryError> {
         Ok(self.dist(x, metric))

@@ -454,6 +454,9 @@ impl Region for Polytope {
         }
         Ok(self.depth_inside(x, &steps))
     }
+    fn convex_pieces(&self) -> Option<Vec<&dyn Region>> {
+        Some(vec![self])
+    }
 }
 
 #[cfg(test)]
