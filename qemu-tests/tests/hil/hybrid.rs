@@ -1,10 +1,11 @@
 //! Hybrid runs on the target. Example 4.25 (§4.2.2): a run across the internal edge x₁ = 0, certified
 //! by `certify::internal`, in an image with a guard exit. The forced cart (§4.2.1): a run that switches
 //! from `forward` to `backward` by its table, certified by `certify::forced`, and the same cart with an
-//! MTL task (Def 4.18, `certify::forced::certify_forced_formula`). The emulated Cortex-M4F
+//! MTL task (Def 4.18, `certify::forced::certify_forced_formula`); Example 4.20's eight locations and
+//! three discs the same way. The emulated Cortex-M4F
 //! runs each from 50 initial states in the run's ball, against the hybrid plant simulated on the host
 //! with its exact flow (events found between samples, [`host_compiler::model::hybrid::Hybrid::flow`]).
-//! Every run must switch once, reach Goal within T, never enter Unsafe (at every sample and at 8
+//! Every run must switch where its run does, reach Goal within T, never enter Unsafe (at every sample and at 8
 //! sub-samples of each period) and apply only inputs within the bound, with the firmware's inputs (and
 //! the location its reply carries) equal to the host evaluator's bit for bit.
 
@@ -193,27 +194,57 @@ fn hybrid_example_4_25_meets_the_spec_on_the_target_from_50_initial_states() {
 /// event by itself.
 #[test]
 fn hybrid_forced_cart_meets_the_spec_on_the_target_from_50_initial_states() {
-    forced_cart_on_target("hybrid-forced-cart.toml", "hybrid_forced_cart", 0x420);
+    forced_on_target(
+        "hybrid-forced-cart.toml",
+        "hybrid_forced_cart",
+        0x420,
+        &[0.0, 0.0],
+        0.5,
+    );
 }
 
 /// The same cart with its task an MTL formula (Def 4.18): every run is judged by the formula as
 /// written over the whole horizon, at the samples and the sub-samples.
 #[test]
 fn hybrid_forced_cart_mtl_meets_the_formula_on_the_target_from_50_initial_states() {
-    forced_cart_on_target(
+    forced_on_target(
         "hybrid-forced-cart-mtl.toml",
         "hybrid_forced_cart_mtl",
         0x418,
+        &[0.0, 0.0],
+        0.5,
     );
 }
 
-/// A forced-switching cart example planned from Init's centre and run on the target from 50 starts.
-fn forced_cart_on_target(example: &str, tag: &str, salt: u64) {
+/// Example 4.20 (8 locations, forced switching, three discs to avoid): a run planned from Init's centre,
+/// its segments certified with the drift against each disc between samples, run on the target from 50
+/// starts in its ball with |u_i| ≤ 2 (the input ball's radius).
+#[test]
+fn hybrid_example_4_20_meets_the_spec_on_the_target_from_50_initial_states() {
+    forced_on_target(
+        "hybrid-forced-4-20.toml",
+        "hybrid_4_20",
+        0x4020,
+        &[3.5, -6.0, 0.0, 0.0],
+        2.0,
+    );
+}
+
+/// A forced-switching example planned from `x0` and run on the target from 50 starts, with inputs
+/// within `u_max` componentwise. Every run switches exactly where the planned run's segments end.
+fn forced_on_target(example: &str, tag: &str, salt: u64, x0: &[f64], u_max: f64) {
     let (task, run, bytes, elf) = setup(example, tag, |task| {
-        plan_forced(task, &[0.0, 0.0]).expect("a run from Init's centre")
+        plan_forced(task, x0).unwrap_or_else(|why| panic!("no run from {x0:?}: {why}"))
     });
-    assert_eq!(run.locations.len(), 2, "the run switches once");
-    let switch_at = run.nominals[0].steps();
+    let switch_at: Vec<usize> = run
+        .nominals
+        .iter()
+        .scan(0, |k, nom| {
+            *k += nom.steps();
+            Some(*k)
+        })
+        .take(run.nominals.len() - 1)
+        .collect();
     let mut switched: Vec<Vec<usize>> = vec![Vec::new(); RUNS];
     let runs = run_on_target(
         &task,
@@ -221,7 +252,7 @@ fn forced_cart_on_target(example: &str, tag: &str, salt: u64) {
         &bytes,
         &elf,
         salt,
-        0.5,
+        u_max,
         |r, k, reply, x, loc| {
             let want = reply.location as usize;
             if want == *loc {
@@ -245,10 +276,18 @@ fn forced_cart_on_target(example: &str, tag: &str, salt: u64) {
             t.events, 0,
             "run {r}: an event the automaton took by itself"
         );
-        assert_eq!(switched[r], vec![switch_at], "run {r}: switches");
+        // A reach-avoid run stops in Goal, possibly before a later switch of its table.
+        let expected: Vec<usize> = switch_at.iter().copied().filter(|&k| k < t.goal).collect();
+        assert_eq!(switched[r], expected, "run {r}: switches");
     }
+    let names: Vec<&str> = run
+        .locations
+        .iter()
+        .map(|&l| task.plant.modes()[l].name.as_str())
+        .collect();
     println!(
-        "HIL {tag}: {RUNS} runs switched at sample {switch_at} and met the task ({}); δ = {:.4}, image {} bytes",
+        "HIL {tag}: {RUNS} runs through {} switched at samples {switch_at:?} and met the task ({}); δ = {:.4}, image {} bytes, worst step cost {} instructions",
+        names.join(" → "),
         if task.formula.is_some() {
             format!("the formula over all {} samples", task.steps)
         } else {
@@ -259,6 +298,7 @@ fn forced_cart_on_target(example: &str, tag: &str, salt: u64) {
             )
         },
         run.delta(),
-        bytes.len()
+        bytes.len(),
+        runs.iter().map(|t| t.cost).max().unwrap_or(0)
     );
 }
