@@ -143,9 +143,15 @@ fn f32_selection_accepts_only_states_in_the_certified_ball() {
     );
 }
 
-#[test]
-fn inter_sample_excursion_is_bounded() {
-    // The planar vehicle of Example 3.3 with a stabilising sampled gain.
+/// The planar vehicle of Example 3.3 (A_c, B_c, c, the continuous plant) with a stabilising sampled
+/// gain K.
+fn planar_vehicle() -> (
+    Mat<f64>,
+    Mat<f64>,
+    Vec<f64>,
+    host_compiler::model::ContinuousPlant,
+    Mat<f64>,
+) {
     let Ac = Mat::from_fn(4, 4, |i, j| {
         [
             [0.0, 0.0, 1.0, 0.0],
@@ -158,15 +164,21 @@ fn inter_sample_excursion_is_bounded() {
         [[0.0, 0.0], [0.0, 0.0], [1.0, 0.0], [0.0, 1.0]][i][j]
     });
     let c = vec![0.0, 0.0, 1.0, 1.0];
-    let h = 0.05;
     let plant =
         host_compiler::model::ContinuousPlant::new(Ac.clone(), Bc.clone(), c.clone()).unwrap();
-    let d = host_compiler::model::zoh(&plant, h).unwrap();
-    const SUB: usize = 50;
-    let fine = host_compiler::model::zoh(&plant, h / SUB as f64).unwrap();
     let K = Mat::from_fn(2, 4, |i, j| {
         [[-2.0, 0.0, -2.5, 0.0], [0.0, -2.0, 0.0, -2.5]][i][j]
     });
+    (Ac, Bc, c, plant, K)
+}
+
+#[test]
+fn inter_sample_excursion_is_bounded() {
+    let (Ac, Bc, c, plant, K) = planar_vehicle();
+    let h = 0.05;
+    let d = host_compiler::model::zoh(&plant, h).unwrap();
+    const SUB: usize = 50;
+    let fine = host_compiler::model::zoh(&plant, h / SUB as f64).unwrap();
     let P = random_pd(4, 5.0, &mut ChaCha8Rng::seed_from_u64(3));
     let sampled = LinearAffine::sampled(plant.clone(), h).unwrap();
     let property = ReachAvoid {
@@ -381,28 +393,12 @@ fn pwa_whitened_test_accepts_only_states_in_the_certified_ball() {
 #[test]
 fn the_directional_unsafe_margin_keeps_every_run_out_between_samples() {
     use host_compiler::certify::Pieces;
-    use host_compiler::geometry::{Ball, Metric, Polytope, Region, Union};
+    use host_compiler::geometry::{Ball, Metric, Polytope, Union};
     use host_compiler::trajectory::Nominal;
-    let Ac = Mat::from_fn(4, 4, |i, j| {
-        [
-            [0.0, 0.0, 1.0, 0.0],
-            [0.0, 0.0, 0.0, 1.0],
-            [-1.0, 0.0, 0.1, 0.0],
-            [0.0, -1.0, 0.0, 0.1],
-        ][i][j]
-    });
-    let Bc = Mat::from_fn(4, 2, |i, j| {
-        [[0.0, 0.0], [0.0, 0.0], [1.0, 0.0], [0.0, 1.0]][i][j]
-    });
-    let c = vec![0.0, 0.0, 1.0, 1.0];
+    let (Ac, Bc, c, plant, K) = planar_vehicle();
     let h = 0.1;
-    let plant =
-        host_compiler::model::ContinuousPlant::new(Ac.clone(), Bc.clone(), c.clone()).unwrap();
     const SUB: usize = 200;
     let fine = host_compiler::model::zoh(&plant, h / SUB as f64).unwrap();
-    let K = Mat::from_fn(2, 4, |i, j| {
-        [[-2.0, 0.0, -2.5, 0.0], [0.0, -2.0, 0.0, -2.5]][i][j]
-    });
     let sampled = LinearAffine::sampled(plant.clone(), h).unwrap();
     // x1 ∈ [1, 2], x2 ∈ [-1, 1] (any velocity), and the unit ball around (-2, 0, 0, 0).
     let boxed = Polytope::new(
