@@ -192,10 +192,13 @@ impl std::fmt::Display for Attempts {
 /// A coverage estimate through the image's f32 selection: the estimate, the uncovered fresh samples, the image.
 type Estimate = (CoverageEstimate, Vec<Vec<f64>>, Vec<u8>);
 
-/// Progress bars of the growth loop: accepted trajectories, and the seeds of the current round.
+/// Progress bars of the growth loop: accepted trajectories, and the seeds of the current round. When
+/// stderr is not a terminal (a CI log, `nohup`), indicatif draws nothing, so each round is also printed
+/// as a plain line.
 struct Bars {
     trajectories: ProgressBar,
     batch: ProgressBar,
+    plain: bool,
 }
 
 impl Bars {
@@ -204,6 +207,7 @@ impl Bars {
             return Self {
                 trajectories: ProgressBar::hidden(),
                 batch: ProgressBar::hidden(),
+                plain: false,
             };
         }
         let mp = indicatif::MultiProgress::new();
@@ -212,10 +216,15 @@ impl Bars {
         Self {
             trajectories,
             batch,
+            plain: !std::io::IsTerminal::is_terminal(&std::io::stderr()),
         }
     }
     fn set_round(&self, round: usize, what: &str) {
-        self.batch.set_message(format!("round {round}: {what}"));
+        let line = format!("round {round}: {what}");
+        if self.plain {
+            eprintln!("{line}");
+        }
+        self.batch.set_message(line);
     }
     fn clear(&self) {
         self.trajectories.finish_and_clear();
@@ -390,6 +399,7 @@ pub fn grow(
     let free = problem.init.free_coords();
     let mut final_round = 0u64;
     let mut round = 0usize;
+    let mut centre_tried = false;
     // Algorithm 4: uncovered samples whose projection no local variation certifies (δ < δε or nothing new).
     let mut discarded: Vec<Vec<f64>> = Vec::new();
     let outside = |trajs: &[CoverTrajectory], x: &[f64]| {
@@ -531,10 +541,16 @@ pub fn grow(
                 .zip(&init.hi)
                 .map(|(l, h)| round32(0.5 * (l + h)))
                 .collect();
+            // The centre is tried in the first round only: the generator is deterministic, so a centre
+            // that failed once fails again, and later rounds give its place to a working sample.
+            let with_centre = !centre_tried;
+            centre_tried = true;
+            let from_work = if with_centre { batch - 1 } else { batch };
             let seeds: Vec<Vec<f64>> = std::iter::once(centre)
+                .filter(|_| with_centre)
                 .chain(
                     work.iter()
-                        .take(batch - 1)
+                        .take(from_work)
                         .map(|x| x.iter().map(|&v| round32(v)).collect()),
                 )
                 .collect();

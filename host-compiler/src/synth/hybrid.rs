@@ -261,6 +261,14 @@ impl HybridRun {
     }
 }
 
+/// Where a planned run starts: `x0` rounded to f32. The image stores the run's first ball centre in f32
+/// and the re-proof from the bytes simulates from there, so the run certified here must start there too;
+/// from an f64 seed the two nominals differ by the rounding, which moves a small δ by more than the
+/// re-proof's tolerance.
+pub fn f32_start(x0: &[f64]) -> Vec<f64> {
+    x0.iter().map(|&v| crate::linalg::round32(v)).collect()
+}
+
 /// The nominal of location `loc`'s loop from `x0` under `v` rounded to f32 (what ships).
 pub fn shipped_nominal(task: &HybridTask, loc: Location, x0: &[f64], v: &[Vec<f64>]) -> Nominal {
     let v32: Vec<Vec<f64>> = v
@@ -360,8 +368,10 @@ fn gen_problem<'a>(
     }
 }
 
-/// Plan and certify a run from `x0` (module doc); the best over the durations tried, or why none.
+/// Plan and certify a run from `x0` (module doc); the best over the durations tried, or why none. The
+/// run starts at `x0` rounded to f32 ([`f32_start`]).
 pub fn plan_run(task: &HybridTask, x0: &[f64]) -> Result<HybridRun, String> {
+    let x0 = &f32_start(x0)[..];
     let gs = GenSettings::default();
     let h = task.plant.period();
     let horizon = task.problem.horizon;

@@ -415,3 +415,26 @@ fn forced_run_certified_for_a_formula_and_refused_when_the_nominal_breaks_it() {
         assert_eq!(c.delta_stored, 0.0);
     }
 }
+
+/// A run planned from a seed that is not an f32 point starts at its f32 rounding, where the image stores
+/// the ball's centre, so the bytes re-prove exactly the tables that were certified.
+#[test]
+fn a_run_planned_from_an_f64_seed_starts_where_the_image_stores_it_and_re_proves() {
+    use host_compiler::synth::hybrid::{forced, image, HybridTask};
+    use host_compiler::verify::hybrid::recheck;
+    let path = format!(
+        "{}/../examples/hybrid-forced-cart.toml",
+        env!("CARGO_MANIFEST_DIR")
+    );
+    let task = HybridTask::new(host_compiler::spec::load(&path).unwrap()).unwrap();
+    let seed = [0.1 + 1e-9 * std::f64::consts::PI, -0.05 + 3e-10];
+    assert!(seed.iter().any(|&v| v as f32 as f64 != v));
+    let run = forced::plan_forced(&task, &seed).expect("a run from near the centre");
+    let start = &run.nominals[0].x[0];
+    for (s, v) in start.iter().zip(&seed) {
+        assert_eq!(*s, *v as f32 as f64, "the run starts at {start:?}");
+    }
+    let bytes = image(&task, std::slice::from_ref(&run)).unwrap();
+    let rc = recheck(&task.plant, &task.property, None, task.steps, &bytes).unwrap();
+    assert!(rc.iter().all(|r| r.ok), "{rc:?}");
+}

@@ -165,3 +165,35 @@ fn a_huge_init_box_is_bad_input_not_a_panic() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// With stderr not a terminal (this pipe, a CI log) the growth's progress still shows, as one plain line
+/// per round; `--quiet` hides it.
+#[test]
+fn progress_shows_as_plain_lines_when_stderr_is_not_a_terminal() {
+    let dir = scratch("plain-progress");
+    let path = dir.join("spec.toml");
+    std::fs::write(
+        &path,
+        format!("{}\n[synthesis]\nmax_trajectories = 1\n", base()),
+    )
+    .unwrap();
+    let run = |quiet: bool| {
+        let mut c = bin();
+        c.arg("synth")
+            .arg(&path)
+            .arg("--out")
+            .arg(dir.join("out"))
+            .args(["--verify-runs", "200"]);
+        if quiet {
+            c.arg("--quiet");
+        }
+        c.output().unwrap()
+    };
+    let o = run(false);
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(3), "{err}");
+    assert!(err.contains("round 1: first seed (SCP + §5.3)"), "{err}");
+    let o = run(true);
+    assert!(!stderr(&o).contains("round 1:"), "{}", stderr(&o));
+    let _ = std::fs::remove_dir_all(&dir);
+}

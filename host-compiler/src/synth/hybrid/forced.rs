@@ -38,8 +38,9 @@ struct Candidate {
 }
 
 /// Plan and certify a forced-switching run from `x0` (module doc): the best over the candidates, or why
-/// none was certified.
+/// none was certified. The run starts at `x0` rounded to f32 ([`super::f32_start`]).
 pub fn plan_forced(task: &HybridTask, x0: &[f64]) -> Result<HybridRun, String> {
+    let x0 = &super::f32_start(x0)[..];
     let l0 = task.initial;
     let h = task.plant.period();
     let mut cands = Vec::new();
