@@ -261,10 +261,10 @@ impl HybridRun {
     }
 }
 
-/// Where a planned run starts: `x0` rounded to f32. The image stores the run's first ball centre in f32
-/// and the re-proof from the bytes simulates from there, so the run certified here must start there too;
-/// from an f64 seed the two nominals differ by the rounding, which moves a small δ by more than the
-/// re-proof's tolerance.
+/// A start the image stores, rounded to f32: a run's first ball centre, or a later segment's start. The
+/// re-proof from the bytes simulates from the stored f32 point, so the segment certified here must start
+/// there too; from an f64 point the two nominals differ by the rounding, which moves a small δ by more
+/// than the re-proof's tolerance.
 pub fn f32_start(x0: &[f64]) -> Vec<f64> {
     x0.iter().map(|&v| crate::linalg::round32(v)).collect()
 }
@@ -423,7 +423,7 @@ pub fn plan_run(task: &HybridTask, x0: &[f64]) -> Result<HybridRun, String> {
             if !last {
                 match landing(task, loc, &nom, task.edges[i]) {
                     // f32-representable: the image stores it, and the certificate is re-proved from it.
-                    Some(l) => x = l.iter().map(|&v| v as f32 as f64).collect(),
+                    Some(l) => x = f32_start(&l),
                     None => {
                         why = format!("segment {i}: the generated nominal does not switch");
                         ok = false;
@@ -499,10 +499,7 @@ fn refine_landing(task: &HybridTask, run: &HybridRun) -> Option<HybridRun> {
         }
     }
     let mid: Vec<f64> = (0..n).map(|q| 0.5 * (lo[q] + hi[q])).collect();
-    let start: Vec<f64> = crate::linalg::mat_vec(roots1.inv_sqrt.as_ref(), &mid)
-        .iter()
-        .map(|&v| v as f32 as f64)
-        .collect();
+    let start = f32_start(&crate::linalg::mat_vec(roots1.inv_sqrt.as_ref(), &mid));
     let gp = gen_problem(task, l1, &task.convex, run.nominals[1].steps());
     let v = generate(&gp, &start, &GenSettings::default())
         .ok()?

@@ -46,7 +46,6 @@
 
 use super::{certify_run, shipped_nominal, HybridRun, HybridTask};
 use crate::certify::internal::{truncate, InternalCertificate};
-use crate::linalg::round32;
 use crate::model::Location;
 use crate::trajectory::csv::Recording;
 use crate::trajectory::Nominal;
@@ -187,7 +186,7 @@ impl Replay {
                 None => nom.clone(),
                 Some(prev) => {
                     let l = super::landing(task, task.path[i - 1], prev, task.edges[i - 1])?;
-                    let x: Vec<f64> = l.iter().map(|&v| round32(v)).collect();
+                    let x = super::f32_start(&l);
                     shipped_nominal(task, task.path[i], &x, &nom.v)
                 }
             };
@@ -223,7 +222,7 @@ pub fn replay(task: &HybridTask, rec: &Recording) -> Result<Replay, ImportError>
     }
     let h = plant.period();
     let name = |l: Location| plant.modes()[l].name.clone();
-    let mut x: Vec<f64> = rec.x0.iter().map(|&v| round32(v)).collect();
+    let mut x = super::f32_start(&rec.x0);
     let mut k0 = 0usize;
     let (mut nominals, mut starts) = (Vec::new(), Vec::new());
     for (i, &loc) in task.path.iter().enumerate() {
@@ -292,7 +291,7 @@ pub fn replay(task: &HybridTask, rec: &Recording) -> Result<Replay, ImportError>
         };
         nominals.push(nom);
         // f32-representable: the image stores the next segment's start.
-        x = xl.iter().map(|&v| round32(v)).collect();
+        x = super::f32_start(&xl);
         k0 += ke + 1;
     }
     Ok(Replay { nominals, starts })
@@ -417,7 +416,7 @@ fn certify_forced_recording(task: &HybridTask, rec: &Recording) -> Result<Hybrid
     starts.push(rec.v.len());
     // The segments as `plan_forced` simulates them: the f32 start, each from the previous one's end.
     let mut nominals = Vec::with_capacity(locations.len());
-    let mut start: Vec<f64> = rec.x0.iter().map(|&v| round32(v)).collect();
+    let mut start = super::f32_start(&rec.x0);
     for (i, &l) in locations.iter().enumerate() {
         let nom = shipped_nominal(task, l, &start, &rec.v[starts[i]..starts[i + 1]]);
         start = nom.x.last().cloned().unwrap_or_default();
