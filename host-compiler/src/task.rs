@@ -72,7 +72,7 @@ impl Task {
             let flat = problem.nonlinear.as_ref().is_some_and(|d| d.flat.is_some());
             if flat {
                 // The model, its bounds and the certificate's terms are built (`model::flat`), but the
-                // image cannot yet carry the controller's own states, so nothing certified could run.
+                // Monte Carlo does not yet run the controller's own states, so nothing could be re-checked.
                 let (q, maps) = crate::model::flat::flatten(&problem)?;
                 let w = match &q.input {
                     crate::spec::InputSet::Box { lo, hi } => lo

@@ -240,6 +240,9 @@ pub struct FlatCoords {
     /// rounding of the stored controller states and of q).
     pub state_rate: Vec<f64>,
     pub jump: Vec<f64>,
+    /// Per q coordinate, the part of `jump` from applying an extended input as its period mean rather than
+    /// the model's ζ_0(t) (`model::flat`, item 3).
+    pub held: Vec<f64>,
 }
 
 impl FlMaps {

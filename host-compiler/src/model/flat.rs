@@ -8,9 +8,13 @@
 //! derivatives and the other inputs) the flat state is q = Φ(x_e) = (L_f^k h_i)_{k < r_i} and
 //! q̇ = A q + B(α(x_e) + Γ(x_e)u_e) with A, B the chains (the spec loader proved Γ nonsingular over the
 //! operating region). The firmware applies u_e = Γ⁻¹(w − α) (all of α cancelled, so the linear model is the
-//! pure chain, K̂ and P of (3.41)): the plant gets an extended input's ζ_0 (the thrust it keeps), the
-//! others their u_e, and ζ advances by the exact zero-order-hold solution of its integrators under the held
-//! u_e: ζ_k⁺ = Σ_{l ≥ k} ζ_l h^{l−k}/(l−k)! + u_e h^{o−k}/(o−k)!.
+//! pure chain, K̂ and P of (3.41)). ζ advances by the exact zero-order-hold solution of its integrators
+//! under the held u_e, ζ_k⁺ = Σ_{l ≥ k} ζ_l h^{l−k}/(l−k)! + u_e h^{o−k}/(o−k)!, so within the period the
+//! model's extended input is the polynomial ζ_0(t) = Σ_l ζ_l t^l/l! + u_e t^o/o!. The plant can only hold
+//! one value: it gets that polynomial's mean over the period, ζ̄ = Σ_l ζ_l h^l/(l+1)! + u_e h^o/(o+1)!
+//! (the thrust, for the quadrotor), and the other inputs their u_e. Holding the mean rather than ζ_0 makes
+//! the held error ζ̄ − ζ_0(t) average to zero over each period, which turns its first-order effect on the
+//! state into a second-order one (item 3).
 //!
 //! **Every bound is over the operating region Q** (a box over q, `plant.region`), evaluated by interval
 //! enclosures of the expressions with x_e = Ξ_e(q) substituted (Ξ the user's map, ζ(q) derived from Υ),
@@ -19,15 +23,21 @@
 //! `model::feedback_linearizable` carries over unchanged.
 //! 1. *The input set* pulled back to a box W of the flat input: the spec's `plant.flat_input` when set,
 //!    else the largest cube {|w_j| ≤ ω} (by bisection); either way the enclosure of every non-extended
-//!    input over Q × W, widened by the input program's rounding, must lie in U (else refused). An
-//!    extended input is ζ_0 = Υ_j(q), whose enclosure over Q must lie in U (else refused: shrink Q).
+//!    input over Q × W, widened by the input program's rounding, must lie in U (else refused). So must an
+//!    extended input's applied mean ζ̄ over Q × W (else refused: shrink Q or W).
 //! 2. *The w-channel mismatch D*: with u_e held, the last chain element's derivative departs from w by
 //!    φ(x_e(t)) − φ(x_e,k), φ = α + Γu_e, whose rate is the Lie derivative E of φ along the extended field
 //!    under the held u_e, plus its Lie derivative along the extended input's column of g times how far the
-//!    held ζ_0 is from the model's ζ_0(t) within a period, Δ = Σ_{k ≥ 1} h^k/k!·|ζ_k| + h^o/o!·|u_e|. So
+//!    held ζ̄ is from the model's ζ_0(t) within a period, Δ = Σ_{k ≥ 1} c_k h^k/k!·|ζ_k| + c_o h^o/o!·|u_e|
+//!    with c_k = k/(k+1) (|t^k/k! − h^k/(k+1)!| ≤ c_k h^k/k! on [0, h]). So
 //!    D = h·sup(‖E‖ + ‖L_{g_T}φ‖Δ) + ‖Γ‖·e_u, e_u the input program's rounding of the non-extended inputs.
-//! 3. *The state-channel rate*: the held ζ_0 also enters q̇ directly, through ∂Φ/∂x·g_T: per coordinate
-//!    b_j = sup|L_{g_T}Φ_j|·Δ (the planar quadrotor's velocity rows).
+//! 3. *The state channel*: the held ζ̄ also enters q̇ directly, as c(t) = L(t)(ζ̄ − ζ_0(t)) with
+//!    L_j = L_{g_T}Φ_j (the planar quadrotor's velocity rows). Over a period it moves q by
+//!    ∫ e^{A(h−s)}c(s)ds = ∫ (F(s) − F(0))(ζ̄ − ζ_0(s))ds, F(s) = e^{A(h−s)}L(s), because ζ̄ − ζ_0 has mean
+//!    zero; with |F'| ≤ A e^{Ah}|L| + e^{Ah}|L̇| entrywise (the chains' e^{At} is nonnegative and grows with
+//!    t) that is a jump of at most h²/2·(A e^{Ah}·sup|L|Δ + e^{Ah}·sup|L̇|Δ) per coordinate (`held`), L̇
+//!    the rate of L along the actual field (the extended field plus L_{g_T}L·Δ). The f32 rounding e_T of
+//!    ζ̄ is a constant error over the period: a rate b_j = sup|L_j|·e_T (`state_rate`).
 //! 4. *The jump per period*: the f32 rounding of ζ⁺ moves q by Σ_k |∂Φ_j/∂ζ_k|·e_ζ,k, and the f32
 //!    rounding e_q of the coords program is a misreading of q, which moves the loop as a jump of
 //!    (1 + ‖row_j(e^{Ah})‖₁)·e_q at most (the loop in the read coordinates q̃ = q + e is exact up to
@@ -104,13 +114,28 @@ pub fn flatten(problem: &Problem) -> Result<(Problem, FlMaps), FlError> {
     let w = |j: usize| Expr::var(Var::Input(j as u16));
     let ue = cancelling_law(&adj, &det, &alpha);
     let state = |s: usize| Expr::var(Var::State(s as u16));
+    let fact = |k: usize| (1..=k).product::<usize>() as f64;
+    // An extended input is applied as the mean over the period of its model's polynomial
+    // ζ_0(t) = Σ_l ζ_l t^l/l! + u_e t^o/o!: Σ_l ζ_l h^l/(l+1)! + u_e h^o/(o+1)! (module doc, item 3).
     let mut outputs: Vec<Expr> = (0..m)
         .map(|j| match first[j] {
-            Some(z0) => state(z0),
+            Some(z0) => {
+                let o = order[j];
+                let mut mean = Expr::c(0.0);
+                for l in 0..o {
+                    mean = Expr::add(
+                        mean,
+                        Expr::mul(Expr::c(h.powi(l as i32) / fact(l + 1)), state(z0 + l)),
+                    );
+                }
+                Expr::add(
+                    mean,
+                    Expr::mul(Expr::c(h.powi(o as i32) / fact(o + 1)), ue[j].clone()),
+                )
+            }
             None => ue[j].clone(),
         })
         .collect();
-    let fact = |k: usize| (1..=k).product::<usize>() as f64;
     for e in &fd.extension {
         let (z0, o) = (first[e.input].unwrap_or(n), e.order);
         for k in 0..o {
@@ -161,22 +186,6 @@ pub fn flatten(problem: &Problem) -> Result<(Problem, FlMaps), FlError> {
         InputSet::Box { lo, hi } => (lo.clone(), hi.clone()),
         InputSet::Ball { .. } => return Err(FlError::FlatInputBall),
     };
-
-    // 3. Extended inputs: ζ_0 over Q inside U.
-    for e in &fd.extension {
-        let z0 = to_q(&state(first[e.input].unwrap_or(n)));
-        let lo_hi = grid_range(&base, &z0).map_err(bound_err("an extended input over Q"))?;
-        let j = e.input;
-        if lo_hi.0 < input.0[j] || lo_hi.1 > input.1[j] {
-            return Err(FlError::FlatExtendedInput {
-                input: desc.names.inputs[j].clone(),
-                lo: lo_hi.0,
-                hi: lo_hi.1,
-                ulo: input.0[j],
-                uhi: input.1[j],
-            });
-        }
-    }
 
     // 4. W by bisection on ω (the non-extended inputs over Q × W inside U, with the program's rounding).
     let free_inputs: Vec<usize> = (0..m).filter(|&j| first[j].is_none()).collect();
@@ -264,6 +273,35 @@ pub fn flatten(problem: &Problem) -> Result<(Problem, FlMaps), FlError> {
         e_q.copy_from_slice(&acc_q);
         e_out.copy_from_slice(&acc_o);
     }
+    // 3. Extended inputs: the applied period mean over Q × W, widened by its rounding, inside U.
+    for e in &fd.extension {
+        let j = e.input;
+        let applied = to_q(&outputs[j]);
+        let on = |sign: f64| -> Result<f64, IntervalError> {
+            sup_over_grid(&base, &dims_used(&[&applied], &base), &|q| {
+                let v = enclose(
+                    &applied,
+                    &VarBox {
+                        x: q,
+                        u: &wb,
+                        p: &[],
+                    },
+                )?;
+                Ok(if sign > 0.0 { v.hi } else { -v.lo })
+            })
+        };
+        let hi = on(1.0).map_err(bound_err("an extended input over Q"))? + e_out[j];
+        let lo = -on(-1.0).map_err(bound_err("an extended input over Q"))? - e_out[j];
+        if lo < input.0[j] || hi > input.1[j] {
+            return Err(FlError::FlatExtendedInput {
+                input: desc.names.inputs[j].clone(),
+                lo,
+                hi,
+                ulo: input.0[j],
+                uhi: input.1[j],
+            });
+        }
+    }
     let e_u: f64 = free_inputs
         .iter()
         .map(|&j| e_out[j] * e_out[j])
@@ -314,7 +352,8 @@ pub fn flatten(problem: &Problem) -> Result<(Problem, FlMaps), FlError> {
                 .collect::<Result<_, _>>()?,
         );
     }
-    // Δ per extended input, as an expression over q and U: Σ_{k≥1} h^k/k!|ζ_k| + h^o/o!|U|.
+    // Δ per extended input, as an expression over q and U: the largest |ζ̄ − ζ_0(t)| over the period for
+    // the applied mean ζ̄, Σ_{k≥1} c_k h^k/k!|ζ_k| + c_o h^o/o!|U| with c_k = k/(k+1) (module doc, item 3).
     let deltas: Vec<Expr> = fd
         .extension
         .iter()
@@ -325,7 +364,7 @@ pub fn flatten(problem: &Problem) -> Result<(Problem, FlMaps), FlError> {
                 d = Expr::add(
                     d,
                     Expr::mul(
-                        Expr::c(h.powi(k as i32) / fact(k)),
+                        Expr::c(h.powi(k as i32) / fact(k) * k as f64 / (k + 1) as f64),
                         Expr::func(crate::expr::Func::Abs, xe_of_q[z0 + k].clone()),
                     ),
                 );
@@ -333,7 +372,10 @@ pub fn flatten(problem: &Problem) -> Result<(Problem, FlMaps), FlError> {
             Expr::add(
                 d,
                 Expr::mul(
-                    Expr::c(h.powi(e.order as i32) / fact(e.order)),
+                    Expr::c(
+                        h.powi(e.order as i32) / fact(e.order) * e.order as f64
+                            / (e.order + 1) as f64,
+                    ),
                     Expr::func(crate::expr::Func::Abs, w(e.input)),
                 ),
             )
@@ -394,31 +436,51 @@ pub fn flatten(problem: &Problem) -> Result<(Problem, FlMaps), FlError> {
     let mismatch_flow = h * sup_rate;
     let mismatch = (mismatch_flow + gamma_norm * e_u) * (1.0 + 1e-9);
 
-    // 7. The state-channel rate and the jump, per q coordinate.
+    // 7. The state-channel terms and the jump, per q coordinate (module doc, items 3–4).
     let mut state_rate = vec![0.0f64; n_q];
     let mut jump = vec![0.0f64; n_q];
+    // Per q coordinate: sup Σ_k |L_jk|·Δ_k and sup Σ_k |L̇_jk|·Δ_k (L_jk = L_{g_k}q_j, L̇ its rate along the
+    // actual flow), which the mean-zero held error turns into a jump below.
+    let mut lag = vec![0.0f64; n_q];
+    let mut lag_rate = vec![0.0f64; n_q];
     // e^{Ah} of the chains: row j's absolute sum is Σ_{l<r−k} h^l/l! for the k-th element of a chain of r.
     let mut ah_row = Vec::with_capacity(n_q);
+    // Each q coordinate's chain: (its position k in the chain, the chain's length r).
+    let mut chain_of = Vec::with_capacity(n_q);
     for &r in &rd.r {
         for k in 0..r {
             ah_row.push((0..r - k).map(|l| h.powi(l as i32) / fact(l)).sum::<f64>());
+            chain_of.push((k, r));
         }
     }
     for j in 0..n_q {
         let qj = &q_exprs[j];
         let mut rate_terms: Vec<Expr> = Vec::new();
+        // L̇_jk along the extended field under the held u_e, and L_{g_k'} L_jk for the held error's share.
+        let mut ldot_terms: Vec<Expr> = Vec::new();
+        let mut ll_terms: Vec<Vec<Expr>> = Vec::new();
         for (_, col) in &g_ext {
-            rate_terms.push(to_q(&lie(qj, col)?));
+            let l = lie(qj, col)?;
+            ldot_terms.push(to_q(&lie(&l, &field_u)?));
+            ll_terms.push(
+                g_ext
+                    .iter()
+                    .map(|(_, c2)| lie(&l, c2).map(|e| to_q(&e)))
+                    .collect::<Result<_, _>>()?,
+            );
+            rate_terms.push(to_q(&l));
         }
         let mut dz_terms: Vec<Expr> = Vec::new();
         for s in n..ne {
             dz_terms.push(to_q(&derivative(qj, Var::State(s as u16))?));
         }
         let mut refs: Vec<&Expr> = rate_terms.iter().chain(&dz_terms).collect();
+        refs.extend(ldot_terms.iter());
+        refs.extend(ll_terms.iter().flatten());
         refs.extend(deltas.iter());
         let dj = dims_used(&refs, &base);
-        let (rate, jz) = {
-            let best = std::cell::Cell::new((0.0f64, 0.0f64));
+        let (rate, jz, a, b_rate) = {
+            let best = std::cell::Cell::new((0.0f64, 0.0f64, 0.0f64, 0.0f64));
             sup_over_grid(&base, &dj, &|q| {
                 let ub = u_box(q)?;
                 let b = VarBox {
@@ -426,16 +488,27 @@ pub fn flatten(problem: &Problem) -> Result<(Problem, FlMaps), FlError> {
                     u: &ub,
                     p: &[],
                 };
-                let mut r = 0.0;
+                let dv: Vec<f64> = deltas
+                    .iter()
+                    .map(|d| enclose(d, &b).map(|v| v.mag()))
+                    .collect::<Result<_, _>>()?;
+                let (mut r, mut a, mut br) = (0.0, 0.0, 0.0);
                 for (k, t) in rate_terms.iter().enumerate() {
-                    r += enclose(t, &b)?.mag() * enclose(&deltas[k], &b)?.mag();
+                    let lk = enclose(t, &b)?.mag();
+                    r += lk * e_out[g_ext[k].0];
+                    a += lk * dv[k];
+                    let mut ld = enclose(&ldot_terms[k], &b)?.mag();
+                    for (k2, t2) in ll_terms[k].iter().enumerate() {
+                        ld += enclose(t2, &b)?.mag() * dv[k2];
+                    }
+                    br += ld * dv[k];
                 }
                 let mut jz = 0.0;
                 for (k, t) in dz_terms.iter().enumerate() {
                     jz += enclose(t, &b)?.mag() * e_zeta[k];
                 }
-                let (r0, j0) = best.get();
-                best.set((r0.max(r), j0.max(jz)));
+                let (r0, j0, a0, b0) = best.get();
+                best.set((r0.max(r), j0.max(jz), a0.max(a), b0.max(br)));
                 Ok(0.0)
             })
             .map_err(bound_err("the held input's rate"))?;
@@ -443,6 +516,25 @@ pub fn flatten(problem: &Problem) -> Result<(Problem, FlMaps), FlError> {
         };
         state_rate[j] = rate * (1.0 + 1e-9);
         jump[j] = (jz + (1.0 + ah_row[j]) * e_q[j]) * (1.0 + 1e-9);
+        lag[j] = a;
+        lag_rate[j] = b_rate;
+    }
+    // The held mean's departure from the model over a period, c(s) = Σ_k L_k(s)(ζ̄_k − ζ_0,k(s)), has mean
+    // zero in each factor ζ̄_k − ζ_0,k, so ∫ e^{A(h−s)}c(s)ds = ∫ (F(s) − F(0))(ζ̄ − ζ_0(s))ds with
+    // F(s) = e^{A(h−s)}L(s), |F'| ≤ A e^{Ah}|L| + e^{Ah}|L̇| entrywise (the chains' e^{At} ≥ 0 grows with t):
+    // a jump of at most h²/2·(A e^{Ah} lag + e^{Ah} lag_rate) per coordinate.
+    let eah = |v: &[f64], j: usize| -> f64 {
+        let (k, r) = chain_of[j];
+        (0..r - k)
+            .map(|l| h.powi(l as i32) / fact(l) * v[j + l])
+            .sum()
+    };
+    let mut held = vec![0.0f64; n_q];
+    for j in 0..n_q {
+        let (k, r) = chain_of[j];
+        let a_part = if k + 1 < r { eah(&lag, j + 1) } else { 0.0 };
+        held[j] = 0.5 * h * h * (a_part + eah(&lag_rate, j)) * (1.0 + 1e-9);
+        jump[j] = (jump[j] + held[j]) * (1.0 + 1e-9);
     }
 
     // 8. The linear model in q: the chains.
@@ -572,37 +664,10 @@ pub fn flatten(problem: &Problem) -> Result<(Problem, FlMaps), FlError> {
             region: region.clone(),
             state_rate,
             jump,
+            held,
         }),
     };
     Ok((q, maps))
-}
-
-/// The range of `e` over the box `base` (a grid of sub-boxes of the coordinates it uses).
-fn grid_range(base: &[Interval], e: &Expr) -> Result<(f64, f64), IntervalError> {
-    let dims = dims_used(&[e], base);
-    let hi = sup_over_grid(base, &dims, &|q| {
-        Ok(enclose(
-            e,
-            &VarBox {
-                x: q,
-                u: &[],
-                p: &[],
-            },
-        )?
-        .hi)
-    })?;
-    let lo = -sup_over_grid(base, &dims, &|q| {
-        Ok(-enclose(
-            e,
-            &VarBox {
-                x: q,
-                u: &[],
-                p: &[],
-            },
-        )?
-        .lo)
-    })?;
-    Ok((lo, hi))
 }
 
 #[cfg(test)]
@@ -664,6 +729,96 @@ mod tests {
         assert_eq!(maps.state_coords(), vec![(0, 0), (1, 1), (4, 2), (5, 3)]);
         // The region's complement joins Unsafe: two half-spaces per flat coordinate.
         assert_eq!(q.unsafe_sets.len(), p.unsafe_sets.len() + 16);
+    }
+
+    /// The quadrotor's state derivative under a thrust and an angular acceleration (m = 1, g = 9.81).
+    fn quadrotor_field(x: &[f64; 6], thrust: f64, tau: f64) -> [f64; 6] {
+        [
+            x[1],
+            -thrust * x[4].sin(),
+            x[3],
+            thrust * x[4].cos() - 9.81,
+            x[5],
+            tau,
+        ]
+    }
+
+    /// The model the chain is exact for: the thrust following its extension's polynomial
+    /// T(t) = T0 + Ṫ0 t + T̈ t²/2 over the period, by classical Runge–Kutta on `steps` sub-steps.
+    fn quadrotor_model(x: [f64; 6], z: [f64; 2], ue: f64, tau: f64, h: f64) -> [f64; 6] {
+        let steps = 4000;
+        let dt = h / steps as f64;
+        let thrust = |t: f64| z[0] + z[1] * t + 0.5 * ue * t * t;
+        let add = |x: &[f64; 6], k: &[f64; 6], a: f64| std::array::from_fn(|i| x[i] + a * k[i]);
+        let mut x = x;
+        for s in 0..steps {
+            let t = s as f64 * dt;
+            let k1 = quadrotor_field(&x, thrust(t), tau);
+            let k2 = quadrotor_field(&add(&x, &k1, 0.5 * dt), thrust(t + 0.5 * dt), tau);
+            let k3 = quadrotor_field(&add(&x, &k2, 0.5 * dt), thrust(t + 0.5 * dt), tau);
+            let k4 = quadrotor_field(&add(&x, &k3, dt), thrust(t + dt), tau);
+            x = std::array::from_fn(|i| {
+                x[i] + dt / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
+            });
+        }
+        x
+    }
+
+    /// The firmware applies the thrust's period mean and holds it; the flat state at the period's end then
+    /// departs from the model's (where the thrust follows its polynomial) by at most `held`, coordinate by
+    /// coordinate, and that bound is far below the first-order one of holding ζ_0 (h·sup|sin θ|·|Ṫ| on Ẋ).
+    #[test]
+    fn holding_the_thrust_s_period_mean_departs_from_the_model_within_the_held_bound() {
+        let p = quadrotor();
+        let (_, maps) = flatten(&p).unwrap_or_else(|e| panic!("{e}"));
+        let fc = maps.flat.as_ref().expect("flat coordinates");
+        let h = p.plant.period;
+        // (X, Ẋ, Y, Ẏ, θ, θ̇), (T, Ṫ) and the snap w: inside the region and W.
+        let cases: [([f64; 6], [f64; 2], [f64; 2]); 3] = [
+            ([0.0, 2.0, 8.0, -1.0, -0.3, 0.4], [11.0, 3.0], [5.0, -7.0]),
+            ([-5.0, -1.0, 12.0, 0.5, 0.2, -0.5], [9.0, -2.0], [-8.0, 3.0]),
+            ([3.0, 0.5, 4.0, 0.0, 0.05, 0.1], [9.9, 0.5], [1.0, 1.0]),
+        ];
+        for (x, z, w) in cases {
+            let xe: Vec<f64> = x.iter().chain(&z).copied().collect();
+            let at = crate::expr::Point {
+                x: &xe,
+                u: &w,
+                p: &[],
+            };
+            let q0 = maps.xi_at(&x, &z);
+            for (j, v) in q0.iter().enumerate() {
+                assert!(
+                    fc.region.lo[j] <= *v && *v <= fc.region.hi[j],
+                    "q0[{j}] = {v}"
+                );
+            }
+            let (tbar, tau) = (maps.input_exprs[0].eval(&at), maps.input_exprs[1].eval(&at));
+            // The extension's input T̈ from the applied mean T̄ = T0 + Ṫ0 h/2 + T̈ h²/6.
+            let ue = (tbar - z[0] - 0.5 * z[1] * h) * 6.0 / (h * h);
+            let actual = maps
+                .plant
+                .flow(&x, &[tbar, tau], h, 1, &mut |_| {})
+                .expect("flow");
+            let model = quadrotor_model(x, z, ue, tau, h);
+            let zh = [z[0] + z[1] * h + 0.5 * ue * h * h, z[1] + ue * h];
+            let (qa, qm) = (maps.xi_at(&actual, &zh), maps.xi_at(&model, &zh));
+            for j in 0..qa.len() {
+                let dev = (qa[j] - qm[j]).abs();
+                assert!(
+                    dev <= fc.held[j] + 1e-12,
+                    "q[{j}]: departs {dev:.3e} > held bound {:.3e} at x = {x:?}",
+                    fc.held[j]
+                );
+            }
+            // Holding ζ_0 instead: the velocity alone departs by about h·|sin θ|·|Ṫ|·h/2.
+            let first_order = 0.5 * h * h * x[4].sin().abs() * z[1].abs();
+            let dev_v = (qa[1] - qm[1]).abs();
+            assert!(
+                dev_v < 0.05 * first_order,
+                "{dev_v:.3e} vs {first_order:.3e}"
+            );
+        }
     }
 
     #[test]
