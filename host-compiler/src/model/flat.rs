@@ -115,45 +115,39 @@ pub fn flatten(problem: &Problem) -> Result<(Problem, FlMaps), FlError> {
     let ue = cancelling_law(&adj, &det, &alpha);
     let state = |s: usize| Expr::var(Var::State(s as u16));
     let fact = |k: usize| (1..=k).product::<usize>() as f64;
-    // An extended input is applied as the mean over the period of its model's polynomial
-    // ζ_0(t) = Σ_l ζ_l t^l/l! + u_e t^o/o!: Σ_l ζ_l h^l/(l+1)! + u_e h^o/(o+1)! (module doc, item 3).
+    // The extension's polynomial from ζ_k on, integrated `shift` times over the period and divided by
+    // h^shift: Σ_{l ≥ k} ζ_l h^{l−k}/(l−k+shift)! + u_e h^{o−k}/(o−k+shift)! (ζ_k⁺ for shift 0; for k = 0 and
+    // shift 1 the mean of ζ_0(t) = Σ_l ζ_l t^l/l! + u_e t^o/o! over the period).
+    let poly = |z0: usize, o: usize, k: usize, shift: usize, u: &Expr| -> Expr {
+        let mut s = Expr::c(0.0);
+        for l in k..o {
+            s = Expr::add(
+                s,
+                Expr::mul(
+                    Expr::c(h.powi((l - k) as i32) / fact(l - k + shift)),
+                    state(z0 + l),
+                ),
+            );
+        }
+        Expr::add(
+            s,
+            Expr::mul(
+                Expr::c(h.powi((o - k) as i32) / fact(o - k + shift)),
+                u.clone(),
+            ),
+        )
+    };
+    // An extended input is applied as that mean (module doc, item 3); ζ advances to ζ⁺.
     let mut outputs: Vec<Expr> = (0..m)
         .map(|j| match first[j] {
-            Some(z0) => {
-                let o = order[j];
-                let mut mean = Expr::c(0.0);
-                for l in 0..o {
-                    mean = Expr::add(
-                        mean,
-                        Expr::mul(Expr::c(h.powi(l as i32) / fact(l + 1)), state(z0 + l)),
-                    );
-                }
-                Expr::add(
-                    mean,
-                    Expr::mul(Expr::c(h.powi(o as i32) / fact(o + 1)), ue[j].clone()),
-                )
-            }
+            Some(z0) => poly(z0, order[j], 0, 1, &ue[j]),
             None => ue[j].clone(),
         })
         .collect();
     for e in &fd.extension {
-        let (z0, o) = (first[e.input].unwrap_or(n), e.order);
-        for k in 0..o {
-            let mut next = Expr::c(0.0);
-            for l in k..o {
-                next = Expr::add(
-                    next,
-                    Expr::mul(Expr::c(h.powi((l - k) as i32) / fact(l - k)), state(z0 + l)),
-                );
-            }
-            next = Expr::add(
-                next,
-                Expr::mul(
-                    Expr::c(h.powi((o - k) as i32) / fact(o - k)),
-                    ue[e.input].clone(),
-                ),
-            );
-            outputs.push(next);
+        let z0 = first[e.input].unwrap_or(n);
+        for k in 0..e.order {
+            outputs.push(poly(z0, e.order, k, 0, &ue[e.input]));
         }
     }
     let coords = compile(&q_exprs, ne, 0, &[])?;
@@ -277,21 +271,23 @@ pub fn flatten(problem: &Problem) -> Result<(Problem, FlMaps), FlError> {
     for e in &fd.extension {
         let j = e.input;
         let applied = to_q(&outputs[j]);
-        let on = |sign: f64| -> Result<f64, IntervalError> {
-            sup_over_grid(&base, &dims_used(&[&applied], &base), &|q| {
-                let v = enclose(
-                    &applied,
-                    &VarBox {
-                        x: q,
-                        u: &wb,
-                        p: &[],
-                    },
-                )?;
-                Ok(if sign > 0.0 { v.hi } else { -v.lo })
-            })
-        };
-        let hi = on(1.0).map_err(bound_err("an extended input over Q"))? + e_out[j];
-        let lo = -on(-1.0).map_err(bound_err("an extended input over Q"))? - e_out[j];
+        let range = std::cell::Cell::new((f64::INFINITY, f64::NEG_INFINITY));
+        sup_over_grid(&base, &dims_used(&[&applied], &base), &|q| {
+            let v = enclose(
+                &applied,
+                &VarBox {
+                    x: q,
+                    u: &wb,
+                    p: &[],
+                },
+            )?;
+            let (lo, hi) = range.get();
+            range.set((lo.min(v.lo), hi.max(v.hi)));
+            Ok(0.0)
+        })
+        .map_err(bound_err("an extended input over Q"))?;
+        let (lo, hi) = range.get();
+        let (lo, hi) = (lo - e_out[j], hi + e_out[j]);
         if lo < input.0[j] || hi > input.1[j] {
             return Err(FlError::FlatExtendedInput {
                 input: desc.names.inputs[j].clone(),
