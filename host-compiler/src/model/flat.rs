@@ -334,19 +334,24 @@ pub fn flatten(problem: &Problem) -> Result<(Problem, FlMaps), FlError> {
             (e.input, col)
         })
         .collect();
+    // An expression's rate along the actual field, in q: its Lie derivative along the extended field under
+    // the held u_e, and along each extended input's column (the share of the held error ζ̄ − ζ_0(t)).
+    let along_actual = |e: &Expr| -> Result<(Expr, Vec<Expr>), crate::expr::ExprError> {
+        let held = g_ext
+            .iter()
+            .map(|(_, col)| lie(e, col).map(|d| to_q(&d)))
+            .collect::<Result<_, _>>()?;
+        Ok((to_q(&lie(e, &field_u)?), held))
+    };
     let mut e_rate = Vec::with_capacity(m);
     let mut e_held: Vec<Vec<Expr>> = Vec::with_capacity(m);
     for i in 0..m {
         let phi = (0..m).fold(alpha[i].clone(), |acc, l| {
             Expr::add(acc, Expr::mul(gamma[i][l].clone(), w(l)))
         });
-        e_rate.push(to_q(&lie(&phi, &field_u)?));
-        e_held.push(
-            g_ext
-                .iter()
-                .map(|(_, col)| lie(&phi, col).map(|e| to_q(&e)))
-                .collect::<Result<_, _>>()?,
-        );
+        let (rate, held) = along_actual(&phi)?;
+        e_rate.push(rate);
+        e_held.push(held);
     }
     // Δ per extended input, as an expression over q and U: the largest |ζ̄ − ζ_0(t)| over the period for
     // the applied mean ζ̄, Σ_{k≥1} c_k h^k/k!|ζ_k| + c_o h^o/o!|U| with c_k = k/(k+1) (module doc, item 3).
@@ -457,13 +462,9 @@ pub fn flatten(problem: &Problem) -> Result<(Problem, FlMaps), FlError> {
         let mut ll_terms: Vec<Vec<Expr>> = Vec::new();
         for (_, col) in &g_ext {
             let l = lie(qj, col)?;
-            ldot_terms.push(to_q(&lie(&l, &field_u)?));
-            ll_terms.push(
-                g_ext
-                    .iter()
-                    .map(|(_, c2)| lie(&l, c2).map(|e| to_q(&e)))
-                    .collect::<Result<_, _>>()?,
-            );
+            let (ldot, ll) = along_actual(&l)?;
+            ldot_terms.push(ldot);
+            ll_terms.push(ll);
             rate_terms.push(to_q(&l));
         }
         let mut dz_terms: Vec<Expr> = Vec::new();
