@@ -439,6 +439,47 @@ pub fn certify_forced_formula(
     })
 }
 
+/// Runs `f` on the loop segment `i` of a forced-switching run is certified in by [`certify_forced`]: the
+/// task's Unsafe with the outside of the location's invariant, and as its goal the safe transition into
+/// segment i+1's ball of radius `next_delta` around its start (Goal itself for the last segment). The
+/// optimiser (§5.3 over a run's segments) maximises δ in exactly this loop. The run must be a
+/// forced-switching run ([`certify_forced`]'s checks).
+pub fn with_segment_loop<R>(
+    segments: &[ForcedSegment<'_>],
+    i: usize,
+    next_delta: f64,
+    f: impl FnOnce(&Loop<'_>) -> R,
+) -> Result<R, ForcedError> {
+    let last = check_chain(segments)?;
+    let guarded = guarded_unsafe(segments)?;
+    let lp = lp_with_invariant(segments, &guarded, i.min(last));
+    if i >= last {
+        return Ok(f(&lp));
+    }
+    let target = transition_target(segments, i, next_delta)?;
+    Ok(f(&Loop {
+        goal: target.as_ref(),
+        ..lp
+    }))
+}
+
+/// Segment `i < last`'s target: the safe transition into the next segment's ball of radius
+/// `next_delta` (an empty target when that ball is empty).
+fn transition_target(
+    segments: &[ForcedSegment<'_>],
+    i: usize,
+    next_delta: f64,
+) -> Result<Box<dyn Region>, ForcedError> {
+    let s = &segments[i];
+    let next = &segments[i + 1];
+    let edge = s.switch.expect("checked by check_chain");
+    Ok(if next_delta > 0.0 {
+        safe_transition(i, edge, next.lp.P, &next.nominal.x[0], next_delta)?
+    } else {
+        Box::new(Empty(s.lp.P.nrows()))
+    })
+}
+
 /// Segment `i < last` certified against its safe transition into the next segment's ball of radius
 /// `next_delta`, judged at its last sample (an empty target when that ball is empty).
 fn certify_switching(
@@ -448,13 +489,7 @@ fn certify_switching(
     next_delta: f64,
 ) -> Result<Certificate, ForcedError> {
     let s = &segments[i];
-    let next = &segments[i + 1];
-    let edge = s.switch.expect("checked by check_chain");
-    let target: Box<dyn Region> = if next_delta > 0.0 {
-        safe_transition(i, edge, next.lp.P, &next.nominal.x[0], next_delta)?
-    } else {
-        Box::new(Empty(s.lp.P.nrows()))
-    };
+    let target = transition_target(segments, i, next_delta)?;
     let lp = Loop {
         goal: target.as_ref(),
         ..*lp

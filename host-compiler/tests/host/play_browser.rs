@@ -73,7 +73,10 @@ fn start_spec(spec: &std::path::Path, out: &std::path::Path) -> Server {
 
 /// Runs headless Chromium on `url` with `extra` flags (`--dump-dom`, `--screenshot=…`); its stdout.
 fn browse(url: &str, extra: &[String]) -> String {
-    let profile = scratch(&format!("profile-{}", extra.len()));
+    // One profile per call: tests run in parallel, and Chromium refuses a profile another instance holds.
+    static CALLS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+    let call = CALLS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let profile = scratch(&format!("profile-{call}"));
     let out = Command::new(chromium())
         .args([
             "--headless",

@@ -10,7 +10,7 @@
 //! the whole horizon only: the formula is judged over all of T, so the table must cover it), split into its
 //! segments (the next segment starts at the reset of the last state, the identity for the resets the task
 //! accepts) and certified backwards by [`crate::certify::forced`]. The run with the largest certified δ
-//! is kept.
+//! is kept, then optimised segment by segment by §5.3 ([`optimise`]).
 //!
 //! The segments' tables are shipped as f32; each segment's nominal is simulated from the previous one's
 //! shipped end, so the run is continuous across the switch as the certificate requires.
@@ -40,6 +40,12 @@ struct Candidate {
 /// Plan and certify a forced-switching run from `x0` (module doc): the best over the candidates, or why
 /// none was certified. The run starts at `x0` rounded to f32 ([`super::f32_start`]).
 pub fn plan_forced(task: &HybridTask, x0: &[f64]) -> Result<HybridRun, String> {
+    let (run, edges) = planned(task, x0)?;
+    Ok(optimise(task, run, &edges))
+}
+
+/// The best certified candidate from `x0` as generated (before §5.3), with its edges.
+fn planned(task: &HybridTask, x0: &[f64]) -> Result<(HybridRun, Vec<usize>), String> {
     let x0 = &super::f32_start(x0)[..];
     let l0 = task.initial;
     let h = task.plant.period();
@@ -69,19 +75,130 @@ pub fn plan_forced(task: &HybridTask, x0: &[f64]) -> Result<HybridRun, String> {
             }
         }
     }
-    let mut best: Option<HybridRun> = None;
+    let mut best: Option<(HybridRun, &Candidate)> = None;
     let mut why = String::from("no candidate schedule");
     for c in &cands {
         match plan_schedule(task, x0, c) {
             Ok(run) => {
-                if best.as_ref().is_none_or(|b| run.delta() > b.delta()) {
-                    best = Some(run);
+                if best.as_ref().is_none_or(|(b, _)| run.delta() > b.delta()) {
+                    best = Some((run, c));
                 }
             }
             Err(e) => why = e,
         }
     }
-    best.ok_or(why)
+    let (run, c) = best.ok_or(why)?;
+    Ok((run, c.edges.clone()))
+}
+
+/// Forward sweeps of §5.3 over a run's segments ([`optimise`]).
+pub const SWEEPS: usize = 2;
+/// Relative change of a δ that [`optimise`] reads as rounding, not as a change.
+const NOISE: f64 = 1e-6;
+
+/// §5.3 over the segments of a forced-switching run (Theorem 4.17 read forwards), for a reach-avoid task.
+///
+/// Segment i's δ is the least of its own Unsafe and input parts and its depth in the safe transition into
+/// segment i+1's ball; a run continuous across the switch ends at that ball's centre, so the depth is as
+/// large as it can be and what binds is the segment's own parts (Example 4.20: Unsafe between samples).
+/// Each sweep maximises, segment by segment from the first, the certified δ of the segment's own loop
+/// ([`crate::certify::forced::with_segment_loop`]: its goal the safe transition into the next segment's
+/// current ball, its table length fixed, since the table's end is the switching sample), then re-simulates
+/// the later segments from the new end with their own tables (the run stays continuous), and lastly
+/// maximises the last segment against Goal, its terminal step free within the horizon. A nominal that
+/// keeps depth d in the transition ends within δᵢ₊₁ − d (roughly) of the old start, so the re-simulated
+/// next segment keeps about d: a step trades the segment's transition depth for its own parts. A step is
+/// kept when the re-certified run's δ does not fall and the optimised segment's δ rises; the answer is
+/// always [`certify_run`]'s. An MTL task's runs are left as planned (its certificate, Def 4.18, is not
+/// the pieces the optimiser differentiates).
+fn optimise(task: &HybridTask, run: HybridRun, edges: &[usize]) -> HybridRun {
+    use crate::optimize::{maximize_delta, BundleSettings};
+    let iterations = task.problem.synthesis.max_iterations;
+    if task.formula.is_some() || iterations == 0 {
+        return run;
+    }
+    let settings = |terminal| {
+        BundleSettings::builder()
+            .max_iterations(iterations)
+            .terminal_time(terminal)
+            .build()
+    };
+    let (Ok(fixed), Ok(free)) = (settings(false), settings(true)) else {
+        return run;
+    };
+    let cancel = std::sync::atomic::AtomicBool::new(false);
+    let last = run.nominals.len() - 1;
+    let mut best = run;
+    for _ in 0..SWEEPS {
+        let before = best.delta();
+        for i in 0..=last {
+            let loc = best.locations[i];
+            let earlier: usize = best.nominals[..i].iter().map(|n| n.steps()).sum();
+            let nom = &best.nominals[i];
+            let steps_max = if i == last {
+                task.steps.saturating_sub(earlier).max(nom.steps())
+            } else {
+                nom.steps()
+            };
+            let next_delta = best
+                .certificate
+                .segments
+                .get(i + 1)
+                .map_or(0.0, |s| s.delta);
+            let segs = segments(task, &best.locations, edges, &best.nominals);
+            let opt = crate::certify::forced::with_segment_loop(&segs, i, next_delta, |lp| {
+                maximize_delta(
+                    lp,
+                    &task.constants[loc],
+                    &nom.x[0],
+                    &nom.v,
+                    steps_max,
+                    if i == last { &free } else { &fixed },
+                    &cancel,
+                )
+            });
+            let Ok(opt) = opt else { break };
+            if i < last && opt.nominal.steps() != nom.steps() {
+                continue;
+            }
+            // The run with segment i's new table, the later segments re-simulated from each new end.
+            let mut nominals = best.nominals[..i].to_vec();
+            let mut start = nom.x[0].clone();
+            for (j, (&l, old)) in best
+                .locations
+                .iter()
+                .zip(&best.nominals)
+                .enumerate()
+                .skip(i)
+            {
+                let v = if j == i { &opt.nominal.v } else { &old.v };
+                let n = shipped_nominal(task, l, &start, v);
+                start = n.x.last().cloned().unwrap_or_default();
+                nominals.push(n);
+            }
+            let Ok(certificate) = certify_run(task, &best.locations, edges, &nominals) else {
+                continue;
+            };
+            let (old0, new0) = (best.delta(), certificate.delta());
+            let (old_i, new_i) = (
+                best.certificate.segments[i].delta,
+                certificate.segments[i].delta,
+            );
+            // Re-certifying the first segment against a changed next ball moves its δ by rounding only
+            // (its own parts are unchanged), so "does not fall" allows that.
+            if new0 > old0 || (new0 >= old0 * (1.0 - NOISE) && new_i > old_i * (1.0 + NOISE)) {
+                best = HybridRun {
+                    nominals,
+                    locations: best.locations.clone(),
+                    certificate,
+                };
+            }
+        }
+        if best.delta() <= before {
+            break;
+        }
+    }
+    best
 }
 
 /// Generate, split and certify one schedule.
@@ -139,18 +256,7 @@ pub fn certify_run(
     edges: &[usize],
     nominals: &[Nominal],
 ) -> Result<InternalCertificate, String> {
-    let segs: Vec<ForcedSegment> = locations
-        .iter()
-        .zip(nominals)
-        .enumerate()
-        .map(|(i, (&l, nom))| ForcedSegment {
-            lp: task.lp(l),
-            lc: &task.constants[l],
-            nominal: nom,
-            switch: edges.get(i).map(|&e| &task.plant.edges()[e]),
-            invariant: task.plant.modes()[l].invariant.as_ref(),
-        })
-        .collect();
+    let segs = segments(task, locations, edges, nominals);
     let Some(tt) = &task.formula else {
         let cert = certify_forced(&segs).map_err(|e| e.to_string())?;
         return Ok(cert.as_segments(nominals));
@@ -164,4 +270,60 @@ pub fn certify_run(
         }
     }
     Ok(out)
+}
+
+/// The segments of a run in `locations`, joined by `edges`, as [`crate::certify::forced`] takes them.
+fn segments<'a>(
+    task: &'a HybridTask,
+    locations: &[Location],
+    edges: &[usize],
+    nominals: &'a [Nominal],
+) -> Vec<ForcedSegment<'a>> {
+    locations
+        .iter()
+        .zip(nominals)
+        .enumerate()
+        .map(|(i, (&l, nom))| ForcedSegment {
+            lp: task.lp(l),
+            lc: &task.constants[l],
+            nominal: nom,
+            switch: edges.get(i).map(|&e| &task.plant.edges()[e]),
+            invariant: task.plant.modes()[l].invariant.as_ref(),
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn example_4_20() -> HybridTask {
+        let path = format!(
+            "{}/../examples/hybrid-forced-4-20.toml",
+            env!("CARGO_MANIFEST_DIR")
+        );
+        HybridTask::new(crate::spec::load(&path).expect("the example parses"))
+            .expect("a hybrid task")
+    }
+
+    #[test]
+    fn optimising_a_run_of_example_4_20_raises_its_certified_delta_and_keeps_its_switching_sample()
+    {
+        let task = example_4_20();
+        let (run, edges) = planned(&task, &[3.5, -6.0, 0.0, 0.0]).expect("a run from the seed");
+        assert_eq!(run.nominals.len(), 2, "the seed's best run switches once");
+        let opt = optimise(&task, run.clone(), &edges);
+        // The answer is the certificate of what it ships, continuous across the switch (certify_run
+        // refuses a gap), switching at the same sample.
+        let again = certify_run(&task, &opt.locations, &edges, &opt.nominals).expect("continuous");
+        assert_eq!(again, opt.certificate);
+        assert_eq!(opt.nominals[0].steps(), run.nominals[0].steps());
+        assert_eq!(opt.locations, run.locations);
+        assert!(
+            opt.delta() > 1.03 * run.delta(),
+            "δ {} → {}",
+            run.delta(),
+            opt.delta()
+        );
+    }
 }
