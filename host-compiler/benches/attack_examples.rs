@@ -7,10 +7,10 @@
 //! F of a PWA image. Per example it prints the runs made, runs per second, the least robustness found and
 //! the violations, and writes them as rows `attack_example_<name>_{worst_margin,evals_per_s,violations}`.
 //!
-//! Two files of `examples/` give no image to attack, and are listed as such: `planar-vehicle-sets.toml`
-//! is a set file for `mtl --sets`, not a task (no `[plant]`), and `hybrid-internal-5-5.toml`'s `synth`
-//! certifies no run by design (exit 1, examples/README.md). `ATTACK_EXAMPLES=name,name` runs only those
-//! examples (the hybrid one takes minutes: its synthesis about 7 and its attack about 8 on two cores).
+//! One file of `examples/` gives no image to attack, and is listed as such: `planar-vehicle-sets.toml`
+//! is a set file for `mtl --sets`, not a task (no `[plant]`). A synthesis that certifies nothing (exit 1
+//! without an image) is listed the same way. `ATTACK_EXAMPLES=name,name` runs only those examples (the
+//! hybrid ones take minutes on two cores).
 //!
 //! A synthesis is seconds to minutes of deterministic (seeded) work, so it is timed directly, once.
 
@@ -67,8 +67,7 @@ fn main() {
             .expect("host-compiler runs");
         let synth_s = t0.elapsed().as_secs_f64();
         let img = out.join("controller.img");
-        // Exit 1 without an image: synthesis certified nothing (a documented outcome for one example),
-        // so there is no image to attack.
+        // Exit 1 without an image: synthesis certified nothing, so there is no image to attack.
         if o.status.code() == Some(1) && !img.exists() {
             let why = String::from_utf8_lossy(&o.stderr);
             println!(
