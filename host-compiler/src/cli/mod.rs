@@ -183,9 +183,13 @@ pub struct SynthArgs {
     #[arg(long = "import", value_name = "FILE.csv|DIR")]
     pub imports: Vec<PathBuf>,
     /// How trajectories after the first are made: `algorithm4` (§5.4: grow from the boundary of the
-    /// closest ball and maximise δ by §5.3) or `scp` (Algorithm 1: the SCP generator per uncovered seed).
-    #[arg(long, value_enum, default_value_t = crate::synth::Generator::Algorithm4)]
-    pub generator: crate::synth::Generator,
+    /// closest ball and maximise δ by §5.3; the default for a single-location plant) or `scp` (Algorithm
+    /// 1: the generator from each uncovered seed; the default for a hybrid plant, whose planner tries
+    /// every switching schedule and, for forced switching, maximises δ by §5.3 over the segments).
+    /// Algorithm 4 on a hybrid plant is for forced switching: a run keeps its parent's locations and
+    /// switching samples.
+    #[arg(long, value_enum)]
+    pub generator: Option<crate::synth::Generator>,
     /// Hide progress bars.
     #[arg(long)]
     pub quiet: bool,

@@ -164,7 +164,7 @@ pub fn run(a: &SynthArgs) -> Outcome {
         verify_interior: a.verify_runs as usize, // ≤ verify::MAX_RUNS (clap)
         progress: !a.quiet,
         imports,
-        generator: a.generator,
+        generator: a.generator.unwrap_or_default(),
         cancel,
         on_accept: log.then(|| {
             crate::synth::AcceptHook(Arc::new(|count| eprintln!("certified trajectory {count}")))

@@ -13,6 +13,7 @@
 use super::synth::write_atomic;
 use super::{BadInput, Exit, Failure, Outcome, SynthArgs};
 use crate::synth::hybrid::{synthesize_hybrid, HybridOptions, HybridTask};
+use crate::synth::Generator;
 use miette::IntoDiagnostic;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
@@ -22,6 +23,14 @@ pub fn run(a: &SynthArgs, problem: crate::spec::Problem) -> Outcome {
     let task = HybridTask::new(problem)
         .map_err(|e| miette::miette!("{e}"))
         .bad_input()?;
+    let generator = a.generator.unwrap_or(Generator::Scp);
+    if generator == Generator::Algorithm4 && !task.forced {
+        return Err(Failure::bad_input(miette::miette!(
+            "--generator algorithm4: Algorithm 4 on a hybrid plant grows forced-switching runs (a run keeps \
+             its parent's locations and switching samples); this plant switches internally, where each \
+             run's landing decides its segments: use --generator scp (the default for a hybrid plant)"
+        )));
+    }
     let cancel = Arc::new(AtomicBool::new(false));
     {
         let cancel = cancel.clone();
@@ -53,6 +62,7 @@ pub fn run(a: &SynthArgs, problem: crate::spec::Problem) -> Outcome {
                 as Arc<dyn Fn(usize, f64) + Send + Sync>
         }),
         imports,
+        generator,
         ..HybridOptions::default()
     };
     let s = synthesize_hybrid(&task, &opts).map_err(|e| Failure {
@@ -78,6 +88,7 @@ pub fn run(a: &SynthArgs, problem: crate::spec::Problem) -> Outcome {
         "seed": task.problem.seed,
         "plant": "hybrid",
         "switching": if task.forced { "forced" } else { "internal" },
+        "generator": generator.to_string(),
         "formula": task.problem.mtl,
         "path": task.path.iter().map(|&l| &task.plant.modes()[l].name).collect::<Vec<_>>(),
         "edges": task.edges,

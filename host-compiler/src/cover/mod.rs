@@ -30,7 +30,8 @@ pub enum Generator {
     #[default]
     #[value(name = "algorithm4")]
     Algorithm4,
-    /// Algorithm 1 with the SCP generator from each uncovered seed, without §5.3 (the earlier pipeline).
+    /// Algorithm 1: the generator from each uncovered seed (for a single-location plant the SCP
+    /// generator without §5.3, the earlier pipeline; for a hybrid plant its planner, the default there).
     Scp,
 }
 

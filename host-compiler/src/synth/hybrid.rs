@@ -25,6 +25,7 @@ use crate::model::hybrid::{EdgeKind, Hybrid, HybridError};
 use crate::model::Location;
 use crate::property::{input_scale, ConvexPiece, ConvexSets, PropertyError, ReachAvoid};
 use crate::spec::Problem;
+use crate::synth::Generator;
 use crate::trajectory::generate::{generate, GenProblem, GenSettings};
 use crate::trajectory::Nominal;
 use faer::Mat;
@@ -611,6 +612,10 @@ pub fn ball_starts(
 
 /// Rounds in a row without a certified run after which the growth stops.
 pub const MAX_EMPTY_ROUNDS: usize = 8;
+/// Times the working samples are extended by as many fresh ones: when every uncovered one was tried, or
+/// when they are covered to the target but fresh ones are not (the holes between balls shrink below the
+/// samples' spacing as the cover fills, and the seeds were working samples).
+pub const MAX_REFILLS: usize = 4;
 
 /// Options of a hybrid synthesis run that are not part of the task (defaults per field).
 #[derive(Clone)]
@@ -631,6 +636,11 @@ pub struct HybridOptions {
     /// Recordings (name, recording) certified first ([`import::certify_recording`]); those accepted
     /// join the runs before the growth (default none).
     pub imports: Vec<(String, crate::trajectory::csv::Recording)>,
+    /// How runs after the first are made (default [`Generator::Scp`]: the planner from each uncovered
+    /// sample). [`Generator::Algorithm4`] grows a forced-switching run from the nearest ball
+    /// ([`forced::grow_from`]), falling back to the planner where that fails; internal switching plans
+    /// every seed.
+    pub generator: Generator,
 }
 
 impl Default for HybridOptions {
@@ -643,6 +653,7 @@ impl Default for HybridOptions {
             cancel: Default::default(),
             on_accept: None,
             imports: Vec::new(),
+            generator: Generator::Scp,
         }
     }
 }
@@ -705,19 +716,114 @@ pub fn admit(
     Ok(rows)
 }
 
-/// Whether `x` is in the first ball of some run (the metric of the initial location, the stored radius).
-fn covered(task: &HybridTask, runs: &[HybridRun], x: &[f64]) -> bool {
-    let P = &task.designs[task.path[0]].P;
-    runs.iter().any(|r| {
-        let c = &r.nominals[0].x[0];
-        let e: Vec<f64> = x.iter().zip(c).map(|(a, b)| a - b).collect();
-        let d = r.certificate.delta_stored as f64;
-        crate::linalg::p_norm(P.as_ref(), &e) <= d
-    })
+/// (5.32) over the runs' first balls: min over runs of ‖x − x̃(0)‖_P − δ (the metric of the initial
+/// location, the stored radius), with the run that attains it; `None` when there is no run.
+fn gap(task: &HybridTask, runs: &[HybridRun], x: &[f64]) -> Option<(f64, usize)> {
+    let P = task.designs[task.path[0]].P.as_ref();
+    runs.iter()
+        .enumerate()
+        .map(|(i, r)| {
+            let d = crate::cover::alg4::dist(P, x, &r.nominals[0].x[0]);
+            (d - r.certificate.delta_stored as f64, i)
+        })
+        .min_by(|a, b| a.0.total_cmp(&b.0))
 }
 
-/// Algorithm 1 over hybrid runs: plan from Init's centre, then from uncovered samples of Init (a batch
-/// per round, planned in parallel, accepted in sample order), until the working samples are covered to
+/// Whether `x` is in the first ball of some run.
+fn covered(task: &HybridTask, runs: &[HybridRun], x: &[f64]) -> bool {
+    gap(task, runs, x).is_some_and(|(d, _)| d <= 0.0)
+}
+
+/// A seed of a growth round: an uncovered sample, and for Algorithm 4 the run whose ball is nearest to
+/// it with the sample projected onto that ball's boundary.
+struct Seed {
+    x: Vec<f64>,
+    grow: Option<(usize, Vec<f64>)>,
+}
+
+/// The seeds of an Algorithm 4 round (§5.4, forced switching): the untried uncovered working samples,
+/// nearest to the cover first (ties in sample order), each projected onto the boundary of its nearest
+/// ball; a batch is spread by the runs' median radius (one seed per neighbourhood). Marks them tried.
+fn algorithm4_seeds(
+    task: &HybridTask,
+    runs: &[HybridRun],
+    working: &[Vec<f64>],
+    tried: &mut [bool],
+    batch: usize,
+) -> Vec<Seed> {
+    let P = task.designs[task.path[0]].P.as_ref();
+    let mut radii: Vec<f64> = runs
+        .iter()
+        .map(|r| r.certificate.delta_stored as f64)
+        .collect();
+    radii.sort_by(f64::total_cmp);
+    let typical = radii.get(radii.len() / 2).copied().unwrap_or(0.0);
+    let mut pool: Vec<(f64, usize, usize)> = working
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| !tried[*i])
+        .filter_map(|(i, x)| gap(task, runs, x).map(|(d, m)| (d, m, i)))
+        .filter(|&(d, _, _)| d > 0.0)
+        .collect();
+    pool.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.2.cmp(&b.2)));
+    let mut out: Vec<Seed> = Vec::new();
+    for (_, m, i) in pool {
+        if out.len() == batch {
+            break;
+        }
+        let r = &runs[m];
+        let Some(yh) = crate::cover::alg4::project_onto_boundary(
+            P,
+            &working[i],
+            &r.nominals[0].x[0],
+            r.certificate.delta_stored as f64,
+        ) else {
+            continue;
+        };
+        let near = |s: &Seed| {
+            s.grow
+                .as_ref()
+                .is_some_and(|(_, z)| crate::cover::alg4::dist(P, z, &yh) < typical)
+        };
+        if out.iter().any(near) {
+            continue;
+        }
+        tried[i] = true;
+        out.push(Seed {
+            x: working[i].clone(),
+            grow: Some((m, yh)),
+        });
+    }
+    out
+}
+
+/// Plan a run for `seed`: by Algorithm 4 when it has a run to grow from, kept when certified at
+/// `min_robustness` with the seed's sample in its ball; otherwise (or when that fails) the planner from
+/// the sample itself (Algorithm 1).
+fn plan_seed(task: &HybridTask, runs: &[HybridRun], seed: &Seed) -> Result<HybridRun, String> {
+    if let Some((m, yh)) = &seed.grow {
+        let floor = task.problem.synthesis.min_robustness;
+        let grown = forced::grow_from(task, &runs[*m], yh).ok().filter(|r| {
+            r.certificate.is_certified()
+                && r.delta() >= floor
+                && covered(task, std::slice::from_ref(r), &seed.x)
+        });
+        if let Some(r) = grown {
+            return Ok(r);
+        }
+    }
+    if task.forced {
+        forced::plan_forced(task, &seed.x)
+    } else {
+        plan_run(task, &seed.x)
+    }
+}
+
+/// Algorithm 1 over hybrid runs: plan from Init's centre, then from uncovered samples of Init (the working
+/// samples, extended up to [`MAX_REFILLS`] times when every uncovered one was tried or fresh samples
+/// are less covered than they are; a batch
+/// per round, planned in parallel, accepted in sample order; with [`Generator::Algorithm4`] and forced
+/// switching, grown from the nearest ball first, [`algorithm4_seeds`] and [`plan_seed`]), until the working samples are covered to
 /// the target, the budget (`max_trajectories`, the table's rows) is spent, no uncovered sample is left
 /// untried, or `cancel` is set; then the coverage estimate (§2.5.2), the image and its Monte Carlo.
 pub fn synthesize_hybrid(
@@ -734,7 +840,8 @@ pub fn synthesize_hybrid(
         lo: task.problem.init.lo.clone(),
         hi: task.problem.init.hi.clone(),
     };
-    let working = init.samples(opts.working_samples.max(1), &mut rng);
+    let mut working = init.samples(opts.working_samples.max(1), &mut rng);
+    let mut refills = 0usize;
     let centre: Vec<f64> = init
         .lo
         .iter()
@@ -779,16 +886,37 @@ pub fn synthesize_hybrid(
         let frac = working.iter().filter(|x| covered(task, &runs, x)).count() as f64
             / working.len() as f64;
         if frac >= target.min(1.0) {
-            stop = format!("the working samples are covered ({:.1} %)", 100.0 * frac);
-            break;
+            // The seeds were working samples, so the working set flatters the cover: confirm on fresh
+            // samples, which join the working set when they fall short.
+            let fresh = init.samples(opts.working_samples.max(1), &mut rng);
+            let fresh_frac = fresh.iter().filter(|x| covered(task, &runs, x)).count() as f64
+                / fresh.len() as f64;
+            if fresh_frac >= target.min(1.0) || refills >= MAX_REFILLS {
+                stop = format!(
+                    "the working samples are covered ({:.1} %; {:.1} % of fresh ones)",
+                    100.0 * frac,
+                    100.0 * fresh_frac
+                );
+                break;
+            }
+            refills += 1;
+            working.extend(fresh);
+            tried.resize(working.len(), false);
+            continue;
         }
         if runs.len() >= s.max_trajectories {
             stop = format!("the budget of {} trajectories is spent", s.max_trajectories);
             break;
         }
-        let seeds: Vec<Vec<f64>> = if first && !covered(task, &runs, &centre) {
+        let seeds: Vec<Seed> = if first && !covered(task, &runs, &centre) {
             first = false;
-            vec![centre.clone()]
+            vec![Seed {
+                x: centre.clone(),
+                grow: None,
+            }]
+        } else if task.forced && !runs.is_empty() && opts.generator == Generator::Algorithm4 {
+            first = false;
+            algorithm4_seeds(task, &runs, &working, &mut tried, opts.batch.max(1))
         } else {
             first = false;
             let mut out = Vec::new();
@@ -798,12 +926,22 @@ pub fn synthesize_hybrid(
                 }
                 if !tried[i] && !covered(task, &runs, x) {
                     tried[i] = true;
-                    out.push(x.clone());
+                    out.push(Seed {
+                        x: x.clone(),
+                        grow: None,
+                    });
                 }
             }
             out
         };
         if seeds.is_empty() {
+            // The holes left are smaller than the working samples' spacing: draw more, up to a bound.
+            if refills < MAX_REFILLS {
+                refills += 1;
+                working.extend(init.samples(opts.working_samples.max(1), &mut rng));
+                tried.resize(working.len(), false);
+                continue;
+            }
             stop =
                 "every uncovered working sample was tried: a new seed trajectory is needed".into();
             break;
@@ -818,15 +956,9 @@ pub fn synthesize_hybrid(
         let before = runs.len();
         let planned: Vec<Result<HybridRun, String>> = seeds
             .par_iter()
-            .map(|x| {
-                if task.forced {
-                    forced::plan_forced(task, x)
-                } else {
-                    plan_run(task, x)
-                }
-            })
+            .map(|seed| plan_seed(task, &runs, seed))
             .collect();
-        for (x, r) in seeds.into_iter().zip(planned) {
+        for (Seed { x, .. }, r) in seeds.into_iter().zip(planned) {
             match r.and_then(|run| admit(task, &runs, rows_used, &run).map(|rows| (run, rows))) {
                 Ok((run, rows)) => {
                     rows_used += rows;

@@ -12,6 +12,9 @@
 //! accepts) and certified backwards by [`crate::certify::forced`]. The run with the largest certified δ
 //! is kept, then optimised segment by segment by §5.3 ([`optimise`]).
 //!
+//! **Algorithm 4** (§5.4, [`grow_from`]): a run is grown from a point on another run's ball boundary by
+//! that run's feedback law (its tables, locations and switching samples), then optimised the same way.
+//!
 //! The segments' tables are shipped as f32; each segment's nominal is simulated from the previous one's
 //! shipped end, so the run is continuous across the switch as the certificate requires.
 
@@ -163,19 +166,14 @@ fn optimise(task: &HybridTask, run: HybridRun, edges: &[usize]) -> HybridRun {
             }
             // The run with segment i's new table, the later segments re-simulated from each new end.
             let mut nominals = best.nominals[..i].to_vec();
-            let mut start = nom.x[0].clone();
-            for (j, (&l, old)) in best
-                .locations
-                .iter()
-                .zip(&best.nominals)
-                .enumerate()
-                .skip(i)
-            {
-                let v = if j == i { &opt.nominal.v } else { &old.v };
-                let n = shipped_nominal(task, l, &start, v);
-                start = n.x.last().cloned().unwrap_or_default();
-                nominals.push(n);
-            }
+            let tables = best.nominals[i..].iter().enumerate().map(|(j, old)| {
+                if j == 0 {
+                    &opt.nominal.v[..]
+                } else {
+                    &old.v[..]
+                }
+            });
+            nominals.extend(chain(task, &nom.x[0], &best.locations[i..], tables));
             let Ok(certificate) = certify_run(task, &best.locations, edges, &nominals) else {
                 continue;
             };
@@ -230,22 +228,72 @@ fn plan_schedule(task: &HybridTask, x0: &[f64], c: &Candidate) -> Result<HybridR
         .collect();
     let g = generate(&gp, x0, &GenSettings::default())
         .map_err(|e| format!("schedule {}: {e}", names.join(" → ")))?;
-    // Split into segments, each simulated from the previous one's shipped end.
-    let mut nominals: Vec<Nominal> = Vec::with_capacity(c.lengths.len());
-    let mut start = x0.to_vec();
-    let mut k0 = 0usize;
-    for (&l, &n) in c.locations.iter().zip(&c.lengths) {
-        let nom = shipped_nominal(task, l, &start, &g.nominal.v[k0..k0 + n]);
-        start = nom.x.last().cloned().unwrap_or_default();
-        k0 += n;
-        nominals.push(nom);
-    }
+    let tables = c.lengths.iter().scan(0usize, |k0, &n| {
+        *k0 += n;
+        Some(&g.nominal.v[*k0 - n..*k0])
+    });
+    let nominals = chain(task, x0, &c.locations, tables);
     let certificate = certify_run(task, &c.locations, &c.edges, &nominals)?;
     Ok(HybridRun {
         nominals,
         locations: c.locations.clone(),
         certificate,
     })
+}
+
+/// The nominals of a run from `x0` through `locations`, segment i under the i-th of `tables` (rounded to
+/// f32 as shipped), each segment simulated from the previous one's shipped end: the identity reset, the
+/// only one a forced-switching task accepts ([`HybridTask::new`]), so the run is continuous across every
+/// switch.
+fn chain<'v>(
+    task: &HybridTask,
+    x0: &[f64],
+    locations: &[Location],
+    tables: impl IntoIterator<Item = &'v [Vec<f64>]>,
+) -> Vec<Nominal> {
+    let mut start = x0.to_vec();
+    locations
+        .iter()
+        .zip(tables)
+        .map(|(&l, v)| {
+            let nom = shipped_nominal(task, l, &start, v);
+            start = nom.x.last().cloned().unwrap_or_default();
+            nom
+        })
+        .collect()
+}
+
+/// The forced edge joining each pair of consecutive `locations` (the first from one to the next, as the
+/// image's re-proof and the plant take it); `None` when a pair has none.
+fn edges_of(task: &HybridTask, locations: &[Location]) -> Option<Vec<usize>> {
+    locations
+        .windows(2)
+        .map(|w| {
+            task.plant
+                .edges()
+                .iter()
+                .position(|e| e.from == w[0] && e.to == w[1] && e.kind == EdgeKind::Forced)
+        })
+        .collect()
+}
+
+/// Algorithm 4 (§5.4) for a forced-switching run: `parent`'s feedback law from `y` (a point on the
+/// boundary of its ball, f32), i.e. the run through the same locations with the same tables, so switching
+/// at the same samples (in the loop's form u = Kx + v the law u = K(x − x̃) + ũ is v = ṽ), certified,
+/// then optimised by §5.3 ([`optimise`]). `Err` says why it was not certified.
+pub fn grow_from(task: &HybridTask, parent: &HybridRun, y: &[f64]) -> Result<HybridRun, String> {
+    let y = &super::f32_start(y)[..];
+    let edges = edges_of(task, &parent.locations)
+        .ok_or("no forced edge joins the parent run's locations")?;
+    let tables = parent.nominals.iter().map(|n| &n.v[..]);
+    let nominals = chain(task, y, &parent.locations, tables);
+    let certificate = certify_run(task, &parent.locations, &edges, &nominals)?;
+    let run = HybridRun {
+        nominals,
+        locations: parent.locations.clone(),
+        certificate,
+    };
+    Ok(optimise(task, run, &edges))
 }
 
 /// Theorem 4.17 for a run of segments in `locations`, joined by `edges` (Def 4.18 when the task is an MTL
@@ -324,6 +372,39 @@ mod tests {
             "δ {} → {}",
             run.delta(),
             opt.delta()
+        );
+    }
+
+    #[test]
+    fn algorithm_4_grows_a_run_of_example_4_20_from_its_ball_s_boundary_with_its_schedule() {
+        let task = example_4_20();
+        let parent = plan_forced(&task, &[3.5, -6.0, 0.0, 0.0]).expect("a run from the seed");
+        // A point on the parent's ball boundary along x (velocities stay 0, as in Init).
+        let P = task.designs[task.initial].P.as_ref();
+        let c = &parent.nominals[0].x[0];
+        let y = crate::cover::alg4::project_onto_boundary(
+            P,
+            &[c[0] + 1.0, c[1], c[2], c[3]],
+            c,
+            parent.certificate.delta_stored as f64,
+        )
+        .expect("off the centre");
+        let grown = grow_from(&task, &parent, &y).expect("certified");
+        assert!(grown.certificate.is_certified(), "{:?}", grown.certificate);
+        assert_eq!(grown.nominals[0].x[0], y, "it starts where it was asked to");
+        assert_eq!(grown.locations, parent.locations);
+        assert_eq!(grown.nominals[0].steps(), parent.nominals[0].steps());
+        let edges = edges_of(&task, &grown.locations).expect("joined by forced edges");
+        let again =
+            certify_run(&task, &grown.locations, &edges, &grown.nominals).expect("continuous");
+        assert_eq!(again, grown.certificate, "the answer is what it ships");
+        // Its ball reaches past the parent's: the point just outside the parent's ball along the ray.
+        let out: Vec<f64> = y.iter().zip(c).map(|(a, b)| a + 0.5 * (a - b)).collect();
+        let e: Vec<f64> = out.iter().zip(&y).map(|(a, b)| a - b).collect();
+        assert!(
+            crate::linalg::p_norm(P, &e) < grown.delta(),
+            "δ = {} from y",
+            grown.delta()
         );
     }
 }
