@@ -853,7 +853,9 @@ pub fn synthesize_hybrid(
     let mut tried = vec![false; working.len()];
     let mut seeds_tried = 0usize;
     let mut rows_used = 0usize;
-    let target = s.coverage_target + s.coverage_tolerance;
+    // The final estimate's lower bound is its mean less the half-width `coverage_tolerance`; the working
+    // estimate is noisier still, so it aims as far again above.
+    let target = s.coverage_target + 2.0 * s.coverage_tolerance;
     let stop;
     let mut first = true;
     // Recorded runs first, through the same accept test.

@@ -26,8 +26,9 @@ use crate::model::Location;
 use crate::trajectory::generate::{generate, GenSettings, Schedule};
 use crate::trajectory::Nominal;
 
-/// Where in the run the switch is tried, as fractions of its length.
-pub const SWITCH_FRACTIONS: [f64; 3] = [0.3, 0.5, 0.7];
+/// Where in the run the switch is tried, as fractions of its length. An early switch (0.1) is what
+/// carries a start whose own location's flow passes close to Unsafe away from it.
+pub const SWITCH_FRACTIONS: [f64; 4] = [0.1, 0.3, 0.5, 0.7];
 /// Run lengths tried, as fractions of the horizon T.
 pub const HORIZONS: [f64; 3] = [0.5, 0.75, 1.0];
 
