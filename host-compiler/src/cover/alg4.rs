@@ -35,6 +35,17 @@ pub fn covers(P: MatRef<'_, f64>, t: &CoverTrajectory, y: &[f64]) -> bool {
     dist(P, y, &t.nominal.x[0]) <= t.certificate.delta_stored as f64
 }
 
+/// The median of `it` (the upper one of an even count); Algorithm 4 spreads a batch by the balls' median
+/// radius. `None` when empty.
+pub fn median(it: impl Iterator<Item = f64>) -> Option<f64> {
+    let mut v: Vec<f64> = it.collect();
+    if v.is_empty() {
+        return None;
+    }
+    v.sort_by(|a, b| a.total_cmp(b));
+    Some(v[v.len() / 2])
+}
+
 /// ŷ: `y` projected onto the boundary ∂B_P(c, δ) along the ray from the centre (the point of the
 /// sphere nearest to `y` in the P-metric), rounded to f32 so that the image stores it exactly. Pinned
 /// coordinates of Init (equal in `y` and `c`) stay exact. `None` when `y` coincides with the centre.

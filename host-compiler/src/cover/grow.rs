@@ -477,7 +477,7 @@ pub fn grow(
             let mut rest = discarded.clone();
             let (est, unc, image) = estimate(&cover.trajectories, final_round)?;
             rest.extend(unc.iter().cloned());
-            let typical = median(
+            let typical = alg4::median(
                 cover
                     .trajectories
                     .iter()
@@ -598,7 +598,7 @@ pub fn grow(
             cover.snapshot(round, &work, &discarded);
             continue;
         }
-        let typical = median(
+        let typical = alg4::median(
             cover
                 .trajectories
                 .iter()
@@ -779,15 +779,6 @@ pub fn grow(
         image,
         warnings,
     })
-}
-
-fn median(it: impl Iterator<Item = f64>) -> Option<f64> {
-    let mut v: Vec<f64> = it.collect();
-    if v.is_empty() {
-        return None;
-    }
-    v.sort_by(|a, b| a.total_cmp(b));
-    Some(v[v.len() / 2])
 }
 
 /// The one path from a recording (a person's run: `synth --import`, `host-compiler play`) to its nominal

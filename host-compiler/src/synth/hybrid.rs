@@ -734,6 +734,12 @@ fn covered(task: &HybridTask, runs: &[HybridRun], x: &[f64]) -> bool {
     gap(task, runs, x).is_some_and(|(d, _)| d <= 0.0)
 }
 
+/// The working samples extended by `fresh`, none of them tried yet.
+fn extend_working(working: &mut Vec<Vec<f64>>, tried: &mut Vec<bool>, fresh: Vec<Vec<f64>>) {
+    working.extend(fresh);
+    tried.resize(working.len(), false);
+}
+
 /// A seed of a growth round: an uncovered sample, and for Algorithm 4 the run whose ball is nearest to
 /// it with the sample projected onto that ball's boundary.
 struct Seed {
@@ -752,12 +758,9 @@ fn algorithm4_seeds(
     batch: usize,
 ) -> Vec<Seed> {
     let P = task.designs[task.path[0]].P.as_ref();
-    let mut radii: Vec<f64> = runs
-        .iter()
-        .map(|r| r.certificate.delta_stored as f64)
-        .collect();
-    radii.sort_by(f64::total_cmp);
-    let typical = radii.get(radii.len() / 2).copied().unwrap_or(0.0);
+    let typical =
+        crate::cover::alg4::median(runs.iter().map(|r| r.certificate.delta_stored as f64))
+            .unwrap_or(0.0);
     let mut pool: Vec<(f64, usize, usize)> = working
         .iter()
         .enumerate()
@@ -819,12 +822,11 @@ fn plan_seed(task: &HybridTask, runs: &[HybridRun], seed: &Seed) -> Result<Hybri
     }
 }
 
-/// Algorithm 1 over hybrid runs: plan from Init's centre, then from uncovered samples of Init (the working
-/// samples, extended up to [`MAX_REFILLS`] times when every uncovered one was tried or fresh samples
-/// are less covered than they are; a batch
-/// per round, planned in parallel, accepted in sample order; with [`Generator::Algorithm4`] and forced
-/// switching, grown from the nearest ball first, [`algorithm4_seeds`] and [`plan_seed`]), until the working samples are covered to
-/// the target, the budget (`max_trajectories`, the table's rows) is spent, no uncovered sample is left
+/// Algorithm 1 over hybrid runs: plan from Init's centre, then from uncovered samples of Init (the
+/// working samples, extended up to [`MAX_REFILLS`] times when every uncovered one was tried or fresh
+/// samples are less covered than they are; a batch per round, planned in parallel, accepted in sample
+/// order; with [`Generator::Algorithm4`] and forced switching, grown from the nearest ball first,
+/// [`algorithm4_seeds`] and [`plan_seed`]), until the working samples are covered to the target, the budget (`max_trajectories`, the table's rows) is spent, no uncovered sample is left
 /// untried, or `cancel` is set; then the coverage estimate (§2.5.2), the image and its Monte Carlo.
 pub fn synthesize_hybrid(
     task: &HybridTask,
@@ -885,14 +887,15 @@ pub fn synthesize_hybrid(
             stop = "interrupted".to_string();
             break;
         }
-        let frac = working.iter().filter(|x| covered(task, &runs, x)).count() as f64
-            / working.len() as f64;
+        let fraction = |xs: &[Vec<f64>]| {
+            xs.iter().filter(|x| covered(task, &runs, x)).count() as f64 / xs.len() as f64
+        };
+        let frac = fraction(&working);
         if frac >= target.min(1.0) {
             // The seeds were working samples, so the working set flatters the cover: confirm on fresh
             // samples, which join the working set when they fall short.
             let fresh = init.samples(opts.working_samples.max(1), &mut rng);
-            let fresh_frac = fresh.iter().filter(|x| covered(task, &runs, x)).count() as f64
-                / fresh.len() as f64;
+            let fresh_frac = fraction(&fresh);
             if fresh_frac >= target.min(1.0) || refills >= MAX_REFILLS {
                 stop = format!(
                     "the working samples are covered ({:.1} %; {:.1} % of fresh ones)",
@@ -902,8 +905,7 @@ pub fn synthesize_hybrid(
                 break;
             }
             refills += 1;
-            working.extend(fresh);
-            tried.resize(working.len(), false);
+            extend_working(&mut working, &mut tried, fresh);
             continue;
         }
         if runs.len() >= s.max_trajectories {
@@ -940,8 +942,8 @@ pub fn synthesize_hybrid(
             // The holes left are smaller than the working samples' spacing: draw more, up to a bound.
             if refills < MAX_REFILLS {
                 refills += 1;
-                working.extend(init.samples(opts.working_samples.max(1), &mut rng));
-                tried.resize(working.len(), false);
+                let fresh = init.samples(opts.working_samples.max(1), &mut rng);
+                extend_working(&mut working, &mut tried, fresh);
                 continue;
             }
             stop =
