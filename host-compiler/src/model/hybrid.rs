@@ -312,9 +312,16 @@ impl Hybrid {
 
     /// The forced edge `from` → `to`, the one a controller that moves to location `to` takes (§4.2.1).
     pub fn forced_edge(&self, from: Location, to: Location) -> Option<&Edge> {
+        self.edge_index(from, to, EdgeKind::Forced)
+            .map(|e| &self.edges[e])
+    }
+
+    /// The index of the edge of `kind` from `from` to `to`: the first in the spec's order, the one the
+    /// plant takes, the certificate joins segments by and the re-proof from the image finds.
+    pub fn edge_index(&self, from: Location, to: Location, kind: EdgeKind) -> Option<usize> {
         self.edges
             .iter()
-            .find(|e| e.from == from && e.to == to && e.kind == EdgeKind::Forced)
+            .position(|e| e.from == from && e.to == to && e.kind == kind)
     }
 
     pub fn modes(&self) -> &[Mode] {

@@ -411,11 +411,7 @@ pub fn recheck(
                     Exit::Guard { .. } => crate::model::hybrid::EdgeKind::Internal,
                 };
                 let to = img.segment(s + 1).map_or(usize::MAX, |h| h.location);
-                match plant
-                    .edges()
-                    .iter()
-                    .position(|e| e.from == g.location && e.to == to && e.kind == kind)
-                {
+                match plant.edge_index(g.location, to, kind) {
                     Some(e) => {
                         if kind == crate::model::hybrid::EdgeKind::Forced {
                             forced = true;

@@ -269,12 +269,7 @@ fn chain<'v>(
 fn edges_of(task: &HybridTask, locations: &[Location]) -> Option<Vec<usize>> {
     locations
         .windows(2)
-        .map(|w| {
-            task.plant
-                .edges()
-                .iter()
-                .position(|e| e.from == w[0] && e.to == w[1] && e.kind == EdgeKind::Forced)
-        })
+        .map(|w| task.plant.edge_index(w[0], w[1], EdgeKind::Forced))
         .collect()
 }
 
