@@ -38,16 +38,6 @@ pub enum TaskError {
          this path takes one-location plants (synth and verify take hybrid specs through synth::hybrid)"
     )]
     HybridNotSupported { locations: usize, edges: usize },
-    /// A differentially flat plant, checked and bounded, that this version does not synthesise: the image
-    /// carries the dynamic extension's states, but the closed-loop checks do not yet run them.
-    #[error(
-        "the differentially flat plant is checked (Ξ and Υ reproduce f, Γ nonsingular over the region) \
-         and bounded (a chain in the {n_flat} flat coordinates, flat input W = {w}, sampled-loop \
-         mismatch D = {d:.4e}), but this version does not synthesise it yet: the image can carry the \
-         controller's own states (the dynamic extension), but the Monte Carlo that re-checks every \
-         certificate does not yet run them against the plant, so nothing could be called certified"
-    )]
-    FlatNotSynthesised { n_flat: usize, w: String, d: f64 },
     /// A feedback-linearizable plant outside what this version linearises and bounds.
     #[error("plant: {0}")]
     Linearize(#[from] FlError),
@@ -71,23 +61,12 @@ impl Task {
             // Every stage works on the linear model in ξ; the plant carries the maps and bounds.
             let flat = problem.nonlinear.as_ref().is_some_and(|d| d.flat.is_some());
             if flat {
-                // The model, its bounds and the certificate's terms are built (`model::flat`), but the
-                // Monte Carlo does not yet run the controller's own states, so nothing could be re-checked.
+                // The chain in the flat state q, the maps and their bounds (`model::flat`); the
+                // firmware and the Monte Carlo keep the controller's own states ζ.
+                // (An [mtl] formula over a flat plant is refused there, `FlError::FlatMtl`.)
                 let (q, maps) = crate::model::flat::flatten(&problem)?;
-                let w = match &q.input {
-                    crate::spec::InputSet::Box { lo, hi } => lo
-                        .iter()
-                        .zip(hi)
-                        .map(|(l, h)| format!("[{l}, {h}]"))
-                        .collect::<Vec<_>>()
-                        .join(" × "),
-                    other => format!("{other:?}"),
-                };
-                return Err(TaskError::FlatNotSynthesised {
-                    n_flat: q.plant.n(),
-                    w,
-                    d: maps.mismatch,
-                });
+                let plant: Box<dyn Plant> = Box::new(feedback_linearizable::plant(&q, maps)?);
+                return Self::with_plant(q, plant);
             }
             let (xi, maps) = feedback_linearizable::linearize(&problem)?;
             let plant: Box<dyn Plant> = Box::new(feedback_linearizable::plant(&xi, maps)?);
@@ -138,21 +117,29 @@ mod tests {
         assert_eq!(maps.n_plant, 6);
     }
 
-    /// A differentially flat spec is checked and bounded, then refused with the figures: its runs with
-    /// the controller's states are not re-checked yet.
+    /// A differentially flat spec is the chain in its flat state q (two chains of four for the
+    /// quadrotor); with an MTL formula it is refused with the reason.
     #[test]
-    fn a_differentially_flat_task_is_refused_until_its_runs_are_rechecked() {
+    fn a_differentially_flat_task_is_its_chain_in_q_and_refused_with_a_formula() {
         let path = concat!(
             env!("CARGO_MANIFEST_DIR"),
             "/../examples/flat-quadrotor.toml"
         );
         let problem = crate::spec::load(path).expect("the shipped example");
-        let Err(e) = Task::new(problem) else {
-            panic!("a flat task is refused")
+        let task = Task::new(problem.clone()).expect("a flat task");
+        assert_eq!((task.plant.n(), task.plant.m()), (8, 2));
+        let maps = task.plant.linearization().expect("maps");
+        assert_eq!((maps.n_plant, maps.m_plant), (6, 2));
+        assert_eq!(maps.flat.as_ref().expect("flat").ext_orders, vec![2]);
+        let mut temporal = problem;
+        temporal.mtl = Some("F[0,6] goal".into());
+        let Err(e) = Task::new(temporal) else {
+            panic!("a flat task with a formula is refused")
         };
         let msg = e.to_string();
-        assert!(msg.contains("does not synthesise it yet"), "{msg}");
-        assert!(msg.contains("8 flat coordinates"), "{msg}");
-        assert!(msg.contains("[-10, 10] × [-10, 10]"), "{msg}");
+        assert!(
+            msg.contains("an [mtl] task on a differentially flat plant"),
+            "{msg}"
+        );
     }
 }

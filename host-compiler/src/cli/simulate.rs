@@ -82,7 +82,7 @@ pub fn run(a: &SimulateArgs) -> Outcome {
                 &task.property.input,
                 false,
                 &mut |x, u| Ok(plant.step(0, x, u)),
-                &|x| x.to_vec(),
+                &|x, _| x.to_vec(),
             )?
         }
         Some(maps) => {
@@ -106,7 +106,7 @@ pub fn run(a: &SimulateArgs) -> Outcome {
                         .flow(x, u, h, 1, &mut |_| {})
                         .map_err(|e| e.to_string())
                 },
-                &|x| maps.xi_of(x),
+                &|x, zeta| maps.xi_at(x, zeta),
             )?
         }
     };
@@ -145,6 +145,11 @@ struct Run {
 }
 
 /// The closed loop for `steps` steps from `x0`, one CSV row per sample (module doc): the evaluator's
+/// One period of the plant from (x, u).
+type Advance<'a> = dyn FnMut(&[f64], &[f64]) -> Result<Vec<f64>, String> + 'a;
+/// A state in the task's coordinates from (x, the controller's own states ζ).
+type Judged<'a> = dyn Fn(&[f64], &[f64]) -> Vec<f64> + 'a;
+
 /// `step_plant` for a plant with model maps (`plant_step`), else `step`; `advance` the plant over one period, `judged` the state in the
 /// task's coordinates; `K` gives the reference columns when the plant's input is the law's.
 #[allow(clippy::too_many_arguments)]
@@ -157,8 +162,8 @@ fn write_run(
     K: Option<&Vec<Vec<f64>>>,
     input: &crate::property::InputBound,
     plant_step: bool,
-    advance: &mut dyn FnMut(&[f64], &[f64]) -> Result<Vec<f64>, String>,
-    judged: &dyn Fn(&[f64]) -> Vec<f64>,
+    advance: &mut Advance<'_>,
+    judged: &Judged<'_>,
 ) -> Result<Run, Failure> {
     let (n, m) = (x0.len(), img.plant_m());
     let mut ctl = Controller::new(*img);
@@ -180,7 +185,9 @@ fn write_run(
         stopped: None,
     };
     for k in 0..=steps {
-        run.judged.push(judged(&x));
+        // The state in the task's coordinates, read with the controller's own states (a flat plant's).
+        let zeta: Vec<f64> = ctl.extension().iter().map(|&v| v as f64).collect();
+        run.judged.push(judged(&x, &zeta));
         let xf: Vec<f32> = x.iter().map(|&v| v as f32).collect();
         let answer = if plant_step {
             ctl.step_plant(&xf)

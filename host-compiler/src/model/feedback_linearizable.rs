@@ -231,6 +231,8 @@ pub struct FlatCoords {
     pub coords_exprs: Vec<Expr>,
     /// The controller states' initial values ζ0.
     pub ext_init: Vec<f64>,
+    /// The order of each extended input's chain in ζ, in ζ's order (its states ζ_0 … ζ_{o−1}).
+    pub ext_orders: Vec<usize>,
     /// q_j is the plant's state s.
     pub q_states: Vec<Option<usize>>,
     /// The operating region, a box over q: leaving it is entering Unsafe.
@@ -243,6 +245,35 @@ pub struct FlatCoords {
     /// Per q coordinate, the part of `jump` from applying an extended input as its period mean rather than
     /// the model's ζ_0(t) (`model::flat`, item 3).
     pub held: Vec<f64>,
+}
+
+impl FlatCoords {
+    /// The model's controller states at time t ∈ [0, h] of a period that began with ζ = `z0` and ended
+    /// with ζ⁺ = `z1`: each chain's highest derivative u_e is held over the period, so it is
+    /// (ζ⁺_{o−1} − ζ_{o−1})/h, and ζ_l(t) = Σ_{k ≥ l} ζ_k t^{k−l}/(k−l)! + u_e t^{o−l}/(o−l)!
+    /// (`model::flat`, the law).
+    pub fn zeta_within(&self, z0: &[f64], z1: &[f64], h: f64, t: f64) -> Vec<f64> {
+        let mut out = Vec::with_capacity(z0.len());
+        let mut at = 0;
+        for &o in &self.ext_orders {
+            let (c0, c1) = (&z0[at..at + o], &z1[at..at + o]);
+            let ue = (c1[o - 1] - c0[o - 1]) / h;
+            for l in 0..o {
+                let mut v = 0.0;
+                let mut term = 1.0; // t^{k−l}/(k−l)!
+                for (i, zk) in c0[l..].iter().enumerate() {
+                    if i > 0 {
+                        term *= t / i as f64;
+                    }
+                    v += zk * term;
+                }
+                v += ue * term * t / (o - l) as f64;
+                out.push(v);
+            }
+            at += o;
+        }
+        out
+    }
 }
 
 impl FlMaps {
@@ -1170,6 +1201,37 @@ pub fn plant(xi: &Problem, maps: FlMaps) -> Result<FeedbackLinearized, ModelErro
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// ζ's model within a period: the thrust chain (T, Ṫ) under a held T̈ = 2 is T(t) = T0 + Ṫ0 t + t²,
+    /// Ṫ(t) = Ṫ0 + 2t, recovered from ζ at the period's two ends.
+    #[test]
+    fn the_controller_states_between_samples_follow_their_chain() {
+        let fc = FlatCoords {
+            coords_exprs: vec![],
+            ext_init: vec![9.81, 0.0],
+            ext_orders: vec![2],
+            q_states: vec![],
+            region: InitBox {
+                lo: vec![],
+                hi: vec![],
+            },
+            state_rate: vec![],
+            jump: vec![],
+            held: vec![],
+        };
+        let (h, z0) = (0.01, [9.81, 0.5]);
+        let at = |t: f64| [z0[0] + z0[1] * t + t * t, z0[1] + 2.0 * t];
+        for t in [0.0, 0.003, 0.005, 0.01] {
+            let got = fc.zeta_within(&z0, &at(h), h, t);
+            for (g, w) in got.iter().zip(at(t)) {
+                assert!(
+                    (g - w).abs() < 1e-12,
+                    "t = {t}: {got:?} against {:?}",
+                    at(t)
+                );
+            }
+        }
+    }
 
     fn ex49() -> Problem {
         let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../examples/fl-4-9.toml");

@@ -47,11 +47,13 @@
 //! `certify::LoopConstants` adds 3 and 4 to the per-step disturbance in the P-metric
 //! (φ Σ b_j √P_jj + Σ J_j √P_jj), next to φβD.
 //!
-//! **Not yet synthesised.** `task::Task::new` builds all of this and then refuses the task
-//! (`TaskError::FlatNotSynthesised`). The image carries the controller's states ζ (ζ0 in the model maps
-//! section, ζ⁺ from the input map on every accepted step), but the closed-loop Monte Carlo, `simulate`
-//! and `play` still judge a plant state without them, so no certificate could be re-checked. The bounds
-//! it reports (W, D) are the ones the certificate will take.
+//! **The pipeline.** `task::Task::new` makes the task the chain in q with these maps on the plant
+//! (`FeedbackLinearized`), so the CAF, the generator, §5.3 and the cover run on the chain as on any
+//! feedback-linearizable task. The image carries ζ0 (model maps section) and the evaluator keeps ζ
+//! (ζ⁺ from the input map on every accepted step); the Monte Carlo (`verify::nonlinear`), the falsifier
+//! and `simulate` read q with the evaluator's ζ at the samples and with ζ's model over the period
+//! between them ([`super::feedback_linearizable::FlatCoords::zeta_within`]). An MTL formula over a flat
+//! plant is refused (`FlError::FlatMtl`), and so is the game.
 
 use super::feedback_linearizable::{
     adjugate, bound_err, cancelling_law, dims_used, gram, norm2_bound, outside_interval,
@@ -657,6 +659,7 @@ pub fn flatten(problem: &Problem) -> Result<(Problem, FlMaps), FlError> {
         flat: Some(FlatCoords {
             coords_exprs: q_exprs,
             ext_init: fd.ext_init(),
+            ext_orders: fd.extension.iter().map(|e| e.order).collect(),
             q_states: fd.q_states.clone(),
             region: region.clone(),
             state_rate,

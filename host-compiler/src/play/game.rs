@@ -182,6 +182,12 @@ impl Game {
     /// The game of a task: its CAF designed as `synth` designs it, the coverage samples drawn, and the
     /// runs already in the out directory certified again. Errors say what stops the game.
     pub fn new(task: Task, settings: PlaySettings) -> Result<Self, String> {
+        if task.plant.linearization().is_some_and(|m| m.flat.is_some()) {
+            return Err("a differentially flat plant is not playable yet: the game steps the plant \
+                        through the law without the controller's own states (the dynamic extension); \
+                        `synth` certifies it"
+                .into());
+        }
         Self::of(Played::one(task)?, settings)
     }
 

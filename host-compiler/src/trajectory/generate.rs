@@ -482,7 +482,18 @@ fn solve_subproblem(
             .convex
             .unsafe_pieces
             .iter()
-            .map(|piece| halfspaces(piece, &nom.x, sides))
+            .enumerate()
+            .map(|(i, piece)| {
+                let others: Vec<&ConvexPiece> = prob
+                    .convex
+                    .unsafe_pieces
+                    .iter()
+                    .enumerate()
+                    .filter(|&(j, _)| j != i)
+                    .map(|(_, o)| o)
+                    .collect();
+                halfspaces(piece, &others, &nom.x, sides)
+            })
             .collect();
         for k in 0..=N {
             let xk = &nom.x[k];
@@ -603,8 +614,14 @@ fn solve_subproblem(
     Ok((v, z[d].max(0.0)))
 }
 
-/// The supporting half-space of `piece` for every sample of an iterate `xs`, by the rule `sides`.
-fn halfspaces(piece: &ConvexPiece, xs: &[Vec<f64>], sides: Sides) -> Vec<(Vec<f64>, f64)> {
+/// The supporting half-space of `piece` for every sample of an iterate `xs`, by the rule `sides`
+/// (`others`: Unsafe's other pieces, which a crossing must not be pushed into).
+fn halfspaces(
+    piece: &ConvexPiece,
+    others: &[&ConvexPiece],
+    xs: &[Vec<f64>],
+    sides: Sides,
+) -> Vec<(Vec<f64>, f64)> {
     let mut out: Vec<(Vec<f64>, f64)> = xs.iter().map(|x| supporting_halfspace(piece, x)).collect();
     if sides == Sides::Nearest {
         return out;
@@ -623,7 +640,7 @@ fn halfspaces(piece: &ConvexPiece, xs: &[Vec<f64>], sides: Sides) -> Vec<(Vec<f6
         // the first sample or ends at the last).
         let a = &xs[first.saturating_sub(1)];
         let b = &xs[k.min(xs.len() - 1)];
-        let plane = crossing_halfspace(piece, a, b, &xs[first..k]);
+        let plane = crossing_halfspace(piece, others, a, b, &xs[first..k]);
         for o in &mut out[first..k] {
             *o = plane.clone();
         }
@@ -635,9 +652,13 @@ fn halfspaces(piece: &ConvexPiece, xs: &[Vec<f64>], sides: Sides) -> Vec<(Vec<f6
 /// An ellipsoid {(Cx − c)ᵀQ(Cx − c) ≤ 1}: tangent where the ray from its centre through the point of the
 /// chord [Ca, Cb] nearest the centre meets the boundary, so the crossing is pushed out on the side it
 /// already passes (perpendicular to the chord, deterministically, when the chord meets the centre). A
-/// polytope: the facet least penetrated by the crossing's mean point.
+/// polytope: a facet the crossing can pass along: preferably one whose far side (where the crossing's
+/// mean point would leave through it) is not in another piece of Unsafe (a hill of two stacked boxes is
+/// crossed over its top, not between them), then one that the crossing's entry a and exit b both lie
+/// within (it runs along the way, not across it), then the one its mean point penetrates least.
 fn crossing_halfspace(
     piece: &ConvexPiece,
+    others: &[&ConvexPiece],
     a: &[f64],
     b: &[f64],
     inside: &[Vec<f64>],
@@ -665,12 +686,38 @@ fn crossing_halfspace(
             let target: Vec<f64> = (0..p).map(|i| c[i] + off[i]).collect();
             supporting_halfspace(piece, &lift(C.as_ref(), a, &ya, &target))
         }
-        ConvexPiece::Polytope { .. } => {
+        ConvexPiece::Polytope { H, b: off } => {
             let n = a.len();
             let mean: Vec<f64> = (0..n)
                 .map(|j| inside.iter().map(|x| x[j]).sum::<f64>() / inside.len().max(1) as f64)
                 .collect();
-            supporting_halfspace(piece, &mean)
+            let dot = |r: usize, x: &[f64]| (0..n).map(|j| H[(r, j)] * x[j]).sum::<f64>() - off[r];
+            let norm = |r: usize| (0..n).map(|j| H[(r, j)] * H[(r, j)]).sum::<f64>().sqrt();
+            // Where the mean point leaves through facet r: its projection onto the facet's plane, moved
+            // a step past it (a thousandth of the piece's scale, at least 10⁻³).
+            let scale = off.iter().fold(1e-3f64, |s, v| s.max(1e-3 * v.abs()));
+            let beyond = |r: usize| -> Vec<f64> {
+                let nn = norm(r).max(1e-150);
+                let t = (scale * nn - dot(r, &mean)) / (nn * nn);
+                (0..n).map(|j| mean[j] + t * H[(r, j)]).collect()
+            };
+            // Facets ranked: not covered by another piece, then not facing the crossing's entry or exit
+            // (a facet that a or b lies beyond sends the crossing back where it came from or ahead of
+            // where it goes), then least penetrated by the mean (ties: facet order).
+            let r = (0..H.nrows())
+                .map(|r| {
+                    let covered = others.iter().any(|o| piece_contains(o, &beyond(r)));
+                    let facing = dot(r, a) > 0.0 || dot(r, b) > 0.0;
+                    (covered, facing, -dot(r, &mean) / norm(r).max(1e-300), r)
+                })
+                .min_by(|x, y| {
+                    (x.0, x.1)
+                        .cmp(&(y.0, y.1))
+                        .then(x.2.total_cmp(&y.2))
+                        .then(x.3.cmp(&y.3))
+                })
+                .map_or(0, |t| t.3);
+            ((0..n).map(|j| H[(r, j)]).collect(), off[r])
         }
     }
 }
@@ -864,6 +911,60 @@ mod tests {
         for xk in &crossing.nominal.x {
             let gap = (xk[0] - 1.0).hypot(xk[1]) - 0.3;
             assert!(gap >= d - 1e-6, "{xk:?} is {gap} from the disc, δ = {d}");
+        }
+    }
+
+    /// A hill of two stacked boxes, crossed by the first iterate low through the top box: the facet it
+    /// penetrates least is the top box's floor, which the lower box covers. One side per crossing takes
+    /// the top box's roof instead, and the tube clears both boxes (with the floor, it found nothing).
+    #[test]
+    fn a_crossing_of_a_stacked_box_is_pushed_over_it_not_into_the_box_below() {
+        let input = InputBound::Box {
+            lo: vec![-0.6, -0.6],
+            hi: vec![0.6, 0.6],
+        };
+        let hill = || {
+            vec![
+                rect([0.3, -3.0], [3.7, -0.5]),
+                rect([0.8, -0.5], [3.2, 1.0]),
+            ]
+        };
+        let run = |sides| {
+            solve_with(
+                disc(4.0, -0.1, 0.3),
+                [4.0, -0.1, 0.3],
+                hill(),
+                input.clone(),
+                40,
+                sides,
+            )
+        };
+        let crossing = run(Some(Sides::PerCrossing)).expect("over the top");
+        let d = crossing.delta_lin;
+        assert!(d > 0.0, "delta {d}");
+        for xk in &crossing.nominal.x {
+            for (lo, hi) in [([0.3, -3.0], [3.7, -0.5]), ([0.8, -0.5], [3.2, 1.0])] {
+                let gap = (0..2)
+                    .map(|j| (lo[j] - xk[j]).max(xk[j] - hi[j]).max(0.0))
+                    .fold(0.0f64, f64::hypot);
+                assert!(gap >= d - 1e-6, "{xk:?} is {gap} from a box, δ = {d}");
+            }
+        }
+        assert!(
+            crossing
+                .nominal
+                .x
+                .iter()
+                .any(|x| (0.8..=3.2).contains(&x[0]) && x[1] > 1.0),
+            "the run passes over the top box"
+        );
+    }
+
+    /// The box lo ≤ x ≤ hi in the plane as a polytope.
+    fn rect(lo: [f64; 2], hi: [f64; 2]) -> ConvexPiece {
+        ConvexPiece::Polytope {
+            H: from_row_major(4, 2, &[1.0, 0.0, -1.0, 0.0, 0.0, 1.0, 0.0, -1.0]),
+            b: vec![hi[0], -lo[0], hi[1], -lo[1]],
         }
     }
 

@@ -54,7 +54,7 @@ fn run_fl_inner(
     margins: bool,
     visit: &mut dyn FnMut(&[f64]),
 ) -> RunOutcome {
-    let metric = crate::geometry::Metric::euclidean(maps.xi_states.len());
+    let metric = crate::geometry::Metric::euclidean(maps.n_xi());
     let goal = task.property.goal.as_ref();
     let unsafe_set = task.property.unsafe_region();
     let input = input_bound(&maps.input);
@@ -62,7 +62,11 @@ fn run_fl_inner(
     let mut ctl = Controller::new(*image);
     let mut x = x0.to_vec();
     let mut out = RunOutcome::new(x0);
-    let check = |x: &[f64], out: &mut RunOutcome, sample: bool| {
+    // The controller's own states ζ (a flat plant's dynamic extension; empty otherwise), as the evaluator
+    // keeps them: ξ of a plant state is read with them.
+    let zeta =
+        |ctl: &Controller<'_>| -> Vec<f64> { ctl.extension().iter().map(|&v| v as f64).collect() };
+    let check = |x: &[f64], xi: &[f64], out: &mut RunOutcome, sample: bool| {
         // Outside the operating region (the plant's whole state, zero dynamics included) is Unsafe.
         if let Some(r) = &maps.region {
             let outside = x
@@ -76,21 +80,21 @@ fn run_fl_inner(
             }
         }
         if let Some(us) = unsafe_set {
-            let xi = maps.xi_of(x);
-            let inside = us.contains(&xi);
+            let inside = us.contains(xi);
             if out.goal_step.is_some() {
                 out.after_goal_unsafe |= inside;
                 return;
             }
             out.entered_unsafe |= inside;
             if margins && sample {
-                out.unsafe_margin = out.unsafe_margin.min(-us.signed_dist(&xi, &metric).value);
+                out.unsafe_margin = out.unsafe_margin.min(-us.signed_dist(xi, &metric).value);
             }
         }
     };
-    check(&x, &mut out, true);
+    let mut z = zeta(&ctl);
+    let mut xi = maps.xi_at(&x, &z);
+    check(&x, &xi, &mut out, true);
     for k in 0..=task.steps {
-        let xi = maps.xi_of(&x);
         visit(&xi);
         if out.goal_step.is_none() && goal.contains(&xi) {
             out.reached_goal = true;
@@ -118,10 +122,18 @@ fn run_fl_inner(
             out.input_margin = out.input_margin.min(s);
             out.input_violation |= s < 0.0;
         }
-        match maps
-            .plant
-            .flow(&x, &u, h, SUBSTEPS, &mut |xs| check(xs, &mut out, false))
-        {
+        // Between samples ζ follows its model over the period (`FlatCoords::zeta_within`).
+        let z1 = zeta(&ctl);
+        let mut i = 0;
+        let mut between = |xs: &[f64]| {
+            i += 1;
+            let zs = match &maps.flat {
+                Some(fc) => fc.zeta_within(&z, &z1, h, i as f64 * h / SUBSTEPS as f64),
+                None => Vec::new(),
+            };
+            check(xs, &maps.xi_at(xs, &zs), &mut out, false)
+        };
+        match maps.plant.flow(&x, &u, h, SUBSTEPS, &mut between) {
             Ok(next) => x = next,
             Err(_) => {
                 // The integrator failed: nothing is known about the run, so it counts against the image.
@@ -131,9 +143,73 @@ fn run_fl_inner(
                 return out;
             }
         }
-        check(&x, &mut out, true);
+        z = z1;
+        xi = maps.xi_at(&x, &z);
+        check(&x, &xi, &mut out, true);
     }
     out
+}
+
+/// A plant state whose ξ (with the controller states at ζ0) lies on the boundary of trajectory `t`'s ball,
+/// a hair inside the stored radius: from the plant state x_c whose ξ-states are the ball's centre (the
+/// others from `x`, a draw in Init), along a random direction of the plant's state space (of its
+/// ξ-states only when `states_only`: no tilt for the quadrotor), by bisection on the ball's metric; `x`
+/// itself when x_c is not inside the ball (a centre no plant state at rest reaches).
+fn flat_boundary_start(
+    image: &Image<'_>,
+    maps: &FlMaps,
+    ext0: &[f64],
+    t: usize,
+    mut x: Vec<f64>,
+    states_only: bool,
+    rng: &mut ChaCha8Rng,
+) -> Vec<f64> {
+    let n = image.n();
+    let centre: Vec<f64> = (0..n).map(|i| image.centre(t, i) as f64).collect();
+    let loc = image.location(t, 0);
+    let radius = image.delta(t) as f64 * (1.0 - 1e-6);
+    let dist = |y: &[f64]| {
+        let q = maps.xi_at(y, ext0);
+        let e: Vec<f64> = (0..n).map(|i| q[i] - centre[i]).collect();
+        let pe: f64 = (0..n)
+            .map(|i| {
+                (0..n)
+                    .map(|j| e[i] * image.P(loc, i, j) as f64 * e[j])
+                    .sum::<f64>()
+            })
+            .sum();
+        pe.max(0.0).sqrt()
+    };
+    let coords = maps.state_coords();
+    for &(j, s) in &coords {
+        x[s] = centre[j];
+    }
+    if !(dist(&x) < radius) {
+        return x;
+    }
+    let dir: Vec<f64> = (0..x.len())
+        .map(|s| {
+            if states_only && !coords.iter().any(|&(_, c)| c == s) {
+                0.0
+            } else {
+                rng.sample::<f64, _>(rand_distr::StandardNormal)
+            }
+        })
+        .collect();
+    let at = |a: f64| -> Vec<f64> { x.iter().zip(&dir).map(|(v, d)| v + a * d).collect() };
+    let (mut lo, mut hi) = (0.0f64, 1e-6f64);
+    while dist(&at(hi)) < radius && hi < 1e6 {
+        (lo, hi) = (hi, 2.0 * hi);
+    }
+    for _ in 0..80 {
+        let mid = 0.5 * (lo + hi);
+        if dist(&at(mid)) < radius {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    at(lo)
 }
 
 /// Whether the image carries the task's model maps, byte for byte, and the plant's dimensions: an image
@@ -210,12 +286,22 @@ pub fn monte_carlo_fl(
     let interior_runs = starts.len();
     let mut boundary: Vec<Vec<f64>> = Vec::new();
     for t in 0..image.n_trajectories() {
-        for _ in 0..per_ball {
-            let xi = ball_boundary_point(image, Pis.as_ref(), t, &mut rng);
-            let mut x = draw(&mut rng);
-            for (j, &s) in maps.xi_states.iter().enumerate() {
-                x[s] = xi[j];
-            }
+        for b in 0..per_ball {
+            let x = match &maps.flat {
+                None => {
+                    let xi = ball_boundary_point(image, Pis.as_ref(), t, &mut rng);
+                    let mut x = draw(&mut rng);
+                    for (j, &s) in maps.xi_states.iter().enumerate() {
+                        x[s] = xi[j];
+                    }
+                    x
+                }
+                Some(fc) => {
+                    // ξ is not a set of plant states: a plant state on the ball's boundary instead, with ζ0.
+                    let x = draw(&mut rng);
+                    flat_boundary_start(image, maps, &fc.ext_init, t, x, b % 2 == 1, &mut rng)
+                }
+            };
             boundary.push(x);
         }
     }

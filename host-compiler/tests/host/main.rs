@@ -22,6 +22,7 @@ mod certify_temporal;
 mod cli_exit;
 mod cli_fl;
 mod cli_fl_pendulum;
+mod cli_flat;
 mod cli_hybrid;
 mod cli_limits;
 mod cli_mtl;
