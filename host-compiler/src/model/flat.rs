@@ -704,8 +704,8 @@ mod tests {
         assert_eq!(
             q.input,
             InputSet::Box {
-                lo: vec![-10.0; 2],
-                hi: vec![10.0; 2]
+                lo: vec![-3.0; 2],
+                hi: vec![3.0; 2]
             }
         );
         // The held thrust enters the velocities' derivatives only; the jumps are rounding-sized.
@@ -775,9 +775,13 @@ mod tests {
         let h = p.plant.period;
         // (X, Ẋ, Y, Ẏ, θ, θ̇), (T, Ṫ) and the snap w: inside the region and W.
         let cases: [([f64; 6], [f64; 2], [f64; 2]); 3] = [
-            ([0.0, 2.0, 8.0, -1.0, -0.3, 0.4], [11.0, 3.0], [5.0, -7.0]),
-            ([-5.0, -1.0, 12.0, 0.5, 0.2, -0.5], [9.0, -2.0], [-8.0, 3.0]),
-            ([3.0, 0.5, 4.0, 0.0, 0.05, 0.1], [9.9, 0.5], [1.0, 1.0]),
+            ([0.0, 2.0, 8.0, -1.0, -0.1, 0.05], [9.9, 0.5], [2.0, -2.5]),
+            (
+                [-5.0, -1.0, 12.0, 0.5, 0.15, -0.06],
+                [10.5, -0.6],
+                [-2.8, 1.0],
+            ),
+            ([3.0, 0.5, 4.0, 0.0, 0.05, 0.05], [9.9, 0.5], [1.0, 1.0]),
         ];
         for (x, z, w) in cases {
             let xe: Vec<f64> = x.iter().chain(&z).copied().collect();

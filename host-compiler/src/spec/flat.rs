@@ -901,8 +901,8 @@ mod tests {
     fn a_region_reaching_zero_thrust_is_refused_for_a_singular_gamma() {
         // Ÿ down to −g: the thrust m√(Ẍ² + (Ÿ + g)²) reaches 0 at Ẍ = 0, where Γ is singular.
         let e = variant(
-            "lo = [-10.0, -6.0, -6.0, -6.0, 0.0, -6.0, -3.0, -6.0]",
-            "lo = [-10.0, -6.0, -6.0, -6.0, 0.0, -6.0, -9.81, -6.0]",
+            "lo = [-10.0, -6.0, -2.0, -1.0, 0.0, -6.0, -2.0, -1.0]",
+            "lo = [-10.0, -6.0, -2.0, -1.0, 0.0, -6.0, -9.81, -1.0]",
         )
         .unwrap_err();
         assert_eq!(e.kind(), ErrorKind::Model, "{}", e.message());
