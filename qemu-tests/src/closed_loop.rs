@@ -41,6 +41,15 @@ impl<'a> HostEvaluator<'a> {
         self.controller.in_terminal_phase()
     }
 
+    /// The controller's own states ζ as the evaluator keeps them (empty without a dynamic extension).
+    pub fn extension(&self) -> Vec<f64> {
+        self.controller
+            .extension()
+            .iter()
+            .map(|&v| f64::from(v))
+            .collect()
+    }
+
     /// One accepted step: the status and the input the firmware must reply.
     pub fn step(&mut self, x: &[f32]) -> (Status, Input) {
         let (status, u) = match self.controller.step_plant(x) {
@@ -73,6 +82,10 @@ pub struct Trace {
     pub states: Vec<Vec<f64>>,
     /// The firmware's replies, one per step.
     pub replies: Vec<Reply>,
+    /// The controller's own states ζ at each sample (`ζ(0)` … `ζ(steps)`), as the host evaluator keeps
+    /// them in step with the firmware: before the step at that sample, so ξ of sample k is read from
+    /// `states[k]` and `controller_states[k]`. Empty vectors for an image without a dynamic extension.
+    pub controller_states: Vec<Vec<f64>>,
 }
 
 impl Trace {
@@ -156,6 +169,7 @@ pub fn run_with(
     let mut trace = Trace {
         states: vec![x0.to_vec()],
         replies: Vec::with_capacity(steps),
+        controller_states: vec![host.extension()],
     };
     let mut x = x0.to_vec();
     for k in 0..steps {
@@ -165,6 +179,7 @@ pub fn run_with(
         x = plant(&x, &u).map_err(|e| HilError::Check(format!("seq {seq}: the plant: {e}")))?;
         trace.states.push(x.clone());
         trace.replies.push(reply);
+        trace.controller_states.push(host.extension());
     }
     Ok(trace)
 }

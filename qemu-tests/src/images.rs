@@ -17,7 +17,9 @@
 //! of the sampled closed loop and the ball covers Init's corners. Not certified: it exercises the
 //! section, the interpreter and the loop. [`fl_4_9_certified`]: the certified image `synth` makes from
 //! the same spec, [`fl_pendulum_certified`] the one of the torque-driven pendulum
-//! (`examples/fl-pendulum.toml`), and [`accepted_starts`] for their runs.
+//! (`examples/fl-pendulum.toml`), [`flat_quadrotor_certified`] the differentially flat planar quadrotor's
+//! (`examples/flat-quadrotor.toml`, a controller with states of its own), and [`accepted_starts`] for
+//! their runs.
 #![allow(non_snake_case)]
 
 use crate::plant::{double_integrator as double_integrator_plant, ContinuousPlant, DiscretePlant};
@@ -377,6 +379,16 @@ pub fn fl_pendulum_certified() -> Result<(Task, Synthesis), ImageBuildError> {
     ))
 }
 
+/// The certified image of the differentially flat planar quadrotor (`examples/flat-quadrotor.toml`: the
+/// chain in its flat state q, the thrust and its rate kept by the controller), as [`fl_4_9_certified`]
+/// makes Example 4.9's.
+pub fn flat_quadrotor_certified() -> Result<(Task, Synthesis), ImageBuildError> {
+    fl_certified(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../examples/flat-quadrotor.toml"
+    ))
+}
+
 /// The certified image `synth` makes from a feedback-linearizable spec, with its task; verified by Monte
 /// Carlo (64 interior states and 2 per ball), without the falsifier.
 fn fl_certified(path: &str) -> Result<(Task, Synthesis), ImageBuildError> {
@@ -395,7 +407,8 @@ fn fl_certified(path: &str) -> Result<(Task, Synthesis), ImageBuildError> {
 }
 
 /// `count` initial plant states drawn in Init (seeded) whose ξ the image's selection accepts, for an image
-/// of a feedback-linearizable task.
+/// of a feedback-linearizable task (of a flat one: ξ read with the controller's initial states ζ0, as a
+/// run starts).
 pub fn accepted_starts(
     task: &Task,
     image: image::Image<'_>,

@@ -444,7 +444,19 @@ impl Region for InOutput {
         self.n
     }
     fn contains(&self, x: &[f64]) -> bool {
-        x.len() == self.n && self.inner.contains(&self.output(x))
+        if x.len() != self.n {
+            return false;
+        }
+        // A small output on the stack: membership is asked at every sample, and between samples, of every
+        // verifier run, where allocating y cost more than the test itself.
+        let mut buf = [0.0; 8];
+        match buf.get_mut(..self.p) {
+            Some(y) => {
+                linalg::matvec(&self.C, self.p, self.n, x, y);
+                self.inner.contains(y)
+            }
+            None => self.inner.contains(&self.output(x)),
+        }
     }
     fn dist(&self, x: &[f64], metric: &Metric) -> Witness {
         Witness::or_invalid(self.try_dist(x, metric))

@@ -291,6 +291,46 @@ impl Polytope {
         Witness { value, point }
     }
 
+    /// The distance from an outside point to an axis-aligned box (every nonzero row of A has one nonzero
+    /// entry) in a diagonal metric, in closed form: the QP (7.1) separates by coordinate, and each
+    /// coordinate's nearest value is x's clamped to the box's interval on that axis. `None` when the set
+    /// is not such a box or R is not diagonal (the QP answers then). The goal and obstacle boxes of a task
+    /// meet this at every sample of a verifier's margin runs, where the QP was most of the run's cost.
+    fn dist_box(&self, x: &[f64], R: &[f64]) -> Option<Witness> {
+        let n = self.n;
+        let diagonal = (0..n).all(|i| (0..n).all(|j| i == j || R[i * n + j] == 0.0));
+        if !diagonal {
+            return None;
+        }
+        let mut lo = vec![f64::NEG_INFINITY; n];
+        let mut hi = vec![f64::INFINITY; n];
+        for (row, &b) in self.A.chunks_exact(n).zip(&self.b) {
+            let mut nonzero = row.iter().enumerate().filter(|(_, a)| **a != 0.0);
+            let Some((j, &a)) = nonzero.next() else {
+                continue;
+            };
+            if nonzero.next().is_some() {
+                return None;
+            }
+            let bound = b / a;
+            if a > 0.0 {
+                hi[j] = hi[j].min(bound);
+            } else {
+                lo[j] = lo[j].max(bound);
+            }
+        }
+        if lo.iter().zip(&hi).any(|(l, h)| l > h) {
+            return None;
+        }
+        let point: Vec<f64> = (0..n).map(|j| x[j].clamp(lo[j], hi[j])).collect();
+        let value = (0..n)
+            .map(|j| R[j * n + j] * (point[j] - x[j]).powi(2))
+            .sum::<f64>()
+            .max(0.0)
+            .sqrt();
+        Some(Witness { value, point })
+    }
+
     fn depth_inside(&self, x: &[f64], steps: &FacetSteps) -> Witness {
         let n = self.n;
         let slack: Vec<f64> = (0..self.k)
@@ -441,6 +481,9 @@ impl Region for Polytope {
         if self.k == 1 {
             return Ok(self.dist_half_space(x, &steps));
         }
+        if let Some(w) = self.dist_box(x, &steps.R) {
+            return Ok(w);
+        }
         self.project(x, &steps.R)
     }
     fn try_depth(&self, x: &[f64], metric: &Metric) -> Result<Witness, GeometryError> {
@@ -485,6 +528,41 @@ mod tests {
         assert!((w.value - 0.5).abs() < 1e-15);
         assert_eq!(w.point, vec![1.0, -0.2]);
         assert!((p.signed_dist(&[2.0, 0.0], &m).value + 1.0).abs() < 1e-10);
+    }
+
+    #[test]
+    fn a_box_in_a_diagonal_metric_is_answered_in_closed_form_as_the_qp_answers() {
+        // A box with a redundant row, in a diagonal metric: the closed form against the QP itself.
+        let (A, b) = (
+            vec![1.0, 0.0, -2.0, 0.0, 0.0, 1.0, 0.0, -1.0, 0.0, 3.0],
+            vec![1.0, 2.0, 2.0, 1.0, 9.0],
+        );
+        let p = Polytope::new(2, A, b).unwrap();
+        let m = Metric::new(2, vec![4.0, 0.0, 0.0, 0.25]).unwrap();
+        let steps = p.steps(&m).unwrap();
+        for x in [[3.0, 4.0], [-5.0, 0.5], [0.0, -7.0], [-2.0, 2.5]] {
+            let closed = p.dist(&x, &m);
+            let qp = p.project(&x, &steps.R).unwrap();
+            assert!(
+                (closed.value - qp.value).abs() < 1e-9,
+                "{x:?}: {closed:?} {qp:?}"
+            );
+            for (a, b) in closed.point.iter().zip(&qp.point) {
+                assert!((a - b).abs() < 1e-8, "{x:?}: {closed:?} {qp:?}");
+            }
+        }
+        // x₀ ∈ [−1, 1], x₁ ∈ [−1, 2]: from (3, 4) the nearest point is (1, 2), at √(4·4 + 0.25·4).
+        let w = p.dist(&[3.0, 4.0], &m);
+        assert_eq!(w.point, vec![1.0, 2.0]);
+        assert!((w.value - 17.0_f64.sqrt()).abs() < 1e-15);
+        // A non-diagonal metric or a slanted row is the QP's.
+        let full = Metric::new(2, vec![2.0, 0.5, 0.5, 1.0]).unwrap();
+        assert!(p
+            .dist_box(&[3.0, 4.0], &p.steps(&full).unwrap().R)
+            .is_none());
+        let slanted =
+            Polytope::new(2, vec![1.0, 1.0, -1.0, 0.0, 0.0, -1.0], vec![1.0, 0.0, 0.0]).unwrap();
+        assert!(slanted.dist_box(&[3.0, 4.0], &steps.R).is_none());
     }
 
     #[test]

@@ -17,8 +17,12 @@
 //! `nonlinear_step_instructions_max`: the largest cost of one control step of an image with model maps
 //! (a feedback-linearizable plant: ξ = coords(x), the feedforward law, u = input_map(x, w)), over the
 //! closed loops of the certified Example 4.9 image (`qemu_tests::images::fl_4_9_certified`, synthesised
-//! here: the selection over all its balls at κ = 0, the input map λ(x)w with its sin and cos of θ) from
-//! 12 seeded starts in Init over the task's horizon, against the nonlinear plant integrated on the host.
+//! here: the selection over all its balls at κ = 0, the input map λ(x)w with its sin and cos of θ) and of
+//! the certified flat quadrotor image (`qemu_tests::images::flat_quadrotor_certified`: q from the plant
+//! state and the controller's thrust and its rate, with atan2 and a square root; u and the next
+//! controller states from the snap), from 12 seeded starts in Init each over the task's horizon, against
+//! the nonlinear plant integrated on the host; `nonlinear_step_instructions_max_fl_4_9` and
+//! `_flat_quadrotor` are the two parts, `model_program_bytes_flat_quadrotor` the quadrotor's programs.
 //! `nonlinear_step_instructions_max_one_ball` is the same on the hand-built one-ball image of
 //! `qemu_tests::images::fl_4_9` (u = R(θ)w) from its five starts; `model_program_bytes` is the size of
 //! that image's two programs.
@@ -94,7 +98,7 @@ fn run() -> Result<(), Box<dyn std::error::Error>> {
         "pwa_double_integrator",
     )?;
     let (hybrid_max, hybrid_stack) = hybrid_step_max()?;
-    let (nonlinear_max, nonlinear_hand_max, nonlinear_stack, program_bytes) = nonlinear_step_max()?;
+    let nl = nonlinear_step_max()?;
     let size = qemu_tests::elf_size(&std::fs::read(&elf)?)?;
     let rows = [
         Row::new(
@@ -104,18 +108,33 @@ fn run() -> Result<(), Box<dyn std::error::Error>> {
         ),
         Row::new(
             "nonlinear_step_instructions_max",
-            nonlinear_max as f64,
-            "instructions (certified Ex 4.9 image with model maps, programs included)",
+            nl.certified_fl_4_9.max(nl.certified_flat_quadrotor) as f64,
+            "instructions (certified Ex 4.9 and flat quadrotor images, programs included)",
+        ),
+        Row::new(
+            "nonlinear_step_instructions_max_fl_4_9",
+            nl.certified_fl_4_9 as f64,
+            "instructions (certified Ex 4.9 image)",
+        ),
+        Row::new(
+            "nonlinear_step_instructions_max_flat_quadrotor",
+            nl.certified_flat_quadrotor as f64,
+            "instructions (certified flat quadrotor image, controller states kept)",
         ),
         Row::new(
             "nonlinear_step_instructions_max_one_ball",
-            nonlinear_hand_max as f64,
+            nl.hand_built as f64,
             "instructions (hand-built one-ball Ex 4.9 image)",
         ),
         Row::new(
             "model_program_bytes",
-            program_bytes as f64,
+            nl.program_bytes as f64,
             "bytes (Ex 4.9)",
+        ),
+        Row::new(
+            "model_program_bytes_flat_quadrotor",
+            nl.flat_program_bytes as f64,
+            "bytes (flat quadrotor: q from (x, T, Ṫ); u and ζ⁺ from (x, T, Ṫ, w))",
         ),
         Row::new("pwa_step_instructions_max", pwa_max as f64, "instructions"),
         Row::new(
@@ -142,7 +161,7 @@ fn run() -> Result<(), Box<dyn std::error::Error>> {
                 .max(pwa_stack)
                 .max(pwa_di_stack)
                 .max(hybrid_stack)
-                .max(nonlinear_stack) as f64,
+                .max(nl.stack) as f64,
             "bytes (measured: painted-stack high-water mark, every image mode)",
         ),
     ];
@@ -284,10 +303,10 @@ fn hybrid_step_max() -> Result<(u32, u64), Box<dyn std::error::Error>> {
 }
 
 /// The nonlinear rows (module doc): the largest cost of any reply over the closed loops of the certified
-/// Example 4.9 image from 12 seeded starts in Init (each over the task's horizon) and of the hand-built
-/// one-ball image from its five starts, the stack high-water mark, and the bytes of the hand-built image's
-/// model programs. Returns (certified max, hand-built max, stack, program bytes).
-fn nonlinear_step_max() -> Result<(u32, u32, u64, usize), Box<dyn std::error::Error>> {
+/// Example 4.9 and flat quadrotor images from 12 seeded starts in Init each (over the task's horizon) and
+/// of the hand-built one-ball image from its five starts, the stack high-water mark, and the bytes of the
+/// model programs.
+fn nonlinear_step_max() -> Result<NonlinearCosts, Box<dyn std::error::Error>> {
     use qemu_tests::nonlinear::PlantFlow;
     let (task, s) = images::fl_4_9_certified()?;
     let maps = task
@@ -313,6 +332,32 @@ fn nonlinear_step_max() -> Result<(u32, u32, u64, usize), Box<dyn std::error::Er
         task.steps
     );
 
+    let (task, s) = images::flat_quadrotor_certified()?;
+    let maps = task
+        .plant
+        .linearization()
+        .ok_or("the flat quadrotor is linearised in its flat state")?;
+    let elf = firmware_with("flat_quadrotor_certified_bench", &s.image)?;
+    let img = decode(&s.image).map_err(qemu_tests::HilError::Image)?;
+    let starts = images::accepted_starts(&task, img, 12, 3_15)?;
+    let h = maps.plant.period();
+    let mut flat = 0u32;
+    for x0 in &starts {
+        let (m, st) = session(&elf, img, x0, task.steps, |x, u| {
+            PlantFlow::flow(&maps.plant, x, u, h)
+        })?;
+        flat = flat.max(m);
+        stack = stack.max(st);
+    }
+    let flat_program_bytes = maps.coords.bytes.len() + maps.input_map.bytes.len();
+    println!(
+        "nonlinear (flat quadrotor certified, controller states T and Ṫ): {} balls, {} runs of {} steps, \
+         programs {flat_program_bytes} bytes, max step {flat} instructions",
+        s.trajectories.len(),
+        starts.len(),
+        task.steps
+    );
+
     let t = images::fl_4_9()?;
     let elf = firmware_with("fl_4_9_bench", &t.bytes)?;
     let img = decode(&t.bytes).map_err(qemu_tests::HilError::Image)?;
@@ -331,7 +376,30 @@ fn nonlinear_step_max() -> Result<(u32, u32, u64, usize), Box<dyn std::error::Er
         starts.len(),
         t.program_bytes
     );
-    Ok((certified, hand, stack, t.program_bytes))
+    Ok(NonlinearCosts {
+        certified_fl_4_9: certified,
+        certified_flat_quadrotor: flat,
+        hand_built: hand,
+        stack,
+        program_bytes: t.program_bytes,
+        flat_program_bytes,
+    })
+}
+
+/// What [`nonlinear_step_max`] measures (module doc).
+struct NonlinearCosts {
+    /// The largest step cost over the certified Example 4.9 image's runs.
+    certified_fl_4_9: u32,
+    /// The same over the certified flat quadrotor image's runs.
+    certified_flat_quadrotor: u32,
+    /// The same over the hand-built one-ball Example 4.9 image's runs.
+    hand_built: u32,
+    /// The stack high-water mark over all of them.
+    stack: u64,
+    /// The hand-built Example 4.9 image's two programs, in bytes.
+    program_bytes: usize,
+    /// The flat quadrotor image's two programs, in bytes.
+    flat_program_bytes: usize,
 }
 
 /// The firmware built with `bytes` as its image; `tag` names the image file and the ELF copy.

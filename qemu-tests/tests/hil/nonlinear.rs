@@ -10,7 +10,10 @@
 //! plant (Goal within T; Unsafe never entered and every input in ‖F‖ ≤ 2 before Goal), bit for bit with
 //! the host, and the worst step cost is printed. The same for the torque-driven pendulum
 //! (`examples/fl-pendulum.toml`, a law that depends on ξ, bounded over its operating region), whose runs
-//! must also stay inside that region.
+//! must also stay inside that region. And the differentially flat planar quadrotor
+//! (`examples/flat-quadrotor.toml`): the firmware keeps the thrust and its rate as states of its own, the
+//! host evaluator keeps them in step, and each sample's ξ is the flat state q read with them (its
+//! operating region, over q, is part of Unsafe).
 //!
 //! Last, an MTL task on a feedback-linearizable plant (issue #14; Theorem 4.2 on the model in ξ with the
 //! mismatch D): the pendulum's swing-up profile (`examples/fl-pendulum-mtl.toml`), one ball certified for
@@ -24,7 +27,8 @@ use host_compiler::verify::input_slack;
 use qemu_tests::closed_loop::{run_with, HostEvaluator};
 use qemu_tests::firmware::{self, FirmwareConfig};
 use qemu_tests::images::{
-    accepted_starts, fl_4_9, fl_4_9_certified, fl_pendulum_certified, FL_TABLE_LEN,
+    accepted_starts, fl_4_9, fl_4_9_certified, fl_pendulum_certified, flat_quadrotor_certified,
+    FL_TABLE_LEN,
 };
 use qemu_tests::nonlinear::PlantFlow;
 use qemu_tests::qemu::Qemu;
@@ -101,6 +105,17 @@ fn fl_pendulum_certified_image_meets_the_spec_from_50_starts() {
     certified_image_meets_the_spec_from_50_starts("fl_pendulum_certified", &task, &s, 2026);
 }
 
+#[test]
+fn flat_quadrotor_certified_image_meets_the_spec_from_50_starts() {
+    let (task, s) = flat_quadrotor_certified().unwrap_or_else(|e| panic!("{e}"));
+    assert!(
+        s.coverage.lower >= 0.99,
+        "coverage lower bound {}",
+        s.coverage.lower
+    );
+    certified_image_meets_the_spec_from_50_starts("flat_quadrotor_certified", &task, &s, 3_15);
+}
+
 /// 50 seeded starts in Init that the image accepts, each run on the firmware against the plant's flow:
 /// Goal within T; before it, no sample in Unsafe or outside the operating region, every reply `Ok`
 /// with its input in the plant's input set, bit for bit with the host evaluator (`run_with`).
@@ -143,14 +158,20 @@ fn certified_image_meets_the_spec_from_50_starts(
             PlantFlow::flow(&maps.plant, x, u, h)
         })
         .unwrap_or_else(|e| panic!("{name} run {r} from {x0:?}: {e}"));
-        let goal_at = trace
+        // ξ of each sample, read with the controller's states there (a flat plant's thrust and its rate).
+        let xi: Vec<Vec<f64>> = trace
             .states
             .iter()
-            .position(|x| goal.contains(&maps.xi_of(x)))
+            .zip(&trace.controller_states)
+            .map(|(x, z)| maps.xi_at(x, z))
+            .collect();
+        let goal_at = xi
+            .iter()
+            .position(|xi| goal.contains(xi))
             .unwrap_or_else(|| panic!("{name} run {r} from {x0:?} never reaches Goal"));
         for (k, x) in trace.states.iter().enumerate().take(goal_at + 1) {
             assert!(
-                unsafe_set.is_none_or(|us| !us.contains(&maps.xi_of(x))),
+                unsafe_set.is_none_or(|us| !us.contains(&xi[k])),
                 "{name} run {r}: Unsafe at sample {k}"
             );
             assert!(
