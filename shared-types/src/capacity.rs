@@ -62,6 +62,9 @@ pub const MAX_PROGRAM_INPUTS: usize = 64;
 pub const MAX_PROGRAM_OUTPUTS: usize = 64;
 /// Largest operand-stack depth of a model program: the evaluator's stack is a `[f32; MAX_PROGRAM_STACK]`.
 pub const MAX_PROGRAM_STACK: usize = 32;
+/// Registers of a model program (`TEE` and `RECALL`: a shared subexpression computed once): the
+/// evaluator keeps them in a `[f32; MAX_PROGRAM_REGS]`.
+pub const MAX_PROGRAM_REGS: usize = 32;
 /// Largest magnitude of an integer power `x^k` in a model program; the evaluator multiplies `|k| − 1`
 /// times (and divides once for `k < 0`).
 pub const MAX_PROGRAM_POWI: i8 = 16;

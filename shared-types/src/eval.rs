@@ -418,7 +418,11 @@ impl<'a> Controller<'a> {
             }
             coords_slots.get(..np + ne).unwrap_or(&[])
         };
-        if maps.coords().eval(coords_in, xi).is_err() || !xi.iter().all(|v| v.is_finite()) {
+        // One memo of library calls for both programs of the step (both need the same angles).
+        let mut memo = crate::program::Memo::new();
+        if maps.coords().eval_with(coords_in, xi, &mut memo).is_err()
+            || !xi.iter().all(|v| v.is_finite())
+        {
             return Err(Status::OutOfEnvelope);
         }
         let input_map = maps.input_map();
@@ -443,7 +447,7 @@ impl<'a> Controller<'a> {
                 else {
                     return Err(Status::OutOfEnvelope);
                 };
-                if input_map.eval(inputs, out).is_err() {
+                if input_map.eval_with(inputs, out, &mut memo).is_err() {
                     return Err(Status::OutOfEnvelope);
                 }
                 let Some((u_out, next)) = out.split_at_checked(mp) else {

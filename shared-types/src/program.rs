@@ -4,7 +4,8 @@
 //!
 //! [`Program::decode`] validates every byte before anything runs: the length against
 //! [`MAX_PROGRAM_LEN`], the counts against their capacities, every constant finite, every opcode known,
-//! every slot, constant and output index in range, and the stack depth by one forward pass (no underflow,
+//! every slot, constant, register and output index in range (a register read only after a write), and
+//! the stack depth by one forward pass (no underflow,
 //! never beyond [`MAX_PROGRAM_STACK`], equal to the depth the header stores, empty at the end), and that
 //! every output is stored exactly once. A decoded program then evaluates with a fixed `[f32;
 //! MAX_PROGRAM_STACK]` stack in one pass over at most [`MAX_PROGRAM_LEN`] bytes of code, so its cost is
@@ -30,6 +31,8 @@
 //! | `0x01` LOAD | slot `u8` | push `inputs[slot]` |
 //! | `0x02` CONST | index `u16` | push `consts[index]` |
 //! | `0x03` STORE | output `u8` | pop into `out[output]` |
+//! | `0x04` TEE | register `u8` | copy the top into `regs[register]` (the top stays) |
+//! | `0x05` RECALL | register `u8` | push `regs[register]`; a register no earlier `TEE` wrote is refused |
 //! | `0x10`–`0x13` ADD SUB MUL DIV | — | pop `b`, pop `a`, push `a ∘ b` |
 //! | `0x14` NEG | — | negate the top |
 //! | `0x15` POWI | exponent `i8`, `1 ≤ |k| ≤ MAX_PROGRAM_POWI` | `x^|k|` by `|k| − 1` multiplications left to right, then `1 / ·` if `k < 0` |
@@ -40,13 +43,15 @@
 
 use crate::capacity::{
     MAX_PROGRAM_CONSTS, MAX_PROGRAM_INPUTS, MAX_PROGRAM_LEN, MAX_PROGRAM_OUTPUTS, MAX_PROGRAM_POWI,
-    MAX_PROGRAM_STACK,
+    MAX_PROGRAM_REGS, MAX_PROGRAM_STACK,
 };
 use crate::error::{Dim, Field, ImageError, Pos};
 use crate::raw::{check_dim, check_finite, f32_at, sat16, sat32, u16_at};
 
 // The interpreter masks stack indices with the capacity ([`Program::eval`]).
 const _: () = assert!(MAX_PROGRAM_STACK.is_power_of_two());
+// And register indices alike; the decoder's bit set of written registers is a `u32`.
+const _: () = assert!(MAX_PROGRAM_REGS.is_power_of_two() && MAX_PROGRAM_REGS <= 32);
 
 /// Bytes of a program's header.
 pub const PROGRAM_HEADER_LEN: usize = 8;
@@ -59,6 +64,10 @@ pub mod opcode {
     pub const CONST: u8 = 0x02;
     /// Pop into an output.
     pub const STORE: u8 = 0x03;
+    /// Copy the top into a register.
+    pub const TEE: u8 = 0x04;
+    /// Push a register.
+    pub const RECALL: u8 = 0x05;
     /// `a + b`.
     pub const ADD: u8 = 0x10;
     /// `a − b`.
@@ -160,6 +169,10 @@ pub enum Op {
     Const(u16),
     /// Pop into output `i`.
     Store(u8),
+    /// Copy the top into register `i` (the top stays).
+    Tee(u8),
+    /// Push register `i`.
+    Recall(u8),
     /// Pop `b`, pop `a`, push `a + b`.
     Add,
     /// Pop `b`, pop `a`, push `a − b`.
@@ -182,8 +195,9 @@ impl Op {
     /// Values popped and pushed.
     pub const fn arity(self) -> (usize, usize) {
         match self {
-            Op::Load(_) | Op::Const(_) => (0, 1),
+            Op::Load(_) | Op::Const(_) | Op::Recall(_) => (0, 1),
             Op::Store(_) => (1, 0),
+            Op::Tee(_) => (1, 1),
             Op::Add | Op::Sub | Op::Mul | Op::Div | Op::Atan2 => (2, 1),
             Op::Neg | Op::Powi(_) | Op::Func(_) => (1, 1),
         }
@@ -198,6 +212,8 @@ impl Op {
                 ([opcode::CONST, b[0], b[1]], 3)
             }
             Op::Store(i) => ([opcode::STORE, i, 0], 2),
+            Op::Tee(i) => ([opcode::TEE, i, 0], 2),
+            Op::Recall(i) => ([opcode::RECALL, i, 0], 2),
             Op::Add => ([opcode::ADD, 0, 0], 1),
             Op::Sub => ([opcode::SUB, 0, 0], 1),
             Op::Mul => ([opcode::MUL, 0, 0], 1),
@@ -244,6 +260,8 @@ fn decode_op(code: &[u8], offset: usize) -> Result<(Op, usize), ImageError> {
     let op = match byte {
         opcode::LOAD => (Op::Load(operand(1).ok_or(bad)?), 2),
         opcode::STORE => (Op::Store(operand(1).ok_or(bad)?), 2),
+        opcode::TEE => (Op::Tee(operand(1).ok_or(bad)?), 2),
+        opcode::RECALL => (Op::Recall(operand(1).ok_or(bad)?), 2),
         opcode::CONST => {
             if operand(2).is_none() {
                 return Err(bad);
@@ -333,16 +351,23 @@ impl<'a> Program<'a> {
         let mut depth = 0usize;
         let mut max_depth = 0usize;
         let mut stored = 0u64;
+        let mut written = 0u32;
         let mut offset = 0usize;
         while offset < code.len() {
             let (op, len) = decode_op(code, offset)?;
             let at = sat16(offset);
+            let reg_bit = |i: u8| 1u32.checked_shl(u32::from(i)).unwrap_or(0);
             let in_range = match op {
                 Op::Load(i) => i < n_inputs,
                 Op::Const(i) => usize::from(i) < n_consts,
                 Op::Store(i) => i < n_outputs,
+                Op::Tee(i) => usize::from(i) < MAX_PROGRAM_REGS,
+                Op::Recall(i) => usize::from(i) < MAX_PROGRAM_REGS && written & reg_bit(i) != 0,
                 _ => true,
             };
+            if let Op::Tee(i) = op {
+                written |= reg_bit(i);
+            }
             if !in_range {
                 return Err(ImageError::ProgramOperand { offset: at });
             }
@@ -428,9 +453,21 @@ impl<'a> Program<'a> {
     /// Evaluates the program: `inputs` has [`Self::n_inputs`] values, `out` receives
     /// [`Self::n_outputs`]. Slices of other lengths are refused with [`ImageError::ProgramArity`].
     /// Non-finite inputs or results are not refused here: the caller judges the outputs.
+    pub fn eval(&self, inputs: &[f32], out: &mut [f32]) -> Result<(), ImageError> {
+        self.eval_with(inputs, out, &mut Memo::new())
+    }
+
+    /// [`Program::eval`] with the library calls remembered in `memo`, which may hold calls of an
+    /// earlier program of the same step (the coordinates and the input map both need sin θ): the
+    /// results are the same bits either way.
     // `tos = under + tos`, not `tos += under`: the operands stay in the table's order a ∘ b.
     #[allow(clippy::assign_op_pattern)]
-    pub fn eval(&self, inputs: &[f32], out: &mut [f32]) -> Result<(), ImageError> {
+    pub fn eval_with(
+        &self,
+        inputs: &[f32],
+        out: &mut [f32],
+        memo: &mut Memo,
+    ) -> Result<(), ImageError> {
         if inputs.len() != self.n_inputs() {
             return Err(ImageError::ProgramArity {
                 expected: self.n_inputs.into(),
@@ -449,8 +486,9 @@ impl<'a> Program<'a> {
         // compiler drop the bounds checks, and no path can panic. One dispatch on the opcode byte per
         // instruction; the arithmetic is that of the instruction table, in code order.
         const MASK: usize = MAX_PROGRAM_STACK - 1;
+        const REG_MASK: usize = MAX_PROGRAM_REGS - 1;
         let mut stack = [0.0f32; MAX_PROGRAM_STACK];
-        let mut memo = Memo::new();
+        let mut regs = [0.0f32; MAX_PROGRAM_REGS];
         let mut sp = 0usize;
         let mut tos = 0.0f32;
         let code = self.code;
@@ -488,6 +526,14 @@ impl<'a> Program<'a> {
                         *o = tos;
                     }
                     tos = pop_under!();
+                    2
+                }
+                opcode::TEE => {
+                    regs[usize::from(a) & REG_MASK] = tos;
+                    2
+                }
+                opcode::RECALL => {
+                    push!(regs[usize::from(a) & REG_MASK]);
                     2
                 }
                 opcode::ADD => {
@@ -536,19 +582,27 @@ impl<'a> Program<'a> {
 /// How many library calls one evaluation remembers ([`Memo`]).
 const MEMO_LEN: usize = 4;
 
-/// The library calls already made in one evaluation, by function and argument bits: the bytecode has no
-/// shared subexpressions, so a program that needs sin θ in two outputs (a rotation) would otherwise pay
-/// for it twice, and a call costs far more on the target than a few comparisons (`libm` computes in f64,
-/// which a Cortex-M4F emulates). The functions are pure, so a remembered value has exactly the bits a
-/// new call would give. Oldest entry replaced first; bounded by [`MEMO_LEN`].
-struct Memo {
+/// The library calls already made in one step, by function and argument bits: a program shares a
+/// subexpression through its registers, but two programs of one step (the coordinates and the input
+/// map) and two equal arguments the compiler did not see as one expression would otherwise pay for a call
+/// twice, and a call costs far more on the target than a few comparisons (`libm` computes in f64, which a
+/// Cortex-M4F emulates). The functions are pure, so a remembered value has exactly the bits a new call
+/// would give. Oldest entry replaced first; bounded by [`MEMO_LEN`].
+pub struct Memo {
     /// (opcode, argument bits, value); opcode 0 (no function has it) marks an empty entry.
     entries: [(u8, u32, f32); MEMO_LEN],
     next: usize,
 }
 
+impl Default for Memo {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
 impl Memo {
-    fn new() -> Self {
+    /// Nothing remembered.
+    pub fn new() -> Self {
         Memo {
             entries: [(0, 0, 0.0); MEMO_LEN],
             next: 0,

@@ -61,7 +61,7 @@ pub struct CFile {
 
 /// The template with every `@NAME@` placeholder replaced.
 fn fill(template: &str) -> String {
-    let values: [(&str, usize); 23] = [
+    let values: [(&str, usize); 24] = [
         ("FORMAT_VERSION", FORMAT_VERSION as usize),
         ("MAX_N", capacity::MAX_N),
         ("MAX_M", capacity::MAX_M),
@@ -86,6 +86,7 @@ fn fill(template: &str) -> String {
         ("MAX_PROGRAM_INPUTS", capacity::MAX_PROGRAM_INPUTS),
         ("MAX_PROGRAM_OUTPUTS", capacity::MAX_PROGRAM_OUTPUTS),
         ("MAX_PROGRAM_STACK", capacity::MAX_PROGRAM_STACK),
+        ("MAX_PROGRAM_REGS", capacity::MAX_PROGRAM_REGS),
         ("MAX_EXT", capacity::MAX_EXT),
         (
             "MAX_PROGRAM_POWI",

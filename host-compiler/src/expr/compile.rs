@@ -1,15 +1,19 @@
 //! Compiling expressions to the target's model program (`shared_types::program`): postfix code with a
 //! deduplicated constant pool, parameters bound to their values, and the operands of `+` and `·`
 //! ordered so that the deeper side runs first (Sethi–Ullman), which lowers the stack depth without
-//! changing a single result bit (f32 addition and multiplication are commutative). The bytes are judged
-//! by `Program::decode` before they are returned, and every size is checked against the capacities.
+//! changing a single result bit (f32 addition and multiplication are commutative). A subexpression that
+//! occurs more than once over all the outputs (a derived map repeats sin θ, T/m, their products, …) is
+//! computed once, kept in a register (`TEE`) and recalled (`RECALL`) where it recurs: the same bits,
+//! since its f32 evaluation does not depend on where it stands. The bytes are judged by
+//! `Program::decode` before they are returned, and every size is checked against the capacities.
 //!
 //! Slot layout of the program's inputs: states `x_0..x_{n−1}` in slots `0..n`, then inputs `u_0..u_{m−1}`
 //! in slots `n..n+m`. Parameters are constants of the pool.
 
 use super::{Expr, ExprError, Var};
 use shared_types::capacity::{
-    MAX_PROGRAM_CONSTS, MAX_PROGRAM_INPUTS, MAX_PROGRAM_LEN, MAX_PROGRAM_OUTPUTS, MAX_PROGRAM_STACK,
+    MAX_PROGRAM_CONSTS, MAX_PROGRAM_INPUTS, MAX_PROGRAM_LEN, MAX_PROGRAM_OUTPUTS, MAX_PROGRAM_REGS,
+    MAX_PROGRAM_STACK,
 };
 use shared_types::program::{write_header, Op, Program, PROGRAM_HEADER_LEN};
 use std::collections::HashMap;
@@ -45,11 +49,102 @@ impl Compiled {
     }
 }
 
-struct Gen {
+struct Gen<'e> {
     code: Vec<u8>,
     pool: Vec<f64>,
     index: HashMap<u64, u16>,
     n_states: usize,
+    /// The stack depth after the code so far, and the most it reached.
+    depth: usize,
+    max_depth: usize,
+    /// Every compound subtree's structural hash, by address ([`hash_tree`]).
+    hashes: HashMap<*const Expr, u64>,
+    /// Per hash, the distinct subtrees with it: how often each is used once shared ones are computed once
+    /// ([`count_uses`]), and the register holding it once computed.
+    uses: HashMap<u64, Vec<Use<'e>>>,
+    /// Registers handed out.
+    regs: usize,
+}
+
+/// A compound subtree of the outputs: how many times the code needs its value, and its register.
+struct Use<'e> {
+    tree: &'e Expr,
+    count: usize,
+    reg: Option<u8>,
+}
+
+/// Whether `e` is a leaf (a load or a constant: as cheap as a recall).
+fn leaf(e: &Expr) -> bool {
+    matches!(e, Expr::Const(_) | Expr::Var(_))
+}
+
+/// The structural hash of `e` (equal trees hash alike), recorded with every compound subtree's in `out`.
+fn hash_tree(e: &Expr, out: &mut HashMap<*const Expr, u64>) -> u64 {
+    use std::hash::{Hash, Hasher};
+    // SipHash with fixed keys: the same on every run, so the program's bytes are too.
+    let mut h = std::collections::hash_map::DefaultHasher::new();
+    std::mem::discriminant(e).hash(&mut h);
+    match e {
+        Expr::Const(v) => v.to_bits().hash(&mut h),
+        Expr::Var(v) => v.hash(&mut h),
+        Expr::Neg(a) => hash_tree(a, out).hash(&mut h),
+        Expr::Pow(a, k) => {
+            hash_tree(a, out).hash(&mut h);
+            k.hash(&mut h);
+        }
+        Expr::Func(f, a) => {
+            f.hash(&mut h);
+            hash_tree(a, out).hash(&mut h);
+        }
+        Expr::Add(a, b)
+        | Expr::Sub(a, b)
+        | Expr::Mul(a, b)
+        | Expr::Div(a, b)
+        | Expr::Atan2(a, b) => {
+            hash_tree(a, out).hash(&mut h);
+            hash_tree(b, out).hash(&mut h);
+        }
+    }
+    let v = h.finish();
+    if !leaf(e) {
+        out.insert(e as *const Expr, v);
+    }
+    v
+}
+
+/// Counts the uses of every compound subtree of `e` into `uses`, not descending into one already seen
+/// (its inside is computed once, with it).
+fn count_uses<'e>(
+    e: &'e Expr,
+    hashes: &HashMap<*const Expr, u64>,
+    uses: &mut HashMap<u64, Vec<Use<'e>>>,
+) {
+    if leaf(e) {
+        return;
+    }
+    let h = hashes[&(e as *const Expr)];
+    let bucket = uses.entry(h).or_default();
+    if let Some(u) = bucket.iter_mut().find(|u| *u.tree == *e) {
+        u.count += 1;
+        return;
+    }
+    bucket.push(Use {
+        tree: e,
+        count: 1,
+        reg: None,
+    });
+    match e {
+        Expr::Const(_) | Expr::Var(_) => {}
+        Expr::Neg(a) | Expr::Pow(a, _) | Expr::Func(_, a) => count_uses(a, hashes, uses),
+        Expr::Add(a, b)
+        | Expr::Sub(a, b)
+        | Expr::Mul(a, b)
+        | Expr::Div(a, b)
+        | Expr::Atan2(a, b) => {
+            count_uses(a, hashes, uses);
+            count_uses(b, hashes, uses);
+        }
+    }
 }
 
 /// Stack depth the postfix code of `e` needs (with the operand order [`Gen::emit`] chooses).
@@ -65,10 +160,49 @@ fn need(e: &Expr) -> usize {
     }
 }
 
-impl Gen {
+impl<'e> Gen<'e> {
     fn op(&mut self, op: Op) {
         let (b, len) = op.encode();
         self.code.extend_from_slice(&b[..len]);
+        let (pops, pushes) = op.arity();
+        self.depth = self.depth.saturating_sub(pops) + pushes;
+        self.max_depth = self.max_depth.max(self.depth);
+    }
+
+    /// The use record of the compound subtree `e`.
+    fn use_of(&mut self, e: &Expr) -> Option<&mut Use<'e>> {
+        let h = *self.hashes.get(&(e as *const Expr))?;
+        self.uses
+            .get_mut(&h)?
+            .iter_mut()
+            .find(|u| std::ptr::eq(u.tree, e) || *u.tree == *e)
+    }
+
+    /// Emits `e`: recalled from its register when computed before; else computed, and teed into a new
+    /// register when the code needs it again (while registers last).
+    fn emit(&mut self, e: &'e Expr) -> Result<(), ExprError> {
+        if leaf(e) {
+            return self.emit_tree(e);
+        }
+        let (reg, shared) = match self.use_of(e) {
+            Some(u) => (u.reg, u.count > 1),
+            None => (None, false),
+        };
+        if let Some(r) = reg {
+            self.op(Op::Recall(r));
+            return Ok(());
+        }
+        self.emit_tree(e)?;
+        // The next free register after e's own code (which may have taken some for its inside).
+        if shared && self.regs < MAX_PROGRAM_REGS {
+            let r = self.regs as u8;
+            if let Some(u) = self.use_of(e) {
+                u.reg = Some(r);
+            }
+            self.regs += 1;
+            self.op(Op::Tee(r));
+        }
+        Ok(())
     }
 
     fn constant(&mut self, v: f64) -> Result<(), ExprError> {
@@ -98,7 +232,8 @@ impl Gen {
         Ok(())
     }
 
-    fn emit(&mut self, e: &Expr) -> Result<(), ExprError> {
+    /// The code of `e` itself (its operands through [`Gen::emit`]).
+    fn emit_tree(&mut self, e: &'e Expr) -> Result<(), ExprError> {
         if self.code.len() > MAX_PROGRAM_LEN {
             return Err(ExprError::Program(format!(
                 "the code is longer than {MAX_PROGRAM_LEN} bytes"
@@ -175,29 +310,45 @@ pub fn compile(
             outputs.len()
         )));
     }
-    let mut g = Gen {
-        code: Vec::new(),
-        pool: Vec::new(),
-        index: HashMap::new(),
-        n_states,
-    };
-    let mut depth = 0;
-    for (i, e) in outputs.iter().enumerate() {
-        let e = e.bind_params(params);
-        if let Some(bad) = out_of_range(&e, n_states, n_inputs) {
+    let bound: Vec<Expr> = outputs.iter().map(|e| e.bind_params(params)).collect();
+    for (i, e) in bound.iter().enumerate() {
+        if let Some(bad) = out_of_range(e, n_states, n_inputs) {
             return Err(ExprError::Program(format!(
                 "output {i} uses {bad:?}, outside the {n_states} states and {n_inputs} inputs"
             )));
         }
-        depth = depth.max(need(&e));
+        // The stack a tree needs without sharing bounds what it needs with it (a recall is one slot).
+        let depth = need(e);
         if depth > MAX_PROGRAM_STACK {
             return Err(ExprError::Program(format!(
                 "output {i} needs a stack of {depth} values, more than {MAX_PROGRAM_STACK}"
             )));
         }
-        g.emit(&e)?;
+    }
+    let mut hashes = HashMap::new();
+    for e in &bound {
+        hash_tree(e, &mut hashes);
+    }
+    let mut uses = HashMap::new();
+    for e in &bound {
+        count_uses(e, &hashes, &mut uses);
+    }
+    let mut g = Gen {
+        code: Vec::new(),
+        pool: Vec::new(),
+        index: HashMap::new(),
+        n_states,
+        depth: 0,
+        max_depth: 0,
+        hashes,
+        uses,
+        regs: 0,
+    };
+    for (i, e) in bound.iter().enumerate() {
+        g.emit(e)?;
         g.op(Op::Store(i as u8));
     }
+    let depth = g.max_depth;
     let len = PROGRAM_HEADER_LEN + 4 * g.pool.len() + g.code.len();
     if len > MAX_PROGRAM_LEN {
         return Err(ExprError::Program(format!(

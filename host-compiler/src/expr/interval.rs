@@ -619,8 +619,18 @@ pub fn rounding_bound(
     let slots: Vec<Interval> = x.iter().chain(u).copied().collect();
     let mut stack: Vec<Val> = Vec::with_capacity(p.max_stack());
     let mut out: Vec<Option<OutputBound>> = vec![None; p.n_outputs()];
+    // A register holds the value of the subexpression teed into it: the same enclosure and error bound
+    // wherever it is recalled (the target recalls the very bits it computed).
+    let mut regs: Vec<Option<Val>> = vec![None; shared_types::capacity::MAX_PROGRAM_REGS];
     for (_, op) in p.ops() {
         let v = match op {
+            Op::Tee(r) => {
+                regs[r as usize] = stack.last().copied();
+                continue;
+            }
+            Op::Recall(r) => {
+                regs[r as usize].expect("decode proved a register is written before read")
+            }
             Op::Load(i) => {
                 let i = i as usize;
                 let xi = slots.get(i).copied().ok_or(IntervalError::Unbound(

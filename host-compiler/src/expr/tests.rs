@@ -557,3 +557,38 @@ proptest! {
         }
     }
 }
+
+#[test]
+fn a_repeated_subexpression_is_computed_once_with_the_same_bits() {
+    use shared_types::program::{Func, Op};
+    let n = names();
+    // sin(x5)·x1 recurs within and across outputs, 1 + x2² twice, and sin(x5) also on its own (a
+    // shared subtree inside a shared subtree: each keeps its own register).
+    let exprs = [
+        "sin(x5)*x1 + sin(x5)*x1/(1 + x2^2)",
+        "(sin(x5)*x1)^2 - (1 + x2^2)",
+        "x3 + sin(x5)",
+    ]
+    .map(|t| parse(t, &n).unwrap());
+    let shared = compile(&exprs, 6, 2, &PARAMS).unwrap();
+    let ops: Vec<Op> = shared.program().ops().map(|(_, op)| op).collect();
+    let count = |f: &dyn Fn(&Op) -> bool| ops.iter().filter(|o| f(o)).count();
+    assert_eq!(count(&|o| *o == Op::Func(Func::Sin)), 1, "{ops:?}");
+    assert_eq!(count(&|o| matches!(o, Op::Tee(_))), 3, "{ops:?}");
+    assert_eq!(count(&|o| matches!(o, Op::Recall(_))), 4, "{ops:?}");
+    // Each output compiled on its own (nothing to share) gives the same bits.
+    for (i, e) in exprs.iter().enumerate() {
+        let alone = compile(std::slice::from_ref(e), 6, 2, &PARAMS).unwrap();
+        for x in [
+            [0.3, -0.2, 0.5, 0.0, 1.1, 0.7],
+            [-2.0, 1.5, 3.0, 0.1, 0.0, -0.4],
+        ] {
+            let u = [0.7, 0.1];
+            assert_eq!(
+                shared.eval_f32(&x, &u)[i].to_bits(),
+                alone.eval_f32(&x, &u)[0].to_bits(),
+                "output {i} at {x:?}"
+            );
+        }
+    }
+}

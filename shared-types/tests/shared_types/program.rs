@@ -2,7 +2,7 @@
 //! refuses what it names, and random or mutated bytes never panic the decoder or the evaluator.
 
 use proptest::prelude::*;
-use shared_types::capacity::{MAX_PROGRAM_LEN, MAX_PROGRAM_STACK};
+use shared_types::capacity::{MAX_PROGRAM_LEN, MAX_PROGRAM_REGS, MAX_PROGRAM_STACK};
 use shared_types::error::{Dim, Field, ImageError};
 use shared_types::program::{powi, write_header, Func, Op, Program, PROGRAM_HEADER_LEN};
 
@@ -228,6 +228,35 @@ fn every_validation_rule_refuses_what_it_names() {
 }
 
 #[test]
+fn a_register_is_read_only_after_a_write_and_within_capacity() {
+    use Op::*;
+    // x0·x0 teed into register 3, recalled: out0 = (x0·x0) + (x0·x0).
+    let ok = assemble(
+        1,
+        1,
+        &[],
+        &[Load(0), Load(0), Mul, Tee(3), Recall(3), Add, Store(0)],
+        2,
+    );
+    let p = Program::decode(&ok).expect("valid");
+    let mut out = [0.0f32];
+    p.eval(&[1.5], &mut out).unwrap();
+    assert_eq!(out[0].to_bits(), (1.5f32 * 1.5 + 1.5 * 1.5).to_bits());
+    // A recall before any tee of that register, a register beyond the capacity.
+    let unwritten = assemble(1, 1, &[], &[Load(0), Tee(2), Recall(3), Add, Store(0)], 2);
+    assert_eq!(
+        Program::decode(&unwritten),
+        Err(ImageError::ProgramOperand { offset: 4 })
+    );
+    let r = MAX_PROGRAM_REGS as u8;
+    let beyond = assemble(1, 1, &[], &[Load(0), Tee(r), Store(0)], 1);
+    assert_eq!(
+        Program::decode(&beyond),
+        Err(ImageError::ProgramOperand { offset: 2 })
+    );
+}
+
+#[test]
 fn stack_beyond_capacity_is_refused_at_the_instruction_that_overflows() {
     let mut ops = vec![Op::Load(0); MAX_PROGRAM_STACK + 1];
     ops.extend(std::iter::repeat_n(Op::Add, MAX_PROGRAM_STACK));
@@ -410,8 +439,13 @@ fn remembered_calls_give_the_bits_of_fresh_ones() {
 /// each library call made afresh.
 fn reference_eval(p: &Program<'_>, inputs: &[f32], out: &mut [f32]) {
     let mut stack: Vec<f32> = Vec::new();
+    let mut regs = std::collections::HashMap::new();
     for (_, op) in p.ops() {
         match op {
+            Op::Tee(r) => {
+                regs.insert(r, *stack.last().unwrap());
+            }
+            Op::Recall(r) => stack.push(regs[&r]),
             Op::Load(i) => stack.push(inputs[i as usize]),
             Op::Const(i) => stack.push(p.constant(i as usize)),
             Op::Store(i) => out[i as usize] = stack.pop().unwrap(),
@@ -453,12 +487,19 @@ fn interpreter_equals_the_instruction_table_on_random_programs() {
         let consts: Vec<f32> = (0..n_consts).map(|_| rng.random_range(-3.0..3.0)).collect();
         let mut ops = Vec::new();
         let mut max_depth = 0usize;
+        let mut teed: Vec<u8> = Vec::new();
         for o in 0..n_outputs {
             let mut depth = 0usize;
             for _ in 0..rng.random_range(1..30) {
-                let choice = rng.random_range(0..10);
-                let op = if depth == 0 || (choice < 4 && depth < MAX_PROGRAM_STACK) {
-                    if rng.random_bool(0.7) {
+                let choice = rng.random_range(0..11);
+                let op = if choice == 10 && depth > 0 {
+                    let r = rng.random_range(0..MAX_PROGRAM_REGS) as u8;
+                    teed.push(r);
+                    Op::Tee(r)
+                } else if depth == 0 || (choice < 4 && depth < MAX_PROGRAM_STACK) {
+                    if !teed.is_empty() && rng.random_bool(0.2) {
+                        Op::Recall(teed[rng.random_range(0..teed.len())])
+                    } else if rng.random_bool(0.7) {
                         Op::Load(rng.random_range(0..n_inputs) as u8)
                     } else {
                         Op::Const(rng.random_range(0..n_consts) as u16)

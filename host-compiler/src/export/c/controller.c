@@ -556,6 +556,8 @@ static sc_error parse_pwa_balls(sc_image *im, sc_bytes s) {
 #define SC_OP_LOAD 0x01u
 #define SC_OP_CONST 0x02u
 #define SC_OP_STORE 0x03u
+#define SC_OP_TEE 0x04u
+#define SC_OP_RECALL 0x05u
 #define SC_OP_ADD 0x10u
 #define SC_OP_SUB 0x11u
 #define SC_OP_MUL 0x12u
@@ -571,7 +573,8 @@ static sc_error parse_pwa_balls(sc_image *im, sc_bytes s) {
 static uint32_t op_len(sc_bytes code, uint32_t pc) {
     uint8_t op = code.p[pc];
     uint32_t rest = code.len - pc - 1u;
-    if (op == SC_OP_LOAD || op == SC_OP_STORE) return rest >= 1u ? 2u : 0u;
+    if (op == SC_OP_LOAD || op == SC_OP_STORE || op == SC_OP_TEE || op == SC_OP_RECALL)
+        return rest >= 1u ? 2u : 0u;
     if (op == SC_OP_CONST) return rest >= 2u ? 3u : 0u;
     if (op == SC_OP_POWI) {
         int k;
@@ -587,6 +590,7 @@ static uint32_t op_len(sc_bytes code, uint32_t pc) {
 static sc_error decode_program(sc_program *pr, sc_bytes b) {
     uint32_t n_consts, code_len, pc = 0, depth = 0, max_depth = 0, stack, i;
     uint64_t stored = 0;
+    uint32_t written = 0; /* registers a TEE has written so far */
     sc_bytes consts;
     memset(pr, 0, sizeof *pr);
     if (b.len < SC_PROGRAM_HEADER_LEN || b.len > SC_MAX_PROGRAM_LEN) return SC_E_PROGRAM;
@@ -623,6 +627,16 @@ static sc_error decode_program(sc_program *pr, sc_bytes b) {
             pops = 1;
             if (stored & (1ull << out)) return SC_E_PROGRAM;
             stored |= 1ull << out;
+        } else if (op == SC_OP_TEE) {
+            uint32_t r = pr->code.p[pc + 1u];
+            if (r >= SC_MAX_PROGRAM_REGS) return SC_E_PROGRAM;
+            written |= 1u << r;
+            pops = 1;
+            pushes = 1;
+        } else if (op == SC_OP_RECALL) {
+            uint32_t r = pr->code.p[pc + 1u];
+            if (r >= SC_MAX_PROGRAM_REGS || !(written & (1u << r))) return SC_E_PROGRAM;
+            pushes = 1;
         } else if ((op >= SC_OP_ADD && op <= SC_OP_DIV) || op == SC_OP_ATAN2) {
             pops = 2;
             pushes = 1;
@@ -658,6 +672,7 @@ static float powi_f32(float x, int k) {
  * validated program, and checked anyway. */
 static void eval_program(const sc_program *pr, const float *inputs, float *out) {
     float st[SC_MAX_PROGRAM_STACK];
+    float regs[SC_MAX_PROGRAM_REGS] = {0};
     uint32_t pc = 0, sp = 0;
     while (pc < pr->code.len) {
         uint32_t len = op_len(pr->code, pc);
@@ -674,6 +689,14 @@ static void eval_program(const sc_program *pr, const float *inputs, float *out) 
             if (sp == 0) return;
             sp--;
             if (o < pr->n_outputs) out[o] = st[sp];
+        } else if (op == SC_OP_TEE) {
+            uint32_t r = pr->code.p[pc + 1u];
+            if (sp == 0 || r >= SC_MAX_PROGRAM_REGS) return;
+            regs[r] = st[sp - 1u];
+        } else if (op == SC_OP_RECALL) {
+            uint32_t r = pr->code.p[pc + 1u];
+            if (sp >= SC_MAX_PROGRAM_STACK || r >= SC_MAX_PROGRAM_REGS) return;
+            st[sp++] = regs[r];
         } else if ((op >= SC_OP_ADD && op <= SC_OP_DIV) || op == SC_OP_ATAN2) {
             if (sp < 2) return;
             b = st[sp - 1u];

@@ -46,8 +46,8 @@
  *     (x, zeta), input_map reads (x, zeta, w) and stores (u, zeta+); zeta <- zeta+ when the step is
  *     accepted (every value finite, else SC_OUT_OF_ENVELOPE and zeta unchanged); the fallback and every
  *     error leave zeta; sc_init and sc_reset set zeta0. n_ext = 0 for a feedback-linearizable plant. The programs are a stack bytecode
- *     (shared-types/src/program.rs) interpreted with a fixed stack of SC_MAX_PROGRAM_STACK floats in one
- *     pass over their code; sinf, cosf, tanf, expf, logf, atanf, tanhf and atan2f come from <math.h>
+ *     (shared-types/src/program.rs) interpreted with a fixed stack of SC_MAX_PROGRAM_STACK floats and
+ *     SC_MAX_PROGRAM_REGS registers (shared subexpressions) in one pass over their code; sinf, cosf, tanf, expf, logf, atanf, tanhf and atan2f come from <math.h>
  *     (sqrtf and fabsf are exact). The Rust evaluator uses the `libm` crate's functions: a program
  *     without those six functions gives the same bits; with them the C library's results may differ
  *     from Rust's in the last place or so (a conforming libm is faithful, within an ulp or two), which
@@ -86,6 +86,7 @@ extern "C" {
 #define SC_MAX_PROGRAM_INPUTS @MAX_PROGRAM_INPUTS@
 #define SC_MAX_PROGRAM_OUTPUTS @MAX_PROGRAM_OUTPUTS@
 #define SC_MAX_PROGRAM_STACK @MAX_PROGRAM_STACK@
+#define SC_MAX_PROGRAM_REGS @MAX_PROGRAM_REGS@
 #define SC_MAX_PROGRAM_POWI @MAX_PROGRAM_POWI@
 #define SC_MAX_EXT @MAX_EXT@
 
