@@ -63,7 +63,6 @@ impl Task {
             if flat {
                 // The chain in the flat state q, the maps and their bounds (`model::flat`); the
                 // firmware and the Monte Carlo keep the controller's own states ζ.
-                // (An [mtl] formula over a flat plant is refused there, `FlError::FlatMtl`.)
                 let (q, maps) = crate::model::flat::flatten(&problem)?;
                 let plant: Box<dyn Plant> = Box::new(feedback_linearizable::plant(&q, maps)?);
                 return Self::with_plant(q, plant);

@@ -149,9 +149,12 @@ pub enum FlError {
     )]
     PredicateOnZeroDynamics { predicate: String, state: String },
     #[error(
-        "an [mtl] task on a differentially flat plant is not built yet (issue #14); reach-avoid is"
+        "the [mtl] formula's predicate `{predicate}` constrains {state}, which is not a flat \
+         coordinate; predicates may only constrain the flat outputs and their derivatives"
     )]
-    FlatMtl,
+    PredicateOffFlatState { predicate: String, state: String },
+    #[error("the [mtl] formula uses {atom} the other way round: {why}")]
+    FlatAtomPolarity { atom: String, why: &'static str },
     #[error(
         "a differentially flat plant's input set must be a box (kind = \"box\"): an extended \
          input is bounded by the operating region, the others by a box of the flat input"

@@ -52,8 +52,13 @@
 //! feedback-linearizable task. The image carries ζ0 (model maps section) and the evaluator keeps ζ
 //! (ζ⁺ from the input map on every accepted step); the Monte Carlo (`verify::nonlinear`), the falsifier
 //! and `simulate` read q with the evaluator's ζ at the samples and with ζ's model over the period
-//! between them ([`super::feedback_linearizable::FlatCoords::zeta_within`]). An MTL formula over a flat
-//! plant is refused (`FlError::FlatMtl`), and so is the game.
+//! between them ([`super::feedback_linearizable::FlatCoords::zeta_within`]). The game refuses a flat
+//! plant.
+//!
+//! **MTL tasks** (Problem 2.28, Theorem 4.2): the formula is rewritten over q ([`formula_in_q`]) with its
+//! atoms moved by the read error e_q by polarity (a required atom shrunk, a forbidden one inflated) and
+//! the region as a conjunct; `certify::temporal` then certifies it on the chain exactly as a
+//! feedback-linearizable task's, and `verify::temporal` judges the image on the plant with ζ kept.
 
 use super::feedback_linearizable::{
     adjugate, bound_err, cancelling_law, dims_used, gram, norm2_bound, outside_interval,
@@ -83,9 +88,6 @@ pub fn flatten(problem: &Problem) -> Result<(Problem, FlMaps), FlError> {
         .flat
         .as_deref()
         .expect("flatten is called on a flat plant");
-    if problem.mtl.is_some() {
-        return Err(FlError::FlatMtl);
-    }
     let pv = desc.names.param_values();
     let bind = |e: &Expr| e.bind_params(&pv);
     let rd = &desc.derivatives;
@@ -632,6 +634,27 @@ pub fn flatten(problem: &Problem) -> Result<(Problem, FlMaps), FlError> {
         .iter()
         .map(|(k, s)| Ok((k.clone(), remap(&format!("[sets.{k}]"), s, true)?)))
         .collect::<Result<_, FlError>>()?;
+    if let Some(src) = &problem.mtl {
+        let (formula, held) =
+            formula_in_q(src, n, &q_of_state, names, &e_q, region, problem.horizon)?;
+        for name in held {
+            let (_, set) = problem
+                .sets
+                .iter()
+                .find(|(k, _)| *k == name)
+                .expect("formula_in_q names only the spec's sets");
+            let held_name = held_set_name(&name);
+            if problem.sets.iter().any(|(k, _)| *k == held_name) {
+                return Err(FlError::Formula(format!(
+                    "a set named `{held_name}` is taken: the set `{name}` shrunk by the read error \
+                     of q is given that name"
+                )));
+            }
+            q.sets
+                .push((held_name, remap(&format!("[sets.{name}]"), set, false)?));
+        }
+        q.mtl = Some(formula);
+    }
     q.input = InputSet::Box {
         lo: wb.iter().map(|i| i.lo).collect(),
         hi: wb.iter().map(|i| i.hi).collect(),
@@ -670,6 +693,163 @@ pub fn flatten(problem: &Problem) -> Result<(Problem, FlMaps), FlError> {
     Ok((q, maps))
 }
 
+/// The name under which a named set, shrunk by the read error of q, stands where a formula requires it.
+fn held_set_name(name: &str) -> String {
+    format!("{name}_held")
+}
+
+/// The `[mtl]` formula of a flat spec rewritten over the flat state q (module doc, *MTL tasks*), with the
+/// names of the sets it requires somewhere (which [`flatten`] adds shrunk, as [`held_set_name`]).
+///
+/// The controller reads q within `e_q` of the true flat state (item 4), so an atom is moved by that
+/// error in the direction that makes it harder: where the formula requires an atom (positive polarity:
+/// under an even number of negations, the left side of an implication counting as one), a predicate's
+/// bound is tightened by Σ|a_j|·e_q,j and a named set is replaced by its shrunk copy; where it forbids it,
+/// the predicate is loosened and the set is the inflated one `q.sets` already holds. `Goal` (shrunk) may
+/// only be required and `Unsafe` (inflated) only forbidden. A predicate's plant signal must be a state that
+/// is a flat coordinate (the flat outputs and their derivatives). The operating region over q, shrunk by
+/// e_q, joins as `(φ) & G[0,T] (q inside it)`, as for a feedback-linearizable plant's region.
+fn formula_in_q(
+    src: &str,
+    n: usize,
+    q_of_state: &dyn Fn(usize) -> Option<usize>,
+    names: &crate::expr::Names,
+    e_q: &[f64],
+    region: &crate::spec::InitBox,
+    horizon: f64,
+) -> Result<(String, Vec<String>), FlError> {
+    use crate::robustness::mtl::{Expr as M, Interval as TI, LinearPredicate, Span};
+    let parsed = crate::robustness::mtl::parse(src).map_err(|e| FlError::Formula(e.to_string()))?;
+    let plant_signals = crate::property::state_signals(n);
+    struct Walk<'a> {
+        plant_signals: &'a [String],
+        q_of_state: &'a dyn Fn(usize) -> Option<usize>,
+        names: &'a crate::expr::Names,
+        e_q: &'a [f64],
+        held: Vec<String>,
+    }
+    impl Walk<'_> {
+        fn go(&mut self, e: &M, positive: bool) -> Result<M, FlError> {
+            Ok(match e {
+                M::True | M::False => e.clone(),
+                M::Set { name, span } => {
+                    match name.as_str() {
+                        "Goal" if !positive => return Err(FlError::FlatAtomPolarity {
+                            atom: "Goal".into(),
+                            why: "it is shrunk by the read error of q, so it may only be required",
+                        }),
+                        "Unsafe" if positive => return Err(FlError::FlatAtomPolarity {
+                            atom: "Unsafe".into(),
+                            why: "it is inflated by the read error of q, so it may only be avoided",
+                        }),
+                        "Goal" | "Unsafe" => e.clone(),
+                        _ if positive => {
+                            if !self.held.contains(name) {
+                                self.held.push(name.clone());
+                            }
+                            M::Set {
+                                name: held_set_name(name),
+                                span: *span,
+                            }
+                        }
+                        _ => e.clone(),
+                    }
+                }
+                M::Linear(p) => {
+                    let mut q = p.clone();
+                    let mut moved = 0.0;
+                    for (name, c, _) in q.terms.iter_mut() {
+                        let Some(s) = self.plant_signals.iter().position(|v| v == name) else {
+                            continue;
+                        };
+                        match (self.q_of_state)(s) {
+                            Some(j) => {
+                                *name = format!("x{}", j + 1);
+                                moved += c.abs() * self.e_q[j];
+                            }
+                            None if *c != 0.0 => {
+                                return Err(FlError::PredicateOffFlatState {
+                                    predicate: p.to_string(),
+                                    state: format!(
+                                        "{name} ({})",
+                                        super::feedback_linearizable::state_name(self.names, s)
+                                    ),
+                                })
+                            }
+                            None => name.clear(),
+                        }
+                    }
+                    q.terms.retain(|(name, _, _)| !name.is_empty());
+                    if q.terms.is_empty() {
+                        if 0.0 <= p.b {
+                            M::True
+                        } else {
+                            M::False
+                        }
+                    } else {
+                        // aᵀq̃ ≤ b − Σ|a_j|e_j implies aᵀq ≤ b for the true q; the loosened bound for
+                        // a forbidden predicate likewise.
+                        q.b = if positive { p.b - moved } else { p.b + moved };
+                        M::Linear(q)
+                    }
+                }
+                M::Not(x) => M::Not(Box::new(self.go(x, !positive)?)),
+                M::And(v) => M::And(
+                    v.iter()
+                        .map(|x| self.go(x, positive))
+                        .collect::<Result<_, _>>()?,
+                ),
+                M::Or(v) => M::Or(
+                    v.iter()
+                        .map(|x| self.go(x, positive))
+                        .collect::<Result<_, _>>()?,
+                ),
+                M::Implies(l, r) => M::Implies(
+                    Box::new(self.go(l, !positive)?),
+                    Box::new(self.go(r, positive)?),
+                ),
+                M::Eventually(i, x) => M::Eventually(*i, Box::new(self.go(x, positive)?)),
+                M::Always(i, x) => M::Always(*i, Box::new(self.go(x, positive)?)),
+                M::Until(i, l, r) => M::Until(
+                    *i,
+                    Box::new(self.go(l, positive)?),
+                    Box::new(self.go(r, positive)?),
+                ),
+                M::Release(i, l, r) => M::Release(
+                    *i,
+                    Box::new(self.go(l, positive)?),
+                    Box::new(self.go(r, positive)?),
+                ),
+            })
+        }
+    }
+    let mut walk = Walk {
+        plant_signals: &plant_signals,
+        q_of_state,
+        names,
+        e_q,
+        held: Vec::new(),
+    };
+    let phi = walk.go(&parsed, true)?;
+    // G[0,T] (q inside the region shrunk by e_q): the bounds of the law and of D hold only there.
+    let span = Span::new(0, 0);
+    let mut keep = Vec::with_capacity(2 * e_q.len());
+    for (j, e) in e_q.iter().enumerate() {
+        let name = format!("x{}", j + 1);
+        for (a, b) in [(1.0, region.hi[j] - e), (-1.0, -(region.lo[j] + e))] {
+            keep.push(M::Linear(LinearPredicate {
+                terms: vec![(name.clone(), a, span)],
+                b,
+                span,
+            }));
+        }
+    }
+    let t = TI::new(0.0, horizon)
+        .ok_or_else(|| FlError::Formula(format!("the horizon {horizon} is not a time bound")))?;
+    let out = M::And(vec![phi, M::Always(t, Box::new(M::And(keep)))]);
+    Ok((out.to_string(), walk.held))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -682,6 +862,48 @@ mod tests {
         crate::spec::load(path).unwrap_or_else(|e| panic!("{}", e.headline()))
     }
 
+    /// The speed task's formula over q: the plant's velocity signals renamed to q's, the sets it requires
+    /// (Cruise under `!Cruise ->`, Slow) shrunk under new names, Unsafe and Goal as they are, the region's
+    /// conjunct; a predicate on θ and a required Unsafe are refused, naming them.
+    #[test]
+    fn an_mtl_formula_is_rewritten_over_q_with_its_atoms_moved_by_polarity() {
+        let path = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../examples/flat-quadrotor-speed.toml"
+        );
+        let mut p = crate::spec::load(path).unwrap_or_else(|e| panic!("{}", e.headline()));
+        let (q, _) = flatten(&p).unwrap_or_else(|e| panic!("{e}"));
+        let f = q.mtl.as_deref().expect("the formula in q");
+        assert!(f.contains("Slow_held") && f.contains("Cruise_held"), "{f}");
+        assert!(f.contains("Unsafe") && !f.contains("Unsafe_held"), "{f}");
+        assert!(f.contains("G[0.0,9.0] ((1.0*x1 <= 9.99999"), "{f}");
+        let radius = |name: &str| match &q.sets.iter().find(|(k, _)| k == name).unwrap().1.shape {
+            Shape::Ball { radius, .. } => *radius,
+            _ => panic!("{name} is a ball"),
+        };
+        assert!(radius("Slow_held") < 3.2 && 3.2 < radius("Slow"));
+        // The velocities X' and Y' are q's second and sixth coordinates.
+        p.mtl = Some("G[0,9] (x2 <= 3.5 & x4 >= -3.5)".into());
+        let (q, _) = flatten(&p).unwrap_or_else(|e| panic!("{e}"));
+        let f = q.mtl.unwrap();
+        // Required: each bound tightened by the read error of its coordinate.
+        assert!(
+            f.contains("1.0*x2 <= 3.49999") && f.contains("1.0*x6 <= 3.49999"),
+            "{f}"
+        );
+        p.mtl = Some("G[0,9] (x5 <= 0.3)".into());
+        let e = flatten(&p)
+            .err()
+            .expect("θ is not a flat coordinate")
+            .to_string();
+        assert!(
+            e.contains("th") && e.contains("not a flat coordinate"),
+            "{e}"
+        );
+        p.mtl = Some("F[0,9] Unsafe".into());
+        let e = flatten(&p).err().expect("a required Unsafe").to_string();
+        assert!(e.contains("Unsafe") && e.contains("only be avoided"), "{e}");
+    }
     #[test]
     fn the_quadrotor_flattens_to_two_chains_of_four_with_its_bounds() {
         let p = quadrotor();

@@ -447,9 +447,15 @@ fn run_fl(
                 .any(|(v, (l, h))| !(l < v && v < h))
         })
     };
-    let mut rec = RunRecord::new(&maps.xi_of(x0), h);
-    let mut x = x0.to_vec();
     let mut ctl = Controller::new(*image);
+    // The controller's own states ζ (a flat plant's dynamic extension; empty otherwise), as the evaluator
+    // keeps them: ξ of a plant state is read with them, and between samples with their model
+    // (`FlatCoords::zeta_within`), as `verify::nonlinear` reads them.
+    let zeta =
+        |ctl: &Controller<'_>| -> Vec<f64> { ctl.extension().iter().map(|&v| v as f64).collect() };
+    let mut z = zeta(&ctl);
+    let mut rec = RunRecord::new(&maps.xi_at(x0, &z), h);
+    let mut x = x0.to_vec();
     let mut slack = f64::INFINITY;
     let mut left: Option<(usize, Vec<f64>)> = outside(x0).then(|| (0, x0.to_vec()));
     for k in 0..task.steps {
@@ -464,13 +470,19 @@ fn run_fl(
             }
         };
         slack = slack.min(super::input_slack(&input, &u));
+        let z1 = zeta(&ctl);
         let mut i = 0usize;
         let next = maps.plant.flow(&x, &u, h, SUBSTEPS, &mut |xs| {
             i += 1;
             if left.is_none() && outside(xs) {
                 left = Some((k, xs.to_vec()));
             }
-            rec.push_between(i as f64 * h / SUBSTEPS as f64, &maps.xi_of(xs));
+            let tau = i as f64 * h / SUBSTEPS as f64;
+            let zs = match &maps.flat {
+                Some(fc) => fc.zeta_within(&z, &z1, h, tau),
+                None => Vec::new(),
+            };
+            rec.push_between(tau, &maps.xi_at(xs, &zs));
         });
         x = match next {
             Ok(x) => x,
@@ -483,7 +495,8 @@ fn run_fl(
         if left.is_none() && outside(&x) {
             left = Some((k + 1, x.clone()));
         }
-        rec.push_sample(&maps.xi_of(&x));
+        z = z1;
+        rec.push_sample(&maps.xi_at(&x, &z));
     }
     if let Some((k, xs)) = left {
         return Some(Err(format!(
@@ -519,7 +532,9 @@ fn run_fl(
 /// Monte Carlo of a feedback-linearizable task's image for its MTL formula on the nonlinear plant itself
 /// (§3.1.2, Theorem 4.2 with the mismatch D; `model::feedback_linearizable`, *MTL tasks*): each start in
 /// ξ (`starts`, as [`crate::verify::hybrid::starts_from_image`] draws them) is lifted to a plant state
-/// with its zero-dynamics states drawn uniformly in Init (seeded by `seed`); the shared evaluator's
+/// with its zero-dynamics states drawn uniformly in Init (seeded by `seed`; for a flat plant the states
+/// that are flat coordinates come from ξ and the others from Init, and the run reads q with ζ0, so its
+/// first sample is that plant state's q, whatever ξ it was lifted from); the shared evaluator's
 /// `step_plant` maps the state to ξ and w back to u through the image's model programs in f32, the plant
 /// is flowed by the adaptive integrator (Dop853, `model::nonlinear`) with
 /// [`super::nonlinear::SUBSTEPS`] − 1 states recorded inside every period. A run violates the task when

@@ -20,7 +20,9 @@
 //! the formula from Init's centre; the firmware runs it from 50 states of the ball (25 on its boundary,
 //! 25 inside) against the plant's flow, and every run must satisfy the formula (as rewritten into ξ, with
 //! the region's conjunct) at the samples and sampled 8 times per period, stay inside the operating region,
-//! apply only inputs in the plant's input set, bit for bit with the host evaluator.
+//! apply only inputs in the plant's input set, bit for bit with the host evaluator. The same for the
+//! flat quadrotor's speed rule (`examples/flat-quadrotor-speed.toml`, Example 4.3's kind), its runs
+//! drawn in Init where the one ball's image accepts them.
 
 use host_compiler::property::input_bound;
 use host_compiler::verify::input_slack;
@@ -326,6 +328,101 @@ fn fl_pendulum_mtl_holds_on_the_target_from_50_initial_states() {
     println!(
         "HIL fl-pendulum MTL: {RUNS} runs of {} steps satisfied `{}` on the plant (least robustness \
          {least:.4e}, Euclidean, in ξ), bit for bit; δ = {:.4}, image {} bytes, worst step cost \
+         {worst_cost} instructions",
+        task.steps,
+        tt.written.source(),
+        ball.certificate.delta,
+        bytes.len()
+    );
+}
+
+/// An MTL task on the differentially flat quadrotor (issue #14, `examples/flat-quadrotor-speed.toml`):
+/// one ball certified for the speed rule from Init's centre in q; the firmware (keeping the thrust and
+/// its rate) runs it from 50 plant states in Init whose q the image accepts, against the plant's flow;
+/// every run must satisfy the formula as rewritten into q (with the region's conjunct) at the samples and
+/// sampled 8 times per period (q read with the controller's states, and between samples with their
+/// model), apply only inputs in the plant's input set, bit for bit with the host evaluator.
+#[test]
+fn flat_quadrotor_speed_rule_holds_on_the_target_from_50_initial_states() {
+    use host_compiler::geometry::Metric;
+    use host_compiler::property::TemporalTask;
+    use host_compiler::synth::temporal::single_ball;
+    use host_compiler::verify::temporal::{formula_value, RunRecord};
+    use qemu_tests::closed_loop::exchange;
+    const RUNS: usize = 50;
+    const SUB: usize = 8;
+    let spec = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../examples/flat-quadrotor-speed.toml"
+    );
+    let problem = host_compiler::spec::load(spec).expect("the example parses");
+    let task = host_compiler::task::Task::new(problem).expect("the task in q");
+    let tt = TemporalTask::from_problem(&task.problem).expect("the formula in q");
+    let maps = task.plant.linearization().expect("a linearised plant");
+    let fc = maps.flat.as_ref().expect("a flat plant");
+    let centre: Vec<f64> = task.init().centre();
+    let (ball, bytes) = single_ball(&task, &tt, &centre).unwrap_or_else(|e| panic!("{e}"));
+    assert!(ball.certificate.is_certified(), "{:?}", ball.certificate);
+    let path = firmware::write_image("flat_quadrotor_speed", &bytes).expect("image written");
+    let elf = firmware::build(
+        "flat_quadrotor_speed",
+        &FirmwareConfig {
+            image: Some(path),
+            ..Default::default()
+        },
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    let img = shared_types::image::decode(&bytes).expect("the image decodes");
+    let starts = accepted_starts(&task, img, RUNS, 4_3).unwrap_or_else(|e| panic!("{e}"));
+    let sets = tt
+        .sets(&Metric::euclidean(task.plant.n()))
+        .expect("the sets");
+    let input = input_bound(&maps.input);
+    let h = maps.plant.period();
+    let (mut worst_cost, mut least) = (0u32, f64::INFINITY);
+    for (r, x0) in starts.iter().enumerate() {
+        let mut q = Qemu::launch(&elf, Duration::from_secs(120)).unwrap_or_else(|e| panic!("{e}"));
+        let mut host = HostEvaluator::new(img);
+        let mut x = x0.clone();
+        let mut z = host.extension();
+        let mut rec = RunRecord::new(&maps.xi_at(x0, &z), h);
+        for k in 0..task.steps {
+            let reply = exchange(&mut q, k as u32, &x, |xf| host.step(xf))
+                .unwrap_or_else(|e| panic!("run {r}: {e}"));
+            assert_eq!(reply.status, Status::Ok, "run {r} from {x0:?}: step {k}");
+            worst_cost = worst_cost.max(reply.cost);
+            let u: Vec<f64> = reply.u.as_slice().iter().map(|&v| v as f64).collect();
+            assert!(
+                input_slack(&input, &u) >= 0.0,
+                "run {r}: input {u:?} outside the plant's input set at step {k}"
+            );
+            let z1 = host.extension();
+            let mut i = 0usize;
+            x = maps
+                .plant
+                .flow(&x, &u, h, SUB, &mut |xs| {
+                    i += 1;
+                    let tau = i as f64 * h / SUB as f64;
+                    rec.push_between(tau, &maps.xi_at(xs, &fc.zeta_within(&z, &z1, h, tau)));
+                })
+                .unwrap_or_else(|e| panic!("run {r}: the flow in period {k}: {e}"));
+            z = z1;
+            rec.push_sample(&maps.xi_at(&x, &z));
+        }
+        let exit = q.shutdown().unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(exit.code, Some(0), "run {r}: firmware exit");
+        let (tc, tf) = rec.traces().expect("the run's traces");
+        let rho = formula_value(&tt, &sets, &tc).expect("the formula at the samples");
+        let rho_fine = formula_value(&tt, &sets, &tf).expect("the formula sampled finer");
+        assert!(
+            rho > 0.0 && rho_fine > 0.0,
+            "run {r} from {x0:?}: robustness {rho} at the samples, {rho_fine} sampled finer"
+        );
+        least = least.min(rho).min(rho_fine);
+    }
+    println!(
+        "HIL flat quadrotor MTL: {RUNS} runs of {} steps satisfied `{}` on the plant (least robustness \
+         {least:.4e}, Euclidean, in q), bit for bit; δ = {:.4}, image {} bytes, worst step cost \
          {worst_cost} instructions",
         task.steps,
         tt.written.source(),
