@@ -1125,33 +1125,15 @@ pub fn formula_in_xi(
         Ok(match e {
             M::True | M::False | M::Set { .. } => e.clone(),
             M::Linear(p) => {
-                let mut q = p.clone();
-                for (name, c, _) in q.terms.iter_mut() {
-                    let Some(s) = plant_signals.iter().position(|v| v == name) else {
-                        continue;
-                    };
-                    match xi_states.iter().position(|&q| q == s) {
-                        Some(j) => *name = format!("x{}", j + 1),
-                        None if *c != 0.0 => {
-                            return Err(FlError::PredicateOnZeroDynamics {
-                                predicate: p.to_string(),
-                                state: format!("{name} ({})", state_name(names, s)),
-                            })
-                        }
-                        // A zero coefficient weighs nothing: the term is dropped below.
-                        None => name.clear(),
-                    }
-                }
-                q.terms.retain(|(name, _, _)| !name.is_empty());
-                if q.terms.is_empty() {
-                    // 0 ≤ b: a constant.
-                    if 0.0 <= p.b {
-                        M::True
-                    } else {
-                        M::False
-                    }
-                } else {
-                    M::Linear(q)
+                let coord_of = |s: usize| xi_states.iter().position(|&q| q == s);
+                let refuse = |predicate: String, state: String| FlError::PredicateOnZeroDynamics {
+                    predicate,
+                    state,
+                };
+                match predicate_in_coords(p, plant_signals, &coord_of, names, &refuse)? {
+                    Renamed::Constant(true) => M::True,
+                    Renamed::Constant(false) => M::False,
+                    Renamed::Predicate(q, _) => M::Linear(q),
                 }
             }
             M::Not(x) => M::Not(Box::new(go(x)?)),
@@ -1191,6 +1173,54 @@ pub fn formula_in_xi(
         out = M::And(vec![out, M::Always(t, Box::new(within))]);
     }
     Ok(out.to_string())
+}
+
+/// A formula predicate over the plant's state signals, renamed to the linear coordinates.
+pub(super) enum Renamed {
+    /// No term weighs a state: `0 ≤ b`, true or false.
+    Constant(bool),
+    /// The predicate over `x<j+1>`, with each term's coordinate j.
+    Predicate(crate::robustness::mtl::LinearPredicate, Vec<usize>),
+}
+
+/// `p` with every term's plant signal `x<s+1>` (state s) renamed `x<j+1>` for the coordinate
+/// j = `coord_of(s)`; a term with a nonzero coefficient on a state without one is refused by
+/// `refuse(predicate, state)`, a zero one dropped; names that are not state signals are kept as written
+/// (binding the task reports them).
+pub(super) fn predicate_in_coords(
+    p: &crate::robustness::mtl::LinearPredicate,
+    plant_signals: &[String],
+    coord_of: &dyn Fn(usize) -> Option<usize>,
+    names: &crate::expr::Names,
+    refuse: &dyn Fn(String, String) -> FlError,
+) -> Result<Renamed, FlError> {
+    let mut q = p.clone();
+    let mut coords = Vec::with_capacity(q.terms.len());
+    for (name, c, _) in q.terms.iter_mut() {
+        let Some(s) = plant_signals.iter().position(|v| v == name) else {
+            continue;
+        };
+        match coord_of(s) {
+            Some(j) => {
+                *name = format!("x{}", j + 1);
+                coords.push(j);
+            }
+            None if *c != 0.0 => {
+                return Err(refuse(
+                    p.to_string(),
+                    format!("{name} ({})", state_name(names, s)),
+                ))
+            }
+            // A zero coefficient weighs nothing: the term is dropped below.
+            None => name.clear(),
+        }
+    }
+    q.terms.retain(|(name, _, _)| !name.is_empty());
+    Ok(if q.terms.is_empty() {
+        Renamed::Constant(0.0 <= p.b)
+    } else {
+        Renamed::Predicate(q, coords)
+    })
 }
 
 /// The task's plant of a linearised spec.

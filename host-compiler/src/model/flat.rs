@@ -62,7 +62,7 @@
 
 use super::feedback_linearizable::{
     adjugate, bound_err, cancelling_law, dims_used, gram, norm2_bound, outside_interval,
-    sup_over_grid, FlError, FlMaps, FlatCoords,
+    predicate_in_coords, sup_over_grid, FlError, FlMaps, FlatCoords, Renamed,
 };
 use super::nonlinear::NonlinearPlant;
 use crate::expr::compile::compile;
@@ -635,15 +635,19 @@ pub fn flatten(problem: &Problem) -> Result<(Problem, FlMaps), FlError> {
         .map(|(k, s)| Ok((k.clone(), remap(&format!("[sets.{k}]"), s, true)?)))
         .collect::<Result<_, FlError>>()?;
     if let Some(src) = &problem.mtl {
-        let (formula, held) =
-            formula_in_q(src, n, &q_of_state, names, &e_q, region, problem.horizon)?;
-        for name in held {
-            let (_, set) = problem
-                .sets
-                .iter()
-                .find(|(k, _)| *k == name)
-                .expect("formula_in_q names only the spec's sets");
-            let held_name = held_set_name(&name);
+        let set_names: Vec<String> = problem.sets.iter().map(|(k, _)| k.clone()).collect();
+        let (formula, held) = formula_in_q(
+            src,
+            n,
+            &q_of_state,
+            names,
+            &e_q,
+            region,
+            problem.horizon,
+            &set_names,
+        )?;
+        for (name, set) in problem.sets.iter().filter(|(k, _)| held.contains(k)) {
+            let held_name = held_set_name(name);
             if problem.sets.iter().any(|(k, _)| *k == held_name) {
                 return Err(FlError::Formula(format!(
                     "a set named `{held_name}` is taken: the set `{name}` shrunk by the read error \
@@ -717,6 +721,7 @@ fn formula_in_q(
     e_q: &[f64],
     region: &crate::spec::InitBox,
     horizon: f64,
+    set_names: &[String],
 ) -> Result<(String, Vec<String>), FlError> {
     use crate::robustness::mtl::{Expr as M, Interval as TI, LinearPredicate, Span};
     let parsed = crate::robustness::mtl::parse(src).map_err(|e| FlError::Formula(e.to_string()))?;
@@ -726,6 +731,7 @@ fn formula_in_q(
         q_of_state: &'a dyn Fn(usize) -> Option<usize>,
         names: &'a crate::expr::Names,
         e_q: &'a [f64],
+        sets: &'a [String],
         held: Vec<String>,
     }
     impl Walk<'_> {
@@ -743,7 +749,9 @@ fn formula_in_q(
                             why: "it is inflated by the read error of q, so it may only be avoided",
                         }),
                         "Goal" | "Unsafe" => e.clone(),
-                        _ if positive => {
+                        // A name that is not a set of the spec is left as written: binding the task
+                        // reports it, pointing into the formula.
+                        _ if positive && self.sets.iter().any(|k| k == name) => {
                             if !self.held.contains(name) {
                                 self.held.push(name.clone());
                             }
@@ -756,41 +764,30 @@ fn formula_in_q(
                     }
                 }
                 M::Linear(p) => {
-                    let mut q = p.clone();
-                    let mut moved = 0.0;
-                    for (name, c, _) in q.terms.iter_mut() {
-                        let Some(s) = self.plant_signals.iter().position(|v| v == name) else {
-                            continue;
-                        };
-                        match (self.q_of_state)(s) {
-                            Some(j) => {
-                                *name = format!("x{}", j + 1);
-                                moved += c.abs() * self.e_q[j];
-                            }
-                            None if *c != 0.0 => {
-                                return Err(FlError::PredicateOffFlatState {
-                                    predicate: p.to_string(),
-                                    state: format!(
-                                        "{name} ({})",
-                                        super::feedback_linearizable::state_name(self.names, s)
-                                    ),
-                                })
-                            }
-                            None => name.clear(),
+                    let refuse = |predicate: String, state: String| {
+                        FlError::PredicateOffFlatState { predicate, state }
+                    };
+                    match predicate_in_coords(
+                        p,
+                        self.plant_signals,
+                        self.q_of_state,
+                        self.names,
+                        &refuse,
+                    )? {
+                        Renamed::Constant(true) => M::True,
+                        Renamed::Constant(false) => M::False,
+                        Renamed::Predicate(mut q, coords) => {
+                            // aᵀq̃ ≤ b − Σ|a_j|e_j implies aᵀq ≤ b for the true q; the loosened bound
+                            // for a forbidden predicate likewise.
+                            let moved: f64 = q
+                                .terms
+                                .iter()
+                                .zip(&coords)
+                                .map(|((_, c, _), &j)| c.abs() * self.e_q[j])
+                                .sum();
+                            q.b = if positive { p.b - moved } else { p.b + moved };
+                            M::Linear(q)
                         }
-                    }
-                    q.terms.retain(|(name, _, _)| !name.is_empty());
-                    if q.terms.is_empty() {
-                        if 0.0 <= p.b {
-                            M::True
-                        } else {
-                            M::False
-                        }
-                    } else {
-                        // aᵀq̃ ≤ b − Σ|a_j|e_j implies aᵀq ≤ b for the true q; the loosened bound for
-                        // a forbidden predicate likewise.
-                        q.b = if positive { p.b - moved } else { p.b + moved };
-                        M::Linear(q)
                     }
                 }
                 M::Not(x) => M::Not(Box::new(self.go(x, !positive)?)),
@@ -828,6 +825,7 @@ fn formula_in_q(
         q_of_state,
         names,
         e_q,
+        sets: set_names,
         held: Vec::new(),
     };
     let phi = walk.go(&parsed, true)?;

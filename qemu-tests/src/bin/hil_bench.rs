@@ -309,52 +309,20 @@ fn hybrid_step_max() -> Result<(u32, u64), Box<dyn std::error::Error>> {
 fn nonlinear_step_max() -> Result<NonlinearCosts, Box<dyn std::error::Error>> {
     use qemu_tests::nonlinear::PlantFlow;
     let (task, s) = images::fl_4_9_certified()?;
-    let maps = task
-        .plant
-        .linearization()
-        .ok_or("Ex 4.9 is feedback linearizable")?;
-    let elf = firmware_with("fl_4_9_certified_bench", &s.image)?;
-    let img = decode(&s.image).map_err(qemu_tests::HilError::Image)?;
-    let starts = images::accepted_starts(&task, img, 12, 4_9)?;
-    let h = maps.plant.period();
-    let (mut certified, mut stack) = (0u32, 0u64);
-    for x0 in &starts {
-        let (m, st) = session(&elf, img, x0, task.steps, |x, u| {
-            PlantFlow::flow(&maps.plant, x, u, h)
-        })?;
-        certified = certified.max(m);
-        stack = stack.max(st);
-    }
+    let (certified, mut stack, _) = certified_runs("fl_4_9_certified_bench", &task, &s, 4_9)?;
     println!(
-        "nonlinear (Ex 4.9 certified, model maps): {} balls, {} runs of {} steps, max step {certified} instructions",
+        "nonlinear (Ex 4.9 certified, model maps): {} balls, 12 runs of {} steps, max step {certified} instructions",
         s.trajectories.len(),
-        starts.len(),
         task.steps
     );
-
     let (task, s) = images::flat_quadrotor_certified()?;
-    let maps = task
-        .plant
-        .linearization()
-        .ok_or("the flat quadrotor is linearised in its flat state")?;
-    let elf = firmware_with("flat_quadrotor_certified_bench", &s.image)?;
-    let img = decode(&s.image).map_err(qemu_tests::HilError::Image)?;
-    let starts = images::accepted_starts(&task, img, 12, 3_15)?;
-    let h = maps.plant.period();
-    let mut flat = 0u32;
-    for x0 in &starts {
-        let (m, st) = session(&elf, img, x0, task.steps, |x, u| {
-            PlantFlow::flow(&maps.plant, x, u, h)
-        })?;
-        flat = flat.max(m);
-        stack = stack.max(st);
-    }
-    let flat_program_bytes = maps.coords.bytes.len() + maps.input_map.bytes.len();
+    let (flat, st, flat_program_bytes) =
+        certified_runs("flat_quadrotor_certified_bench", &task, &s, 3_15)?;
+    stack = stack.max(st);
     println!(
-        "nonlinear (flat quadrotor certified, controller states T and Ṫ): {} balls, {} runs of {} steps, \
+        "nonlinear (flat quadrotor certified, controller states T and Ṫ): {} balls, 12 runs of {} steps, \
          programs {flat_program_bytes} bytes, max step {flat} instructions",
         s.trajectories.len(),
-        starts.len(),
         task.steps
     );
 
@@ -384,6 +352,38 @@ fn nonlinear_step_max() -> Result<NonlinearCosts, Box<dyn std::error::Error>> {
         program_bytes: t.program_bytes,
         flat_program_bytes,
     })
+}
+
+/// A certified image of a linearised task run on the firmware from 12 seeded starts in Init that it
+/// accepts, each over the task's horizon against the plant's flow: the largest step cost, the stack
+/// high-water mark and the bytes of its two model programs.
+fn certified_runs(
+    tag: &str,
+    task: &host_compiler::task::Task,
+    s: &host_compiler::synth::Synthesis,
+    seed: u64,
+) -> Result<(u32, u64, usize), Box<dyn std::error::Error>> {
+    use qemu_tests::nonlinear::PlantFlow;
+    let maps = task
+        .plant
+        .linearization()
+        .ok_or("the task is linearised (feedback linearizable or flat)")?;
+    let elf = firmware_with(tag, &s.image)?;
+    let img = decode(&s.image).map_err(qemu_tests::HilError::Image)?;
+    let h = maps.plant.period();
+    let (mut max, mut stack) = (0u32, 0u64);
+    for x0 in &images::accepted_starts(task, img, 12, seed)? {
+        let (m, st) = session(&elf, img, x0, task.steps, |x, u| {
+            PlantFlow::flow(&maps.plant, x, u, h)
+        })?;
+        max = max.max(m);
+        stack = stack.max(st);
+    }
+    Ok((
+        max,
+        stack,
+        maps.coords.bytes.len() + maps.input_map.bytes.len(),
+    ))
 }
 
 /// What [`nonlinear_step_max`] measures (module doc).

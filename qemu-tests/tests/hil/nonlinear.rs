@@ -209,11 +209,8 @@ fn fl_pendulum_mtl_holds_on_the_target_from_50_initial_states() {
     use host_compiler::linalg::PdRoots;
     use host_compiler::property::TemporalTask;
     use host_compiler::synth::temporal::single_ball;
-    use host_compiler::verify::temporal::{formula_value, RunRecord};
-    use qemu_tests::closed_loop::exchange;
     use rand::{Rng, SeedableRng};
     const RUNS: usize = 50;
-    const SUB: usize = 8;
     let spec = concat!(
         env!("CARGO_MANIFEST_DIR"),
         "/../examples/fl-pendulum-mtl.toml"
@@ -276,55 +273,7 @@ fn fl_pendulum_mtl_holds_on_the_target_from_50_initial_states() {
             .zip(region.lo.iter().zip(&region.hi))
             .all(|(v, (l, h))| l < v && v < h)
     };
-    let input = input_bound(&maps.input);
-    let h = maps.plant.period();
-    let mut worst_cost = 0u32;
-    let mut least = f64::INFINITY;
-    for (r, x0) in starts.iter().enumerate() {
-        let mut q = Qemu::launch(&elf, Duration::from_secs(120)).unwrap_or_else(|e| panic!("{e}"));
-        let mut host = HostEvaluator::new(img);
-        let mut x = x0.clone();
-        let mut rec = RunRecord::new(&maps.xi_of(x0), h);
-        for k in 0..task.steps {
-            let reply = exchange(&mut q, k as u32, &x, |xf| host.step(xf))
-                .unwrap_or_else(|e| panic!("run {r}: {e}"));
-            assert_eq!(reply.status, Status::Ok, "run {r} from {x0:?}: step {k}");
-            worst_cost = worst_cost.max(reply.cost);
-            let u: Vec<f64> = reply.u.as_slice().iter().map(|&v| v as f64).collect();
-            assert!(
-                input_slack(&input, &u) >= 0.0,
-                "run {r}: input {u:?} outside the plant's input set at step {k}"
-            );
-            let mut i = 0usize;
-            x = maps
-                .plant
-                .flow(&x, &u, h, SUB, &mut |xs| {
-                    i += 1;
-                    assert!(
-                        inside(xs),
-                        "run {r}: outside the region in period {k}: {xs:?}"
-                    );
-                    rec.push_between(i as f64 * h / SUB as f64, &maps.xi_of(xs));
-                })
-                .unwrap_or_else(|e| panic!("run {r}: the flow in period {k}: {e}"));
-            assert!(
-                inside(&x),
-                "run {r}: outside the region at sample {}: {x:?}",
-                k + 1
-            );
-            rec.push_sample(&maps.xi_of(&x));
-        }
-        let exit = q.shutdown().unwrap_or_else(|e| panic!("{e}"));
-        assert_eq!(exit.code, Some(0), "run {r}: firmware exit");
-        let (tc, tf) = rec.traces().expect("the run's traces");
-        let rho = formula_value(&tt, &sets, &tc).expect("the formula at the samples");
-        let rho_fine = formula_value(&tt, &sets, &tf).expect("the formula sampled finer");
-        assert!(
-            rho > 0.0 && rho_fine > 0.0,
-            "run {r} from {x0:?}: robustness {rho} at the samples, {rho_fine} sampled finer"
-        );
-        least = least.min(rho).min(rho_fine);
-    }
+    let (least, worst_cost) = mtl_runs_on_target(&task, &tt, &sets, &elf, img, &starts, &inside);
     println!(
         "HIL fl-pendulum MTL: {RUNS} runs of {} steps satisfied `{}` on the plant (least robustness \
          {least:.4e}, Euclidean, in ξ), bit for bit; δ = {:.4}, image {} bytes, worst step cost \
@@ -347,10 +296,7 @@ fn flat_quadrotor_speed_rule_holds_on_the_target_from_50_initial_states() {
     use host_compiler::geometry::Metric;
     use host_compiler::property::TemporalTask;
     use host_compiler::synth::temporal::single_ball;
-    use host_compiler::verify::temporal::{formula_value, RunRecord};
-    use qemu_tests::closed_loop::exchange;
     const RUNS: usize = 50;
-    const SUB: usize = 8;
     let spec = concat!(
         env!("CARGO_MANIFEST_DIR"),
         "/../examples/flat-quadrotor-speed.toml"
@@ -359,7 +305,7 @@ fn flat_quadrotor_speed_rule_holds_on_the_target_from_50_initial_states() {
     let task = host_compiler::task::Task::new(problem).expect("the task in q");
     let tt = TemporalTask::from_problem(&task.problem).expect("the formula in q");
     let maps = task.plant.linearization().expect("a linearised plant");
-    let fc = maps.flat.as_ref().expect("a flat plant");
+    assert!(maps.flat.is_some(), "a flat plant");
     let centre: Vec<f64> = task.init().centre();
     let (ball, bytes) = single_ball(&task, &tt, &centre).unwrap_or_else(|e| panic!("{e}"));
     assert!(ball.certificate.is_certified(), "{:?}", ball.certificate);
@@ -377,11 +323,43 @@ fn flat_quadrotor_speed_rule_holds_on_the_target_from_50_initial_states() {
     let sets = tt
         .sets(&Metric::euclidean(task.plant.n()))
         .expect("the sets");
+    // The operating region over q is a conjunct of the rewritten formula.
+    let (least, worst_cost) = mtl_runs_on_target(&task, &tt, &sets, &elf, img, &starts, &|_| true);
+    println!(
+        "HIL flat quadrotor MTL: {RUNS} runs of {} steps satisfied `{}` on the plant (least robustness \
+         {least:.4e}, Euclidean, in q), bit for bit; δ = {:.4}, image {} bytes, worst step cost \
+         {worst_cost} instructions",
+        task.steps,
+        tt.written.source(),
+        ball.certificate.delta,
+        bytes.len()
+    );
+}
+
+/// Each start run on the firmware `elf` (image `img`) against the plant's flow with 8 states recorded per
+/// period: every reply `Ok` and bit for bit with the host evaluator, every input in the plant's input
+/// set, every plant state `inside` (at the samples and between them), and the formula as rewritten into
+/// ξ true on the samples and on the finer record (ξ read with the controller's states, between samples
+/// with their model: a flat plant's thrust and its rate). Returns the least robustness (Euclidean) and
+/// the worst step cost.
+fn mtl_runs_on_target(
+    task: &host_compiler::task::Task,
+    tt: &host_compiler::property::TemporalTask,
+    sets: &[host_compiler::robustness::mtl::sets::NamedSet],
+    elf: &std::path::Path,
+    img: shared_types::image::Image<'_>,
+    starts: &[Vec<f64>],
+    inside: &dyn Fn(&[f64]) -> bool,
+) -> (f64, u32) {
+    use host_compiler::verify::temporal::{formula_value, RunRecord};
+    use qemu_tests::closed_loop::exchange;
+    const SUB: usize = 8;
+    let maps = task.plant.linearization().expect("a linearised plant");
     let input = input_bound(&maps.input);
     let h = maps.plant.period();
     let (mut worst_cost, mut least) = (0u32, f64::INFINITY);
     for (r, x0) in starts.iter().enumerate() {
-        let mut q = Qemu::launch(&elf, Duration::from_secs(120)).unwrap_or_else(|e| panic!("{e}"));
+        let mut q = Qemu::launch(elf, Duration::from_secs(120)).unwrap_or_else(|e| panic!("{e}"));
         let mut host = HostEvaluator::new(img);
         let mut x = x0.clone();
         let mut z = host.extension();
@@ -402,31 +380,36 @@ fn flat_quadrotor_speed_rule_holds_on_the_target_from_50_initial_states() {
                 .plant
                 .flow(&x, &u, h, SUB, &mut |xs| {
                     i += 1;
+                    assert!(
+                        inside(xs),
+                        "run {r}: outside the region in period {k}: {xs:?}"
+                    );
                     let tau = i as f64 * h / SUB as f64;
-                    rec.push_between(tau, &maps.xi_at(xs, &fc.zeta_within(&z, &z1, h, tau)));
+                    let zs = match &maps.flat {
+                        Some(fc) => fc.zeta_within(&z, &z1, h, tau),
+                        None => Vec::new(),
+                    };
+                    rec.push_between(tau, &maps.xi_at(xs, &zs));
                 })
                 .unwrap_or_else(|e| panic!("run {r}: the flow in period {k}: {e}"));
+            assert!(
+                inside(&x),
+                "run {r}: outside the region at sample {}: {x:?}",
+                k + 1
+            );
             z = z1;
             rec.push_sample(&maps.xi_at(&x, &z));
         }
         let exit = q.shutdown().unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(exit.code, Some(0), "run {r}: firmware exit");
         let (tc, tf) = rec.traces().expect("the run's traces");
-        let rho = formula_value(&tt, &sets, &tc).expect("the formula at the samples");
-        let rho_fine = formula_value(&tt, &sets, &tf).expect("the formula sampled finer");
+        let rho = formula_value(tt, sets, &tc).expect("the formula at the samples");
+        let rho_fine = formula_value(tt, sets, &tf).expect("the formula sampled finer");
         assert!(
             rho > 0.0 && rho_fine > 0.0,
             "run {r} from {x0:?}: robustness {rho} at the samples, {rho_fine} sampled finer"
         );
         least = least.min(rho).min(rho_fine);
     }
-    println!(
-        "HIL flat quadrotor MTL: {RUNS} runs of {} steps satisfied `{}` on the plant (least robustness \
-         {least:.4e}, Euclidean, in q), bit for bit; δ = {:.4}, image {} bytes, worst step cost \
-         {worst_cost} instructions",
-        task.steps,
-        tt.written.source(),
-        ball.certificate.delta,
-        bytes.len()
-    );
+    (least, worst_cost)
 }
