@@ -239,10 +239,15 @@ impl<'a> Controller<'a> {
             return None;
         }
         // One location, so one P for every ball: the fixed-size path for n = 4, the state dimension of the
-        // planar vehicles (Examples 4.8, 4.9 and their variants), whose images have the most balls. Each
-        // dimension so served costs its own unrolled copy in flash (about 500 bytes for n = 4).
+        // planar vehicles (Examples 4.8, 4.9 and their variants), whose images have the most balls, and
+        // for n = 8, a flat plant with two chains of four (the planar quadrotor of Example 4.10, whose
+        // first step tests every ball of its cover in dimension 8). Each dimension so served costs its
+        // own unrolled copy in flash (about 500 bytes for n = 4).
         if img.n_locations() == 1 && n == 4 {
             return self.select_fixed::<4>(x);
+        }
+        if img.n_locations() == 1 && n == 8 {
+            return self.select_fixed::<8>(x);
         }
         let p = img.payload();
         let mut best: Option<u16> = None;

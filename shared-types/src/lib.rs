@@ -11,6 +11,7 @@
 //! * [`eval`]: the f32 evaluator ([`eval::Controller`]), [`eval::Status`] and [`eval::Input`];
 //! * `linalg`: the evaluator's matrix–vector products on nalgebra views, and their summation order;
 //! * [`program`]: model programs, the validated `f32` stack bytecode of a nonlinear plant's maps;
+//! * [`trig`]: their sine and cosine in f32 arithmetic only (libm's evaluate in f64);
 //! * [`maps`]: the model maps section (`coords: x ↦ ξ`, `input_map: (x, w) ↦ u`) of a
 //!   feedback-linearizable plant's image;
 //! * [`terminal`]: the optional terminal law, a certified law with its invariant ellipsoid in Goal for
@@ -31,3 +32,4 @@ pub mod protocol;
 pub mod pwa;
 mod raw;
 pub mod terminal;
+pub mod trig;

@@ -1,6 +1,6 @@
 //! Model programs: the maps a nonlinear plant's controller evaluates on the target (the coordinates ξ(x),
 //! κ(x) and λ(x) of the feedback law (3.17) for §3.1.2, the flat maps of §3.1.3), as a compact stack
-//! bytecode evaluated in `f32` with `libm` (DESIGN §5 "model programs"; issue 13).
+//! bytecode evaluated in `f32` with `libm` and [`crate::trig`] (DESIGN §5 "model programs"; issue 13).
 //!
 //! [`Program::decode`] validates every byte before anything runs: the length against
 //! [`MAX_PROGRAM_LEN`], the counts against their capacities, every constant finite, every opcode known,
@@ -36,7 +36,7 @@
 //! | `0x10`–`0x13` ADD SUB MUL DIV | — | pop `b`, pop `a`, push `a ∘ b` |
 //! | `0x14` NEG | — | negate the top |
 //! | `0x15` POWI | exponent `i8`, `1 ≤ |k| ≤ MAX_PROGRAM_POWI` | `x^|k|` by `|k| − 1` multiplications left to right, then `1 / ·` if `k < 0` |
-//! | `0x20`–`0x28` SIN COS TAN EXP LOG SQRT ABS ATAN TANH | — | replace the top by `libm`'s `f32` function of it |
+//! | `0x20`–`0x28` SIN COS TAN EXP LOG SQRT ABS ATAN TANH | — | replace the top by its `f32` function: sine and cosine [`crate::trig::sincos`], the others `libm`'s |
 //! | `0x29` ATAN2 | — | pop `x`, pop `y`, push `atan2(y, x)` |
 //!
 //! An image carries programs in its model maps section ([`crate::maps`]), which declares their slots.
@@ -86,12 +86,12 @@ pub mod opcode {
     pub const ATAN2: u8 = 0x29;
 }
 
-/// The unary functions a program evaluates through `libm`.
+/// The unary functions a program evaluates: sine and cosine by [`crate::trig`], the others by `libm`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Func {
-    /// `sinf`.
+    /// Sine ([`crate::trig::sincos`]).
     Sin,
-    /// `cosf`.
+    /// Cosine ([`crate::trig::sincos`]).
     Cos,
     /// `tanf`.
     Tan,
@@ -147,8 +147,8 @@ impl Func {
     #[inline]
     pub fn apply(self, x: f32) -> f32 {
         match self {
-            Func::Sin => libm::sinf(x),
-            Func::Cos => libm::cosf(x),
+            Func::Sin => crate::trig::sincos(x).0,
+            Func::Cos => crate::trig::sincos(x).1,
             Func::Tan => libm::tanf(x),
             Func::Exp => libm::expf(x),
             Func::Log => libm::logf(x),
@@ -585,8 +585,8 @@ const MEMO_LEN: usize = 4;
 /// The library calls already made in one step, by function and argument bits: a program shares a
 /// subexpression through its registers, but two programs of one step (the coordinates and the input
 /// map) and two equal arguments the compiler did not see as one expression would otherwise pay for a call
-/// twice, and a call costs far more on the target than a few comparisons (`libm` computes in f64, which a
-/// Cortex-M4F emulates). The functions are pure, so a remembered value has exactly the bits a new call
+/// twice, and a call costs more on the target than a few comparisons (most of `libm`'s f32 functions
+/// compute in f64, which a Cortex-M4F emulates). The functions are pure, so a remembered value has exactly the bits a new call
 /// would give. Oldest entry replaced first; bounded by [`MEMO_LEN`].
 pub struct Memo {
     /// (opcode, argument bits, value); opcode 0 (no function has it) marks an empty entry.
@@ -609,10 +609,8 @@ impl Memo {
         }
     }
 
-    /// `f(x)`, remembered. A sine or cosine is computed with `libm::sincosf` and both are remembered
-    /// (a rotation needs both of the same angle): `sincosf` gives exactly the bits of `sinf` and `cosf`
-    /// for every f32 (checked exhaustively for the `libm` version in `Cargo.lock`; the test suite
-    /// samples it).
+    /// `f(x)`, remembered. A sine or cosine is computed with [`crate::trig::sincos`] and both are
+    /// remembered (a rotation needs both of the same angle), the bits [`Func::apply`] gives.
     #[inline]
     fn apply(&mut self, f: Func, x: f32) -> f32 {
         let bits = x.to_bits();
@@ -625,7 +623,7 @@ impl Memo {
         }
         match f {
             Func::Sin | Func::Cos => {
-                let (s, c) = libm::sincosf(x);
+                let (s, c) = crate::trig::sincos(x);
                 self.remember(Func::Sin, bits, s);
                 self.remember(Func::Cos, bits, c);
                 if f == Func::Sin {

@@ -6,8 +6,9 @@
 //! feedforward with model maps, [`ext_image`]: model maps with controller states) the tests and the
 //! `c_export` bench run it on. Not used by the pipeline.
 //!
-//! Model programs that call `sin`, `cos`, `tan`, `exp`, `log`, `atan`, `tanh` or `atan2` run the C
-//! library's functions in C and the `libm` crate's in Rust, which may differ in the last place:
+//! Model programs that call `tan`, `exp`, `log`, `atan`, `tanh` or `atan2` run the C library's
+//! functions in C and the `libm` crate's in Rust, which may differ in the last place (`sin` and `cos`
+//! are `shared_types::trig::sincos` on both sides, ported, so the same bits):
 //! [`CHarness::compare_within`] then accepts inputs that differ by at most a given number of ulps (and
 //! reports the largest difference it saw); everything else is compared bit for bit.
 //!

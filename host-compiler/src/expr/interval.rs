@@ -23,11 +23,14 @@
 //! * `x^k` is followed as the `|k| − 1` multiplications (and one division) the target performs;
 //! * a `libm` function φ: |φ₃₂(ŷ) − φ(x)| ≤ L·e + U·2⁻²³·|φ(Y)| + U·2⁻¹⁴⁹, with L a Lipschitz
 //!   constant of φ on Y and U the accuracy in ulps. `sqrtf` is correctly rounded (U = ½, IEEE 754) and
-//!   `fabsf` exact (U = 0). For `sinf cosf tanf expf logf atanf tanhf atan2f` we take U =
-//!   [`LIBM_ULPS`] = 4: the `libm` crate ports musl, whose single-precision functions (from FreeBSD's
-//!   msun) state errors below 1 ulp; we use four times that so that the bound holds with a wide margin
-//!   and does not rest on a figure the crate itself does not promise. The proptests of this module check
-//!   it at random points.
+//!   `fabsf` exact (U = 0). For `tanf expf logf atanf tanhf atan2f` we take U = [`LIBM_ULPS`] = 4:
+//!   the `libm` crate ports musl, whose single-precision functions (from FreeBSD's msun) state errors
+//!   below 1 ulp; we use four times that so that the bound holds with a wide margin and does not rest
+//!   on a figure the crate itself does not promise. Sine and cosine are `shared_types::trig::sincos`
+//!   (f32 only), within 2 ulps in this model plus an absolute term of its reduction by π/2
+//!   (`shared_types::trig::REDUCTION_ABS`·(|x| + 2)) by its own tests; they are charged 4 ulps and
+//!   that term. The
+//!   proptests of this module check it at random points.
 //!
 //! Each error term is taken at its worst over the whole box (an absolute bound), so the bound is tight
 //! on small boxes and loose where a wide box mixes large and small magnitudes (a quotient by a divisor
@@ -575,10 +578,16 @@ fn func_val(f: Func, a: Val) -> Result<Val, IntervalError> {
     let x = func(f, a.x)?;
     let fy = func(f, y)?;
     let (ulps, lip) = func_constants(f, y, a.e)?;
+    // Sine and cosine also carry their reduction's absolute error (`shared_types::trig`).
+    let reduction = match f {
+        Func::Sin | Func::Cos => prod_up(shared_types::trig::REDUCTION_ABS, up(y.mag() + 2.0)),
+        _ => 0.0,
+    };
     let e = sum_up(&[
         prod_up(lip, a.e),
         prod_up(ulps * 2.0 * EPS32, fy.mag()),
         prod_up(ulps, ETA32),
+        reduction,
     ]);
     in_f32(Val { x, e })
 }

@@ -396,14 +396,14 @@ fn f32_select(c: &Content, x: &[f32]) -> Option<u16> {
     best
 }
 
-/// The selection (the fixed-size path of one-location images of dimension 2 and 4, and the general loop
+/// The selection (the fixed-size path of one-location images of dimension 4 and 8, and the general loop
 /// otherwise) answers exactly what the documented f32 operations give, at states near the balls' centres
 /// and on their boundaries.
 #[test]
 fn selection_equals_the_documented_f32_operations() {
     let mut rng = ChaCha8Rng::seed_from_u64(0x5e1);
-    for case in 0..600 {
-        let c = random_content(&mut rng, 5, 2, 16, 3);
+    for case in 0..900 {
+        let c = random_content(&mut rng, 8, 2, 16, 3);
         let bytes = c.to_bytes().unwrap();
         let img = decode(&bytes).unwrap();
         let ctl = Controller::new(img);

@@ -667,6 +667,36 @@ static float powi_f32(float x, int k) {
     return k < 0 ? 1.0f / acc : acc;
 }
 
+/* trig::sincos: sine and cosine in float arithmetic only (Cody-Waite reduction by pi/2, Cephes'
+ * polynomials on [-pi/4, pi/4]), the same operations in the same order as the Rust evaluator, so the
+ * same bits; beyond |x| <= 8192, and for NaN and infinities, the C library's sinf and cosf. */
+static void sincos_f32(float x, float *s_out, float *c_out) {
+    const float C1 = 1.5703125f, C2 = 4.837512969970703125e-4f, C3 = 7.54979012640433e-8f;
+    const float S1 = -1.6666655e-1f, S2 = 8.332161e-3f, S3 = -1.9515296e-4f;
+    const float K1 = 4.1666646e-2f, K2 = -1.3887316e-3f, K3 = 2.4433157e-5f;
+    float a = fabsf(x), kf, r, z, s, c, sa, ca;
+    int32_t k;
+    if (!(a <= 8192.0f)) {
+        *s_out = sinf(x);
+        *c_out = cosf(x);
+        return;
+    }
+    k = (int32_t)(a * 0.636619772f + 0.5f);
+    kf = (float)k;
+    r = ((a - kf * C1) - kf * C2) - kf * C3;
+    z = r * r;
+    s = r + ((S3 * z + S2) * z + S1) * z * r;
+    c = (((K3 * z + K2) * z + K1) * z * z - 0.5f * z) + 1.0f;
+    switch (k & 3) {
+    case 0: sa = s; ca = c; break;
+    case 1: sa = c; ca = -s; break;
+    case 2: sa = -s; ca = -c; break;
+    default: sa = -c; ca = s; break;
+    }
+    *s_out = (f32_bits(x) & 0x80000000u) ? -sa : sa;
+    *c_out = ca;
+}
+
 /* program::Program::eval on a validated program: inputs[0..n_inputs) -> out[0..n_outputs). One pass
  * over at most SC_MAX_PROGRAM_LEN bytes of code with a fixed stack; every access is in range for a
  * validated program, and checked anyway. */
@@ -716,8 +746,8 @@ static void eval_program(const sc_program *pr, const float *inputs, float *out) 
             switch (op) {
             case SC_OP_NEG: v = -a; break;
             case SC_OP_POWI: v = powi_f32(a, (int)(int8_t)pr->code.p[pc + 1u]); break;
-            case SC_OP_FUNC0 + 0u: v = sinf(a); break;
-            case SC_OP_FUNC0 + 1u: v = cosf(a); break;
+            case SC_OP_FUNC0 + 0u: sincos_f32(a, &v, &b); break;
+            case SC_OP_FUNC0 + 1u: sincos_f32(a, &b, &v); break;
             case SC_OP_FUNC0 + 2u: v = tanf(a); break;
             case SC_OP_FUNC0 + 3u: v = expf(a); break;
             case SC_OP_FUNC0 + 4u: v = logf(a); break;
