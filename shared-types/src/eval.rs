@@ -41,6 +41,7 @@
 use crate::capacity::{MAX_EXT, MAX_M, MAX_N};
 use crate::image::{Exit, Fallback, Image, Mode, ModelMaps, Terminal};
 use crate::linalg;
+use crate::program::Workspace;
 use crate::pwa::Region;
 use crate::raw::{f32_span, floats};
 use crate::terminal::TerminalLaw;
@@ -153,6 +154,9 @@ pub struct Controller<'a> {
     /// The controller's own states ζ (model maps with a dynamic extension; the first `n_ext` are used):
     /// ζ0 at reset, ζ⁺ of `input_map` after every accepted step that ran it.
     ext: [f32; MAX_EXT],
+    /// The model programs' working memory, kept across steps (never read before written within an
+    /// evaluation, so it is not state of the law).
+    work: Workspace,
 }
 
 impl<'a> Controller<'a> {
@@ -175,6 +179,7 @@ impl<'a> Controller<'a> {
             terminal: false,
             last_u: Input::zero(m),
             ext,
+            work: Workspace::new(),
         }
     }
 
@@ -406,26 +411,24 @@ impl<'a> Controller<'a> {
         if x.len() != np || !x.iter().all(|v| v.is_finite()) {
             return Err(Status::BadFrame);
         }
-        // The controller's states ζ as this step reads them (a copy: ζ changes only once u is accepted).
-        let ext = self.ext;
-        let zeta = ext.get(..ne).unwrap_or(&[]);
+        // The slots of both programs: x, then the controller's states ζ as this step reads them (ζ
+        // changes only once u is accepted), then w; coords reads the first np + ne of them.
+        let mut slots = [0.0f32; MAX_N + MAX_EXT + MAX_M];
+        for (s, &v) in slots.iter_mut().zip(x) {
+            *s = v;
+        }
+        for (s, &v) in slots.iter_mut().skip(np).zip(self.ext.iter().take(ne)) {
+            *s = v;
+        }
         let mut xi_buf = [0.0f32; MAX_N];
-        let Some(xi) = xi_buf.get_mut(..n) else {
+        let (Some(xi), Some(coords_in)) = (xi_buf.get_mut(..n), slots.get(..np + ne)) else {
             return Err(Status::OutOfEnvelope);
         };
-        // The slots of coords: x, then ζ (x itself without controller states).
-        let mut coords_slots = [0.0f32; MAX_N + MAX_EXT];
-        let coords_in: &[f32] = if ne == 0 {
-            x
-        } else {
-            for (s, &v) in coords_slots.iter_mut().zip(x.iter().chain(zeta)) {
-                *s = v;
-            }
-            coords_slots.get(..np + ne).unwrap_or(&[])
-        };
-        // One memo of library calls for both programs of the step (both need the same angles).
-        let mut memo = crate::program::Memo::new();
-        if maps.coords().eval_with(coords_in, xi, &mut memo).is_err()
+        // One working memory for both programs of the step (its memo: both need the same angles).
+        if maps
+            .coords()
+            .eval_with(coords_in, xi, &mut self.work)
+            .is_err()
             || !xi.iter().all(|v| v.is_finite())
         {
             return Err(Status::OutOfEnvelope);
@@ -437,12 +440,7 @@ impl<'a> Controller<'a> {
                 if !w.as_slice().iter().all(|v| v.is_finite()) {
                     return Err(Status::OutOfEnvelope);
                 }
-                // The slots of input_map: x, then ζ, then w.
-                let mut slots = [0.0f32; MAX_N + MAX_EXT + MAX_M];
-                for (s, &v) in slots
-                    .iter_mut()
-                    .zip(x.iter().chain(zeta).chain(w.as_slice()))
-                {
+                for (s, &v) in slots.iter_mut().skip(np + ne).zip(w.as_slice()) {
                     *s = v;
                 }
                 // Its outputs: u, then ζ⁺.
@@ -452,7 +450,7 @@ impl<'a> Controller<'a> {
                 else {
                     return Err(Status::OutOfEnvelope);
                 };
-                if input_map.eval_with(inputs, out, &mut memo).is_err() {
+                if input_map.eval_with(inputs, out, &mut c.work).is_err() {
                     return Err(Status::OutOfEnvelope);
                 }
                 let Some((u_out, next)) = out.split_at_checked(mp) else {

@@ -454,19 +454,21 @@ impl<'a> Program<'a> {
     /// [`Self::n_outputs`]. Slices of other lengths are refused with [`ImageError::ProgramArity`].
     /// Non-finite inputs or results are not refused here: the caller judges the outputs.
     pub fn eval(&self, inputs: &[f32], out: &mut [f32]) -> Result<(), ImageError> {
-        self.eval_with(inputs, out, &mut Memo::new())
+        self.eval_with(inputs, out, &mut Workspace::new())
     }
 
-    /// [`Program::eval`] with the library calls remembered in `memo`, which may hold calls of an
-    /// earlier program of the same step (the coordinates and the input map both need sin θ): the
-    /// results are the same bits either way.
+    /// [`Program::eval`] in the working memory `work`, which an earlier evaluation may have left as it
+    /// was (the evaluator keeps one across steps, so that a step does not clear it): the stack slots and
+    /// registers are written before they are read (validation), and the library calls remembered in it
+    /// are exact (the coordinates and the input map both need sin θ), so the results are the same bits
+    /// either way.
     // `tos = under + tos`, not `tos += under`: the operands stay in the table's order a ∘ b.
     #[allow(clippy::assign_op_pattern)]
     pub fn eval_with(
         &self,
         inputs: &[f32],
         out: &mut [f32],
-        memo: &mut Memo,
+        work: &mut Workspace,
     ) -> Result<(), ImageError> {
         if inputs.len() != self.n_inputs() {
             return Err(ImageError::ProgramArity {
@@ -487,14 +489,18 @@ impl<'a> Program<'a> {
         // instruction; the arithmetic is that of the instruction table, in code order.
         const MASK: usize = MAX_PROGRAM_STACK - 1;
         const REG_MASK: usize = MAX_PROGRAM_REGS - 1;
-        let mut stack = [0.0f32; MAX_PROGRAM_STACK];
-        let mut regs = [0.0f32; MAX_PROGRAM_REGS];
+        let Workspace { stack, regs, memo } = work;
         let mut sp = 0usize;
         let mut tos = 0.0f32;
         let code = self.code;
         let mut pc = 0usize;
         while let Some(&byte) = code.get(pc) {
-            let a = code.get(pc.wrapping_add(1)).copied().unwrap_or(0);
+            // The operand byte, read only by the instructions that have one.
+            macro_rules! operand {
+                () => {
+                    code.get(pc.wrapping_add(1)).copied().unwrap_or(0)
+                };
+            }
             // Push `v`: spill the old top under it.
             macro_rules! push {
                 ($v:expr) => {{
@@ -513,27 +519,27 @@ impl<'a> Program<'a> {
             }
             pc += match byte {
                 opcode::LOAD => {
-                    push!(inputs.get(usize::from(a)).copied().unwrap_or(0.0));
+                    push!(inputs.get(usize::from(operand!())).copied().unwrap_or(0.0));
                     2
                 }
                 opcode::CONST => {
                     let hi = code.get(pc.wrapping_add(2)).copied().unwrap_or(0);
-                    push!(self.constant(usize::from(u16::from_le_bytes([a, hi]))));
+                    push!(self.constant(usize::from(u16::from_le_bytes([operand!(), hi]))));
                     3
                 }
                 opcode::STORE => {
-                    if let Some(o) = out.get_mut(usize::from(a)) {
+                    if let Some(o) = out.get_mut(usize::from(operand!())) {
                         *o = tos;
                     }
                     tos = pop_under!();
                     2
                 }
                 opcode::TEE => {
-                    regs[usize::from(a) & REG_MASK] = tos;
+                    regs[usize::from(operand!()) & REG_MASK] = tos;
                     2
                 }
                 opcode::RECALL => {
-                    push!(regs[usize::from(a) & REG_MASK]);
+                    push!(regs[usize::from(operand!()) & REG_MASK]);
                     2
                 }
                 opcode::ADD => {
@@ -561,7 +567,7 @@ impl<'a> Program<'a> {
                     1
                 }
                 opcode::POWI => {
-                    tos = powi(tos, a as i8);
+                    tos = powi(tos, operand!() as i8);
                     2
                 }
                 b => {
@@ -582,27 +588,50 @@ impl<'a> Program<'a> {
 /// How many library calls one evaluation remembers ([`Memo`]).
 const MEMO_LEN: usize = 4;
 
-/// The library calls already made in one step, by function and argument bits: a program shares a
-/// subexpression through its registers, but two programs of one step (the coordinates and the input
-/// map) and two equal arguments the compiler did not see as one expression would otherwise pay for a call
-/// twice, and a call costs more on the target than a few comparisons (most of `libm`'s f32 functions
-/// compute in f64, which a Cortex-M4F emulates). The functions are pure, so a remembered value has exactly the bits a new call
-/// would give. Oldest entry replaced first; bounded by [`MEMO_LEN`].
-pub struct Memo {
-    /// (opcode, argument bits, value); opcode 0 (no function has it) marks an empty entry.
-    entries: [(u8, u32, f32); MEMO_LEN],
-    next: usize,
+/// The working memory of program evaluations ([`Program::eval_with`]): the value stack, the registers
+/// and the [`Memo`] of library calls. The evaluator keeps one for as long as the controller lives,
+/// which spares every step the clearing of the two arrays; nothing an evaluation reads in it depends
+/// on what an earlier one left (see `eval_with`).
+#[derive(Clone, Copy, Debug)]
+pub struct Workspace {
+    stack: [f32; MAX_PROGRAM_STACK],
+    regs: [f32; MAX_PROGRAM_REGS],
+    memo: Memo,
 }
 
-impl Default for Memo {
+impl Default for Workspace {
     fn default() -> Self {
         Self::new()
     }
 }
 
+impl Workspace {
+    /// Zeroed, nothing remembered.
+    pub const fn new() -> Self {
+        Workspace {
+            stack: [0.0; MAX_PROGRAM_STACK],
+            regs: [0.0; MAX_PROGRAM_REGS],
+            memo: Memo::new(),
+        }
+    }
+}
+
+/// The library calls already made, by function and argument bits: a program shares a
+/// subexpression through its registers, but two programs of one step (the coordinates and the input
+/// map) and two equal arguments the compiler did not see as one expression would otherwise pay for a call
+/// twice, and a call costs more on the target than a few comparisons (most of `libm`'s f32 functions
+/// compute in f64, which a Cortex-M4F emulates). The functions are pure, so a remembered value has exactly the bits a new call
+/// would give, in this step or a later one. Oldest entry replaced first; bounded by [`MEMO_LEN`].
+#[derive(Clone, Copy, Debug)]
+struct Memo {
+    /// (opcode, argument bits, value); opcode 0 (no function has it) marks an empty entry.
+    entries: [(u8, u32, f32); MEMO_LEN],
+    next: usize,
+}
+
 impl Memo {
     /// Nothing remembered.
-    pub fn new() -> Self {
+    const fn new() -> Self {
         Memo {
             entries: [(0, 0, 0.0); MEMO_LEN],
             next: 0,

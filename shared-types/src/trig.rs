@@ -47,8 +47,8 @@ const K3: f32 = 2.443_315_7e-5;
 #[inline]
 pub fn sincos(x: f32) -> (f32, f32) {
     let a = libm::fabsf(x);
-    // `!(a <= …)` also sends NaN there.
-    if !(a <= REDUCED_MAX) {
+    // NaN fails the comparison and goes there too.
+    if a.is_nan() || a > REDUCED_MAX {
         return libm::sincosf(x);
     }
     // k = round(a·2/π) (half up; a ≥ 0), so |r| ≤ π/4 up to the rounding of a·2/π.

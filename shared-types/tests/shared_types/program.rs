@@ -4,7 +4,7 @@
 use proptest::prelude::*;
 use shared_types::capacity::{MAX_PROGRAM_LEN, MAX_PROGRAM_REGS, MAX_PROGRAM_STACK};
 use shared_types::error::{Dim, Field, ImageError};
-use shared_types::program::{powi, write_header, Func, Op, Program, PROGRAM_HEADER_LEN};
+use shared_types::program::{powi, write_header, Func, Op, Program, Workspace, PROGRAM_HEADER_LEN};
 
 /// Assembles a program from its parts (the stored stack depth is given, so tests can lie about it).
 pub(crate) fn assemble(
@@ -335,49 +335,6 @@ proptest! {
     }
 }
 
-/// The evaluator computes a sine or cosine with `libm::sincosf` and remembers both: that needs
-/// `sincosf(x) == (sinf(x), cosf(x))` bit for bit. Checked exhaustively for the `libm` version in
-/// Cargo.lock when the evaluator began to rely on it; here on the branch thresholds of its argument
-/// reduction (±4 ulp around each), special values and 300 000 random bit patterns.
-#[test]
-fn sincosf_gives_the_bits_of_sinf_and_cosf() {
-    use rand::{Rng, SeedableRng};
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0x51c0);
-    let mut xs: Vec<u32> = vec![
-        0,
-        0x8000_0000,
-        1,
-        0x7f80_0000,
-        0xff80_0000,
-        0x7fc0_0000,
-        0x7f7f_ffff,
-    ];
-    for t in [
-        0x3980_0000u32,
-        0x3f49_0fda,
-        0x4016_cbe3,
-        0x407b_53d1,
-        0x40af_eddf,
-        0x40e2_31d5,
-        0x4b80_0000,
-    ] {
-        for d in 0..9u32 {
-            let b = t.wrapping_add(d).wrapping_sub(4);
-            xs.extend([b, b | 0x8000_0000]);
-        }
-    }
-    xs.extend((0..300_000).map(|_| rng.random::<u32>()));
-    for b in xs {
-        let x = f32::from_bits(b);
-        let (s, c) = libm::sincosf(x);
-        assert_eq!(
-            (s.to_bits(), c.to_bits()),
-            (libm::sinf(x).to_bits(), libm::cosf(x).to_bits()),
-            "x = {x:e} ({b:#010x})"
-        );
-    }
-}
-
 /// Remembered library calls ([`Program::eval`]'s memo) give the bits of fresh ones: a program with the
 /// same calls repeated, more distinct calls than the memo holds, and sine and cosine of one argument.
 #[test]
@@ -478,6 +435,9 @@ fn reference_eval(p: &Program<'_>, inputs: &[f32], out: &mut [f32]) {
 fn interpreter_equals_the_instruction_table_on_random_programs() {
     use rand::{Rng, SeedableRng};
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0x1e7);
+    // One working memory across all cases, as the evaluator keeps one across steps: what earlier
+    // programs left in its stack, registers and memo must not change a result.
+    let mut work = Workspace::new();
     for case in 0..3000 {
         let (n_inputs, n_outputs, n_consts) = (
             rng.random_range(1..6usize),
@@ -535,6 +495,14 @@ fn interpreter_equals_the_instruction_table_on_random_programs() {
             reference_eval(&p, &x, &mut want);
             for (g, w) in got.iter().zip(&want) {
                 assert_eq!(g.to_bits(), w.to_bits(), "case {case}: {ops:?} at {x:?}");
+            }
+            p.eval_with(&x, &mut got, &mut work).unwrap();
+            for (g, w) in got.iter().zip(&want) {
+                assert_eq!(
+                    g.to_bits(),
+                    w.to_bits(),
+                    "case {case}, kept workspace: {ops:?} at {x:?}"
+                );
             }
         }
     }
