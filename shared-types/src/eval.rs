@@ -244,15 +244,11 @@ impl<'a> Controller<'a> {
             return None;
         }
         // One location, so one P for every ball: the fixed-size path for n = 4, the state dimension of the
-        // planar vehicles (Examples 4.8, 4.9 and their variants), whose images have the most balls, and
-        // for n = 8, a flat plant with two chains of four (the planar quadrotor of Example 4.10, whose
-        // first step tests every ball of its cover in dimension 8). Each dimension so served costs its
-        // own unrolled copy in flash (about 500 bytes for n = 4).
+        // planar vehicles (Examples 4.8, 4.9 and their variants), whose images have the most balls. Each
+        // dimension so served costs its own unrolled copy in flash (about 500 bytes for n = 4; n = 8 is
+        // served only on the model-maps path, `select_unrolled`).
         if img.n_locations() == 1 && n == 4 {
             return self.select_fixed::<4>(x);
-        }
-        if img.n_locations() == 1 && n == 8 {
-            return self.select_fixed::<8>(x);
         }
         let p = img.payload();
         let mut best: Option<u16> = None;
@@ -280,6 +276,18 @@ impl<'a> Controller<'a> {
             }
         }
         best
+    }
+
+    /// [`Controller::select`] as the model-maps step runs it: the unrolled path also for n = 8, a flat
+    /// plant with two chains of four (the planar quadrotor of Example 4.10, whose first step tests every
+    /// ball of its cover in dimension 8). The same answers; only [`Controller::step_plant`] with model
+    /// maps calls it, so a firmware whose image has none does not carry its 1.7 kB of unrolled code.
+    /// Pure; does not change state.
+    pub fn select_unrolled(&self, x: &[f32]) -> Option<u16> {
+        if self.image.n_locations() == 1 && self.image.n() == 8 {
+            return self.select_fixed::<8>(x);
+        }
+        self.select(x)
     }
 
     /// [`Controller::select`] for a one-location image of state dimension N (x has N values): P read from
@@ -373,6 +381,7 @@ impl<'a> Controller<'a> {
         }
         self.feedforward(
             x,
+            Self::select,
             |c, u| c.accept(u),
             |c| {
                 let u = c.fallback(x, &c.last_u);
@@ -436,6 +445,7 @@ impl<'a> Controller<'a> {
         let input_map = maps.input_map();
         self.feedforward(
             xi,
+            Self::select_unrolled,
             |c, w| {
                 if !w.as_slice().iter().all(|v| v.is_finite()) {
                     return Err(Status::OutOfEnvelope);
@@ -476,8 +486,8 @@ impl<'a> Controller<'a> {
         )
     }
 
-    /// The feedforward law of one step at the (finite, length-n) state `x`: selection at κ = 0 and its
-    /// latch, the table row (or exits), the terminal behaviour; then `law(self, u)` with the law's input
+    /// The feedforward law of one step at the (finite, length-n) state `x`: selection at κ = 0 by
+    /// `select` (one of the two with the same answers) and its latch, the table row (or exits), the terminal behaviour; then `law(self, u)` with the law's input
     /// or `fallback(self)` where the image's fallback applies. Closures rather than a returned enum, which
     /// the optimiser does not resolve branch by branch: this way `step` costs what its own inline code
     /// would.
@@ -485,6 +495,7 @@ impl<'a> Controller<'a> {
     fn feedforward(
         &mut self,
         x: &[f32],
+        select: impl FnOnce(&Self, &[f32]) -> Option<u16>,
         law: impl FnOnce(&mut Self, Input) -> Result<Input, Status>,
         fallback: impl FnOnce(&mut Self) -> Result<Input, Status>,
     ) -> Result<Input, Status> {
@@ -493,7 +504,7 @@ impl<'a> Controller<'a> {
         }
         let t = match self.active {
             Some(t) => t,
-            None => match self.select(x) {
+            None => match select(self, x) {
                 Some(t) => {
                     self.active = Some(t);
                     self.segment = self.image.trajectory_segments(t as usize).0 as u16;

@@ -396,8 +396,8 @@ fn f32_select(c: &Content, x: &[f32]) -> Option<u16> {
     best
 }
 
-/// The selection (the fixed-size path of one-location images of dimension 4 and 8, and the general loop
-/// otherwise) answers exactly what the documented f32 operations give, at states near the balls' centres
+/// The selection (the fixed-size path of one-location images of dimension 4, and with model maps of
+/// dimension 8 too, and the general loop otherwise) answers exactly what the documented f32 operations give, at states near the balls' centres
 /// and on their boundaries.
 #[test]
 fn selection_equals_the_documented_f32_operations() {
@@ -421,11 +421,9 @@ fn selection_equals_the_documented_f32_operations() {
                 x = (0..n).map(|i| c.centre[t * n + i]).collect();
                 x[0] += c.delta[t] / p00.sqrt();
             }
-            assert_eq!(
-                ctl.select(&x),
-                f32_select(&c, &x),
-                "case {case}, n {n}, x {x:?}"
-            );
+            let want = f32_select(&c, &x);
+            assert_eq!(ctl.select(&x), want, "case {case}, n {n}, x {x:?}");
+            assert_eq!(ctl.select_unrolled(&x), want, "case {case}, n {n}, x {x:?}");
         }
     }
 }
