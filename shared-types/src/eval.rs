@@ -487,8 +487,9 @@ impl<'a> Controller<'a> {
     }
 
     /// The feedforward law of one step at the (finite, length-n) state `x`: selection at κ = 0 by
-    /// `select` (one of the two with the same answers) and its latch, the table row (or exits), the terminal behaviour; then `law(self, u)` with the law's input
-    /// or `fallback(self)` where the image's fallback applies. Closures rather than a returned enum, which
+    /// `select` (one of the two with the same answers) and its latch, the table row (or exits), the
+    /// terminal behaviour; then `law(self, u)` with the law's input or `fallback(self)` where the
+    /// image's fallback applies. Closures rather than a returned enum, which
     /// the optimiser does not resolve branch by branch: this way `step` costs what its own inline code
     /// would.
     #[inline(always)]
