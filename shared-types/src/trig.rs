@@ -16,9 +16,8 @@
 //! error that matters only near a zero of sin or cos, where the value itself is tiny. The tests check the
 //! bound on sampled f32 and next to every multiple of π/2 in range; an exhaustive run over every
 //! positive f32 up to the limit is in `tests` (ignored by default: 40 s in release), whose worst case is
-//! U = 1.03 (at x = 7101.045). The program rounding
-//! analysis (`host_compiler::expr::interval`) charges 4 ulps and this absolute term. Beyond the limit,
-//! NaN and ±∞ the answer is `libm::sincosf`'s.
+//! U = 1.03 (at x = 7101.045). The program rounding analysis (`host_compiler::expr::interval`) charges
+//! 4 ulps and this absolute term. Beyond the limit, NaN and ±∞ the answer is `libm::sincosf`'s.
 
 /// The largest |x| reduced here: |k| ≤ 2¹³ keeps k·[`C1`] and k·[`C2`] exact (8 and 11 significant bits).
 pub const REDUCED_MAX: f32 = 8192.0;
@@ -47,7 +46,6 @@ const K3: f32 = 2.443_315_7e-5;
 #[inline]
 pub fn sincos(x: f32) -> (f32, f32) {
     let a = libm::fabsf(x);
-    // NaN fails the comparison and goes there too.
     if a.is_nan() || a > REDUCED_MAX {
         return libm::sincosf(x);
     }

@@ -29,8 +29,7 @@
 //!   on a figure the crate itself does not promise. Sine and cosine are `shared_types::trig::sincos`
 //!   (f32 only), within 2 ulps in this model plus an absolute term of its reduction by π/2
 //!   (`shared_types::trig::REDUCTION_ABS`·(|x| + 2)) by its own tests; they are charged 4 ulps and
-//!   that term. The
-//!   proptests of this module check it at random points.
+//!   that term. The proptests of this module check it at random points.
 //!
 //! Each error term is taken at its worst over the whole box (an absolute bound), so the bound is tight
 //! on small boxes and loose where a wide box mixes large and small magnitudes (a quotient by a divisor

@@ -397,8 +397,8 @@ fn f32_select(c: &Content, x: &[f32]) -> Option<u16> {
 }
 
 /// The selection (the fixed-size path of one-location images of dimension 4, and with model maps of
-/// dimension 8 too, and the general loop otherwise) answers exactly what the documented f32 operations give, at states near the balls' centres
-/// and on their boundaries.
+/// dimension 8 too, and the general loop otherwise) answers exactly what the documented f32 operations
+/// give, at states near the balls' centres and on their boundaries.
 #[test]
 fn selection_equals_the_documented_f32_operations() {
     let mut rng = ChaCha8Rng::seed_from_u64(0x5e1);
