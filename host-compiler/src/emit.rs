@@ -17,7 +17,9 @@
 //! balls, `K` and `P` are then in ξ (dims n, m), while the fallback and the input box are in the plant's
 //! input space (`m_plant` values) and a linear fallback is refused. A differentially flat plant's maps
 //! also carry the controller's own states (`ext_init`: ζ0 of at most `MAX_EXT` states, which the programs
-//! read after x and `input_map` advances); with none the section is the feedback-linearizable one.
+//! read after x and `input_map` advances); with none the section is the feedback-linearizable one. Such an
+//! image may carry the whitened selection test the model-maps step selects with ([`SelectionTestSpec`],
+//! section 13, `shared_types::selection`).
 //!
 //! [`PwaImageBuilder`] is its sibling for the PWA-feedback image of Ch. 6 (layout and rationale in
 //! `shared_types::pwa`): per partition j the law `u = K_j x + θ0_j` with the full gain `K_j = K + θ_j`
@@ -209,6 +211,20 @@ pub struct ImageBuilder {
     pub model_maps: Option<ModelMapsSpec>,
     /// The certified terminal law (section 11), if any.
     pub terminal_law: Option<StoredTerminal>,
+    /// The whitened selection test (section 13, only with model maps), if any.
+    pub selection_test: Option<SelectionTestSpec>,
+}
+
+/// The whitened selection test of an image with model maps (`shared_types::selection`), as f32 values in
+/// the stored order: per location the factor `R̂_ℓ` (n × n, row-major, 0 below the diagonal), per
+/// trajectory its test record `[ĉ_z, ŝ]` (n + 1 values). The thresholds come from
+/// `crate::certify::pwa_ball_threshold` (see `cover::selection_test`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct SelectionTestSpec {
+    /// `n_locations × n × n` values.
+    pub factors: Vec<f32>,
+    /// `n_trajectories × (n + 1)` values.
+    pub records: Vec<f32>,
 }
 
 /// The model maps of a feedback-linearizable or differentially flat plant (`shared_types::maps`): the
@@ -340,6 +356,7 @@ impl ImageBuilder {
             fingerprint: None,
             terminal_law: None,
             model_maps: None,
+            selection_test: None,
         }
     }
 
@@ -618,6 +635,17 @@ impl ImageBuilder {
         };
         let img = Image::new_with_maps(Mode::Feedforward, dims, period, payload, maps.as_deref())?;
         let terminal = self.terminal_law.as_ref().map(terminal_body);
+        let selection: Option<Vec<u8>> = self.selection_test.as_ref().map(|t| {
+            t.factors
+                .iter()
+                .chain(&t.records)
+                .flat_map(|v| v.to_le_bytes())
+                .collect()
+        });
+        let img = match &selection {
+            Some(body) => img.with_selection_test(body)?,
+            None => img,
+        };
         encode_to_vec(&with_optional(img, &self.fingerprint, terminal.as_ref())?)
     }
 
@@ -680,6 +708,20 @@ impl ImageBuilder {
                 ext_init: mm.ext_inits().collect(),
                 coords: mm.coords_bytes().to_vec(),
                 input_map: mm.input_map_bytes().to_vec(),
+            }),
+            selection_test: img.selection_test().map(|t| {
+                let nl = img.n_locations();
+                let factors = (0..nl * n * n)
+                    .map(|i| t.factor(n, i / (n * n), (i / n) % n, i % n))
+                    .collect();
+                let records = (0..img.n_trajectories())
+                    .flat_map(|b| {
+                        (0..n)
+                            .map(move |i| t.centre_z(n, b, i))
+                            .chain([t.threshold(n, b)])
+                    })
+                    .collect();
+                SelectionTestSpec { factors, records }
             }),
         }
     }

@@ -131,6 +131,8 @@ pub enum Field {
     ExtInit,
     /// The terminal law section as a whole (its length against n and m).
     TerminalLaw,
+    /// The selection test section as a whole (its length against n, the locations and trajectories).
+    SelectionTest,
     /// The terminal law's equilibrium `x_e`.
     TerminalCentre,
     /// The terminal law's gain `K_t`.
@@ -373,6 +375,11 @@ pub enum ImageError {
     BadTerminalLaw,
     /// A terminal law in an image with model maps (not certified for such plants).
     TerminalWithModelMaps,
+    /// A selection test section in an image without model maps (only the model-maps step reads it).
+    SelectionWithoutModelMaps,
+    /// An image with model maps (or a selection test) given to a decoder built without the model-maps
+    /// step ([`crate::image::decode_without_model_maps`]).
+    ModelMapsNotSupported,
     /// The constant fallback input lies outside the stored input box in some component.
     FallbackOutsideBox {
         /// The component.
@@ -641,6 +648,7 @@ impl fmt::Display for Field {
             Field::ModelMaps => "model maps section",
             Field::ExtInit => "controller states' initial values",
             Field::TerminalLaw => "terminal law section",
+            Field::SelectionTest => "selection test section",
             Field::TerminalCentre => "terminal law x_e",
             Field::TerminalK => "terminal law K_t",
             Field::TerminalV => "terminal law v_t",
@@ -777,6 +785,12 @@ impl fmt::Display for ImageError {
             TerminalWithModelMaps => {
                 f.write_str("a terminal law in an image with model maps (not certified for such plants)")
             }
+            ModelMapsNotSupported => f.write_str(
+                "an image with model maps, for a firmware built without the model-maps step",
+            ),
+            SelectionWithoutModelMaps => f.write_str(
+                "a selection test section in an image without model maps (only the model-maps step reads it)",
+            ),
             FallbackOutsideBox { input } => write!(
                 f,
                 "fallback input component {input}: outside the input box"

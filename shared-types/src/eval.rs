@@ -23,6 +23,7 @@
 //!
 //! With model maps ([`crate::maps`], a feedback-linearizable or differentially flat plant, §3.1.2),
 //! [`Controller::step_plant`] wraps the feedforward law: ξ = coords(x, ζ), the feedforward law above on ξ
+//! (selecting with the image's whitened selection test when it has one, [`Controller::select_maps`])
 //! gives w, and (u, ζ⁺) = input_map(x, ζ, w); where the law would apply the fallback, the image's fallback
 //! (in the plant's input space) is applied without running `input_map`. ζ are the controller's own states
 //! (a dynamic extension, `n_ext ≤ MAX_EXT` of them, none for a feedback-linearizable plant): ζ0 (stored in
@@ -246,7 +247,7 @@ impl<'a> Controller<'a> {
         // One location, so one P for every ball: the fixed-size path for n = 4, the state dimension of the
         // planar vehicles (Examples 4.8, 4.9 and their variants), whose images have the most balls. Each
         // dimension so served costs its own unrolled copy in flash (about 500 bytes for n = 4; n = 8 is
-        // served only on the model-maps path, `select_unrolled`).
+        // served only on the model-maps path, `select_maps`).
         if img.n_locations() == 1 && n == 4 {
             return self.select_fixed::<4>(x);
         }
@@ -278,12 +279,14 @@ impl<'a> Controller<'a> {
         best
     }
 
-    /// [`Controller::select`] as the model-maps step runs it: the unrolled path also for n = 8, a flat
-    /// plant with two chains of four (the planar quadrotor of Example 4.10, whose first step tests every
-    /// ball of its cover in dimension 8). The same answers; only [`Controller::step_plant`] with model
-    /// maps calls it, so a firmware whose image has none does not carry its 1.7 kB of unrolled code.
-    /// Pure; does not change state.
-    pub fn select_unrolled(&self, x: &[f32]) -> Option<u16> {
+    /// The selection the model-maps step runs ([`Controller::step_plant`]): the image's whitened
+    /// selection test when it carries one ([`crate::selection`], section 13), else [`Controller::select`]
+    /// with its unrolled path also for n = 8 (the same answers as `select`). Only the model-maps step
+    /// calls it, so a firmware whose image has no model maps carries neither. Pure; does not change state.
+    pub fn select_maps(&self, x: &[f32]) -> Option<u16> {
+        if let Some(test) = self.image.selection_test() {
+            return test.select(&self.image, x);
+        }
         if self.image.n_locations() == 1 && self.image.n() == 8 {
             return self.select_fixed::<8>(x);
         }
@@ -445,7 +448,7 @@ impl<'a> Controller<'a> {
         let input_map = maps.input_map();
         self.feedforward(
             xi,
-            Self::select_unrolled,
+            Self::select_maps,
             |c, w| {
                 if !w.as_slice().iter().all(|v| v.is_finite()) {
                     return Err(Status::OutOfEnvelope);

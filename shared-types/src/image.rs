@@ -42,12 +42,14 @@
 //! | 10  | `ModelMaps`             | raw, [`crate::maps`]       | feedforward, optional |
 //! | 11  | `TerminalLaw`           | raw, [`crate::terminal`]   | both, optional, not with model maps |
 //! | 12  | `SpecFingerprint`       | [`SpecFingerprintSection`] | both, optional |
+//! | 13  | `SelectionTest`         | raw, [`crate::selection`]  | feedforward with model maps, optional |
 //!
 //! Every section a mode lists is required, exactly once; a known section of the other mode is refused.
 //! Two bodies are not postcard. The model maps section's layout is [`crate::maps`]'s (two model
 //! programs, which must keep their constant pools aligned), and with it the fallback and the input box are
 //! in the plant's input space (`m_plant` values) and a linear fallback is refused. The terminal law's is a
-//! fixed run of f32 values ([`crate::terminal`]), which decodes with one length check.
+//! fixed run of f32 values ([`crate::terminal`]), which decodes with one length check. So is the
+//! selection test's ([`crate::selection`]), which only an image with model maps may carry.
 //! The spec fingerprint is [`SPEC_FINGERPRINT_LEN`] bytes: per part of the spec ([`SPEC_PARTS`], in
 //! that order) a hash of [`SPEC_HASH_LEN`] bytes that the host computes; the firmware only checks its
 //! length.
@@ -117,6 +119,7 @@ use crate::raw::{
     check_dim, check_finite, check_len, div, f32_at, f32_span, floats, positive_definite, rem,
     sat16, sat32, u16_le, u32_at_byte,
 };
+use crate::selection::SelectionTest;
 use crate::terminal::TerminalLaw;
 
 /// What the controller does once the active trajectory's table is exhausted.
@@ -682,6 +685,8 @@ pub struct Image<'a> {
     pub(crate) maps: Option<ModelMaps<'a>>,
     /// The terminal law (section 11) and its body, if the image has one.
     pub(crate) terminal_law: Option<(TerminalLaw<'a>, &'a [u8])>,
+    /// The selection test (section 13), if the image has one.
+    pub(crate) selection: Option<SelectionTest<'a>>,
 }
 
 impl<'a> Image<'a> {
@@ -714,6 +719,23 @@ impl<'a> Image<'a> {
             Some(body) => Some(ModelMaps::decode(body, dims.n, dims.m)?),
             None => None,
         };
+        Self::new_feedforward(mode, dims, period, payload, maps)
+    }
+
+    /// The content checks of a feedforward image whose model maps (if any) are decoded already; out of
+    /// line, so that [`decode_without_model_maps`] links no model maps decoder.
+    #[inline(never)]
+    fn new_feedforward(
+        mode: Mode,
+        dims: Dims,
+        period: f32,
+        payload: Payload<'a>,
+        maps: Option<ModelMaps<'a>>,
+    ) -> Result<Self, ImageError> {
+        if mode != Mode::Feedforward {
+            return Err(ImageError::UnsupportedMode { mode });
+        }
+        check_dims(mode, dims)?;
         validate(mode, dims, period, &payload, maps.as_ref())?;
         Ok(Image {
             mode,
@@ -724,6 +746,7 @@ impl<'a> Image<'a> {
             fingerprint: &[],
             maps,
             terminal_law: None,
+            selection: None,
         })
     }
 
@@ -752,6 +775,7 @@ impl<'a> Image<'a> {
             fingerprint: &[],
             maps: None,
             terminal_law: None,
+            selection: None,
         })
     }
 
@@ -774,6 +798,28 @@ impl<'a> Image<'a> {
         let law = TerminalLaw::decode(body, self.dims.n, self.dims.m)?;
         self.terminal_law = Some((law, body));
         Ok(self)
+    }
+
+    /// This image with the selection test whose section body is `body` (section 13), decoded and
+    /// validated against the dimensions ([`SelectionTest::decode`]); refused with
+    /// [`ImageError::SelectionWithoutModelMaps`] for an image without model maps.
+    pub fn with_selection_test(mut self, body: &'a [u8]) -> Result<Self, ImageError> {
+        if self.maps.is_none() || self.mode != Mode::Feedforward {
+            return Err(ImageError::SelectionWithoutModelMaps);
+        }
+        let d = self.dims;
+        self.selection = Some(SelectionTest::decode(
+            body,
+            d.n,
+            d.n_locations,
+            d.n_trajectories,
+        )?);
+        Ok(self)
+    }
+
+    /// The selection test (section 13), if the image has one.
+    pub fn selection_test(&self) -> Option<SelectionTest<'a>> {
+        self.selection
     }
 
     /// The terminal law (section 11), if the image has one.
@@ -1089,22 +1135,27 @@ impl<'a> Image<'a> {
                 hash: self.fingerprint,
             },
         );
+        let selection = RawSection {
+            kind: SectionKind::SelectionTest as u16,
+            body: self.selection.as_ref().map_or(&[][..], SelectionTest::body),
+        };
         let feedforward: [&dyn SectionWrite; 5] =
             [&locations, &fallback, &trajectories, &segments, &steps];
         let pwa: [&dyn SectionWrite; 5] = [&locations, &fallback, &laws, &tree, &balls];
         let ff = self.mode == Mode::Feedforward;
         let base: &[&dyn SectionWrite] = if ff { &feedforward } else { &pwa };
         // The optional sections, in kind order, only when present.
-        let optional: [(bool, &dyn SectionWrite); 4] = [
+        let optional: [(bool, &dyn SectionWrite); 5] = [
             (ff && !p.exits.is_empty(), &exits),
             (ff && self.maps.is_some(), &maps),
             (self.terminal_law.is_some(), &terminal),
             (!self.fingerprint.is_empty(), &fingerprint),
+            (ff && self.selection.is_some(), &selection),
         ];
         let present = optional.iter().filter(|(on, _)| *on).map(|(_, s)| *s);
-        // At most 8 sections (feedforward with exits, maps or a terminal law (never both), and a
-        // fingerprint).
-        let mut list: [&dyn SectionWrite; 8] = [&locations; 8];
+        // At most 9 sections (feedforward with exits, maps or a terminal law (never both), a
+        // fingerprint, and with maps a selection test).
+        let mut list: [&dyn SectionWrite; 9] = [&locations; 9];
         let mut count = 0;
         for (slot, s) in list.iter_mut().zip(base.iter().copied().chain(present)) {
             *slot = s;
@@ -1120,6 +1171,21 @@ impl<'a> Image<'a> {
 /// period, the section directory ([`Directory::parse`]), each section's postcard structure (no trailing
 /// bytes, canonical form), then the content (see module docs).
 pub fn decode(bytes: &[u8]) -> Result<Image<'_>, ImageError> {
+    decode_sections::<true>(bytes)
+}
+
+/// [`decode`] for a firmware built without the model-maps step (it calls [`crate::eval::Controller::step`],
+/// which reads the state as the law's own coordinates): an image with model maps or a selection test is
+/// refused with [`ImageError::ModelMapsNotSupported`] (after the checks before the content), and neither
+/// the model programs' decoder nor the selection test's is linked. Otherwise the same checks and the
+/// same image as [`decode`].
+pub fn decode_without_model_maps(bytes: &[u8]) -> Result<Image<'_>, ImageError> {
+    decode_sections::<false>(bytes)
+}
+
+/// [`decode`], with the model maps and selection test sections admitted only when `MAPS`.
+#[inline(always)]
+fn decode_sections<const MAPS: bool>(bytes: &[u8]) -> Result<Image<'_>, ImageError> {
     let h = Header::parse(bytes)?;
     let payload_bytes = bytes.get(HEADER_LEN..).unwrap_or(&[]);
     if payload_bytes.len() != h.payload_len as usize {
@@ -1152,6 +1218,9 @@ pub fn decode(bytes: &[u8]) -> Result<Image<'_>, ImageError> {
                 None => SegmentExitsSection { exit: &[] },
             };
             let maps = dir.section(SectionKind::ModelMaps);
+            if !MAPS && (maps.is_some() || dir.section(SectionKind::SelectionTest).is_some()) {
+                return Err(ImageError::ModelMapsNotSupported);
+            }
             let payload = Payload {
                 K: locations.K,
                 P: locations.P,
@@ -1165,7 +1234,14 @@ pub fn decode(bytes: &[u8]) -> Result<Image<'_>, ImageError> {
                 terminal: tr.terminal,
                 exits: exits.exit,
             };
-            let img = Image::new_with_maps(mode, d, h.period, payload, maps)?;
+            let img = match maps {
+                Some(body) if MAPS => Image::new_with_maps(mode, d, h.period, payload, Some(body))?,
+                _ => Image::new_feedforward(mode, d, h.period, payload, None)?,
+            };
+            let img = match dir.section(SectionKind::SelectionTest) {
+                Some(body) if MAPS => img.with_selection_test(body)?,
+                _ => img,
+            };
             with_stored_optional(&dir, img)
         }
         Mode::PwaFeedback => {

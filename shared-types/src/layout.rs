@@ -102,12 +102,15 @@ impl Mode {
     }
 
     /// Whether a section of `kind` belongs in an image of this mode: the required ones, the optional
-    /// segment exits and model maps of a feedforward image, and the optional terminal law and spec
-    /// fingerprint of either mode.
+    /// segment exits, model maps and selection test of a feedforward image, and the optional terminal
+    /// law and spec fingerprint of either mode.
     pub fn admits(self, kind: SectionKind) -> bool {
         self.required_sections().contains(&kind)
             || (self == Mode::Feedforward
-                && matches!(kind, SectionKind::SegmentExits | SectionKind::ModelMaps))
+                && matches!(
+                    kind,
+                    SectionKind::SegmentExits | SectionKind::ModelMaps | SectionKind::SelectionTest
+                ))
             || matches!(
                 kind,
                 SectionKind::TerminalLaw | SectionKind::SpecFingerprint
@@ -171,11 +174,15 @@ pub enum SectionKind {
     /// the spec the image was synthesised from, so that a tool can refuse an image whose spec changed
     /// since. The evaluator does not read it.
     SpecFingerprint = 12,
+    /// The whitened selection test (optional, feedforward images with model maps): per location the f32
+    /// Cholesky factor `R̂_ℓ` of `P_ℓ`, per trajectory the whitened centre and squared threshold of its
+    /// ball, which the model-maps step selects with ([`crate::selection`]).
+    SelectionTest = 13,
 }
 
 impl SectionKind {
     /// Every kind this build knows, in tag order.
-    pub const ALL: [SectionKind; 12] = [
+    pub const ALL: [SectionKind; 13] = [
         SectionKind::Locations,
         SectionKind::Fallback,
         SectionKind::Trajectories,
@@ -188,6 +195,7 @@ impl SectionKind {
         SectionKind::ModelMaps,
         SectionKind::TerminalLaw,
         SectionKind::SpecFingerprint,
+        SectionKind::SelectionTest,
     ];
 
     /// The kind with this tag, if this build knows it.
@@ -205,6 +213,7 @@ impl SectionKind {
             10 => Some(SectionKind::ModelMaps),
             11 => Some(SectionKind::TerminalLaw),
             12 => Some(SectionKind::SpecFingerprint),
+            13 => Some(SectionKind::SelectionTest),
             _ => None,
         }
     }
@@ -236,6 +245,7 @@ impl SectionKind {
             SectionKind::ModelMaps => "model_maps",
             SectionKind::TerminalLaw => "terminal_law",
             SectionKind::SpecFingerprint => "spec_fingerprint",
+            SectionKind::SelectionTest => "selection_test",
         }
     }
 }

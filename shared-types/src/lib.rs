@@ -14,6 +14,7 @@
 //! * [`trig`]: their sine and cosine in f32 arithmetic only (libm's evaluate in f64);
 //! * [`maps`]: the model maps section (`coords: x ↦ ξ`, `input_map: (x, w) ↦ u`) of a
 //!   feedback-linearizable plant's image;
+//! * [`selection`]: the optional whitened selection test of an image with model maps;
 //! * [`terminal`]: the optional terminal law, a certified law with its invariant ellipsoid in Goal for
 //!   after the task;
 //! * [`protocol`]: the UART protocol between plant and firmware.
@@ -31,5 +32,6 @@ pub mod program;
 pub mod protocol;
 pub mod pwa;
 mod raw;
+pub mod selection;
 pub mod terminal;
 pub mod trig;

@@ -473,63 +473,14 @@ pub(crate) fn validate_tables(dims: Dims, t: &PwaTables<'_>) -> Result<(), Image
     }
     let n_refs = prev as usize;
 
-    // Factors R̂_ℓ: upper triangular with a positive diagonal.
-    check_len(Field::Factor, t.R, 4 * n_loc * n * n)?;
-    check_finite(Field::Factor, t.R, |i| {
-        Pos(
-            sat16(div(i, n * n)),
-            sat16(div(rem(i, n * n), n)),
-            sat16(rem(i, n)),
-        )
-    })?;
-    for l in 0..n_loc {
-        for r in 0..n {
-            for c in 0..r {
-                if f32_at(t.R, (l * n + r) * n + c) != 0.0 {
-                    return Err(ImageError::FactorNotUpperTriangular {
-                        location: sat16(l),
-                        row: sat16(r),
-                        col: sat16(c),
-                    });
-                }
-            }
-            let d = f32_at(t.R, (l * n + r) * n + r);
-            if d.is_nan() || d <= 0.0 {
-                return Err(ImageError::FactorDiagonal {
-                    location: sat16(l),
-                    row: sat16(r),
-                });
-            }
-        }
-    }
+    validate_factors(t.R, n_loc, n)?;
 
     // Balls.
     check_len(Field::BallCentre, t.ball_centre, 4 * nb * n)?;
     check_finite(Field::BallCentre, t.ball_centre, |i| {
         Pos(sat16(div(i, n)), sat16(rem(i, n)), 0)
     })?;
-    // Test records [ĉ_z,0 … ĉ_z,n−1, ŝ], one per ball.
-    check_len(Field::BallTest, t.ball_test, 4 * nb * (n + 1))?;
-    for b in 0..nb {
-        for k in 0..n {
-            if !f32_at(t.ball_test, b * (n + 1) + k).is_finite() {
-                return Err(ImageError::NonFinite {
-                    field: Field::BallCentreZ,
-                    pos: Pos(sat16(b), sat16(k), 0),
-                });
-            }
-        }
-        let s = f32_at(t.ball_test, b * (n + 1) + n);
-        if !s.is_finite() {
-            return Err(ImageError::NonFinite {
-                field: Field::BallThreshold,
-                pos: Pos(sat16(b), 0, 0),
-            });
-        }
-        if s < 0.0 {
-            return Err(ImageError::NegativeBallThreshold { ball: sat16(b) });
-        }
-    }
+    validate_ball_tests(t.ball_test, nb, n)?;
     check_len(Field::BallLocation, t.ball_location, nb)?;
     for (b, &l) in t.ball_location.iter().enumerate() {
         if l as usize >= n_loc {
@@ -589,6 +540,72 @@ pub(crate) fn node_child(node: &[u8], n: usize, i: usize, side: usize) -> u16 {
         node,
         i.saturating_mul(rec).saturating_add(2 * (n + 1) + side),
     )
+}
+
+/// Checks the per-location factors `R̂_ℓ` (`n_loc` × n × n little-endian f32): the length, every value
+/// finite, upper triangular (every entry below the diagonal exactly 0) with a positive diagonal. Shared
+/// with the selection test section ([`crate::selection`]); out of line, so the two share one copy.
+#[inline(never)]
+pub(crate) fn validate_factors(R: &[u8], n_loc: usize, n: usize) -> Result<(), ImageError> {
+    // Factors R̂_ℓ: upper triangular with a positive diagonal.
+    check_len(Field::Factor, R, 4 * n_loc * n * n)?;
+    check_finite(Field::Factor, R, |i| {
+        Pos(
+            sat16(div(i, n * n)),
+            sat16(div(rem(i, n * n), n)),
+            sat16(rem(i, n)),
+        )
+    })?;
+    for l in 0..n_loc {
+        for r in 0..n {
+            for c in 0..r {
+                if f32_at(R, (l * n + r) * n + c) != 0.0 {
+                    return Err(ImageError::FactorNotUpperTriangular {
+                        location: sat16(l),
+                        row: sat16(r),
+                        col: sat16(c),
+                    });
+                }
+            }
+            let d = f32_at(R, (l * n + r) * n + r);
+            if d.is_nan() || d <= 0.0 {
+                return Err(ImageError::FactorDiagonal {
+                    location: sat16(l),
+                    row: sat16(r),
+                });
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Checks `nb` ball test records `[ĉ_z,0 … ĉ_z,n−1, ŝ]`: the length, every value finite, `ŝ ≥ 0`. Shared
+/// with the selection test section ([`crate::selection`]); out of line, so the two share one copy.
+#[inline(never)]
+pub(crate) fn validate_ball_tests(tests: &[u8], nb: usize, n: usize) -> Result<(), ImageError> {
+    // Test records [ĉ_z,0 … ĉ_z,n−1, ŝ], one per ball.
+    check_len(Field::BallTest, tests, 4 * nb * (n + 1))?;
+    for b in 0..nb {
+        for k in 0..n {
+            if !f32_at(tests, b * (n + 1) + k).is_finite() {
+                return Err(ImageError::NonFinite {
+                    field: Field::BallCentreZ,
+                    pos: Pos(sat16(b), sat16(k), 0),
+                });
+            }
+        }
+        let s = f32_at(tests, b * (n + 1) + n);
+        if !s.is_finite() {
+            return Err(ImageError::NonFinite {
+                field: Field::BallThreshold,
+                pos: Pos(sat16(b), 0, 0),
+            });
+        }
+        if s < 0.0 {
+            return Err(ImageError::NegativeBallThreshold { ball: sat16(b) });
+        }
+    }
+    Ok(())
 }
 
 /// The tree rules: children after parents and in range, everything reachable, depth within capacity and
@@ -806,7 +823,7 @@ fn scan_balls<const N: usize, const SINGLE: bool>(
 /// `z_i = fl(Σ_{j=i}^{N−1} R̂_ij x_j)` for the factor of location `loc`, summed left to right from 0 (module
 /// doc); a short table reads as zeros (never for a validated image).
 #[inline(always)]
-fn whiten<const N: usize>(z: &mut [f32; N], R: &[u8], loc: usize, x: &[f32; N]) {
+pub(crate) fn whiten<const N: usize>(z: &mut [f32; N], R: &[u8], loc: usize, x: &[f32; N]) {
     for (i, zi) in z.iter_mut().enumerate() {
         let row = load::<N>(R, (loc * N + i) * N).unwrap_or([0.0; N]);
         let mut s = 0.0f32;
@@ -862,7 +879,7 @@ fn load_node<const N: usize>(bytes: &[u8], i: usize) -> Option<([f32; N], f32, [
 
 /// Test record `i` of the ball table: `(ĉ_z, ŝ)`, read with one bounds check; `None` if out of range.
 #[inline(always)]
-fn load_ball<const N: usize>(bytes: &[u8], i: usize) -> Option<([f32; N], f32)> {
+pub(crate) fn load_ball<const N: usize>(bytes: &[u8], i: usize) -> Option<([f32; N], f32)> {
     let len = 4 * (N + 1);
     let s = i.checked_mul(len)?;
     let rec = bytes.get(s..s.checked_add(len)?)?;

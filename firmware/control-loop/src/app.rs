@@ -15,16 +15,26 @@
 //! States and inputs are the plant's ([`Image::plant_n`], [`Image::plant_m`] values): the evaluator's
 //! [`Controller::step_plant`] runs an image's model maps, if it has them, around its law. A firmware
 //! whose embedded image has no model maps is built without `cfg(model_maps)` (`build.rs`) and calls
-//! [`Controller::step`], which is `step_plant` for such an image, so the program interpreter and
-//! `libm` take no flash.
+//! [`Controller::step`], which is `step_plant` for such an image, and decodes with
+//! [`shared_types::image::decode_without_model_maps`], which refuses an image with model maps (such a
+//! firmware would read the plant's state as the law's coordinates), so the program interpreter, its
+//! decoder, the selection test and `libm` take no flash.
 //!
 //! The cost reported is that of the evaluation (step, and fallback when the step failed), in instructions;
 //! 0 when nothing was evaluated.
 
 use crate::board::Meter;
 use shared_types::eval::{rejected_image_input, Controller, Input, Status};
-use shared_types::image::{decode, Image, ImageError};
+use shared_types::image::{Image, ImageError};
 use shared_types::protocol::{decode_frame, FrameEvent, InputVec, Reply, Request, State};
+
+/// The image decoder (module doc): every image where the image may have model maps.
+#[cfg(model_maps)]
+use shared_types::image::decode;
+
+/// The image decoder (module doc): the embedded image has no model maps, and one that has is refused.
+#[cfg(not(model_maps))]
+use shared_types::image::decode_without_model_maps as decode;
 
 /// One control period of the plant (module doc): `step_plant` where the image may have model maps.
 #[cfg(model_maps)]

@@ -412,10 +412,17 @@ fn run_temporal(
         );
         print_attack(attack.as_ref());
     }
-    if let Some(t) = unproved.first() {
+    if let Some(c) = rc.iter().find(|c| !c.ok) {
+        // The stored radius within the certified one: what failed is the selection test's threshold.
+        let what = if c.selection_test.is_some() && c.stored <= c.certified {
+            "its whitened selection test accepts states beyond"
+        } else {
+            "its stored radius exceeds"
+        };
         return Err(miette::miette!(
-            "{}: ball {t} is not re-proved: its stored radius exceeds what its table certifies for the formula",
-            a.image.display()
+            "{}: ball {} is not re-proved: {what} what its table certifies for the formula",
+            a.image.display(),
+            c.trajectory
         )
         .into());
     }

@@ -15,7 +15,7 @@ pub use estimate::{CoverageEstimate, SampleBox};
 pub use grow::{certify_recording, grow, Attempts, GrowError, GrowOptions, Grown};
 
 use crate::certify::Certificate;
-use crate::emit::{EmitError, FallbackLaw, ImageBuilder, TrajectoryEntry};
+use crate::emit::{EmitError, FallbackLaw, ImageBuilder, SelectionTestSpec, TrajectoryEntry};
 use crate::optimize::{OptStop, Optimized};
 use crate::task::Task;
 use crate::trajectory::Nominal;
@@ -302,6 +302,27 @@ pub fn feedforward_image(
     )
 }
 
+/// The whitened selection test (`shared_types::selection`) of a one-location cover with metric `P`, for
+/// balls given by their centre and stored radius: the f32 factor R̂ of P, and per ball its whitened
+/// centre and the squared threshold whose acceptance the rounding bound of `shared_types::pwa` proves
+/// inside the ball of the stored radius (so inside the certified ball, which is larger). `None` when
+/// the bound does not apply to some ball; the image then selects with the P-metric test.
+fn selection_test(P: &Mat<f64>, balls: &[(Vec<f64>, f32)]) -> Option<SelectionTestSpec> {
+    let n = P.nrows();
+    let Rh = crate::certify::metric_factor_f32(&crate::linalg::to_row_major(P.as_ref()), n)?;
+    let mut records = Vec::with_capacity(balls.len() * (n + 1));
+    for (c, r) in balls {
+        let cz = crate::certify::whitened_centre(&Rh, c);
+        let s = crate::certify::pwa_ball_threshold(P.as_ref(), c, *r as f64)?;
+        records.extend(cz.iter().map(|&v| v as f32));
+        records.push(s);
+    }
+    Some(SelectionTestSpec {
+        factors: Rh.iter().map(|&v| v as f32).collect(),
+        records,
+    })
+}
+
 /// [`feedforward_image`] of nominals with their stored radii, whatever certified them (Theorem 4.7, or an
 /// MTL task's [`crate::certify::temporal`]).
 pub fn feedforward_image_of<'a>(
@@ -316,7 +337,9 @@ pub fn feedforward_image_of<'a>(
         crate::linalg::to_row_major(Khat.as_ref()),
         crate::linalg::to_row_major(P.as_ref()),
     );
+    let mut starts = Vec::new();
     for (nominal, delta_stored) in balls {
+        starts.push((nominal.x[0].clone(), delta_stored));
         b.add_trajectory(TrajectoryEntry {
             x0: nominal.x[0].clone(),
             delta: delta_stored as f64,
@@ -344,6 +367,7 @@ pub fn feedforward_image_of<'a>(
             coords: m.coords.bytes.clone(),
             input_map: m.input_map.bytes.clone(),
         });
+        b.selection_test = selection_test(P, &starts);
     }
     b.fallback = FallbackLaw::constant(&task.problem.fallback_input);
     b.fingerprint = Some(task.problem.fingerprint.as_bytes().to_vec());

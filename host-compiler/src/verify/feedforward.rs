@@ -12,6 +12,9 @@
 //!   contraction σ_min(P̂ − ÃᵀP̂Ã) > 0) recomputed from the bytes;
 //! * the radius the bytes certify is [`crate::certify::selection_radius`] of that certificate, the
 //!   radius whose f32 ball test accepts only states of the certified ball;
+//! * with a whitened selection test (section 13, the model-maps step's), the radius its acceptance is
+//!   proved within from the stored factor, whitened centre and threshold
+//!   ([`crate::certify::pwa_accept_radius`]) must not exceed the recomputed certified radius;
 //! * the first sample in Goal, k*, must lie within the spec's horizon.
 //!
 //! # The metric's rounding
@@ -41,6 +44,9 @@ pub struct TrajectoryCheck {
     pub delta: f64,
     /// The sample of greatest Goal depth (Theorem 4.7's k*): the ball is in Goal there.
     pub k_star: usize,
+    /// With a whitened selection test (section 13): the radius its acceptance is proved within, from the
+    /// bytes ([`super::selection_test_radius`]); it must not exceed `delta`.
+    pub selection_test: Option<f64>,
     pub ok: bool,
 }
 
@@ -54,6 +60,13 @@ impl TrajectoryCheck {
             format!(
                 "trajectory {}: its stored table certifies no ball at all (stored radius {:e})",
                 self.trajectory, self.stored
+            )
+        } else if self.selection_test.is_some_and(|r| !(r <= self.delta)) {
+            format!(
+                "trajectory {}: its whitened selection test accepts states up to {:e} from the centre, beyond the {:e} its stored table certifies",
+                self.trajectory,
+                self.selection_test.unwrap_or(f64::NAN),
+                self.delta
             )
         } else if self.k_star > horizon {
             format!(
@@ -151,15 +164,18 @@ pub fn recheck(
             let cert = certify(&lp, &lc, &nom);
             let stored = image.delta(t);
             let certified = selection_radius(P.as_ref(), &x0, cert.delta);
+            let whitened = super::selection_test_radius(image, P.as_ref(), t);
             let ok = cert.delta > 0.0
                 && cert.k_star <= horizon
-                && (stored as f64) <= (certified as f64) * (1.0 + tol);
+                && (stored as f64) <= (certified as f64) * (1.0 + tol)
+                && whitened.is_none_or(|r| r <= cert.delta);
             TrajectoryCheck {
                 trajectory: t,
                 stored,
                 certified,
                 delta: cert.delta,
                 k_star: cert.k_star,
+                selection_test: whitened,
                 ok,
             }
         })

@@ -296,6 +296,29 @@ pub struct VerifyReport {
     pub run_steps: usize,
 }
 
+/// The radius (in the image's metric P̂, about the stored centre) within which every state the image's
+/// whitened selection test (section 13, `shared_types::selection`) accepts for trajectory `t` lies,
+/// recomputed from the stored factor, whitened centre and threshold
+/// ([`crate::certify::pwa_accept_radius`]); `None` for an image without the section. The ball's metric
+/// is that of the trajectory's first location; `P` is it, widened from the image.
+pub fn selection_test_radius(image: &Image<'_>, P: faer::MatRef<'_, f64>, t: usize) -> Option<f64> {
+    let test = image.selection_test()?;
+    let n = image.n();
+    let l = image.location(t, 0);
+    let Rh: Vec<f64> = (0..n * n)
+        .map(|i| test.factor(n, l, i / n, i % n) as f64)
+        .collect();
+    let c: Vec<f64> = (0..n).map(|i| image.centre(t, i) as f64).collect();
+    let cz: Vec<f64> = (0..n).map(|i| test.centre_z(n, t, i) as f64).collect();
+    Some(crate::certify::pwa_accept_radius(
+        P,
+        &Rh,
+        &c,
+        &cz,
+        test.threshold(n, t),
+    ))
+}
+
 /// How far `u` lies inside the input set (negative outside): the distance to the nearest box face, or
 /// `max − ‖u − center‖₂`.
 pub fn input_slack(input: &InputBound, u: &[f64]) -> f64 {

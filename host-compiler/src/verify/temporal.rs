@@ -34,6 +34,9 @@ pub struct TemporalCheck {
     pub stored: f32,
     /// The radius the bytes certify.
     pub certified: f32,
+    /// With a whitened selection test (section 13): the radius its acceptance is proved within, from the
+    /// bytes ([`super::selection_test_radius`]); it must not exceed the certified radius.
+    pub selection_test: Option<f64>,
     pub ok: bool,
 }
 
@@ -78,11 +81,15 @@ pub fn recheck(
             let cert = certify_temporal(&lp, &lc, &tl, &nom);
             let stored = image.delta(t);
             let certified = selection_radius(P.as_ref(), &x0, cert.delta);
+            let whitened = super::selection_test_radius(image, P.as_ref(), t);
             TemporalCheck {
                 trajectory: t,
                 stored,
                 certified,
-                ok: cert.delta > 0.0 && (stored as f64) <= (certified as f64) * (1.0 + tol),
+                selection_test: whitened,
+                ok: cert.delta > 0.0
+                    && (stored as f64) <= (certified as f64) * (1.0 + tol)
+                    && whitened.is_none_or(|r| r <= cert.delta),
             }
         })
         .collect())

@@ -78,6 +78,31 @@ fn fl_synth_then_verify() {
     let at = crate::verify_attack::attack_json(&o);
     assert!(at.worst_robustness > 0.0, "{at:?}");
 
+    // The whitened selection test the model-maps step selects with (section 13) is re-proved from the
+    // bytes as well: the last trajectory's threshold enlarged ×4 (CRC recomputed) is refused, naming it.
+    let bytes = std::fs::read(&img).unwrap();
+    let decoded = shared_types::image::decode(&bytes).unwrap();
+    let test = decoded
+        .selection_test()
+        .expect("a feedback-linearizable image carries the selection test");
+    let t = decoded.n_trajectories() - 1;
+    let body = test.body();
+    let at = body.as_ptr() as usize - bytes.as_ptr() as usize + body.len() - 4;
+    assert_eq!(
+        f32::from_le_bytes(bytes[at..at + 4].try_into().unwrap()),
+        test.threshold(decoded.n(), t)
+    );
+    let mut patched = bytes.clone();
+    patched[at..at + 4].copy_from_slice(&(4.0 * test.threshold(decoded.n(), t)).to_le_bytes());
+    let patched = crate::verify_refuses::write_patched("fl-threshold-x4.img", patched);
+    let o = crate::cli_fl::verify(&spec, &patched, &[]);
+    let out = crate::verify_refuses::text(&o);
+    assert_eq!(o.status.code(), Some(1), "{out}");
+    assert!(
+        out.contains(&format!("trajectory {t}: its whitened selection test accepts states")),
+        "{out}"
+    );
+
     // A faster-turning vehicle: refused at once by the spec fingerprint ...
     let faster = dir.join("faster.toml");
     std::fs::write(

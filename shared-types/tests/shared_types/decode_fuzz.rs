@@ -76,6 +76,15 @@ fn kind(e: &ImageError) -> &'static str {
 
 /// Decodes; on success checks canonical re-encoding and drives the evaluator with random states.
 fn exercise(bytes: &[u8], rng: &mut ChaCha8Rng, stats: &mut BTreeMap<&'static str, usize>) {
+    // The decoder of a firmware without the model-maps step agrees, except that it refuses maps.
+    let without = shared_types::image::decode_without_model_maps(bytes);
+    match decode(bytes) {
+        Ok(img) if img.model_maps().is_some() => {
+            assert_eq!(without, Err(ImageError::ModelMapsNotSupported))
+        }
+        Ok(img) => assert_eq!(without, Ok(img)),
+        Err(e) => assert!(without.is_err(), "{e}"),
+    }
     match decode(bytes) {
         Err(e) => {
             // Display must work for every error.

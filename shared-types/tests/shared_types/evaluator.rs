@@ -423,7 +423,7 @@ fn selection_equals_the_documented_f32_operations() {
             }
             let want = f32_select(&c, &x);
             assert_eq!(ctl.select(&x), want, "case {case}, n {n}, x {x:?}");
-            assert_eq!(ctl.select_unrolled(&x), want, "case {case}, n {n}, x {x:?}");
+            assert_eq!(ctl.select_maps(&x), want, "case {case}, n {n}, x {x:?}");
         }
     }
 }

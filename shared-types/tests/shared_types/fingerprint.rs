@@ -128,14 +128,14 @@ fn decoder_refuses_a_malformed_fingerprint() {
                 section: SectionKind::SpecFingerprint
             })
         );
-        // Twice, and a tag after the last known one (13), which this build does not know.
+        // Twice, and a tag after the last known one (14), which this build does not know.
         assert_eq!(
             with(&[(tag, body(&hash())), (tag, body(&hash()))]),
             Err(ImageError::DuplicateSection {
                 kind: SectionKind::SpecFingerprint
             })
         );
-        for reserved in [13u16] {
+        for reserved in [14u16] {
             assert_eq!(
                 with(&[(reserved, body(&hash()))]),
                 Err(ImageError::UnknownSection { kind: reserved })

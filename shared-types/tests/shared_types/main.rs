@@ -10,4 +10,5 @@ mod maps;
 mod program;
 mod pwa_eval;
 mod pwa_format;
+mod selection;
 mod terminal;
