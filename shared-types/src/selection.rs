@@ -33,7 +33,7 @@ use crate::capacity::{MAX_N, MAX_TRAJECTORIES};
 use crate::error::{Field, ImageError};
 use crate::image::Image;
 use crate::pwa::{load_ball, validate_ball_tests, validate_factors, whiten};
-use crate::raw::{check_len, f32_at};
+use crate::raw::{check_len, f32_at, floats};
 
 /// The decoded section: the factors and the test records, borrowed from the image.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -94,16 +94,20 @@ impl<'a> SelectionTest<'a> {
 
     /// The selection of the module doc for the state `x` of `img` (whose section this is); `None` if no
     /// ball accepts `x` or `x` has the wrong length. A one-location image of dimension 8 (the flat
-    /// quadrotor) runs an unrolled instance, every other image the general loop: the same operations in
-    /// the same order, so the same answer.
+    /// quadrotor) or 4 (the planar vehicles) runs an unrolled instance, every other image the general
+    /// loop: the same operations in the same order, so the same answer.
     pub(crate) fn select(&self, img: &Image<'_>, x: &[f32]) -> Option<u16> {
         let n = img.n().clamp(1, MAX_N);
         if x.len() != n {
             return None;
         }
         let count = img.n_trajectories().min(MAX_TRAJECTORIES);
-        if img.n_locations() == 1 && n == 8 {
-            return self.select_fixed::<8>(x, count);
+        if img.n_locations() == 1 {
+            match n {
+                8 => return self.select_fixed::<8>(x, count),
+                4 => return self.select_fixed::<4>(x, count),
+                _ => {}
+            }
         }
         let mut z = [0.0f32; MAX_N];
         let mut z_loc = usize::MAX;
@@ -126,12 +130,16 @@ impl<'a> SelectionTest<'a> {
                 }
                 z_loc = l;
             }
+            // The record, read with one bounds check (never short for a validated section).
+            let Some(rec) = self.tests.get(4 * t * (n + 1)..4 * (t + 1) * (n + 1)) else {
+                break;
+            };
             let mut s = 0.0f32;
-            for (k, &zk) in z.iter().enumerate().take(n) {
-                let d = zk - self.centre_z(n, t, k);
+            for (&zk, c) in z.iter().take(n).zip(floats(rec)) {
+                let d = zk - c;
                 s += d * d;
             }
-            if s <= self.threshold(n, t) && s < best_s {
+            if s <= f32_at(rec, n) && s < best_s {
                 best_s = s;
                 best = Some(t as u16);
             }

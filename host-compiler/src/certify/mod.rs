@@ -553,9 +553,11 @@ pub fn input_distance(
 /// The radius to store so that every state the f32 selection test accepts lies in the certified ball of
 /// radius `delta` (module doc, item 4). The test computes e = fl(x̂ − c) and d² = Σ_i e_i fl(Σ_j P̂_ij e_j) in
 /// f32. Each e_i carries a relative error ≤ u from the subtraction plus the quantisation of x (≤ u|x_i|);
-/// P̂_ij = P_ij(1 + θ) with |θ| ≤ u; the two sums add γ_{n+1}. Hence
-/// |fl(d²) − eᵀPe| ≤ γ_{n+4}·|e|ᵀ|P||e| + terms in u|x|, and |e|ᵀ|P||e| ≤ ‖|P|‖₂/λ_min(P)·‖e‖²_P.
-/// Shrinking δ² by the factor (1 − γ_{n+4}κ)(1 − 2u) and subtracting the quantisation term keeps
+/// P̂_ij = P_ij(1 + θ) with |θ| ≤ u. The inner sum `Σ_j P̂_ij e_j` is an n-term dot product (each term
+/// within γ_n, Higham §3.1), and the outer `Σ_i e_i·s_i` another, so each term `e_i P̂_ij e_j` of the
+/// computed d² carries a factor within γ_{2n} of 1. Hence
+/// |fl(d²) − eᵀPe| ≤ γ_{2n+4}·|e|ᵀ|P||e| + terms in u|x|, and |e|ᵀ|P||e| ≤ ‖|P|‖₂/λ_min(P)·‖e‖²_P.
+/// Shrinking δ² by the factor (1 − γ_{2n+4}κ)(1 − 2u) and subtracting the quantisation term keeps
 /// acceptance inside the ball. Returns the f32 value, rounded down.
 pub fn selection_radius(P: MatRef<'_, f64>, center: &[f64], delta: f64) -> f32 {
     let Some((rel, quant)) = selection_rounding(P, center, delta) else {
@@ -578,7 +580,7 @@ pub fn selection_floor(P: MatRef<'_, f64>, center: &[f64], r_hat: f32, delta: f6
 }
 
 /// The two error terms of the f32 selection test for states within `delta` of `center` (see
-/// [`selection_radius`]): the relative error `γ_{n+4}·‖|P|‖₂/λ_min(P)` of the computed d² and the
+/// [`selection_radius`]): the relative error `γ_{2n+4}·‖|P|‖₂/λ_min(P)` of the computed d² and the
 /// P-norm of the quantisation of x. `None` when P is not positive definite, `delta` not positive, or the
 /// relative error not below 1/2.
 fn selection_rounding(P: MatRef<'_, f64>, center: &[f64], delta: f64) -> Option<(f64, f64)> {
@@ -593,7 +595,7 @@ fn selection_rounding(P: MatRef<'_, f64>, center: &[f64], delta: f64) -> Option<
         return None;
     }
     let kappa = crate::linalg::spectral_norm(absP.as_ref()) / lmin;
-    let rel = gamma_k(n + 4) * kappa;
+    let rel = gamma_k(2 * n + 4) * kappa;
     if rel >= 0.5 {
         return None;
     }

@@ -24,7 +24,7 @@ pub const CONTROLLER_C: &str = include_str!("c/controller.c");
 /// segments, steps, PWA laws, tree and balls, segment exits, model maps; 12: the spec fingerprint, whose
 /// length it checks and which it does not evaluate). A section kind added to the format must be added to
 /// the C (decoder and evaluator, and the harness's images) before it is added here.
-pub const C_SECTION_KINDS: [u16; 12] = [1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12];
+pub const C_SECTION_KINDS: [u16; 13] = [1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13];
 
 /// Why an export failed.
 #[derive(Debug, thiserror::Error)]
@@ -34,7 +34,7 @@ pub enum ExportError {
     Rejected(ImageError),
     /// The image has a section the C evaluator does not implement.
     #[error(
-        "the image has a section of kind {kind}, which the C evaluator does not implement (it knows kinds 1 to 12)"
+        "the image has a section of kind {kind}, which the C evaluator does not implement (it knows kinds 1 to 13)"
     )]
     UnsupportedSection {
         /// The section's kind tag.

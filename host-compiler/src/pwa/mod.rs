@@ -248,6 +248,9 @@ pub enum CapacityExceeded {
          envelope, so the certificate would not hold"
     )]
     LeafBalls { dropped: usize, max: usize },
+    /// The leaves list `refs` ball references in all, more than `max` (`MAX_BALL_REFS`).
+    #[error("{refs} ball references in the leaves, more than MAX_BALL_REFS = {max}")]
+    BallRefs { refs: usize, max: usize },
 }
 
 /// What a PWA tree was built from, for the capacity message.

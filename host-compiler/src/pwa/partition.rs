@@ -479,6 +479,16 @@ fn build_tree(
             learned: None,
         });
     }
+    let refs = t.b.total_ball_refs();
+    if refs > shared_types::capacity::MAX_BALL_REFS {
+        return Err(PwaError::Capacity {
+            exceeded: CapacityExceeded::BallRefs {
+                refs,
+                max: shared_types::capacity::MAX_BALL_REFS,
+            },
+            learned: None,
+        });
+    }
     let depth = t.b.tree_depth()?;
     let stats = PartitionStats {
         partitions: laws.len(),

@@ -22,7 +22,7 @@
 //! radius differs from the stored one by the change of metric: norms in P and P̂ differ by a factor
 //! within √(1 ± u κ) (u = 2⁻²⁴, κ = ‖|P̂|‖₂ / λ_min(P̂)). A stored radius is accepted up to
 //! [`tolerance`] = 16 u κ above the recomputed one (a fraction of the slack the selection radius keeps,
-//! γ_{n+4} κ); anything more (an image whose radii were enlarged) is refused, naming the trajectory.
+//! γ_{2n+4} κ); anything more (an image whose radii were enlarged) is refused, naming the trajectory.
 
 use crate::certify::{certify, selection_radius, CertifyError, Loop, LoopConstants, U32};
 use crate::linalg::{spectral_norm, sym, sym_eigenvalues};

@@ -9,7 +9,9 @@
 //! arithmetic-only programs bit for bit, programs calling the C library's and the `libm` crate's
 //! functions within [`LIBM_ULPS`] ulps, corrupted maps sections refused exactly when Rust refuses them;
 //! model maps with controller states (a dynamic extension) bit for bit, ζ carried, reset and left on the
-//! fallback and on errors as Rust does, and their corrupted sections refused as Rust refuses them; and
+//! fallback and on errors as Rust does, and their corrupted sections refused as Rust refuses them;
+//! model maps with the selection test section (tag 13) bit for bit, including states at its whitened
+//! balls' boundaries and ties, and its corrupted or misplaced sections refused as Rust refuses them; and
 //! the subcommand's exit codes.
 
 use std::path::PathBuf;
@@ -1228,4 +1230,387 @@ fn with_section_body(image: &[u8], off: usize, len: usize, body: &[u8]) -> Vec<u
     let crc = compute_crc(&out).expect("a header");
     out[28..32].copy_from_slice(&crc.to_le_bytes());
     out
+}
+
+/// The selection test section (tag 13) of the feedforward image `img` with model maps: per location the
+/// upper factor R̂ of its metric (`P = RᵀR`, Cholesky in f64 of the stored f32 values, rounded to f32,
+/// exactly 0 below the diagonal), per trajectory `[fl32(R̂_ℓ ĉ), ŝ]` with ℓ the location of its first
+/// segment and `ŝ = fl32(δ² · scale(t))` (the P-metric ball's squared radius, scaled so that the two
+/// tests select differently); with `tie`, trajectory 1's record is trajectory 0's (in a one-location
+/// image an exact tie, which goes to the lowest index).
+struct SelectionSection {
+    factors: Vec<Vec<f32>>,
+    records: Vec<f32>,
+}
+
+impl SelectionSection {
+    fn new(img: &shared_types::image::Image<'_>, scale: impl Fn(usize) -> f64, tie: bool) -> Self {
+        let n = img.n();
+        let factors: Vec<Vec<f32>> = (0..img.n_locations())
+            .map(|l| {
+                let mut rh = vec![0.0f64; n * n];
+                for i in 0..n {
+                    for j in i..n {
+                        let mut s = img.P(l, i, j) as f64;
+                        for k in 0..i {
+                            s -= rh[k * n + i] * rh[k * n + j];
+                        }
+                        rh[i * n + j] = if i == j { s.sqrt() } else { s / rh[i * n + i] };
+                    }
+                }
+                rh.iter().map(|&v| v as f32).collect()
+            })
+            .collect();
+        let mut records = Vec::new();
+        for t in 0..img.n_trajectories() {
+            let rh = &factors[first_location(img, t)];
+            for i in 0..n {
+                let z: f64 = (i..n)
+                    .map(|j| rh[i * n + j] as f64 * img.centre(t, j) as f64)
+                    .sum();
+                records.push(z as f32);
+            }
+            let d = img.delta(t) as f64;
+            records.push((d * d * scale(t)) as f32);
+        }
+        if tie && img.n_trajectories() > 1 {
+            let r0 = records[..n + 1].to_vec();
+            records[n + 1..2 * (n + 1)].copy_from_slice(&r0);
+        }
+        SelectionSection { factors, records }
+    }
+
+    /// The section body (raw little-endian f32).
+    fn body(&self) -> Vec<u8> {
+        self.factors
+            .iter()
+            .flatten()
+            .chain(&self.records)
+            .flat_map(|v| v.to_le_bytes())
+            .collect()
+    }
+}
+
+/// The location of trajectory `t`'s first segment.
+fn first_location(img: &shared_types::image::Image<'_>, t: usize) -> usize {
+    let (s0, _) = img.trajectory_segments(t);
+    img.segment(s0).map_or(0, |s| s.location)
+}
+
+/// `image` (with model maps) re-encoded with the selection test section `body`, which must be valid.
+fn with_selection(image: &[u8], body: &[u8]) -> Vec<u8> {
+    let img = decode(image)
+        .expect("a valid image")
+        .with_selection_test(body)
+        .expect("a valid selection test");
+    let mut out = vec![0u8; img.encoded_len().expect("encoded length")];
+    let len = shared_types::image::encode(&img, &mut out).expect("encode");
+    out.truncate(len);
+    out
+}
+
+/// Runs of two steps from a reset whose first state lies near trajectory t's whitened ball (t at random):
+/// ξ = ĉ + √ŝ·ρ·e/|R̂e| (e a random direction, ρ inside, within 10⁻⁶ or 10⁻⁷ of 1, or outside), lifted to a
+/// plant state of a [`maps_image`]-like image (coords ξ_i = x_i + h(x_n, ...), so x_i = ξ_i − h with h
+/// the coords at x = 0 and the states past n drawn at random).
+fn near_whitened_balls(
+    img: &shared_types::image::Image<'_>,
+    sel: &SelectionSection,
+    seed: u64,
+    runs: usize,
+) -> Vec<Op> {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let n = img.n();
+    let maps = img.model_maps().expect("model maps");
+    let np = maps.n_plant();
+    let mut ops = Vec::new();
+    for _ in 0..runs {
+        let t = rng.random_range(0..img.n_trajectories());
+        let rh = &sel.factors[first_location(img, t)];
+        let e: Vec<f64> = (0..n).map(|_| rng.random_range(-1.0..1.0)).collect();
+        let q = (0..n)
+            .map(|i| {
+                let z: f64 = (i..n).map(|j| rh[i * n + j] as f64 * e[j]).sum();
+                z * z
+            })
+            .sum::<f64>()
+            .sqrt()
+            .max(1e-300);
+        let rho = match rng.random_range(0..4) {
+            0 => rng.random::<f64>(),
+            1 => 1.0 + (rng.random::<f64>() - 0.5) * 1e-6,
+            2 => 1.0 + (rng.random::<f64>() - 0.5) * 1e-7,
+            _ => 1.0 + rng.random::<f64>(),
+        };
+        let s = (sel.records[t * (n + 1) + n] as f64).sqrt();
+        let xi: Vec<f32> = (0..n)
+            .map(|i| (img.centre(t, i) as f64 + s * rho * e[i] / q) as f32)
+            .collect();
+        let z: Vec<f32> = (n..np).map(|_| rng.random_range(-1.0f32..1.0)).collect();
+        let mut probe = vec![0.0f32; np];
+        probe[n..].copy_from_slice(&z);
+        let mut h = vec![0.0f32; n];
+        maps.coords().eval(&probe, &mut h).expect("coords");
+        let x: Vec<f32> = xi
+            .iter()
+            .zip(&h)
+            .map(|(&a, &b)| (a as f64 - b as f64) as f32)
+            .chain(z)
+            .collect();
+        ops.push(Op::Reset);
+        ops.push(Op::Step(x.clone()));
+        ops.push(Op::Step(x));
+    }
+    ops
+}
+
+/// A feedforward image with model maps and `locations` locations: [`feedforward_image`]'s tables with the
+/// model maps, fallback and input box of [`maps_image`] (n_plant = n + 2, m_plant = m).
+fn multi_location_maps_image(
+    seed: u64,
+    n: usize,
+    m: usize,
+    locations: usize,
+    trajs: usize,
+) -> Vec<u8> {
+    use host_compiler::emit::ImageBuilder;
+    let tables = feedforward_image(seed, n, m, locations, trajs, Terminal::Fallback, 1);
+    let maps = maps_image(seed, n + 2, m, n, m, trajs, Terminal::Fallback, 3, false, 0);
+    let mb = ImageBuilder::from_image(&decode(&maps).unwrap());
+    let mut b = ImageBuilder::from_image(&decode(&tables).unwrap());
+    b.model_maps = mb.model_maps.clone();
+    b.fallback = mb.fallback.clone();
+    b.input_box = mb.input_box.clone();
+    b.to_bytes()
+        .expect("a valid multi-location image with model maps")
+}
+
+/// Images with model maps and the selection test section (tag 13): `sc_step_plant` against `step_plant`
+/// bit for bit, for one location with n = 2 and n = 8 (Rust's unrolled `select_fixed::<8>`) and three
+/// locations (z recomputed when the first segment's location changes), thresholds scaled from the
+/// P-metric radii (so the whitened test decides the selection), an exact tie in the one-location
+/// images; the scenario's states plus runs starting within 10⁻⁶ or 10⁻⁷ of a whitened ball's boundary.
+/// The section's image must answer differently from the plain one on some states, or the comparison
+/// would not show that the C reads it.
+#[test]
+fn selection_tests_match_the_rust_evaluator() {
+    let cases: [(&str, Vec<u8>, bool); 3] = [
+        (
+            "n2_one_location",
+            maps_image(800, 4, 2, 2, 2, 6, Terminal::HoldLast, 0, false, 0),
+            true,
+        ),
+        (
+            "n8_one_location",
+            maps_image(801, 12, 6, 8, 3, 5, Terminal::Fallback, 1, false, 0),
+            true,
+        ),
+        (
+            "n3_three_locations",
+            multi_location_maps_image(802, 3, 2, 3, 10),
+            false,
+        ),
+    ];
+    let mut results = Vec::new();
+    for (i, (name, plain, tie)) in cases.iter().enumerate() {
+        let img = decode(plain).expect("valid");
+        assert!(img.model_maps().is_some(), "{name}");
+        let mut rng = ChaCha8Rng::seed_from_u64(90 + i as u64);
+        let scales: Vec<f64> = (0..img.n_trajectories())
+            .map(|_| rng.random_range(0.4..1.6))
+            .collect();
+        let sel = SelectionSection::new(&img, |t| scales[t], *tie);
+        let bytes = with_selection(plain, &sel.body());
+        let with = decode(&bytes).expect("the image with its selection test");
+        assert!(with.selection_test().is_some(), "{name}");
+        // The harness is built on the plain image (the export's embedded array); every run inits from
+        // the bytes with the section.
+        let h = CHarness::build(plain, &scratch(&format!("selection_{name}")))
+            .unwrap_or_else(|e| panic!("{name}: {e}"));
+        let mut ops: Vec<Op> = scenario(&with, 95 + i as u64, 15_000)
+            .into_iter()
+            .map(|op| match op {
+                Op::InitEmbedded => Op::InitBytes(bytes.clone()),
+                op => op,
+            })
+            .collect();
+        ops.extend(near_whitened_balls(&with, &sel, 97 + i as u64, 3_000));
+        let c = h.compare(&ops).unwrap_or_else(|e| panic!("{name}: {e}"));
+        assert_eq!(c.inits, 1, "{name}");
+        assert_eq!(c.init_mismatches, 0, "{name}: the image is refused");
+        // The same runs on the plain image: the selection test must change some answers.
+        let plain_ops: Vec<Op> = ops
+            .iter()
+            .map(|op| match op {
+                Op::InitBytes(_) => Op::InitBytes(plain.clone()),
+                op => op.clone(),
+            })
+            .collect();
+        let differ = h
+            .run_rust(&ops)
+            .iter()
+            .zip(&h.run_rust(&plain_ops))
+            .filter(|(a, b)| a != b)
+            .count();
+        eprintln!("selection {name}: {differ} answers differ from the plain image's");
+        assert!(differ > 100, "{name}: {differ}");
+        results.push((*name, c));
+    }
+    assert!(check_all("selection test", &results) >= 60_000);
+}
+
+/// The selection test section corrupted: by hand (accepted: a zero or −0 threshold, −0 below the
+/// diagonal, after a fingerprint; refused: a negative, NaN or infinite threshold, a nonzero value below
+/// the diagonal, a zero, negative or NaN diagonal, an infinite centre, a value short or long, a trailing
+/// byte, empty, twice, before a fingerprint, in an image without model maps, in a PWA image) and one to
+/// three random bytes of its body changed; the C init decides as `decode` does, and accepted images step
+/// alike.
+#[test]
+fn corrupted_selection_tests_are_refused_as_the_rust_decoder_refuses_them() {
+    let plain = maps_image(810, 5, 2, 3, 2, 4, Terminal::Fallback, 3, false, 0);
+    let img = decode(&plain).unwrap();
+    let n = img.n();
+    let sel = SelectionSection::new(&img, |_| 1.0, false);
+    let body = sel.body();
+    let nl = img.n_locations();
+    let factor_at = |r: usize, c: usize| 4 * (r * n + c);
+    let record_at = |t: usize, k: usize| 4 * (nl * n * n + t * (n + 1) + k);
+    let set = |at: usize, v: f32| {
+        let mut b = body.clone();
+        b[at..at + 4].copy_from_slice(&v.to_le_bytes());
+        b
+    };
+    let tag = SectionKind::SelectionTest as u16;
+    let fp = postcard(&fingerprint());
+    let no_maps = feedforward_image(810, 3, 2, 1, 4, Terminal::Fallback, 1);
+    assert!(decode(&no_maps).unwrap().model_maps().is_none());
+    let pwa = pwa_image(811, 3, 2, 1, 2, 10, 1);
+    let mut long = body.clone();
+    long.extend_from_slice(&0.5f32.to_le_bytes());
+    let mut trailing = body.clone();
+    trailing.push(0);
+    let cases: Vec<(&str, Vec<u8>, bool)> = vec![
+        ("valid", with_section(&plain, tag, &body), true),
+        (
+            "zero threshold",
+            with_section(&plain, tag, &set(record_at(1, n), 0.0)),
+            true,
+        ),
+        (
+            "-0 threshold",
+            with_section(&plain, tag, &set(record_at(2, n), -0.0)),
+            true,
+        ),
+        (
+            "-0 below the diagonal",
+            with_section(&plain, tag, &set(factor_at(2, 0), -0.0)),
+            true,
+        ),
+        (
+            "after a fingerprint",
+            with_section(&with_section(&plain, 12, &fp), tag, &body),
+            true,
+        ),
+        (
+            "negative threshold",
+            with_section(&plain, tag, &set(record_at(3, n), -1e-30)),
+            false,
+        ),
+        (
+            "NaN threshold",
+            with_section(&plain, tag, &set(record_at(0, n), f32::NAN)),
+            false,
+        ),
+        (
+            "infinite threshold",
+            with_section(&plain, tag, &set(record_at(0, n), f32::INFINITY)),
+            false,
+        ),
+        (
+            "nonzero below the diagonal",
+            with_section(&plain, tag, &set(factor_at(1, 0), 1e-30)),
+            false,
+        ),
+        (
+            "zero diagonal",
+            with_section(&plain, tag, &set(factor_at(2, 2), 0.0)),
+            false,
+        ),
+        (
+            "negative diagonal",
+            with_section(&plain, tag, &set(factor_at(0, 0), -1.0)),
+            false,
+        ),
+        (
+            "NaN diagonal",
+            with_section(&plain, tag, &set(factor_at(1, 1), f32::NAN)),
+            false,
+        ),
+        (
+            "infinite centre",
+            with_section(&plain, tag, &set(record_at(1, 0), f32::NEG_INFINITY)),
+            false,
+        ),
+        (
+            "one value short",
+            with_section(&plain, tag, &body[..body.len() - 4]),
+            false,
+        ),
+        ("one value long", with_section(&plain, tag, &long), false),
+        ("trailing byte", with_section(&plain, tag, &trailing), false),
+        ("empty", with_section(&plain, tag, &[]), false),
+        (
+            "twice",
+            with_section(&with_section(&plain, tag, &body), tag, &body),
+            false,
+        ),
+        (
+            "before a fingerprint",
+            with_section(&with_section(&plain, tag, &body), 12, &fp),
+            false,
+        ),
+        (
+            "without model maps",
+            with_section(&no_maps, tag, &body),
+            false,
+        ),
+        ("in a PWA image", with_section(&pwa, tag, &body), false),
+    ];
+    assert!(matches!(
+        decode(&cases[cases.len() - 2].1),
+        Err(shared_types::image::ImageError::SelectionWithoutModelMaps)
+    ));
+    let probe = check_section_cases("selection_section", &plain, &img, 11, &cases);
+    // Random corruption of the body (the section is the last): the C refuses exactly what Rust refuses.
+    let with = &cases[0].1;
+    let (off, len) = (with.len() - body.len(), body.len());
+    let mut rng = ChaCha8Rng::seed_from_u64(79);
+    let mut ops = Vec::new();
+    for k in 0..400 {
+        let mut b = body.clone();
+        for _ in 0..rng.random_range(1..=3) {
+            let i = rng.random_range(0..b.len());
+            b[i] = if k % 2 == 0 {
+                rng.random()
+            } else {
+                b[i] ^ (1 << rng.random_range(0..8))
+            };
+        }
+        ops.push(Op::InitBytes(with_section_body(with, off, len, &b)));
+        ops.extend(probe.iter().cloned());
+    }
+    let h = CHarness::build(&plain, &scratch("selection_corrupt")).expect("harness");
+    let c = h.compare(&ops).expect("driver");
+    let accepted = h
+        .run_rust(&ops)
+        .iter()
+        .filter(|a| matches!(a, Answer::Init(true)))
+        .count();
+    eprintln!(
+        "corrupted selection tests: {} inits, {accepted} accepted by Rust, {} states, {} init mismatches, {} step mismatches",
+        c.inits, c.states, c.init_mismatches, c.mismatches
+    );
+    assert_eq!(c.init_mismatches, 0, "{:?}", c.first);
+    assert_eq!(c.mismatches, 0, "{:?}", c.first);
+    assert!(accepted > 10 && accepted < c.inits, "{accepted}");
 }

@@ -99,7 +99,9 @@ fn fl_synth_then_verify() {
     let out = crate::verify_refuses::text(&o);
     assert_eq!(o.status.code(), Some(1), "{out}");
     assert!(
-        out.contains(&format!("trajectory {t}: its whitened selection test accepts states")),
+        out.contains(&format!(
+            "trajectory {t}: its whitened selection test accepts states"
+        )),
         "{out}"
     );
 

@@ -16,9 +16,10 @@
 #define SC_FORMAT_VERSION @FORMAT_VERSION@u
 #define SC_LEAF_BASE 0x8000u
 #define SC_OUTSIDE 0xFFFFu
-#define SC_N_KINDS 12u /* highest known tag */
+#define SC_N_KINDS 13u /* highest known tag */
 #define SC_KIND_TERMINAL_LAW 11u
 #define SC_KIND_SPEC_FINGERPRINT 12u
+#define SC_KIND_SELECTION_TEST 13u
 #define SC_MAPS_HEADER_LEN 12u
 #define SC_PROGRAM_HEADER_LEN 8u
 #define SC_EXIT_TABLE 0u
@@ -506,6 +507,41 @@ static sc_error parse_terminal(sc_image *im, sc_bytes s) {
     return SC_E_NONE;
 }
 
+/* selection::SelectionTest::decode: a raw body of n_locations*n*n + n_trajectories*(n+1) little-endian
+ * f32, the factors R_l (pwa::validate_factors: finite, exactly 0 below the diagonal, positive diagonal),
+ * then per trajectory [cz_0 .. cz_{n-1}, s] (pwa::validate_ball_tests: finite, s >= 0). Only in an image
+ * with model maps (Image::with_selection_test: ImageError::SelectionWithoutModelMaps). */
+static sc_error parse_selection(sc_image *im, sc_bytes s) {
+    uint32_t n = im->n, nl = im->n_locations, nt = im->n_trajectories, l, r, c, t, k;
+    uint64_t factors = 4ull * nl * n * n;
+    sc_error e;
+    if (!im->has_maps || im->mode != 1) return SC_E_SELECTION;
+    if ((uint64_t)s.len != factors + 4ull * nt * (n + 1u)) return SC_E_LENGTH;
+    im->sel_R.p = s.p;
+    im->sel_R.len = (uint32_t)factors;
+    im->sel_test.p = s.p + (uint32_t)factors;
+    im->sel_test.len = s.len - (uint32_t)factors;
+    if ((e = check_floats(im->sel_R, factors)) != SC_E_NONE) return e;
+    for (l = 0; l < nl; l++) {
+        for (r = 0; r < n; r++) {
+            float d;
+            for (c = 0; c < r; c++)
+                if (f32_at(im->sel_R, ((uint64_t)l * n + r) * n + c) != 0.0f) return SC_E_SELECTION;
+            d = f32_at(im->sel_R, ((uint64_t)l * n + r) * n + r);
+            if (d != d || d <= 0.0f) return SC_E_SELECTION;
+        }
+    }
+    for (t = 0; t < nt; t++) {
+        float thr;
+        for (k = 0; k < n; k++)
+            if (!finite_f32(f32_at(im->sel_test, (uint64_t)t * (n + 1u) + k))) return SC_E_NON_FINITE;
+        thr = f32_at(im->sel_test, (uint64_t)t * (n + 1u) + n);
+        if (!finite_f32(thr)) return SC_E_NON_FINITE;
+        if (thr < 0.0f) return SC_E_SELECTION;
+    }
+    return SC_E_NONE;
+}
+
 static sc_error parse_one_bytes(sc_bytes *out, sc_bytes s) {
     sc_reader r = {0, 0, 0, 0};
     r.p = s.p;
@@ -857,9 +893,9 @@ static sc_error decode(sc_image *im, const uint8_t *bytes, uint32_t len) {
         if (slen > len - next) return SC_E_DIRECTORY;
         if (i > 0 && kind <= prev_kind) return SC_E_DIRECTORY;
         if (kind < 1 || kind > SC_N_KINDS) return SC_E_DIRECTORY;
-        /* admitted by the mode (layout::Mode::admits): kinds 1-5, 9 (segment exits) and 10 (model
-         * maps), both optional, feedforward; 1, 2 and 6-8 PWA; 11 (terminal law) and 12 (spec
-         * fingerprint), optional, both */
+        /* admitted by the mode (layout::Mode::admits): kinds 1-5, 9 (segment exits), 10 (model
+         * maps) and 13 (selection test), all three optional, feedforward; 1, 2 and 6-8 PWA; 11
+         * (terminal law) and 12 (spec fingerprint), optional, both */
         if (kind != SC_KIND_SPEC_FINGERPRINT && kind != SC_KIND_TERMINAL_LAW &&
             (im->mode == 1 ? (kind > 5 && kind < 9) : ((kind >= 3 && kind <= 5) || kind >= 9)))
             return SC_E_DIRECTORY;
@@ -912,6 +948,12 @@ static sc_error decode(sc_image *im, const uint8_t *bytes, uint32_t len) {
         if (im->has_maps) return SC_E_TERMINAL;
         if ((e = parse_terminal(im, body[SC_KIND_TERMINAL_LAW - 1u])) != SC_E_NONE) return e;
         im->has_terminal = 1;
+    }
+    /* the selection test (optional, feedforward with model maps; image::with_stored_optional) */
+    im->has_selection = 0;
+    if (present & (1u << (SC_KIND_SELECTION_TEST - 1u))) {
+        if ((e = parse_selection(im, body[SC_KIND_SELECTION_TEST - 1u])) != SC_E_NONE) return e;
+        im->has_selection = 1;
     }
     return SC_E_NONE;
 }
@@ -1035,6 +1077,45 @@ static int32_t ff_select(const sc_image *im, const float *x) {
     return best;
 }
 
+static void whiten(sc_bytes R, uint32_t n, uint32_t loc, const float *x, float *z);
+
+/* selection::SelectionTest::select (section 13): z = fl(R_l x) (pwa::whiten, recomputed only when the
+ * location l of the trajectory's first segment changes from one trajectory to the next), then per
+ * trajectory t s_t = sum_k (z_k - cz_k)^2 summed left to right from 0; the least s_t with s_t <= its
+ * threshold, ties to the lowest index; -1 if none. The unrolled instance Rust runs for one location and
+ * n = 8 (select_fixed) performs the same operations in the same order. */
+static int32_t sel_select(const sc_image *im, const float *x) {
+    uint32_t n = im->n, t, k, z_loc = 0xFFFFFFFFu;
+    uint32_t count = im->n_trajectories < SC_MAX_TRAJECTORIES ? im->n_trajectories : SC_MAX_TRAJECTORIES;
+    int32_t best = -1;
+    float best_s = bits_f32(0x7F800000u);
+    float z[SC_MAX_N];
+    if (n > SC_MAX_N) return -1;
+    for (t = 0; t < count; t++) {
+        uint32_t l = 0;
+        uint64_t o = (uint64_t)t * (n + 1u);
+        float s = 0.0f;
+        if (im->n_locations != 1) {
+            uint32_t s0, segs;
+            trajectory_segments(im, t, &s0, &segs);
+            l = s0 < n_segments(im) ? segment_at(im->segment, s0).location : 0u;
+        }
+        if (l != z_loc) {
+            whiten(im->sel_R, n, l, x, z);
+            z_loc = l;
+        }
+        for (k = 0; k < n; k++) {
+            float d = z[k] - f32_at(im->sel_test, o + k);
+            s += d * d;
+        }
+        if (s <= f32_at(im->sel_test, o + n) && s < best_s) {
+            best_s = s;
+            best = (int32_t)t;
+        }
+    }
+    return best;
+}
+
 /* Controller::row_location: moves the segment cursor forward until its segment holds `row`. */
 static uint32_t row_location(sc_controller *c, uint32_t t, uint32_t row) {
     const sc_image *im = &c->image;
@@ -1108,14 +1189,15 @@ void sc_fallback(const sc_controller *c, const float *x, uint32_t n_x, const flo
     }
 }
 
-/* pwa::whiten: z_i = sum_{j >= i} R_l[i][j] x_j, summed left to right from 0. */
-static void whiten(const sc_image *im, uint32_t loc, const float *x, float *z) {
-    uint32_t n = im->n, i, j;
-    for (i = 0; i < n; i++) {
+/* pwa::whiten: z_i = sum_{j >= i} R_l[i][j] x_j, summed left to right from 0, with the factors R (the
+ * PWA balls' or the selection test's, n x n per location); a short table reads as zeros. */
+static void whiten(sc_bytes R, uint32_t n, uint32_t loc, const float *x, float *z) {
+    uint32_t i, j;
+    for (i = 0; i < n && i < SC_MAX_N; i++) {
         uint64_t row = ((uint64_t)loc * n + i) * n;
-        int ok = (row + n) <= (uint64_t)(im->R.len / 4u);
+        int ok = (row + n) <= (uint64_t)(R.len / 4u);
         float s = 0.0f;
-        for (j = i; j < n; j++) s += (ok ? f32_at(im->R, row + j) : 0.0f) * x[j];
+        for (j = i; j < n; j++) s += (ok ? f32_at(R, row + j) : 0.0f) * x[j];
         z[i] = s;
     }
 }
@@ -1154,7 +1236,7 @@ static int32_t pwa_locate(const sc_image *im, const float *x) {
     if (start > end || 2ull * end > (uint64_t)im->ball_ref.len) start = end = 0;
     nrefs = end - start;
     if (nrefs > SC_MAX_LEAF_BALLS) nrefs = SC_MAX_LEAF_BALLS;
-    if (im->n_locations == 1) whiten(im, 0, x, z);
+    if (im->n_locations == 1) whiten(im->R, n, 0, x, z);
     for (r = 0; r < nrefs; r++) {
         uint32_t b = le16(im->ball_ref.p + 2u * (start + r));
         uint64_t o = (uint64_t)b * 4u * (n + 1u);
@@ -1162,7 +1244,7 @@ static int32_t pwa_locate(const sc_image *im, const float *x) {
         if (im->n_locations != 1) {
             uint32_t loc = b < im->ball_location.len ? im->ball_location.p[b] : 0u;
             if (loc != z_loc) {
-                whiten(im, loc, x, z);
+                whiten(im->R, n, loc, x, z);
                 z_loc = loc;
             }
         }
@@ -1177,7 +1259,8 @@ static int32_t pwa_locate(const sc_image *im, const float *x) {
 }
 
 static sc_status finish(sc_controller *c, const float *v, uint32_t m, float u[SC_MAX_M]);
-static sc_status feedforward(sc_controller *c, const float *x, float w[SC_MAX_M], int *law);
+static sc_status feedforward(sc_controller *c, const float *x, float w[SC_MAX_M], int *law,
+                             int maps);
 
 /* What the feedforward law gives (eval::Law): the law's input in w, or the fallback. */
 #define SC_LAW 0
@@ -1324,7 +1407,7 @@ sc_status sc_step(sc_controller *c, const float *x, uint32_t n_x, float u[SC_MAX
         int law;
         sc_status st;
         if (!state_ok(im, x, n_x)) return SC_BAD_FRAME;
-        st = feedforward(c, x, v, &law);
+        st = feedforward(c, x, v, &law, 0);
         if (st != SC_OK) return st;
         if (law == SC_LAW) return finish(c, v, im->m, u);
         sc_fallback(c, x, n_x, c->last_u, v);
@@ -1353,7 +1436,7 @@ sc_status sc_step_plant(sc_controller *c, const float *x, uint32_t n_x, float u[
     eval_program(&im->coords, slots, xi);
     for (i = 0; i < im->n; i++)
         if (!finite_f32(xi[i])) return SC_OUT_OF_ENVELOPE;
-    st = feedforward(c, xi, w, &law);
+    st = feedforward(c, xi, w, &law, 1);
     if (st != SC_OK) return st;
     if (law == SC_LAW_FALLBACK) {
         sc_fallback(c, x, n_x, c->last_u, v);
@@ -1375,8 +1458,11 @@ sc_status sc_step_plant(sc_controller *c, const float *x, uint32_t n_x, float u[
 
 /* The feedforward law of one step at the (finite, length-n) state x (Controller::feedforward): selection
  * at kappa = 0 and its latch, the table row (or exits), the terminal behaviour; w receives the law's
- * input when *law is SC_LAW. Does not advance kappa. */
-static sc_status feedforward(sc_controller *c, const float *x, float w[SC_MAX_M], int *law) {
+ * input when *law is SC_LAW. Does not advance kappa. `maps` is 1 on the model-maps step, which selects
+ * with the image's selection test when it has one (Controller::select_maps), else 0
+ * (Controller::select, the P-metric test, as without the section). */
+static sc_status feedforward(sc_controller *c, const float *x, float w[SC_MAX_M], int *law,
+                             int maps) {
     const sc_image *im = &c->image;
     {
         uint32_t t, start, len, k;
@@ -1384,7 +1470,7 @@ static sc_status feedforward(sc_controller *c, const float *x, float w[SC_MAX_M]
         if (c->has_active) {
             t = c->active;
         } else {
-            int32_t sel = ff_select(im, x);
+            int32_t sel = (maps && im->has_selection) ? sel_select(im, x) : ff_select(im, x);
             uint32_t s0, count;
             if (sel < 0) {
                 c->out_of_envelope = 1;

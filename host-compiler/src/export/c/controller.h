@@ -52,6 +52,11 @@
  *     without those six functions gives the same bits; with them the C library's results may differ
  *     from Rust's in the last place or so (a conforming libm is faithful, within an ulp or two), which
  *     the host's rounding analysis of a program already allows for (4 ulp per call).
+ *   - selection test (optional section 13, only with model maps; shared-types/src/selection.rs): the
+ *     model-maps step (sc_step_plant) then selects at kappa = 0 with the whitened test: z = fl(R_l xi)
+ *     (row i: sum_{j >= i} R_l[i][j] xi_j from 0, l the location of the trajectory's first segment),
+ *     s_t = sum_k (z_k - cz_t,k)^2 from 0, accepted if s_t <= the stored threshold, the least s_t
+ *     (ties: lowest index). sc_step, and sc_step_plant without the section, use the P-metric test.
  * On any status but SC_OK the firmware applies sc_fallback (the Rust firmware passes the last input it
  * applied as last_u).
  */
@@ -127,8 +132,10 @@ typedef enum {
                                   state, a map's slots or outputs, or a linear fallback with maps */
     SC_E_PROGRAM = 22,         /* a model program: length, counts, constants, opcodes, operands, stack
                                   depth, outputs stored once */
-    SC_E_TERMINAL = 23         /* terminal law (section 11): P_t not symmetric positive definite, radius
+    SC_E_TERMINAL = 23,        /* terminal law (section 11): P_t not symmetric positive definite, radius
                                   negative or not finite, or with model maps */
+    SC_E_SELECTION = 24        /* selection test (section 13): a factor not upper triangular or with a
+                                  non-positive diagonal, a negative threshold, or without model maps */
 } sc_error;
 
 typedef struct {
@@ -172,6 +179,10 @@ typedef struct {
     uint8_t has_terminal;
     sc_bytes t_x_e, t_K, t_v, t_P;
     float t_radius;
+    /* selection test (optional section 13, only with model maps): the factors R_l (n_locations*n*n
+       f32) and per trajectory [cz_0 .. cz_{n-1}, s] (n_trajectories*(n+1) f32) */
+    uint8_t has_selection;
+    sc_bytes sel_R, sel_test;
 } sc_image;
 
 /* Controller state (shared_types::eval::Controller). */
