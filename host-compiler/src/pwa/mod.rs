@@ -137,8 +137,8 @@ pub enum TreeSplit {
     /// to the most balanced cut; a node whose balls share no verified law is cut down to small mixed
     /// leaves, and a node with one law down to `leaf_balls` balls.
     Laws,
-    /// Cut on the data alone: the most balanced cut until a node holds at most `MAX_LEAF_BALLS` balls,
-    /// whatever their laws. Every listed ball carries the law verified for it and the evaluator applies
+    /// Cut on the data alone: the most balanced cut until a node holds at most a leaf size of balls
+    /// (the smallest of 16, 32 and `MAX_LEAF_BALLS` whose tree fits the capacities), whatever their laws. Every listed ball carries the law verified for it and the evaluator applies
     /// that law, so a mixed leaf is as sound as a pure one; the tree then only routes, and its size follows
     /// how many balls overlap rather than how many law boundaries there are. Where the balls of F overlap
     /// densely (every ball meeting a cell must be listed by its leaf), cutting by laws duplicates the

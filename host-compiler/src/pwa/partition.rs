@@ -19,8 +19,10 @@
 //! quartiles is used. Children with no ball are "outside the envelope".
 //!
 //! With [`TreeSplit::Balanced`] (chosen by `Auto` when the tree above exceeds a capacity) the laws play no
-//! part in the cuts: every node is cut by the most balanced candidate until it holds at most
-//! `MAX_LEAF_BALLS` balls, and every leaf is a mixed leaf as below. Where many balls overlap, the cuts
+//! part in the cuts: every node is cut by the most balanced candidate until it holds at most a leaf size
+//! of balls, the smallest of 16, 32 and `MAX_LEAF_BALLS` whose tree fits the capacities (a state outside
+//! the balls tests all of its leaf's, so the worst step grows with the leaf size), and every leaf is a
+//! mixed leaf as below. Where many balls overlap, the cuts
 //! between laws list the overlapping balls on both sides level after level, and that tree outgrows the
 //! capacities long before the balanced one does.
 //!
@@ -77,7 +79,15 @@ struct Tree<'a> {
     b: PwaImageBuilder,
     ball_of: HashMap<(usize, usize), usize>,
     dropped: usize,
+    /// [`TreeSplit::Balanced`]: a node becomes a leaf at this many balls (≤ `MAX_LEAF_BALLS`).
+    leaf_cap: usize,
 }
+
+/// The leaf sizes [`TreeSplit::Balanced`] tries, smallest first: the first tree that fits the
+/// capacities is kept. A leaf's balls are all tested when a state lies outside them, so the worst step
+/// grows with the leaf size; a smaller leaf costs more references (balls cut by more hyperplanes are
+/// listed on both sides), which is what a larger one saves when the capacity is short.
+const BALANCED_LEAF_CAPS: [usize; 3] = [16, 32, MAX_LEAF_BALLS];
 
 /// Robust LP [192]: min mean(s_A) + mean(s_B) s.t. aᵀx − b ≤ −1 + s (class A), aᵀx − b ≥ 1 − s (class B),
 /// s ≥ 0. Coordinates are scaled by `scale`; returns (a, b) in the original coordinates.
@@ -371,11 +381,11 @@ impl Tree<'_> {
         self.split(a, b, l, r, depth)
     }
 
-    /// A node of [`TreeSplit::Balanced`]: a leaf once the set holds at most `MAX_LEAF_BALLS` balls (or at
-    /// the depth limit, or when no cut makes progress), labelled with its most frequent law; otherwise the
+    /// A node of [`TreeSplit::Balanced`]: a leaf once the set holds at most `leaf_cap` balls (or at the
+    /// depth limit, or when no cut makes progress), labelled with its most frequent law; otherwise the
     /// most balanced cut.
     fn balanced_node(&mut self, set: Vec<usize>, depth: usize) -> Result<Child, PwaError> {
-        let cut = (set.len() > MAX_LEAF_BALLS && depth < self.ctx.settings.max_depth)
+        let cut = (set.len() > self.leaf_cap && depth < self.ctx.settings.max_depth)
             .then(|| self.stored_cut(&set, self.balanced_cut(&set)))
             .flatten();
         match cut {
@@ -428,24 +438,37 @@ pub fn build_image(
     assignment: &[usize],
     admissible: &[Vec<usize>],
 ) -> Result<(PwaImageBuilder, PartitionStats), PwaError> {
-    match ctx.settings.split {
-        TreeSplit::Auto => match build_tree(ctx, laws, assignment, admissible, TreeSplit::Laws) {
-            Err(PwaError::Capacity { .. }) => {
-                build_tree(ctx, laws, assignment, admissible, TreeSplit::Balanced)
+    let balanced = || {
+        let mut last = None;
+        for cap in BALANCED_LEAF_CAPS {
+            match build_tree(ctx, laws, assignment, admissible, TreeSplit::Balanced, cap) {
+                Err(e @ PwaError::Capacity { .. }) => last = Some(e),
+                r => return r,
             }
-            r => r,
-        },
-        split => build_tree(ctx, laws, assignment, admissible, split),
+        }
+        Err(last.unwrap_or(PwaError::NoData))
+    };
+    match ctx.settings.split {
+        TreeSplit::Auto => {
+            match build_tree(ctx, laws, assignment, admissible, TreeSplit::Laws, MAX_LEAF_BALLS) {
+                Err(PwaError::Capacity { .. }) => balanced(),
+                r => r,
+            }
+        }
+        TreeSplit::Balanced => balanced(),
+        split => build_tree(ctx, laws, assignment, admissible, split, MAX_LEAF_BALLS),
     }
 }
 
-/// [`build_image`] with the cuts of `split` (`Laws` or `Balanced`).
+/// [`build_image`] with the cuts of `split` (`Laws` or `Balanced`, whose leaves hold at most `leaf_cap`
+/// balls).
 fn build_tree(
     ctx: &PwaContext,
     laws: &[LearnedLaw],
     assignment: &[usize],
     admissible: &[Vec<usize>],
     split: TreeSplit,
+    leaf_cap: usize,
 ) -> Result<(PwaImageBuilder, PartitionStats), PwaError> {
     let mut b = PwaImageBuilder::new(ctx.n, ctx.m, 0.0);
     let K = crate::linalg::to_row_major(ctx.K.as_ref());
@@ -462,6 +485,7 @@ fn build_tree(
         b,
         ball_of: HashMap::new(),
         dropped: 0,
+        leaf_cap: leaf_cap.min(MAX_LEAF_BALLS),
     };
     let all: Vec<usize> = (0..ctx.points.len()).collect();
     let root = t.node(all, 0)?;

@@ -61,7 +61,7 @@ impl TrajectoryCheck {
                 "trajectory {}: its stored table certifies no ball at all (stored radius {:e})",
                 self.trajectory, self.stored
             )
-        } else if self.selection_test.is_some_and(|r| !(r <= self.delta)) {
+        } else if !self.selection_test.is_none_or(|r| r <= self.delta) {
             format!(
                 "trajectory {}: its whitened selection test accepts states up to {:e} from the centre, beyond the {:e} its stored table certifies",
                 self.trajectory,
