@@ -107,6 +107,18 @@ pub fn run(a: &VerifyArgs) -> Outcome {
             rc.tolerance,
             rc.sigma_min
         );
+        let whitened: Vec<f64> = rc
+            .trajectories
+            .iter()
+            .filter_map(|c| c.selection_test.map(|r| r / c.delta))
+            .collect();
+        if !whitened.is_empty() {
+            println!(
+                "selection test re-proved from the bytes: {} thresholds (accepted states within {:.9} × the certified radius at most)",
+                whitened.len(),
+                whitened.iter().copied().fold(0.0f64, f64::max)
+            );
+        }
         for c in &rc.trajectories {
             if let Some(why) = c.failure(rc.horizon) {
                 println!("certificate failure: {why}");

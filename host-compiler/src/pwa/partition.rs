@@ -450,7 +450,14 @@ pub fn build_image(
     };
     match ctx.settings.split {
         TreeSplit::Auto => {
-            match build_tree(ctx, laws, assignment, admissible, TreeSplit::Laws, MAX_LEAF_BALLS) {
+            match build_tree(
+                ctx,
+                laws,
+                assignment,
+                admissible,
+                TreeSplit::Laws,
+                MAX_LEAF_BALLS,
+            ) {
                 Err(PwaError::Capacity { .. }) => balanced(),
                 r => r,
             }
