@@ -524,9 +524,9 @@ pub fn recheck(
     Ok(out)
 }
 
-/// Monte Carlo starts for a hybrid image: `interior` uniform samples of Init that the image's f32
-/// selection accepts (at most 100 draws per start), and `per_ball` points just inside the boundary of
-/// every stored ball (1 − 10⁻⁶ of its radius in its stored metric), seeded.
+/// Monte Carlo starts for a hybrid image (and a temporal task's): `interior` uniform samples of Init that
+/// the image's f32 selection accepts (at most 100 draws per start), and `per_ball` points just inside the
+/// boundary of every stored ball (at [`super::boundary_radius`] in its stored metric), seeded.
 pub fn starts_from_image(
     bytes: &[u8],
     init: &crate::cover::estimate::SampleBox,
@@ -545,7 +545,8 @@ pub fn starts_from_image(
         draws += 1;
         let x = init.sample(&mut rng);
         let x32: Vec<f32> = x.iter().map(|&v| v as f32).collect();
-        if ctl.select(&x32).is_some() {
+        // The selection the image's own step runs (for an image with model maps, its whitened test).
+        if ctl.select_maps(&x32).is_some() {
             out.push(x);
         }
     }
@@ -556,7 +557,7 @@ pub fn starts_from_image(
         let Some(roots) = crate::linalg::PdRoots::new(P.as_ref()) else {
             continue;
         };
-        let delta = img.delta(t) as f64 * (1.0 - 1e-6);
+        let delta = super::boundary_radius(&img, t);
         let c: Vec<f64> = (0..n).map(|i| img.centre(t, i) as f64).collect();
         for _ in 0..per_ball {
             out.push(point_on_sphere(&mut rng, &roots, &c, delta));

@@ -302,6 +302,35 @@ pub struct VerifyReport {
 /// ([`crate::certify::pwa_accept_radius`]); `None` for an image without the section. The ball's metric
 /// is that of the trajectory's first location; `P` is it, widened from the image.
 pub fn selection_test_radius(image: &Image<'_>, P: faer::MatRef<'_, f64>, t: usize) -> Option<f64> {
+    selection_test_data(image, t)
+        .map(|(Rh, c, cz, s)| crate::certify::pwa_accept_radius(P, &Rh, &c, &cz, s))
+}
+
+/// The radius at which a Monte Carlo places trajectory `t`'s boundary starts, in the image's metric about
+/// the stored centre: a hair (one part in 10⁶) inside the stored radius, and with a whitened selection
+/// test inside the radius within which that test accepts every state
+/// ([`crate::certify::pwa_complete_radius`]), so that the starts are states the evaluator runs.
+pub(crate) fn boundary_radius(image: &Image<'_>, t: usize) -> f64 {
+    let stored = image.delta(t) as f64;
+    let r = match selection_test_data(image, t) {
+        Some((Rh, c, cz, s)) => {
+            let n = image.n();
+            let l = image.location(t, 0);
+            let P: Vec<f64> = (0..n * n)
+                .map(|i| image.P(l, i / n, i % n) as f64)
+                .collect();
+            let P = crate::linalg::from_row_major(n, n, &P);
+            stored.min(crate::certify::pwa_complete_radius(P.as_ref(), &Rh, &c, &cz, s))
+        }
+        None => stored,
+    };
+    r * (1.0 - 1e-6)
+}
+
+/// Trajectory `t`'s record of the image's selection test, widened: the factor of its location, its
+/// stored centre, whitened centre and threshold; `None` without the section.
+#[allow(clippy::type_complexity)]
+fn selection_test_data(image: &Image<'_>, t: usize) -> Option<(Vec<f64>, Vec<f64>, Vec<f64>, f32)> {
     let test = image.selection_test()?;
     let n = image.n();
     let l = image.location(t, 0);
@@ -310,13 +339,7 @@ pub fn selection_test_radius(image: &Image<'_>, P: faer::MatRef<'_, f64>, t: usi
         .collect();
     let c: Vec<f64> = (0..n).map(|i| image.centre(t, i) as f64).collect();
     let cz: Vec<f64> = (0..n).map(|i| test.centre_z(n, t, i) as f64).collect();
-    Some(crate::certify::pwa_accept_radius(
-        P,
-        &Rh,
-        &c,
-        &cz,
-        test.threshold(n, t),
-    ))
+    Some((Rh, c, cz, test.threshold(n, t)))
 }
 
 /// How far `u` lies inside the input set (negative outside): the distance to the nearest box face, or
@@ -519,8 +542,8 @@ pub fn monte_carlo(
     Ok(report)
 }
 
-/// A point on the boundary of trajectory `t`'s ball, c + δ·P^{-1/2}w/‖w‖ for a random direction w, a
-/// hair inside the stored radius so that the f32 selection accepts nearly all of them (`Pis` = P^{-1/2}).
+/// A point on the boundary of trajectory `t`'s ball, c + r·P^{-1/2}w/‖w‖ for a random direction w, at
+/// the [`boundary_radius`] r, so that the f32 selection accepts nearly all of them (`Pis` = P^{-1/2}).
 pub(crate) fn ball_boundary_point(
     image: &Image<'_>,
     Pis: faer::MatRef<'_, f64>,
@@ -528,7 +551,7 @@ pub(crate) fn ball_boundary_point(
     rng: &mut ChaCha8Rng,
 ) -> Vec<f64> {
     let n = image.n();
-    let d = image.delta(t) as f64 * (1.0 - 1e-6);
+    let d = boundary_radius(image, t);
     let w: Vec<f64> = (0..n)
         .map(|_| rng.sample::<f64, _>(rand_distr::StandardNormal))
         .collect();

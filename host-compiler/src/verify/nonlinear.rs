@@ -151,7 +151,7 @@ fn run_fl_inner(
 }
 
 /// A plant state whose ξ (with the controller states at ζ0) lies on the boundary of trajectory `t`'s ball,
-/// a hair inside the stored radius: from the plant state x_c whose ξ-states are the ball's centre (the
+/// at [`super::boundary_radius`]: from the plant state x_c whose ξ-states are the ball's centre (the
 /// others from `x`, a draw in Init), along a random direction of the plant's state space (of its
 /// ξ-states only when `states_only`: no tilt for the quadrotor), by bisection on the ball's metric; `x`
 /// itself when x_c is not inside the ball (a centre no plant state at rest reaches).
@@ -167,7 +167,7 @@ fn flat_boundary_start(
     let n = image.n();
     let centre: Vec<f64> = (0..n).map(|i| image.centre(t, i) as f64).collect();
     let loc = image.location(t, 0);
-    let radius = image.delta(t) as f64 * (1.0 - 1e-6);
+    let radius = super::boundary_radius(image, t);
     let dist = |y: &[f64]| {
         let q = maps.xi_at(y, ext0);
         let e: Vec<f64> = (0..n).map(|i| q[i] - centre[i]).collect();
