@@ -432,7 +432,7 @@ pub fn accepted_starts(
             .map(|(&l, &h)| if h > l { rng.random_range(l..=h) } else { l })
             .collect();
         let xi: Vec<f32> = maps.xi_of(&x).iter().map(|&v| v as f32).collect();
-        if ctl.select(&xi).is_some() {
+        if ctl.select_maps(&xi).is_some() {
             starts.push(x);
         }
     }

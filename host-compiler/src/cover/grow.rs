@@ -385,7 +385,7 @@ pub fn grow(
             .par_iter()
             .filter(|x| {
                 let xf: Vec<f32> = x.iter().map(|&v| v as f32).collect();
-                ctl.select(&xf).is_none()
+                ctl.select_maps(&xf).is_none()
             })
             .cloned()
             .collect();

@@ -478,7 +478,7 @@ pub fn synthesize_temporal(
     let ctl = shared_types::eval::Controller::new(decoded);
     let accepted = |x: &[f64]| {
         let x32: Vec<f32> = x.iter().map(|&v| v as f32).collect();
-        ctl.select(&x32).is_some()
+        ctl.select_maps(&x32).is_some()
     };
     let coverage = estimate(&init, s.coverage_samples(), s.confidence, &mut rng, |x| {
         accepted(x)

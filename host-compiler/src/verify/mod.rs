@@ -310,7 +310,7 @@ pub fn selection_test_radius(image: &Image<'_>, P: faer::MatRef<'_, f64>, t: usi
 /// the stored centre: a hair (one part in 10⁶) inside the stored radius, and with a whitened selection
 /// test inside the radius within which that test accepts every state
 /// ([`crate::certify::pwa_complete_radius`]), so that the starts are states the evaluator runs.
-pub(crate) fn boundary_radius(image: &Image<'_>, t: usize) -> f64 {
+pub fn boundary_radius(image: &Image<'_>, t: usize) -> f64 {
     let stored = image.delta(t) as f64;
     let r = match selection_test_data(image, t) {
         Some((Rh, c, cz, s)) => {
@@ -320,7 +320,13 @@ pub(crate) fn boundary_radius(image: &Image<'_>, t: usize) -> f64 {
                 .map(|i| image.P(l, i / n, i % n) as f64)
                 .collect();
             let P = crate::linalg::from_row_major(n, n, &P);
-            stored.min(crate::certify::pwa_complete_radius(P.as_ref(), &Rh, &c, &cz, s))
+            stored.min(crate::certify::pwa_complete_radius(
+                P.as_ref(),
+                &Rh,
+                &c,
+                &cz,
+                s,
+            ))
         }
         None => stored,
     };

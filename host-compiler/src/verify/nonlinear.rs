@@ -279,7 +279,7 @@ pub fn monte_carlo_fl(
         draws += 1;
         let x = draw(&mut rng);
         let xi: Vec<f32> = maps.xi_of(&x).iter().map(|&v| v as f32).collect();
-        if ctl.select(&xi).is_some() {
+        if ctl.select_maps(&xi).is_some() {
             starts.push(x);
         }
     }
