@@ -35,9 +35,15 @@ fn example_rows(file: &str, key: &str, what: &str) -> Vec<Row> {
     let task = Task::new(host_compiler::spec::load(&path).expect("the shipped example")).unwrap();
     let maps = task.plant.linearization().expect("a linearised plant");
     let program_bytes = maps.coords.bytes.len() + maps.input_map.bytes.len();
+    // A flat plant has no λ (its input map is Υ, not κ + λw): its bound is NaN by construction.
+    let lambda = if maps.lambda_norm.is_nan() {
+        "none (flat plant)".to_string()
+    } else {
+        format!("≤ {:.5}", maps.lambda_norm)
+    };
     println!(
-        "{what}: D = {:.4e} (flow {:.4e}), ‖λ‖ ≤ {:.5}, program rounding {:.3e}, W = {:?}",
-        maps.mismatch, maps.mismatch_flow, maps.lambda_norm, maps.e_prog, task.problem.input
+        "{what}: D = {:.4e} (flow {:.4e}), ‖λ‖ {lambda}, program rounding {:.3e}, W = {:?}",
+        maps.mismatch, maps.mismatch_flow, maps.e_prog, task.problem.input
     );
     let opts = SynthOptions {
         progress: false,
