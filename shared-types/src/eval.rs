@@ -284,8 +284,13 @@ impl<'a> Controller<'a> {
     /// with its unrolled path also for n = 8 (the same answers as `select`). Only the model-maps step
     /// calls it, so a firmware whose image has no model maps carries neither. Pure; does not change state.
     pub fn select_maps(&self, x: &[f32]) -> Option<u16> {
-        if let Some(test) = self.image.selection_test() {
-            return test.select(&self.image, x);
+        let img = &self.image;
+        if let Some(test) = img.selection_test() {
+            let first_location = |t: usize| {
+                let (s0, _) = img.trajectory_segments(t);
+                img.segment(s0).map_or(0, |s| s.location)
+            };
+            return test.select(img.dims(), first_location, x);
         }
         if self.image.n_locations() == 1 && self.image.n() == 8 {
             return self.select_fixed::<8>(x);

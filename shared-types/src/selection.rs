@@ -31,7 +31,7 @@
 
 use crate::capacity::{MAX_N, MAX_TRAJECTORIES};
 use crate::error::{Field, ImageError};
-use crate::image::Image;
+use crate::layout::Dims;
 use crate::pwa::{load_ball, validate_ball_tests, validate_factors, whiten};
 use crate::raw::{check_len, f32_at, floats};
 
@@ -92,17 +92,23 @@ impl<'a> SelectionTest<'a> {
         f32_at(self.tests, t * (n + 1) + n)
     }
 
-    /// The selection of the module doc for the state `x` of `img` (whose section this is); `None` if no
-    /// ball accepts `x` or `x` has the wrong length. A one-location image of dimension 8 (the flat
+    /// The selection of the module doc for the state `x` of the image of dimensions `dims` whose section
+    /// this is, `first_location(t)` the location of trajectory t's first segment; `None` if no ball
+    /// accepts `x` or `x` has the wrong length. A one-location image of dimension 8 (the flat
     /// quadrotor) or 4 (the planar vehicles) runs an unrolled instance, every other image the general
     /// loop: the same operations in the same order, so the same answer.
-    pub(crate) fn select(&self, img: &Image<'_>, x: &[f32]) -> Option<u16> {
-        let n = img.n().clamp(1, MAX_N);
+    pub(crate) fn select(
+        &self,
+        dims: Dims,
+        first_location: impl Fn(usize) -> usize,
+        x: &[f32],
+    ) -> Option<u16> {
+        let n = dims.n.clamp(1, MAX_N);
         if x.len() != n {
             return None;
         }
-        let count = img.n_trajectories().min(MAX_TRAJECTORIES);
-        if img.n_locations() == 1 {
+        let count = dims.n_trajectories.min(MAX_TRAJECTORIES);
+        if dims.n_locations == 1 {
             match n {
                 8 => return self.select_fixed::<8>(x, count),
                 4 => return self.select_fixed::<4>(x, count),
@@ -114,11 +120,10 @@ impl<'a> SelectionTest<'a> {
         let mut best: Option<u16> = None;
         let mut best_s = f32::INFINITY;
         for t in 0..count {
-            let l = if img.n_locations() == 1 {
+            let l = if dims.n_locations == 1 {
                 0
             } else {
-                let (s0, _) = img.trajectory_segments(t);
-                img.segment(s0).map_or(0, |s| s.location)
+                first_location(t)
             };
             if l != z_loc {
                 for (i, zi) in z.iter_mut().enumerate().take(n) {

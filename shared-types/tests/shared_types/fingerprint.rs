@@ -135,11 +135,9 @@ fn decoder_refuses_a_malformed_fingerprint() {
                 kind: SectionKind::SpecFingerprint
             })
         );
-        for reserved in [14u16] {
-            assert_eq!(
-                with(&[(reserved, body(&hash()))]),
-                Err(ImageError::UnknownSection { kind: reserved })
-            );
-        }
+        assert_eq!(
+            with(&[(14, body(&hash()))]),
+            Err(ImageError::UnknownSection { kind: 14 })
+        );
     }
 }
