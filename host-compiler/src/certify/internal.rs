@@ -14,8 +14,11 @@
 //! **The certificate, backwards** (segment N is judged against Goal, as one location, [`super::certify`]).
 //! For segment i < N with radius r, every quantity below is an affine bound in r, so the largest r is found
 //! by bisection on their conjunction (each is monotone in r):
-//! 1. *Before the switch* the run is an ordinary run of location ℓᵢ: within r of x̃ᵢ(κ) in Pᵢ at the
-//!    samples, within Rκ = γr + ρκ + φβε̄ between them ([`super`]'s inter-sample bound). Unsafe and the
+//! 1. *Before the switch* the run is an ordinary run of location ℓᵢ: within rκ of x̃ᵢ(κ) in Pᵢ at the
+//!    samples, within Rκ = γrκ + ρκ + φβε̄ between them ([`super`]'s inter-sample bound). Its deviation
+//!    obeys e(κ+1) = Ãe(κ) + B·(rounding), so rκ = min(r, ‖Ã^κ‖_P·r + S_κ·z) (variation of constants,
+//!    z the rounding's P-norm per step; r itself by the CAF): the tube narrows towards the guard, and
+//!    items 2–5 take rκ. Theorem 4.7's parts keep r. Unsafe and the
 //!    input set are checked over the kept rows (Theorem 4.7's Unsafe and Input parts), with the run's other
 //!    guards and the faces of ℓᵢ's invariant not implied by "outside G" counted as Unsafe.
 //! 2. *Sample 0* lies outside G by more than θ_eff: the edge is armed and nothing is detected at once.
@@ -40,7 +43,7 @@
 //!    next sample within θ_eff of the plane and not yet taken for switched; the controller then applies
 //!    row κ+1 of segment i for one more period, which is interval κ+1 with s = 0 (item 4 covers it). Its
 //!    state differs from the location-ℓᵢ run by at most η = L·s_late (in Pᵢ), so items 1–4 are checked at
-//!    r + η.
+//!    rκ + η.
 //!
 //! Entering segment i+1 (any segment with an entry edge), the tube must stay on G's side: at samples
 //! 0..W the flow crosses into G (transversality as in item 4, over segment i+1's own balls), after W its
@@ -359,6 +362,21 @@ struct ExitSamples {
     unsafe_next: Vec<f64>,
     /// ‖M(s)x̃ + N(s)ṽ + m(s) − x̃ᵢ₊₁(0)‖_{P′} per grid point.
     land: Vec<Vec<f64>>,
+    /// ‖Ã^κ‖_P and S_κ·z (z the rounding's P-norm per step): a run's sample-κ deviation is at most
+    /// ‖Ã^κ‖_P·r + S_κ·z (variation of constants), and at most r (the CAF's invariant ball).
+    power: Vec<f64>,
+    disturbed: Vec<f64>,
+}
+
+impl ExitSamples {
+    /// The sample-κ radius of the runs from the r-ball at row 0 ([`ExitSamples::power`]), plus η.
+    fn radius(&self, k: usize, r: f64, eta: f64) -> f64 {
+        let contracted = match (self.power.get(k), self.disturbed.get(k)) {
+            (Some(&p), Some(&z)) => (p * r + z).min(r),
+            _ => r,
+        };
+        contracted + eta
+    }
 }
 
 /// r-independent constants of a segment with an exit.
@@ -407,18 +425,19 @@ fn check_exit(
     grid: &Grid,
     eta: f64,
 ) -> Verdict {
-    let re = r + eta;
     let rows = d.g.len() - 1;
     // 2. Sample 0 outside G by more than θ_eff.
-    if !(d.g[0] - c.dn * re > c.theta_eff) {
+    if !(d.g[0] - c.dn * d.radius(0, r, eta) > c.theta_eff) {
         return Verdict::Fail("the first sample's ball reaches the guard");
     }
     // 3. κ_f.
-    let Some(kappa_f) = (1..=rows).find(|&k| d.g[k] + c.dn * re <= -c.theta_eff) else {
+    let Some(kappa_f) = (1..=rows).find(|&k| d.g[k] + c.dn * d.radius(k, r, eta) <= -c.theta_eff)
+    else {
         return Verdict::Fail("the extended segment's tube never lies inside the guard");
     };
     let (mut first, mut last) = (None, None);
     for k in 0..kappa_f {
+        let re = d.radius(k, r, eta);
         let R = loc.inter(re, d.rho[k], c.eps);
         if d.g[k] - c.dn * R > 0.0 {
             continue;
@@ -722,8 +741,16 @@ pub fn certify_internal(
         // The bisection's upper end: a Pᵢ-ball inside the next ball's P′-ball, and deep enough somewhere.
         let c_id = cross(&post.lc.roots, Mat::<f64>::identity(n, n).as_ref(), roots);
         let c_back = cross(roots, Mat::<f64>::identity(n, n).as_ref(), &post.lc.roots);
-        let deepest = gs.iter().fold(f64::INFINITY, |a, &b| a.min(b));
-        let r_max = (delta_next / c_id).min(-deepest / dn);
+        // A run's sample-κ radius is at least ‖Ã^κ‖_P·r ([`ExitSamples::radius`]), so some sample's ball
+        // lies in G only if r ≤ −g(x̃(κ))/(‖â‖·‖Ã^κ‖_P) there.
+        let power = pre.lc.power_norms(rows + 1);
+        let deepest = gs
+            .iter()
+            .zip(&power)
+            .fold(f64::NEG_INFINITY, |a, (&g, &p)| {
+                a.max(-g / (dn * p.min(1.0)))
+            });
+        let r_max = (delta_next / c_id).min(deepest);
         if !(delta_next > 0.0) || !(r_max > 0.0) {
             let base = certify_at(&lp_of(i), s.lc, nom, GoalAt::Free(0.0));
             certs.push(empty(
@@ -850,6 +877,19 @@ pub fn certify_internal(
                         .collect()
                 })
                 .collect(),
+            disturbed: {
+                let per_step = (pre.lc.roots.norm_into(pre.lc.B.as_ref()) * eps
+                    + pre.lc.mismatch_step())
+                    * (1.0 + 1e-9);
+                let mut sum = 0.0;
+                let mut out = Vec::with_capacity(rows + 1);
+                for &p in &power {
+                    out.push(sum * per_step);
+                    sum += p;
+                }
+                out
+            },
+            power,
         };
         // η (item 5) at the largest radius: L grows with r.
         let L_max = (0..rows)
@@ -863,7 +903,7 @@ pub fn certify_internal(
         let eta = L_max * c.s_late * c.c_back;
         // Theorem 4.7's parts over the rows kept at r_max.
         let kf_max = (1..=rows)
-            .find(|&k| gs[k] + dn * (r_max + eta) <= -theta_eff)
+            .find(|&k| gs[k] + dn * samples.radius(k, r_max, eta) <= -theta_eff)
             .unwrap_or(rows);
         let kept = truncate(nom, kf_max);
         let base = certify_at(&lp_of(i), s.lc, &kept, GoalAt::Free(r_max));

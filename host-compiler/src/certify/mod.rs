@@ -213,8 +213,8 @@ pub struct LoopConstants {
     /// the MTL tube (Remark 2.29's embedding must certify the same δ) and the optimiser's gradient carry
     /// the directional one too.
     pub directional_unsafe: bool,
-    /// Prefix sums of ‖Ã^j‖_P ([`LoopConstants::accumulation`]), computed once when first asked.
-    accumulated: std::sync::OnceLock<Vec<f64>>,
+    /// ‖Ã^j‖_P ([`LoopConstants::power_norms`]), computed once when first asked.
+    power_norms: std::sync::OnceLock<Vec<f64>>,
 }
 
 /// Why a loop cannot be certified at all.
@@ -291,7 +291,7 @@ impl LoopConstants {
             mismatch,
             state_step,
             directional_unsafe: false,
-            accumulated: std::sync::OnceLock::new(),
+            power_norms: std::sync::OnceLock::new(),
         })
     }
 
@@ -304,29 +304,33 @@ impl LoopConstants {
         }
     }
 
-    /// S_k = Σ_{j<k} ‖Ã^j‖_P (the P-induced norms of the closed loop's powers, each rounded up by a
-    /// relative 10⁻⁹): a disturbance of P-norm ≤ z every step moves a run at most S_k·z from where the
-    /// undisturbed loop would take it within k steps, by the variation-of-constants sum.
-    pub fn accumulation(&self, k: usize) -> f64 {
-        let sums = |k: usize| {
+    /// ‖Ã^j‖_P for j < k (the P-induced norms of the closed loop's powers, each rounded up by a relative
+    /// 10⁻⁹), computed once for the first k asked.
+    pub fn power_norms(&self, k: usize) -> Vec<f64> {
+        let norms = |k: usize| {
             let At = &self.roots.sqrt * &self.At * &self.roots.inv_sqrt;
             let n = At.nrows();
             let mut pw = Mat::<f64>::from_fn(n, n, |i, j| if i == j { 1.0 } else { 0.0 });
-            let mut out = Vec::with_capacity(k + 1);
-            let mut s = 0.0;
-            out.push(0.0);
+            let mut out = Vec::with_capacity(k);
             for _ in 0..k {
-                s += crate::linalg::spectral_norm(pw.as_ref()) * (1.0 + 1e-9);
-                out.push(s);
+                out.push(crate::linalg::spectral_norm(pw.as_ref()) * (1.0 + 1e-9));
                 pw = &At * &pw;
             }
             out
         };
-        let pre = self.accumulated.get_or_init(|| sums(k));
-        match pre.get(k) {
-            Some(&s) => s,
-            None => sums(k)[k],
+        let pre = self.power_norms.get_or_init(|| norms(k));
+        if pre.len() >= k {
+            pre[..k].to_vec()
+        } else {
+            norms(k)
         }
+    }
+
+    /// S_k = Σ_{j<k} ‖Ã^j‖_P ([`LoopConstants::power_norms`]): a disturbance of P-norm ≤ z every step
+    /// moves a run at most S_k·z from where the undisturbed loop would take it within k steps, by the
+    /// variation-of-constants sum.
+    pub fn accumulation(&self, k: usize) -> f64 {
+        self.power_norms(k).iter().sum()
     }
 
     /// How far the held input's disturbances move the state within one period, in the P-metric: φβ(ε̄ + D)

@@ -11,7 +11,9 @@
 //! its tube lies inside the guard (the extended segment). The nominal hybrid run itself, flowing exactly
 //! across the event ([`Hybrid::flow`]), gives the next segment's start: the first sample after its own
 //! switch. The last segment is generated from there to Goal. Segment lengths are searched over a few
-//! durations; the run with the largest certified δ is kept.
+//! durations; the run with the largest certified δ is kept, and optimised (§5.3, [`optimise`]: the
+//! tables before the last segment and the later starts by a derivative-free search on the certificate,
+//! the last segment against Goal by the bundle method).
 //!
 //! **Recorded runs.** A person's recording (`synth --import`, `host-compiler play`) is replayed on the
 //! automaton, split at its events into the path's segments and certified by the same [`certify_run`]
@@ -32,6 +34,7 @@ use faer::Mat;
 
 pub mod forced;
 pub mod import;
+pub mod optimise;
 
 /// How far past a guard's plane (Euclidean) a non-last segment's generated nominal must end: each is
 /// tried (a deeper target makes the nominal cross the plane more steeply, so that the tube's crossing
@@ -369,8 +372,9 @@ fn gen_problem<'a>(
     }
 }
 
-/// Plan and certify a run from `x0` (module doc); the best over the durations tried, or why none. The
-/// run starts at `x0` rounded to f32 ([`f32_start`]).
+/// Plan and certify a run from `x0` (module doc); the best over the durations tried, then optimised
+/// (§5.3, [`optimise`], with half the spec's `max_iterations` per search), or why none. The run starts at
+/// `x0` rounded to f32 ([`f32_start`]).
 pub fn plan_run(task: &HybridTask, x0: &[f64]) -> Result<HybridRun, String> {
     let x0 = &f32_start(x0)[..];
     let gs = GenSettings::default();
@@ -455,7 +459,10 @@ pub fn plan_run(task: &HybridTask, x0: &[f64]) -> Result<HybridRun, String> {
             }
         }
     }
-    best.ok_or(why)
+    // §5.3 over the planned run's tables and later starts ([`optimise`]).
+    let iterations = (task.problem.synthesis.max_iterations / 2) as u64;
+    best.map(|b| optimise::optimise(task, b, iterations))
+        .ok_or(why)
 }
 
 /// For a run of two segments whose first certifies event intervals κ ∈ [a, b]: the landings the

@@ -58,3 +58,38 @@ fn example_4_25_run_is_certified() {
     assert_eq!(rep.switched, rep.runs - rep.rejected);
     assert_eq!(rep.max_events, 1);
 }
+
+/// The exit check bounds a run's deviation at sample κ by ‖Ã^κ‖_P·r (the closed loop's powers,
+/// `LoopConstants::power_norms`) instead of r: runs of Example 5.5's first segment from its ball's
+/// boundary, simulated by the location's exact sampled loop, stay within it, and the factor is well
+/// below 1 by the crossing (what the landing gains).
+#[test]
+fn a_segment_s_runs_contract_as_the_closed_loop_s_powers_say() {
+    use host_compiler::linalg::p_norm;
+    let t = task("hybrid-internal-5-5.toml");
+    let run = plan_run(&t, &[-5.0, 1.0, 2.0]).unwrap();
+    let loc = run.locations[0];
+    let nom = &run.nominals[0];
+    let power = t.constants[loc].power_norms(nom.steps() + 1);
+    let P = t.designs[loc].P.as_ref();
+    let (first, _) = run.certificate.segments[0].events.unwrap();
+    assert!(power[first] < 0.9, "‖Ã^{first}‖_P = {}", power[first]);
+    let delta = run.delta();
+    for start in ball_starts(&t, &run, 0, 24, 11) {
+        let x = t.lp(loc).simulate(&start, &nom.v).x;
+        let r0 = p_norm(P, &sub(&start, &nom.x[0]));
+        assert!(r0 <= delta * (1.0 + 1e-6), "{r0} > {delta}");
+        for k in 0..=nom.steps() {
+            let rk = p_norm(P, &sub(&x[k], &nom.x[k]));
+            assert!(
+                rk <= power[k] * r0 * (1.0 + 1e-9) + 1e-12,
+                "sample {k}: {rk} > ‖Ã^k‖_P·{r0} = {}",
+                power[k] * r0
+            );
+        }
+    }
+}
+
+fn sub(a: &[f64], b: &[f64]) -> Vec<f64> {
+    a.iter().zip(b).map(|(p, q)| p - q).collect()
+}
