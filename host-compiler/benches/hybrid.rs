@@ -1,5 +1,5 @@
 //! Hybrid plants with internal switching (§4.2.2) and forced switching (§4.2.1): Example 5.5's certified δ from x0 = (−5, 1, 2) (one
-//! run across x₁ = 0, as planned: §5.3 is built for forced runs, not for internally switched ones), and Example
+//! run across x₁ = 0, planned and optimised by §5.3, `synth::hybrid::optimise`), and Example
 //! 5.6's cover grown over Init (Algorithm 1 over runs, δε = 0.4 as the text): the coverage lower bound at
 //! 99 % confidence, the trajectories, the wall time of the whole synthesis on this machine, and its Monte
 //! Carlo against the exact hybrid flow (which must find no violation); the same for the forced-switching

@@ -214,3 +214,44 @@ pub fn optimise(task: &HybridTask, run: HybridRun, iterations: u64) -> HybridRun
     let run = last_segment(task, run);
     search(task, run, iterations)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn example_5_5() -> HybridTask {
+        let path = format!(
+            "{}/../examples/hybrid-internal-5-5.toml",
+            env!("CARGO_MANIFEST_DIR")
+        );
+        HybridTask::new(crate::spec::load(&path).expect("the example parses"))
+            .expect("a hybrid task")
+    }
+
+    #[test]
+    fn optimising_example_5_5_s_run_raises_its_delta_and_ships_what_it_certified() {
+        let mut task = example_5_5();
+        // The planner's run without the search (half of 1 iteration is none; the bundle gets one).
+        task.problem.synthesis.max_iterations = 1;
+        let run = super::super::plan_run(&task, &[-5.0, 1.0, 2.0]).expect("a run");
+        let opt = optimise(&task, run.clone(), 100);
+        assert!(
+            opt.delta() > 1.02 * run.delta(),
+            "δ {} → {}",
+            run.delta(),
+            opt.delta()
+        );
+        // The answer is the certificate of the nominals it ships: the first from the same f32 start,
+        // each later one from an f32 start, and the run's certificate recomputed from them is the same.
+        assert_eq!(opt.nominals[0].x[0], run.nominals[0].x[0]);
+        for nom in &opt.nominals[1..] {
+            assert_eq!(nom.x[0], f32_start(&nom.x[0]));
+        }
+        assert_eq!(opt.locations, run.locations);
+        let again = certify_run(&task, &opt.nominals).expect("a run of the path");
+        assert_eq!(again, opt.certificate);
+        // No iterations: the search is the identity.
+        let same = search(&task, run.clone(), 0);
+        assert_eq!(same.certificate, run.certificate);
+    }
+}
