@@ -26,14 +26,17 @@
 //!    there would have crossed the plane of G continuously, so every run has switched (and been
 //!    detected) by κ_f. The table keeps rows 0..κ_f.
 //! 4. *Each event interval* κ < κ_f whose inter-sample ball (radius Rκ) meets G: the run crosses the
-//!    plane at a point p of that ball, and flows in ℓᵢ₊₁ for τ ∈ [0, h] with the input of row κ before
-//!    its next sample. p lies in the plane's slab |g| ≤ θ_eff and in the ball, so within
-//!    sqrt(Rκ² − d²) + 2θ_eff/‖â‖_{Pᵢ⁻¹} (in Pᵢ) of p̂, the Pᵢ-projection of x̃ᵢ(κ) onto the plane (d:
-//!    the centre's Pᵢ-distance to the slab; parallel and normal parts are Pᵢ-orthogonal). The landing
-//!    x(τ) = Φ′(τ)p + Γ′(τ)(B′u + c′), u = ũ(κ) + Kᵢe + ε, is then within
-//!    ‖Φ′(τ)p̂ + Γ′(τ)(B′ũ + c′) − x̃ᵢ₊₁(0)‖_{P′} + ‖Φ′(τ)‖_{Pᵢ→P′}(that radius) + ‖Γ′B′Kᵢ‖_{Pᵢ→P′}r +
-//!    ‖P′^{1/2}Γ′B′‖ε̄ of the next segment's start; on a grid of τ with spacing Δτ, plus LΔτ/2 with
-//!    L = e^{μ′⁺h} sup‖fᵢ₊₁‖_{P′} (the speed of the flow after the switch), this must be below δᵢ₊₁
+//!    plane at some s ∈ [0, h] of the period, and then flows in ℓᵢ₊₁ for τ = h − s with the input of
+//!    row κ before its next sample. On a grid of τ with spacing Δτ, a run that crosses at
+//!    s ∈ [h − τ, h − τ + Δτ] is within R′ = γrκ + φβε̄ + Δτ·(‖fᵢ(x̃ᵢ(κ), ũ)‖_{Pᵢ} + ‖Aᵢ‖_{Pᵢ}ρκ) of
+//!    xₛ = x̃ᵢ(κ + h − τ), the nominal's own flow under the held input (its deviation from that flow, and
+//!    the flow's motion over Δτ). Its crossing point p lies in the plane's slab |g| ≤ θ_eff and in that
+//!    ball, so within sqrt(R′² − d²) + 2θ_eff/‖â‖_{Pᵢ⁻¹} (in Pᵢ) of p̂ₛ, the Pᵢ-projection of xₛ onto the
+//!    plane (d: xₛ's Pᵢ-distance to the slab; parallel and normal parts are Pᵢ-orthogonal; none crosses
+//!    there when d ≥ R′). The landing x(τ) = Φ′(τ)p + Γ′(τ)(B′u + c′), u = ũ(κ) + Kᵢe + ε, is then within
+//!    ‖Φ′(τ)p̂ₛ + Γ′(τ)(B′ũ + c′) − x̃ᵢ₊₁(0)‖_{P′} + ‖Φ′(τ)‖_{Pᵢ→P′}(that radius) + ‖Γ′B′Kᵢ‖_{Pᵢ→P′}rκ +
+//!    ‖P′^{1/2}Γ′B′‖ε̄ + LΔτ of the next segment's start (LΔτ: the flow time is up to Δτ shorter), with
+//!    L = e^{μ′⁺h} sup‖fᵢ₊₁‖_{P′} (the speed of the flow after the switch); this must be below δᵢ₊₁
 //!    (Lemma 4.23's safe transition, with the event time unknown within the period: the "hole").
 //!    After the switch the states stay in the P′-ball of radius ρ_post = ‖I‖_{Pᵢ→P′}Rκ + φ′ sup‖fᵢ₊₁‖_{P′}
 //!    around x̃ᵢ(κ): it must clear the next location's Unsafe, and the flow must go into G at a rate
@@ -300,6 +303,11 @@ struct Grid {
     Phi: Vec<Mat<f64>>,
     GB: Vec<Mat<f64>>,
     Gc: Vec<Vec<f64>>,
+    /// The switching location's flow over s = h − τ: Φ(s), Γ(s)B, Γ(s)c (where the nominal is when a
+    /// run that lands after τ crossed).
+    pre_Phi: Vec<Mat<f64>>,
+    pre_GB: Vec<Mat<f64>>,
+    pre_Gc: Vec<Vec<f64>>,
     /// ‖Φ′(τ)‖_{Pᵢ→P′}, ‖Γ′(τ)B′Kᵢ‖_{Pᵢ→P′}, ‖P′^{1/2}Γ′(τ)B′‖.
     norm_Phi: Vec<f64>,
     norm_GBK: Vec<f64>,
@@ -327,6 +335,9 @@ impl Grid {
             Phi: Vec::new(),
             GB: Vec::new(),
             Gc: Vec::new(),
+            pre_Phi: Vec::new(),
+            pre_GB: Vec::new(),
+            pre_Gc: Vec::new(),
             norm_Phi: Vec::new(),
             norm_GBK: Vec::new(),
             norm_GB: Vec::new(),
@@ -343,6 +354,10 @@ impl Grid {
             g.Phi.push(Phi);
             g.GB.push(GB);
             g.Gc.push(Gc);
+            let (Phi, GB, Gc) = flow_parts(pre.cp, h - tau);
+            g.pre_Phi.push(Phi);
+            g.pre_GB.push(GB);
+            g.pre_Gc.push(Gc);
         }
         g
     }
@@ -360,8 +375,12 @@ struct ExitSamples {
     trans: Vec<f64>,
     /// Signed P′-distance from x̃(κ) to the next location's Unsafe (with its extras).
     unsafe_next: Vec<f64>,
-    /// ‖M(s)x̃ + N(s)ṽ + m(s) − x̃ᵢ₊₁(0)‖_{P′} per grid point.
+    /// Per grid point τ (s = h − τ): g(x̃(κ + s)), the guard at the nominal's flow within the period, and
+    /// ‖Φ′(τ)p̂ₛ + Γ′(τ)(B′ũ + c′) − x̃ᵢ₊₁(0)‖_{P′}, p̂ₛ the Pᵢ-projection of x̃(κ + s) onto the plane.
+    sub_g: Vec<Vec<f64>>,
     land: Vec<Vec<f64>>,
+    /// ‖fᵢ(x̃(κ), ũ)‖_{Pᵢ} + ‖Aᵢ‖_{Pᵢ}ρκ: the nominal's speed within the period at most.
+    speed: Vec<f64>,
     /// ‖Ã^κ‖_P and S_κ·z (z the rounding's P-norm per step): a run's sample-κ deviation is at most
     /// ‖Ã^κ‖_P·r + S_κ·z (variation of constants), and at most r (the CAF's invariant ball).
     power: Vec<f64>,
@@ -453,17 +472,25 @@ fn check_exit(
         if !(t <= -c.nu_min) {
             return Verdict::Fail("transversality after a switch");
         }
-        // The crossing point lies in the slab |g| ≤ θ_eff and in the interval's ball: within
-        // sqrt(R² − d²) + 2θ_eff/‖â‖ of p̂ (P-orthogonal parts), d the ball centre's distance to the slab.
-        let d_slab = ((d.g[k].abs() - c.theta_eff).max(0.0)) / c.dn;
-        let rad_p = (R * R - d_slab * d_slab).max(0.0).sqrt() + 2.0 * c.theta_eff / c.dn;
+        // A run that crosses at s ∈ [h − τ, h − τ + Δτ] of the period is then within R′ = γrκ + φβε̄ +
+        // Δτ·speed of x̃(κ + h − τ) (its deviation from the nominal's own flow, and the nominal's motion over
+        // the grid step), and flows τ′ ∈ [τ − Δτ, τ] after the switch (L·Δτ from the flow over τ). Its
+        // crossing point lies in the slab |g| ≤ θ_eff and that ball: within sqrt(R′² − d²) + 2θ_eff/‖â‖ of
+        // p̂ₛ (P-orthogonal parts), d the centre's distance to the slab; none crosses there if d ≥ R′.
         let L = c.grow * F_post;
+        let R_sub = loc.inter(re, c.dt * d.speed[k], c.eps);
         for j in 0..d.land[k].len() {
+            let d_slab = ((d.sub_g[k][j].abs() - c.theta_eff).max(0.0)) / c.dn;
+            if d_slab >= R_sub {
+                continue;
+            }
+            let rad_p =
+                (R_sub * R_sub - d_slab * d_slab).max(0.0).sqrt() + 2.0 * c.theta_eff / c.dn;
             let reach = d.land[k][j]
                 + grid.norm_Phi[j] * rad_p
                 + grid.norm_GBK[j] * re
                 + grid.norm_GB[j] * c.eps
-                + L * c.dt / 2.0;
+                + L * c.dt;
             if !(reach < c.delta_next) {
                 return Verdict::Fail("the landing misses the next segment's ball");
             }
@@ -823,6 +850,20 @@ pub fn certify_internal(
         };
         let target = &next.nominal.x[0];
         let next_unsafe = lp_of(i + 1).unsafe_set;
+        // The nominal's flow within each period, at s = h − τ for the grid's τ, under the held input.
+        let sub: Vec<Vec<Vec<f64>>> = (0..=rows)
+            .map(|k| {
+                let u = nom.u.get(k).or(nom.u.last()).expect("rows ≥ 1");
+                (0..GRID)
+                    .map(|j| {
+                        let fx = mat_vec(grid.pre_Phi[j].as_ref(), &nom.x[k]);
+                        let fu = mat_vec(grid.pre_GB[j].as_ref(), u);
+                        (0..n).map(|q| fx[q] + fu[q] + grid.pre_Gc[j][q]).collect()
+                    })
+                    .collect()
+            })
+            .collect();
+        let a_pre = cross(roots, pre.cp.A.as_ref(), roots);
         let samples = ExitSamples {
             g: gs.clone(),
             rho: (0..=rows)
@@ -858,15 +899,22 @@ pub fn certify_internal(
                     None => f64::INFINITY,
                 })
                 .collect(),
-            land: (0..=rows)
-                .map(|k| {
+            sub_g: sub
+                .iter()
+                .map(|row| row.iter().map(|x| exit.g(x)).collect())
+                .collect(),
+            land: sub
+                .iter()
+                .enumerate()
+                .map(|(k, row)| {
                     let u = nom.u.get(k).or(nom.u.last()).expect("rows ≥ 1");
-                    // p̂: the Pᵢ-projection of x̃(κ) onto the plane of G.
                     let pinv_a = mat_vec(roots.inv.as_ref(), &exit.a);
-                    let t = gs[k] / (dn * dn);
-                    let p: Vec<f64> = (0..n).map(|q| nom.x[k][q] - t * pinv_a[q]).collect();
-                    (0..GRID)
-                        .map(|j| {
+                    row.iter()
+                        .enumerate()
+                        .map(|(j, x)| {
+                            // p̂ₛ: the Pᵢ-projection of x̃(κ + s) onto the plane of G.
+                            let t = exit.g(x) / (dn * dn);
+                            let p: Vec<f64> = (0..n).map(|q| x[q] - t * pinv_a[q]).collect();
                             let fx = mat_vec(grid.Phi[j].as_ref(), &p);
                             let fu = mat_vec(grid.GB[j].as_ref(), u);
                             let e: Vec<f64> = (0..n)
@@ -875,6 +923,17 @@ pub fn certify_internal(
                             p_norm(post.lc.P.as_ref(), &e)
                         })
                         .collect()
+                })
+                .collect(),
+            speed: (0..=rows)
+                .map(|k| {
+                    let u = nom.u.get(k).or(nom.u.last()).expect("rows ≥ 1");
+                    let rho = if k < rows {
+                        pre.lc.phi * p_norm(pre.lc.P.as_ref(), &pre.cp.f(&nom.x[k], u))
+                    } else {
+                        0.0
+                    };
+                    p_norm(pre.lc.P.as_ref(), &pre.cp.f(&nom.x[k], u)) + a_pre * rho
                 })
                 .collect(),
             disturbed: {

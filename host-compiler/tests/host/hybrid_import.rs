@@ -193,17 +193,12 @@ fn recordings_that_do_not_cross_or_cross_into_unsafe_are_refused_with_the_reason
         import::certify_recording(t, &bad),
         Err(import::ImportError::Shape { x0: 2, n: 3, .. })
     ));
-    // Into Unsafe: the same inputs from another corner of Init switch later and land inside the ball.
+    // Into Unsafe: the same inputs from another point of Init switch elsewhere and land inside the ball.
     let into = Recording {
-        x0: UNSAFE_X0.to_vec(),
+        x0: unsafe_start(t, &rec),
         v: rec.v.clone(),
         locations: None,
     };
-    let landed = &import::replay(t, &into).unwrap().nominals[1].x[0];
-    assert!(
-        t.property.unsafe_region().unwrap().contains(landed),
-        "{landed:?}"
-    );
     let e = import::certify_recording(t, &into).unwrap_err();
     let why = e.to_string();
     assert!(matches!(e, import::ImportError::Refused(_)), "{why}");
@@ -214,8 +209,34 @@ fn recordings_that_do_not_cross_or_cross_into_unsafe_are_refused_with_the_reason
     assert!(why.contains("δ_Unsafe = -"), "{why}");
 }
 
-/// A start in Init from which the planned run's inputs cross the plane into Unsafe.
-const UNSAFE_X0: [f64; 3] = [-6.0, 2.0, 4.0];
+/// A start in Init from which the recording's inputs cross the plane into Unsafe: the first of a 3×3×5
+/// grid over Init whose replay lands there.
+fn unsafe_start(t: &HybridTask, rec: &Recording) -> Vec<f64> {
+    for i in 0..3 {
+        for j in 0..3 {
+            for k in 0..5 {
+                let x0 = vec![-6.0 + i as f64, j as f64, -4.0 + 2.0 * k as f64];
+                let into = Recording {
+                    x0: x0.clone(),
+                    v: rec.v.clone(),
+                    locations: None,
+                };
+                let Ok(r) = import::replay(t, &into) else {
+                    continue;
+                };
+                if r.nominals.len() > 1
+                    && t.property
+                        .unsafe_region()
+                        .unwrap()
+                        .contains(&r.nominals[1].x[0])
+                {
+                    return x0;
+                }
+            }
+        }
+    }
+    panic!("no start of the grid over Init lands in Unsafe");
+}
 
 #[test]
 fn an_imported_run_joins_the_synthesis_first_and_is_re_proved_from_the_image() {
