@@ -525,9 +525,13 @@ fn problem_sets<P>(
         None => SynthesisSettings::default(),
     };
     // ---- sizes: the whole budget's table within the image ----
+    // A hybrid run keeps only the rows its certificate covers (each segment up to its guard or Goal,
+    // usually far fewer than the horizon's), and its growth admits a run only while its rows fit the
+    // image (`synth::hybrid::admit`), so the budget is not bounded by the horizon's rows there; one
+    // run's table (the horizon's samples) is checked above.
     let steps = limits::steps_in(horizon, plant.period);
     let rows = steps.saturating_mul(synthesis.max_trajectories);
-    if rows > MAX_STEPS {
+    if rows > MAX_STEPS && hybrid.is_none() {
         let max_traj = raw
             .synthesis
             .as_ref()

@@ -969,7 +969,16 @@ pub fn synthesize_hybrid(
             .par_iter()
             .map(|seed| plan_seed(task, &runs, seed))
             .collect();
+        // A certified run whose rows no longer fit the image's table (its smallest).
+        let mut left_out: Option<usize> = None;
         for (Seed { x, .. }, r) in seeds.into_iter().zip(planned) {
+            let needs = r.as_ref().map_or(0, |run| {
+                run.certificate
+                    .segments
+                    .iter()
+                    .map(|c| c.rows)
+                    .sum::<usize>()
+            });
             match r.and_then(|run| admit(task, &runs, rows_used, &run).map(|rows| (run, rows))) {
                 Ok((run, rows)) => {
                     rows_used += rows;
@@ -978,8 +987,20 @@ pub fn synthesize_hybrid(
                         f(runs.len(), runs.last().map_or(0.0, |r| r.delta()));
                     }
                 }
-                Err(e) => refused.push((x, e)),
+                Err(e) => {
+                    if needs > 0 && rows_used + needs > shared_types::capacity::MAX_STEPS {
+                        left_out = Some(left_out.map_or(needs, |m: usize| m.min(needs)));
+                    }
+                    refused.push((x, e))
+                }
             }
+        }
+        if let (Some(needs), true) = (left_out, runs.len() == before) {
+            stop = format!(
+                "the image's table is full: {rows_used} of {} rows used, and the certified runs of this                  round need {needs} or more",
+                shared_types::capacity::MAX_STEPS
+            );
+            break;
         }
         empty_rounds = if runs.len() > before {
             0
