@@ -997,7 +997,8 @@ pub fn synthesize_hybrid(
         }
         if let (Some(needs), true) = (left_out, runs.len() == before) {
             stop = format!(
-                "the image's table is full: {rows_used} of {} rows used, and the certified runs of this                  round need {needs} or more",
+                "the image's table is full: {rows_used} of {} rows used, and the certified runs of this \
+                 round need {needs} or more",
                 shared_types::capacity::MAX_STEPS
             );
             break;
