@@ -18,9 +18,9 @@
 //!    samples, within Rκ = γrκ + ρκ + φβε̄ between them ([`super`]'s inter-sample bound). Its deviation
 //!    obeys e(κ+1) = Ãe(κ) + B·(rounding), so rκ = min(r, ‖Ã^κ‖_P·r + S_κ·z) (variation of constants,
 //!    z the rounding's P-norm per step; r itself by the CAF): the tube narrows towards the guard, and
-//!    items 2–5 take rκ. Theorem 4.7's parts keep r. Unsafe and the
-//!    input set are checked over the kept rows (Theorem 4.7's Unsafe and Input parts), with the run's other
-//!    guards and the faces of ℓᵢ's invariant not implied by "outside G" counted as Unsafe.
+//!    items 2–5 take rκ; Theorem 4.7's parts keep r. Unsafe and the input set are checked over the kept
+//!    rows (Theorem 4.7's Unsafe and Input parts), with the run's other guards and the faces of ℓᵢ's
+//!    invariant not implied by "outside G" counted as Unsafe.
 //! 2. *Sample 0* lies outside G by more than θ_eff: the edge is armed and nothing is detected at once.
 //! 3. *All switch by κ_f*: κ_f is the first sample whose ball lies in G at depth θ_eff; a run still in ℓᵢ
 //!    there would have crossed the plane of G continuously, so every run has switched (and been
