@@ -864,17 +864,30 @@ pub fn certify_internal(
             })
             .collect();
         let a_pre = cross(roots, pre.cp.A.as_ref(), roots);
+        // ‖fᵢ(x̃(κ), ũ(κ))‖_{Pᵢ} (the last sample with the last input), and ρκ = φ·that (0 at the last).
+        let f_norm: Vec<f64> = (0..=rows)
+            .map(|k| {
+                let u = nom.u.get(k).or(nom.u.last()).expect("rows ≥ 1");
+                p_norm(pre.lc.P.as_ref(), &pre.cp.f(&nom.x[k], u))
+            })
+            .collect();
+        let rho: Vec<f64> = (0..=rows)
+            .map(|k| {
+                if k < rows {
+                    pre.lc.phi * f_norm[k]
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        let speed: Vec<f64> = f_norm
+            .iter()
+            .zip(&rho)
+            .map(|(f, r)| f + a_pre * r)
+            .collect();
         let samples = ExitSamples {
             g: gs.clone(),
-            rho: (0..=rows)
-                .map(|k| {
-                    if k < rows {
-                        pre.lc.phi * p_norm(pre.lc.P.as_ref(), &pre.cp.f(&nom.x[k], &nom.u[k]))
-                    } else {
-                        0.0
-                    }
-                })
-                .collect(),
+            rho,
             f_pre: (0..=rows)
                 .map(|k| {
                     let u = nom.u.get(k).or(nom.u.last()).expect("rows ≥ 1");
@@ -925,17 +938,7 @@ pub fn certify_internal(
                         .collect()
                 })
                 .collect(),
-            speed: (0..=rows)
-                .map(|k| {
-                    let u = nom.u.get(k).or(nom.u.last()).expect("rows ≥ 1");
-                    let rho = if k < rows {
-                        pre.lc.phi * p_norm(pre.lc.P.as_ref(), &pre.cp.f(&nom.x[k], u))
-                    } else {
-                        0.0
-                    };
-                    p_norm(pre.lc.P.as_ref(), &pre.cp.f(&nom.x[k], u)) + a_pre * rho
-                })
-                .collect(),
+            speed,
             disturbed: {
                 let per_step = (pre.lc.roots.norm_into(pre.lc.B.as_ref()) * eps
                     + pre.lc.mismatch_step())

@@ -263,6 +263,10 @@ impl HybridRun {
     pub fn delta(&self) -> f64 {
         self.certificate.delta()
     }
+    /// The table rows the image keeps for this run (each segment's certified rows).
+    pub fn rows(&self) -> usize {
+        self.certificate.segments.iter().map(|c| c.rows).sum()
+    }
 }
 
 /// A start the image stores, rounded to f32: a run's first ball centre, or a later segment's start. The
@@ -706,7 +710,7 @@ pub fn admit(
             import::bindings(task, &run.locations, &run.certificate)
         ));
     }
-    let rows: usize = run.certificate.segments.iter().map(|c| c.rows).sum();
+    let rows = run.rows();
     if runs.len() >= s.max_trajectories {
         return Err(format!(
             "the budget of {} trajectories is spent",
@@ -972,13 +976,7 @@ pub fn synthesize_hybrid(
         // A certified run whose rows no longer fit the image's table (its smallest).
         let mut left_out: Option<usize> = None;
         for (Seed { x, .. }, r) in seeds.into_iter().zip(planned) {
-            let needs = r.as_ref().map_or(0, |run| {
-                run.certificate
-                    .segments
-                    .iter()
-                    .map(|c| c.rows)
-                    .sum::<usize>()
-            });
+            let needs = r.as_ref().map_or(0, HybridRun::rows);
             match r.and_then(|run| admit(task, &runs, rows_used, &run).map(|rows| (run, rows))) {
                 Ok((run, rows)) => {
                     rows_used += rows;
