@@ -37,8 +37,8 @@
 use std::path::Path;
 
 use shared_types::capacity::{
-    MAX_BALLS, MAX_BALL_REFS, MAX_EXT, MAX_LEAF_BALLS, MAX_LEAVES, MAX_LOCATIONS, MAX_M, MAX_N,
-    MAX_PARTITIONS, MAX_SEGMENTS, MAX_STEPS, MAX_TRAJECTORIES, MAX_TREE_DEPTH, MAX_TREE_NODES,
+    max_rows, MAX_BALLS, MAX_BALL_REFS, MAX_EXT, MAX_LEAF_BALLS, MAX_LEAVES, MAX_LOCATIONS, MAX_M,
+    MAX_N, MAX_PARTITIONS, MAX_SEGMENTS, MAX_TRAJECTORIES, MAX_TREE_DEPTH, MAX_TREE_NODES,
 };
 use shared_types::image::{
     self, Dims, Fallback, Image, ImageError, InputBox, Mode, Payload, PwaPayload, EXIT_GUARD,
@@ -458,7 +458,7 @@ impl ImageBuilder {
             1,
             MAX_TRAJECTORIES,
         )?;
-        capacity("total table rows", self.total_steps(), 1, MAX_STEPS)?;
+        capacity("total table rows", self.total_steps(), 1, max_rows(m))?;
         let period = to_f32(|| "sample period".into(), self.period)?;
         if period <= 0.0 {
             return Err(EmitError::Invalid {
@@ -568,7 +568,7 @@ impl ImageBuilder {
                     }
                 }
             }
-            row += len; // ≤ MAX_STEPS, checked above
+            row += len; // ≤ max_rows(m), checked above
             seg_end.extend_from_slice(&(n_segments as u16).to_le_bytes());
         }
 

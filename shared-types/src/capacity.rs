@@ -26,8 +26,18 @@ pub const MAX_M: usize = 6;
 pub const MAX_LOCATIONS: usize = 8;
 /// Largest number of nominal trajectories (robust balls) in a feedforward image.
 pub const MAX_TRAJECTORIES: usize = 256;
-/// Largest total number of rows of the feedforward table, summed over all trajectories.
-pub const MAX_STEPS: usize = 32768;
+/// Largest number of values of the feedforward table (rows × m), summed over all trajectories. The table's
+/// size in bytes is what the image bounds, not its rows: a plant with one input may have six times the rows
+/// of one with six ([`max_rows`]).
+pub const MAX_TABLE_VALUES: usize = 32768 * MAX_M;
+/// Largest total number of rows of the feedforward table, summed over all trajectories, at any input
+/// dimension (that of `m = 1`); [`max_rows`] gives it for `m` inputs.
+pub const MAX_STEPS: usize = MAX_TABLE_VALUES;
+
+/// Largest total number of rows of the feedforward table of a plant with `m` inputs (`m = 0` is read as 1).
+pub const fn max_rows(m: usize) -> usize {
+    MAX_TABLE_VALUES / if m == 0 { 1 } else { m }
+}
 /// Largest number of segments of the feedforward table (a segment is a run of rows of one trajectory in
 /// one location; a trajectory of a single-location plant is one segment).
 pub const MAX_SEGMENTS: usize = 4096;
@@ -94,7 +104,7 @@ const COMMON_PAYLOAD_LEN: usize = 4
 const FEEDFORWARD_PAYLOAD_LEN: usize = COMMON_PAYLOAD_LEN
     + 4 * (MAX_TRAJECTORIES * MAX_N       // ball centres
         + MAX_TRAJECTORIES                // ball radii
-        + MAX_STEPS * MAX_M)              // v table
+        + MAX_TABLE_VALUES)               // v table
     + 2 * MAX_TRAJECTORIES                // trajectory segment ends (u16)
     + SEGMENT_RECORD_LEN * MAX_SEGMENTS // segment records
     + 4 * MAX_SEGMENTS * (2 * MAX_N + 3) // segment exits

@@ -92,7 +92,7 @@
 //! field's byte length, every float finite, `P` symmetric and positive definite, `δ ≥ 0`, trajectory
 //! segment ends strictly increasing with at most [`MAX_SEGMENTS`] segments, a constant fallback input inside
 //! the input box, segments tiling the step table
-//! (non-empty, each starting where the previous ends, total rows within [`MAX_STEPS`] and equal to the
+//! (non-empty, each starting where the previous ends, total rows within [`max_rows`]`(m)` and equal to the
 //! table's), segment locations in range and maximal within their trajectory, and the input box non-empty;
 //! for PWA images also everything listed in [`crate::pwa`] (tree well-formed and within depth, indices in
 //! range, stored depth exact). An [`Image`] can only be obtained through them, so its accessors never meet
@@ -102,7 +102,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::capacity::{
-    HEADER_LEN, MAX_LOCATIONS, MAX_M, MAX_N, MAX_PARTITIONS, MAX_SEGMENTS, MAX_STEPS,
+    max_rows, HEADER_LEN, MAX_LOCATIONS, MAX_M, MAX_N, MAX_PARTITIONS, MAX_SEGMENTS,
     MAX_TRAJECTORIES,
 };
 pub use crate::error::{Dim, Field, ImageError, ModelMap, Pos};
@@ -485,12 +485,12 @@ fn validate(
                 return Err(ImageError::SegmentNotMaximal { segment: sat16(s) });
             }
             rows = rows.saturating_add(seg.len);
-            if rows > MAX_STEPS {
+            if rows > max_rows(m) {
                 return Err(ImageError::DimOutOfRange {
                     dim: Dim::Steps,
                     value: sat32(rows),
                     min: 1,
-                    max: sat32(MAX_STEPS),
+                    max: sat32(max_rows(m)),
                 });
             }
         }

@@ -61,13 +61,14 @@ pub struct CFile {
 
 /// The template with every `@NAME@` placeholder replaced.
 fn fill(template: &str) -> String {
-    let values: [(&str, usize); 24] = [
+    let values: [(&str, usize); 25] = [
         ("FORMAT_VERSION", FORMAT_VERSION as usize),
         ("MAX_N", capacity::MAX_N),
         ("MAX_M", capacity::MAX_M),
         ("MAX_LOCATIONS", capacity::MAX_LOCATIONS),
         ("MAX_TRAJECTORIES", capacity::MAX_TRAJECTORIES),
         ("MAX_STEPS", capacity::MAX_STEPS),
+        ("MAX_TABLE_VALUES", capacity::MAX_TABLE_VALUES),
         ("MAX_SEGMENTS", capacity::MAX_SEGMENTS),
         ("MAX_SECTIONS", capacity::MAX_SECTIONS),
         ("MAX_PARTITIONS", capacity::MAX_PARTITIONS),

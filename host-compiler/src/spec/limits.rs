@@ -8,8 +8,8 @@
 //! | state dimension n (rows of `plant.A`) | [`MAX_N`] = 12 | image capacity |
 //! | input dimension m (columns of `plant.B`) | [`MAX_M`] = 6 | image capacity |
 //! | locations of a hybrid plant | [`MAX_LOCATIONS`] = 8 | image capacity |
-//! | samples in the horizon, ⌊`horizon` / `plant.period`⌋ (one trajectory's table rows) | [`MAX_STEPS`] = 32 768 | image capacity |
-//! | table rows of a full budget, samples × `synthesis.max_trajectories` | [`MAX_STEPS`] = 32 768 | image capacity |
+//! | samples in the horizon, ⌊`horizon` / `plant.period`⌋ (one trajectory's table rows) | [`max_rows`]`(m)` = [`MAX_TABLE_VALUES`] / m = 196 608 / m | image capacity |
+//! | table rows of a full budget, samples × `synthesis.max_trajectories` (one run's for a hybrid plant, whose growth admits runs while their rows fit) | [`max_rows`]`(m)` | image capacity |
 //! | `synthesis.max_trajectories` | [`MAX_TRAJECTORIES`] = 256 | image capacity |
 //! | rows of one polytope (`A` of a `kind = "polytope"` set, an invariant or a guard) | [`MAX_POLYTOPE_ROWS`] = 64 | work per distance |
 //! | one expression of a nonlinear plant (`plant.f`, `g`, `h`): bytes, nesting, tree depth, integer power | 4 096, 64, 256, 16 ([`crate::expr`]) | parse work and recursion |
@@ -20,7 +20,9 @@
 //! Flags are bounded where they are parsed (`verify --runs`, `--per-ball`: see `crate::verify`), and an
 //! imported recording by the horizon ([`crate::trajectory::csv`]).
 
-pub use shared_types::capacity::{MAX_LOCATIONS, MAX_M, MAX_N, MAX_STEPS, MAX_TRAJECTORIES};
+pub use shared_types::capacity::{
+    max_rows, MAX_LOCATIONS, MAX_M, MAX_N, MAX_STEPS, MAX_TABLE_VALUES, MAX_TRAJECTORIES,
+};
 
 /// Largest number of rows (inequalities) of one polytope in a spec. Every signed distance to a polytope
 /// is a small quadratic program over its rows, evaluated at every sample of every candidate trajectory;

@@ -9,7 +9,7 @@ use toml::Spanned;
 use super::checks::{self, GoalVerdict, Meet};
 use super::error::{ErrorKind, SpecError};
 use super::hybrid;
-use super::limits::{self, MAX_M, MAX_N, MAX_STEPS, MAX_TRAJECTORIES};
+use super::limits::{self, max_rows, MAX_M, MAX_N, MAX_STEPS, MAX_TABLE_VALUES, MAX_TRAJECTORIES};
 use super::raw::{RawF, RawInput, RawMat, RawSpec, RawSynthesis, RawTime, RawVec};
 use super::sets::{named_sets, set_from_raw, SetCtx};
 use super::settings::{ControllerMode, SynthesisSettings, TerminalChoice};
@@ -395,7 +395,7 @@ fn horizon_seed<P>(
         return Err(capacity(
             format!(
                 "horizon {horizon} s at plant.period {period} s is {} samples; a trajectory's table may \
-                 have at most {MAX_STEPS} rows (the image's capacity), one per sample",
+                 have at most {MAX_STEPS} rows (the image's capacity at one input), one per sample",
                 if steps == usize::MAX { "more than 2⁶⁴".to_string() } else { steps.to_string() }
             ),
             raw.horizon.span(),
@@ -525,33 +525,48 @@ fn problem_sets<P>(
         None => SynthesisSettings::default(),
     };
     // ---- sizes: the whole budget's table within the image ----
-    // A hybrid run keeps only the rows its certificate covers (each segment up to its guard or Goal,
-    // usually far fewer than the horizon's), and its growth admits a run only while its rows fit the
-    // image (`synth::hybrid::admit`), so the budget is not bounded by the horizon's rows there; one
-    // run's table (the horizon's samples) is checked above.
+    // The image bounds the table's values (rows × m), so the rows it holds depend on the inputs. A hybrid
+    // run keeps only the rows its certificate covers (each segment up to its guard or Goal, usually far
+    // fewer than the horizon's), and its growth admits a run only while its rows fit the image
+    // (`synth::hybrid::admit`), so there the budget is not bounded by the horizon's rows: one run's is.
     let steps = limits::steps_in(horizon, plant.period);
-    let rows = steps.saturating_mul(synthesis.max_trajectories);
-    if rows > MAX_STEPS && hybrid.is_none() {
+    let cap = max_rows(plant.m());
+    let budget = if hybrid.is_some() {
+        1
+    } else {
+        synthesis.max_trajectories
+    };
+    let rows = steps.saturating_mul(budget);
+    if rows > cap {
         let max_traj = raw
             .synthesis
             .as_ref()
-            .and_then(|s| s.get_ref().max_trajectories.as_ref().map(|v| v.span()));
+            .and_then(|s| s.get_ref().max_trajectories.as_ref().map(|v| v.span()))
+            .filter(|_| hybrid.is_none());
+        let m = plant.m();
         let mut e = capacity(
             format!(
-                "{} trajectories of {steps} samples (horizon {horizon} s at period {} s) make a table of \
-                 {rows} rows; the image holds at most {MAX_STEPS} rows",
-                synthesis.max_trajectories, plant.period
+                "{budget} trajectories of {steps} samples (horizon {horizon} s at period {} s) make a table of \
+                 {rows} rows; the image holds at most {cap} rows at m = {m} (its {MAX_TABLE_VALUES} values \
+                 over the inputs)",
+                plant.period
             ),
             max_traj.clone().unwrap_or_else(|| raw.horizon.span()),
             if max_traj.is_some() {
                 format!("{rows} rows with this budget")
+            } else if hybrid.is_some() {
+                format!("{rows} rows for one run")
             } else {
                 format!("{rows} rows with the default max_trajectories = {}", synthesis.max_trajectories)
             },
-            format!(
-                "set synthesis.max_trajectories to at most {}, or shorten the horizon",
-                MAX_STEPS / steps.max(1)
-            ),
+            if hybrid.is_some() || steps > cap {
+                format!(
+                    "shorten the horizon to at most {} s or lengthen the period",
+                    cap as f64 * plant.period
+                )
+            } else {
+                format!("set synthesis.max_trajectories to at most {}, or shorten the horizon", cap / steps.max(1))
+            },
         );
         if max_traj.is_some() {
             e = e.at(raw.horizon.span(), format!("{steps} samples"));

@@ -717,14 +717,18 @@ pub fn admit(
             s.max_trajectories
         ));
     }
-    if rows_used + rows > shared_types::capacity::MAX_STEPS {
+    let capacity = table_rows(task);
+    if rows_used + rows > capacity {
         return Err(format!(
-            "its {rows} rows do not fit the image's table ({} of {} rows used)",
-            rows_used,
-            shared_types::capacity::MAX_STEPS
+            "its {rows} rows do not fit the image's table ({rows_used} of {capacity} rows used)"
         ));
     }
     Ok(rows)
+}
+
+/// The rows the image's table holds for this plant's inputs.
+fn table_rows(task: &HybridTask) -> usize {
+    shared_types::capacity::max_rows(task.problem.plant.m())
 }
 
 /// (5.32) over the runs' first balls: min over runs of ‖x − x̃(0)‖_P − δ (the metric of the initial
@@ -986,7 +990,7 @@ pub fn synthesize_hybrid(
                     }
                 }
                 Err(e) => {
-                    if needs > 0 && rows_used + needs > shared_types::capacity::MAX_STEPS {
+                    if needs > 0 && rows_used + needs > table_rows(task) {
                         left_out = Some(left_out.map_or(needs, |m: usize| m.min(needs)));
                     }
                     refused.push((x, e))
@@ -997,7 +1001,7 @@ pub fn synthesize_hybrid(
             stop = format!(
                 "the image's table is full: {rows_used} of {} rows used, and the certified runs of this \
                  round need {needs} or more",
-                shared_types::capacity::MAX_STEPS
+                table_rows(task)
             );
             break;
         }

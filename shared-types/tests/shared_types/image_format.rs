@@ -9,7 +9,8 @@ use proptest::prelude::*;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use shared_types::capacity::{
-    HEADER_LEN, MAX_IMAGE_LEN, MAX_N, MAX_SECTIONS, MAX_SEGMENTS, MAX_STEPS, MAX_TRAJECTORIES,
+    max_rows, HEADER_LEN, MAX_IMAGE_LEN, MAX_N, MAX_SECTIONS, MAX_SEGMENTS, MAX_STEPS,
+    MAX_TABLE_VALUES, MAX_TRAJECTORIES,
 };
 use shared_types::image::{
     decode, directory, encode, Dim, Field, Header, ImageError, Mode, Pos, SectionKind, Segment,
@@ -96,10 +97,12 @@ fn largest_image_fits_max_image_len() {
     c.P = (0..nl)
         .flat_map(|_| crate::common::random_spd(&mut rng, n))
         .collect();
-    c.traj_len = vec![MAX_STEPS / nt; nt];
+    let rows = max_rows(m);
+    assert_eq!(rows * m, MAX_TABLE_VALUES);
+    c.traj_len = vec![rows / nt; nt];
     c.centre = vec![0.0; nt * n];
     c.delta = vec![1.0; nt];
-    c.v = vec![1.0; MAX_STEPS * m];
+    c.v = vec![1.0; MAX_TABLE_VALUES];
     c.fallback = FallbackC::Linear {
         K: vec![1.0; m * n],
         x_ref: vec![0.0; n],
@@ -107,14 +110,14 @@ fn largest_image_fits_max_image_len() {
     };
     c.input_box = Some((vec![-1.0; m], vec![1.0; m]));
     // A location change every row is more segments than the capacity allows...
-    c.location = (0..MAX_STEPS).map(|i| (i % nl) as u8).collect();
+    c.location = (0..rows).map(|i| (i % nl) as u8).collect();
     assert!(matches!(
         c.to_bytes(),
         Err(ImageError::DimOutOfRange { dim: Dim::Segments, max, .. }) if max as usize == MAX_SEGMENTS
     ));
-    // ... a change every MAX_STEPS / MAX_SEGMENTS rows fills it exactly.
-    let run = MAX_STEPS / MAX_SEGMENTS;
-    c.location = (0..MAX_STEPS).map(|i| ((i / run) % nl) as u8).collect();
+    // ... a change every rows / MAX_SEGMENTS rows fills it exactly.
+    let run = rows / MAX_SEGMENTS;
+    c.location = (0..rows).map(|i| ((i / run) % nl) as u8).collect();
     let bytes = c.to_bytes().unwrap();
     assert_eq!(decode(&bytes).unwrap().n_segments(), MAX_SEGMENTS);
     assert!(
@@ -124,6 +127,15 @@ fn largest_image_fits_max_image_len() {
         MAX_IMAGE_LEN
     );
     assert_eq!(Content::from_image(&decode(&bytes).unwrap()), c);
+    // One row more is more values than the table holds at m = 6.
+    c.traj_len[nt - 1] += 1;
+    c.v.extend([1.0; 6]);
+    c.location.push(*c.location.last().unwrap());
+    assert!(matches!(
+        c.to_bytes(),
+        Err(ImageError::DimOutOfRange { dim: Dim::Steps, value, max, .. })
+            if value as usize == rows + 1 && max as usize == rows
+    ));
 }
 
 #[test]
@@ -558,6 +570,8 @@ fn rejects_bad_trajectory_structure() {
 
 #[test]
 fn rejects_too_many_rows() {
+    // At m = 1 the table holds MAX_TABLE_VALUES rows (at m = 6, a sixth: `largest_image_fits_max_image_len`).
+    assert_eq!(MAX_STEPS, max_rows(1));
     let mut c = simple();
     c.traj_len = vec![MAX_STEPS, 1];
     c.v = vec![0.0; MAX_STEPS + 1];

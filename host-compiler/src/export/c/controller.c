@@ -272,7 +272,7 @@ static sc_error validate_feedforward(const sc_image *im) {
             if (s > s0 && segment_at(im->segment, s - 1u).location == g.location)
                 return SC_E_TRAJECTORIES;
             rows += g.len;
-            if (rows > SC_MAX_STEPS) return SC_E_DIMENSION;
+            if (rows * (m ? m : 1u) > SC_MAX_TABLE_VALUES) return SC_E_DIMENSION;
         }
         s0 = s1;
     }
