@@ -25,11 +25,12 @@ pub const MAX_M: usize = 6;
 /// Largest number of locations (discrete modes of a hybrid plant), each with its own `K` and `P`.
 pub const MAX_LOCATIONS: usize = 8;
 /// Largest number of nominal trajectories (robust balls) in a feedforward image.
-pub const MAX_TRAJECTORIES: usize = 256;
-/// Largest number of values of the feedforward table (rows × m), summed over all trajectories. The table's
-/// size in bytes is what the image bounds, not its rows: a plant with one input may have six times the rows
-/// of one with six ([`max_rows`]).
-pub const MAX_TABLE_VALUES: usize = 32768 * MAX_M;
+pub const MAX_TRAJECTORIES: usize = 1024;
+/// Largest number of values of the feedforward table (rows × m), summed over all trajectories: 2 MiB of
+/// f32, so an image at capacity (about 2.6 MB) fits the reference board's 4 MiB of flash. The table's size
+/// in bytes is what the image bounds, not its rows: a plant with one input may have six times the rows of
+/// one with six ([`max_rows`]).
+pub const MAX_TABLE_VALUES: usize = 1 << 19;
 /// Largest total number of rows of the feedforward table, summed over all trajectories, at any input
 /// dimension (that of `m = 1`); [`max_rows`] gives it for `m` inputs.
 pub const MAX_STEPS: usize = MAX_TABLE_VALUES;

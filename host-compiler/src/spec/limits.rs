@@ -8,9 +8,9 @@
 //! | state dimension n (rows of `plant.A`) | [`MAX_N`] = 12 | image capacity |
 //! | input dimension m (columns of `plant.B`) | [`MAX_M`] = 6 | image capacity |
 //! | locations of a hybrid plant | [`MAX_LOCATIONS`] = 8 | image capacity |
-//! | samples in the horizon, ⌊`horizon` / `plant.period`⌋ (one trajectory's table rows) | [`max_rows`]`(m)` = [`MAX_TABLE_VALUES`] / m = 196 608 / m | image capacity |
+//! | samples in the horizon, ⌊`horizon` / `plant.period`⌋ (one trajectory's table rows) | [`max_rows`]`(m)` = [`MAX_TABLE_VALUES`] / m = 524 288 / m | image capacity |
 //! | table rows of a full budget, samples × `synthesis.max_trajectories` (one run's for a hybrid plant, whose growth admits runs while their rows fit) | [`max_rows`]`(m)` | image capacity |
-//! | `synthesis.max_trajectories` | [`MAX_TRAJECTORIES`] = 256 | image capacity |
+//! | `synthesis.max_trajectories` | [`MAX_TRAJECTORIES`] = 1 024 | image capacity |
 //! | rows of one polytope (`A` of a `kind = "polytope"` set, an invariant or a guard) | [`MAX_POLYTOPE_ROWS`] = 64 | work per distance |
 //! | one expression of a nonlinear plant (`plant.f`, `g`, `h`): bytes, nesting, tree depth, integer power | 4 096, 64, 256, 16 ([`crate::expr`]) | parse work and recursion |
 //! | derivatives of a nonlinear plant (Lie derivatives, Jacobians): nodes, depth | 50 000, 1 024 ([`crate::expr`]) | memory and recursion |

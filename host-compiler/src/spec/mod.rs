@@ -37,8 +37,8 @@
 //!
 //! # Limits
 //! Every size a spec implies is bounded before any work ([`limits`], which has the table): n ≤ 12,
-//! m ≤ 6, at most 8 locations, at most 196 608 / m samples in the horizon and as many table rows for the
-//! whole trajectory budget (samples × `max_trajectories`, `max_trajectories` ≤ 256; the image bounds the
+//! m ≤ 6, at most 8 locations, at most 524 288 / m samples in the horizon and as many table rows for the
+//! whole trajectory budget (samples × `max_trajectories`, `max_trajectories` ≤ 1 024; the image bounds the
 //! table's values, rows × m), at most 64 rows per
 //! polytope, and coverage samples (from `coverage_tolerance` and `confidence`) within 512 MiB.
 

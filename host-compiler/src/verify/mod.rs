@@ -24,8 +24,8 @@ pub mod temporal;
 /// so 10⁶ runs take at most about 120 MB and minutes, not the 24 GB a 10⁹ request would.
 pub const MAX_RUNS: u64 = 1_000_000;
 
-/// Largest number of runs from the boundary of each ball (`verify --per-ball`): with at most 256 balls
-/// (`shared_types::capacity::MAX_TRAJECTORIES`), at most 1 048 576 boundary runs.
+/// Largest number of runs from the boundary of each ball (`verify --per-ball`): with at most 1 024 balls
+/// (`shared_types::capacity::MAX_TRAJECTORIES`), at most 4 194 304 boundary runs.
 pub const MAX_PER_BALL: u64 = 4_096;
 
 use crate::certify::terminal::{TerminalCertificate, TerminalRefusal};

@@ -125,5 +125,5 @@ fn a_spec_beyond_the_limits_is_bad_input_at_its_key() {
         .arg("--quiet")
         .output()
         .unwrap();
-    bad_input(&o, &["spec::capacity", "horizon", "196608"]);
+    bad_input(&o, &["spec::capacity", "horizon", "524288"]);
 }

@@ -6,7 +6,7 @@ use host_compiler::cli::inspect::{render, InspectError};
 use host_compiler::emit::{EmitError, FallbackLaw, ImageBuilder, Terminal, TrajectoryEntry};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use shared_types::capacity::MAX_STEPS;
+use shared_types::capacity::{MAX_STEPS, MAX_TRAJECTORIES};
 use shared_types::eval::Controller;
 use shared_types::image::{decode, ImageError};
 
@@ -213,13 +213,16 @@ fn refusals_say_what_is_wrong() {
     );
 
     let mut b = builder();
-    for _ in 0..256 {
+    for _ in 0..MAX_TRAJECTORIES {
         let t = b.trajectories[1].clone();
         b.add_trajectory(t);
     }
     assert_eq!(
         err(&b),
-        "number of trajectories is 258, allowed 1..=256 (image capacity)"
+        format!(
+            "number of trajectories is {}, allowed 1..={MAX_TRAJECTORIES} (image capacity)",
+            MAX_TRAJECTORIES + 2
+        )
     );
 
     let mut b = builder();

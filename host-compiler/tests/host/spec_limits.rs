@@ -43,11 +43,11 @@ fn vector(n: usize, v: f64) -> String {
 fn a_horizon_beyond_the_table_capacity_is_refused_at_the_horizon() {
     // The cases of the issue: 1e9 s, and a period of 1e-9 s (1e18 and 2e9 samples).
     let msg = refused_at(&edit("horizon = 2.0", "horizon = 1e9"), "horizon");
-    assert!(msg.contains("196608") && msg.contains("samples"), "{msg}");
+    assert!(msg.contains("524288") && msg.contains("samples"), "{msg}");
     let msg = refused_at(&edit("period = 0.1", "period = 1e-9"), "horizon");
     assert!(msg.contains("2000000000 samples"), "{msg}");
     // Exactly the capacity with a budget of one trajectory is accepted.
-    let src = edit("horizon = 2.0", "horizon = 19660.8").replace(
+    let src = edit("horizon = 2.0", "horizon = 52428.8").replace(
         "hi = [1.0]\n",
         "hi = [1.0]\n\n[synthesis]\nmax_trajectories = 1\n",
     );
@@ -57,33 +57,33 @@ fn a_horizon_beyond_the_table_capacity_is_refused_at_the_horizon() {
 
 #[test]
 fn a_budget_whose_table_exceeds_the_image_is_refused() {
-    // 4000 samples × the default 64 trajectories = 256 000 rows (m = 1: the image's 196 608 values are
+    // 10 000 samples × the default 64 trajectories = 640 000 rows (m = 1: the image's 524 288 values are
     // as many rows): at the horizon, naming the default.
-    let src = edit("horizon = 2.0", "horizon = 400.0");
+    let src = edit("horizon = 2.0", "horizon = 1000.0");
     let msg = refused_at(&src, "horizon");
     assert!(
-        msg.contains("256000 rows")
+        msg.contains("640000 rows")
             && msg.contains("64 trajectories")
-            && msg.contains("196608 rows at m = 1"),
+            && msg.contains("524288 rows at m = 1"),
         "{msg}"
     );
-    // With an explicit budget: at max_trajectories. 50 × 4000 = 200 000 > 196 608 ≥ 49 × 4000.
+    // With an explicit budget: at max_trajectories. 53 × 10 000 = 530 000 > 524 288 ≥ 52 × 10 000.
     let with = |k: usize| {
         src.replace(
             "hi = [1.0]\n",
             &format!("hi = [1.0]\n\n[synthesis]\nmax_trajectories = {k}\n"),
         )
     };
-    let msg = refused_at(&with(50), "max_trajectories");
-    assert!(msg.contains("200000 rows"), "{msg}");
-    spec::parse(&with(49), "spec.toml").unwrap();
+    let msg = refused_at(&with(53), "max_trajectories");
+    assert!(msg.contains("530000 rows"), "{msg}");
+    spec::parse(&with(52), "spec.toml").unwrap();
     // A budget beyond the image's trajectory capacity, whatever the horizon.
     let src = BASE.replace(
         "hi = [1.0]\n",
-        "hi = [1.0]\n\n[synthesis]\nmax_trajectories = 300\n",
+        "hi = [1.0]\n\n[synthesis]\nmax_trajectories = 1100\n",
     );
     let msg = refused_at(&src, "max_trajectories");
-    assert!(msg.contains("256"), "{msg}");
+    assert!(msg.contains("1024"), "{msg}");
 }
 
 #[test]

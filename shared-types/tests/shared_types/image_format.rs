@@ -97,12 +97,14 @@ fn largest_image_fits_max_image_len() {
     c.P = (0..nl)
         .flat_map(|_| crate::common::random_spd(&mut rng, n))
         .collect();
+    // Every row the table holds at m = 6 (MAX_TABLE_VALUES / 6, rounded down), split over the trajectories.
     let rows = max_rows(m);
-    assert_eq!(rows * m, MAX_TABLE_VALUES);
+    assert!(rows * m <= MAX_TABLE_VALUES && (rows + 1) * m > MAX_TABLE_VALUES);
     c.traj_len = vec![rows / nt; nt];
+    c.traj_len[nt - 1] += rows % nt;
     c.centre = vec![0.0; nt * n];
     c.delta = vec![1.0; nt];
-    c.v = vec![1.0; MAX_TABLE_VALUES];
+    c.v = vec![1.0; rows * m];
     c.fallback = FallbackC::Linear {
         K: vec![1.0; m * n],
         x_ref: vec![0.0; n],
@@ -115,9 +117,15 @@ fn largest_image_fits_max_image_len() {
         c.to_bytes(),
         Err(ImageError::DimOutOfRange { dim: Dim::Segments, max, .. }) if max as usize == MAX_SEGMENTS
     ));
-    // ... a change every rows / MAX_SEGMENTS rows fills it exactly.
-    let run = rows / MAX_SEGMENTS;
-    c.location = (0..rows).map(|i| ((i / run) % nl) as u8).collect();
+    // ... MAX_SEGMENTS / nt segments in every trajectory (a location change at each quarter) fills it
+    // exactly.
+    let per = MAX_SEGMENTS / nt;
+    assert_eq!(per * nt, MAX_SEGMENTS);
+    c.location = c
+        .traj_len
+        .iter()
+        .flat_map(|&len| (0..len).map(move |i| ((i * per / len) % nl) as u8))
+        .collect();
     let bytes = c.to_bytes().unwrap();
     assert_eq!(decode(&bytes).unwrap().n_segments(), MAX_SEGMENTS);
     assert!(
