@@ -138,6 +138,7 @@ pub fn run(a: &SynthArgs, problem: crate::spec::Problem) -> Outcome {
         s.coverage.samples
     );
     println!("stop              {}", s.stop);
+    print_refusals(&s.refused);
     println!(
         "verification      {} runs ({} switched, at most {} events; {} boundary starts refused by the f32 selection, not run), {} violations",
         s.verify.runs - s.verify.rejected,
@@ -169,4 +170,31 @@ pub fn run(a: &SynthArgs, problem: crate::spec::Problem) -> Outcome {
         &s.stop,
         "runs",
     )
+}
+
+/// The seeds that certified no run, by the kind of their reason, with where in Init they lie: the place a
+/// new seed trajectory is needed when the growth stops short ([`crate::synth::refusals`]); the three
+/// largest groups.
+fn print_refusals(refused: &[(Vec<f64>, String)]) {
+    let groups = crate::synth::refusals::groups(refused);
+    if groups.is_empty() {
+        return;
+    }
+    println!(
+        "refused seeds     {} (by reason; certificate.json lists each)",
+        refused.len()
+    );
+    for g in groups.iter().take(3) {
+        let span: Vec<String> =
+            g.lo.iter()
+                .zip(&g.hi)
+                .map(|(l, h)| format!("[{l:.2}, {h:.2}]"))
+                .collect();
+        println!("  {:>5} × {}", g.count, g.reason);
+        println!("          within {}", span.join(" × "));
+    }
+    if groups.len() > 3 {
+        let rest: usize = groups[3..].iter().map(|g| g.count).sum();
+        println!("  {rest:>5} × other reasons ({} kinds)", groups.len() - 3);
+    }
 }

@@ -689,8 +689,8 @@ pub struct HybridSynthesis {
 }
 
 /// The one accept test of a certified run (planned or imported): its δ is at least the spec's
-/// `min_robustness` (and positive), the trajectory budget has room, and its kept rows fit the image's
-/// table with the `rows_used` so far. `Err` says why not.
+/// `min_robustness` (and positive), the trajectory budget has room, and its kept rows and its segments fit
+/// the image with the `rows_used` so far ([`no_room`]). `Err` says why not.
 pub fn admit(
     task: &HybridTask,
     runs: &[HybridRun],
@@ -717,13 +717,33 @@ pub fn admit(
             s.max_trajectories
         ));
     }
-    let capacity = table_rows(task);
+    if let Some(why) = no_room(task, runs, rows_used, run) {
+        return Err(why);
+    }
+    Ok(rows)
+}
+
+/// Why `run` does not fit the image after `runs` (their kept rows `rows_used`): its rows beyond the
+/// table's, or its segments beyond [`MAX_SEGMENTS`](shared_types::capacity::MAX_SEGMENTS) (one per
+/// nominal, an upper bound on the image's maximal runs of one location); `None` when it fits.
+fn no_room(
+    task: &HybridTask,
+    runs: &[HybridRun],
+    rows_used: usize,
+    run: &HybridRun,
+) -> Option<String> {
+    let (rows, capacity) = (run.rows(), table_rows(task));
     if rows_used + rows > capacity {
-        return Err(format!(
+        return Some(format!(
             "its {rows} rows do not fit the image's table ({rows_used} of {capacity} rows used)"
         ));
     }
-    Ok(rows)
+    let max = shared_types::capacity::MAX_SEGMENTS;
+    let used: usize = runs.iter().map(|r| r.nominals.len()).sum();
+    let segments = run.nominals.len();
+    (used + segments > max).then(|| {
+        format!("its {segments} segments do not fit the image ({used} of {max} segments used)")
+    })
 }
 
 /// The rows the image's table holds for this plant's inputs.
@@ -977,10 +997,13 @@ pub fn synthesize_hybrid(
             .par_iter()
             .map(|seed| plan_seed(task, &runs, seed))
             .collect();
-        // A certified run whose rows no longer fit the image's table (its smallest).
-        let mut left_out: Option<usize> = None;
+        // Why a certified run of this round no longer fits the image (the first).
+        let mut left_out: Option<String> = None;
         for (Seed { x, .. }, r) in seeds.into_iter().zip(planned) {
-            let needs = r.as_ref().map_or(0, HybridRun::rows);
+            let full = r
+                .as_ref()
+                .ok()
+                .and_then(|run| no_room(task, &runs, rows_used, run));
             match r.and_then(|run| admit(task, &runs, rows_used, &run).map(|rows| (run, rows))) {
                 Ok((run, rows)) => {
                     rows_used += rows;
@@ -990,19 +1013,15 @@ pub fn synthesize_hybrid(
                     }
                 }
                 Err(e) => {
-                    if needs > 0 && rows_used + needs > table_rows(task) {
-                        left_out = Some(left_out.map_or(needs, |m: usize| m.min(needs)));
+                    if left_out.is_none() && full.as_ref() == Some(&e) {
+                        left_out = full;
                     }
                     refused.push((x, e))
                 }
             }
         }
-        if let (Some(needs), true) = (left_out, runs.len() == before) {
-            stop = format!(
-                "the image's table is full: {rows_used} of {} rows used, and the certified runs of this \
-                 round need {needs} or more",
-                table_rows(task)
-            );
+        if let (Some(why), true) = (left_out, runs.len() == before) {
+            stop = format!("the image is full: a certified run of this round does not fit ({why})");
             break;
         }
         empty_rounds = if runs.len() > before {

@@ -14,6 +14,7 @@
 //! collected in a fixed order, so the same spec and seed give a byte-identical image.
 
 pub mod hybrid;
+pub mod refusals;
 pub mod temporal;
 
 use crate::certify::{self, Loop, LoopConstants};
