@@ -546,9 +546,10 @@ fn problem_sets<P>(
         let m = plant.m();
         let mut e = capacity(
             format!(
-                "{budget} trajectories of {steps} samples (horizon {horizon} s at period {} s) make a table of \
+                "{} of {steps} samples (horizon {horizon} s at period {} s): a table of \
                  {rows} rows; the image holds at most {cap} rows at m = {m} (its {MAX_TABLE_VALUES} values \
                  over the inputs)",
+                if hybrid.is_some() { "a run".to_string() } else { format!("{budget} trajectories") },
                 plant.period
             ),
             max_traj.clone().unwrap_or_else(|| raw.horizon.span()),
