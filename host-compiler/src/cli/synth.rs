@@ -160,6 +160,8 @@ pub fn run(a: &SynthArgs) -> Outcome {
     }
     // Without a terminal the bars are hidden; log each certified trajectory instead.
     let log = !a.quiet && !std::io::IsTerminal::is_terminal(&std::io::stderr());
+    // Read again after the search: a Ctrl-C after the growth returned still ends the run as interrupted.
+    let interrupt = cancel.clone();
     let opts = SynthOptions {
         verify_interior: a.verify_runs as usize, // ≤ verify::MAX_RUNS (clap)
         progress: !a.quiet,
@@ -174,7 +176,11 @@ pub fn run(a: &SynthArgs) -> Outcome {
     let problem = &task.problem;
     let s = synthesize(&task, &opts).map_err(synth_failure)?;
     if problem.synthesis.mode == crate::spec::ControllerMode::Pwa {
-        return crate::cli::synth_pwa::run(a, &task, &s);
+        let out = crate::cli::synth_pwa::run(a, &task, &s);
+        return match late_interrupt(&s.stop, &interrupt) {
+            Some(f) if out.is_ok() => Err(f),
+            _ => out,
+        };
     }
     let img_path = a.out.join("controller.img");
     // An image the verification refutes is not written (the report says why).
@@ -299,7 +305,24 @@ pub fn run(a: &SynthArgs) -> Outcome {
             ),
         });
     }
+    if let Some(f) = late_interrupt(&s.stop, &interrupt) {
+        return Err(f);
+    }
     Ok(short_of_target(&s, problem.synthesis.coverage_target))
+}
+
+/// A Ctrl-C that came after the growth returned (during verification or the report): the run is
+/// reported as interrupted (exit 130) all the same, never as a success. `None` when there was none, or
+/// when the growth itself stopped for it (that exit is reported above).
+fn late_interrupt(stop: &StopReason, cancel: &AtomicBool) -> Option<Failure> {
+    let late = cancel.load(Ordering::SeqCst) && !matches!(stop, StopReason::Interrupted { .. });
+    late.then(|| Failure {
+        exit: Exit::Interrupted,
+        report: miette::miette!(
+            "interrupted after the search had ended: the files written hold its whole result, but the \
+             run did not finish"
+        ),
+    })
 }
 
 /// The terminal law for `certificate.json`: the stored values and the certificate, or why there is none.
@@ -470,4 +493,21 @@ fn median_gain(s: &crate::synth::Synthesis) -> Option<f64> {
     }
     g.sort_by(|a, b| a.total_cmp(b));
     Some(g[g.len() / 2])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_ctrl_c_after_the_search_ended_exits_130_and_none_exits_as_before() {
+        let pressed = AtomicBool::new(true);
+        let f = late_interrupt(&StopReason::Covered, &pressed).expect("a late Ctrl-C is an interruption");
+        assert_eq!(f.exit.code(), 130);
+        assert!(f.report.to_string().contains("interrupted"), "{}", f.report);
+        assert!(late_interrupt(&StopReason::Covered, &AtomicBool::new(false)).is_none());
+        // The growth's own interruption is reported where it was before.
+        let stop = StopReason::Interrupted { trajectories: 3 };
+        assert!(late_interrupt(&stop, &pressed).is_none());
+    }
 }

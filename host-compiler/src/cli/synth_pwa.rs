@@ -23,7 +23,7 @@ pub fn run(a: &SynthArgs, task: &Task, s: &Synthesis) -> Outcome {
         .into_diagnostic()?;
     let pwa = learn_pwa(task, s, &settings).map_err(|e| miette::miette!("PWA learning: {e}"))?;
     let img = shared_types::image::decode(&pwa.image)
-        .map_err(|e| miette::miette!("the emitted PWA image is rejected: {e:?}"))?;
+        .map_err(|e| miette::miette!("the emitted PWA image is rejected: {e}"))?;
     let judge = Judge::new(task);
     let rc = recheck(&judge, &img).map_err(|e| miette::miette!(e))?;
     let init_centres = s.init_centres();
@@ -141,7 +141,11 @@ pub fn run(a: &SynthArgs, task: &Task, s: &Synthesis) -> Outcome {
         mc.runs, mc.init_runs, mc.rejected, mc.violations, mc.max_steps_to_goal
     );
     for v in &mc.first_violations {
-        println!("violation from x0 = {:?}: {v:?}", v.x0);
+        println!(
+            "violation from x0 = {:?}: {}",
+            v.x0,
+            crate::verify::attack::describe(v)
+        );
     }
     match &s.terminal {
         crate::synth::TerminalOutcome::Certified(_) => println!(

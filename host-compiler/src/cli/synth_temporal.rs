@@ -100,7 +100,12 @@ pub fn run(a: &SynthArgs, problem: crate::spec::Problem) -> Outcome {
         ..TemporalOptions::default()
     };
     let s = synthesize_temporal(task, tt, &opts).map_err(|e| Failure {
-        exit: Exit::Failed,
+        // A vacuous formula is the spec's fault (bad input); anything else a failed search.
+        exit: if e.starts_with(crate::synth::temporal::VACUOUS) {
+            Exit::BadInput
+        } else {
+            Exit::Failed
+        },
         report: miette::miette!("{e}"),
     })?;
     for (name, r) in &s.imported {

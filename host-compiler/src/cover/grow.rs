@@ -59,7 +59,7 @@ pub enum GrowError {
     Recording { name: String, n: usize, m: usize },
     #[error("image: {0}")]
     Emit(#[from] EmitError),
-    #[error("the emitted image is rejected by the decoder: {0:?}")]
+    #[error("the emitted image is rejected by the decoder: {0}")]
     ImageRejected(shared_types::image::ImageError),
     #[error("no certified trajectory at all: interrupted before any trajectory was certified")]
     InterruptedEmpty,

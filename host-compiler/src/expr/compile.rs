@@ -314,7 +314,7 @@ pub fn compile(
     for (i, e) in bound.iter().enumerate() {
         if let Some(bad) = out_of_range(e, n_states, n_inputs) {
             return Err(ExprError::Program(format!(
-                "output {i} uses {bad:?}, outside the {n_states} states and {n_inputs} inputs"
+                "output {i} uses {bad}, outside the {n_states} states and {n_inputs} inputs"
             )));
         }
         // The stack a tree needs without sharing bounds what it needs with it (a recall is one slot).

@@ -59,6 +59,27 @@ pub fn derivative(e: &Expr, v: Var) -> Result<Expr, ExprError> {
     checked(d(e, v, &mut budget)?)
 }
 
+/// `a · b`, 0 when either factor is the constant 0. A derivative's (or a Lie derivative's) terms are
+/// only read where the expression differentiated is defined, and there every factor of the rules below
+/// is too; so a zero factor may drop its partner (`0 · 1/q` from the quotient rule), which the general
+/// constructor [`Expr::mul`] keeps unless the partner is defined everywhere.
+fn times(a: Expr, b: Expr) -> Expr {
+    if a.is_zero() || b.is_zero() {
+        Expr::c(0.0)
+    } else {
+        Expr::mul(a, b)
+    }
+}
+
+/// `a / b`, 0 when `a` is the constant 0 (see [`times`]).
+fn over(a: Expr, b: Expr) -> Expr {
+    if a.is_zero() {
+        Expr::c(0.0)
+    } else {
+        Expr::div(a, b)
+    }
+}
+
 fn d(e: &Expr, v: Var, b: &mut Budget) -> Result<Expr, ExprError> {
     // A subtree without v has derivative 0: skip it without copying anything.
     if !e.uses(v) {
@@ -73,16 +94,16 @@ fn d(e: &Expr, v: Var, b: &mut Budget) -> Result<Expr, ExprError> {
         Expr::Sub(p, q) => Expr::sub(d(p, v, b)?, d(q, v, b)?),
         // (pq)' = p'q + pq'
         Expr::Mul(p, q) => Expr::add(
-            Expr::mul(d(p, v, b)?, b.copy(q)?),
-            Expr::mul(b.copy(p)?, d(q, v, b)?),
+            times(d(p, v, b)?, b.copy(q)?),
+            times(b.copy(p)?, d(q, v, b)?),
         ),
         // (p/q)' = p'/q − p q'/q²
         Expr::Div(p, q) => Expr::sub(
-            Expr::div(d(p, v, b)?, b.copy(q)?),
-            Expr::div(Expr::mul(b.copy(p)?, d(q, v, b)?), Expr::pow(b.copy(q)?, 2)),
+            over(d(p, v, b)?, b.copy(q)?),
+            over(times(b.copy(p)?, d(q, v, b)?), Expr::pow(b.copy(q)?, 2)),
         ),
         // (p^k)' = k p^(k−1) p'
-        Expr::Pow(p, k) => Expr::mul(
+        Expr::Pow(p, k) => times(
             Expr::mul(Expr::c(f64::from(*k)), Expr::pow(b.copy(p)?, k - 1)),
             d(p, v, b)?,
         ),
@@ -105,16 +126,16 @@ fn d(e: &Expr, v: Var, b: &mut Budget) -> Result<Expr, ExprError> {
                 Func::Atan => Expr::div(Expr::c(1.0), Expr::add(Expr::c(1.0), Expr::pow(p, 2))),
                 Func::Tanh => Expr::sub(Expr::c(1.0), Expr::pow(Expr::func(Func::Tanh, p), 2)),
             };
-            Expr::mul(outer, dp)
+            times(outer, dp)
         }
         // atan2(y, x)' = (x y' − y x') / (x² + y²)
         Expr::Atan2(y, x) => {
             let num = Expr::sub(
-                Expr::mul(b.copy(x)?, d(y, v, b)?),
-                Expr::mul(b.copy(y)?, d(x, v, b)?),
+                times(b.copy(x)?, d(y, v, b)?),
+                times(b.copy(y)?, d(x, v, b)?),
             );
             let den = Expr::add(Expr::pow(b.copy(x)?, 2), Expr::pow(b.copy(y)?, 2));
-            Expr::div(num, den)
+            over(num, den)
         }
     })
 }
@@ -142,7 +163,7 @@ pub fn lie(h: &Expr, field: &[Expr]) -> Result<Expr, ExprError> {
             continue;
         }
         let dh = derivative(h, Var::State(i as u16))?;
-        sum = Expr::add(sum, Expr::mul(dh, fi.clone()));
+        sum = Expr::add(sum, times(dh, fi.clone()));
     }
     checked(sum)
 }

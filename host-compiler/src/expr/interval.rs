@@ -76,7 +76,7 @@ pub enum IntervalError {
     #[error("a value may overflow f32 over the box (magnitude up to {mag:.6e})")]
     Overflow { mag: f64 },
     /// A variable without an interval (a box of the wrong length).
-    #[error("the box gives no interval for {0:?}")]
+    #[error("the box gives no interval for {0}")]
     Unbound(Var),
 }
 

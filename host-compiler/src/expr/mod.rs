@@ -58,6 +58,17 @@ pub enum Var {
     Param(u16),
 }
 
+impl std::fmt::Display for Var {
+    /// `state 2`, `input 0`, `parameter 1` (0-based; messages with names use [`Expr::display`]).
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Var::State(i) => write!(f, "state {i}"),
+            Var::Input(i) => write!(f, "input {i}"),
+            Var::Param(i) => write!(f, "parameter {i}"),
+        }
+    }
+}
+
 /// An expression tree. Build it with [`parse`] or the simplifying constructors ([`Expr::add`], ...).
 #[derive(Clone, Debug, PartialEq)]
 pub enum Expr {
@@ -117,7 +128,7 @@ pub enum ExprError {
         span: Range<usize>,
     },
     /// A name declared twice, or one that shadows a function or `pi`.
-    #[error("name `{name}` {why}")]
+    #[error("name `{}` {why}", crate::text::excerpt(name))]
     BadName { name: String, why: &'static str },
     /// Compilation to the target's program does not fit its capacities, or a value it would store is not
     /// finite in f32.
@@ -368,8 +379,57 @@ impl Expr {
         Display { e: self, names }
     }
 
+    /// Whether the expression is defined (finite) at every real point, whatever the values of its
+    /// variables: built from finite numbers, variables, `+ − ·`, positive powers and the functions
+    /// defined on all of ℝ (sin, cos, exp, abs, atan, tanh, atan2). Division, negative powers, log,
+    /// sqrt and tan are partial. The simplifier folds `0·e` and `e − e` to 0 only for such an `e`.
+    pub fn total(&self) -> bool {
+        match self {
+            Expr::Const(v) => v.is_finite(),
+            Expr::Var(_) => true,
+            Expr::Neg(a) => a.total(),
+            Expr::Add(a, b) | Expr::Sub(a, b) | Expr::Mul(a, b) | Expr::Atan2(a, b) => {
+                a.total() && b.total()
+            }
+            Expr::Div(..) => false,
+            Expr::Pow(a, k) => *k > 0 && a.total(),
+            Expr::Func(f, a) => {
+                !matches!(f, Func::Log | Func::Sqrt | Func::Tan) && a.total()
+            }
+        }
+    }
+
+    /// The innermost subterm whose value at `at` is not finite (NaN or ±∞) while its operands' are,
+    /// with that value; `None` when every subterm is finite there. The spec refuses a term that is
+    /// undefined at a point of its region with this subterm and the point.
+    pub fn undefined_at(&self, at: &Point<'_>) -> Option<(&Expr, f64)> {
+        fn walk<'e>(e: &'e Expr, at: &Point<'_>) -> Result<f64, (&'e Expr, f64)> {
+            let v = match e {
+                Expr::Const(v) => *v,
+                Expr::Var(v) => at.get(*v),
+                Expr::Neg(a) => -walk(a, at)?,
+                Expr::Add(a, b) => walk(a, at)? + walk(b, at)?,
+                Expr::Sub(a, b) => walk(a, at)? - walk(b, at)?,
+                Expr::Mul(a, b) => walk(a, at)? * walk(b, at)?,
+                Expr::Div(a, b) => walk(a, at)? / walk(b, at)?,
+                Expr::Pow(a, k) => walk(a, at)?.powi((*k).into()),
+                Expr::Func(f, a) => apply_f64(*f, walk(a, at)?),
+                Expr::Atan2(y, x) => walk(y, at)?.atan2(walk(x, at)?),
+            };
+            if v.is_finite() {
+                Ok(v)
+            } else {
+                Err((e, v))
+            }
+        }
+        walk(self, at).err()
+    }
+
     // ---- simplifying constructors: fold constants and drop the trivial terms 0 and 1, so that
-    // derivatives stay small and structural zeros (Def 3.5's L_g L_f^k h = 0) are recognised.
+    // derivatives stay small and structural zeros (Def 3.5's L_g L_f^k h = 0) are recognised. A fold
+    // never changes the value where the expression is defined, and never makes an expression defined
+    // where it is not (a constant is folded only when finite; `0·e`, `e − e` only for a total `e`; `0/e`
+    // never), so every undefined term of a user's expression survives parsing to be refused.
 
     /// `−a`.
     #[allow(clippy::should_implement_trait)]
@@ -385,7 +445,7 @@ impl Expr {
     #[allow(clippy::should_implement_trait)]
     pub fn add(a: Expr, b: Expr) -> Expr {
         match (a, b) {
-            (Expr::Const(x), Expr::Const(y)) => Expr::c(x + y),
+            (Expr::Const(x), Expr::Const(y)) if (x + y).is_finite() => Expr::c(x + y),
             (Expr::Const(z), e) | (e, Expr::Const(z)) if z == 0.0 => e,
             (a, Expr::Neg(b)) => Expr::sub(a, *b),
             (a, b) => Expr::Add(Box::new(a), Box::new(b)),
@@ -396,11 +456,12 @@ impl Expr {
     #[allow(clippy::should_implement_trait)]
     pub fn sub(a: Expr, b: Expr) -> Expr {
         match (a, b) {
-            (Expr::Const(x), Expr::Const(y)) => Expr::c(x - y),
+            (Expr::Const(x), Expr::Const(y)) if (x - y).is_finite() => Expr::c(x - y),
             (e, Expr::Const(z)) if z == 0.0 => e,
             (Expr::Const(z), e) if z == 0.0 => Expr::neg(e),
             (a, Expr::Neg(b)) => Expr::add(a, *b),
-            (a, b) if a == b => Expr::c(0.0),
+            // `a − a` is 0 only where a is defined: folded for a defined everywhere.
+            (a, b) if a == b && a.total() => Expr::c(0.0),
             (a, b) => Expr::Sub(Box::new(a), Box::new(b)),
         }
     }
@@ -409,15 +470,19 @@ impl Expr {
     #[allow(clippy::should_implement_trait)]
     pub fn mul(a: Expr, b: Expr) -> Expr {
         match (a, b) {
-            (Expr::Const(x), Expr::Const(y)) => Expr::c(x * y),
-            (Expr::Const(z), _) | (_, Expr::Const(z)) if z == 0.0 => Expr::c(0.0),
+            (Expr::Const(x), Expr::Const(y)) if (x * y).is_finite() => Expr::c(x * y),
+            // `0 · e` is 0 only where e is defined: folded for e defined everywhere, so that
+            // `0*sqrt(-1)` stays undefined and is refused where the spec checks its terms.
+            (Expr::Const(z), e) | (e, Expr::Const(z)) if z == 0.0 && e.total() => Expr::c(0.0),
             (Expr::Const(o), e) | (e, Expr::Const(o)) if o == 1.0 => e,
             (Expr::Const(o), e) | (e, Expr::Const(o)) if o == -1.0 => Expr::neg(e),
             (Expr::Neg(a), Expr::Neg(b)) => Expr::mul(*a, *b),
             (Expr::Neg(a), b) | (b, Expr::Neg(a)) => Expr::neg(Expr::mul(*a, b)),
             // Constants first, so that c1·(c2·e) folds.
             (e, Expr::Const(c)) => Expr::mul(Expr::c(c), e),
-            (Expr::Const(c), Expr::Mul(a, b)) if a.as_const().is_some() => {
+            (Expr::Const(c), Expr::Mul(a, b))
+                if a.as_const().is_some_and(|k| (c * k).is_finite() && c * k != 0.0) =>
+            {
                 Expr::mul(Expr::c(c * a.as_const().unwrap_or(1.0)), *b)
             }
             (a, b) => Expr::Mul(Box::new(a), Box::new(b)),
@@ -428,8 +493,9 @@ impl Expr {
     #[allow(clippy::should_implement_trait)]
     pub fn div(a: Expr, b: Expr) -> Expr {
         match (a, b) {
-            (Expr::Const(x), Expr::Const(y)) if y != 0.0 => Expr::c(x / y),
-            (Expr::Const(z), _) if z == 0.0 => Expr::c(0.0),
+            (Expr::Const(x), Expr::Const(y)) if y != 0.0 && (x / y).is_finite() => Expr::c(x / y),
+            // `0 / e` is not folded: it is undefined where e = 0 (and where e is), which the spec's
+            // checks must see.
             (e, Expr::Const(o)) if o == 1.0 => e,
             (a, b) => Expr::Div(Box::new(a), Box::new(b)),
         }
@@ -438,9 +504,10 @@ impl Expr {
     /// `a^k`.
     pub fn pow(a: Expr, k: i8) -> Expr {
         match (a, k) {
+            // Only derivatives build `p^0` (from `p^1`), where p is defined.
             (_, 0) => Expr::c(1.0),
             (a, 1) => a,
-            (Expr::Const(x), k) => Expr::c(x.powi(k.into())),
+            (Expr::Const(x), k) if x.powi(k.into()).is_finite() => Expr::c(x.powi(k.into())),
             (a, k) => Expr::Pow(Box::new(a), k),
         }
     }

@@ -343,11 +343,14 @@ impl Parser<'_> {
             (None, call) => match self.names.lookup(name) {
                 Some(v) if !call => Ok(Expr::var(v)),
                 Some(_) => Err(self.syntax(
-                    format!("`{name}` is not a function: write `{name}*(...)` to multiply"),
+                    format!(
+                        "`{0}` is not a function: write `{0}*(...)` to multiply",
+                        crate::text::excerpt(name)
+                    ),
                     span,
                 )),
                 None => Err(ExprError::UnknownName {
-                    name: name.to_string(),
+                    name: crate::text::excerpt(name),
                     span,
                     hint: if call {
                         "; the functions are sin, cos, tan, exp, log, sqrt, abs, atan, tanh and atan2"

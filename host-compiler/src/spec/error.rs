@@ -102,6 +102,9 @@ struct Inner {
     /// (byte range, label text); the first entry is the primary location.
     labels: Vec<(Range<usize>, String)>,
     src: Option<NamedSource<String>>,
+    /// What a rendering shows: the source with every overlong line cut to an excerpt around its labels
+    /// ([`crate::text::clip_source`]), and the labels moved into it.
+    shown: Option<(NamedSource<String>, Vec<(Range<usize>, String)>)>,
     io: Option<std::io::Error>,
 }
 
@@ -114,6 +117,7 @@ impl SpecError {
             help: None,
             labels: Vec::new(),
             src: None,
+            shown: None,
             io: None,
         }))
     }
@@ -149,12 +153,20 @@ impl SpecError {
             r.end = r.end.clamp(r.start, len);
         }
         self.0.src = Some(NamedSource::new(name, text.to_string()));
+        let spans: Vec<Range<usize>> = self.0.labels.iter().map(|(r, _)| r.clone()).collect();
+        let (clipped, moved) = crate::text::clip_source(text, &spans);
+        let labels = moved
+            .into_iter()
+            .zip(&self.0.labels)
+            .map(|(r, (_, l))| (r, l.clone()))
+            .collect();
+        self.0.shown = Some((NamedSource::new(name, clipped), labels));
         self
     }
 
     /// Convert a TOML/serde error (syntax, unknown key, missing key, wrong type) keeping its span.
     pub(crate) fn from_toml(e: &toml::de::Error) -> Self {
-        let msg = e.message().trim().to_string();
+        let msg = crate::text::clip_runs(e.message().trim());
         let kind = if msg.starts_with("unknown field") {
             ErrorKind::UnknownKey
         } else if msg.starts_with("missing field") {
@@ -262,14 +274,15 @@ impl Diagnostic for SpecError {
     }
 
     fn source_code(&self) -> Option<&dyn SourceCode> {
-        self.0.src.as_ref().map(|s| s as &dyn SourceCode)
+        self.0.shown.as_ref().map(|(s, _)| s as &dyn SourceCode)
     }
 
     fn labels(&self) -> Option<Box<dyn Iterator<Item = LabeledSpan> + '_>> {
-        if self.0.src.is_none() || self.0.labels.is_empty() {
+        let (_, labels) = self.0.shown.as_ref()?;
+        if labels.is_empty() {
             return None;
         }
-        Some(Box::new(self.0.labels.iter().enumerate().map(
+        Some(Box::new(labels.iter().enumerate().map(
             |(i, (r, text))| {
                 let span = (r.start, r.end - r.start);
                 let label = if text.is_empty() {

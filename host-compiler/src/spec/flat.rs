@@ -216,7 +216,7 @@ pub(crate) fn check(
                     ErrorKind::BadValue,
                     format!(
                         "plant.extension names `{}`, which is not one of plant.inputs",
-                        r.input.get_ref()
+                        crate::text::excerpt(r.input.get_ref())
                     ),
                 )
                 .at(r.input.span(), "not an input"));
@@ -700,8 +700,12 @@ pub(crate) fn check(
         let zeta: Vec<f64> = zeta_b.iter().map(|e| e.eval(&at)).collect();
         for (i, val) in x.iter().enumerate() {
             if !val.is_finite() {
+                let term = xi_b[i]
+                    .undefined_at(&at)
+                    .map(|(t, v)| format!(": {}", super::nonlinear::undefined_term(t, v, &flat_names)))
+                    .unwrap_or_default();
                 return Err(model_err(
-                    format!("plant.state_of_flat[{i}] is {val} {}", where_()),
+                    format!("plant.state_of_flat[{i}] is {val} {}{term}", where_()),
                     list_span(&p.state_of_flat, i),
                     "not finite there",
                 ));
@@ -709,8 +713,12 @@ pub(crate) fn check(
         }
         for (j, val) in u.iter().enumerate() {
             if !val.is_finite() {
+                let term = ups_b[j]
+                    .undefined_at(&at)
+                    .map(|(t, v)| format!(": {}", super::nonlinear::undefined_term(t, v, &flat_names)))
+                    .unwrap_or_default();
                 return Err(model_err(
-                    format!("plant.input_of_flat[{j}] is {val} {}", where_()),
+                    format!("plant.input_of_flat[{j}] is {val} {}{term}", where_()),
                     list_span(&p.input_of_flat, j),
                     "not finite there",
                 ));
@@ -751,6 +759,25 @@ pub(crate) fn check(
             u: &[],
             p: &[],
         };
+        // f and g defined at the state (a term undefined there is refused by name, not as a mismatch).
+        for i in 0..n {
+            let terms = std::iter::once((format!("plant.f[{i}]"), &f_b[i]))
+                .chain((0..m).map(|j| (format!("plant.g[{i}][{j}]"), &g_b[i][j])));
+            for (what, e) in terms {
+                if let Some((t, v)) = e.undefined_at(&atx) {
+                    return Err(model_err(
+                        format!(
+                            "{what} is not defined at the state {} ({}): {}",
+                            fmt_point(&names, &x),
+                            where_(),
+                            super::nonlinear::undefined_term(t, v, &names)
+                        ),
+                        p.f.span(),
+                        "not finite there",
+                    ));
+                }
+            }
+        }
         for i in 0..n {
             let lhs = dxi[i].eval(&at);
             let rhs = f_b[i].eval(&atx) + (0..m).map(|j| g_b[i][j].eval(&atx) * u[j]).sum::<f64>();

@@ -159,10 +159,10 @@ fn find(names: &[String], name: &Spanned<String>, key: &str) -> Result<usize, Sp
                 ErrorKind::BadValue,
                 format!(
                     "{key} = \"{}\" is not a location; the locations are {}",
-                    name.get_ref(),
+                    crate::text::excerpt(name.get_ref()),
                     names
                         .iter()
-                        .map(|x| format!("\"{x}\""))
+                        .map(|x| format!("\"{}\"", crate::text::excerpt(x)))
                         .collect::<Vec<_>>()
                         .join(", ")
                 ),
@@ -295,7 +295,10 @@ pub(crate) fn plant(
             other => {
                 return Err(SpecError::new(
                     ErrorKind::BadValue,
-                    format!("{key}.kind = \"{other}\"; it must be \"internal\" or \"forced\""),
+                    format!(
+                        "{key}.kind = \"{}\"; it must be \"internal\" or \"forced\"",
+                        crate::text::excerpt(other)
+                    ),
                 )
                 .at(r.kind.span(), "unknown kind")
                 .help("internal: the flow takes the edge on entering the guard; forced: the controller does"))

@@ -15,6 +15,7 @@
 //! | one expression of a nonlinear plant (`plant.f`, `g`, `h`): bytes, nesting, tree depth, integer power | 4 096, 64, 256, 16 ([`crate::expr`]) | parse work and recursion |
 //! | derivatives of a nonlinear plant (Lie derivatives, Jacobians): nodes, depth | 50 000, 1 024 ([`crate::expr`]) | memory and recursion |
 //! | boxes of the interval proof that Γ is nonsingular over Init | 256 ([`super::nonlinear::MAX_GAMMA_BOXES`]) | work |
+//! | `[mtl] formula`: bytes of its text, atoms (set names, linear predicates, `true`, `false`) | [`MAX_FORMULA_LEN`] = 4 096, [`MAX_FORMULA_ATOMS`] = 256 (nesting 100: `crate::robustness::mtl::parse::MAX_DEPTH`) | every atom is a distance at every sample of every candidate run |
 //! | coverage samples implied by `synthesis.coverage_tolerance` and `confidence` | [`MAX_SAMPLE_BYTES`] = 512 MiB of states | memory |
 //!
 //! Flags are bounded where they are parsed (`verify --runs`, `--per-ball`: see `crate::verify`), and an
@@ -28,6 +29,14 @@ pub use shared_types::capacity::{
 /// is a small quadratic program over its rows, evaluated at every sample of every candidate trajectory;
 /// 64 rows describe any box up to n = 32 and any practical task set, and keep that work bounded.
 pub const MAX_POLYTOPE_ROWS: usize = 64;
+
+/// Largest text of an MTL formula (`[mtl] formula`, `host-compiler mtl`), in bytes.
+pub const MAX_FORMULA_LEN: usize = 4096;
+
+/// Most atoms (set names, linear predicates, `true`, `false`) of an MTL formula. Certification and
+/// Monte Carlo evaluate every atom at every sample of every run (a signed distance each), so the
+/// formula's size multiplies all the synthesis work.
+pub const MAX_FORMULA_ATOMS: usize = 256;
 
 /// Memory budget, in bytes, of the uniform samples of Init the coverage estimate draws
 /// ([`super::SynthesisSettings::coverage_samples`]), estimated by [`sample_bytes`].

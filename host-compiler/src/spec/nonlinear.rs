@@ -212,7 +212,10 @@ pub(crate) fn model(raw: &Spanned<RawFlPlant>, src: &str) -> Result<Model, SpecE
             "differentially_flat" => PlantClass::DifferentiallyFlat,
             other => return Err(SpecError::new(
                 ErrorKind::BadValue,
-                format!("plant.class = \"{other}\" is not a plant class"),
+                format!(
+                    "plant.class = \"{}\" is not a plant class",
+                    crate::text::excerpt(other)
+                ),
             )
             .at(p.class.span(), "unknown class")
             .help(
@@ -332,7 +335,10 @@ pub(crate) fn model(raw: &Spanned<RawFlPlant>, src: &str) -> Result<Model, SpecE
                 })
                 .unwrap_or_else(|| raw.span());
             return Err(
-                SpecError::new(ErrorKind::BadValue, format!("plant: name `{name}` {why}"))
+                SpecError::new(
+                    ErrorKind::BadValue,
+                    format!("plant: name `{}` {why}", crate::text::excerpt(&name)),
+                )
                     .at(span, "this name"),
             );
         }
@@ -466,6 +472,14 @@ pub(super) fn sample_points(init: &InitBox) -> Vec<Vec<f64>> {
     pts
 }
 
+/// `its term `0/0` is NaN there`: the innermost undefined subterm of an equation
+/// ([`Expr::undefined_at`]), quoted within [`crate::text::MAX_EXCERPT`].
+pub(super) fn undefined_term(term: &Expr, v: f64, names: &Names) -> String {
+    let shown = crate::text::excerpt(&term.display(names).to_string());
+    let what = if v.is_nan() { "NaN (undefined)" } else { "infinite" };
+    format!("its term `{shown}` is {what} there")
+}
+
 /// A point of the state space (no inputs: f, g and h do not use them).
 pub(super) fn point<'a>(x: &'a [f64], p: &'a [f64]) -> Point<'a> {
     Point { x, u: &[], p }
@@ -585,12 +599,12 @@ pub(crate) fn check(
                     .map(|(i, e)| (e, format!("plant.h[{i}]"), p.h.get_ref()[i].span())),
             );
         for (e, what, span) in eqs {
-            let v = e.eval(&pt);
-            if !v.is_finite() {
+            if let Some((term, v)) = e.undefined_at(&pt) {
                 return Err(model_err(
                     format!(
-                        "{what} is {v} at the point {} of {within}",
-                        fmt_point(&names, x)
+                        "{what} is not defined at the point {} of {within}: {}",
+                        fmt_point(&names, x),
+                        undefined_term(term, v, &names)
                     ),
                     span,
                     "not finite there",

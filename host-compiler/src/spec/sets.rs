@@ -243,7 +243,10 @@ pub(crate) fn set_from_raw(raw: &Spanned<RawSet>, ctx: &SetCtx<'_>) -> Result<Se
         other => {
             return Err(SpecError::new(
                 ErrorKind::BadValue,
-                format!("{what}: unknown set kind `{other}`; expected {KINDS}"),
+                format!(
+                    "{what}: unknown set kind `{}`; expected {KINDS}",
+                    crate::text::excerpt(other)
+                ),
             )
             .at(r.kind.span(), "unknown kind"))
         }

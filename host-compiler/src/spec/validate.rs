@@ -524,6 +524,20 @@ fn problem_sets<P>(
         Some(s) => synthesis(s.get_ref(), n_state)?,
         None => SynthesisSettings::default(),
     };
+    if let (Some(_), ControllerMode::Pwa) = (&hybrid, synthesis.mode) {
+        let span = raw
+            .synthesis
+            .as_ref()
+            .and_then(|s| s.get_ref().mode.as_ref().map(|m| m.span()))
+            .unwrap_or_else(|| raw.plant.span());
+        return Err(SpecError::new(
+            ErrorKind::BadValue,
+            "synthesis.mode = \"pwa\" is not available for a hybrid plant: its image is a feedforward \
+             table per run, switched by the guards or the controller",
+        )
+        .at(span, "pwa on a hybrid plant")
+        .help("remove synthesis.mode (or write mode = \"feedforward\")"));
+    }
     // ---- sizes: the whole budget's table within the image ----
     // The image bounds the table's values (rows × m), so the rows it holds depend on the inputs. A hybrid
     // run keeps only the rows its certificate covers (each segment up to its guard or Goal, usually far
@@ -581,6 +595,23 @@ fn problem_sets<P>(
                 return Err(SpecError::new(ErrorKind::BadValue, "mtl.formula is empty")
                     .at(t.get_ref().formula.span(), "empty formula"));
             }
+            if f.len() > limits::MAX_FORMULA_LEN {
+                return Err(capacity(
+                    format!(
+                        "mtl.formula is {} bytes long, more than the limit {} (spec::limits)",
+                        f.len(),
+                        limits::MAX_FORMULA_LEN
+                    ),
+                    t.get_ref().formula.span(),
+                    format!("beyond the limit {}", limits::MAX_FORMULA_LEN),
+                    format!(
+                        "a formula has at most {} bytes and {} atoms: name the sets in [sets.*] \
+                         instead of spelling out many predicates",
+                        limits::MAX_FORMULA_LEN,
+                        limits::MAX_FORMULA_ATOMS
+                    ),
+                ));
+            }
             Some(f.clone())
         }
         None => None,
@@ -621,6 +652,29 @@ fn problem_sets<P>(
         }
     }
 
+    // A feedback-linearizable plant's runs stay in its operating region (leaving it is Unsafe), so a
+    // Goal that misses the region cannot be reached: refused here, before any search.
+    if let Some(region) = nonlinear
+        .as_ref()
+        .filter(|d| d.class == super::nonlinear::PlantClass::FeedbackLinearizable)
+        .and_then(|d| d.region.as_ref())
+    {
+        if checks::box_meets_set(&region.lo, &region.hi, &goal) == Meet::Disjoint {
+            return Err(SpecError::new(
+                ErrorKind::GoalUnreachable,
+                format!(
+                    "goal is unreachable by construction: it lies outside the operating region \
+                     plant.region (lo = {}, hi = {}), and a run that leaves the region counts as \
+                     entering Unsafe",
+                    fmt_vec(&region.lo),
+                    fmt_vec(&region.hi)
+                ),
+            )
+            .at(raw.goal.span(), "this goal set misses plant.region")
+            .help("move Goal into plant.region, or widen the region to contain part of Goal"));
+        }
+    }
+
     let name = raw.name.as_ref().map(|s| s.get_ref().clone());
     Ok(Problem {
         name,
@@ -656,7 +710,7 @@ fn init_box<P>(raw: &RawSpec<P>, n_state: usize) -> Result<InitBox, SpecError> {
             ErrorKind::BadValue,
             format!(
                 "init must be a box (kind = \"box\"), found kind = \"{}\"",
-                r.kind.get_ref()
+                crate::text::excerpt(r.kind.get_ref())
             ),
         )
         .at(r.kind.span(), "init must be a box")
@@ -753,7 +807,7 @@ fn input_set(r: &RawInput, span: Range<usize>, m: usize) -> Result<InputSet, Spe
         }
         other => Err(SpecError::new(
             ErrorKind::BadValue,
-            format!("input: unknown kind `{other}`; expected \"box\" (lo, hi) or \"ball\" (2-norm bound: radius, optional center)"),
+            format!("input: unknown kind `{}`; expected \"box\" (lo, hi) or \"ball\" (2-norm bound: radius, optional center)", crate::text::excerpt(other)),
         )
         .at(r.kind.span(), "unknown kind")),
     }
@@ -801,7 +855,7 @@ fn synthesis(r: &RawSynthesis, n_state: usize) -> Result<SynthesisSettings, Spec
                 ErrorKind::BadValue,
                 format!(
                     "synthesis.mode = \"{}\" is unknown; expected \"feedforward\" or \"pwa\"",
-                    v.get_ref()
+                    crate::text::excerpt(v.get_ref())
                 ),
             )
             .at(v.span(), "unknown mode")
@@ -813,7 +867,7 @@ fn synthesis(r: &RawSynthesis, n_state: usize) -> Result<SynthesisSettings, Spec
                 ErrorKind::BadValue,
                 format!(
                     "synthesis.terminal = \"{}\" is unknown; expected \"auto\", \"invariant\", \"hold\" or \"fallback\"",
-                    v.get_ref()
+                    crate::text::excerpt(v.get_ref())
                 ),
             )
             .at(v.span(), "unknown terminal behaviour")

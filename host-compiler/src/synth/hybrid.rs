@@ -35,6 +35,7 @@ use faer::Mat;
 pub mod forced;
 pub mod import;
 pub mod optimise;
+pub mod reach;
 
 /// How far past a guard's plane (Euclidean) a non-last segment's generated nominal must end: each is
 /// tried (a deeper target makes the nominal cross the plane more steeply, so that the tube's crossing
@@ -107,6 +108,9 @@ pub enum HybridSynthError {
     Formula(#[from] crate::property::TemporalError),
     #[error("{0}")]
     Run(String),
+    /// No run can reach Goal (`reach`), found before any planning.
+    #[error("goal is unreachable: {0}")]
+    Unreachable(reach::Unreachable),
 }
 
 impl HybridTask {
@@ -147,6 +151,18 @@ impl HybridTask {
         if forced {
             if let Some(edge) = plant.edges().iter().position(|e| !e.reset.is_identity()) {
                 return Err(HybridSynthError::ForcedReset { edge });
+            }
+        }
+        if forced && problem.mtl.is_none() {
+            if let Some(why) = reach::goal_unreachable(
+                &plant,
+                initial,
+                &problem.init,
+                &problem.input,
+                &problem.goal,
+                steps,
+            ) {
+                return Err(HybridSynthError::Unreachable(why));
             }
         }
         let formula = match (&problem.mtl, forced) {

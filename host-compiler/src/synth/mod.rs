@@ -197,7 +197,7 @@ pub enum SynthError {
     Certify(#[from] certify::CertifyError),
     #[error(transparent)]
     Cover(#[from] GrowError),
-    #[error("the emitted image is rejected by the decoder: {0:?}")]
+    #[error("the emitted image is rejected by the decoder: {0}")]
     ImageRejected(shared_types::image::ImageError),
     #[error(transparent)]
     Verify(#[from] crate::verify::MonteCarloError),

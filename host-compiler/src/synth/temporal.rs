@@ -154,6 +154,33 @@ pub fn certificate_text(c: &TemporalCertificate, h: f64) -> String {
     )
 }
 
+/// How the reason a seed gives starts when the formula is vacuous ([`vacuous`]).
+pub const VACUOUS: &str = "the formula is (nearly) always true";
+
+/// Ratio of ρ(0) to the input margin it costs past which a failed certificate is put down to the
+/// formula's margin: the f32 rounding over the tube (taken at radius ρ(0)) grows with ρ(0) at the rate of
+/// f32 rounding times the loop's gains, far below this ratio's inverse for a formula that constrains the
+/// runs.
+const VACUOUS_RATIO: f64 = 1e3;
+
+/// The reason a run's certificate fails when the formula holds by a margin no tube can use: ρ(0) = +∞
+/// (`true`), or so large that the f32 rounding over a tube that wide leaves no input margin
+/// (δ_Input < 0 by far less than ρ(0)). Every run fails the same way, so the growth stops at the first.
+fn vacuous(c: &TemporalCertificate) -> Option<String> {
+    let rho = c.delta_samples;
+    let unusable = rho.is_infinite()
+        || !(c.delta_input > f64::NEG_INFINITY)
+        || (c.delta_input < 0.0 && rho > VACUOUS_RATIO * -c.delta_input);
+    (rho > 0.0 && unusable).then(|| {
+        format!(
+            "{VACUOUS}: it holds on this run with robustness ρ(0) = {rho:.3e}, a margin no tube of the \
+             controller can use, so there is nothing to certify; write a formula that constrains the \
+             runs (e.g. reach Goal: `F[0,T] goal`), and check its predicates' constants against the \
+             states' range"
+        )
+    })
+}
+
 /// What planning a seed borrows from the run.
 struct Planner<'a> {
     lp: &'a Loop<'a>,
@@ -205,6 +232,9 @@ fn plan(
                 nominal: o.nominal,
                 certificate: o.certificate,
             });
+        }
+        if let Some(v) = vacuous(&o.certificate) {
+            return Err(v);
         }
         why.push(format!(
             "{source}: ρ(0) = {:.3e}, continuous {:.3e}, δ_Input = {:.3e} after {} ascent steps",
@@ -442,6 +472,12 @@ pub fn synthesize_temporal(
                 Err(e) => refused.push((x, e)),
             }
         }
+        // A vacuous formula fails every run alike: said at the first.
+        if let (true, Some((_, why))) = (balls.is_empty(), refused.last()) {
+            if why.starts_with(VACUOUS) {
+                return Err(why.clone());
+            }
+        }
         empty_rounds = if balls.len() > before {
             0
         } else {
@@ -470,7 +506,7 @@ pub fn synthesize_temporal(
             .map(|b| (&b.nominal, b.certificate.delta_stored)),
     )
     .map_err(|e| format!("image: {e}"))?;
-    let decoded = shared_types::image::decode(&image).map_err(|e| format!("image: {e:?}"))?;
+    let decoded = shared_types::image::decode(&image).map_err(|e| format!("image: {e}"))?;
     mark("image", &mut timings);
     let recheck = recheck(task, tt, &decoded).map_err(|e| e.to_string())?;
     mark("re-proof", &mut timings);

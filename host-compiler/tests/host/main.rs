@@ -59,6 +59,7 @@ mod optimize_potential;
 mod play_browser;
 mod play_plants;
 mod play_server;
+mod plain_bounds;
 mod property_semantics;
 mod pwa_example_6_4_period;
 mod pwa_learn;

@@ -95,13 +95,14 @@ impl<'s> Monitor<'s> {
             .chain(self.signals.iter().cloned())
             .collect();
         let set: Vec<&str> = sets.iter().map(|s| s.name.as_str()).collect();
+        // Each list quoted within `text::MAX_EXCERPT` (a trace of a million columns lists no million names).
         format!(
             "signals: {}; sets: {}",
-            sig.join(", "),
+            crate::text::excerpt(&sig.join(", ")),
             if set.is_empty() {
                 "(none; pass --sets)".to_string()
             } else {
-                set.join(", ")
+                crate::text::excerpt(&set.join(", "))
             }
         )
     }
@@ -119,7 +120,7 @@ impl<'s> Monitor<'s> {
                             src,
                             *span,
                             FormulaErrorKind::UnknownName { name: name.clone() },
-                            format!("unknown signal `{name}`"),
+                            format!("unknown signal `{}`", crate::text::excerpt(name)),
                             "not a column of the trace".into(),
                         )
                         .with_help(self.known(sets))
@@ -134,10 +135,11 @@ impl<'s> Monitor<'s> {
             }
             Expr::Set { name, span } => {
                 let Some(set) = sets.iter().find(|s| &s.name == name) else {
+                    let shown = crate::text::excerpt(name);
                     let msg = if self.column(name).is_some() {
-                        format!("`{name}` is a signal, not a set; compare it, e.g. `{name} >= 0`")
+                        format!("`{shown}` is a signal, not a set; compare it, e.g. `{shown} >= 0`")
                     } else {
-                        format!("unknown set `{name}`")
+                        format!("unknown set `{shown}`")
                     };
                     return Err(FormulaError::new(
                         src,
@@ -161,7 +163,9 @@ impl<'s> Monitor<'s> {
                 for s in &set.signals {
                     cols.push(self.column(s).ok_or_else(|| {
                         mismatch(format!(
-                            "set `{name}` is over signal `{s}`, which the trace does not have"
+                            "set `{}` is over signal `{}`, which the trace does not have",
+                            crate::text::excerpt(name),
+                            crate::text::excerpt(s)
                         ))
                         .with_help(self.known(sets))
                     })?);

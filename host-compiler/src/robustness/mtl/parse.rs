@@ -18,6 +18,8 @@
 //! ```
 //!
 //! Nesting is limited to [`MAX_DEPTH`] levels; `&` and `|` chains of any length are flat n-ary nodes.
+//! The text is at most [`MAX_FORMULA_LEN`] bytes and has at most [`MAX_FORMULA_ATOMS`] atoms (limits of
+//! `crate::spec::limits`), since every atom is evaluated at every sample of every run.
 //!
 //! An operator written without an interval ranges over [0, inf]. `F G U R true false inf` are reserved
 //! words. An identifier followed by `* + - <= >= < >` starts a linear predicate, any other identifier
@@ -43,6 +45,8 @@ pub enum FormulaErrorKind {
     DegeneratePredicate,
     /// Nesting deeper than `limit` levels ([`MAX_DEPTH`]).
     TooDeep { limit: usize },
+    /// A formula longer than [`MAX_FORMULA_LEN`] bytes or with more than [`MAX_FORMULA_ATOMS`] atoms.
+    TooLarge { what: &'static str, limit: usize },
     /// A name that is neither a signal of the trace (for predicates) nor a known set.
     UnknownName { name: String },
     /// A named set whose coordinates do not match the trace or whose dimension is wrong.
@@ -83,13 +87,16 @@ impl FormulaError {
         let line_start = before.rfind('\n').map(|i| i + 1).unwrap_or(0);
         let column = src[line_start..start].chars().count() + 1;
         let len = span.end.saturating_sub(span.start).min(src.len() - start);
+        // What a rendering shows: an overlong line cut around the span (`text::clip_source`).
+        let (shown, spans) = crate::text::clip_source(src, &[start..start + len]);
+        let at = spans.first().cloned().unwrap_or(0..0);
         Self {
             kind,
             message,
             line,
             column,
-            src: src.to_string(),
-            span: (start, len).into(),
+            src: shown,
+            span: (at.start, at.end - at.start).into(),
             label,
             help: None,
         }
@@ -270,6 +277,8 @@ struct Parser<'s> {
     pos: usize,
     /// Current nesting level ([`MAX_DEPTH`]).
     depth: usize,
+    /// Atoms parsed so far ([`MAX_FORMULA_ATOMS`]).
+    atoms: usize,
 }
 
 /// The deepest nesting a formula may have. Each parenthesis, prefix operator (`!`, `F`, `G`) and
@@ -278,6 +287,8 @@ struct Parser<'s> {
 /// neither the parser nor the evaluator, the printer or `Drop` (all recursive over the tree, whose
 /// depth this bounds) can overflow the stack.
 pub const MAX_DEPTH: usize = 100;
+
+pub use crate::spec::limits::{MAX_FORMULA_ATOMS, MAX_FORMULA_LEN};
 
 const FORMULA_START: &str =
     "a formula (`true`, `false`, `!`, `F`, `G`, `(`, a set name or a linear predicate)";
@@ -428,7 +439,32 @@ impl<'s> Parser<'s> {
         }
         self.primary()
     }
+    /// Counts one atom at the current token, or refuses past [`MAX_FORMULA_ATOMS`].
+    fn atom(&mut self) -> Result<(), FormulaError> {
+        self.atoms += 1;
+        if self.atoms <= MAX_FORMULA_ATOMS {
+            return Ok(());
+        }
+        Err(FormulaError::new(
+            self.src,
+            self.span(),
+            FormulaErrorKind::TooLarge {
+                what: "atoms",
+                limit: MAX_FORMULA_ATOMS,
+            },
+            format!(
+                "the formula has more than {MAX_FORMULA_ATOMS} atoms (set names, predicates, `true`, \
+                 `false`); atom {} is here",
+                self.atoms
+            ),
+            format!("atom {} of at most {MAX_FORMULA_ATOMS}", self.atoms),
+        )
+        .with_help("name a region in [sets.*] instead of spelling it out as many predicates"))
+    }
     fn primary(&mut self) -> Result<Expr, FormulaError> {
+        if matches!(self.peek(), Tok::Ident(_) | Tok::Num(_) | Tok::Minus | Tok::Plus) {
+            self.atom()?;
+        }
         match self.peek().clone() {
             Tok::LParen => {
                 self.descend()?;
@@ -636,12 +672,30 @@ impl<'s> Parser<'s> {
 
 /// Parse a formula (grammar in the module doc).
 pub fn parse(src: &str) -> Result<Expr, FormulaError> {
+    if src.len() > MAX_FORMULA_LEN {
+        let end = (0..=MAX_FORMULA_LEN).rev().find(|&i| src.is_char_boundary(i)).unwrap_or(0);
+        return Err(FormulaError::new(
+            src,
+            Span::new(end, src.len()),
+            FormulaErrorKind::TooLarge {
+                what: "bytes",
+                limit: MAX_FORMULA_LEN,
+            },
+            format!(
+                "the formula is {} bytes long, more than the limit {MAX_FORMULA_LEN}",
+                src.len()
+            ),
+            format!("beyond byte {MAX_FORMULA_LEN}"),
+        )
+        .with_help("name a region in [sets.*] instead of spelling it out as many predicates"));
+    }
     let toks = lex(src)?;
     let mut p = Parser {
         src,
         toks,
         pos: 0,
         depth: 0,
+        atoms: 0,
     };
     let e = p.formula()?;
     if *p.peek() != Tok::Eof {
