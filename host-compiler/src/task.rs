@@ -88,6 +88,21 @@ impl Task {
         })
     }
 
+    /// The same task with another Goal (the plant rebuilt from the spec; Unsafe, the input set, Init,
+    /// the horizon and the settings as they are): the task a cover is grown for when its runs must end in
+    /// a terminal law's handover region inside Goal ([`crate::certify::terminal`]'s module doc). The
+    /// spec's own Goal stays in [`Task::problem`], for the report and for judging runs.
+    pub fn with_goal(
+        &self,
+        piece: crate::property::ConvexPiece,
+        region: Box<dyn crate::geometry::Region>,
+    ) -> Result<Task, TaskError> {
+        let mut task = Task::new(self.problem.clone())?;
+        task.property.goal = region;
+        task.convex.goal = piece;
+        Ok(task)
+    }
+
     /// Init, a box in state coordinates.
     pub fn init(&self) -> &InitBox {
         &self.problem.init

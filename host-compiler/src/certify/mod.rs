@@ -213,8 +213,23 @@ pub struct LoopConstants {
     /// the MTL tube (Remark 2.29's embedding must certify the same δ) and the optimiser's gradient carry
     /// the directional one too.
     pub directional_unsafe: bool,
+    /// A set every run must stay in, at the samples and between them, from the first sample at which the
+    /// whole tube lies in it until the critical sample κ*: the task's Goal, where the loop's own goal is a
+    /// terminal law's handover region inside it (`certify::terminal`'s module doc, issue 42 item 4);
+    /// `None` otherwise ([`LoopConstants::with_stay_in`]).
+    pub stay_in: Option<StayIn>,
     /// ‖Ã^j‖_P ([`LoopConstants::power_norms`]), computed once when first asked.
     power_norms: std::sync::OnceLock<Vec<f64>>,
+}
+
+/// The set of [`LoopConstants::stay_in`], shared by every clone of the constants.
+#[derive(Clone)]
+pub struct StayIn(pub std::sync::Arc<dyn Region>);
+
+impl std::fmt::Debug for StayIn {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "StayIn(a region in dimension {})", self.0.dim())
+    }
 }
 
 /// Why a loop cannot be certified at all.
@@ -291,6 +306,7 @@ impl LoopConstants {
             mismatch,
             state_step,
             directional_unsafe: false,
+            stay_in: None,
             power_norms: std::sync::OnceLock::new(),
         })
     }
@@ -300,6 +316,15 @@ impl LoopConstants {
     pub fn with_directional_unsafe(self) -> Self {
         Self {
             directional_unsafe: true,
+            ..self
+        }
+    }
+
+    /// These constants with a set the runs must stay in from the first sample at which the whole tube
+    /// lies in it until κ* ([`LoopConstants::stay_in`]).
+    pub fn with_stay_in(self, region: std::sync::Arc<dyn Region>) -> Self {
+        Self {
+            stay_in: Some(StayIn(region)),
             ..self
         }
     }
@@ -739,6 +764,13 @@ pub fn certify_at(lp: &Loop<'_>, lc: &LoopConstants, nom: &Nominal, at: GoalAt) 
     let (k_input, delta_input) = input.map_or((0, f64::INFINITY), |c| (c.index, c.value));
     let r_crit = lc.r_crit(eps_f32);
     let d47 = goal.value.min(delta_unsafe_is).min(delta_input);
+    // Staying in the task's Goal until κ* (LoopConstants::stay_in): the largest radius up to d47 for which
+    // the tube, once wholly in it, stays in it.
+    let stay = lc
+        .stay_in
+        .as_ref()
+        .map(|s| StayMargins::new(lp, lc, nom, s.0.as_ref(), goal.index, eps_f32));
+    let d47 = stay.as_ref().map_or(d47, |s| s.largest(d47));
     // Theorem 3.21: any r in [r_crit, d47) works; the strict inequalities of Lemma 4.4 need r < d47.
     let mut delta = if d47 > 0.0 && r_crit < d47 {
         d47 * (1.0 - 1e-9)
@@ -753,6 +785,12 @@ pub fn certify_at(lp: &Loop<'_>, lc: &LoopConstants, nom: &Nominal, at: GoalAt) 
         let per_step = lc.roots.norm_into(lc.B.as_ref()) * eps_f32 + lc.mismatch_step();
         accumulated = lc.accumulation(N) * per_step * (1.0 + 1e-9);
         delta = delta.max((d47 - accumulated) * (1.0 - 1e-9));
+    }
+    if let Some(s) = &stay {
+        // The tube's radius lies between δ and δ + accumulated at every sample.
+        if delta > 0.0 && !s.holds(delta, delta + accumulated) {
+            delta = 0.0;
+        }
     }
     let delta_stored = selection_radius(lp.P, &nom.x[0], delta);
     Certificate {
@@ -769,6 +807,107 @@ pub fn certify_at(lp: &Loop<'_>, lc: &LoopConstants, nom: &Nominal, at: GoalAt) 
         delta,
         delta_stored,
         accumulated,
+    }
+}
+
+/// The figures of the stay-in condition ([`LoopConstants::stay_in`]) over samples 0..=κ*: the tube of
+/// radius r about x̃(κ) lies in the set at sample κ when its P-depth g_κ ≥ r, and between κ and κ + 1
+/// (κ < κ*) when r ≤ (g_κ − φ‖f_κ‖_P − φβ(ε̄ + D))/γ, the isotropic inter-sample bound of the module doc
+/// (item 2) taken against the set's complement. From κ* on the run is handed over to the terminal law,
+/// whose certificate covers the rest.
+struct StayMargins {
+    /// g_κ for κ ≤ κ*.
+    depth: Vec<f64>,
+    /// min(g_κ, the inter-sample margin) for κ < κ*, g_κ* at κ*.
+    margin: Vec<f64>,
+}
+
+impl StayMargins {
+    fn new(
+        lp: &Loop<'_>,
+        lc: &LoopConstants,
+        nom: &Nominal,
+        set: &dyn Region,
+        k_star: usize,
+        eps_f32: f64,
+    ) -> Self {
+        let metric = Metric {
+            n: lp.P.nrows(),
+            R: crate::linalg::to_row_major(lp.P),
+        };
+        let last = k_star.min(nom.x.len().saturating_sub(1));
+        let held = lc.held_disturbance(eps_f32);
+        let depth: Vec<f64> = nom.x[..=last]
+            .iter()
+            .map(|x| {
+                let v = set.signed_dist(x, &metric).value;
+                if v.is_nan() {
+                    f64::NEG_INFINITY
+                } else {
+                    v
+                }
+            })
+            .collect();
+        let margin = depth
+            .iter()
+            .enumerate()
+            .map(|(k, &g)| {
+                if k == last || k >= nom.steps() {
+                    return g;
+                }
+                match lp.plant.vector_field(lp.loc, &nom.x[k], &nom.u[k]) {
+                    Some(f) => {
+                        let between = (g - lc.phi * crate::linalg::p_norm(lp.P, &f) - held) / lc.gamma;
+                        if between.is_nan() {
+                            f64::NEG_INFINITY
+                        } else {
+                            g.min(between)
+                        }
+                    }
+                    None => g,
+                }
+            })
+            .collect();
+        Self { depth, margin }
+    }
+
+    /// Whether tubes of radius between `lo` and `hi` stay in the set: from the first sample with depth ≥ lo
+    /// (the earliest the whole tube can lie in it) to κ*, every margin ≥ hi. True when no sample has
+    /// depth ≥ lo (the tube is never wholly in the set before κ*: nothing to keep).
+    fn holds(&self, lo: f64, hi: f64) -> bool {
+        match self.depth.iter().position(|&g| g >= lo) {
+            None => true,
+            Some(j) => self.margin[j..].iter().all(|&m| m >= hi),
+        }
+    }
+
+    /// The largest r ≤ `bound` (less a relative 10⁻⁹) for which [`StayMargins::holds`]`(r, r)`, or 0. With
+    /// j the first sample whose depth reaches r, r must exceed every earlier depth and be at most the least
+    /// margin from j on: each j gives one candidate, min(suffix minimum at j, bound).
+    fn largest(&self, bound: f64) -> f64 {
+        if !(bound > 0.0) {
+            return bound;
+        }
+        let n = self.margin.len();
+        let mut suffix = vec![f64::INFINITY; n + 1];
+        for k in (0..n).rev() {
+            suffix[k] = suffix[k + 1].min(self.margin[k]);
+        }
+        let mut before = f64::NEG_INFINITY;
+        let mut best = 0.0f64;
+        for j in 0..n {
+            let r = suffix[j].min(bound);
+            // δ is taken a relative 10⁻⁹ below its bound: the first sample at depth ≥ δ must still be j.
+            if r * (1.0 - 1e-9) > before && r > best {
+                best = r;
+            }
+            before = before.max(self.depth[j]);
+        }
+        // No sample wholly in the set below the bound: nothing to keep.
+        if before < bound * (1.0 - 1e-9) {
+            best = best.max(bound);
+        }
+        best
     }
 }
 
@@ -810,4 +949,36 @@ pub fn shipped(
     let nom = lp.simulate(x0, &v32);
     let cert = certify(lp, lc, &nom);
     (nom, cert)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::StayMargins;
+
+    fn stay(depth: &[f64], margin: &[f64]) -> StayMargins {
+        StayMargins {
+            depth: depth.to_vec(),
+            margin: margin.to_vec(),
+        }
+    }
+
+    /// A nominal that enters the set, leaves it and comes back: a tube of radius r is wholly in it first
+    /// at the first sample of depth ≥ r and must stay from there, so a large r (first wholly inside
+    /// after the dip) passes, a middle one (inside before the dip) fails, and the largest passing r up to
+    /// the bound is found.
+    #[test]
+    fn the_stay_condition_starts_where_the_tube_is_first_wholly_inside() {
+        // Depths: outside, inside 0.2, dips out to −0.1, deep inside 0.5 and 0.6 (κ* = 4).
+        let s = stay(&[-1.0, 0.2, -0.1, 0.5, 0.6], &[-1.0, 0.2, -0.1, 0.5, 0.6]);
+        assert!(s.holds(0.4, 0.4), "wholly inside first at κ = 3, and stays");
+        assert!(!s.holds(0.1, 0.1), "wholly inside at κ = 1, then out at κ = 2");
+        assert!((s.largest(0.55) - 0.55).abs() < 1e-12);
+        assert!((s.largest(0.45) - 0.45).abs() < 1e-12);
+        // A bound below the first visit's depth: every radius up to it meets the dip.
+        assert_eq!(s.largest(0.15), 0.0);
+        // The inter-sample margin counts between κ and κ + 1.
+        let s = stay(&[-1.0, 0.5, 0.6], &[-1.0, 0.3, 0.6]);
+        assert!((s.largest(0.5) - 0.3).abs() < 1e-12);
+        assert!(s.holds(0.3, 0.3) && !s.holds(0.31, 0.31));
+    }
 }

@@ -26,6 +26,22 @@
 //! Together: a run handed over at any sample is in Goal then and at every later instant, never in Unsafe,
 //! with every input in the input set. That is the reach-avoid property completed, so the handover may
 //! happen whenever the test accepts (before T as well).
+//!
+//! # Handed over before it can leave Goal (issue 42, item 4)
+//! A run that reaches Goal but not the handover test's acceptance would keep the table (its last row
+//! after the end) or the PWA law, which certify nothing past Goal. So where a law is certified, the task
+//! the cover is certified for has the **handover region** H = {x : ‖x − x_e‖_{P_t} ≤ ρ_h} as its Goal
+//! ([`handover_radius`]: ρ_h is [`super::selection_floor`] of the stored r̂, within which the f32 test
+//! provably accepts every state, its quantisation to f32 included, shrunk by a relative 10⁻⁶). H lies in
+//! E_1, hence in Goal (item 6), so a run certified to reach H within T reaches Goal within T: the original
+//! task is implied. At the sample κ* at which a certified ball's tube lies in H, the evaluator's first act
+//! of the step is the handover test, which accepts: every run is handed over by κ* at the latest (earlier
+//! where the test accepts earlier), and items 4–6 keep it in Goal and out of Unsafe from then on, between
+//! samples too. Before the handover the cover's certificate holds as ever: Unsafe and the inputs over the
+//! whole table, between samples too. And from the first sample at which the whole tube lies in Goal until
+//! κ*, the tube stays in Goal at the samples and between them ([`super::LoopConstants::stay_in`]): in the
+//! tube's terms, no run leaves Goal before its handover. A PWA image built from that cover ends its
+//! successor chains in H too (`verify::pwa` rechecks liveness with H from the image's own bytes).
 
 // Negated comparisons (`!(x >= y)`) are deliberate: they reject NaN as well.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
@@ -220,6 +236,40 @@ pub fn certify(
         goal_depth,
         unsafe_distance,
     })
+}
+
+/// ρ_h, the radius of the handover region H (module doc) in the law's metric: the f32 handover test with
+/// the stored r̂ accepts every state within it ([`selection_floor`] at radius 1, the acceptance's own
+/// bound), shrunk by a relative 10⁻⁶ so that a point a solver places on H's boundary is still accepted.
+/// 0 when the rounding analysis does not apply (then nothing is known to be handed over).
+pub fn handover_radius(law: &StoredTerminal) -> f64 {
+    (selection_floor(law.P.as_ref(), &law.x_e, law.radius, 1.0) * (1.0 - 1e-6)).min(1.0)
+}
+
+/// H = {x : ‖x − x_e‖_{P_t} ≤ ρ_h} as a convex piece (the generator's form) and as a region (what
+/// certification and verification evaluate); `None` when ρ_h is 0 or P_t is not usable.
+pub fn handover_region(
+    law: &StoredTerminal,
+) -> Option<(crate::property::ConvexPiece, Box<dyn crate::geometry::Region>)> {
+    let n = law.x_e.len();
+    let rho = handover_radius(law);
+    if !(rho > 0.0) {
+        return None;
+    }
+    let Q = Mat::from_fn(n, n, |i, j| {
+        0.5 * (law.P[(i, j)] + law.P[(j, i)]) / (rho * rho)
+    });
+    let region = crate::geometry::Ellipsoid::new(
+        law.x_e.clone(),
+        crate::linalg::to_row_major(Q.as_ref()),
+    )
+    .ok()?;
+    let piece = crate::property::ConvexPiece::Ellipsoid {
+        C: Mat::identity(n, n),
+        c: law.x_e.clone(),
+        Q,
+    };
+    Some((piece, Box::new(region)))
 }
 
 /// max over s = ih/N (i = 0..=N) of ‖e^{As} + Γ(s)BK‖_P, with e^{As} and Γ(s)B from the exponential of

@@ -482,6 +482,8 @@ struct Report {
     model_maps: Option<MapsJson>,
     /// The terminal law (section 11; `null`: the image has none).
     terminal_law: Option<TerminalLawJson>,
+    /// What the image does after Goal, in one line ([`crate::report::after_goal_line`]).
+    after_goal: String,
 }
 
 /// The terminal law as stored (f32 values): its equilibrium, law u = K_t x + v_t and the ellipsoid
@@ -566,6 +568,7 @@ impl Report {
                 })
                 .collect(),
             total_steps: img.total_steps(),
+            after_goal: crate::report::after_goal_line(&img),
             terminal: (img.mode() == Mode::Feedforward).then_some(match img.terminal() {
                 Terminal::HoldLast => "hold_last",
                 Terminal::Fallback => "fallback",
@@ -737,6 +740,7 @@ fn summary(r: &Report, path: &str) -> String {
             }
         );
     }
+    let _ = writeln!(s, "{}", r.after_goal);
     match &r.fallback {
         FallbackJson::Hold => {
             let _ = writeln!(s, "fallback: hold the last applied input");

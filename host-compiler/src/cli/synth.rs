@@ -258,13 +258,7 @@ pub fn run(a: &SynthArgs) -> Outcome {
             at.evaluations, at.worst_robustness, at.violations
         );
     }
-    print_terminal(&s.terminal, &s.verify);
-    if s.verify.after_goal_input_excursions + s.verify.after_goal_unsafe > 0 {
-        println!(
-            "after Goal        {} runs left the input set, {} entered Unsafe under the terminal law (not judged: the task ends in Goal)",
-            s.verify.after_goal_input_excursions, s.verify.after_goal_unsafe
-        );
-    }
+    print_terminal(&s.terminal, &s.verify, s.handover_radius, &s.image);
     if certified {
         println!(
             "image             {} ({} bytes)",
@@ -328,9 +322,16 @@ pub(crate) fn terminal_json(t: &crate::synth::TerminalOutcome) -> serde_json::Va
     }
 }
 
-/// The terminal law's lines of the summary: what was certified (or why nothing was) and what the
-/// Monte Carlo saw after Goal.
-pub(crate) fn print_terminal(t: &crate::synth::TerminalOutcome, v: &crate::verify::VerifyReport) {
+/// The terminal law's lines of the summary: what was certified (or why nothing was), what the image
+/// does after Goal ([`crate::report::after_goal_line`]) and what the Monte Carlo saw after Goal: with a
+/// terminal law a judged result (each run counted is among the violations, `verify`'s module doc), else
+/// counts that are not judged.
+pub(crate) fn print_terminal(
+    t: &crate::synth::TerminalOutcome,
+    v: &crate::verify::VerifyReport,
+    handover_radius: Option<f64>,
+    image: &[u8],
+) {
     use crate::synth::TerminalOutcome;
     match t {
         TerminalOutcome::Certified(d) => {
@@ -339,16 +340,36 @@ pub(crate) fn print_terminal(t: &crate::synth::TerminalOutcome, v: &crate::verif
                 "terminal law      certified at x_e = {:?}, u_e = {:?}: invariant ellipsoid (contraction {:.4}, next sample within {:.4} of the accepted {:.4}), Goal depth {:.4} ≥ {:.4} between samples",
                 d.stored.x_e, d.u_e, c.contraction, c.theta, c.acceptance_floor, c.goal_depth, c.between_samples
             );
+            if let Some(rho) = handover_radius {
+                println!(
+                    "handover          the cover's runs are certified to reach the handover region (radius {rho:.6} in the law's metric, accepted by the f32 test) within the horizon"
+                );
+            }
         }
         TerminalOutcome::None(e) => println!("terminal law      none: {e}"),
         TerminalOutcome::NotAsked => {
             println!("terminal law      none (the spec's [synthesis] terminal)")
         }
     }
-    println!(
-        "after Goal        {} of the runs that reached Goal were outside it again within {} samples; {} were handed over to the terminal law",
-        v.runs_leaving_goal, v.run_steps, v.handed_over
-    );
+    if let Ok(img) = shared_types::image::decode(image) {
+        println!("{}", crate::report::after_goal_line(&img));
+    }
+    if v.after_goal_judged {
+        println!(
+            "after Goal        judged over runs of {} samples: {} runs left Goal, {} entered Unsafe, {} left the input set, {} were not handed over within the horizon (each a violation); {} were handed over",
+            v.run_steps,
+            v.runs_leaving_goal,
+            v.after_goal_unsafe,
+            v.after_goal_input_excursions,
+            v.not_handed_over,
+            v.handed_over
+        );
+    } else {
+        println!(
+            "after Goal        not judged (no terminal law): within {} samples {} runs were outside Goal again, {} entered Unsafe, {} left the input set",
+            v.run_steps, v.runs_leaving_goal, v.after_goal_unsafe, v.after_goal_input_excursions
+        );
+    }
 }
 
 /// [`Exit::Success`] when the cover met the coverage target, else [`Exit::ShortOfTarget`] with a line on

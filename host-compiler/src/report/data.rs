@@ -63,10 +63,12 @@ pub struct VerifySummary {
     pub worst_goal_margin: f64,
     pub worst_unsafe_margin: f64,
     pub worst_input_margin: f64,
-    /// Runs whose terminal law left the input set / entered Unsafe after the task ended in Goal (not
-    /// judged; shown so that nobody mistakes the terminal law for a certified one).
+    /// Runs that left the input set / entered Unsafe after the task ended in Goal: violations when the
+    /// image has a terminal law (`after_goal_judged`), else not judged (shown so that nobody mistakes
+    /// what runs after Goal for something certified).
     pub after_goal_input_excursions: usize,
     pub after_goal_unsafe: usize,
+    pub after_goal_judged: bool,
     /// The falsifier, when it ran: its runs, the least run robustness it found, its violations.
     pub attack: Option<(usize, f64, usize)>,
 }
@@ -89,6 +91,12 @@ pub struct TerminalReport {
     pub runs_leaving_goal: usize,
     pub handed_over: usize,
     pub run_steps: usize,
+    /// With a terminal law (judged after Goal, each a violation): runs not handed over within the
+    /// horizon; and the radius ρ_h of the handover region the cover's runs are certified to reach.
+    pub not_handed_over: usize,
+    pub handover_radius: Option<f64>,
+    /// What the image does after Goal, in one line ([`crate::report::after_goal_line`]).
+    pub after_goal: String,
 }
 
 /// Everything `report.html` shows.

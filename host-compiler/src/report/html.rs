@@ -454,8 +454,7 @@ fn terminal(h: &mut String, t: &super::data::TerminalReport) {
     if t.x_e.is_empty() {
         let _ = writeln!(
             h,
-            "<p>No terminal law: {}. Past the table the image keeps its behaviour (the last row's law or \
-             the fallback); what runs do after Goal is not certified.</p>",
+            "<p>No terminal law: {}.</p>",
             escape(t.status.trim_start_matches("none: "))
         );
     } else {
@@ -491,12 +490,34 @@ fn terminal(h: &mut String, t: &super::data::TerminalReport) {
             .collect();
         kv(h, &rows);
     }
-    let _ = writeln!(
-        h,
-        "<p id=\"after-goal\">Monte Carlo, runs of {} samples: {} handed over to the terminal law; {} were \
-         outside Goal again after reaching it.</p>",
-        t.run_steps, t.handed_over, t.runs_leaving_goal
-    );
+    if !t.after_goal.is_empty() {
+        let _ = writeln!(h, "<p id=\"after-goal-line\">{}.</p>", escape(&t.after_goal));
+    }
+    if let Some(rho) = t.handover_radius {
+        let _ = writeln!(
+            h,
+            "<p>The cover's runs are certified to reach the handover region (radius {} in the law's \
+             metric, where the f32 handover test accepts every state) within the horizon, and to stay \
+             in Goal from the first sample their whole tube lies in it until then.</p>",
+            num(rho)
+        );
+    }
+    if t.x_e.is_empty() {
+        let _ = writeln!(
+            h,
+            "<p id=\"after-goal\">Monte Carlo, runs of {} samples: {} were outside Goal again after \
+             reaching it (not judged).</p>",
+            t.run_steps, t.runs_leaving_goal
+        );
+    } else {
+        let _ = writeln!(
+            h,
+            "<p id=\"after-goal\">Monte Carlo, runs of {} samples, judged after Goal: {} handed over to \
+             the terminal law, {} not handed over within the horizon, {} outside Goal again after \
+             reaching it.</p>",
+            t.run_steps, t.handed_over, t.not_handed_over, t.runs_leaving_goal
+        );
+    }
     h.push_str("</section>\n");
 }
 
@@ -551,19 +572,27 @@ fn verification(h: &mut String, v: Option<&VerifySummary>) {
                         },
                     ),
                     (
-                        "After Goal (not judged)",
+                        if v.after_goal_judged {
+                            "After Goal (judged)"
+                        } else {
+                            "After Goal (not judged)"
+                        },
                         format!(
-                            "{} runs left the input set, {} entered Unsafe under the terminal law",
+                            "{} runs left the input set, {} entered Unsafe after Goal",
                             count(v.after_goal_input_excursions),
                             count(v.after_goal_unsafe)
                         ),
                     ),
                 ],
             );
-            h.push_str(
+            h.push_str(if v.after_goal_judged {
+                "<p class=\"note\">The reach-avoid task of Theorem 4.7 ends at a run's first sample in \
+                 Goal; with the terminal law the whole run of twice the horizon is judged, and a run that \
+                 leaves Goal, enters Unsafe or leaves the input set after Goal is a violation.</p>\n"
+            } else {
                 "<p class=\"note\">A run is judged until its first sample in Goal, where the reach-avoid \
-                 task of Theorem 4.7 ends; the terminal law that runs after it is not certified.</p>\n",
-            );
+                 task of Theorem 4.7 ends; what the image does after it is not certified.</p>\n"
+            });
         }
     }
     h.push_str("</section>\n");

@@ -89,6 +89,12 @@ pub fn render(task: &HybridTask, spec: &str, s: &HybridSynthesis) -> String {
     if let Some(v) = &s.verify.first_violation {
         h.push_str(&format!("<p><b>First violation:</b> {}</p>", escape(v)));
     }
+    if let Ok(img) = shared_types::image::decode(&s.image) {
+        h.push_str(&format!(
+            "<p id=\"after-goal-line\">{}.</p>",
+            escape(&super::after_goal_line(&img))
+        ));
+    }
 
     h.push_str(
         "<h2>Automaton</h2><table><tr><th>edge</th><th>kind</th><th>guard</th><th>reset</th></tr>",

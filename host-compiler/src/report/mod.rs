@@ -3,6 +3,7 @@
 //! `planar` the 2-D clipping, `plots` the SVG plots, `format` the number and text formatting, and `html`
 //! the page itself.
 
+pub mod after_goal;
 pub mod data;
 pub mod format;
 pub mod html;
@@ -14,5 +15,6 @@ mod present;
 pub mod pwa;
 pub mod temporal;
 
+pub use after_goal::after_goal_line;
 pub use html::{render_html, verdict, write_report, Verdict};
 pub use present::report_data;

@@ -239,6 +239,7 @@ pub fn report_data(
             worst_input_margin: s.verify.worst_input_margin,
             after_goal_input_excursions: s.verify.after_goal_input_excursions,
             after_goal_unsafe: s.verify.after_goal_unsafe,
+            after_goal_judged: s.verify.after_goal_judged,
             attack: s
                 .attack
                 .as_ref()
@@ -265,6 +266,11 @@ fn terminal_report(s: &Synthesis, pl: [usize; 2]) -> TerminalReport {
         runs_leaving_goal: s.verify.runs_leaving_goal,
         handed_over: s.verify.handed_over,
         run_steps: s.verify.run_steps,
+        not_handed_over: s.verify.not_handed_over,
+        handover_radius: s.handover_radius,
+        after_goal: shared_types::image::decode(&s.image)
+            .map(|img| crate::report::after_goal_line(&img))
+            .unwrap_or_default(),
     };
     match &s.terminal {
         TerminalOutcome::Certified(d) => {

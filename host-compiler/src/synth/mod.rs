@@ -10,6 +10,11 @@
 //! stops when Init is covered, the budget is spent, no local variation reaches the rest ("needs a new seed
 //! trajectory"), or on [`SynthOptions::cancel`] (Ctrl-C), always with a verified image of what is certified.
 //!
+//! Where a terminal law is certified (designed before the cover, [`terminal_for`]), the cover is grown for
+//! the task whose Goal is the law's handover region ([`handover_task`]), so that every certified run is
+//! handed over within the horizon, before it can leave Goal (the argument: `certify::terminal`'s module
+//! doc); the verification judges the spec's own task, to twice the horizon.
+//!
 //! Everything random is drawn from ChaCha streams seeded by the spec's seed, and parallel work is
 //! collected in a fixed order, so the same spec and seed give a byte-identical image.
 
@@ -114,6 +119,9 @@ pub struct Synthesis {
     pub warnings: Vec<String>,
     /// The terminal law in the image, or why there is none (issue 17).
     pub terminal: TerminalOutcome,
+    /// With a certified terminal law: ρ_h, the radius (in the law's metric) of the handover region the
+    /// cover's runs are certified to reach ([`handover_task`]).
+    pub handover_radius: Option<f64>,
 }
 
 impl Synthesis {
@@ -197,6 +205,8 @@ pub enum SynthError {
     Attack(#[from] AttackError),
     #[error("[synthesis] terminal = \"invariant\": {0}")]
     Terminal(NoTerminal),
+    #[error("the terminal law's handover region: {0}")]
+    Handover(String),
 }
 
 /// Run the whole pipeline.
@@ -210,10 +220,9 @@ pub fn synthesize(task: &Task, opts: &SynthOptions) -> Result<Synthesis, SynthEr
     let mut warnings = design.warnings.clone();
     timings.push(("CAF (SDP)".to_string(), t0.elapsed().as_secs_f64()));
 
-    let lp = Loop::new(task, &design);
-    let lc = LoopConstants::new(&lp)?;
-    // The terminal law first: it does not depend on the cover, and a spec that requires one that does
-    // not exist fails here rather than after the growth.
+    // The terminal law first: it does not depend on the cover, a spec that requires one that does not
+    // exist fails here rather than after the growth, and where one is certified the cover is grown for
+    // its handover region (below).
     let t_terminal = Instant::now();
     let terminal = terminal_for(task)?;
     timings.push((
@@ -224,10 +233,27 @@ pub fn synthesize(task: &Task, opts: &SynthOptions) -> Result<Synthesis, SynthEr
         TerminalOutcome::None(e) => warnings.push(format!("no terminal law: {e}")),
         TerminalOutcome::Certified(_) | TerminalOutcome::NotAsked => {}
     }
+    // With a certified terminal law, every run must be handed over before it can leave Goal (issue 42,
+    // item 4; the argument is certify::terminal's module doc): the cover's Goal is the handover region
+    // H ⊂ Goal, and its tubes stay in the task's Goal from the first sample wholly in it until H.
+    let handover = match terminal.design() {
+        Some(d) => Some(handover_task(task, d)?),
+        None => None,
+    };
+    let cover_task = handover.as_ref().map_or(task, |(t, _)| t);
+    let lp = Loop::new(cover_task, &design);
+    let mut lc = LoopConstants::new(&lp)?;
+    if handover.is_some() {
+        let goal = task
+            .problem
+            .goal_region()
+            .map_err(|e| SynthError::Handover(e.to_string()))?;
+        lc = lc.with_stay_in(Arc::from(goal));
+    }
 
     let t1 = Instant::now();
     let grown = grow(
-        task,
+        cover_task,
         &lp,
         &lc,
         &GrowOptions {
@@ -339,5 +365,23 @@ pub fn synthesize(task: &Task, opts: &SynthOptions) -> Result<Synthesis, SynthEr
         timings,
         warnings,
         terminal,
+        handover_radius: handover.map(|(_, rho)| rho),
     })
+}
+
+/// The task a cover is grown for under a certified terminal law `d`: the task with the law's handover
+/// region H as its Goal ([`crate::certify::terminal::handover_region`]), and H's radius ρ_h in the
+/// law's metric.
+pub fn handover_task(task: &Task, d: &TerminalDesign) -> Result<(Task, f64), SynthError> {
+    let (piece, region) = crate::certify::terminal::handover_region(&d.stored).ok_or_else(|| {
+        SynthError::Handover(
+            "the f32 handover test is not proved to accept any state (its rounding analysis does not \
+             apply)"
+                .into(),
+        )
+    })?;
+    let t = task
+        .with_goal(piece, region)
+        .map_err(|e| SynthError::Handover(e.to_string()))?;
+    Ok((t, crate::certify::terminal::handover_radius(&d.stored)))
 }

@@ -132,12 +132,14 @@ pub fn recheck(
     let (n, m) = (image.n(), image.m());
     let K = Mat::from_fn(m, n, |i, j| image.K(0, i, j) as f64);
     let P = sym(Mat::from_fn(n, n, |i, j| image.P(0, i, j) as f64).as_ref());
+    // With a terminal law the runs are certified to reach its handover region (verify's module doc).
+    let handover = super::handover_target(image);
     let lp = Loop {
         plant: judge.plant,
         loc: 0,
         K: K.as_ref(),
         P: P.as_ref(),
-        goal: judge.property.goal.as_ref(),
+        goal: handover.as_deref().unwrap_or(judge.goal()),
         unsafe_set: judge.property.unsafe_region(),
         input: &judge.property.input,
     };

@@ -8,9 +8,17 @@
 //! The task is the reach-avoid problem of Theorem 4.7: it is met at the first sample in Goal, provided
 //! Unsafe was avoided and every input was admissible up to then. That is exactly what a certificate
 //! proves (the ball reaches Goal at k* and the tube is checked up to the end of its table), so only that
-//! part of a run is judged. A run is still simulated to the horizon, and what the terminal law does after
-//! Goal (inputs outside the set, entering Unsafe) is counted and reported separately, not as a violation:
+//! part of a run is judged. A run is still simulated to the horizon, and what the image does after Goal
+//! (inputs outside the set, entering Unsafe) is counted and reported separately, not as a violation:
 //! a trajectory whose table the optimiser cut at k* (§5.3) certifies nothing after it.
+//!
+//! # After Goal, with a terminal law (issue 42, item 4)
+//! An image with a terminal law (section 11) is certified for the whole run: its cover reaches the law's
+//! handover region inside Goal, so every run is handed over within the horizon and the law keeps it in
+//! Goal for ever (`certify::terminal`'s module doc). Its runs last 2T, and after the first sample in Goal
+//! each of these is a violation ([`RunOutcome::terminal_violation`]): outside Goal again (at a sample or
+//! between samples), in Unsafe, an input outside the set, a refusal by the evaluator, or no handover
+//! within the horizon.
 
 pub mod attack;
 pub mod feedforward;
@@ -216,8 +224,12 @@ pub struct RunOutcome {
     pub left_goal: bool,
     /// The terminal law took over (images with one).
     pub handed_over: bool,
-    /// Under the terminal law the run left Goal, entered Unsafe, applied an input outside the set or was
-    /// refused by the evaluator: the terminal law's certificate is broken (a violation).
+    /// The run reached Goal but the terminal law had not taken over by the end of the horizon (images
+    /// with one; a violation).
+    pub not_handed_over: bool,
+    /// With a terminal law in the image, after the run's first sample in Goal: it left Goal, entered
+    /// Unsafe, applied an input outside the set, was refused by the evaluator or was not handed over
+    /// within the horizon. The certificate covers the whole run (module doc): a violation.
     pub terminal_violation: bool,
 }
 
@@ -240,13 +252,15 @@ impl RunOutcome {
             after_goal_unsafe: false,
             left_goal: false,
             handed_over: false,
+            not_handed_over: false,
             terminal_violation: false,
         }
     }
 
     /// Records that the evaluator refused the state at sample `k`: at k = 0 the start lies outside the
-    /// cover (not a violation); before Goal an evaluator error; after Goal a violation of the terminal
-    /// law's certificate when that law was in charge (`terminal`), else nothing (the task has ended).
+    /// cover (not a violation); before Goal an evaluator error; after Goal a violation when the run is
+    /// judged after Goal (`terminal`: the image has a terminal law, module doc), else nothing (the task
+    /// has ended).
     pub fn refused(&mut self, k: usize, terminal: bool) {
         if k == 0 {
             self.rejected = true;
@@ -292,6 +306,12 @@ pub struct VerifyReport {
     /// law, else T), and runs the terminal law took over (counted among the accepted runs).
     pub runs_leaving_goal: usize,
     pub handed_over: usize,
+    /// Runs that reached Goal and were not handed over within the horizon (images with a terminal law).
+    pub not_handed_over: usize,
+    /// Whether what runs do after Goal is judged (the image has a terminal law, module doc): then every
+    /// run counted above, and every run entering Unsafe or leaving the input set after Goal, is among
+    /// the violations.
+    pub after_goal_judged: bool,
     /// Samples each run lasts: the horizon, or twice it with a terminal law.
     pub run_steps: usize,
 }
@@ -403,18 +423,19 @@ fn run_until(
     let mut ctl = Controller::new(*image);
     let mut x = x0.to_vec();
     let mut out = RunOutcome::new(x0);
-    // Judged until the first sample in Goal (module doc); after it, only recorded, except under a
+    // Judged until the first sample in Goal (module doc); after it, only recorded, except with a
     // terminal law, whose certificate covers the rest of the run.
-    let check = |x: &[f64], out: &mut RunOutcome, sample: bool, terminal: bool| {
+    let judged = image.terminal_law().is_some();
+    let check = |x: &[f64], out: &mut RunOutcome, sample: bool| {
         if out.goal_step.is_some() && !judge.goal().contains(x) {
             out.left_goal = true;
-            out.terminal_violation |= terminal;
+            out.terminal_violation |= judged;
         }
         if let Some(us) = judge.unsafe_set() {
             let inside = us.contains(x);
             if out.goal_step.is_some() {
                 out.after_goal_unsafe |= inside;
-                out.terminal_violation |= inside && terminal;
+                out.terminal_violation |= inside && judged;
                 return;
             }
             out.entered_unsafe |= inside;
@@ -423,7 +444,7 @@ fn run_until(
             }
         }
     };
-    check(&x, &mut out, true, false);
+    check(&x, &mut out, true);
     for k in 0..=last {
         visit(&x);
         // Only samples within the horizon get here before Goal (the loop ends at T without it).
@@ -443,16 +464,20 @@ fn run_until(
         let u: Vec<f64> = match ctl.step(&xf) {
             Ok(u) => u.as_slice().iter().map(|&v| v as f64).collect(),
             Err(_) => {
-                out.refused(k, ctl.in_terminal_phase());
+                out.refused(k, judged);
                 return out;
             }
         };
-        let terminal = ctl.in_terminal_phase();
-        out.handed_over |= terminal;
+        out.handed_over |= ctl.in_terminal_phase();
+        // The handover happens at the step of sample κ* ≤ N ≤ T at the latest.
+        if judged && k == judge.steps && out.goal_step.is_some() && !out.handed_over {
+            out.not_handed_over = true;
+            out.terminal_violation = true;
+        }
         let s = input_slack(judge.input(), &u);
         if out.goal_step.is_some() {
             out.after_goal_input_excursion |= s < 0.0;
-            out.terminal_violation |= terminal && s < 0.0;
+            out.terminal_violation |= judged && s < 0.0;
         } else {
             out.input_margin = out.input_margin.min(s);
             if s < 0.0 {
@@ -461,9 +486,9 @@ fn run_until(
         }
         judge
             .plant
-            .between_samples(0, &x, &u, &mut |xs| check(xs, &mut out, false, terminal));
+            .between_samples(0, &x, &u, &mut |xs| check(xs, &mut out, false));
         x = judge.plant.step(0, &x, &u);
-        check(&x, &mut out, true, terminal);
+        check(&x, &mut out, true);
     }
     out
 }
@@ -481,6 +506,19 @@ pub fn recheck_terminal(
         &task.property,
         &stored,
     ))
+}
+
+/// Where the image's runs are certified to end: with a terminal law, its handover region H inside Goal,
+/// from the section's own bytes ([`crate::certify::terminal::handover_region`]; the empty set when the
+/// f32 test is proved to accept nothing); `None` without a terminal law (the task's Goal).
+pub fn handover_target(image: &Image<'_>) -> Option<Box<dyn Region>> {
+    let law = image.terminal_law()?;
+    let (n, m) = (image.n(), image.m());
+    let stored = crate::emit::stored_terminal(&law, n, m);
+    Some(
+        crate::certify::terminal::handover_region(&stored)
+            .map_or_else(|| Box::new(crate::geometry::Empty(n)) as Box<dyn Region>, |(_, h)| h),
+    )
 }
 
 /// Samples a run of `image` lasts: the horizon, or twice it when the image has a terminal law (whose
@@ -545,6 +583,7 @@ pub fn monte_carlo(
         .collect();
     let mut report = summarize(&outcomes, interior_runs, boundary_runs);
     report.run_steps = run_steps(judge, image);
+    report.after_goal_judged = image.terminal_law().is_some();
     Ok(report)
 }
 
@@ -606,6 +645,8 @@ pub fn summarize(
         after_goal_unsafe: outcomes.iter().filter(|o| o.after_goal_unsafe).count(),
         runs_leaving_goal: outcomes.iter().filter(|o| o.left_goal).count(),
         handed_over: outcomes.iter().filter(|o| o.handed_over).count(),
+        not_handed_over: outcomes.iter().filter(|o| o.not_handed_over).count(),
+        after_goal_judged: false,
         run_steps: 0,
     }
 }

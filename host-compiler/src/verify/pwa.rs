@@ -35,6 +35,10 @@
 //!   (containment), and the first listed ball containing x⁺ has rank ≤ τ(b') ≤ τ(b) − 1: Goal is reached
 //!   after at most τ(b) + 1 steps. The least ranks must give at most the horizon's steps. The learner's
 //!   order (increasing κ*_i − κ) is one such ranking; the recheck derives its own from the bytes.
+//!   With a terminal law (section 11), "Goal" here is the law's handover region H inside Goal, derived
+//!   from the section's own bytes ([`crate::certify::terminal::handover_region`]): every run then reaches
+//!   a state the f32 handover test accepts within T, and the law (its certificate rechecked apart) keeps
+//!   it in Goal from there; the Monte Carlo judges the whole run of 2T ([`super`]'s module doc).
 //! * **Input** over every listed ball, and **Unsafe between samples** for continuous plants (the bound of
 //!   [`crate::certify`] item 2 with the law's gain).
 
@@ -291,6 +295,9 @@ pub fn recheck(judge: &Judge<'_>, image: &Image<'_>) -> Result<PwaRecheck, Reche
             }
         })
         .collect();
+    // Where a run ends: Goal, or with a terminal law its handover region (module doc).
+    let handover = super::handover_target(image);
+    let target = handover.as_deref().unwrap_or(judge.goal());
     // (ball, law) pairs, once each. The evaluator applies the law of the ball that holds the state (the
     // ball's partition, not the leaf's: a leaf may list balls of several laws), so that is the law checked.
     let mut pairs: Vec<(usize, usize)> = Vec::new();
@@ -331,10 +338,10 @@ pub fn recheck(judge: &Judge<'_>, image: &Image<'_>) -> Result<PwaRecheck, Reche
                 .map(|(a, o)| a + o)
                 .collect();
             let free = model.step(c, &vec![0.0; m]);
-            // Image of the ball lies in Goal?
+            // Image of the ball lies in Goal (the handover region with a terminal law)?
             let cplus = model.step(c, &u);
             let r_plus = L.norm * r + normB * eps_round;
-            let in_goal = judge.goal().signed_dist(&cplus, &metric).value > r_plus;
+            let in_goal = target.signed_dist(&cplus, &metric).value > r_plus;
             let (mut rcrit_ratio, mut reach_ratio) = (f64::INFINITY, f64::INFINITY);
             let mut succ = Vec::new();
             let mut best_valid = false;
@@ -540,13 +547,14 @@ pub fn run_pwa(judge: &Judge<'_>, image: &Image<'_>, x0: &[f64]) -> (RunOutcome,
     let mut path = vec![x.clone()];
     let mut out = RunOutcome::new(x0);
     let hit = |x: &[f64]| judge.unsafe_set().is_some_and(|us| us.contains(x));
-    // After Goal (terminal law only): outside Goal or in Unsafe, judged when the terminal law acts.
-    let after = |x: &[f64], out: &mut RunOutcome, terminal: bool| {
+    // After Goal (terminal law only): outside Goal or in Unsafe, a violation (super's module doc).
+    let judged = image.terminal_law().is_some();
+    let after = |x: &[f64], out: &mut RunOutcome| {
         let outside = !judge.goal().contains(x);
         let unsafe_ = hit(x);
         out.left_goal |= outside;
         out.after_goal_unsafe |= unsafe_;
-        out.terminal_violation |= terminal && (outside || unsafe_);
+        out.terminal_violation |= judged && (outside || unsafe_);
     };
     let last = super::run_steps(judge, image);
     out.entered_unsafe |= hit(&x);
@@ -565,21 +573,25 @@ pub fn run_pwa(judge: &Judge<'_>, image: &Image<'_>, x0: &[f64]) -> (RunOutcome,
         let u: Vec<f64> = match ctl.step(&xf) {
             Ok(u) => u.as_slice().iter().map(|&v| v as f64).collect(),
             Err(_) => {
-                out.refused(k, ctl.in_terminal_phase());
+                out.refused(k, judged);
                 break;
             }
         };
-        let terminal = ctl.in_terminal_phase();
-        out.handed_over |= terminal;
+        out.handed_over |= ctl.in_terminal_phase();
+        // The handover happens within the horizon (module doc, "Goal within T").
+        if judged && k == judge.steps && out.goal_step.is_some() && !out.handed_over {
+            out.not_handed_over = true;
+            out.terminal_violation = true;
+        }
         let s = input_slack(judge.input(), &u);
         if out.goal_step.is_some() {
             out.after_goal_input_excursion |= s < 0.0;
-            out.terminal_violation |= terminal && s < 0.0;
+            out.terminal_violation |= judged && s < 0.0;
             judge
                 .plant
-                .between_samples(0, &x, &u, &mut |xs| after(xs, &mut out, terminal));
+                .between_samples(0, &x, &u, &mut |xs| after(xs, &mut out));
             x = judge.plant.step(0, &x, &u);
-            after(&x, &mut out, terminal);
+            after(&x, &mut out);
         } else {
             out.input_margin = out.input_margin.min(s);
             out.input_violation |= s < 0.0;
@@ -613,6 +625,11 @@ pub struct PwaMonteCarlo {
     /// runs last [`super::run_steps`] samples).
     pub runs_leaving_goal: usize,
     pub handed_over: usize,
+    /// After Goal (images with a terminal law, judged: each is a violation): runs that entered Unsafe,
+    /// left the input set, or were not handed over within the horizon.
+    pub after_goal_unsafe: usize,
+    pub after_goal_input_excursions: usize,
+    pub not_handed_over: usize,
     /// A few runs (sample paths), for the report.
     pub sample_paths: Vec<Vec<Vec<f64>>>,
 }
@@ -708,7 +725,11 @@ pub fn monte_carlo_pwa(
         .unwrap_or(0);
     let runs_leaving_goal = outcomes.iter().filter(|o| o.0.left_goal).count();
     let handed_over = outcomes.iter().filter(|o| o.0.handed_over).count();
+    let count = |f: fn(&RunOutcome) -> bool| outcomes.iter().filter(|o| f(&o.0)).count();
     Ok(PwaMonteCarlo {
+        after_goal_unsafe: count(|o| o.after_goal_unsafe),
+        after_goal_input_excursions: count(|o| o.after_goal_input_excursion),
+        not_handed_over: count(|o| o.not_handed_over),
         max_steps_to_goal,
         runs_leaving_goal,
         handed_over,

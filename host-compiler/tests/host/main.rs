@@ -10,6 +10,7 @@
 //! child process instead. Scratch files are named per test (`CARGO_TARGET_TMPDIR`, or the system temp dir
 //! with the process id), so two tests never share one.
 
+mod after_goal;
 mod c_export;
 mod caf_example33;
 mod caf_props;

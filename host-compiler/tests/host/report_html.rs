@@ -151,6 +151,7 @@ fn sample() -> ReportData {
             worst_input_margin: 0.004,
             after_goal_input_excursions: 3,
             after_goal_unsafe: 0,
+            after_goal_judged: false,
             attack: Some((600, 0.0123, 0)),
         }),
         optimization: None,
@@ -626,7 +627,7 @@ fn optimization_section_shows_history_tubes_frames_and_seed_request() {
 fn verification_shows_what_the_terminal_law_did_after_goal() {
     let html = render_html(&sample());
     assert!(
-        html.contains("3 runs left the input set, 0 entered Unsafe under the terminal law"),
+        html.contains("3 runs left the input set, 0 entered Unsafe after Goal"),
         "the after-Goal counts are missing from the verification section"
     );
     assert!(html.contains("first sample in Goal"));
