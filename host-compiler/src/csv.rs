@@ -4,11 +4,18 @@
 //! A leading byte-order mark is ignored; blank lines and comment lines (`#` first, after optional
 //! whitespace) are skipped wherever they are; the comment `# x0 = a, b, …` before the header names a
 //! run's initial state; the first other line is the header; fields are separated by commas and trimmed;
-//! quoting is not supported. A column named [`STATUS`] (what `simulate` writes) holds text and is not a
-//! signal: readers skip its fields. Lines and character columns are 1-based, as errors print them.
+//! quoting is not supported. The columns named [`STATUS`] (what `simulate` writes) and [`LOCATION`] (a
+//! hybrid run's location names) hold text and are not signals: a trace reader skips their fields, and
+//! the import of recordings reads [`LOCATION`] as names. Lines and character columns are 1-based, as
+//! errors print them.
 
 /// The name of `simulate`'s status column, whose fields readers skip.
 pub const STATUS: &str = "status";
+/// The name of the column that gives each row's location of a hybrid plant by name (`simulate`, `play`;
+/// read by [`crate::trajectory::csv`]).
+pub const LOCATION: &str = "location";
+/// The columns that hold text, not signals: [`STATUS`] and [`LOCATION`].
+pub const TEXT_COLUMNS: [&str; 2] = [STATUS, LOCATION];
 
 /// The text without a leading byte-order mark.
 pub fn strip_bom(text: &str) -> &str {

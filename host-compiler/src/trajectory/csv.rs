@@ -10,7 +10,9 @@
 //!
 //! A recording of a hybrid plant with forced switching (§4.2.1) also names, per row, the location the
 //! controller chose for that sample: a column [`LOCATION`] of location names (`host-compiler play` writes
-//! it). A change of location between two rows is a switch at the later row's sample.
+//! it). A change of location between two rows is a switch at the later row's sample. A run `simulate`
+//! wrote of a hybrid image has the column for either kind of switching (the location the plant flows in
+//! from the row's sample on); with internal switching the import checks it against the replay.
 //!
 //! # Bounds
 //! The caller gives the most rows it can use (for an import, the samples in the spec's horizon, at most
@@ -100,8 +102,8 @@ pub enum CsvError {
     },
 }
 
-/// The column that names each row's location (forced switching, module doc).
-pub const LOCATION: &str = "location";
+/// The column that names each row's location (module doc).
+pub use crate::csv::LOCATION;
 /// Longest location name a recording's row may give (characters).
 pub const MAX_LOCATION_NAME: usize = 64;
 

@@ -123,7 +123,7 @@ pub fn run_hybrid(
     }
     let (mut x, mut loc) = (x0.to_vec(), initial);
     let mut why: Option<String> = None;
-    'run: for k in 0..=steps {
+    for k in 0..=steps {
         visit(&x);
         if !formula && property.goal.contains(&x) {
             out.goal_step = Some(k);
@@ -142,20 +142,15 @@ pub fn run_hybrid(
                 break;
             }
         };
-        // Forced switching (§4.2.1): the location of the evaluator's row is the discrete input. A change
-        // takes the forced edge between the two locations, whose guard must hold the state.
-        let want = ctl.location();
-        if want != loc {
-            if let Some(e) = fine.forced_edge(loc, want) {
-                if !e.guard.contains(&x) {
-                    why = Some(format!(
-                        "sample {k}: the controller switches to location {want}, but x = {x:?} is not in the edge's guard"
-                    ));
-                    break;
-                }
-                x = e.reset.apply(&x);
-                loc = want;
-                out.events += 1;
+        // Forced switching (§4.2.1): the location of the evaluator's row is the discrete input.
+        match take_forced(fine, &mut loc, &mut x, ctl.location()) {
+            Ok(Some(_)) => out.events += 1,
+            Ok(None) => {}
+            Err(want) => {
+                why = Some(format!(
+                    "sample {k}: the controller switches to location {want}, but x = {x:?} is not in the edge's guard"
+                ));
+                break;
             }
         }
         let u64s: Vec<f64> = u.as_slice().iter().map(|&v| v as f64).collect();
@@ -166,33 +161,36 @@ pub fn run_hybrid(
             ));
             break;
         }
-        for sub in 0..SUBSTEPS {
-            let step = match fine.flow(loc, &x, &u64s) {
-                Ok(s) => s,
-                Err(e) => {
-                    let e: FlowError = e;
-                    why = Some(format!("sample {k}: the flow failed at x = {x:?}: {e}"));
-                    break 'run;
-                }
-            };
-            out.events += step.events.len();
-            x = step.x;
-            loc = step.loc;
+        let flowed = flow_period(fine, &mut loc, &mut x, &u64s, &mut |s| {
+            out.events += s.events.len();
             if formula {
-                if sub + 1 < SUBSTEPS {
-                    record.push_between((sub + 1) as f64 * fine.period(), &x);
+                if s.index < SUBSTEPS {
+                    record.push_between(s.index as f64 * fine.period(), s.x);
                 } else {
-                    record.push_sample(&x);
+                    record.push_sample(s.x);
                 }
-                continue;
+                return Ok(());
             }
             if let Some(us) = property.unsafe_region() {
-                let d = us.dist(&x, &euclid).value;
+                let d = us.dist(s.x, &euclid).value;
                 out.min_unsafe_distance = out.min_unsafe_distance.min(d);
-                if us.contains(&x) {
-                    why = Some(format!("sample {k}: in Unsafe at x = {x:?}"));
-                    break 'run;
+                if us.contains(s.x) {
+                    return Err(format!("sample {k}: in Unsafe at x = {:?}", s.x));
                 }
+            }
+            Ok(())
+        });
+        match flowed {
+            Ok(()) => {}
+            Err(PeriodStop::Flow { from, error }) => {
+                why = Some(format!(
+                    "sample {k}: the flow failed at x = {from:?}: {error}"
+                ));
+                break;
+            }
+            Err(PeriodStop::Stopped(w)) => {
+                why = Some(w);
+                break;
             }
         }
     }
@@ -223,6 +221,80 @@ pub fn run_hybrid(
     }
     out.violation = why;
     out
+}
+
+/// Forced switching (§4.2.1) at a sample: where the evaluator's row is in location `want` ≠ `*loc` and
+/// a forced edge leads there, the plant takes it (its guard must hold `x`; its reset is applied, and
+/// `*loc` becomes `want`). `Ok(Some(edge))` when it did, `Ok(None)` when there is no forced edge to take
+/// (the same location, or internal switching, where the row's location follows the plant's), `Err(want)`
+/// when the edge's guard does not hold `x` (nothing changed).
+pub fn take_forced(
+    fine: &Hybrid,
+    loc: &mut Location,
+    x: &mut Vec<f64>,
+    want: Location,
+) -> Result<Option<usize>, Location> {
+    if want == *loc {
+        return Ok(None);
+    }
+    let Some(e) = fine.edge_index(*loc, want, crate::model::hybrid::EdgeKind::Forced) else {
+        return Ok(None);
+    };
+    let edge = &fine.edges()[e];
+    if !edge.guard.contains(x) {
+        return Err(want);
+    }
+    *x = edge.reset.apply(x);
+    *loc = want;
+    Ok(Some(e))
+}
+
+/// One state between samples that [`flow_period`] reached.
+pub struct SubSample<'a> {
+    /// 1..=[`SUBSTEPS`]: the end of the `index`-th sub-period (the next sample at [`SUBSTEPS`]).
+    pub index: usize,
+    pub x: &'a [f64],
+    pub loc: Location,
+    /// The events the flow took within this sub-period, their times in seconds after the sub-period's
+    /// start (`Event::time`).
+    pub events: &'a [crate::model::hybrid::Event],
+}
+
+/// Why [`flow_period`] stopped before the period's end.
+pub enum PeriodStop {
+    /// The automaton's flow failed from `from` (Zeno, undecided, not finite).
+    Flow { from: Vec<f64>, error: FlowError },
+    /// The caller's `sub` stopped it, saying why.
+    Stopped(String),
+}
+
+/// One control period of the automaton from (`*loc`, `*x`) with `u` held, on `fine` (the automaton
+/// resampled at [`SUBSTEPS`] sub-periods per period): the exact flow of each sub-period ([`Hybrid::flow`],
+/// internal events and resets), `sub` seeing the state after each. `*loc` and `*x` follow the flow up to
+/// where it stopped.
+pub fn flow_period(
+    fine: &Hybrid,
+    loc: &mut Location,
+    x: &mut Vec<f64>,
+    u: &[f64],
+    sub: &mut dyn FnMut(SubSample<'_>) -> Result<(), String>,
+) -> Result<(), PeriodStop> {
+    for index in 1..=SUBSTEPS {
+        let step = fine.flow(*loc, x, u).map_err(|error| PeriodStop::Flow {
+            from: x.clone(),
+            error,
+        })?;
+        *x = step.x;
+        *loc = step.loc;
+        sub(SubSample {
+            index,
+            x,
+            loc: *loc,
+            events: &step.events,
+        })
+        .map_err(PeriodStop::Stopped)?;
+    }
+    Ok(())
 }
 
 /// Runs the image `bytes` from each start (in location `initial`) for `steps` samples (module doc). A

@@ -27,6 +27,7 @@ mod cli_flat;
 mod cli_hybrid;
 mod cli_limits;
 mod cli_mtl;
+mod cli_simulate_hybrid;
 mod cli_synth;
 mod cli_terminal;
 mod csv_dialect;

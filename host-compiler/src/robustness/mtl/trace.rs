@@ -2,7 +2,7 @@
 //!
 //! A trace is a strictly increasing list of sample times t_k with one value per named signal at each
 //! sample. The CSV form is the tools' one dialect ([`crate::csv`]: byte-order mark, comment and blank
-//! lines, the `# x0` line, trimmed fields, the `status` column skipped), with a header
+//! lines, the `# x0` line, trimmed fields, the text columns `status` and `location` skipped), with a header
 //! `t,<signal names>` and one row per sample.
 //! Every other field must be a finite number. Errors name the 1-based line, the 1-based field number
 //! and the 1-based character column where the field starts.
@@ -190,13 +190,16 @@ impl Trace {
             ));
         }
         let mut names: Vec<String> = Vec::new();
-        // The field of `simulate`'s status column, if the header has one (skipped in every row).
-        let mut status: Option<usize> = None;
+        // The fields of the text columns (`simulate`'s status, a hybrid run's location), each kept once
+        // in increasing order (skipped in every row).
+        let mut text: Vec<usize> = Vec::new();
         // Seen names, for the duplicate check in linear time (a header may have a million columns).
         let mut seen = std::collections::HashSet::new();
         for (i, &(cc, name)) in hfields.iter().enumerate().skip(1) {
-            if name == crate::csv::STATUS && status.is_none() {
-                status = Some(i);
+            if crate::csv::TEXT_COLUMNS.contains(&name)
+                && !text.iter().any(|&j| hfields[j].1 == name)
+            {
+                text.push(i);
                 continue;
             }
             if name.is_empty() {
@@ -214,8 +217,8 @@ impl Trace {
         let mut all: Vec<&str> = std::iter::once("t")
             .chain(names.iter().map(|s| s.as_str()))
             .collect();
-        if let Some(i) = status {
-            all.insert(i, "status");
+        for &i in &text {
+            all.insert(i, hfields[i].1);
         }
         let width = all.len();
         let mut times = Vec::new();
@@ -247,15 +250,11 @@ impl Trace {
                 });
             }
             for (i, &(cc, f)) in fields.iter().enumerate() {
-                if Some(i) == status {
+                if text.contains(&i) {
                     continue;
                 }
-                // The signal this field belongs to: fields after the status column shift by one.
-                let signal = if status.is_some_and(|s| i > s) {
-                    i - 1
-                } else {
-                    i
-                };
+                // The signal this field belongs to: fields after a text column shift by one each.
+                let signal = i - text.iter().filter(|&&s| s < i).count();
                 let v: f64 = f.parse().map_err(|_| TraceError::NotNumeric {
                     origin: origin_s.clone(),
                     line,

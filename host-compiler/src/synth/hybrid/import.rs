@@ -21,7 +21,9 @@
 //! kept (a longer extension only adds rows of the location's flow under inputs meant for the next one,
 //! which may run into Unsafe before the upper end of the certificate's bisection is inside the guard).
 //! A run that takes another edge than the path's, switches more than once in a period, or never
-//! switches, is refused, saying so.
+//! switches, is refused, saying so. A recording that names each row's location (a
+//! [`crate::trajectory::csv::LOCATION`] column, as `simulate` writes a hybrid run) must name the ones the
+//! replay finds up to Goal, else it is refused at the first row that differs.
 //!
 //! **Where the next segment starts.** The replayed state after the event is one landing; the certificate
 //! bounds every landing of runs near the nominal (item 4 of [`crate::certify::internal`]) against the
@@ -91,8 +93,16 @@ pub enum ImportError {
          {rows} rows, and its tables must cover the horizon"
     )]
     ShortForFormula { rows: usize, steps: usize },
-    #[error("the automaton's edges are internal: a recording's `location` column is for forced switching")]
-    LocationsWithInternal,
+    #[error(
+        "row {row} (t = {t:.2} s): the recording's `location` is {recorded}; replayed on the automaton \
+         (whose edges are internal: the plant switches), the run is in {replayed} there"
+    )]
+    LocationMismatch {
+        row: usize,
+        t: f64,
+        recorded: String,
+        replayed: String,
+    },
     #[error(
         "segment {segment} ({from}): the run never takes the path's edge {edge} ({from} → {to}); it stays \
          in {from} for the {rows} samples it has from t = {t:.2} s on"
@@ -204,9 +214,6 @@ pub fn replay(task: &HybridTask, rec: &Recording) -> Result<Replay, ImportError>
     if task.forced {
         return Err(ImportError::Forced);
     }
-    if rec.locations.is_some() {
-        return Err(ImportError::LocationsWithInternal);
-    }
     let plant = &task.plant;
     let (n, m) = (crate::model::Plant::n(plant), crate::model::Plant::m(plant));
     if rec.x0.len() != n || rec.v.iter().any(|r| r.len() != m) {
@@ -294,7 +301,43 @@ pub fn replay(task: &HybridTask, rec: &Recording) -> Result<Replay, ImportError>
         x = super::f32_start(&xl);
         k0 += ke + 1;
     }
-    Ok(Replay { nominals, starts })
+    let replay = Replay { nominals, starts };
+    if let Some(names) = &rec.locations {
+        check_locations(task, names, &replay)?;
+    }
+    Ok(replay)
+}
+
+/// With internal switching a recording's [`crate::trajectory::csv::LOCATION`] column (a run `simulate`
+/// wrote has one) says where the plant was; up to the last segment's first sample in Goal (after which
+/// the certificate judges nothing, and the plant may switch on) it must be where the replay puts it: row
+/// κ in the path's location of the segment the replay starts at or before κ.
+fn check_locations(
+    task: &HybridTask,
+    names: &[String],
+    replay: &Replay,
+) -> Result<(), ImportError> {
+    let modes = task.plant.modes();
+    let starts = &replay.starts;
+    let last = starts.last().copied().unwrap_or(0);
+    let goal = replay
+        .nominals
+        .last()
+        .and_then(|nom| nom.x.iter().position(|x| task.property.goal.contains(x)));
+    let judged = goal.map_or(names.len(), |k| (last + k + 1).min(names.len()));
+    for (row, name) in names.iter().enumerate().take(judged) {
+        let seg = starts.iter().rposition(|&s| s <= row).unwrap_or(0);
+        let replayed = &modes[task.path[seg]].name;
+        if name != replayed {
+            return Err(ImportError::LocationMismatch {
+                row,
+                t: row as f64 * task.plant.period(),
+                recorded: crate::text::excerpt(name),
+                replayed: replayed.clone(),
+            });
+        }
+    }
+    Ok(())
 }
 
 /// A recording certified as a run of the task's path (module doc): the run when its certificate is
