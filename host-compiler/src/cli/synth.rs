@@ -471,7 +471,7 @@ fn synth_failure(e: SynthError) -> Failure {
         }
         SynthError::Cover(GrowError::Recording { .. } | GrowError::Emit(_)) => Exit::BadInput,
         SynthError::Cover(GrowError::InterruptedEmpty) => Exit::Interrupted,
-        SynthError::Terminal(_) => Exit::BadInput,
+        SynthError::Terminal(_) | SynthError::NoRoute { .. } => Exit::BadInput,
         _ => Exit::Failed,
     };
     Failure {

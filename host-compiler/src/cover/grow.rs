@@ -18,7 +18,8 @@ use crate::optimize::{maximize_delta, BundleSettings};
 use crate::property::input_scale;
 use crate::task::Task;
 use crate::trajectory::csv::Recording;
-use crate::trajectory::generate::{generate, GenError, GenProblem, GenSettings};
+use crate::trajectory::generate::{generate, generate_from, GenError, GenProblem, GenSettings};
+use crate::trajectory::route::{timed_guess, Route, RouteMap, RouteSettings};
 use crate::trajectory::Nominal;
 use indicatif::{ProgressBar, ProgressStyle};
 use rand::SeedableRng;
@@ -287,19 +288,6 @@ pub fn grow(
         Ok(v)
     };
     // A generated, certified trajectory, or why not (the refused certificate, or the generator's reason).
-    let make = |x0: &[f64]| -> Result<CoverTrajectory, Result<Certificate, GenError>> {
-        let v = generated(x0).map_err(Err)?;
-        let (nominal, certificate) = shipped(x0, &v);
-        if accept(&certificate) {
-            Ok(CoverTrajectory {
-                source: "generated".into(),
-                nominal,
-                certificate,
-            })
-        } else {
-            Err(Ok(certificate))
-        }
-    };
     let bundle = match opts.optimizer {
         Some(b) => b.clone().to_builder(),
         None => BundleSettings::builder().max_iterations(problem.synthesis.max_iterations),
@@ -323,6 +311,62 @@ pub fn grow(
     let seed_scp = |x0: &[f64]| {
         let v = generated(x0)?;
         Ok::<_, GenError>(optimise(x0, &v))
+    };
+    // Routes of the global search (`trajectory::route`), where the plain generator found no accepted
+    // trajectory from a seed: each route's timed reference is the generator's first linearisation point,
+    // then §5.3; the first accepted result, with its route's index. The grid is built once, on first use.
+    let route_settings = RouteSettings::default();
+    let route_map = std::sync::OnceLock::new();
+    let map = || {
+        route_map
+            .get_or_init(|| {
+                RouteMap::new(&task.convex, &problem.init.lo, &problem.init.hi, &route_settings)
+            })
+            .as_ref()
+    };
+    let route_generated = |x0: &[f64], route: &Route, map: &RouteMap| {
+        let guess = timed_guess(route, map.coords(), x0, steps, route_settings.arrive, m);
+        let mut v = generate_from(&gp, x0, &gs, &guess).ok()?.nominal.v;
+        crate::trajectory::hold::project(&mut v, hold);
+        Some(v)
+    };
+    let from_routes = |x0: &[f64]| {
+        let map: &RouteMap = map()?;
+        map.routes(x0).iter().enumerate().find_map(|(r, route)| {
+            let v = route_generated(x0, route, map)?;
+            let made = optimise(x0, &v);
+            accept(&made.1 .1).then_some((r, made))
+        })
+    };
+    // Algorithm 1's seed: a generated, certified trajectory (the plain generator, then the routes of
+    // the global search where it gives none accepted), or why not (the plain generator's refused
+    // certificate, or its reason).
+    let make = |x0: &[f64]| -> Result<CoverTrajectory, Result<Certificate, GenError>> {
+        let plain = generated(x0).map(|v| shipped(x0, &v));
+        if let Ok((nominal, certificate)) = &plain {
+            if accept(certificate) {
+                return Ok(CoverTrajectory {
+                    source: "generated".into(),
+                    nominal: nominal.clone(),
+                    certificate: certificate.clone(),
+                });
+            }
+        }
+        let routed = map().and_then(|map| {
+            map.routes(x0).iter().enumerate().find_map(|(r, route)| {
+                let (nominal, certificate) = shipped(x0, &route_generated(x0, route, map)?);
+                accept(&certificate).then(|| CoverTrajectory {
+                    source: format!("route {} (SCP)", r + 1),
+                    nominal,
+                    certificate,
+                })
+            })
+        });
+        match (routed, plain) {
+            (Some(t), _) => Ok(t),
+            (None, Ok((_, c))) => Err(Ok(c)),
+            (None, Err(e)) => Err(Err(e)),
+        }
     };
 
     let init = SampleBox {
@@ -445,10 +489,8 @@ pub fn grow(
                 .0;
             let x0: Vec<f64> = discarded[far].iter().map(|&v| round32(v)).collect();
             bars.set_round(round, "new seed trajectory (SCP)");
-            let made = seed_scp(&x0);
-            let mut ok = false;
-            if let Ok((before, (nominal, certificate), opt)) = made {
-                ok = accept(&certificate)
+            let covers_far = |nominal: &Nominal, certificate: &Certificate| {
+                accept(certificate)
                     && !outside(
                         std::slice::from_ref(&CoverTrajectory {
                             source: String::new(),
@@ -456,11 +498,25 @@ pub fn grow(
                             certificate: certificate.clone(),
                         }),
                         &discarded[far],
-                    );
+                    )
+            };
+            let mut made = seed_scp(&x0).map(|m| (None, m));
+            if !matches!(&made, Ok((_, (_, (n, c), _))) if covers_far(n, c)) {
+                // The plain generator did not reach this sample: the routes of the global search.
+                if let Some((r, m)) = from_routes(&x0).filter(|(_, m)| covers_far(&m.1 .0, &m.1 .1)) {
+                    made = Ok((Some(r), m));
+                }
+            }
+            let mut ok = false;
+            if let Ok((route, (before, (nominal, certificate), opt))) = made {
+                ok = covers_far(&nominal, &certificate);
                 cover.record(
                     OptStart::new(round, None, &x0, before, opt),
                     CoverTrajectory {
-                        source: "generated (SCP) + §5.3".into(),
+                        source: route.map_or_else(
+                            || "generated (SCP) + §5.3".into(),
+                            |r| format!("route {} (SCP) + §5.3", r + 1),
+                        ),
                         nominal,
                         certificate,
                     },
@@ -586,6 +642,25 @@ pub fn grow(
                         failed += 1;
                         work.retain(|x| alg4::dist(P.as_ref(), x, s) > 0.0125);
                     }
+                }
+            }
+            if !got {
+                // The plain generator certified nothing from this round's seeds: their routes, in order.
+                bars.set_round(round, "first seed (routes, SCP + §5.3)");
+                if let Some((s, (r, (before, (nominal, certificate), opt)))) =
+                    seeds.iter().find_map(|s| from_routes(s).map(|m| (s, m)))
+                {
+                    cover.record(
+                        OptStart::new(round, None, s, before, opt),
+                        CoverTrajectory {
+                            source: format!("route {} (SCP) + §5.3", r + 1),
+                            nominal,
+                            certificate,
+                        },
+                        true,
+                        &on_accept,
+                    );
+                    got = true;
                 }
             }
             if !got && work.is_empty() {

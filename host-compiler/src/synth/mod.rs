@@ -207,6 +207,57 @@ pub enum SynthError {
     Terminal(NoTerminal),
     #[error("the terminal law's handover region: {0}")]
     Handover(String),
+    /// Goal cannot be reached from Init in the free space at all (`trajectory::route`): bad input.
+    #[error(
+        "no route: Goal cannot be reached from any state of Init without entering Unsafe; {pieces} \
+         close it off (a search of the free space in the coordinates {coords}, {cells} cells)"
+    )]
+    NoRoute {
+        /// The spec's names of the pieces, e.g. `unsafe[3], unsafe[4]`.
+        pieces: String,
+        coords: String,
+        cells: usize,
+    },
+}
+
+/// Refuses, before any other work, a task whose Goal no continuous path from Init reaches in the free
+/// space ([`crate::trajectory::route::RouteMap::closed_off`]), naming the Unsafe pieces that close it
+/// off. Only for a continuous-time plant: a sampled one may jump a wall between samples.
+pub fn refuse_without_route(task: &Task) -> Result<(), SynthError> {
+    use crate::trajectory::route::{RouteMap, RouteSettings};
+    if task.convex.unsafe_pieces.is_empty() || task.plant.continuous(0).is_none() {
+        return Ok(());
+    }
+    let init = task.init();
+    let Some(map) = RouteMap::new(&task.convex, &init.lo, &init.hi, &RouteSettings::default())
+    else {
+        return Ok(());
+    };
+    let Some(closed) = map.closed_off(&init.lo, &init.hi) else {
+        return Ok(());
+    };
+    let named = task.problem.unsafe_sets.len();
+    let pieces: Vec<String> = closed
+        .pieces
+        .iter()
+        .map(|&i| {
+            if i < named {
+                format!("unsafe[{i}]")
+            } else {
+                format!("the complement of the operating region (piece {i})")
+            }
+        })
+        .collect();
+    let coords: Vec<String> = closed.coords.iter().map(|j| format!("x{}", j + 1)).collect();
+    Err(SynthError::NoRoute {
+        pieces: if pieces.is_empty() {
+            "the region's bounds".into()
+        } else {
+            pieces.join(", ")
+        },
+        coords: coords.join(", "),
+        cells: closed.cells,
+    })
 }
 
 /// Run the whole pipeline.
@@ -214,6 +265,8 @@ pub fn synthesize(task: &Task, opts: &SynthOptions) -> Result<Synthesis, SynthEr
     let problem = &task.problem;
     let mut timings = Vec::new();
     let t0 = Instant::now();
+    // At once: a Goal walled off from Init is said before any design or seed work (issue 48, item 6).
+    refuse_without_route(task)?;
     // CAF and feedback for the sampled loop (LMIs (3.66)–(3.67) with the σ-margin of Remark 3.22); what
     // ships, and everything below is certified for, is the f32 gain K̂.
     let design = crate::caf::design(task)?;

@@ -22,7 +22,9 @@
 //! When the iteration fails, it is run again with one half-space per crossing, on the side the crossing
 //! already passes ([`crossing_halfspace`]), and with the drift against each half-space's normal
 //! ([`crate::model::drift_against`]) where it is smaller. The first pass is kept as it is so that what it
-//! proposes does not change. Each subproblem is a
+//! proposes does not change. [`generate_from`] starts instead from a given first linearisation point, a
+//! timed reference along a route of the global search ([`super::route`]), so that the first subproblem
+//! already holds the route's side of every piece (the route's homotopy class). Each subproblem is a
 //! second-order cone program solved with clarabel. The certified δ is computed afterwards, independently,
 //! by the robustness library; this module only proposes trajectories.
 
@@ -324,15 +326,47 @@ pub fn generate(
         });
     }
     let roots = prob.roots().ok_or(GenError::BadMetric)?;
-    match iterate(prob, &roots, x0, settings, Sides::Nearest) {
+    match iterate(prob, &roots, x0, settings, Sides::Nearest, None) {
         Err(e) if !prob.convex.unsafe_pieces.is_empty() => {
             // A first iterate through Unsafe can get half-spaces that exclude each other (module doc):
             // the second pass takes one side per crossing. Tried only when the first fails, so every
             // trajectory the first pass finds is proposed as before.
-            iterate(prob, &roots, x0, settings, Sides::PerCrossing).map_err(|_| e)
+            iterate(prob, &roots, x0, settings, Sides::PerCrossing, None).map_err(|_| e)
         }
         r => r,
     }
+}
+
+/// [`generate`] from a given first linearisation point `guess` (a timed reference along a route,
+/// [`super::route::timed_guess`]) instead of the first iterate that ignores Unsafe: the first subproblem
+/// already keeps the samples on the side of each piece the guess passes, so the trajectory stays in the
+/// guess's homotopy class. `guess.x` must hold N + 1 states of the plant's dimension and `guess.u` N
+/// inputs (only its states and inputs are read).
+pub fn generate_from(
+    prob: &GenProblem<'_>,
+    x0: &[f64],
+    settings: &GenSettings,
+    guess: &Nominal,
+) -> Result<Generated, GenError> {
+    settings.validate()?;
+    let model = prob.model_at(0);
+    let n = model.n();
+    let m = model.m();
+    let fits = guess.x.len() == prob.steps + 1
+        && guess.u.len() == prob.steps
+        && guess.x.iter().all(|x| x.len() == n)
+        && guess.u.iter().all(|u| u.len() == m);
+    if x0.len() != n || prob.K.nrows() != m || prob.K.ncols() != n || !fits {
+        return Err(GenError::Dimension {
+            n,
+            m,
+            x0: x0.len(),
+            k_rows: prob.K.nrows(),
+            k_cols: prob.K.ncols(),
+        });
+    }
+    let roots = prob.roots().ok_or(GenError::BadMetric)?;
+    iterate(prob, &roots, x0, settings, Sides::Nearest, Some(guess.clone()))
 }
 
 /// How the Unsafe rows of a subproblem are written from an iterate (module doc).
@@ -356,9 +390,11 @@ fn iterate(
     x0: &[f64],
     settings: &GenSettings,
     sides: Sides,
+    guess: Option<Nominal>,
 ) -> Result<Generated, GenError> {
     let mut best: Option<Generated> = None;
-    let mut lin: Option<Nominal> = None;
+    // Without a guess, the first subproblem ignores Unsafe and only seeds the next one.
+    let mut lin: Option<Nominal> = guess;
     for it in 0..settings.max_iter.max(1) {
         let sol = solve_subproblem(prob, roots, x0, lin.as_ref(), settings, sides);
 
@@ -867,6 +903,7 @@ mod tests {
                 &[0.0, 0.0],
                 &GenSettings::default(),
                 sides,
+                None,
             ),
         }
     }

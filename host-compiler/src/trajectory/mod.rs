@@ -4,6 +4,7 @@
 pub mod csv;
 pub mod generate;
 pub mod hold;
+pub mod route;
 
 use crate::model::DiscretePlant;
 use faer::MatRef;

@@ -68,6 +68,7 @@ mod refactor_fixtures;
 mod report_clip;
 mod report_html;
 mod robustness_safety;
+mod route_search;
 mod spec_bounds;
 mod spec_errors;
 mod spec_examples;
