@@ -24,11 +24,15 @@ struct Fixture {
 fn fixture() -> &'static Fixture {
     static F: OnceLock<Fixture> = OnceLock::new();
     F.get_or_init(|| {
-        let problem = host_compiler::spec::load(concat!(
+        let mut problem = host_compiler::spec::load(concat!(
             env!("CARGO_MANIFEST_DIR"),
             "/../examples/double-integrator.toml"
         ))
         .unwrap();
+        // The cover of the reach-avoid task itself, without a terminal law (whose handover region would
+        // be the cover's Goal): its PWA tree, cut by laws, fits the image's capacities, which the tests
+        // of the two tree cuts below need.
+        problem.synthesis.terminal = host_compiler::spec::TerminalChoice::Hold;
         let opts = SynthOptions {
             verify_interior: 200,
             verify_per_ball: 4,
