@@ -72,8 +72,9 @@ fn huge_fields_and_headers_are_quoted_as_excerpts() {
         &e[..e.len().min(300)]
     );
     assert!(e.len() < 1_000, "{} bytes", e.len());
-    // A huge name in a formula.
-    let f = format!("x1 <= 1 {}", "y".repeat(1_000_000));
+    // A huge name in a formula (within the formula's length limit, `spec::limits::MAX_FORMULA_LEN`;
+    // a longer text is refused by its length, `plain_bounds`).
+    let f = format!("x1 <= 1 {}", "y".repeat(4_000));
     let e = host_compiler::robustness::mtl::Formula::parse(&f).unwrap_err();
     assert!(
         e.message.contains("yyy…"),
