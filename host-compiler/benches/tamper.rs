@@ -3,7 +3,7 @@
 //! `host_compiler::verify::verdict::verify` (the checks `host-compiler verify` runs), and every one it
 //! passes judged independently: a Monte Carlo from uniform starts of the spec's Init that the perturbed
 //! image accepts and from its balls' boundaries, through the perturbed image, each run judged by the task
-//! (`host_compiler::verify::tamper::unsound`). Rows:
+//! (`host_compiler::verification::tamper::unsound`). Rows:
 //!
 //! * `tamper_false_claims`: tamperings the verification passes (exit 0 or 3) although the independent
 //!   check finds the image unsound (a violating run, or a start it accepted and then refused). Target 0.
@@ -18,7 +18,7 @@
 //! `cargo bench -p host-compiler --bench tamper` (`TAMPER_QUICK=1`: one example, a few hundred tamperings).
 
 use host_compiler::benchkit::{write_rows, Row};
-use host_compiler::verify::tamper::{campaign, Campaign};
+use host_compiler::verification::tamper::{campaign, Campaign};
 use std::path::PathBuf;
 use std::process::Command;
 

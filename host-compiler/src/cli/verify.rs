@@ -1,4 +1,4 @@
-//! `host-compiler verify SPEC IMAGE`: an image against its spec, by [`crate::verify::verdict::verify`]
+//! `host-compiler verify SPEC IMAGE`: an image against its spec, by [`crate::verification::verify`]
 //! (refused unless its dimensions, sample period and fingerprint are the spec's; its stored values the
 //! spec gives, its certificate re-proved from the bytes, its coverage of the spec's Init estimated, then
 //! closed-loop Monte Carlo through the shared f32 evaluator, and with `--attack` the falsifier for every
@@ -7,7 +7,7 @@
 
 use super::{decode_image, image_matches_spec, read_image, Exit, Failure, Outcome};
 use crate::verify::attack::AttackReport;
-use crate::verify::verdict::{Options, Refusal, Report, Verification};
+use crate::verification::{Options, Refusal, Report, Verification};
 use miette::IntoDiagnostic;
 use std::path::PathBuf;
 
@@ -67,7 +67,7 @@ pub fn run(a: &VerifyArgs) -> Outcome {
         coverage: true,
         stop_early: false,
     };
-    let v = crate::verify::verdict::verify(problem, &bytes, &o).map_err(|r| refusal(r, a))?;
+    let v = crate::verification::verify(problem, &bytes, &o).map_err(|r| refusal(r, a))?;
     if a.json {
         println!("{}", serde_json::to_string_pretty(&v).into_diagnostic()?);
     } else {

@@ -19,9 +19,7 @@ pub mod hybrid;
 pub mod nonlinear;
 pub mod pwa;
 pub mod stored;
-pub mod tamper;
 pub mod temporal;
-pub mod verdict;
 
 /// Largest number of Monte Carlo runs from the cover one check may ask for (`verify --runs`,
 /// `synth --verify-runs`): every start is held in memory (8n + 24 bytes) and simulated over the horizon,

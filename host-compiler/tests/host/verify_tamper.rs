@@ -1,10 +1,10 @@
 //! The tamper campaign's small version (issue 42, item 3): a few hundred perturbations of the double
 //! integrator's image, every stored field of every section (the CRC recomputed), each verified as
 //! `host-compiler verify` verifies it. None may pass while the independent Monte Carlo
-//! (`verify::tamper::unsound`) finds a violating run; the whole campaign is `benches/tamper.rs`.
+//! (`verification::tamper::unsound`) finds a violating run; the whole campaign is `benches/tamper.rs`.
 
 use crate::verify_refuses::{image, spec};
-use host_compiler::verify::tamper::{campaign, tamperings};
+use host_compiler::verification::tamper::{campaign, tamperings};
 
 #[test]
 fn no_tampering_of_the_double_integrator_image_passes_falsely() {

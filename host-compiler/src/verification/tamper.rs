@@ -1,5 +1,5 @@
 //! The tamper campaign (issue 42, item 3): an image's stored fields perturbed one at a time (the CRC
-//! recomputed), each perturbed image verified by [`super::verdict::verify`] (what `host-compiler verify`
+//! recomputed), each perturbed image verified by [`super::verify`] (what `host-compiler verify`
 //! runs), and every one that passes judged independently by [`unsound`]: a Monte Carlo through the
 //! perturbed image from uniform starts of the spec's Init it accepts and from its balls' boundaries, on
 //! the plant, each run judged by the task. A tampering the verification passes although that check
@@ -14,7 +14,7 @@
 //! more words than the budget allows, the step table's rows are taken at even spacing and every other
 //! word in full. Seeded; the result does not depend on the thread count.
 
-use super::verdict::{verify, Options, Refusal};
+use super::{verify, Options, Refusal};
 use std::collections::BTreeMap;
 
 /// How each word is changed (`x` the word read as f32).
@@ -148,8 +148,8 @@ pub fn unsound(
     };
     if problem.hybrid.is_some() {
         let task = crate::synth::hybrid::HybridTask::new(problem.clone()).ok()?;
-        let starts = super::hybrid::starts_from_image(bytes, &init, runs, per_ball, seed).ok()?;
-        let r = super::hybrid::monte_carlo_hybrid(
+        let starts = crate::verify::hybrid::starts_from_image(bytes, &init, runs, per_ball, seed).ok()?;
+        let r = crate::verify::hybrid::monte_carlo_hybrid(
             &task.plant,
             &task.property,
             task.formula.as_ref(),
@@ -167,7 +167,7 @@ pub fn unsound(
     let task = crate::task::Task::new(problem.clone()).ok()?;
     if problem.mtl.is_some() {
         let tt = crate::property::TemporalTask::from_problem(&task.problem).ok()?;
-        let starts = super::hybrid::starts_from_image(
+        let starts = crate::verify::hybrid::starts_from_image(
             bytes,
             &crate::cover::estimate::SampleBox {
                 lo: task.problem.init.lo.clone(),
@@ -179,21 +179,21 @@ pub fn unsound(
         )
         .ok()?;
         let r = if task.plant.linearization().is_some() {
-            super::temporal::monte_carlo_temporal_fl(&task, &tt, &img, &starts, seed ^ 1).ok()?
+            crate::verify::temporal::monte_carlo_temporal_fl(&task, &tt, &img, &starts, seed ^ 1).ok()?
         } else {
-            super::temporal::monte_carlo_temporal(&task, &tt, &img, &starts).ok()?
+            crate::verify::temporal::monte_carlo_temporal(&task, &tt, &img, &starts).ok()?
         };
         return (r.violations > 0).then(|| r.first_violation.unwrap_or_default());
     }
-    let judge = super::Judge::new(&task);
+    let judge = crate::verify::Judge::new(&task);
     if img.mode() == shared_types::image::Mode::PwaFeedback {
-        let r = super::pwa::monte_carlo_pwa(&judge, &img, &[], runs, seed, 0).ok()?;
+        let r = crate::verify::pwa::monte_carlo_pwa(&judge, &img, &[], runs, seed, 0).ok()?;
         return (r.violations > 0).then(|| format!("{} violations", r.violations));
     }
     let r = if task.plant.linearization().is_some() {
-        super::nonlinear::monte_carlo_fl(&task, &img, runs, per_ball, seed).ok()?
+        crate::verify::nonlinear::monte_carlo_fl(&task, &img, runs, per_ball, seed).ok()?
     } else {
-        super::monte_carlo(&judge, &img, runs, per_ball, seed).ok()?
+        crate::verify::monte_carlo(&judge, &img, runs, per_ball, seed).ok()?
     };
     (r.violations > 0).then(|| {
         r.first_violations

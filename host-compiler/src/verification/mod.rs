@@ -1,23 +1,26 @@
-//! One verification of an image against its spec, without printing: what `host-compiler verify` runs
+//! One verification of an image against its spec, without printing (above `verify`, whose checks it
+//! runs, and `synth`, whose hybrid task it builds): what `host-compiler verify` runs
 //! (the CLI only prints its result and maps it to an exit status) and what the tamper campaign
-//! (`benches/tamper.rs`) runs on every perturbed image, so both run the same checks.
+//! ([`tamper`], `benches/tamper.rs`) runs on every perturbed image, so both run the same checks.
 //!
 //! In order, for every image mode: the image must decode and belong to the spec
-//! ([`super::check_matches`]; else a [`Refusal`], bad input); its stored values that no re-proof reads
-//! must be the ones the spec gives ([`super::stored`]); its certificate is re-proved from the bytes (the
+//! ([`crate::verify::check_matches`]; else a [`Refusal`], bad input); its stored values that no re-proof reads
+//! must be the ones the spec gives ([`crate::verify::stored`]); its certificate is re-proved from the bytes (the
 //! mode's re-proof and the terminal law's); its coverage of the spec's Init is estimated
-//! ([`super::coverage`]); then the Monte Carlo (every start it draws is one the certificate covers, so a
+//! ([`crate::verify::coverage`]); then the Monte Carlo (every start it draws is one the certificate covers, so a
 //! refused start is a failure, `refused`) and, when asked, the falsifier. The first check that fails is
 //! the [`Failed`] result (exit 1); a coverage short of the spec's target with every check passed is
 //! [`Verification::short_of_coverage`] (exit 3).
 
-use super::attack::{AttackError, AttackReport, AttackSettings};
-use super::coverage::Coverage;
-use super::feedforward::FeedforwardRecheck;
-use super::hybrid::{HybridReport, RunCheck};
-use super::pwa::{PwaMonteCarlo, PwaRecheck};
-use super::temporal::{TemporalCheck, TemporalReport};
-use super::{Judge, VerifyReport};
+pub mod tamper;
+
+use crate::verify::attack::{AttackError, AttackReport, AttackSettings};
+use crate::verify::coverage::Coverage;
+use crate::verify::feedforward::FeedforwardRecheck;
+use crate::verify::hybrid::{HybridReport, RunCheck};
+use crate::verify::pwa::{PwaMonteCarlo, PwaRecheck};
+use crate::verify::temporal::{TemporalCheck, TemporalReport};
+use crate::verify::{Judge, VerifyReport};
 use crate::certify::terminal::TerminalCertificate;
 use crate::cover::estimate::SampleBox;
 use shared_types::image::{Image, Mode};
@@ -33,7 +36,7 @@ pub struct Options {
     pub seed: Option<u64>,
     /// Closed-loop runs per Nelder–Mead start of the falsifier; `None`: no falsifier.
     pub attack_evals: Option<usize>,
-    /// Estimate the coverage of the spec's Init ([`super::coverage`]).
+    /// Estimate the coverage of the spec's Init ([`crate::verify::coverage`]).
     pub coverage: bool,
     /// Stop at the first failed check (the campaign), instead of running every part for the report.
     pub stop_early: bool,
@@ -73,7 +76,7 @@ impl Refusal {
 /// The check that failed (the campaign counts refusals by it).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize)]
 pub enum Check {
-    /// A stored value no re-proof reads is not the spec's ([`super::stored`]).
+    /// A stored value no re-proof reads is not the spec's ([`crate::verify::stored`]).
     Stored,
     /// The certificate is not re-proved from the bytes.
     Recheck,
@@ -212,7 +215,7 @@ pub fn verify(
     o: &Options,
 ) -> Result<Verification, Refusal> {
     let img = shared_types::image::decode(bytes).map_err(|e| Refusal::Rejected(e.to_string()))?;
-    super::check_matches(&problem, &img).map_err(|e| Refusal::Mismatch(e.to_string()))?;
+    crate::verify::check_matches(&problem, &img).map_err(|e| Refusal::Mismatch(e.to_string()))?;
     if problem.hybrid.is_some() {
         return verify_hybrid(problem, bytes, &img, o);
     }
@@ -226,8 +229,8 @@ pub fn verify(
     verify_feedforward(&task, bytes, &img, o)
 }
 
-fn stored(v: &mut Verdict, bytes: &[u8], expected: &super::stored::Expected) {
-    if let Err(e) = super::stored::check(bytes, expected) {
+fn stored(v: &mut Verdict, bytes: &[u8], expected: &crate::verify::stored::Expected) {
+    if let Err(e) = crate::verify::stored::check(bytes, expected) {
         v.fail(Check::Stored, true, || e.to_string());
     }
 }
@@ -250,12 +253,12 @@ fn coverage(
     seed: u64,
 ) -> Option<Coverage> {
     (o.coverage && !v.stop()).then(|| {
-        super::coverage::estimate(
+        crate::verify::coverage::estimate(
             img,
             proved,
             init,
             &problem.synthesis,
-            super::coverage::seed_of(o.seed.unwrap_or(seed)),
+            crate::verify::coverage::seed_of(o.seed.unwrap_or(seed)),
         )
     })
 }
@@ -265,7 +268,7 @@ fn terminal(
     task: &crate::task::Task,
     img: &Image<'_>,
 ) -> Option<TerminalCertificate> {
-    match super::recheck_terminal(task, img) {
+    match crate::verify::recheck_terminal(task, img) {
         None => None,
         Some(Ok(c)) => Some(c),
         Some(Err(e)) => {
@@ -312,14 +315,14 @@ fn verify_feedforward(
     let judge = Judge::new(task);
     let linearized = task.plant.linearization().is_some();
     if let Some(maps) = task.plant.linearization() {
-        super::nonlinear::check_maps(maps, img).map_err(Refusal::Mismatch)?;
+        crate::verify::nonlinear::check_maps(maps, img).map_err(Refusal::Mismatch)?;
     }
     let mut v = Verdict {
         failure: None,
         stop_early: o.stop_early,
     };
-    stored(&mut v, bytes, &super::stored::Expected::feedforward(task, false));
-    let rc = super::feedforward::recheck(&judge, img).map_err(|e| {
+    stored(&mut v, bytes, &crate::verify::stored::Expected::feedforward(task, false));
+    let rc = crate::verify::feedforward::recheck(&judge, img).map_err(|e| {
         // Not re-provable at all: a failed check about the image.
         Failed {
             check: Check::Recheck,
@@ -378,9 +381,9 @@ fn verify_feedforward(
         None
     } else {
         let r = if linearized {
-            super::nonlinear::monte_carlo_fl(task, img, o.runs, o.per_ball, seed)
+            crate::verify::nonlinear::monte_carlo_fl(task, img, o.runs, o.per_ball, seed)
         } else {
-            super::monte_carlo(&judge, img, o.runs, o.per_ball, seed)
+            crate::verify::monte_carlo(&judge, img, o.runs, o.per_ball, seed)
         }
         .map_err(Refusal::bad)?;
         refused_verdict(&mut v, r.refused, r.interior_runs + r.boundary_runs);
@@ -392,10 +395,10 @@ fn verify_feedforward(
     let attack = match attack_settings(o, problem.seed)? {
         Some(_) if v.stop() => None,
         Some(s) if linearized => {
-            Some(super::attack::attack_fl(task, img, &s).map_err(|e| Refusal::BadInput(e.into()))?)
+            Some(crate::verify::attack::attack_fl(task, img, &s).map_err(|e| Refusal::BadInput(e.into()))?)
         }
         Some(s) => Some(
-            super::attack::attack(&judge, img, &s).map_err(|e| Refusal::BadInput(e.into()))?,
+            crate::verify::attack::attack(&judge, img, &s).map_err(|e| Refusal::BadInput(e.into()))?,
         ),
         None => None,
     };
@@ -435,8 +438,8 @@ fn verify_pwa(
         failure: None,
         stop_early: o.stop_early,
     };
-    stored(&mut v, bytes, &super::stored::Expected::pwa(task));
-    let rc = super::pwa::recheck(&judge, img).map_err(Refusal::bad)?;
+    stored(&mut v, bytes, &crate::verify::stored::Expected::pwa(task));
+    let rc = crate::verify::pwa::recheck(&judge, img).map_err(Refusal::bad)?;
     if rc.failures > 0 {
         v.fail(Check::Recheck, true, || {
             format!("{} certificate failures", rc.failures)
@@ -448,7 +451,7 @@ fn verify_pwa(
         None
     } else {
         // The image does not mark which balls start a trajectory: all runs start anywhere in F.
-        let mc = super::pwa::monte_carlo_pwa(&judge, img, &[], o.runs, o.seed.unwrap_or(0x7e51f1), 0)
+        let mc = crate::verify::pwa::monte_carlo_pwa(&judge, img, &[], o.runs, o.seed.unwrap_or(0x7e51f1), 0)
             .map_err(Refusal::bad)?;
         if mc.violations > 0 {
             v.fail(Check::Violation, false, || {
@@ -459,7 +462,7 @@ fn verify_pwa(
     };
     let attack = match attack_settings(o, problem.seed)? {
         Some(s) if !v.stop() => Some(
-            super::attack::attack_pwa(&judge, img, &s).map_err(|e| Refusal::BadInput(e.into()))?,
+            crate::verify::attack::attack_pwa(&judge, img, &s).map_err(|e| Refusal::BadInput(e.into()))?,
         ),
         _ => None,
     };
@@ -477,7 +480,7 @@ fn verify_pwa(
             terminal,
             monte_carlo: mc,
             attack,
-            run_steps: super::run_steps(&judge, img),
+            run_steps: crate::verify::run_steps(&judge, img),
         },
         coverage,
         failure: v.failure,
@@ -490,7 +493,7 @@ fn verify_temporal(
     img: &Image<'_>,
     o: &Options,
 ) -> Result<Verification, Refusal> {
-    use super::temporal::{monte_carlo_temporal, monte_carlo_temporal_fl, recheck};
+    use crate::verify::temporal::{monte_carlo_temporal, monte_carlo_temporal_fl, recheck};
     use crate::property::TemporalTask;
     if img.mode() != Mode::Feedforward {
         return Err(Refusal::bad(
@@ -513,13 +516,13 @@ fn verify_temporal(
         (src != written).then(|| src.to_string())
     };
     if let Some(maps) = task.plant.linearization() {
-        super::nonlinear::check_maps(maps, img).map_err(Refusal::Mismatch)?;
+        crate::verify::nonlinear::check_maps(maps, img).map_err(Refusal::Mismatch)?;
     }
     let mut v = Verdict {
         failure: None,
         stop_early: o.stop_early,
     };
-    stored(&mut v, bytes, &super::stored::Expected::feedforward(&task, true));
+    stored(&mut v, bytes, &crate::verify::stored::Expected::feedforward(&task, true));
     let rc = recheck(&task, &tt, img).map_err(Refusal::bad)?;
     if let Some(c) = rc.iter().find(|c| !c.ok) {
         // The stored radius within the certified one: what failed is the selection test's threshold.
@@ -546,7 +549,7 @@ fn verify_temporal(
     let mc = if v.stop() {
         None
     } else {
-        let starts = super::hybrid::starts_from_image(bytes, &init, o.runs, o.per_ball, seed)
+        let starts = crate::verify::hybrid::starts_from_image(bytes, &init, o.runs, o.per_ball, seed)
             .map_err(Refusal::bad)?;
         let r = if linearized {
             // On the nonlinear plant, the zero states drawn in Init.
@@ -574,11 +577,11 @@ fn verify_temporal(
     let attack = match attack_settings(o, task.problem.seed)? {
         Some(_) if v.stop() => None,
         Some(s) if linearized => Some(
-            super::attack::attack_temporal_fl(&task, &tt, img, &s)
+            crate::verify::attack::attack_temporal_fl(&task, &tt, img, &s)
                 .map_err(|e| Refusal::BadInput(e.into()))?,
         ),
         Some(s) => Some(
-            super::attack::attack_temporal(&task, &tt, img, &s)
+            crate::verify::attack::attack_temporal(&task, &tt, img, &s)
                 .map_err(|e| Refusal::BadInput(e.into()))?,
         ),
         None => None,
@@ -603,14 +606,14 @@ fn verify_hybrid(
     img: &Image<'_>,
     o: &Options,
 ) -> Result<Verification, Refusal> {
-    use super::hybrid::{monte_carlo_hybrid, recheck, starts_from_image};
+    use crate::verify::hybrid::{monte_carlo_hybrid, recheck, starts_from_image};
     use rayon::prelude::*;
     let task = crate::synth::hybrid::HybridTask::new(problem).map_err(Refusal::bad)?;
     let mut v = Verdict {
         failure: None,
         stop_early: o.stop_early,
     };
-    stored(&mut v, bytes, &super::stored::Expected::hybrid());
+    stored(&mut v, bytes, &crate::verify::stored::Expected::hybrid());
     let rc = recheck(
         &task.plant,
         &task.property,
@@ -671,7 +674,7 @@ fn verify_hybrid(
     };
     let attack = match attack_settings(o, task.problem.seed)? {
         Some(s) if !v.stop() => {
-            let runs = super::attack::HybridRuns {
+            let runs = crate::verify::attack::HybridRuns {
                 plant: &task.plant,
                 property: &task.property,
                 formula: task.formula.as_ref(),
@@ -679,7 +682,7 @@ fn verify_hybrid(
                 steps: task.steps,
             };
             Some(
-                super::attack::attack_hybrid(runs, bytes, &s)
+                crate::verify::attack::attack_hybrid(runs, bytes, &s)
                     .map_err(|e| Refusal::BadInput(e.into()))?,
             )
         }
