@@ -33,4 +33,5 @@ pub mod task;
 pub mod terminal;
 pub mod text;
 pub mod trajectory;
+pub mod verification;
 pub mod verify;

@@ -35,7 +35,7 @@ pub mod verify;
     0    success (synth: the coverage target is met and the verification passed)\n  \
     1    a check failed: a violation, a certificate the image bytes do not prove, or nothing certified\n  \
     2    bad input: a spec, image, trace, recording or flag that is invalid, unreadable or does not match\n  \
-    3    synth only: certified and verified, but short of the coverage target (the image covers less)\n  \
+    3    certified and verified, but short of the coverage target (synth: the cover; verify: the image's coverage of the spec's Init)\n  \
     130  synth interrupted by Ctrl-C (the image holds what was certified so far)"
 )]
 pub struct Cli {
@@ -82,7 +82,8 @@ pub enum Exit {
     /// 2: bad input: a spec, image, trace, recording or flag that is invalid, unreadable or does not
     /// match the others.
     BadInput,
-    /// 3: `synth` certified and verified an image, but its cover is short of the coverage target.
+    /// 3: `synth` certified and verified an image, but its cover is short of the coverage target; or
+    /// `verify` passed every check, but the image's coverage of the spec's Init is short of it.
     ShortOfTarget,
     /// 130: `synth` was interrupted (Ctrl-C); the image holds what was certified so far.
     Interrupted,

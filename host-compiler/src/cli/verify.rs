@@ -1,13 +1,13 @@
-//! `host-compiler verify SPEC IMAGE`: an image against its spec: refused unless its dimensions and sample
-//! period are the spec's, its certificate re-proved from the bytes ([`crate::verify::feedforward`],
-//! [`crate::verify::pwa`]), then closed-loop Monte Carlo through the shared f32 evaluator, and with
-//! `--attack` the falsifier ([`crate::verify::attack`]) for every image mode.
+//! `host-compiler verify SPEC IMAGE`: an image against its spec, by [`crate::verification::verify`]
+//! (refused unless its dimensions, sample period and fingerprint are the spec's; its stored values the
+//! spec gives, its certificate re-proved from the bytes, its coverage of the spec's Init estimated, then
+//! closed-loop Monte Carlo through the shared f32 evaluator, and with `--attack` the falsifier for every
+//! image mode). This file parses the flags, prints the result and maps it to the exit status: 1 for a
+//! failed check, 3 when every check passed but the coverage of the spec's Init is short of its target.
 
-use super::{
-    decode_image, image_matches_spec, read_image, task_of, BadInput, Exit, Failure, Outcome,
-};
-use crate::verify::attack::{AttackError, AttackReport, AttackSettings};
-use crate::verify::{monte_carlo, Judge};
+use super::{decode_image, image_matches_spec, read_image, Exit, Failure, Outcome};
+use crate::verify::attack::AttackReport;
+use crate::verification::{Options, Refusal, Report, Verification};
 use miette::IntoDiagnostic;
 use std::path::PathBuf;
 
@@ -47,7 +47,7 @@ pub struct VerifyArgs {
 pub fn run(a: &VerifyArgs) -> Outcome {
     // Within `verify::MAX_RUNS` and `MAX_PER_BALL` (clap checked), so the conversions are exact.
     let (runs, per_ball) = (a.runs as usize, a.per_ball as usize);
-    let problem = crate::spec::load(&a.spec).bad_input()?;
+    let problem = crate::spec::load(&a.spec).map_err(Failure::bad_input)?;
     let bytes = read_image(&a.image)?;
     let img = decode_image(&bytes, &a.image)?;
     image_matches_spec(&problem, &img, &a.image, &a.spec)?;
@@ -59,150 +59,255 @@ pub fn run(a: &VerifyArgs) -> Outcome {
             if pwa { "" } else { " --per-ball 0" }
         )));
     }
-    if problem.hybrid.is_some() {
-        return run_hybrid(a, runs, per_ball, problem, &bytes);
-    }
-    if problem.mtl.is_some() {
-        return run_temporal(a, runs, per_ball, problem, &bytes);
-    }
-    let task = task_of(problem)?;
-    let problem = &task.problem;
-    let judge = Judge::new(&task);
-    if pwa {
-        return run_pwa(a, runs, &task, &judge, &img, problem.seed);
-    }
-    let linearized = task.plant.linearization().is_some();
-    if let Some(maps) = task.plant.linearization() {
-        super::maps_match(maps, &img, &a.image, &a.spec)?;
-    }
-    let rc = crate::verify::feedforward::recheck(&judge, &img)
-        .map_err(|e| miette::miette!("{}: {e}", a.image.display()))?;
-    let terminal = terminal_recheck(&task, &img, &a.image, !a.json)?;
-    let seed = a.seed.unwrap_or(problem.seed ^ 0x7e51f1);
-    let r = if linearized {
-        crate::verify::nonlinear::monte_carlo_fl(&task, &img, runs, per_ball, seed)
-    } else {
-        monte_carlo(&judge, &img, runs, per_ball, seed)
-    }
-    .into_diagnostic()?;
-    let attack = match attack_settings(a, problem.seed)? {
-        Some(s) if linearized => {
-            Some(crate::verify::attack::attack_fl(&task, &img, &s).bad_input()?)
-        }
-        Some(s) => Some(crate::verify::attack::attack(&judge, &img, &s).bad_input()?),
-        None => None,
+    let o = Options {
+        runs,
+        per_ball,
+        seed: a.seed,
+        attack_evals: a.attack.then_some(a.attack_evals as usize),
+        coverage: true,
+        stop_early: false,
     };
+    let v = crate::verification::verify(problem, &bytes, &o).map_err(|r| refusal(r, a))?;
     if a.json {
-        let j = serde_json::json!({
-            "recheck": rc, "terminal": terminal, "monte_carlo": r, "attack": attack,
-        });
-        println!("{}", serde_json::to_string_pretty(&j).into_diagnostic()?);
+        println!("{}", serde_json::to_string_pretty(&v).into_diagnostic()?);
     } else {
-        println!(
-            "radii re-proved from the bytes: {} trajectories, {} failing (worst stored/certified {:.9}, \
-             tolerance 1 + {:.1e}; σ_min {:.4e})",
-            rc.trajectories.len(),
-            rc.failures,
-            rc.worst_ratio,
-            rc.tolerance,
-            rc.sigma_min
+        print_report(&v, &img);
+    }
+    exit_of(&v, a)
+}
+
+/// A verification that could not run: bad input naming the files.
+fn refusal(r: Refusal, a: &VerifyArgs) -> Failure {
+    Failure::bad_input(match r {
+        Refusal::Rejected(e) => {
+            miette::miette!("{}: the image is rejected: {e}", a.image.display())
+        }
+        Refusal::Mismatch(e) => miette::miette!(
+            "{} does not belong to {}: {e}",
+            a.image.display(),
+            a.spec.display()
+        ),
+        Refusal::BadInput(e) => e.wrap_err(format!("{}", a.image.display())),
+    })
+}
+
+/// The exit status of a verification: a failed check (1, naming it), short of the spec's coverage
+/// target (3, said on standard error), or success.
+fn exit_of(v: &Verification, a: &VerifyArgs) -> Outcome {
+    if let Some(f) = &v.failure {
+        return Err(if f.about_image {
+            miette::miette!("{}: {}", a.image.display(), f.message)
+        } else {
+            miette::miette!("{}", f.message)
+        }
+        .into());
+    }
+    if let Some(c) = v.coverage.as_ref().filter(|c| !c.met) {
+        eprintln!(
+            "coverage target NOT met: the image covers the spec's Init at least {:.5} at {} confidence              ({} of {} samples), short of the target {}; it is verified for its cover only (exit status 3)",
+            c.estimate.lower, c.estimate.confidence, c.estimate.covered, c.estimate.samples, c.target
         );
-        let whitened: Vec<f64> = rc
-            .trajectories
-            .iter()
-            .filter_map(|c| c.selection_test.map(|r| r / c.delta))
-            .collect();
-        if !whitened.is_empty() {
+        return Ok(Exit::ShortOfTarget);
+    }
+    Ok(Exit::Success)
+}
+
+/// The report for people: each mode's lines, then the coverage line.
+fn print_report(v: &Verification, img: &shared_types::image::Image<'_>) {
+    match &v.report {
+        Report::Feedforward {
+            recheck,
+            terminal,
+            monte_carlo,
+            attack,
+            has_unsafe,
+        } => {
+            print_terminal(terminal.as_ref(), img);
+            print_feedforward(recheck, monte_carlo.as_ref(), *has_unsafe, attack.as_ref());
+        }
+        Report::Pwa {
+            recheck: rc,
+            terminal,
+            monte_carlo,
+            attack,
+            run_steps,
+        } => {
+            print_terminal(terminal.as_ref(), img);
             println!(
-                "selection test re-proved from the bytes: {} thresholds (accepted states within {:.9} × the certified radius at most)",
-                whitened.len(),
-                whitened.iter().copied().fold(0.0f64, f64::max)
+                "partitions {}, tree depth {}, containment across boundaries: {} leaf visits, {} failing balls",
+                rc.partitions.len(),
+                rc.depth,
+                rc.containment_checks,
+                rc.containment_failures
             );
-        }
-        for c in &rc.trajectories {
-            if let Some(why) = c.failure(rc.horizon) {
-                println!("certificate failure: {why}");
+            for p in rc.partitions.iter().filter(|p| !p.ok) {
+                println!(
+                    "partition {} fails its certificate: {}",
+                    p.partition,
+                    serde_json::to_string(p).unwrap_or_default()
+                );
             }
+            println!("goal within T: {}", rc.liveness.describe());
+            if let Some(mc) = monte_carlo {
+                println!(
+                    "runs {} from F ({} drawn starts not accepted), at most {} steps to Goal",
+                    mc.runs, mc.rejected, mc.max_steps_to_goal
+                );
+                if img.terminal_law().is_some() {
+                    println!(
+                        "after Goal (judged under the terminal law, to {run_steps} samples): {} runs were outside Goal again, {} were handed over",
+                        mc.runs_leaving_goal, mc.handed_over
+                    );
+                }
+                for v in &mc.first_violations {
+                    println!("violation from x0 = {:?}: {v:?}", v.x0);
+                }
+                println!("violations {}", mc.violations);
+            }
+            print_attack(attack.as_ref());
         }
+        Report::Temporal {
+            recheck: rc,
+            monte_carlo,
+            attack,
+            written,
+            in_xi,
+        } => {
+            let unproved = rc.iter().filter(|c| !c.ok).count();
+            println!(
+                "re-proved         {} of {} balls from the image bytes, for `{written}`{}",
+                rc.len() - unproved,
+                rc.len(),
+                in_xi
+                    .as_deref()
+                    .map_or(String::new(), |xi| format!(" (in ξ: `{xi}`)"))
+            );
+            if let Some(r) = monte_carlo {
+                println!(
+                    "monte carlo       {} runs judged by the formula at the samples and sampled 8× finer ({} starts refused by the f32 selection, not run), {} violations",
+                    r.runs, r.rejected, r.violations
+                );
+            }
+            print_attack(attack.as_ref());
+        }
+        Report::Hybrid {
+            recheck: rc,
+            monte_carlo,
+            attack,
+        } => {
+            let unproved = rc.iter().filter(|c| !c.ok).count();
+            println!(
+                "re-proved         {} of {} runs from the image bytes",
+                rc.len() - unproved,
+                rc.len()
+            );
+            if let Some(r) = monte_carlo {
+                println!(
+                    "monte carlo       {} runs ({} switched, at most {} events; {} starts refused by the f32 selection, not run), {} violations",
+                    r.runs - r.rejected,
+                    r.switched,
+                    r.max_events,
+                    r.rejected,
+                    r.violations
+                );
+            }
+            print_attack(attack.as_ref());
+        }
+    }
+    if let Some(c) = &v.coverage {
         println!(
-            "runs {} interior + {} boundary ({} boundary points not accepted by the f32 selection)",
-            r.interior_runs, r.boundary_runs, r.boundary_rejected
+            "coverage of the spec's Init {:.5} (lower bound {:.5}, upper {:.5} at {} confidence, {} samples; target {}{})",
+            c.estimate.mean,
+            c.estimate.lower,
+            c.estimate.upper,
+            c.estimate.confidence,
+            c.estimate.samples,
+            c.target,
+            if c.met { ", met" } else { ", NOT met" }
+        );
+    }
+}
+
+/// The terminal law's line (none, or re-proved with its figures; a refused one is the failure).
+fn print_terminal(
+    terminal: Option<&crate::certify::terminal::TerminalCertificate>,
+    img: &shared_types::image::Image<'_>,
+) {
+    match terminal {
+        Some(c) => println!(
+            "terminal law re-proved from the bytes: contraction {:.4}, next sample within {:.6} of the accepted {:.6}; Goal depth {:.4} ≥ {:.4}, Unsafe distance {:.4}, input distance {:.4} (ellipsoid metric)",
+            c.contraction, c.theta, c.acceptance_floor, c.goal_depth, c.between_samples, c.unsafe_distance, c.input_distance
+        ),
+        None if img.terminal_law().is_none() => println!("terminal law: none in the image"),
+        // Not re-proved: the failure says why.
+        None => {}
+    }
+}
+
+fn print_feedforward(
+    rc: &crate::verify::feedforward::FeedforwardRecheck,
+    r: Option<&crate::verify::VerifyReport>,
+    has_unsafe: bool,
+    attack: Option<&AttackReport>,
+) {
+    println!(
+        "radii re-proved from the bytes: {} trajectories, {} failing (worst stored/certified {:.9}, \
+         tolerance 1 + {:.1e}; σ_min {:.4e})",
+        rc.trajectories.len(),
+        rc.failures,
+        rc.worst_ratio,
+        rc.tolerance,
+        rc.sigma_min
+    );
+    let whitened: Vec<f64> = rc
+        .trajectories
+        .iter()
+        .filter_map(|c| c.selection_test.map(|r| r / c.delta))
+        .collect();
+    if !whitened.is_empty() {
+        println!(
+            "selection test re-proved from the bytes: {} thresholds (accepted states within {:.9} × the certified radius at most)",
+            whitened.len(),
+            whitened.iter().copied().fold(0.0f64, f64::max)
+        );
+    }
+    for c in &rc.trajectories {
+        if let Some(why) = c.failure(rc.horizon) {
+            println!("certificate failure: {why}");
+        }
+    }
+    if let Some(r) = r {
+        println!(
+            "runs {} interior + {} boundary ({} refused by the evaluator although its certificate covers them{})",
+            r.interior_runs,
+            r.boundary_runs,
+            r.refused,
+            if r.boundary_outside > 0 {
+                format!(
+                    "; {} boundary points outside the image's selection on the spec's maps, not run",
+                    r.boundary_outside
+                )
+            } else {
+                String::new()
+            }
         );
         println!(
             "worst margins: goal depth {}, unsafe distance {}, input slack {}",
             margin(r.worst_goal_margin),
-            if judge.unsafe_set().is_none() {
-                "none (no Unsafe set)".to_string()
-            } else {
+            if has_unsafe {
                 margin(r.worst_unsafe_margin)
+            } else {
+                "none (no Unsafe set)".to_string()
             },
             margin(r.worst_input_margin)
         );
         for v in &r.first_violations {
             println!("violation from x0 = {:?}: {v:?}", v.x0);
         }
-        print_after_goal(&r);
+        print_after_goal(r);
         println!("violations {}", r.violations);
-        print_attack(attack.as_ref());
     }
-    if rc.failures > 0 {
-        let first = rc
-            .trajectories
-            .iter()
-            .find_map(|c| c.failure(rc.horizon))
-            .unwrap_or_default();
-        return Err(miette::miette!(
-            "{}: {} of {} stored radii are not certified by the image's own bytes; first: {first}",
-            a.image.display(),
-            rc.failures,
-            rc.trajectories.len()
-        )
-        .into());
-    }
-    if r.violations > 0 {
-        return Err(miette::miette!("{} violations", r.violations).into());
-    }
-    attack_verdict(attack.as_ref())?;
-    if r.interior_runs < runs {
-        return Err(miette::miette!(
-            "only {} of {} initial states could be drawn in the certified cover",
-            r.interior_runs,
-            runs
-        )
-        .into());
-    }
-    Ok(Exit::Success)
-}
-
-/// The image's terminal law re-proved from its bytes, printed when `print` (not with `--json`, whose
-/// object holds it); a law the bytes do not certify is a failed check (exit 1) naming the condition.
-fn terminal_recheck(
-    task: &crate::task::Task,
-    img: &shared_types::image::Image<'_>,
-    path: &std::path::Path,
-    print: bool,
-) -> Result<Option<crate::certify::terminal::TerminalCertificate>, Failure> {
-    match crate::verify::recheck_terminal(task, img) {
-        None => {
-            if print {
-                println!("terminal law: none in the image");
-            }
-            Ok(None)
-        }
-        Some(Ok(c)) if !print => Ok(Some(c)),
-        Some(Ok(c)) => {
-            println!(
-                "terminal law re-proved from the bytes: contraction {:.4}, next sample within {:.6} of the accepted {:.6}; Goal depth {:.4} ≥ {:.4}, Unsafe distance {:.4}, input distance {:.4} (ellipsoid metric)",
-                c.contraction, c.theta, c.acceptance_floor, c.goal_depth, c.between_samples, c.unsafe_distance, c.input_distance
-            );
-            Ok(Some(c))
-        }
-        Some(Err(e)) => Err(miette::miette!(
-            "{}: the terminal law is not certified by the image's own bytes: {e}",
-            path.display()
-        )
-        .into()),
-    }
+    print_attack(attack);
 }
 
 /// What the runs did after Goal: under a terminal law this is judged (its violations are counted);
@@ -212,20 +317,6 @@ fn print_after_goal(r: &crate::verify::VerifyReport) {
         "after Goal: {} runs were outside Goal again within {} samples, {} were handed over to the terminal law; {} left the input set, {} entered Unsafe (judged only under the terminal law)",
         r.runs_leaving_goal, r.run_steps, r.handed_over, r.after_goal_input_excursions, r.after_goal_unsafe
     );
-}
-
-/// The falsifier's settings from the flags (`None` without `--attack`), seeded by `--seed` or the spec's.
-fn attack_settings(a: &VerifyArgs, spec_seed: u64) -> Result<Option<AttackSettings>, Failure> {
-    if !a.attack {
-        return Ok(None);
-    }
-    let s = AttackSettings::builder()
-        .evaluations_per_start(a.attack_evals as usize)
-        .seed(a.seed.unwrap_or(spec_seed ^ 0xa77ac))
-        .build()
-        .map_err(AttackError::from)
-        .bad_input()?;
-    Ok(Some(s))
 }
 
 /// The falsifier's line (and its violations, each with its start), when it ran.
@@ -245,25 +336,6 @@ fn print_attack(attack: Option<&AttackReport>) {
     }
 }
 
-/// A failed check when the falsifier found a violating run (named with its start).
-fn attack_verdict(attack: Option<&AttackReport>) -> Result<(), Failure> {
-    match attack {
-        Some(at) if at.violations > 0 => {
-            let first = at
-                .first_violations
-                .first()
-                .map(|v| format!(" (first from x0 = {:?}: {})", v.x0, v.what))
-                .unwrap_or_default();
-            Err(miette::miette!(
-                "the falsifier found {} violating runs{first}",
-                at.violations
-            )
-            .into())
-        }
-        _ => Ok(()),
-    }
-}
-
 /// A worst margin for people: its value, or that no run recorded one (never `inf` as if it were a
 /// result).
 fn margin(v: f64) -> String {
@@ -272,286 +344,4 @@ fn margin(v: f64) -> String {
     } else {
         "none recorded (no run reached this check)".to_string()
     }
-}
-
-/// PWA images (Ch. 6): the independent certificate recheck and closed-loop Monte Carlo from F
-/// ([`crate::verify::pwa`]); runs terminate upon entering Goal (Theorem 6.5).
-fn run_pwa(
-    a: &VerifyArgs,
-    runs: usize,
-    task: &crate::task::Task,
-    judge: &Judge<'_>,
-    img: &shared_types::image::Image<'_>,
-    spec_seed: u64,
-) -> Outcome {
-    let rc = crate::verify::pwa::recheck(judge, img).map_err(|e| miette::miette!(e))?;
-    let terminal = terminal_recheck(task, img, &a.image, !a.json)?;
-    // The image does not mark which balls start a trajectory: all runs start anywhere in F.
-    let mc =
-        crate::verify::pwa::monte_carlo_pwa(judge, img, &[], runs, a.seed.unwrap_or(0x7e51f1), 0)
-            .into_diagnostic()?;
-    let attack = match attack_settings(a, spec_seed)? {
-        Some(s) => Some(crate::verify::attack::attack_pwa(judge, img, &s).bad_input()?),
-        None => None,
-    };
-    if a.json {
-        let j = serde_json::json!({
-            "recheck": rc, "terminal": terminal, "monte_carlo": mc, "attack": attack,
-        });
-        println!("{}", serde_json::to_string_pretty(&j).into_diagnostic()?);
-    } else {
-        println!(
-            "partitions {}, tree depth {}, containment across boundaries: {} leaf visits, {} failing balls",
-            rc.partitions.len(),
-            rc.depth,
-            rc.containment_checks,
-            rc.containment_failures
-        );
-        for p in rc.partitions.iter().filter(|p| !p.ok) {
-            println!("partition {} fails its certificate: {p:?}", p.partition);
-        }
-        println!("goal within T: {}", rc.liveness.describe());
-        println!(
-            "runs {} from F ({} drawn starts not accepted), at most {} steps to Goal",
-            mc.runs, mc.rejected, mc.max_steps_to_goal
-        );
-        if img.terminal_law().is_some() {
-            println!(
-                "after Goal (judged under the terminal law, to {} samples): {} runs were outside Goal again, {} were handed over",
-                crate::verify::run_steps(judge, img),
-                mc.runs_leaving_goal,
-                mc.handed_over
-            );
-        }
-        for v in &mc.first_violations {
-            println!("violation from x0 = {:?}: {v:?}", v.x0);
-        }
-        println!("violations {}", mc.violations);
-        print_attack(attack.as_ref());
-    }
-    if rc.failures > 0 || mc.violations > 0 {
-        return Err(miette::miette!(
-            "{} certificate failures, {} violations",
-            rc.failures,
-            mc.violations
-        )
-        .into());
-    }
-    attack_verdict(attack.as_ref())?;
-    if mc.runs < runs {
-        return Err(miette::miette!(
-            "only {} of {} initial states could be drawn in F",
-            mc.runs,
-            runs
-        )
-        .into());
-    }
-    Ok(Exit::Success)
-}
-
-/// `verify` of an image for an MTL task: every ball re-proved from the bytes for the formula
-/// ([`crate::verify::temporal::recheck`]), then Monte Carlo from Init (states the image accepts) and from
-/// the boundary of every ball, each run judged by the formula as written.
-fn run_temporal(
-    a: &VerifyArgs,
-    runs: usize,
-    per_ball: usize,
-    problem: crate::spec::Problem,
-    bytes: &[u8],
-) -> Outcome {
-    use crate::verify::temporal::{monte_carlo_temporal, recheck};
-    let img = decode_image(bytes, &a.image)?;
-    if img.mode() != shared_types::image::Mode::Feedforward || problem.hybrid.is_some() {
-        return Err(Failure::bad_input(miette::miette!(
-            "{}: MTL tasks are certified for feedforward images of one-location plants",
-            a.image.display()
-        )));
-    }
-    let ts = super::synth_temporal::temporal_task(problem)?;
-    let (tt, task) = (&ts.tt, &ts.task);
-    if let Some(maps) = task.plant.linearization() {
-        super::maps_match(maps, &img, &a.image, &a.spec)?;
-    }
-    let rc = recheck(task, tt, &img)
-        .map_err(|e| miette::miette!("{}: {e}", a.image.display()))
-        .bad_input()?;
-    let init = crate::cover::estimate::SampleBox {
-        lo: task.problem.init.lo.clone(),
-        hi: task.problem.init.hi.clone(),
-    };
-    let seed = a.seed.unwrap_or(task.problem.seed ^ 0x7e51f1);
-    let starts = crate::verify::hybrid::starts_from_image(bytes, &init, runs, per_ball, seed)
-        .map_err(|e| miette::miette!("{e}"))
-        .bad_input()?;
-    let linearized = task.plant.linearization().is_some();
-    let r = if linearized {
-        // On the nonlinear plant, the zero states drawn in Init.
-        crate::verify::temporal::monte_carlo_temporal_fl(task, tt, &img, &starts, seed ^ 0x2e10)
-            .map_err(|e| miette::miette!("{}: {e}", a.image.display()))
-            .bad_input()?
-    } else {
-        monte_carlo_temporal(task, tt, &img, &starts).map_err(miette::Report::new)?
-    };
-    let attack = match attack_settings(a, task.problem.seed)? {
-        // On the nonlinear plant too.
-        Some(s) if linearized => {
-            Some(crate::verify::attack::attack_temporal_fl(task, tt, &img, &s).bad_input()?)
-        }
-        Some(s) => Some(crate::verify::attack::attack_temporal(task, tt, &img, &s).bad_input()?),
-        None => None,
-    };
-    let unproved: Vec<usize> = rc.iter().filter(|c| !c.ok).map(|c| c.trajectory).collect();
-    if a.json {
-        println!(
-            "{}",
-            serde_json::to_string_pretty(
-                &serde_json::json!({"recheck": rc, "monte_carlo": r, "attack": attack})
-            )
-            .into_diagnostic()?
-        );
-    } else {
-        println!(
-            "re-proved         {} of {} balls from the image bytes, for `{}`{}",
-            rc.len() - unproved.len(),
-            rc.len(),
-            ts.written,
-            ts.rewritten()
-                .map_or(String::new(), |xi| format!(" (in ξ: `{xi}`)"))
-        );
-        println!(
-            "monte carlo       {} runs judged by the formula at the samples and sampled 8× finer ({} starts refused by the f32 selection, not run), {} violations",
-            r.runs, r.rejected, r.violations
-        );
-        print_attack(attack.as_ref());
-    }
-    if let Some(c) = rc.iter().find(|c| !c.ok) {
-        // The stored radius within the certified one: what failed is the selection test's threshold.
-        let what = if c.selection_test.is_some() && c.stored <= c.certified {
-            "its whitened selection test accepts states beyond"
-        } else {
-            "its stored radius exceeds"
-        };
-        return Err(miette::miette!(
-            "{}: ball {} is not re-proved: {what} what its table certifies for the formula",
-            a.image.display(),
-            c.trajectory
-        )
-        .into());
-    }
-    if r.violations > 0 {
-        return Err(miette::miette!(
-            "{} violations (first: {})",
-            r.violations,
-            r.first_violation.as_deref().unwrap_or("?")
-        )
-        .into());
-    }
-    attack_verdict(attack.as_ref())?;
-    Ok(Exit::Success)
-}
-
-/// `verify` of a hybrid image: every run re-proved from the bytes ([`crate::verify::hybrid::recheck`]),
-/// then Monte Carlo against the automaton's exact flow from Init (states the image accepts) and from the
-/// boundary of every ball.
-fn run_hybrid(
-    a: &VerifyArgs,
-    runs: usize,
-    per_ball: usize,
-    problem: crate::spec::Problem,
-    bytes: &[u8],
-) -> Outcome {
-    use crate::verify::hybrid::{monte_carlo_hybrid, recheck, starts_from_image, HybridReport};
-    use rayon::prelude::*;
-    let task = crate::synth::hybrid::HybridTask::new(problem)
-        .map_err(|e| miette::miette!("{e}"))
-        .bad_input()?;
-    let rc = recheck(
-        &task.plant,
-        &task.property,
-        task.formula.as_ref(),
-        task.steps,
-        bytes,
-    )
-    .map_err(|e| miette::miette!("{}: {e}", a.image.display()))
-    .bad_input()?;
-    let init = crate::cover::estimate::SampleBox {
-        lo: task.problem.init.lo.clone(),
-        hi: task.problem.init.hi.clone(),
-    };
-    let seed = a.seed.unwrap_or(task.problem.seed ^ 0x7e51f1);
-    let starts = starts_from_image(bytes, &init, runs, per_ball, seed)
-        .map_err(|e| miette::miette!("{e}"))
-        .bad_input()?;
-    let parts: Vec<Result<HybridReport, String>> = starts
-        .par_chunks(64)
-        .map(|c| {
-            monte_carlo_hybrid(
-                &task.plant,
-                &task.property,
-                task.formula.as_ref(),
-                task.initial,
-                task.steps,
-                bytes,
-                c,
-            )
-        })
-        .collect();
-    let mut r = HybridReport {
-        min_unsafe_distance: f64::INFINITY,
-        ..Default::default()
-    };
-    for p in parts {
-        r.merge(p.map_err(|e| miette::miette!("{e}"))?);
-    }
-    let attack = match attack_settings(a, task.problem.seed)? {
-        Some(s) => {
-            let runs = crate::verify::attack::HybridRuns {
-                plant: &task.plant,
-                property: &task.property,
-                formula: task.formula.as_ref(),
-                initial: task.initial,
-                steps: task.steps,
-            };
-            Some(crate::verify::attack::attack_hybrid(runs, bytes, &s).bad_input()?)
-        }
-        None => None,
-    };
-    let unproved: Vec<&str> = rc.iter().filter_map(|c| c.why.as_deref()).collect();
-    if a.json {
-        println!(
-            "{}",
-            serde_json::to_string_pretty(
-                &serde_json::json!({"recheck": rc, "monte_carlo": r, "attack": attack})
-            )
-            .into_diagnostic()?
-        );
-    } else {
-        println!(
-            "re-proved         {} of {} runs from the image bytes",
-            rc.len() - unproved.len(),
-            rc.len()
-        );
-        println!(
-            "monte carlo       {} runs ({} switched, at most {} events; {} starts refused by the f32 selection, not run), {} violations",
-            r.runs - r.rejected,
-            r.switched,
-            r.max_events,
-            r.rejected,
-            r.violations
-        );
-        print_attack(attack.as_ref());
-    }
-    if let Some(why) = unproved.first() {
-        return Err(miette::miette!("{}: not re-proved: {why}", a.image.display()).into());
-    }
-    if r.violations > 0 {
-        return Err(miette::miette!(
-            "{} violations (first: {})",
-            r.violations,
-            r.first_violation.as_deref().unwrap_or("?")
-        )
-        .into());
-    }
-    attack_verdict(attack.as_ref())?;
-    Ok(Exit::Success)
 }

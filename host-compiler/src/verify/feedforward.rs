@@ -20,9 +20,16 @@
 //! # The metric's rounding
 //! The synthesiser certifies in the f64 metric P and stores its f32 rounding P̂, so the recomputed
 //! radius differs from the stored one by the change of metric: norms in P and P̂ differ by a factor
-//! within √(1 ± u κ) (u = 2⁻²⁴, κ = ‖|P̂|‖₂ / λ_min(P̂)). A stored radius is accepted up to
-//! [`tolerance`] = 16 u κ above the recomputed one (a fraction of the slack the selection radius keeps,
-//! γ_{2n+4} κ); anything more (an image whose radii were enlarged) is refused, naming the trajectory.
+//! within √(1 ± u κ) (u = 2⁻²⁴, κ = ‖|P̂|‖₂ / λ_min(P̂)). A stored radius r̂ is accepted up to
+//! [`tolerance`] = (n + 2) u κ above the recomputed one r_c = [`crate::certify::selection_radius`] of the
+//! recomputed δ, and no further: that is the slack the selection radius keeps below δ. It stores
+//! δ·√((1 − γ_{2n+4}κ)(1 − 2u)) less the quantisation term, and √(1 − γ_{2n+4}κ) ≤ 1 − (n + 2)uκ
+//! (γ_k = ku/(1 − ku) ≥ ku), so r̂ ≤ r_c·(1 + (n + 2)uκ) ≤ δ·(1 − (n + 2)uκ)(1 + (n + 2)uκ) < δ: an
+//! accepted stored radius never exceeds the radius the bytes certify, and the tolerance spends at most
+//! the selection radius' own rounding allowance (whose worst case, a relative error of d² near
+//! γ_{2n+4}κ in the direction that accepts more, is what it was kept for) on the change of metric,
+//! whose effect on δ is of order uκ. Anything more (an image whose radii were enlarged by more than
+//! about (n + 2) uκ, a few parts in 10⁶ for the examples' metrics) is refused, naming the trajectory.
 
 use crate::certify::{certify, selection_radius, CertifyError, Loop, LoopConstants, U32};
 use crate::linalg::{spectral_norm, sym, sym_eigenvalues};
@@ -110,7 +117,8 @@ pub enum FeedforwardRecheckError {
     Location { trajectory: usize, location: usize },
 }
 
-/// The relative tolerance on a stored radius (module doc, "The metric's rounding"): 16 u κ(P̂).
+/// The relative tolerance on a stored radius (module doc, "The metric's rounding"): (n + 2) u κ(P̂), the
+/// slack [`crate::certify::selection_radius`] keeps below the certified radius.
 pub fn tolerance(P: faer::MatRef<'_, f64>) -> f64 {
     let n = P.nrows();
     let absP = Mat::from_fn(n, n, |i, j| P[(i, j)].abs());
@@ -118,7 +126,7 @@ pub fn tolerance(P: faer::MatRef<'_, f64>) -> f64 {
         .and_then(|e| e.first().copied())
         .unwrap_or(0.0);
     if lmin > 0.0 {
-        16.0 * U32 * spectral_norm(absP.as_ref()) / lmin
+        (n as f64 + 2.0) * U32 * spectral_norm(absP.as_ref()) / lmin
     } else {
         0.0
     }

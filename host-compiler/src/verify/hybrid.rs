@@ -384,7 +384,7 @@ pub struct RunCheck {
 /// [`crate::certify::forced::certify_forced`] for forced switching, or
 /// [`crate::certify::forced::certify_forced_formula`] when the task is the MTL `formula`). A run passes when the stored guard and threshold are
 /// the ones the certificate gives, every guard segment's rows reach its κ_f, and the stored radius is at
-/// most the selection radius of the recomputed δ times 1 + 16uκ(P̂) (as for a single location,
+/// most the selection radius of the recomputed δ times 1 + (n + 2)uκ(P̂) (as for a single location,
 /// [`super::feedforward::tolerance`]).
 pub fn recheck(
     plant: &Hybrid,

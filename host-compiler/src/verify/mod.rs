@@ -21,10 +21,12 @@
 //! within the horizon.
 
 pub mod attack;
+pub mod coverage;
 pub mod feedforward;
 pub mod hybrid;
 pub mod nonlinear;
 pub mod pwa;
+pub mod stored;
 pub mod temporal;
 
 /// Largest number of Monte Carlo runs from the cover one check may ask for (`verify --runs`,
@@ -289,8 +291,16 @@ pub const MARGIN_EVERY: usize = 16;
 pub struct VerifyReport {
     pub interior_runs: usize,
     pub boundary_runs: usize,
-    /// Boundary points the f32 selection did not accept (not violations: the controller reports them).
+    /// Boundary points the evaluator refused at κ = 0 (part of `refused`).
     pub boundary_rejected: usize,
+    /// Starts the evaluator refused at κ = 0 although the certificate covers them: every start is drawn
+    /// where the image's f32 selection provably accepts (interior starts by that selection itself,
+    /// boundary starts within [`boundary_radius`]; with model maps, ξ by the spec's coords program at the
+    /// spec's ζ0). Any is a failed verification, never "0 violations".
+    pub refused: usize,
+    /// With model maps: boundary points whose ξ (the spec's coords program in f32) the image's selection
+    /// does not accept (the program's rounding, or a ball whose centre no plant state reaches); not run.
+    pub boundary_outside: usize,
     pub violations: usize,
     pub first_violations: Vec<RunOutcome>,
     /// Worst margins over the runs that recorded them (every [`MARGIN_EVERY`]-th): Goal depth (max over
@@ -327,28 +337,36 @@ pub fn selection_test_radius(image: &Image<'_>, P: faer::MatRef<'_, f64>, t: usi
 }
 
 /// The radius at which a Monte Carlo places trajectory `t`'s boundary starts, in the image's metric about
-/// the stored centre: a hair (one part in 10⁶) inside the stored radius, and with a whitened selection
-/// test inside the radius within which that test accepts every state
-/// ([`crate::certify::pwa_complete_radius`]), so that the starts are states the evaluator runs.
+/// the stored centre: a hair (one part in 10⁶) inside the radius within which the image's f32 selection
+/// test provably accepts every state (the P-metric test with the stored radius,
+/// [`crate::certify::selection_floor`]; a whitened selection test, [`crate::certify::pwa_complete_radius`]),
+/// so that every boundary start is a state the certificate covers and the evaluator must run: a refused
+/// one fails the verification.
 pub fn boundary_radius(image: &Image<'_>, t: usize) -> f64 {
     let stored = image.delta(t) as f64;
+    let n = image.n();
+    let l = image.location(t, 0);
+    let P: Vec<f64> = (0..n * n)
+        .map(|i| image.P(l, i / n, i % n) as f64)
+        .collect();
+    let P = crate::linalg::from_row_major(n, n, &P);
     let r = match selection_test_data(image, t) {
-        Some((Rh, c, cz, s)) => {
-            let n = image.n();
-            let l = image.location(t, 0);
-            let P: Vec<f64> = (0..n * n)
-                .map(|i| image.P(l, i / n, i % n) as f64)
-                .collect();
-            let P = crate::linalg::from_row_major(n, n, &P);
-            stored.min(crate::certify::pwa_complete_radius(
+        Some((Rh, c, cz, s)) => stored.min(crate::certify::pwa_complete_radius(
+            P.as_ref(),
+            &Rh,
+            &c,
+            &cz,
+            s,
+        )),
+        None => {
+            let c: Vec<f64> = (0..n).map(|i| image.centre(t, i) as f64).collect();
+            stored.min(crate::certify::selection_floor(
                 P.as_ref(),
-                &Rh,
                 &c,
-                &cz,
-                s,
+                image.delta(t),
+                stored,
             ))
         }
-        None => stored,
     };
     r * (1.0 - 1e-6)
 }
@@ -618,6 +636,7 @@ pub fn summarize(
         .iter()
         .filter(|o| o.rejected)
         .count();
+    let refused = outcomes.iter().filter(|o| o.rejected).count();
     let bad: Vec<&RunOutcome> = outcomes.iter().filter(|o| o.violated()).collect();
     let ok = outcomes
         .iter()
@@ -633,6 +652,8 @@ pub fn summarize(
         interior_runs,
         boundary_runs,
         boundary_rejected,
+        refused,
+        boundary_outside: 0,
         violations: bad.len(),
         first_violations: bad.into_iter().take(10).cloned().collect(),
         worst_goal_margin: wg,

@@ -247,8 +247,11 @@ pub fn check_maps(maps: &FlMaps, image: &Image<'_>) -> Result<(), String> {
 
 /// Monte Carlo over the certified cover of a feedback-linearizable task: `interior` plant states drawn
 /// uniformly in Init whose ξ the evaluator's selection accepts (at most 50× as many draws), plus
-/// `per_ball` states per ball whose ξ lies on the ball's boundary (the stored radius less one part in 10⁶)
-/// and whose zero-dynamics states are drawn in Init. Deterministic for a seed; runs in parallel.
+/// `per_ball` states per ball whose ξ lies on the ball's boundary ([`super::boundary_radius`]) and whose
+/// zero-dynamics states are drawn in Init. ξ is the spec's coords program's in f32 at the spec's ζ0, so
+/// a start the evaluator then refuses (its own maps or ζ0 differ) counts in `refused`, a failure;
+/// boundary points that selection does not accept are counted in `boundary_outside` and not run.
+/// Deterministic for a seed; runs in parallel.
 pub fn monte_carlo_fl(
     task: &Task,
     image: &Image<'_>,
@@ -273,18 +276,34 @@ pub fn monte_carlo_fl(
             .map(|(&l, &h)| if h > l { rng.random_range(l..=h) } else { l })
             .collect()
     };
+    // Whether the image's selection accepts a plant state's ξ as the spec's maps give it in f32 (its
+    // coords program at its ζ0): such a start is covered by the certificate, and the evaluator must run
+    // it (`VerifyReport::refused`).
+    let ext0: Vec<f32> = maps.flat.as_ref().map_or_else(Vec::new, |f| {
+        f.ext_init.iter().map(|&z| z as f32).collect()
+    });
+    let coords = shared_types::program::Program::decode(&maps.coords.bytes).ok();
+    let accepted = |x: &[f64]| -> bool {
+        let Some(p) = &coords else { return false };
+        let inputs: Vec<f32> = x.iter().map(|&v| v as f32).chain(ext0.iter().copied()).collect();
+        let mut xi = vec![0.0f32; image.n()];
+        let mut work = shared_types::program::Workspace::new();
+        p.eval_with(&inputs, &mut xi, &mut work).is_ok()
+            && xi.iter().all(|v| v.is_finite())
+            && ctl.select_maps(&xi).is_some()
+    };
     let mut starts: Vec<Vec<f64>> = Vec::new();
     let mut draws = 0usize;
     while starts.len() < interior && draws < interior.saturating_mul(50) {
         draws += 1;
         let x = draw(&mut rng);
-        let xi: Vec<f32> = maps.xi_of(&x).iter().map(|&v| v as f32).collect();
-        if ctl.select_maps(&xi).is_some() {
+        if accepted(&x) {
             starts.push(x);
         }
     }
     let interior_runs = starts.len();
     let mut boundary: Vec<Vec<f64>> = Vec::new();
+    let mut outside = 0usize;
     for t in 0..image.n_trajectories() {
         for b in 0..per_ball {
             let x = match &maps.flat {
@@ -302,7 +321,11 @@ pub fn monte_carlo_fl(
                     flat_boundary_start(image, maps, &fc.ext_init, t, x, b % 2 == 1, &mut rng)
                 }
             };
-            boundary.push(x);
+            if accepted(&x) {
+                boundary.push(x);
+            } else {
+                outside += 1;
+            }
         }
     }
     let boundary_runs = boundary.len();
@@ -312,5 +335,7 @@ pub fn monte_carlo_fl(
         .enumerate()
         .map(|(i, x0)| run_fl(task, maps, image, x0, i % MARGIN_EVERY == 0))
         .collect();
-    Ok(summarize(&outcomes, interior_runs, boundary_runs))
+    let mut report = summarize(&outcomes, interior_runs, boundary_runs);
+    report.boundary_outside = outside;
+    Ok(report)
 }

@@ -83,3 +83,5 @@ mod synth_import_dir;
 mod verify_attack;
 mod verify_refuses;
 mod verify_semantics;
+mod verify_tamper;
+mod verify_truth;

@@ -177,9 +177,10 @@ pub(crate) struct Passed {
 /// The `attack` of a passing `verify --attack --json`, checked: exit 0, runs made, a finite least
 /// robustness, no violation.
 pub(crate) fn attack_json(o: &std::process::Output) -> Passed {
-    assert_eq!(
-        o.status.code(),
-        Some(0),
+    // 3: every check passed, the image's coverage of the spec's Init short of its target (the tests'
+    // one-run images).
+    assert!(
+        matches!(o.status.code(), Some(0 | 3)),
         "{}\n{}",
         String::from_utf8_lossy(&o.stdout),
         String::from_utf8_lossy(&o.stderr)
