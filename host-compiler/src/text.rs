@@ -21,7 +21,7 @@ pub fn excerpt(s: &str) -> String {
 pub fn clip_runs(s: &str) -> String {
     let mut out = String::with_capacity(s.len().min(1 << 12));
     let mut run = String::new();
-    let mut flush = |run: &mut String, out: &mut String| {
+    let flush = |run: &mut String, out: &mut String| {
         out.push_str(&excerpt(run));
         run.clear();
     };

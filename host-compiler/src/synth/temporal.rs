@@ -169,7 +169,8 @@ const VACUOUS_RATIO: f64 = 1e3;
 fn vacuous(c: &TemporalCertificate) -> Option<String> {
     let rho = c.delta_samples;
     let unusable = rho.is_infinite()
-        || !(c.delta_input > f64::NEG_INFINITY)
+        || c.delta_input.is_nan()
+        || c.delta_input == f64::NEG_INFINITY
         || (c.delta_input < 0.0 && rho > VACUOUS_RATIO * -c.delta_input);
     (rho > 0.0 && unusable).then(|| {
         format!(
