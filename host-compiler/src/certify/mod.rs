@@ -885,7 +885,7 @@ impl StayMargins {
     /// j the first sample whose depth reaches r, r must exceed every earlier depth and be at most the least
     /// margin from j on: each j gives one candidate, min(suffix minimum at j, bound).
     fn largest(&self, bound: f64) -> f64 {
-        if !(bound > 0.0) {
+        if bound.is_nan() || bound <= 0.0 {
             return bound;
         }
         let n = self.margin.len();
@@ -895,13 +895,14 @@ impl StayMargins {
         }
         let mut before = f64::NEG_INFINITY;
         let mut best = 0.0f64;
-        for j in 0..n {
-            let r = suffix[j].min(bound);
-            // δ is taken a relative 10⁻⁹ below its bound: the first sample at depth ≥ δ must still be j.
+        for (&s, &g) in suffix.iter().zip(&self.depth) {
+            let r = s.min(bound);
+            // δ is taken a relative 10⁻⁹ below its bound: the first sample at depth ≥ δ must still be
+            // this one.
             if r * (1.0 - 1e-9) > before && r > best {
                 best = r;
             }
-            before = before.max(self.depth[j]);
+            before = before.max(g);
         }
         // No sample wholly in the set below the bound: nothing to keep.
         if before < bound * (1.0 - 1e-9) {

@@ -568,7 +568,7 @@ impl Report {
                 })
                 .collect(),
             total_steps: img.total_steps(),
-            after_goal: crate::report::after_goal_line(&img),
+            after_goal: crate::report::after_goal_line(img),
             terminal: (img.mode() == Mode::Feedforward).then_some(match img.terminal() {
                 Terminal::HoldLast => "hold_last",
                 Terminal::Fallback => "fallback",
