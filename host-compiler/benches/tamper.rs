@@ -81,7 +81,10 @@ fn synth(ex: &Example, dir: &std::path::Path) -> Option<(PathBuf, Vec<u8>)> {
         );
         return None;
     }
-    Some((spec, std::fs::read(d.join("out").join("controller.img")).ok()?))
+    Some((
+        spec,
+        std::fs::read(d.join("out").join("controller.img")).ok()?,
+    ))
 }
 
 fn main() {

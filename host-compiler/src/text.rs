@@ -71,7 +71,9 @@ pub fn clip_source(text: &str, labels: &[Range<usize>]) -> (String, Vec<Range<us
                 - start;
             let offsets: Vec<usize> = body.char_indices().map(|(i, _)| i).collect();
             let anchor_char = offsets.partition_point(|&o| o < anchor);
-            let first = anchor_char.saturating_sub(keep / 4).min(chars.saturating_sub(keep));
+            let first = anchor_char
+                .saturating_sub(keep / 4)
+                .min(chars.saturating_sub(keep));
             let last = (first + keep).min(chars);
             let kept_lo = offsets[first];
             let kept_hi = offsets.get(last).copied().unwrap_or(body.len());
@@ -80,7 +82,14 @@ pub fn clip_source(text: &str, labels: &[Range<usize>]) -> (String, Vec<Range<us
             out.push_str(&body[kept_lo..kept_hi]);
             out.push_str(&format!("… ({chars} characters)"));
             out.push_str(&line[body.len()..]);
-            pieces.push((start, end, out_start, start + kept_lo, start + kept_hi, prefix.len()));
+            pieces.push((
+                start,
+                end,
+                out_start,
+                start + kept_lo,
+                start + kept_hi,
+                prefix.len(),
+            ));
         }
         start = end;
     }
@@ -94,7 +103,11 @@ pub fn clip_source(text: &str, labels: &[Range<usize>]) -> (String, Vec<Range<us
         .iter()
         .map(|r| {
             let s = map(r.start);
-            let e = if r.end > r.start { map(r.end - 1).max(s) + 1 } else { s };
+            let e = if r.end > r.start {
+                map(r.end - 1).max(s) + 1
+            } else {
+                s
+            };
             let e = e.min(out.len());
             let mut s = s.min(e);
             while !out.is_char_boundary(s) {
@@ -116,7 +129,10 @@ mod tests {
 
     #[test]
     fn long_runs_in_a_message_are_cut_and_short_words_kept() {
-        let m = format!("invalid type: string \"{}\", expected f64", "a".repeat(10_000));
+        let m = format!(
+            "invalid type: string \"{}\", expected f64",
+            "a".repeat(10_000)
+        );
         let c = clip_runs(&m);
         assert!(c.starts_with("invalid type: string \"aaaa"), "{c}");
         assert!(c.ends_with("(10003 characters) expected f64"), "{c}");
@@ -140,7 +156,6 @@ mod tests {
         assert_eq!(same, "a = 1\n");
         assert_eq!(l2[0], 0..1);
     }
-
 
     #[test]
     fn short_text_is_kept_and_long_text_is_cut_at_a_character_boundary() {

@@ -857,7 +857,8 @@ impl StayMargins {
                 }
                 match lp.plant.vector_field(lp.loc, &nom.x[k], &nom.u[k]) {
                     Some(f) => {
-                        let between = (g - lc.phi * crate::linalg::p_norm(lp.P, &f) - held) / lc.gamma;
+                        let between =
+                            (g - lc.phi * crate::linalg::p_norm(lp.P, &f) - held) / lc.gamma;
                         if between.is_nan() {
                             f64::NEG_INFINITY
                         } else {
@@ -972,7 +973,10 @@ mod tests {
         // Depths: outside, inside 0.2, dips out to −0.1, deep inside 0.5 and 0.6 (κ* = 4).
         let s = stay(&[-1.0, 0.2, -0.1, 0.5, 0.6], &[-1.0, 0.2, -0.1, 0.5, 0.6]);
         assert!(s.holds(0.4, 0.4), "wholly inside first at κ = 3, and stays");
-        assert!(!s.holds(0.1, 0.1), "wholly inside at κ = 1, then out at κ = 2");
+        assert!(
+            !s.holds(0.1, 0.1),
+            "wholly inside at κ = 1, then out at κ = 2"
+        );
         assert!((s.largest(0.55) - 0.55).abs() < 1e-12);
         assert!((s.largest(0.45) - 0.45).abs() < 1e-12);
         // A bound below the first visit's depth: every radius up to it meets the dip.

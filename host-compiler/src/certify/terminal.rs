@@ -250,7 +250,10 @@ pub fn handover_radius(law: &StoredTerminal) -> f64 {
 /// certification and verification evaluate); `None` when ρ_h is 0 or P_t is not usable.
 pub fn handover_region(
     law: &StoredTerminal,
-) -> Option<(crate::property::ConvexPiece, Box<dyn crate::geometry::Region>)> {
+) -> Option<(
+    crate::property::ConvexPiece,
+    Box<dyn crate::geometry::Region>,
+)> {
     let n = law.x_e.len();
     let rho = handover_radius(law);
     if !(rho > 0.0) {
@@ -259,11 +262,9 @@ pub fn handover_region(
     let Q = Mat::from_fn(n, n, |i, j| {
         0.5 * (law.P[(i, j)] + law.P[(j, i)]) / (rho * rho)
     });
-    let region = crate::geometry::Ellipsoid::new(
-        law.x_e.clone(),
-        crate::linalg::to_row_major(Q.as_ref()),
-    )
-    .ok()?;
+    let region =
+        crate::geometry::Ellipsoid::new(law.x_e.clone(), crate::linalg::to_row_major(Q.as_ref()))
+            .ok()?;
     let piece = crate::property::ConvexPiece::Ellipsoid {
         C: Mat::identity(n, n),
         c: law.x_e.clone(),

@@ -502,7 +502,8 @@ mod tests {
     #[test]
     fn a_ctrl_c_after_the_search_ended_exits_130_and_none_exits_as_before() {
         let pressed = AtomicBool::new(true);
-        let f = late_interrupt(&StopReason::Covered, &pressed).expect("a late Ctrl-C is an interruption");
+        let f = late_interrupt(&StopReason::Covered, &pressed)
+            .expect("a late Ctrl-C is an interruption");
         assert_eq!(f.exit.code(), 130);
         assert!(f.report.to_string().contains("interrupted"), "{}", f.report);
         assert!(late_interrupt(&StopReason::Covered, &AtomicBool::new(false)).is_none());

@@ -6,8 +6,8 @@
 //! failed check, 3 when every check passed but the coverage of the spec's Init is short of its target.
 
 use super::{decode_image, image_matches_spec, read_image, Exit, Failure, Outcome};
-use crate::verify::attack::AttackReport;
 use crate::verification::{Options, Refusal, Report, Verification};
+use crate::verify::attack::AttackReport;
 use miette::IntoDiagnostic;
 use std::path::PathBuf;
 
@@ -104,7 +104,7 @@ fn exit_of(v: &Verification, a: &VerifyArgs) -> Outcome {
     }
     if let Some(c) = v.coverage.as_ref().filter(|c| !c.met) {
         eprintln!(
-            "coverage target NOT met: the image covers the spec's Init at least {:.5} at {} confidence              ({} of {} samples), short of the target {}; it is verified for its cover only (exit status 3)",
+            "coverage target NOT met: the image covers the spec's Init at least {:.5} at {} confidence ({} of {} samples), short of the target {}; it is verified for its cover only (exit status 3)",
             c.estimate.lower, c.estimate.confidence, c.estimate.covered, c.estimate.samples, c.target
         );
         return Ok(Exit::ShortOfTarget);
@@ -155,12 +155,16 @@ fn print_report(v: &Verification, img: &shared_types::image::Image<'_>) {
                 );
                 if img.terminal_law().is_some() {
                     println!(
-                        "after Goal (judged under the terminal law, to {run_steps} samples): {} runs were outside Goal again, {} were handed over",
-                        mc.runs_leaving_goal, mc.handed_over
+                        "after Goal: judged over runs of {run_steps} samples: {} runs left Goal, {} entered Unsafe, {} left the input set, {} were not handed over within the horizon (each a violation); {} were handed over",
+                        mc.runs_leaving_goal, mc.after_goal_unsafe, mc.after_goal_input_excursions, mc.not_handed_over, mc.handed_over
                     );
                 }
                 for v in &mc.first_violations {
-                    println!("violation from x0 = {:?}: {v:?}", v.x0);
+                    println!(
+                        "violation from x0 = {:?}: {}",
+                        v.x0,
+                        crate::verify::attack::describe(v)
+                    );
                 }
                 println!("violations {}", mc.violations);
             }
@@ -302,7 +306,11 @@ fn print_feedforward(
             margin(r.worst_input_margin)
         );
         for v in &r.first_violations {
-            println!("violation from x0 = {:?}: {v:?}", v.x0);
+            println!(
+                "violation from x0 = {:?}: {}",
+                v.x0,
+                crate::verify::attack::describe(v)
+            );
         }
         print_after_goal(r);
         println!("violations {}", r.violations);
@@ -313,10 +321,22 @@ fn print_feedforward(
 /// What the runs did after Goal: under a terminal law this is judged (its violations are counted);
 /// without one it is reported only.
 fn print_after_goal(r: &crate::verify::VerifyReport) {
-    println!(
-        "after Goal: {} runs were outside Goal again within {} samples, {} were handed over to the terminal law; {} left the input set, {} entered Unsafe (judged only under the terminal law)",
-        r.runs_leaving_goal, r.run_steps, r.handed_over, r.after_goal_input_excursions, r.after_goal_unsafe
-    );
+    if r.after_goal_judged {
+        println!(
+            "after Goal: judged over runs of {} samples: {} runs left Goal, {} entered Unsafe, {} left the input set, {} were not handed over within the horizon (each a violation); {} were handed over",
+            r.run_steps,
+            r.runs_leaving_goal,
+            r.after_goal_unsafe,
+            r.after_goal_input_excursions,
+            r.not_handed_over,
+            r.handed_over
+        );
+    } else {
+        println!(
+            "after Goal: not judged (no terminal law): within {} samples {} runs were outside Goal again, {} entered Unsafe, {} left the input set",
+            r.run_steps, r.runs_leaving_goal, r.after_goal_unsafe, r.after_goal_input_excursions
+        );
+    }
 }
 
 /// The falsifier's line (and its violations, each with its start), when it ran.

@@ -320,7 +320,12 @@ pub fn grow(
     let map = || {
         route_map
             .get_or_init(|| {
-                RouteMap::new(&task.convex, &problem.init.lo, &problem.init.hi, &route_settings)
+                RouteMap::new(
+                    &task.convex,
+                    &problem.init.lo,
+                    &problem.init.hi,
+                    &route_settings,
+                )
             })
             .as_ref()
     };
@@ -503,7 +508,8 @@ pub fn grow(
             let mut made = seed_scp(&x0).map(|m| (None, m));
             if !matches!(&made, Ok((_, (_, (n, c), _))) if covers_far(n, c)) {
                 // The plain generator did not reach this sample: the routes of the global search.
-                if let Some((r, m)) = from_routes(&x0).filter(|(_, m)| covers_far(&m.1 .0, &m.1 .1)) {
+                if let Some((r, m)) = from_routes(&x0).filter(|(_, m)| covers_far(&m.1 .0, &m.1 .1))
+                {
                     made = Ok((Some(r), m));
                 }
             }

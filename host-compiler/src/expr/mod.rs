@@ -393,9 +393,7 @@ impl Expr {
             }
             Expr::Div(..) => false,
             Expr::Pow(a, k) => *k > 0 && a.total(),
-            Expr::Func(f, a) => {
-                !matches!(f, Func::Log | Func::Sqrt | Func::Tan) && a.total()
-            }
+            Expr::Func(f, a) => !matches!(f, Func::Log | Func::Sqrt | Func::Tan) && a.total(),
         }
     }
 
@@ -481,7 +479,8 @@ impl Expr {
             // Constants first, so that c1·(c2·e) folds.
             (e, Expr::Const(c)) => Expr::mul(Expr::c(c), e),
             (Expr::Const(c), Expr::Mul(a, b))
-                if a.as_const().is_some_and(|k| (c * k).is_finite() && c * k != 0.0) =>
+                if a.as_const()
+                    .is_some_and(|k| (c * k).is_finite() && c * k != 0.0) =>
             {
                 Expr::mul(Expr::c(c * a.as_const().unwrap_or(1.0)), *b)
             }

@@ -269,12 +269,16 @@ fn read_request(stream: &mut TcpStream, deadline: Instant) -> Result<Request, Re
                 let mut length: Option<u64> = None;
                 for h in req.headers.iter() {
                     if h.name.eq_ignore_ascii_case("content-length") {
-                        let v = std::str::from_utf8(h.value).ok().and_then(|v| v.trim().parse().ok());
-                        length = Some(v.ok_or((400, "Content-Length is not a number".to_string()))?);
+                        let v = std::str::from_utf8(h.value)
+                            .ok()
+                            .and_then(|v| v.trim().parse().ok());
+                        length =
+                            Some(v.ok_or((400, "Content-Length is not a number".to_string()))?);
                     } else if h.name.eq_ignore_ascii_case("transfer-encoding") {
                         return Err(Some((
                             411,
-                            "send the body with a Content-Length (chunked bodies are not read)".into(),
+                            "send the body with a Content-Length (chunked bodies are not read)"
+                                .into(),
                         )));
                     }
                 }
@@ -300,7 +304,10 @@ fn read_request(stream: &mut TcpStream, deadline: Instant) -> Result<Request, Re
             }
             Ok(httparse::Status::Partial) if buf.len() <= MAX_HEAD => {}
             Ok(httparse::Status::Partial) => {
-                return Err(Some((431, format!("the request head is larger than {MAX_HEAD} bytes"))))
+                return Err(Some((
+                    431,
+                    format!("the request head is larger than {MAX_HEAD} bytes"),
+                )))
             }
             Err(e) => return Err(Some((400, format!("not an HTTP request: {e}")))),
         }
@@ -346,7 +353,10 @@ fn reason(code: u16) -> &'static str {
 fn write_response(stream: &mut TcpStream, code: u16, reply: &Reply) -> std::io::Result<()> {
     let (kind, body): (&str, Vec<u8>) = match reply {
         Reply::Page => ("text/html; charset=utf-8", PAGE.as_bytes().to_vec()),
-        Reply::Json(v) => ("application/json", serde_json::to_vec(v).unwrap_or_default()),
+        Reply::Json(v) => (
+            "application/json",
+            serde_json::to_vec(v).unwrap_or_default(),
+        ),
     };
     let head = format!(
         "HTTP/1.1 {code} {}\r\nContent-Type: {kind}\r\nContent-Length: {}\r\nCache-Control: no-store\r\n\

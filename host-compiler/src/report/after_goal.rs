@@ -23,9 +23,11 @@ fn fallback_words(image: &Image<'_>) -> String {
                 .collect();
             format!("the fallback (the constant input {u:?})")
         }
-        Fallback::Linear { .. } => "the fallback (its linear law K_fb (x − x_ref) + u_ref, saturated to \
+        Fallback::Linear { .. } => {
+            "the fallback (its linear law K_fb (x − x_ref) + u_ref, saturated to \
                                     the input box where one is stored)"
-            .into(),
+                .into()
+        }
     }
 }
 

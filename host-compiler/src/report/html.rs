@@ -491,7 +491,11 @@ fn terminal(h: &mut String, t: &super::data::TerminalReport) {
         kv(h, &rows);
     }
     if !t.after_goal.is_empty() {
-        let _ = writeln!(h, "<p id=\"after-goal-line\">{}.</p>", escape(&t.after_goal));
+        let _ = writeln!(
+            h,
+            "<p id=\"after-goal-line\">{}.</p>",
+            escape(&t.after_goal)
+        );
     }
     if let Some(rho) = t.handover_radius {
         let _ = writeln!(

@@ -282,21 +282,19 @@ impl Diagnostic for SpecError {
         if labels.is_empty() {
             return None;
         }
-        Some(Box::new(labels.iter().enumerate().map(
-            |(i, (r, text))| {
-                let span = (r.start, r.end - r.start);
-                let label = if text.is_empty() {
-                    None
-                } else {
-                    Some(text.clone())
-                };
-                if i == 0 {
-                    LabeledSpan::new_primary_with_span(label, span)
-                } else {
-                    LabeledSpan::new_with_span(label, span)
-                }
-            },
-        )))
+        Some(Box::new(labels.iter().enumerate().map(|(i, (r, text))| {
+            let span = (r.start, r.end - r.start);
+            let label = if text.is_empty() {
+                None
+            } else {
+                Some(text.clone())
+            };
+            if i == 0 {
+                LabeledSpan::new_primary_with_span(label, span)
+            } else {
+                LabeledSpan::new_with_span(label, span)
+            }
+        })))
     }
 }
 

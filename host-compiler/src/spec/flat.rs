@@ -702,7 +702,9 @@ pub(crate) fn check(
             if !val.is_finite() {
                 let term = xi_b[i]
                     .undefined_at(&at)
-                    .map(|(t, v)| format!(": {}", super::nonlinear::undefined_term(t, v, &flat_names)))
+                    .map(|(t, v)| {
+                        format!(": {}", super::nonlinear::undefined_term(t, v, &flat_names))
+                    })
                     .unwrap_or_default();
                 return Err(model_err(
                     format!("plant.state_of_flat[{i}] is {val} {}{term}", where_()),
@@ -715,7 +717,9 @@ pub(crate) fn check(
             if !val.is_finite() {
                 let term = ups_b[j]
                     .undefined_at(&at)
-                    .map(|(t, v)| format!(": {}", super::nonlinear::undefined_term(t, v, &flat_names)))
+                    .map(|(t, v)| {
+                        format!(": {}", super::nonlinear::undefined_term(t, v, &flat_names))
+                    })
                     .unwrap_or_default();
                 return Err(model_err(
                     format!("plant.input_of_flat[{j}] is {val} {}{term}", where_()),

@@ -334,13 +334,11 @@ pub(crate) fn model(raw: &Spanned<RawFlPlant>, src: &str) -> Result<Model, SpecE
                     })
                 })
                 .unwrap_or_else(|| raw.span());
-            return Err(
-                SpecError::new(
-                    ErrorKind::BadValue,
-                    format!("plant: name `{}` {why}", crate::text::excerpt(&name)),
-                )
-                    .at(span, "this name"),
-            );
+            return Err(SpecError::new(
+                ErrorKind::BadValue,
+                format!("plant: name `{}` {why}", crate::text::excerpt(&name)),
+            )
+            .at(span, "this name"));
         }
         Err(e) => {
             let span = p.params.as_ref().map_or_else(|| raw.span(), |ps| ps.span());
@@ -476,7 +474,11 @@ pub(super) fn sample_points(init: &InitBox) -> Vec<Vec<f64>> {
 /// ([`Expr::undefined_at`]), quoted within [`crate::text::MAX_EXCERPT`].
 pub(super) fn undefined_term(term: &Expr, v: f64, names: &Names) -> String {
     let shown = crate::text::excerpt(&term.display(names).to_string());
-    let what = if v.is_nan() { "NaN (undefined)" } else { "infinite" };
+    let what = if v.is_nan() {
+        "NaN (undefined)"
+    } else {
+        "infinite"
+    };
     format!("its term `{shown}` is {what} there")
 }
 

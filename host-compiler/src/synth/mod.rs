@@ -248,7 +248,11 @@ pub fn refuse_without_route(task: &Task) -> Result<(), SynthError> {
             }
         })
         .collect();
-    let coords: Vec<String> = closed.coords.iter().map(|j| format!("x{}", j + 1)).collect();
+    let coords: Vec<String> = closed
+        .coords
+        .iter()
+        .map(|j| format!("x{}", j + 1))
+        .collect();
     Err(SynthError::NoRoute {
         pieces: if pieces.is_empty() {
             "the region's bounds".into()

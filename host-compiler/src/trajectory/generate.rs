@@ -366,7 +366,14 @@ pub fn generate_from(
         });
     }
     let roots = prob.roots().ok_or(GenError::BadMetric)?;
-    iterate(prob, &roots, x0, settings, Sides::Nearest, Some(guess.clone()))
+    iterate(
+        prob,
+        &roots,
+        x0,
+        settings,
+        Sides::Nearest,
+        Some(guess.clone()),
+    )
 }
 
 /// How the Unsafe rows of a subproblem are written from an iterate (module doc).

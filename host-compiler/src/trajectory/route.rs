@@ -188,13 +188,15 @@ impl Piece {
                 if *empty || rows.is_empty() {
                     return (None, None);
                 }
-                (lp_extent(rows, i, 1.0), lp_extent(rows, i, -1.0).map(|v| -v))
+                (
+                    lp_extent(rows, i, 1.0),
+                    lp_extent(rows, i, -1.0).map(|v| -v),
+                )
             }
             Piece::Ell { C, c, Q, .. } => {
                 let d = C.ncols();
                 if C.nrows() != d
-                    || sym_eigenvalues(Q.as_ref())
-                        .is_none_or(|e| e.iter().any(|&l| !(l > 0.0)))
+                    || sym_eigenvalues(Q.as_ref()).is_none_or(|e| e.iter().any(|&l| !(l > 0.0)))
                 {
                     return (None, None);
                 }
@@ -208,7 +210,11 @@ impl Piece {
                     return (None, None);
                 };
                 let hw = (0..d)
-                    .map(|a| (0..d).map(|b| w[(a, 0)] * Qi[(a, b)] * w[(b, 0)]).sum::<f64>())
+                    .map(|a| {
+                        (0..d)
+                            .map(|b| w[(a, 0)] * Qi[(a, b)] * w[(b, 0)])
+                            .sum::<f64>()
+                    })
                     .sum::<f64>()
                     .max(0.0)
                     .sqrt();
@@ -531,7 +537,10 @@ impl RouteMap {
         // Every cell Init's box meets.
         let a: Vec<f64> = self.coords.iter().map(|&j| init_lo[j]).collect();
         let b: Vec<f64> = self.coords.iter().map(|&j| init_hi[j]).collect();
-        let (ia, ib) = (self.unindex(self.cell_of(&a)), self.unindex(self.cell_of(&b)));
+        let (ia, ib) = (
+            self.unindex(self.cell_of(&a)),
+            self.unindex(self.cell_of(&b)),
+        );
         let mut from_init = Vec::new();
         let mut idx = ia.clone();
         loop {
@@ -575,11 +584,7 @@ impl RouteMap {
     /// world outside the grid as one more node: `None` as soon as a cell passing `stop` is reached (or
     /// the outside, when Goal is unbounded); else the pieces wholly holding the blocked cells met
     /// (ascending) and false.
-    fn flood(
-        &self,
-        from: &[usize],
-        stop: &dyn Fn(usize) -> bool,
-    ) -> Option<(Vec<usize>, bool)> {
+    fn flood(&self, from: &[usize], stop: &dyn Fn(usize) -> bool) -> Option<(Vec<usize>, bool)> {
         let total = self.cells();
         let free = |i: usize| self.full[i].is_none();
         let outside = total;
@@ -686,11 +691,7 @@ impl RouteMap {
         }
         let c_star = a;
         let c = 0.5 * c_star;
-        let holes = if d == 2 {
-            self.holes(c)
-        } else {
-            Vec::new()
-        };
+        let holes = if d == 2 { self.holes(c) } else { Vec::new() };
         let mut extra = vec![false; total];
         let mut found: Vec<Route> = Vec::new();
         let mut cut_holes: Vec<usize> = Vec::new();
@@ -700,14 +701,10 @@ impl RouteMap {
             };
             let mut points: Vec<Vec<f64>> = vec![y0.clone()];
             points.extend(cells.iter().skip(1).map(|&i| self.centre(i)));
-            let signature: Vec<f64> = holes
-                .iter()
-                .map(|(_, p)| winding(&points, p))
-                .collect();
+            let signature: Vec<f64> = holes.iter().map(|(_, p)| winding(&points, p)).collect();
             let new = found.iter().all(|r| {
                 d != 2
-                    || r
-                        .signature
+                    || r.signature
                         .iter()
                         .zip(&signature)
                         .any(|(a, b)| (a - b).abs() > std::f64::consts::PI)
@@ -733,7 +730,10 @@ impl RouteMap {
             } else {
                 // A band of width 2c around the route's middle (its ends stay open).
                 let w = 2.0 * c + self.cell;
-                let ends = [self.centre(start), self.centre(*cells.last().expect("a path"))];
+                let ends = [
+                    self.centre(start),
+                    self.centre(*cells.last().expect("a path")),
+                ];
                 for i in 0..total {
                     let y = self.centre(i);
                     if ends.iter().any(|e| dist(e, &y) <= w) {
@@ -877,7 +877,8 @@ impl RouteMap {
         loop {
             t += step;
             let y = [q[0] + dir[0] / len * t, q[1] + dir[1] / len * t];
-            if (0..2).any(|k| y[k] < self.lo[k] || y[k] > self.lo[k] + self.dims[k] as f64 * self.cell)
+            if (0..2)
+                .any(|k| y[k] < self.lo[k] || y[k] > self.lo[k] + self.dims[k] as f64 * self.cell)
             {
                 break;
             }
@@ -934,7 +935,14 @@ fn winding(pts: &[Vec<f64>], p: &[f64]) -> f64 {
 /// ⌈`arrive`·N⌉ and staying there; inputs zero. Not a trajectory of the plant: the generator's first
 /// subproblem takes Unsafe's supporting half-spaces at these points (so in the route's class) and
 /// finds the trajectory.
-pub fn timed_guess(route: &Route, coords: &[usize], x0: &[f64], steps: usize, arrive: f64, m: usize) -> Nominal {
+pub fn timed_guess(
+    route: &Route,
+    coords: &[usize],
+    x0: &[f64],
+    steps: usize,
+    arrive: f64,
+    m: usize,
+) -> Nominal {
     let na = ((arrive.clamp(0.05, 1.0) * steps as f64).ceil() as usize).clamp(1, steps.max(1));
     let total = route.length.max(1e-300);
     // Cumulative arc length.
@@ -944,8 +952,13 @@ pub fn timed_guess(route: &Route, coords: &[usize], x0: &[f64], steps: usize, ar
     }
     let at = |s: f64| -> Vec<f64> {
         let s = s.clamp(0.0, total);
-        let k = cum.partition_point(|&c| c < s).clamp(1, route.points.len().max(2) - 1);
-        let (a, b) = (&route.points[k - 1], &route.points[k.min(route.points.len() - 1)]);
+        let k = cum
+            .partition_point(|&c| c < s)
+            .clamp(1, route.points.len().max(2) - 1);
+        let (a, b) = (
+            &route.points[k - 1],
+            &route.points[k.min(route.points.len() - 1)],
+        );
         let seg = (cum[k] - cum[k - 1]).max(1e-300);
         let t = ((s - cum[k - 1]) / seg).clamp(0.0, 1.0);
         a.iter().zip(b).map(|(p, q)| p + t * (q - p)).collect()

@@ -14,6 +14,8 @@
 
 pub mod tamper;
 
+use crate::certify::terminal::TerminalCertificate;
+use crate::cover::estimate::SampleBox;
 use crate::verify::attack::{AttackError, AttackReport, AttackSettings};
 use crate::verify::coverage::Coverage;
 use crate::verify::feedforward::FeedforwardRecheck;
@@ -21,8 +23,6 @@ use crate::verify::hybrid::{HybridReport, RunCheck};
 use crate::verify::pwa::{PwaMonteCarlo, PwaRecheck};
 use crate::verify::temporal::{TemporalCheck, TemporalReport};
 use crate::verify::{Judge, VerifyReport};
-use crate::certify::terminal::TerminalCertificate;
-use crate::cover::estimate::SampleBox;
 use shared_types::image::{Image, Mode};
 
 /// What to run.
@@ -288,7 +288,10 @@ fn attack_verdict(v: &mut Verdict, attack: Option<&AttackReport>) {
             .map(|x| format!(" (first from x0 = {:?}: {})", x.x0, x.what))
             .unwrap_or_default();
         v.fail(Check::Attack, false, || {
-            format!("the falsifier found {} violating runs{first}", at.violations)
+            format!(
+                "the falsifier found {} violating runs{first}",
+                at.violations
+            )
         });
     }
 }
@@ -321,7 +324,11 @@ fn verify_feedforward(
         failure: None,
         stop_early: o.stop_early,
     };
-    stored(&mut v, bytes, &crate::verify::stored::Expected::feedforward(task, false));
+    stored(
+        &mut v,
+        bytes,
+        &crate::verify::stored::Expected::feedforward(task, false),
+    );
     let rc = crate::verify::feedforward::recheck(&judge, img).map_err(|e| {
         // Not re-provable at all: a failed check about the image.
         Failed {
@@ -388,17 +395,21 @@ fn verify_feedforward(
         .map_err(Refusal::bad)?;
         refused_verdict(&mut v, r.refused, r.interior_runs + r.boundary_runs);
         if r.violations > 0 {
-            v.fail(Check::Violation, false, || format!("{} violations", r.violations));
+            v.fail(Check::Violation, false, || {
+                format!("{} violations", r.violations)
+            });
         }
         Some(r)
     };
     let attack = match attack_settings(o, problem.seed)? {
         Some(_) if v.stop() => None,
-        Some(s) if linearized => {
-            Some(crate::verify::attack::attack_fl(task, img, &s).map_err(|e| Refusal::BadInput(e.into()))?)
-        }
+        Some(s) if linearized => Some(
+            crate::verify::attack::attack_fl(task, img, &s)
+                .map_err(|e| Refusal::BadInput(e.into()))?,
+        ),
         Some(s) => Some(
-            crate::verify::attack::attack(&judge, img, &s).map_err(|e| Refusal::BadInput(e.into()))?,
+            crate::verify::attack::attack(&judge, img, &s)
+                .map_err(|e| Refusal::BadInput(e.into()))?,
         ),
         None => None,
     };
@@ -446,23 +457,42 @@ fn verify_pwa(
         });
     }
     let terminal = terminal(&mut v, task, img);
-    let coverage = coverage(&v, o, img, &[], &init_box(task.init()), problem, problem.seed);
+    let coverage = coverage(
+        &v,
+        o,
+        img,
+        &[],
+        &init_box(task.init()),
+        problem,
+        problem.seed,
+    );
     let mc = if v.stop() {
         None
     } else {
         // The image does not mark which balls start a trajectory: all runs start anywhere in F.
-        let mc = crate::verify::pwa::monte_carlo_pwa(&judge, img, &[], o.runs, o.seed.unwrap_or(0x7e51f1), 0)
-            .map_err(Refusal::bad)?;
+        let mc = crate::verify::pwa::monte_carlo_pwa(
+            &judge,
+            img,
+            &[],
+            o.runs,
+            o.seed.unwrap_or(0x7e51f1),
+            0,
+        )
+        .map_err(Refusal::bad)?;
         if mc.violations > 0 {
             v.fail(Check::Violation, false, || {
-                format!("{} certificate failures, {} violations", rc.failures, mc.violations)
+                format!(
+                    "{} certificate failures, {} violations",
+                    rc.failures, mc.violations
+                )
             });
         }
         Some(mc)
     };
     let attack = match attack_settings(o, problem.seed)? {
         Some(s) if !v.stop() => Some(
-            crate::verify::attack::attack_pwa(&judge, img, &s).map_err(|e| Refusal::BadInput(e.into()))?,
+            crate::verify::attack::attack_pwa(&judge, img, &s)
+                .map_err(|e| Refusal::BadInput(e.into()))?,
         ),
         _ => None,
     };
@@ -470,7 +500,10 @@ fn verify_pwa(
     if let Some(mc) = &mc {
         if mc.runs < o.runs {
             v.fail(Check::Draws, false, || {
-                format!("only {} of {} initial states could be drawn in F", mc.runs, o.runs)
+                format!(
+                    "only {} of {} initial states could be drawn in F",
+                    mc.runs, o.runs
+                )
             });
         }
     }
@@ -493,8 +526,8 @@ fn verify_temporal(
     img: &Image<'_>,
     o: &Options,
 ) -> Result<Verification, Refusal> {
-    use crate::verify::temporal::{monte_carlo_temporal, monte_carlo_temporal_fl, recheck};
     use crate::property::TemporalTask;
+    use crate::verify::temporal::{monte_carlo_temporal, monte_carlo_temporal_fl, recheck};
     if img.mode() != Mode::Feedforward {
         return Err(Refusal::bad(
             "MTL tasks are certified for feedforward images of one-location plants",
@@ -522,7 +555,11 @@ fn verify_temporal(
         failure: None,
         stop_early: o.stop_early,
     };
-    stored(&mut v, bytes, &crate::verify::stored::Expected::feedforward(&task, true));
+    stored(
+        &mut v,
+        bytes,
+        &crate::verify::stored::Expected::feedforward(&task, true),
+    );
     let rc = recheck(&task, &tt, img).map_err(Refusal::bad)?;
     if let Some(c) = rc.iter().find(|c| !c.ok) {
         // The stored radius within the certified one: what failed is the selection test's threshold.
@@ -544,16 +581,26 @@ fn verify_temporal(
         Some(m) => init_box(&m.init),
         None => init.clone(),
     };
-    let coverage = coverage(&v, o, img, &proved, &cov_init, &task.problem, task.problem.seed);
+    let coverage = coverage(
+        &v,
+        o,
+        img,
+        &proved,
+        &cov_init,
+        &task.problem,
+        task.problem.seed,
+    );
     let seed = o.seed.unwrap_or(task.problem.seed ^ 0x7e51f1);
     let mc = if v.stop() {
         None
     } else {
-        let starts = crate::verify::hybrid::starts_from_image(bytes, &init, o.runs, o.per_ball, seed)
-            .map_err(Refusal::bad)?;
+        let starts =
+            crate::verify::hybrid::starts_from_image(bytes, &init, o.runs, o.per_ball, seed)
+                .map_err(Refusal::bad)?;
         let r = if linearized {
             // On the nonlinear plant, the zero states drawn in Init.
-            monte_carlo_temporal_fl(&task, &tt, img, &starts, seed ^ 0x2e10).map_err(Refusal::bad)?
+            monte_carlo_temporal_fl(&task, &tt, img, &starts, seed ^ 0x2e10)
+                .map_err(Refusal::bad)?
         } else {
             monte_carlo_temporal(&task, &tt, img, &starts).map_err(Refusal::bad)?
         };

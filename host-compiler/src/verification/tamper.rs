@@ -19,10 +19,28 @@ use std::collections::BTreeMap;
 
 /// How each word is changed (`x` the word read as f32).
 pub const PERTURBATIONS: &[(&str, fn(f32) -> f32)] = &[
-    ("×(1+1e-6)", |x| if x == 0.0 { 1e-6 } else { x * (1.0 + 1e-6) }),
-    ("×(1−1e-6)", |x| if x == 0.0 { -1e-6 } else { x * (1.0 - 1e-6) }),
-    ("×(1+1e-3)", |x| if x == 0.0 { 1e-3 } else { x * (1.0 + 1e-3) }),
-    ("×(1−1e-3)", |x| if x == 0.0 { -1e-3 } else { x * (1.0 - 1e-3) }),
+    (
+        "×(1+1e-6)",
+        |x| if x == 0.0 { 1e-6 } else { x * (1.0 + 1e-6) },
+    ),
+    ("×(1−1e-6)", |x| {
+        if x == 0.0 {
+            -1e-6
+        } else {
+            x * (1.0 - 1e-6)
+        }
+    }),
+    (
+        "×(1+1e-3)",
+        |x| if x == 0.0 { 1e-3 } else { x * (1.0 + 1e-3) },
+    ),
+    ("×(1−1e-3)", |x| {
+        if x == 0.0 {
+            -1e-3
+        } else {
+            x * (1.0 - 1e-3)
+        }
+    }),
     ("×1.1", |x| if x == 0.0 { 0.1 } else { x * 1.1 }),
     ("×0.5", |x| if x == 0.0 { -0.1 } else { x * 0.5 }),
     ("×2", |x| if x == 0.0 { 1.0 } else { x * 2.0 }),
@@ -69,7 +87,10 @@ fn section_of(bytes: &[u8], at: usize) -> String {
         return "header".into();
     }
     let count = bytes
-        .get(shared_types::layout::SECTION_COUNT_OFFSET..shared_types::layout::SECTION_COUNT_OFFSET + 2)
+        .get(
+            shared_types::layout::SECTION_COUNT_OFFSET
+                ..shared_types::layout::SECTION_COUNT_OFFSET + 2,
+        )
         .map_or(0, |b| u16::from_le_bytes([b[0], b[1]]) as usize);
     let dir_end = HEADER + count * shared_types::layout::DIR_ENTRY_LEN;
     if at < dir_end {
@@ -82,7 +103,9 @@ fn section_of(bytes: &[u8], at: usize) -> String {
     };
     for i in 0..count {
         let e = HEADER + i * shared_types::layout::DIR_ENTRY_LEN;
-        let kind = bytes.get(e..e + 2).map_or(0, |b| u16::from_le_bytes([b[0], b[1]]));
+        let kind = bytes
+            .get(e..e + 2)
+            .map_or(0, |b| u16::from_le_bytes([b[0], b[1]]));
         let (off, len) = (u32_at(e + 4), u32_at(e + 8));
         if (off..off + len).contains(&at) {
             return match shared_types::layout::SectionKind::from_u16(kind) {
@@ -148,7 +171,8 @@ pub fn unsound(
     };
     if problem.hybrid.is_some() {
         let task = crate::synth::hybrid::HybridTask::new(problem.clone()).ok()?;
-        let starts = crate::verify::hybrid::starts_from_image(bytes, &init, runs, per_ball, seed).ok()?;
+        let starts =
+            crate::verify::hybrid::starts_from_image(bytes, &init, runs, per_ball, seed).ok()?;
         let r = crate::verify::hybrid::monte_carlo_hybrid(
             &task.plant,
             &task.property,
@@ -179,7 +203,8 @@ pub fn unsound(
         )
         .ok()?;
         let r = if task.plant.linearization().is_some() {
-            crate::verify::temporal::monte_carlo_temporal_fl(&task, &tt, &img, &starts, seed ^ 1).ok()?
+            crate::verify::temporal::monte_carlo_temporal_fl(&task, &tt, &img, &starts, seed ^ 1)
+                .ok()?
         } else {
             crate::verify::temporal::monte_carlo_temporal(&task, &tt, &img, &starts).ok()?
         };
@@ -196,9 +221,10 @@ pub fn unsound(
         crate::verify::monte_carlo(&judge, &img, runs, per_ball, seed).ok()?
     };
     (r.violations > 0).then(|| {
-        r.first_violations
-            .first()
-            .map_or_else(|| "a violation".into(), |v| format!("run from x0 = {:?}", v.x0))
+        r.first_violations.first().map_or_else(
+            || "a violation".into(),
+            |v| format!("run from x0 = {:?}", v.x0),
+        )
     })
 }
 
@@ -217,7 +243,12 @@ pub fn campaign_options(seed: u64) -> Options {
 
 /// Every tampering of `bytes` (at most about `budget`) verified against `problem`, the passed ones
 /// judged by [`unsound`] (module doc).
-pub fn campaign(problem: &crate::spec::Problem, bytes: &[u8], budget: usize, seed: u64) -> Campaign {
+pub fn campaign(
+    problem: &crate::spec::Problem,
+    bytes: &[u8],
+    budget: usize,
+    seed: u64,
+) -> Campaign {
     let mut c = Campaign::default();
     for (what, b) in tamperings(bytes, budget) {
         c.tamperings += 1;

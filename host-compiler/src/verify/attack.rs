@@ -398,6 +398,25 @@ pub fn describe(o: &RunOutcome) -> String {
     if o.evaluator_error {
         why.push("the evaluator refused a later state".to_string());
     }
+    if o.terminal_violation {
+        let mut after = Vec::new();
+        if o.left_goal {
+            after.push("left Goal");
+        }
+        if o.after_goal_unsafe {
+            after.push("entered Unsafe");
+        }
+        if o.after_goal_input_excursion {
+            after.push("an input left the input set");
+        }
+        if o.not_handed_over {
+            after.push("was not handed over to the terminal law within T");
+        }
+        if after.is_empty() {
+            after.push("the evaluator refused a state");
+        }
+        why.push(format!("after Goal: {}", after.join(", ")));
+    }
     why.join("; ")
 }
 

@@ -534,8 +534,10 @@ pub fn handover_target(image: &Image<'_>) -> Option<Box<dyn Region>> {
     let (n, m) = (image.n(), image.m());
     let stored = crate::emit::stored_terminal(&law, n, m);
     Some(
-        crate::certify::terminal::handover_region(&stored)
-            .map_or_else(|| Box::new(crate::geometry::Empty(n)) as Box<dyn Region>, |(_, h)| h),
+        crate::certify::terminal::handover_region(&stored).map_or_else(
+            || Box::new(crate::geometry::Empty(n)) as Box<dyn Region>,
+            |(_, h)| h,
+        ),
     )
 }
 

@@ -279,13 +279,18 @@ pub fn monte_carlo_fl(
     // Whether the image's selection accepts a plant state's ξ as the spec's maps give it in f32 (its
     // coords program at its ζ0): such a start is covered by the certificate, and the evaluator must run
     // it (`VerifyReport::refused`).
-    let ext0: Vec<f32> = maps.flat.as_ref().map_or_else(Vec::new, |f| {
-        f.ext_init.iter().map(|&z| z as f32).collect()
-    });
+    let ext0: Vec<f32> = maps
+        .flat
+        .as_ref()
+        .map_or_else(Vec::new, |f| f.ext_init.iter().map(|&z| z as f32).collect());
     let coords = shared_types::program::Program::decode(&maps.coords.bytes).ok();
     let accepted = |x: &[f64]| -> bool {
         let Some(p) = &coords else { return false };
-        let inputs: Vec<f32> = x.iter().map(|&v| v as f32).chain(ext0.iter().copied()).collect();
+        let inputs: Vec<f32> = x
+            .iter()
+            .map(|&v| v as f32)
+            .chain(ext0.iter().copied())
+            .collect();
         let mut xi = vec![0.0f32; image.n()];
         let mut work = shared_types::program::Workspace::new();
         p.eval_with(&inputs, &mut xi, &mut work).is_ok()

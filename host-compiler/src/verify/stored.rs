@@ -54,8 +54,8 @@ impl Expected {
     pub fn feedforward(task: &crate::task::Task, temporal: bool) -> Self {
         let maps = task.plant.linearization();
         let input = maps.map_or(&task.problem.input, |m| &m.input);
-        let fallback_past_table = !temporal
-            && task.settings().terminal == crate::spec::TerminalChoice::Fallback;
+        let fallback_past_table =
+            !temporal && task.settings().terminal == crate::spec::TerminalChoice::Fallback;
         Expected {
             fallback: FallbackLaw::constant(&task.problem.fallback_input),
             input_box: input_box(input),
@@ -102,7 +102,8 @@ impl Expected {
 pub fn check(bytes: &[u8], expected: &Expected) -> Result<(), StoredMismatch> {
     let img = shared_types::image::decode(bytes)
         .map_err(|e| StoredMismatch(format!("the image is rejected: {e}")))?;
-    let differs = |what: &str| StoredMismatch(format!("its stored {what} is not the one the spec gives"));
+    let differs =
+        |what: &str| StoredMismatch(format!("its stored {what} is not the one the spec gives"));
     // Each value the spec gives put in place of the stored one: the bytes must not change.
     let rebuilt = |f: &dyn Fn(&mut Edit)| -> Option<Vec<u8>> {
         let mut e = Edit::of(&img)?;

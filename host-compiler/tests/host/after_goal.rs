@@ -71,12 +71,18 @@ fn a_point_mass_is_handed_over_before_it_can_leave_goal_or_reach_the_wall() {
     };
     let s = synthesize(&task, &opts).unwrap();
     let d = s.terminal.design().expect("a certified terminal law");
-    let rho = s.handover_radius.expect("the cover aims at the handover region");
+    let rho = s
+        .handover_radius
+        .expect("the cover aims at the handover region");
     assert!(rho > 0.0 && rho < 1.0, "{rho}");
     assert!(!s.trajectories.is_empty());
     // Every trajectory's tube lies in the handover region at κ*: its nominal there is within ρ_h of x_e
     // in the law's metric.
-    for t in s.trajectories.iter().filter(|t| t.certificate.is_certified()) {
+    for t in s
+        .trajectories
+        .iter()
+        .filter(|t| t.certificate.is_certified())
+    {
         let x = &t.nominal.x[t.certificate.k_star];
         let e: Vec<f64> = x.iter().zip(&d.stored.x_e).map(|(a, b)| a - b).collect();
         let q = host_compiler::linalg::p_norm(d.stored.P.as_ref(), &e);
@@ -190,7 +196,10 @@ fn the_image_says_in_one_line_what_it_does_after_goal() {
     );
     let bytes = leaving_image(true);
     let line = host_compiler::report::after_goal_line(&decode(&bytes).unwrap());
-    assert!(line.starts_with("after Goal: the terminal law (section 11) takes over"), "{line}");
+    assert!(
+        line.starts_with("after Goal: the terminal law (section 11) takes over"),
+        "{line}"
+    );
     // `inspect` prints the same line.
     let text = host_compiler::cli::inspect::render(&leaving_image(false), "leaving.img", false)
         .expect("renders");

@@ -53,7 +53,7 @@ fn synth_then_verify_simulate_and_inspect() {
     let stdout = String::from_utf8_lossy(&o.stdout);
     assert!(o.status.success(), "verify failed: {stdout}");
     assert!(
-        stdout.lines().last().unwrap().trim() == "violations 0",
+        stdout.lines().any(|l| l.trim() == "violations 0"),
         "{stdout}"
     );
 
@@ -219,10 +219,14 @@ fn sigint_keeps_a_valid_verified_image() {
         .output()
         .unwrap();
     let stdout = String::from_utf8_lossy(&o.stdout);
-    assert!(o.status.success(), "verify failed: {stdout}");
-    assert_eq!(
-        stdout.lines().last().unwrap().trim(),
-        "violations 0",
+    // The interrupted cover is verified for what it covers; short of the target the status is 3.
+    match o.status.code() {
+        Some(0) => {}
+        Some(3) => assert!(stdout.contains("NOT met"), "{stdout}"),
+        c => panic!("verify exited {c:?}: {stdout}"),
+    }
+    assert!(
+        stdout.lines().any(|l| l.trim() == "violations 0"),
         "{stdout}"
     );
     let _ = std::fs::remove_dir_all(&out);
@@ -281,9 +285,8 @@ fn synth_and_verify_a_pwa_spec() {
         .unwrap();
     let stdout = String::from_utf8_lossy(&o.stdout);
     assert!(o.status.success(), "verify failed: {stdout}");
-    assert_eq!(
-        stdout.lines().last().unwrap().trim(),
-        "violations 0",
+    assert!(
+        stdout.lines().any(|l| l.trim() == "violations 0"),
         "{stdout}"
     );
     assert!(stdout.contains("0 failing balls"), "{stdout}");

@@ -458,7 +458,9 @@ fn inspect_json_contains_the_pwa_content() {
     ] {
         assert!(text.contains(line), "missing {line:?} in\n{text}");
     }
-    assert!(!text.contains("terminal"), "{text}");
+    // No terminal law section; the after-Goal line says there is none.
+    assert!(!text.contains("terminal law (section 11)"), "{text}");
+    assert!(text.contains("after Goal: no terminal law"), "{text}");
 
     // A feedforward image's JSON has no PWA section.
     let mut ff = ImageBuilder::new(1, 1, 0.1);

@@ -106,7 +106,14 @@ fn the_simplifier_folds_only_where_the_value_is_kept() {
     let p = |s: &str| parse(s, &names).unwrap();
     assert_eq!(p("0*x"), Expr::c(0.0));
     assert_eq!(p("x - x"), Expr::c(0.0));
-    for kept in ["0/x", "0*sqrt(x)", "sqrt(x) - sqrt(x)", "0/0", "1/0", "0*log(x)"] {
+    for kept in [
+        "0/x",
+        "0*sqrt(x)",
+        "sqrt(x) - sqrt(x)",
+        "0/0",
+        "1/0",
+        "0*log(x)",
+    ] {
         assert!(
             !matches!(p(kept), Expr::Const(_)),
             "{kept} folded to {:?}",
@@ -191,7 +198,11 @@ fn mtl_formulas_are_bounded_in_length_and_atoms() {
         matches!(e.kind, FormulaErrorKind::TooLarge { what: "bytes", .. }),
         "{e}"
     );
-    assert!(e.src.len() < 400, "the error keeps {} bytes of source", e.src.len());
+    assert!(
+        e.src.len() < 400,
+        "the error keeps {} bytes of source",
+        e.src.len()
+    );
     // In a spec: refused at load, at the key.
     let src = format!(
         "{}\n[mtl]\nformula = \"{huge}\"\n",
@@ -342,7 +353,10 @@ fn a_vacuous_formula_is_refused_with_advice() {
         assert!(e.contains("always true"), "{formula}: {e}");
         assert!(e.contains("F[0,T] goal"), "{formula}: {e}");
         assert!(!e.contains("ascent steps"), "{formula}: {e}");
-        assert!(t < Duration::from_secs(30), "{formula}: refused after {t:?}");
+        assert!(
+            t < Duration::from_secs(30),
+            "{formula}: refused after {t:?}"
+        );
     }
 }
 

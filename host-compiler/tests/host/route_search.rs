@@ -168,7 +168,10 @@ fn synth_exits_2_on_a_walled_off_goal() {
         .unwrap();
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(2), "{err}");
-    assert!(err.contains("unsafe[1], unsafe[2], unsafe[3], unsafe[4]"), "{err}");
+    assert!(
+        err.contains("unsafe[1], unsafe[2], unsafe[3], unsafe[4]"),
+        "{err}"
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }
 

@@ -33,7 +33,14 @@ fn no_tampering_of_the_double_integrator_image_passes_falsely() {
 #[test]
 fn every_section_is_perturbed() {
     let t = tamperings(image(), 320);
-    for section in ["header", "directory", "Locations", "Fallback", "Trajectories", "Steps"] {
+    for section in [
+        "header",
+        "directory",
+        "Locations",
+        "Fallback",
+        "Trajectories",
+        "Steps",
+    ] {
         assert!(
             t.iter().any(|(what, _)| what.starts_with(section)),
             "{section} is not perturbed"

@@ -26,7 +26,10 @@ fn a_changed_input_box_is_refused_naming_it() {
     // linear fallback, but it is a stored value the spec gives, so it must be the spec's.
     let bytes = image().to_vec();
     let img = decode(&bytes).unwrap();
-    let b = img.payload().input_box.expect("the spec's input set is a box");
+    let b = img
+        .payload()
+        .input_box
+        .expect("the spec's input set is a box");
     let (lo, hi) = (b.lo.as_ptr() as usize, b.hi.as_ptr() as usize);
     let base = bytes.as_ptr() as usize;
     let mut patched = bytes.clone();

@@ -462,7 +462,10 @@ impl<'s> Parser<'s> {
         .with_help("name a region in [sets.*] instead of spelling it out as many predicates"))
     }
     fn primary(&mut self) -> Result<Expr, FormulaError> {
-        if matches!(self.peek(), Tok::Ident(_) | Tok::Num(_) | Tok::Minus | Tok::Plus) {
+        if matches!(
+            self.peek(),
+            Tok::Ident(_) | Tok::Num(_) | Tok::Minus | Tok::Plus
+        ) {
             self.atom()?;
         }
         match self.peek().clone() {
@@ -673,7 +676,10 @@ impl<'s> Parser<'s> {
 /// Parse a formula (grammar in the module doc).
 pub fn parse(src: &str) -> Result<Expr, FormulaError> {
     if src.len() > MAX_FORMULA_LEN {
-        let end = (0..=MAX_FORMULA_LEN).rev().find(|&i| src.is_char_boundary(i)).unwrap_or(0);
+        let end = (0..=MAX_FORMULA_LEN)
+            .rev()
+            .find(|&i| src.is_char_boundary(i))
+            .unwrap_or(0);
         return Err(FormulaError::new(
             src,
             Span::new(end, src.len()),

@@ -50,7 +50,11 @@ impl std::fmt::Display for Unreachable {
             write!(
                 f,
                 "; no run reaches the guard of {} {}",
-                if self.edges_never_enabled.len() == 1 { "the edge" } else { "the edges" },
+                if self.edges_never_enabled.len() == 1 {
+                    "the edge"
+                } else {
+                    "the edges"
+                },
                 self.edges_never_enabled.join(", ")
             )?;
         }
@@ -148,9 +152,7 @@ pub fn goal_unreachable(
             .zip(hi)
             .map(|(l, h)| (0.5 * (l + h), 0.5 * (h - l)))
             .unzip(),
-        InputSet::Ball { center, radius } => {
-            (center.clone(), vec![*radius; center.len()])
-        }
+        InputSet::Ball { center, radius } => (center.clone(), vec![*radius; center.len()]),
     };
     let state_box = match (&goal.shape, goal.map_matrix(n)) {
         (Shape::Box { lo, hi }, Ok(None)) => Some((lo.clone(), hi.clone())),
@@ -164,7 +166,12 @@ pub fn goal_unreachable(
     let mut boxes: Vec<Option<CBox>> = vec![None; locs];
     boxes[initial] = Some(CBox {
         c: init.centre(),
-        r: init.lo.iter().zip(&init.hi).map(|(l, h)| 0.5 * (h - l)).collect(),
+        r: init
+            .lo
+            .iter()
+            .zip(&init.hi)
+            .map(|(l, h)| 0.5 * (h - l))
+            .collect(),
     });
     let mut enabled = vec![false; edges.len()];
     let mut entered = vec![false; locs];
@@ -231,7 +238,10 @@ pub fn goal_unreachable(
                 c[i] = ci;
                 r[i] = ri + SLACK * (mag + ri) + f64::MIN_POSITIVE;
             }
-            if r.iter().chain(&c).any(|v| !v.is_finite() || v.abs() > MAX_RADIUS) {
+            if r.iter()
+                .chain(&c)
+                .any(|v| !v.is_finite() || v.abs() > MAX_RADIUS)
+            {
                 return None;
             }
             *b = CBox { c, r };
@@ -266,14 +276,24 @@ mod tests {
     fn verdict(p: &crate::spec::Problem) -> Option<Unreachable> {
         let h = p.hybrid.as_ref().expect("hybrid");
         let plant = Hybrid::from_spec(h, p.plant.period).expect("automaton");
-        goal_unreachable(&plant, h.initial, &p.init, &p.input, &p.goal, p.horizon_steps())
+        goal_unreachable(
+            &plant,
+            h.initial,
+            &p.init,
+            &p.input,
+            &p.goal,
+            p.horizon_steps(),
+        )
     }
 
     #[test]
     fn a_guard_beyond_reach_makes_goal_unreachable_and_is_named() {
         let p = task("guard = { A = [[-1.0, 0.0]], b = [-100.0] }");
         let why = verdict(&p).expect("refused");
-        assert_eq!(why.edges_never_enabled, vec!["forward → backward".to_string()]);
+        assert_eq!(
+            why.edges_never_enabled,
+            vec!["forward → backward".to_string()]
+        );
         assert_eq!(why.locations_never_entered, vec!["backward".to_string()]);
         let text = why.to_string();
         assert!(text.contains("no run can reach Goal"), "{text}");
