@@ -289,3 +289,33 @@ pub(crate) fn sha256_hex(bytes: &[u8]) -> String {
         .map(|b| format!("{b:02x}"))
         .collect()
 }
+
+/// What runs did after Goal under a terminal law, each count a violation except the handed-over one: one
+/// wording for `synth`, the PWA `synth` and `verify`.
+pub(crate) fn after_goal_judged(
+    steps: usize,
+    left_goal: usize,
+    unsafe_: usize,
+    input: usize,
+    not_handed_over: usize,
+    handed_over: usize,
+) -> String {
+    format!(
+        "judged over runs of {steps} samples: {left_goal} runs left Goal, {unsafe_} entered Unsafe, \
+         {input} left the input set, {not_handed_over} were not handed over within the horizon (each a \
+         violation); {handed_over} were handed over"
+    )
+}
+
+/// What runs did after Goal without a terminal law (reported, not judged: the task ends in Goal).
+pub(crate) fn after_goal_unjudged(
+    steps: usize,
+    left_goal: usize,
+    unsafe_: usize,
+    input: usize,
+) -> String {
+    format!(
+        "not judged (no terminal law): within {steps} samples {left_goal} runs were outside Goal again, \
+         {unsafe_} entered Unsafe, {input} left the input set"
+    )
+}

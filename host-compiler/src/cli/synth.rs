@@ -379,18 +379,25 @@ pub(crate) fn print_terminal(
     }
     if v.after_goal_judged {
         println!(
-            "after Goal        judged over runs of {} samples: {} runs left Goal, {} entered Unsafe, {} left the input set, {} were not handed over within the horizon (each a violation); {} were handed over",
-            v.run_steps,
-            v.runs_leaving_goal,
-            v.after_goal_unsafe,
-            v.after_goal_input_excursions,
-            v.not_handed_over,
-            v.handed_over
+            "after Goal        {}",
+            super::after_goal_judged(
+                v.run_steps,
+                v.runs_leaving_goal,
+                v.after_goal_unsafe,
+                v.after_goal_input_excursions,
+                v.not_handed_over,
+                v.handed_over
+            )
         );
     } else {
         println!(
-            "after Goal        not judged (no terminal law): within {} samples {} runs were outside Goal again, {} entered Unsafe, {} left the input set",
-            v.run_steps, v.runs_leaving_goal, v.after_goal_unsafe, v.after_goal_input_excursions
+            "after Goal        {}",
+            super::after_goal_unjudged(
+                v.run_steps,
+                v.runs_leaving_goal,
+                v.after_goal_unsafe,
+                v.after_goal_input_excursions
+            )
         );
     }
 }

@@ -149,13 +149,15 @@ pub fn run(a: &SynthArgs, task: &Task, s: &Synthesis) -> Outcome {
     }
     match &s.terminal {
         crate::synth::TerminalOutcome::Certified(_) => println!(
-            "terminal law      in the PWA image too; after Goal, judged over runs of up to {} samples: {} runs left Goal, {} entered Unsafe, {} left the input set, {} were not handed over within the horizon (each a violation); {} were handed over",
-            mc.max_steps,
-            mc.runs_leaving_goal,
-            mc.after_goal_unsafe,
-            mc.after_goal_input_excursions,
-            mc.not_handed_over,
-            mc.handed_over
+            "terminal law      in the PWA image too; after Goal, {}",
+            super::after_goal_judged(
+                mc.max_steps,
+                mc.runs_leaving_goal,
+                mc.after_goal_unsafe,
+                mc.after_goal_input_excursions,
+                mc.not_handed_over,
+                mc.handed_over
+            )
         ),
         crate::synth::TerminalOutcome::None(e) => println!("terminal law      none: {e}"),
         crate::synth::TerminalOutcome::NotAsked => {

@@ -155,8 +155,15 @@ fn print_report(v: &Verification, img: &shared_types::image::Image<'_>) {
                 );
                 if img.terminal_law().is_some() {
                     println!(
-                        "after Goal: judged over runs of {run_steps} samples: {} runs left Goal, {} entered Unsafe, {} left the input set, {} were not handed over within the horizon (each a violation); {} were handed over",
-                        mc.runs_leaving_goal, mc.after_goal_unsafe, mc.after_goal_input_excursions, mc.not_handed_over, mc.handed_over
+                        "after Goal: {}",
+                        super::after_goal_judged(
+                            *run_steps,
+                            mc.runs_leaving_goal,
+                            mc.after_goal_unsafe,
+                            mc.after_goal_input_excursions,
+                            mc.not_handed_over,
+                            mc.handed_over
+                        )
                     );
                 }
                 for v in &mc.first_violations {
@@ -321,22 +328,24 @@ fn print_feedforward(
 /// What the runs did after Goal: under a terminal law this is judged (its violations are counted);
 /// without one it is reported only.
 fn print_after_goal(r: &crate::verify::VerifyReport) {
-    if r.after_goal_judged {
-        println!(
-            "after Goal: judged over runs of {} samples: {} runs left Goal, {} entered Unsafe, {} left the input set, {} were not handed over within the horizon (each a violation); {} were handed over",
+    let line = if r.after_goal_judged {
+        super::after_goal_judged(
             r.run_steps,
             r.runs_leaving_goal,
             r.after_goal_unsafe,
             r.after_goal_input_excursions,
             r.not_handed_over,
-            r.handed_over
-        );
+            r.handed_over,
+        )
     } else {
-        println!(
-            "after Goal: not judged (no terminal law): within {} samples {} runs were outside Goal again, {} entered Unsafe, {} left the input set",
-            r.run_steps, r.runs_leaving_goal, r.after_goal_unsafe, r.after_goal_input_excursions
-        );
-    }
+        super::after_goal_unjudged(
+            r.run_steps,
+            r.runs_leaving_goal,
+            r.after_goal_unsafe,
+            r.after_goal_input_excursions,
+        )
+    };
+    println!("after Goal: {line}");
 }
 
 /// The falsifier's line (and its violations, each with its start), when it ran.
