@@ -248,6 +248,24 @@ pub struct ModelMapsSpec {
     pub input_map: Vec<u8>,
 }
 
+impl ModelMapsSpec {
+    /// The section a plant's maps give: what `synth` writes and what `verify` re-derives from the spec
+    /// and requires equal. A flat plant's controller states start at the extension's ζ0, stored as f32
+    /// (the jump bound of `model::flat` covers that rounding).
+    pub fn of(m: &crate::model::feedback_linearizable::FlMaps) -> Self {
+        Self {
+            n_plant: m.n_plant,
+            m_plant: m.m_plant,
+            ext_init: m
+                .flat
+                .as_ref()
+                .map_or_else(Vec::new, |f| f.ext_init.iter().map(|&z| z as f32).collect()),
+            coords: m.coords.bytes.clone(),
+            input_map: m.input_map.bytes.clone(),
+        }
+    }
+}
+
 /// How a segment ends ([`shared_types::image::Exit`]), owned, with the f32 values stored (serialised as
 /// `inspect --json` shows it: `{"kind": "table"}` or `{"kind": "guard", "a", "b", "theta", "next"}`).
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]

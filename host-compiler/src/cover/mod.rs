@@ -355,18 +355,7 @@ pub fn feedforward_image_of<'a>(
         b.input_box = Some((lo.clone(), hi.clone()));
     }
     if let Some(m) = maps {
-        b.model_maps = Some(crate::emit::ModelMapsSpec {
-            n_plant: m.n_plant,
-            m_plant: m.m_plant,
-            // A flat plant's controller states start at the extension's ζ0 (stored as f32; the jump
-            // bound of `model::flat` covers that rounding).
-            ext_init: m
-                .flat
-                .as_ref()
-                .map_or_else(Vec::new, |f| f.ext_init.iter().map(|&z| z as f32).collect()),
-            coords: m.coords.bytes.clone(),
-            input_map: m.input_map.bytes.clone(),
-        });
+        b.model_maps = Some(crate::emit::ModelMapsSpec::of(m));
         b.selection_test = selection_test(P, &starts);
     }
     b.fallback = FallbackLaw::constant(&task.problem.fallback_input);

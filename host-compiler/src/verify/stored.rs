@@ -64,16 +64,7 @@ impl Expected {
             } else {
                 Terminal::HoldLast
             },
-            model_maps: maps.map(|m| ModelMapsSpec {
-                n_plant: m.n_plant,
-                m_plant: m.m_plant,
-                ext_init: m
-                    .flat
-                    .as_ref()
-                    .map_or_else(Vec::new, |f| f.ext_init.iter().map(|&z| z as f32).collect()),
-                coords: m.coords.bytes.clone(),
-                input_map: m.input_map.bytes.clone(),
-            }),
+            model_maps: maps.map(ModelMapsSpec::of),
         }
     }
 
