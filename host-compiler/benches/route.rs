@@ -1,6 +1,6 @@
-//! The global route search (issue 48) on the SCOTS maze with a point mass
-//! (`examples/maze-scots-pointmass.toml`), with no recording:
+//! The global route search (issue 48) on the SCOTS maze, with no recording.
 //!
+//! The point mass (`examples/maze-scots-pointmass.toml`):
 //! * `route_search_ms`: the route search alone (the grid of the maze's sets and the routes from Init's
 //!   centre), median of repeated runs;
 //! * `route_maze_synth_s`: the whole `synthesize` of the example (CAF, terminal law, cover, 10 000 + 32
@@ -8,26 +8,60 @@
 //! * `route_maze_coverage`: its coverage of Init, the lower bound at the spec's 99 % confidence, target
 //!   ≥ 0.99;
 //! * `route_maze_violations`: violations the Monte Carlo and the falsifier found (must be 0).
+//!
+//! The SCOTS vehicle (`examples/maze-scots-vehicle.toml`, feedback linearizable in its position):
+//! * `route_maze_vehicle_synth_s`: its whole `synthesize` (or the time until it is refused), target
+//!   ≤ 300 s; cancelled at 300 s (as by Ctrl-C), when what it certified by then is what counts;
+//! * `route_maze_vehicle_coverage`: its coverage lower bound (0 when nothing is certified), target ≥ 0.99;
+//! * per sample period h (the example's spec with only `plant.period` changed; `_h<h in s>`):
+//!   `route_maze_vehicle_D_…` the sampled-loop mismatch D the plant reports (the w-channel disturbance),
+//!   `route_maze_vehicle_accumulated_…` what the certificate subtracts for it over the table,
+//!   S_N·(‖P^{1/2}B‖ε̄ + φβD) of the route's trajectory, and `route_maze_vehicle_route_delta_…` the
+//!   certificate's parts minimum less that (the δ the route would certify by the accumulated bound;
+//!   negative: refused), for the trajectory that follows the first route's timed reference exactly
+//!   (no generator, no §5.3: the route itself, what a person's route would give).
+//!
+//! `ROUTE_BENCH=pointmass` or `ROUTE_BENCH=vehicle` runs one maze only (the rows file then holds its
+//! rows only).
 
 use host_compiler::benchkit::{median_time, write_rows, Row};
+use host_compiler::certify::{shipped, Loop, LoopConstants};
 use host_compiler::synth::{synthesize, SynthOptions};
 use host_compiler::task::Task;
-use host_compiler::trajectory::route::{RouteMap, RouteSettings};
+use host_compiler::trajectory::route::{timed_guess, RouteMap, RouteSettings};
 use std::time::{Duration, Instant};
 
 fn main() {
-    let path = format!(
-        "{}/../examples/maze-scots-pointmass.toml",
-        env!("CARGO_MANIFEST_DIR")
-    );
-    let task = Task::new(host_compiler::spec::load(&path).expect("the shipped example")).unwrap();
+    let only = std::env::var("ROUTE_BENCH").ok();
+    let mut rows = Vec::new();
+    if only.as_deref() != Some("vehicle") {
+        rows.extend(pointmass());
+    }
+    if only.as_deref() != Some("pointmass") {
+        rows.extend(vehicle());
+    }
+    let path = write_rows("route", &rows).expect("rows written");
+    println!("rows: {}", path.display());
+}
+
+fn example(name: &str) -> String {
+    format!("{}/../examples/{name}", env!("CARGO_MANIFEST_DIR"))
+}
+
+fn centre(task: &Task) -> Vec<f64> {
     let init = task.init();
-    let centre: Vec<f64> = init
-        .lo
+    init.lo
         .iter()
         .zip(&init.hi)
         .map(|(l, h)| 0.5 * (l + h))
-        .collect();
+        .collect()
+}
+
+fn pointmass() -> Vec<Row> {
+    let path = example("maze-scots-pointmass.toml");
+    let task = Task::new(host_compiler::spec::load(&path).expect("the shipped example")).unwrap();
+    let init = task.init();
+    let centre = centre(&task);
     let settings = RouteSettings::default();
     let mut found = Vec::new();
     let search = median_time(
@@ -45,37 +79,202 @@ fn main() {
         found.first().map_or(0.0, |r| r.clearance),
         search * 1e3
     );
+    let (secs, coverage, violations) = synth_rows("maze", &task, None);
+    vec![
+        Row::new("route_search_ms", search * 1e3, "ms"),
+        Row::new("route_maze_synth_s", secs, "s"),
+        Row::new("route_maze_coverage", coverage, "lower bound, 99 %"),
+        Row::new("route_maze_violations", violations, "runs"),
+    ]
+}
+
+/// The whole `synthesize` of a task: (seconds, coverage lower bound, violations); a refusal is printed
+/// and counts as coverage 0. With a `budget`, synthesis is cancelled (as by Ctrl-C) when it runs out,
+/// and what it certified by then is what counts.
+fn synth_rows(what: &str, task: &Task, budget: Option<Duration>) -> (f64, f64, f64) {
     let opts = SynthOptions {
         progress: false,
         ..SynthOptions::default()
     };
+    if let Some(b) = budget {
+        let cancel = opts.cancel.clone();
+        std::thread::spawn(move || {
+            std::thread::sleep(b);
+            cancel.store(true, std::sync::atomic::Ordering::Relaxed);
+        });
+    }
     let t = Instant::now();
-    let s = synthesize(&task, &opts).expect("synthesis");
+    let s = synthesize(task, &opts);
     let secs = t.elapsed().as_secs_f64();
-    let attack = s.attack.as_ref().map_or(0, |a| a.violations);
-    let violations = s.verify.violations + attack;
+    if budget.is_some_and(|b| secs >= b.as_secs_f64()) {
+        println!("{what}: cancelled at the {:.0} s budget", secs);
+    }
+    match s {
+        Ok(s) => {
+            let attack = s.attack.as_ref().map_or(0, |a| a.violations);
+            let violations = s.verify.violations + attack;
+            println!(
+                "{what}: {} trajectories (first δ {:.4e} from {}), coverage {:.5} (lower {:.5} at {} \
+                 confidence), {} + {} Monte Carlo runs, {} violations ({} by the falsifier), {secs:.1} s \
+                 ({:?}); stop: {}",
+                s.trajectories.len(),
+                s.trajectories.first().map_or(0.0, |t| t.certificate.delta),
+                s.trajectories.first().map_or("-", |t| t.source.as_str()),
+                s.coverage.mean,
+                s.coverage.lower,
+                s.coverage.confidence,
+                s.verify.interior_runs,
+                s.verify.boundary_runs,
+                violations,
+                attack,
+                s.timings,
+                s.stop
+            );
+            (secs, s.coverage.lower, violations as f64)
+        }
+        Err(e) => {
+            println!("{what}: refused after {secs:.1} s: {e}");
+            (secs, 0.0, 0.0)
+        }
+    }
+}
+
+/// The vehicle's synthesis is cancelled after its row's target time (what it certified by then counts).
+const VEHICLE_BUDGET: Duration = Duration::from_secs(300);
+
+/// The sample periods of the vehicle's mismatch table, seconds.
+const PERIODS: [f64; 6] = [0.3, 0.2, 0.1, 0.05, 0.025, 0.0125];
+
+fn vehicle() -> Vec<Row> {
+    let path = example("maze-scots-vehicle.toml");
+    let src = std::fs::read_to_string(&path).expect("the shipped example");
+    let mut rows = Vec::new();
     println!(
-        "maze: {} trajectories (first δ {:.4e} from {}), coverage {:.5} (lower {:.5} at {} confidence), \
-         {} + {} Monte Carlo runs, {} violations ({} by the falsifier), {secs:.1} s ({:?}); stop: {}",
-        s.trajectories.len(),
-        s.trajectories.first().map_or(0.0, |t| t.certificate.delta),
-        s.trajectories.first().map_or("-", |t| t.source.as_str()),
-        s.coverage.mean,
-        s.coverage.lower,
-        s.coverage.confidence,
-        s.verify.interior_runs,
-        s.verify.boundary_runs,
-        violations,
-        attack,
-        s.timings,
-        s.stop
+        "vehicle, the first route's timed reference followed exactly, per period h:\n\
+         {:>7} {:>6} {:>10} {:>10} {:>10} {:>10} {:>12} {:>10}",
+        "h [s]", "N", "D", "δ_Goal", "δ_Unsafe", "δ_Input", "accumulated", "δ"
     );
-    let rows = vec![
-        Row::new("route_search_ms", search * 1e3, "ms"),
-        Row::new("route_maze_synth_s", secs, "s"),
-        Row::new("route_maze_coverage", s.coverage.lower, "lower bound, 99 %"),
-        Row::new("route_maze_violations", violations as f64, "runs"),
-    ];
-    let path = write_rows("route", &rows).expect("rows written");
-    println!("rows: {}", path.display());
+    for h in PERIODS {
+        let f = route_figures(&with_period(&src, h));
+        println!(
+            "{h:>7.3} {:>6} {:>10.4e} {:>10.4e} {:>10.4e} {:>10.4e} {:>12.4e} {:>10.4e}",
+            f.steps, f.mismatch, f.parts[0], f.parts[1], f.parts[2], f.accumulated, f.delta
+        );
+        rows.push(Row::new(
+            &format!("route_maze_vehicle_D_h{h}"),
+            f.mismatch,
+            "w-channel mismatch",
+        ));
+        rows.push(Row::new(
+            &format!("route_maze_vehicle_accumulated_h{h}"),
+            f.accumulated,
+            "P-metric, over the table",
+        ));
+        rows.push(Row::new(
+            &format!("route_maze_vehicle_route_delta_h{h}"),
+            f.delta,
+            "P-metric (< 0: refused)",
+        ));
+    }
+    let task = Task::new(host_compiler::spec::parse(&src, &path).expect("the shipped example"))
+        .expect("its task");
+    let (secs, coverage, violations) = synth_rows("vehicle maze", &task, Some(VEHICLE_BUDGET));
+    rows.push(Row::new("route_maze_vehicle_synth_s", secs, "s"));
+    rows.push(Row::new(
+        "route_maze_vehicle_coverage",
+        coverage,
+        "lower bound, 99 %",
+    ));
+    rows.push(Row::new(
+        "route_maze_vehicle_violations",
+        violations,
+        "runs",
+    ));
+    rows
+}
+
+/// The spec text with its (only) `period = …` line set to `h`, and `max_trajectories` lowered to what
+/// the image's table holds at that many samples (the table's trajectory alone is certified here).
+fn with_period(src: &str, h: f64) -> String {
+    src.lines()
+        .map(|l| {
+            if l.trim_start().starts_with("period =") {
+                format!("period = {h}")
+            } else if l.trim_start().starts_with("max_trajectories =") {
+                "max_trajectories = 8".to_string()
+            } else {
+                l.to_string()
+            }
+        })
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
+struct Figures {
+    steps: usize,
+    mismatch: f64,
+    parts: [f64; 3],
+    accumulated: f64,
+    delta: f64,
+}
+
+/// The certificate of the trajectory that follows the first route from Init's centre exactly: the
+/// route's timed reference (`trajectory::route::timed_guess`) is a sequence of positions, and on the
+/// chain in ξ = (x, y) (x⁺ = x + h·u, B diagonal) the input that moves between them is u_k =
+/// (ξ_{k+1} − A ξ_k)/B_jj, the reference v_k = u_k − K̂ ξ_k.
+fn route_figures(src: &str) -> Figures {
+    let task =
+        Task::new(host_compiler::spec::parse(src, "maze-scots-vehicle.toml").unwrap()).unwrap();
+    let design = host_compiler::caf::design(&task).expect("a CAF");
+    let lp = Loop::new(&task, &design);
+    let lc = LoopConstants::new(&lp).expect("loop constants");
+    let x0: Vec<f64> = centre(&task).iter().map(|&v| v as f32 as f64).collect();
+    let init = task.init();
+    let map =
+        RouteMap::new(&task.convex, &init.lo, &init.hi, &RouteSettings::default()).expect("a grid");
+    let route = map.routes(&x0).into_iter().next().expect("a route");
+    let (n, m) = (task.plant.n(), task.plant.m());
+    let guess = timed_guess(&route, map.coords(), &x0, task.steps, 0.8, m);
+    let (a, b, k) = (lp.A(), lp.B(), lp.K);
+    let v: Vec<Vec<f64>> = guess
+        .x
+        .windows(2)
+        .map(|w| {
+            (0..m)
+                .map(|i| {
+                    let ax: f64 = (0..n).map(|j| a[(i, j)] * w[0][j]).sum();
+                    let u = (w[1][i] - ax) / b[(i, i)];
+                    u - (0..n).map(|j| k[(i, j)] * w[0][j]).sum::<f64>()
+                })
+                .collect()
+        })
+        .collect();
+    let (nom, c) = shipped(&lp, &lc, &x0, &v);
+    let umax = nom
+        .u
+        .iter()
+        .flat_map(|u| u.iter().map(|a| a.abs()))
+        .fold(0.0f64, f64::max);
+    println!(
+        "  route length {:.2}, clearance {:.3}; W {:?}; largest |w| {umax:.4}; K {:?}",
+        route.length,
+        route.clearance,
+        task.property.input,
+        (0..m)
+            .map(|i| (0..n).map(|j| k[(i, j)]).collect::<Vec<_>>())
+            .collect::<Vec<_>>()
+    );
+    let parts = [c.delta_goal, c.delta_unsafe_intersample, c.delta_input];
+    let accumulated = if c.accumulated > 0.0 {
+        c.accumulated
+    } else {
+        lc.accumulation(task.steps) * lc.mismatch_step()
+    };
+    Figures {
+        steps: task.steps,
+        mismatch: task.plant.model_mismatch(),
+        parts,
+        accumulated,
+        delta: c.parts_min() - accumulated,
+    }
 }

@@ -2,12 +2,14 @@
 //! in several homotopy classes, that the SCP generator ([`super::generate`]) takes as its first
 //! linearisation point; and the verdict that no route exists at all.
 //!
-//! What it owns: the grid over the *route coordinates* (the state columns some convex piece of Goal or
-//! Unsafe actually constrains, so for a feedback-linearizable or flat plant the coordinates of ξ or q the
-//! task's sets are written in), the clearance of each cell, the route search on it, the distinct
-//! classes, the timed reference along a route ([`timed_guess`]) and the "closed off" verdict
-//! ([`RouteMap::closed_off`]). A route only *proposes*: the generator turns it into a trajectory of the
-//! plant and everything is certified afterwards exactly as without it.
+//! What it owns: the grid over the *route coordinates* ([`route_coords`]: the state columns Goal
+//! constrains and those of the Unsafe pieces that constrain any of them, so for a feedback-linearizable
+//! or flat plant the coordinates of ξ or q the task's sets are written in, not every coordinate its
+//! operating region bounds; pieces outside them are ignored, which only widens the free space), the
+//! clearance of each cell, the route search on it, the distinct classes, the timed reference along a
+//! route ([`timed_guess`]) and the "closed off" verdict ([`RouteMap::closed_off`]). A route only
+//! *proposes*: the generator turns it into a trajectory of the plant and everything is certified
+//! afterwards exactly as without it.
 //!
 //! # Method, and why
 //! * **Region.** The box spanned by every finite extent of Init, Goal and the Unsafe pieces in the route
@@ -87,6 +89,8 @@ enum Piece {
         rows: Vec<(Vec<f64>, f64, f64)>,
         empty: bool,
     },
+    /// A piece outside the route coordinates, which blocks no cell.
+    Ignored,
     /// C restricted, centre, Q, and the scale √λ_max(Q)·‖C‖.
     Ell {
         C: Mat<f64>,
@@ -142,6 +146,7 @@ impl Piece {
                     .map(|(h, b, nn)| (dot(h, y) - b) / nn)
                     .fold(f64::NEG_INFINITY, f64::max)
             }
+            Piece::Ignored => f64::INFINITY,
             Piece::Ell { scale, .. } => {
                 let s = self.q(y).sqrt();
                 if *scale > 0.0 && scale.is_finite() {
@@ -168,7 +173,7 @@ impl Piece {
                     .map(|i| (0..p).map(|j| d[i] * Q[(i, j)] * d[j]).sum::<f64>())
                     .sum()
             }
-            Piece::Poly { .. } => 0.0,
+            Piece::Poly { .. } | Piece::Ignored => 0.0,
         }
     }
 
@@ -177,6 +182,7 @@ impl Piece {
         match self {
             Piece::Poly { rows, empty } => !empty && rows.iter().all(|(h, b, _)| dot(h, y) <= *b),
             Piece::Ell { .. } => self.q(y) <= 1.0,
+            Piece::Ignored => false,
         }
     }
 
@@ -184,6 +190,7 @@ impl Piece {
     /// not computed).
     fn extent(&self, i: usize) -> (Option<f64>, Option<f64>) {
         match self {
+            Piece::Ignored => (None, None),
             Piece::Poly { rows, empty } => {
                 if *empty || rows.is_empty() {
                     return (None, None);
@@ -272,6 +279,40 @@ fn lp_extent(rows: &[(Vec<f64>, f64, f64)], i: usize, s: f64) -> Option<f64> {
     }
 }
 
+/// The route coordinates of a task's sets (module doc): the state columns Goal constrains, closed under
+/// "an Unsafe piece that constrains one of them adds all of its own"; every column some piece
+/// constrains when Goal constrains none. So an operating region's bound on a coordinate neither Goal
+/// nor an obstacle around it weighs (a feedback-linearizable or flat plant's velocities, whose
+/// complement joins Unsafe as one-coordinate half-spaces) does not add a dimension to the grid.
+pub fn route_coords(convex: &ConvexSets, n: usize) -> Vec<usize> {
+    let uses = |p: &ConvexPiece, j: usize| match p {
+        ConvexPiece::Polytope { H, .. } => (0..H.nrows()).any(|r| H[(r, j)] != 0.0),
+        ConvexPiece::Ellipsoid { C, .. } => (0..C.nrows()).any(|r| C[(r, j)] != 0.0),
+    };
+    let mut on: Vec<bool> = (0..n).map(|j| uses(&convex.goal, j)).collect();
+    if !on.contains(&true) {
+        return (0..n)
+            .filter(|&j| convex.unsafe_pieces.iter().any(|p| uses(p, j)))
+            .collect();
+    }
+    loop {
+        let mut grew = false;
+        for p in &convex.unsafe_pieces {
+            if (0..n).any(|j| on[j] && uses(p, j)) {
+                for (j, o) in on.iter_mut().enumerate() {
+                    if !*o && uses(p, j) {
+                        *o = true;
+                        grew = true;
+                    }
+                }
+            }
+        }
+        if !grew {
+            return (0..n).filter(|&j| on[j]).collect();
+        }
+    }
+}
+
 /// The grid over the route coordinates with each cell's clearance, Goal depth and the Unsafe piece
 /// that wholly holds it (module doc).
 #[derive(Clone, Debug)]
@@ -318,22 +359,25 @@ impl RouteMap {
             ConvexPiece::Polytope { H, .. } => (0..H.nrows()).any(|r| H[(r, j)] != 0.0),
             ConvexPiece::Ellipsoid { C, .. } => (0..C.nrows()).any(|r| C[(r, j)] != 0.0),
         };
-        let coords: Vec<usize> = (0..n)
-            .filter(|&j| {
-                std::iter::once(&convex.goal)
-                    .chain(&convex.unsafe_pieces)
-                    .any(|p| uses(p, j))
-            })
-            .collect();
+        let coords = route_coords(convex, n);
         let d = coords.len();
         if d == 0 {
             return None;
         }
         let goal = Piece::of(&convex.goal, &coords);
+        // A piece that constrains none of the route coordinates (an operating region's bound on a
+        // velocity) blocks nothing here: ignoring it only widens the free space, so the routes and the
+        // no-route verdict stay what they claim.
         let unsafe_: Vec<Piece> = convex
             .unsafe_pieces
             .iter()
-            .map(|p| Piece::of(p, &coords))
+            .map(|p| {
+                if (0..n).all(|j| !uses(p, j) || coords.contains(&j)) {
+                    Piece::of(p, &coords)
+                } else {
+                    Piece::Ignored
+                }
+            })
             .collect();
         // The region: every finite extent, plus a margin.
         let mut lo = vec![f64::INFINITY; d];

@@ -44,6 +44,7 @@ mod geometry_regions;
 mod hybrid_import;
 mod image_exits;
 mod inspect_certificate;
+mod maze_vehicle;
 mod messages;
 mod model_hybrid;
 mod model_zoh;
