@@ -24,13 +24,6 @@ pub fn run(a: &SynthArgs, problem: crate::spec::Problem) -> Outcome {
         .map_err(|e| miette::miette!("{e}"))
         .bad_input()?;
     let generator = a.generator.unwrap_or(Generator::Scp);
-    if generator == Generator::Algorithm4 && !task.forced {
-        return Err(Failure::bad_input(miette::miette!(
-            "--generator algorithm4: Algorithm 4 on a hybrid plant grows forced-switching runs (a run keeps \
-             its parent's locations and switching samples); this plant switches internally, where each \
-             run's landing decides its segments: use --generator scp (the default for a hybrid plant)"
-        )));
-    }
     let cancel = Arc::new(AtomicBool::new(false));
     {
         let cancel = cancel.clone();
