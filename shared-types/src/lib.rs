@@ -20,6 +20,7 @@
 //! * [`protocol`]: the UART protocol between plant and firmware.
 #![no_std]
 
+pub mod budgets;
 pub mod capacity;
 pub mod error;
 pub mod eval;

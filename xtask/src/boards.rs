@@ -1,5 +1,5 @@
 //! The firmware's boards: which there are, how each is built, and their flash and RAM against the budgets,
-//! which are stated here and nowhere else ([`BUDGETS`]).
+//! which are stated in `shared_types::budgets` and nowhere else ([`BUDGETS`]).
 //!
 //! Flash and RAM are read from the linked ELF's section headers (the `object` crate; the logic of
 //! `llvm-size`/Berkeley `size`): flash is every allocated section with contents (vector table, code,
@@ -31,11 +31,11 @@ pub struct Budgets {
     pub stack_bytes: u64,
 }
 
-/// The budgets: the one place they are stated.
+/// The budgets, as `shared_types::budgets` states them (the one place; `synth` reads them too).
 pub const BUDGETS: Budgets = Budgets {
-    flash_bytes: 128 * 1024,
-    ram_bytes: 32 * 1024,
-    stack_bytes: 8 * 1024,
+    flash_bytes: shared_types::budgets::FLASH_BYTES,
+    ram_bytes: shared_types::budgets::RAM_BYTES,
+    stack_bytes: shared_types::budgets::STACK_BYTES,
 };
 
 /// The shipped examples' images, as the HIL suite (and hil-bench) name them in `<target>/hil/images/`:

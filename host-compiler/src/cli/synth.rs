@@ -245,11 +245,14 @@ pub fn run(a: &SynthArgs) -> Outcome {
         s.coverage.samples
     );
     println!("stop              {}", s.stop);
-    if let Some(g) = median_gain(&s) {
-        println!(
-            "optimisation      {} runs (§5.3), median δ gain {g:.3}",
-            s.optimization.len()
-        );
+    let seeds: Vec<(f64, f64)> = s
+        .optimization
+        .iter()
+        .filter(|r| r.origin.is_some())
+        .map(|r| (r.delta_before, r.delta_after))
+        .collect();
+    if let Some(line) = gain_summary(s.optimization.len(), &seeds) {
+        println!("optimisation      {line}");
     }
     println!(
         "verification      {} runs ({} interior, {} boundary), {} violations",
@@ -266,11 +269,10 @@ pub fn run(a: &SynthArgs) -> Outcome {
     }
     print_terminal(&s.terminal, &s.verify, s.handover_radius, &s.image);
     if certified {
-        println!(
-            "image             {} ({} bytes)",
-            img_path.display(),
-            s.image.len()
-        );
+        println!("{}", image_line(&img_path, s.image.len()));
+        if let Some(w) = flash_warning(s.image.len()) {
+            eprintln!("warning: {w}");
+        }
     } else {
         println!("image             not written: the verification refutes it");
     }
@@ -487,24 +489,86 @@ fn synth_failure(e: SynthError) -> Failure {
     }
 }
 
-/// Median of δ after ÷ δ before over the Algorithm 4 seeds (those started on a ball's boundary).
-fn median_gain(s: &crate::synth::Synthesis) -> Option<f64> {
-    let mut g: Vec<f64> = s
-        .optimization
-        .iter()
-        .filter(|r| r.origin.is_some())
-        .map(|r| r.gain())
-        .collect();
-    if g.is_empty() {
+/// What §5.3 did over `runs` optimisations to the Algorithm 4 seeds (those started on a ball's boundary),
+/// given as (δ before, δ after): the median of δ after ÷ δ before over the seeds that started certified,
+/// and how many started uncertified (δ 0), whose gain has no finite ratio; `None` without such seeds.
+fn gain_summary(runs: usize, seeds: &[(f64, f64)]) -> Option<String> {
+    if seeds.is_empty() {
         return None;
     }
+    let mut g: Vec<f64> = seeds
+        .iter()
+        .filter(|(before, _)| *before > 0.0)
+        .map(|(before, after)| after / before)
+        .collect();
     g.sort_by(|a, b| a.total_cmp(b));
-    Some(g[g.len() / 2])
+    let repaired = seeds.len() - g.len();
+    let repaired = match repaired {
+        0 => String::new(),
+        k => format!("; {k} started uncertified (δ 0) and were repaired, a gain without a finite ratio"),
+    };
+    Some(match g.get(g.len() / 2) {
+        Some(median) if g.len() == seeds.len() => {
+            format!("{runs} runs (§5.3), median δ gain {median:.3}")
+        }
+        Some(median) => format!(
+            "{runs} runs (§5.3), median δ gain {median:.3} over the {} seeds that started certified{repaired}",
+            g.len()
+        ),
+        None => format!("{runs} runs (§5.3){repaired}"),
+    })
+}
+
+/// The summary line of a written image: its path and size against the boards' flash budget
+/// (`shared_types::budgets`, the firmware and the image together).
+pub(super) fn image_line(path: &std::path::Path, bytes: usize) -> String {
+    format!(
+        "image             {} ({bytes} bytes; the boards' flash budget for firmware and image together is {} bytes)",
+        path.display(),
+        shared_types::budgets::FLASH_BYTES
+    )
+}
+
+/// A warning when an image alone is larger than the boards' flash budget: with its firmware it fits no
+/// board as the budgets stand (`cargo xtask budgets` checks the linked firmware).
+pub(super) fn flash_warning(bytes: usize) -> Option<String> {
+    let budget = shared_types::budgets::FLASH_BYTES;
+    (bytes as u64 > budget).then(|| {
+        format!(
+            "the image is {bytes} bytes, more than the flash budget every board must meet with its \
+             firmware ({budget} bytes, shared_types::budgets): it fits no board as shipped; a smaller \
+             max_trajectories or a shorter horizon shrinks it"
+        )
+    })
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn an_image_larger_than_the_flash_budget_is_warned_of_and_one_within_it_is_not() {
+        let budget = shared_types::budgets::FLASH_BYTES as usize;
+        assert!(flash_warning(budget).is_none());
+        let w = flash_warning(1_026_635).expect("over the budget");
+        assert!(w.contains("1026635 bytes") && w.contains(&budget.to_string()), "{w}");
+        assert!(image_line(std::path::Path::new("c.img"), 10).contains(&budget.to_string()));
+    }
+
+    #[test]
+    fn the_gain_summary_is_finite_and_counts_the_seeds_that_started_uncertified() {
+        let line = gain_summary(4, &[(0.1, 0.2), (0.0, 0.3), (0.2, 0.3)]).expect("seeds");
+        assert!(!line.contains("inf"), "{line}");
+        assert!(line.contains("median δ gain 2.000 over the 2 seeds"), "{line}");
+        assert!(line.contains("1 started uncertified"), "{line}");
+        let line = gain_summary(1, &[(0.0, 0.3)]).unwrap();
+        assert!(!line.contains("inf") && !line.contains("median"), "{line}");
+        assert_eq!(
+            gain_summary(2, &[(0.1, 0.2), (0.2, 0.3)]).unwrap(),
+            "2 runs (§5.3), median δ gain 2.000"
+        );
+        assert!(gain_summary(0, &[]).is_none());
+    }
 
     #[test]
     fn a_ctrl_c_after_the_search_ended_exits_130_and_none_exits_as_before() {

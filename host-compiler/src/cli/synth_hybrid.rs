@@ -24,13 +24,6 @@ pub fn run(a: &SynthArgs, problem: crate::spec::Problem) -> Outcome {
         .map_err(|e| miette::miette!("{e}"))
         .bad_input()?;
     let generator = a.generator.unwrap_or(Generator::Scp);
-    if generator == Generator::Algorithm4 && !task.forced {
-        return Err(Failure::bad_input(miette::miette!(
-            "--generator algorithm4: Algorithm 4 on a hybrid plant grows forced-switching runs (a run keeps \
-             its parent's locations and switching samples); this plant switches internally, where each \
-             run's landing decides its segments: use --generator scp (the default for a hybrid plant)"
-        )));
-    }
     let cancel = Arc::new(AtomicBool::new(false));
     {
         let cancel = cancel.clone();
@@ -158,11 +151,10 @@ pub fn run(a: &SynthArgs, problem: crate::spec::Problem) -> Outcome {
         s.verify.violations,
         s.verify.first_violation.as_deref(),
     )?;
-    println!(
-        "image             {} ({} bytes)",
-        img_path.display(),
-        s.image.len()
-    );
+    println!("{}", super::synth::image_line(&img_path, s.image.len()));
+    if let Some(w) = super::synth::flash_warning(s.image.len()) {
+        eprintln!("warning: {w}");
+    }
     super::synth::coverage_exit(
         cancel.load(Ordering::Relaxed),
         &s.coverage,

@@ -126,6 +126,9 @@ pub fn run(a: &SynthArgs, task: &Task, s: &Synthesis) -> Outcome {
         summary.image_bytes,
         summary.feedforward_image_bytes
     );
+    if let Some(w) = super::synth::flash_warning(summary.image_bytes) {
+        eprintln!("warning: {w}");
+    }
     let bad_parts = summary.recheck.partitions.iter().filter(|p| !p.ok).count();
     println!(
         "recheck           {} partitions, {} failing; containment across boundaries {} leaf visits, {} failing balls",

@@ -216,11 +216,10 @@ pub fn run(a: &SynthArgs, problem: crate::spec::Problem) -> Outcome {
         s.verify.violations,
         s.verify.first_violation.as_deref(),
     )?;
-    println!(
-        "image             {} ({} bytes)",
-        img_path.display(),
-        s.image.len()
-    );
+    println!("{}", super::synth::image_line(&img_path, s.image.len()));
+    if let Some(w) = super::synth::flash_warning(s.image.len()) {
+        eprintln!("warning: {w}");
+    }
     super::synth::coverage_exit(
         cancel.load(Ordering::Relaxed),
         &s.coverage,

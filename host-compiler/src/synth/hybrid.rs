@@ -664,9 +664,8 @@ pub struct HybridOptions {
     /// join the runs before the growth (default none).
     pub imports: Vec<(String, crate::trajectory::csv::Recording)>,
     /// How runs after the first are made (default [`Generator::Scp`]: the planner from each uncovered
-    /// sample). [`Generator::Algorithm4`] grows a forced-switching run from the nearest ball
-    /// ([`forced::grow_from`]), falling back to the planner where that fails; internal switching plans
-    /// every seed.
+    /// sample). [`Generator::Algorithm4`] grows a run from the nearest ball ([`forced::grow_from`]; across
+    /// internal guards [`optimise::grow_from`]), falling back to the planner where that fails.
     pub generator: Generator,
 }
 
@@ -798,8 +797,8 @@ struct Seed {
     grow: Option<(usize, Vec<f64>)>,
 }
 
-/// The seeds of an Algorithm 4 round (§5.4, forced switching): the untried uncovered working samples,
-/// nearest to the cover first (ties in sample order), each projected onto the boundary of its nearest
+/// The seeds of an Algorithm 4 round (§5.4; forced switching, or internal across the guards): the
+/// untried uncovered working samples, nearest to the cover first (ties in sample order), each projected onto the boundary of its nearest
 /// ball; a batch is spread by the runs' median radius (one seed per neighbourhood). Marks them tried.
 fn algorithm4_seeds(
     task: &HybridTask,
@@ -857,7 +856,13 @@ fn algorithm4_seeds(
 fn plan_seed(task: &HybridTask, runs: &[HybridRun], seed: &Seed) -> Result<HybridRun, String> {
     if let Some((m, yh)) = &seed.grow {
         let floor = task.problem.synthesis.min_robustness;
-        let grown = forced::grow_from(task, &runs[*m], yh).ok().filter(|r| {
+        let grown = if task.forced {
+            forced::grow_from(task, &runs[*m], yh)
+        } else {
+            let iterations = (task.problem.synthesis.max_iterations / 2) as u64;
+            optimise::grow_from(task, &runs[*m], yh, iterations)
+        };
+        let grown = grown.ok().filter(|r| {
             r.certificate.is_certified()
                 && r.delta() >= floor
                 && covered(task, std::slice::from_ref(r), &seed.x)
@@ -876,7 +881,7 @@ fn plan_seed(task: &HybridTask, runs: &[HybridRun], seed: &Seed) -> Result<Hybri
 /// Algorithm 1 over hybrid runs: plan from Init's centre, then from uncovered samples of Init (the
 /// working samples, extended up to [`MAX_REFILLS`] times when every uncovered one was tried or fresh
 /// samples are less covered than they are; a batch per round, planned in parallel, accepted in sample
-/// order; with [`Generator::Algorithm4`] and forced switching, grown from the nearest ball first,
+/// order; with [`Generator::Algorithm4`], grown from the nearest ball first,
 /// [`algorithm4_seeds`] and [`plan_seed`]), until the working samples are covered to the target, the budget (`max_trajectories`, the table's rows) is spent, no uncovered sample is left
 /// untried, or `cancel` is set; then the coverage estimate (§2.5.2), the image and its Monte Carlo.
 pub fn synthesize_hybrid(
@@ -969,7 +974,7 @@ pub fn synthesize_hybrid(
                 x: centre.clone(),
                 grow: None,
             }]
-        } else if task.forced && !runs.is_empty() && opts.generator == Generator::Algorithm4 {
+        } else if !runs.is_empty() && opts.generator == Generator::Algorithm4 {
             first = false;
             algorithm4_seeds(task, &runs, &working, &mut tried, opts.batch.max(1))
         } else {

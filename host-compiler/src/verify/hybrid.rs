@@ -137,7 +137,7 @@ pub fn run_hybrid(
             Ok(u) => u,
             Err(s) => {
                 why = Some(format!(
-                    "sample {k}: the evaluator answered {s:?} at x = {x:?}"
+                    "sample {k}: the evaluator answered: {s}, at x = {x:?}"
                 ));
                 break;
             }

@@ -278,7 +278,7 @@ fn run(
             Err(_) if k == 0 => return None,
             Err(e) => {
                 return Some(Err(format!(
-                    "x0 = {x0:?}: the evaluator refused the state at step {k} ({e:?})"
+                    "x0 = {x0:?}: the evaluator refused the state at step {k}: {e}"
                 )))
             }
         };
@@ -472,7 +472,7 @@ fn run_fl(
             Err(_) if k == 0 => return None,
             Err(e) => {
                 return Some(Err(format!(
-                    "x0 = {x0:?}: the evaluator refused the state at step {k} ({e:?})"
+                    "x0 = {x0:?}: the evaluator refused the state at step {k}: {e}"
                 )))
             }
         };

@@ -186,30 +186,6 @@ fn verify_attack_and_enlarged_radius(
     assert!(stderr.contains("not re-proved"), "{stderr}");
 }
 
-/// Algorithm 4 on a hybrid plant grows forced-switching runs; asked of an internally switched plant it is
-/// bad input (exit 2) that says why and what to use, before any synthesis.
-#[test]
-fn algorithm_4_on_an_internally_switched_plant_is_refused_with_the_reason() {
-    let spec = format!(
-        "{}/../examples/hybrid-internal-4-25.toml",
-        env!("CARGO_MANIFEST_DIR")
-    );
-    let out = std::env::temp_dir().join(format!("hc-cli-alg4-{}", std::process::id()));
-    let o = bin()
-        .args(["synth", &spec, "--out", out.to_str().unwrap()])
-        .args(["--generator", "algorithm4", "--quiet"])
-        .output()
-        .unwrap();
-    let stderr = String::from_utf8_lossy(&o.stderr);
-    assert_eq!(o.status.code(), Some(2), "{stderr}");
-    // The report is wrapped to the terminal's width: look for single words.
-    assert!(
-        stderr.contains("algorithm4") && stderr.contains("internally") && stderr.contains("scp"),
-        "{stderr}"
-    );
-    assert!(!out.join("controller.img").exists());
-}
-
 /// `synth` of the shipped `example` with a budget of one run into a fresh directory, with
 /// `verify_runs` Monte Carlo runs: exit 3 (short of the coverage target), the run re-proved from the
 /// bytes, 0 violations. Returns the directory, the spec written there and the out directory.

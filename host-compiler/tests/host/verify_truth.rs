@@ -120,22 +120,7 @@ fn a_radius_enlarged_by_more_than_the_selection_slack_is_not_reproved() {
 /// controller states ζ0.
 #[test]
 fn a_flat_images_changed_initial_thrust_is_refused() {
-    let src = std::fs::read_to_string(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../examples/flat-quadrotor.toml"
-    ))
-    .unwrap()
-    .replace(
-        "lo = [-7.25, 0.0, 4.75, 0.0, 0.0, 0.0]",
-        "lo = [-7.0, 0.0, 5.0, 0.0, 0.0, 0.0]",
-    )
-    .replace(
-        "hi = [-6.75, 0.0, 5.25, 0.0, 0.0, 0.0]",
-        "hi = [-7.0, 0.0, 5.0, 0.0, 0.0, 0.0]",
-    )
-    .replace("max_trajectories = 32", "max_trajectories = 1")
-    .replace("max_iterations = 20", "max_iterations = 3");
-    let (_dir, spec_path, img_path) = crate::cli_fl::synth_then_verify(&src, "verify-truth-flat");
+    let (_, spec_path, img_path) = crate::cli_flat::one_state();
     let bytes = std::fs::read(&img_path).unwrap();
     let img = decode(&bytes).unwrap();
     let maps = img.model_maps().expect("model maps");

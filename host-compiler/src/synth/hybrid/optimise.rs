@@ -32,6 +32,8 @@ const OFFSET_STEP: f64 = 0.3;
 struct Trial<'a> {
     task: &'a HybridTask,
     base: &'a HybridRun,
+    /// The first segment's start (f32): the base run's, or for Algorithm 4 a point on its ball's boundary.
+    start: Vec<f64>,
     /// Input scale per channel (half-width of the input box).
     scale: Vec<f64>,
 }
@@ -52,7 +54,7 @@ impl Trial<'_> {
         let segs = self.base.nominals.len();
         let (n, m) = (self.base.nominals[0].x[0].len(), self.scale.len());
         let per = HATS * m + n;
-        let mut x = self.base.nominals[0].x[0].clone();
+        let mut x = self.start.clone();
         let mut nominals = Vec::with_capacity(segs);
         for (i, old) in self.base.nominals.iter().enumerate() {
             let loc = self.base.locations[i];
@@ -125,14 +127,11 @@ fn search(task: &HybridTask, base: HybridRun, iterations: u64) -> HybridRun {
         return base;
     }
     let m = base.nominals[0].v[0].len();
-    let scale: Vec<f64> = match &task.property.input {
-        InputBound::Box { lo, hi } => lo.iter().zip(hi).map(|(l, h)| 0.5 * (h - l)).collect(),
-        InputBound::Norm2 { max, .. } => vec![*max; m],
-    };
     let trial = Trial {
         task,
         base: &base,
-        scale,
+        start: base.nominals[0].x[0].clone(),
+        scale: input_half_widths(task, m),
     };
     let dim = trial.dims();
     let per = HATS * m + base.nominals[0].x[0].len();
@@ -168,6 +167,43 @@ fn search(task: &HybridTask, base: HybridRun, iterations: u64) -> HybridRun {
         },
         _ => base,
     }
+}
+
+/// Half the input set's width per channel (the search's unit of a table change).
+fn input_half_widths(task: &HybridTask, m: usize) -> Vec<f64> {
+    match &task.property.input {
+        InputBound::Box { lo, hi } => lo.iter().zip(hi).map(|(l, h)| 0.5 * (h - l)).collect(),
+        InputBound::Norm2 { max, .. } => vec![*max; m],
+    }
+}
+
+/// Algorithm 4 (§5.4) across internal guards: `parent`'s feedback law from `y` (a point on the boundary
+/// of its ball). In the loop's form u = Kx + v the law u = K(x − x̃) + ũ is v = ṽ, so each segment keeps
+/// the parent's table; the run re-synchronises at each guard as the image does, the next segment starting
+/// from the centre of its own nominal's landings ([`super::landing`]). The run is certified as shipped,
+/// then optimised by §5.3 ([`optimise`], `iterations` per search). `Err` says why it was not certified.
+pub fn grow_from(
+    task: &HybridTask,
+    parent: &HybridRun,
+    y: &[f64],
+    iterations: u64,
+) -> Result<HybridRun, String> {
+    let m = parent.nominals[0].v.first().map_or(0, |r| r.len());
+    let trial = Trial {
+        task,
+        base: parent,
+        start: f32_start(y),
+        scale: input_half_widths(task, m),
+    };
+    let (nominals, certificate) = trial
+        .run(&vec![0.0; trial.dims()])
+        .ok_or("the parent's law from this start does not cross a guard, or the run is not certified")?;
+    let run = HybridRun {
+        nominals,
+        locations: parent.locations.clone(),
+        certificate,
+    };
+    Ok(optimise(task, run, iterations))
 }
 
 /// The last segment's table maximised against Goal (its terminal step free within the horizon), the run
@@ -228,12 +264,46 @@ mod tests {
             .expect("a hybrid task")
     }
 
+    /// Example 5.5 with one iteration of §5.3 (half of 1 is none for the search; the bundle gets one),
+    /// and the planner's run from (−5, 1, 2), planned once for the tests below.
+    fn planned_5_5() -> &'static (HybridTask, HybridRun) {
+        static ONCE: std::sync::OnceLock<(HybridTask, HybridRun)> = std::sync::OnceLock::new();
+        ONCE.get_or_init(|| {
+            let mut task = example_5_5();
+            task.problem.synthesis.max_iterations = 1;
+            let run = super::super::plan_run(&task, &[-5.0, 1.0, 2.0]).expect("a run");
+            (task, run)
+        })
+    }
+
+    #[test]
+    fn algorithm_4_grows_a_run_across_the_guard_from_a_point_on_its_parents_ball() {
+        let (task, parent) = planned_5_5();
+        let x0 = &parent.nominals[0].x[0];
+        let r = parent.certificate.delta_stored as f64;
+        // A point 0.9 of the way to the ball's boundary along the first axis of the first metric.
+        let P = task.designs[task.path[0]].P.as_ref();
+        let mut y = x0.clone();
+        y[0] += 0.9 * r / P[(0, 0)].sqrt();
+        let grown = grow_from(task, parent, &y, 0).expect("grown and certified");
+        // It starts at the f32 point, keeps the parent's locations, crosses the guard, and ships what it
+        // certified (the certificate recomputed from its nominals is the same).
+        assert_eq!(grown.nominals[0].x[0], f32_start(&y));
+        assert_eq!(grown.locations, parent.locations);
+        assert_eq!(grown.nominals.len(), parent.nominals.len());
+        assert!(grown.certificate.is_certified(), "δ {}", grown.delta());
+        assert_eq!(certify_run(task, &grown.nominals).unwrap(), grown.certificate);
+        // With no search the tables are the parent's: the law v = ṽ.
+        assert_eq!(grown.nominals[0].v, parent.nominals[0].v);
+        // A start the parent's law does not carry across the guard is refused, not certified.
+        let far: Vec<f64> = x0.iter().map(|v| v + 1e3).collect();
+        assert!(grow_from(task, parent, &far, 0).is_err());
+    }
+
     #[test]
     fn optimising_example_5_5_s_run_raises_its_delta_and_ships_what_it_certified() {
-        let mut task = example_5_5();
-        // The planner's run without the search (half of 1 iteration is none; the bundle gets one).
-        task.problem.synthesis.max_iterations = 1;
-        let run = super::super::plan_run(&task, &[-5.0, 1.0, 2.0]).expect("a run");
+        let (task, run) = planned_5_5();
+        let (task, run) = (task, run.clone());
         let opt = optimise(&task, run.clone(), 100);
         assert!(
             opt.delta() > 1.02 * run.delta(),
