@@ -76,8 +76,8 @@ pub fn project_onto_boundary(
 
 /// The reference sequence of trajectory m's feedback law u = K (x − x̃_m(κ)) + ũ_m(κ) (Algorithm 4, step
 /// 2) in the loop's form u = K x + v: since ũ_m = K x̃_m + ṽ_m, it is v = ṽ_m, applied from the new x0.
-pub fn feedback_law_reference(t: &CoverTrajectory) -> Vec<Vec<f64>> {
-    t.nominal.v.clone()
+pub fn feedback_law_reference(t: &CoverTrajectory) -> &[Vec<f64>] {
+    &t.nominal.v
 }
 
 /// One group of uncovered samples.
@@ -191,7 +191,7 @@ mod tests {
 
     fn ball(c: Vec<f64>, delta: f32) -> CoverTrajectory {
         CoverTrajectory {
-            source: "t".into(),
+            source: super::super::Source::import("t"),
             nominal: Nominal {
                 x: vec![c],
                 v: vec![],

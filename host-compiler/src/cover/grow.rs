@@ -8,6 +8,7 @@
 //! a fixed batch collected in order, so the cover does not depend on the number of threads.
 
 use super::estimate::{self, CoverageEstimate, SampleBox};
+use super::seeds::{certify_recording, Ask, Generators, Origin, Seed, Source, Sources};
 use super::{
     alg4, feedforward_image, AcceptHook, Cover, CoverTrajectory, Generator, OptStart, StopReason,
 };
@@ -18,8 +19,7 @@ use crate::optimize::{maximize_delta, BundleSettings};
 use crate::property::input_scale;
 use crate::task::Task;
 use crate::trajectory::csv::Recording;
-use crate::trajectory::generate::{generate, generate_from, GenError, GenProblem, GenSettings};
-use crate::trajectory::route::{timed_guess, Route, RouteMap, RouteSettings};
+use crate::trajectory::generate::{GenError, GenProblem};
 use crate::trajectory::Nominal;
 use indicatif::{ProgressBar, ProgressStyle};
 use rand::SeedableRng;
@@ -274,20 +274,16 @@ pub fn grow(
         input_margin: 1e-5 * input_scale(&task.property.input),
         schedule: None,
     };
-    let gs = GenSettings::default();
     let shipped =
         |x0: &[f64], v: &[Vec<f64>]| -> (Nominal, Certificate) { certify::shipped(lp, lc, x0, v) };
     let delta_eps = problem.synthesis.min_robustness;
     let accept = |c: &Certificate| c.is_certified() && c.delta >= delta_eps;
+    // The seed sources (`super::seeds`): the SCP generator, then the routes of the global search.
     // Generated references are held over blocks of `reference_hold` samples (move blocking); recorded
     // ones are used as recorded. Algorithm 4's seeds reuse a held reference, and §5.3 keeps it held.
     let hold = problem.synthesis.reference_hold;
-    let generated = |x0: &[f64]| -> Result<Vec<Vec<f64>>, GenError> {
-        let mut v = generate(&gp, x0, &gs)?.nominal.v;
-        crate::trajectory::hold::project(&mut v, hold);
-        Ok(v)
-    };
-    // A generated, certified trajectory, or why not (the refused certificate, or the generator's reason).
+    let gens =
+        Generators::new(&gp, hold).with_routes(&task.convex, &problem.init.lo, &problem.init.hi);
     let bundle = match opts.optimizer {
         Some(b) => b.clone().to_builder(),
         None => BundleSettings::builder().max_iterations(problem.synthesis.max_iterations),
@@ -309,62 +305,37 @@ pub fn grow(
     // a "no trajectory" error still says which δ part fails and how far Goal is.
     let unforced = |x0: &[f64]| shipped(x0, &vec![vec![0.0; m]; steps]).1;
     let seed_scp = |x0: &[f64]| {
-        let v = generated(x0)?;
+        let v = gens.generated(x0)?;
         Ok::<_, GenError>(optimise(x0, &v))
     };
-    // Routes of the global search (`trajectory::route`), where the plain generator found no accepted
-    // trajectory from a seed: each route's timed reference is the generator's first linearisation point,
-    // then §5.3; the first accepted result, with its route's index. The grid is built once, on first use.
-    let route_settings = RouteSettings::default();
-    let route_map = std::sync::OnceLock::new();
-    let map = || {
-        route_map
-            .get_or_init(|| {
-                RouteMap::new(
-                    &task.convex,
-                    &problem.init.lo,
-                    &problem.init.hi,
-                    &route_settings,
-                )
-            })
-            .as_ref()
-    };
-    let route_generated = |x0: &[f64], route: &Route, map: &RouteMap| {
-        let guess = timed_guess(route, map.coords(), x0, steps, route_settings.arrive, m);
-        let mut v = generate_from(&gp, x0, &gs, &guess).ok()?.nominal.v;
-        crate::trajectory::hold::project(&mut v, hold);
-        Some(v)
-    };
+    // The routes of the global search, where the plain generator found no accepted trajectory from a
+    // seed: each route's reference then §5.3; the first accepted result, with its route's index.
     let from_routes = |x0: &[f64]| {
-        let map: &RouteMap = map()?;
-        map.routes(x0).iter().enumerate().find_map(|(r, route)| {
-            let v = route_generated(x0, route, map)?;
-            let made = optimise(x0, &v);
-            accept(&made.1 .1).then_some((r, made))
+        gens.routed(x0).find_map(|p| {
+            let made = optimise(x0, &p.candidate);
+            accept(&made.1 .1).then_some((p.origin, made))
         })
     };
-    // Algorithm 1's seed: a generated, certified trajectory (the plain generator, then the routes of
-    // the global search where it gives none accepted), or why not (the plain generator's refused
-    // certificate, or its reason).
+    // Algorithm 1's seed: the seed's sources in order, certified without §5.3 (the plain generator, then
+    // the routes of the global search where it gives none accepted), or why not (the plain generator's
+    // refused certificate, or its reason).
     let make = |x0: &[f64]| -> Result<CoverTrajectory, Result<Certificate, GenError>> {
-        let plain = generated(x0).map(|v| shipped(x0, &v));
+        let plain = gens.generated(x0).map(|v| shipped(x0, &v));
         if let Ok((nominal, certificate)) = &plain {
             if accept(certificate) {
                 return Ok(CoverTrajectory {
-                    source: "generated".into(),
+                    source: Source::new(Origin::Generator, false),
                     nominal: nominal.clone(),
                     certificate: certificate.clone(),
                 });
             }
         }
-        let routed = map().and_then(|map| {
-            map.routes(x0).iter().enumerate().find_map(|(r, route)| {
-                let (nominal, certificate) = shipped(x0, &route_generated(x0, route, map)?);
-                accept(&certificate).then(|| CoverTrajectory {
-                    source: format!("route {} (SCP)", r + 1),
-                    nominal,
-                    certificate,
-                })
+        let routed = gens.routed(x0).find_map(|p| {
+            let (nominal, certificate) = shipped(x0, &p.candidate);
+            accept(&certificate).then(|| CoverTrajectory {
+                source: Source::new(p.origin, false),
+                nominal,
+                certificate,
             })
         });
         match (routed, plain) {
@@ -394,7 +365,7 @@ pub fn grow(
         if cert.is_certified() {
             cover.push(
                 CoverTrajectory {
-                    source: format!("csv:{name}"),
+                    source: Source::import(name),
                     nominal: nom,
                     certificate: cert,
                 },
@@ -498,31 +469,37 @@ pub fn grow(
                 accept(certificate)
                     && !outside(
                         std::slice::from_ref(&CoverTrajectory {
-                            source: String::new(),
+                            source: Source::new(Origin::Generator, false),
                             nominal: nominal.clone(),
                             certificate: certificate.clone(),
                         }),
                         &discarded[far],
                     )
             };
-            let mut made = seed_scp(&x0).map(|m| (None, m));
-            if !matches!(&made, Ok((_, (_, (n, c), _))) if covers_far(n, c)) {
-                // The plain generator did not reach this sample: the routes of the global search.
-                if let Some((r, m)) = from_routes(&x0).filter(|(_, m)| covers_far(&m.1 .0, &m.1 .1))
-                {
-                    made = Ok((Some(r), m));
+            // The seed's sources in order, each then §5.3: the plain generator, kept (for the record) unless
+            // a route's does cover the sample; of the routes only the first accepted one is looked at.
+            let seed = Seed::at(x0.clone());
+            let src = gens.over(Vec::new());
+            let mut made = None;
+            for p in src.proposals(&seed) {
+                let Ok(v) = p.candidate else { continue };
+                let m = optimise(&x0, &v);
+                let plain = p.origin == Origin::Generator;
+                let (accepted, far) = (accept(&m.1 .1), covers_far(&m.1 .0, &m.1 .1));
+                if plain || far {
+                    made = Some((p.origin, m));
+                }
+                if far || (accepted && !plain) {
+                    break;
                 }
             }
             let mut ok = false;
-            if let Ok((route, (before, (nominal, certificate), opt))) = made {
+            if let Some((origin, (before, (nominal, certificate), opt))) = made {
                 ok = covers_far(&nominal, &certificate);
                 cover.record(
                     OptStart::new(round, None, &x0, before, opt),
                     CoverTrajectory {
-                        source: route.map_or_else(
-                            || "generated (SCP) + §5.3".into(),
-                            |r| format!("route {} (SCP) + §5.3", r + 1),
-                        ),
+                        source: Source::new(origin, true),
                         nominal,
                         certificate,
                     },
@@ -624,7 +601,7 @@ pub fn grow(
                         cover.record(
                             OptStart::new(round, None, s, before, opt),
                             CoverTrajectory {
-                                source: "generated (SCP) + §5.3".into(),
+                                source: Source::new(Origin::Generator, true),
                                 nominal,
                                 certificate,
                             },
@@ -653,13 +630,13 @@ pub fn grow(
             if !got {
                 // The plain generator certified nothing from this round's seeds: their routes, in order.
                 bars.set_round(round, "first seed (routes, SCP + §5.3)");
-                if let Some((s, (r, (before, (nominal, certificate), opt)))) =
+                if let Some((s, (origin, (before, (nominal, certificate), opt)))) =
                     seeds.iter().find_map(|s| from_routes(s).map(|m| (s, m)))
                 {
                     cover.record(
                         OptStart::new(round, None, s, before, opt),
                         CoverTrajectory {
-                            source: format!("route {} (SCP) + §5.3", r + 1),
+                            source: Source::new(origin, true),
                             nominal,
                             certificate,
                         },
@@ -730,18 +707,35 @@ pub fn grow(
                 bars.set_round(round, "optimising (Algorithm 4, §5.3)");
                 bars.batch.set_length(items.len() as u64);
                 bars.batch.set_position(0);
+                // Each item's seed asks Algorithm 4 alone: its ball's feedback law from ŷ.
+                let src = gens.over(
+                    cover
+                        .trajectories
+                        .iter()
+                        .map(alg4::feedback_law_reference)
+                        .collect(),
+                );
                 let made: Vec<_> = items
                     .par_iter()
                     .map(|(_, mi, yh)| {
-                        let v = alg4::feedback_law_reference(&cover.trajectories[*mi]);
-                        let r = optimise(yh, &v);
+                        let seed = Seed {
+                            x: yh.clone(),
+                            grow: Some((*mi, yh.clone())),
+                        };
+                        let r = src
+                            .answer(&seed, Ask::Grow)
+                            .find_map(|p| Some((p.origin, optimise(yh, &p.candidate.ok()?))));
                         bars.batch.inc(1);
                         r
                     })
                     .collect();
-                for ((i, mi, yh), (before, (nominal, certificate), opt)) in items.iter().zip(made) {
+                for ((i, mi, yh), made) in items.iter().zip(made) {
+                    // (Every item's ball is in the cover, so it has its candidate.)
+                    let Some((origin, (before, (nominal, certificate), opt))) = made else {
+                        continue;
+                    };
                     let cand = CoverTrajectory {
-                        source: format!("Algorithm 4 from #{mi} + §5.3"),
+                        source: Source::new(origin, true),
                         nominal,
                         certificate,
                     };
@@ -847,6 +841,7 @@ pub fn grow(
         cover.snapshot(round, &work, &discarded);
     };
     bars.clear();
+    cover.routes = gens.searches();
     if cover.trajectories.is_empty() {
         return Err(GrowError::NothingCertified {
             attempts: Box::new(attempts),
@@ -860,16 +855,4 @@ pub fn grow(
         image,
         warnings,
     })
-}
-
-/// The one path from a recording (a person's run: `synth --import`, `host-compiler play`) to its nominal
-/// and certificate: the initial state rounded to f32 (what the image stores), then [`certify::shipped`]
-/// with the recorded reference inputs. A recording is accepted when the certificate is certified.
-pub fn certify_recording(
-    lp: &Loop<'_>,
-    lc: &LoopConstants,
-    rec: &Recording,
-) -> (Nominal, Certificate) {
-    let x0: Vec<f64> = rec.x0.iter().map(|&v| round32(v)).collect();
-    certify::shipped(lp, lc, &x0, &rec.v)
 }

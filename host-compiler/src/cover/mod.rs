@@ -5,14 +5,18 @@
 //! * [`estimate`]: uniform sampling of Init and the coverage estimate with its Chernoff bounds (§2.5.2);
 //! * [`alg4`]: the geometry of Algorithm 4 (the gap (5.32), projection onto the closest ball, where the
 //!   unreachable samples lie);
+//! * [`seeds`]: the seed sources every cover loop asks (generator, routes, Algorithm 4, recordings) and
+//!   the provenance each trajectory keeps;
 //! * [`grow`]: the growth loop itself, from the first seed to the stop.
 
 pub mod alg4;
 pub mod estimate;
 mod grow;
+pub mod seeds;
 
 pub use estimate::{CoverageEstimate, SampleBox};
-pub use grow::{certify_recording, grow, Attempts, GrowError, GrowOptions, Grown};
+pub use grow::{grow, Attempts, GrowError, GrowOptions, Grown};
+pub use seeds::{certify_recording, RouteSearch, Source};
 
 use crate::certify::Certificate;
 use crate::emit::{EmitError, FallbackLaw, ImageBuilder, SelectionTestSpec, TrajectoryEntry};
@@ -99,7 +103,8 @@ impl std::fmt::Display for StopReason {
 /// One certified trajectory of the cover.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct CoverTrajectory {
-    pub source: String,
+    /// Where it came from (a recording, the generator, a route, Algorithm 4 from a ball).
+    pub source: Source,
     pub nominal: Nominal,
     pub certificate: Certificate,
 }
@@ -232,6 +237,8 @@ pub struct Cover {
     pub records: Vec<OptRecord>,
     /// The cover after each round.
     pub snapshots: Vec<CoverSnapshot>,
+    /// Every route search the growth ran (`seeds::Generators::searches`).
+    pub routes: Vec<RouteSearch>,
 }
 
 impl Cover {
@@ -242,6 +249,7 @@ impl Cover {
             trajectories: Vec::new(),
             records: Vec::new(),
             snapshots: Vec::new(),
+            routes: Vec::new(),
         }
     }
 

@@ -31,8 +31,11 @@ pub enum Shape2 {
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct TrajectoryReport {
     pub id: usize,
-    /// Where it came from: "generated", "csv:<path>", …
+    /// Where it came from: "generated", "csv:<path>", "route 1 (SCP) + §5.3", …
     pub source: String,
+    /// The route (index into [`ReportData::routes`]) it came from: directly, or through the balls
+    /// Algorithm 4 grew it from.
+    pub route: Option<usize>,
     /// Initial state x̃(0).
     pub x0: Vec<f64>,
     /// Certified radius δ (CAF metric) of the ball of initial states, as shipped.
@@ -53,6 +56,22 @@ pub struct TrajectoryReport {
     pub u_nominal: Vec<f64>,
     /// The largest input any state in the tube can apply at each step (same measure as `u_nominal`).
     pub u_worst: Vec<f64>,
+}
+
+/// A route the global search found (issue 48), with the trajectories that came from it.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct RouteReport {
+    /// "route k" (with the seed's number when several seeds were searched).
+    pub label: String,
+    /// The seed it starts from (full state), its length and the clearance it keeps from Unsafe, in the
+    /// route coordinates.
+    pub seed: Vec<f64>,
+    pub length: f64,
+    pub clearance: f64,
+    /// Its points in the workspace plane (empty when the route coordinates are not that plane's).
+    pub points: Vec<[f64; 2]>,
+    /// Ids of the trajectories that came from it.
+    pub trajectories: Vec<usize>,
 }
 
 /// Summary of the closed-loop Monte Carlo re-check.
@@ -115,6 +134,8 @@ pub struct ReportData {
     pub goal_plane: Vec<Shape2>,
     pub unsafe_plane: Vec<Shape2>,
     pub trajectories: Vec<TrajectoryReport>,
+    /// The routes of the global search, when the growth ran one.
+    pub routes: Vec<RouteReport>,
     /// Axis labels of the Init plane (its two free coordinates) and the Init box there.
     pub init_labels: [String; 2],
     pub init_box: Shape2,

@@ -7,9 +7,9 @@ use std::path::{Path, PathBuf};
 use super::data::{ReportData, VerifySummary};
 use super::format::{bytes, count, escape, num, pct, pct_down, pct_up, seconds, vector};
 use super::plots::{
-    css_color, init_plane_svg, input_measure, input_svg, shape_summary, sorted_trajectories,
-    trajectory_color, tubes_per_trajectory, workspace_svg, BALL_COLOR, FEW_TRAJECTORIES,
-    GOAL_COLOR, INIT_COLOR, UNSAFE_COLOR,
+    color_of, css_color, init_plane_svg, input_measure, input_svg, route_color, shape_summary,
+    sorted_trajectories, trajectory_color, tubes_per_trajectory, workspace_svg, BALL_COLOR,
+    FEW_TRAJECTORIES, GOAL_COLOR, INIT_COLOR, NO_ROUTE_COLOR, UNSAFE_COLOR,
 };
 
 /// The page's verdict: green only when coverage meets the target and verification ran with 0 violations.
@@ -82,6 +82,7 @@ pub fn render_html(data: &ReportData) -> String {
     plots(&mut h, data);
     super::optimization::section(&mut h, data);
     trajectory_table(&mut h, data);
+    route_table(&mut h, data);
     coverage_table(&mut h, data);
     certificate(&mut h, data);
     image(&mut h, data);
@@ -205,9 +206,38 @@ fn line_key(color: &str, label: &str, dashed: bool) -> String {
     )
 }
 
-/// Legend keys of the trajectories: the first [`LEGEND_TRAJECTORIES`], then a count of the rest.
+/// Legend keys of the trajectories: with routes, one per route (dashed, with how many trajectories came
+/// from it) and one for those from none; else the first [`LEGEND_TRAJECTORIES`], then a count of the rest.
 fn trajectory_keys(data: &ReportData) -> String {
     let ts = sorted_trajectories(data);
+    if !data.routes.is_empty() {
+        let mut keys: String = data
+            .routes
+            .iter()
+            .enumerate()
+            .map(|(r, route)| {
+                let n = route.trajectories.len();
+                line_key(
+                    &css_color(route_color(r)),
+                    &format!(
+                        "{}: {n} trajector{}",
+                        route.label,
+                        if n == 1 { "y" } else { "ies" }
+                    ),
+                    true,
+                )
+            })
+            .collect();
+        let none = ts.iter().filter(|t| t.route.is_none()).count();
+        if none > 0 {
+            keys.push_str(&line_key(
+                &css_color(NO_ROUTE_COLOR),
+                &format!("from no route: {none}"),
+                false,
+            ));
+        }
+        return keys;
+    }
     let mut keys: String = ts
         .iter()
         .take(LEGEND_TRAJECTORIES)
@@ -322,6 +352,51 @@ fn plots(h: &mut String, data: &ReportData) {
     );
 }
 
+/// A trajectory's source, with the route it came from through Algorithm 4's balls when its own source
+/// does not name it.
+fn source_cell(data: &ReportData, t: &super::data::TrajectoryReport) -> String {
+    match t.route.and_then(|r| data.routes.get(r)) {
+        Some(route) if !t.source.starts_with("route ") => {
+            format!("{} (from {})", t.source, route.label)
+        }
+        _ => t.source.clone(),
+    }
+}
+
+/// The routes of the global search: each one's seed, length and clearance, and the trajectories that
+/// came from it.
+fn route_table(h: &mut String, data: &ReportData) {
+    if data.routes.is_empty() {
+        return;
+    }
+    h.push_str(
+        "<section id=\"routes\">\n<h2>Routes</h2>\n<p>The global route search's routes (dashed in the \
+         workspace plot), each the generator's first linearisation point from its seed; every trajectory is \
+         certified afterwards. A trajectory grown by Algorithm 4 counts for the route its ball came from.</p>\n\
+         <table id=\"route-table\">\n<thead><tr><th>route</th><th>seed</th><th>length</th><th>clearance</th>\
+         <th>trajectories</th></tr></thead>\n<tbody>\n",
+    );
+    for (r, route) in data.routes.iter().enumerate() {
+        let ids: Vec<String> = route.trajectories.iter().map(|i| format!("#{i}")).collect();
+        let _ = writeln!(
+            h,
+            "<tr><td><span class=\"ln dash\" style=\"border-top-color:{}\"></span>{}</td><td class=\"n\">{}</td>\
+             <td class=\"n\">{}</td><td class=\"n\">{}</td><td>{}</td></tr>",
+            css_color(route_color(r)),
+            escape(&route.label),
+            escape(&vector(&route.seed)),
+            num(route.length),
+            num(route.clearance),
+            if ids.is_empty() {
+                "none".to_string()
+            } else {
+                format!("{} ({})", ids.len(), ids.join(", "))
+            }
+        );
+    }
+    h.push_str("</tbody>\n</table>\n</section>\n");
+}
+
 fn trajectory_table(h: &mut String, data: &ReportData) {
     h.push_str("<section id=\"trajectories\">\n<h2>Trajectories</h2>\n");
     h.push_str(
@@ -340,9 +415,9 @@ fn trajectory_table(h: &mut String, data: &ReportData) {
             h,
             "<tr><td><span class=\"ln\" style=\"border-top-color:{}\"></span>{}</td><td>{}</td><td class=\"n\">{}</td>\
              <td class=\"{delta_class}\">{}</td>{}{}{}<td class=\"n\">{}</td></tr>",
-            css_color(trajectory_color(rank)),
+            css_color(color_of(data, rank, t)),
             t.id,
-            escape(&t.source),
+            escape(&source_cell(data, t)),
             escape(&vector(&t.x0)),
             num(t.delta),
             cell(t.delta_goal),

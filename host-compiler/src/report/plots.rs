@@ -81,6 +81,24 @@ pub fn trajectory_color(rank: usize) -> RGBColor {
     PALETTE[rank % PALETTE.len()]
 }
 
+/// The colour of the `r`-th route of the global search.
+pub fn route_color(r: usize) -> RGBColor {
+    PALETTE[r % PALETTE.len()]
+}
+
+/// A trajectory that came from no route, where the report has routes.
+pub const NO_ROUTE_COLOR: RGBColor = RGBColor(90, 90, 90);
+
+/// The colour of trajectory `t` (rank `rank` in the id-sorted order): its route's when the report has
+/// routes (so a plot shows which route each trajectory came from), else its rank's.
+pub fn color_of(data: &ReportData, rank: usize, t: &TrajectoryReport) -> RGBColor {
+    if data.routes.is_empty() {
+        trajectory_color(rank)
+    } else {
+        t.route.map_or(NO_ROUTE_COLOR, route_color)
+    }
+}
+
 /// `#rrggbb` of a colour, for CSS.
 pub fn css_color(c: RGBColor) -> String {
     format!("#{:02x}{:02x}{:02x}", c.0, c.1, c.2)
@@ -343,7 +361,7 @@ fn draw_workspace(data: &ReportData) -> DynResult<String> {
             if drawn > MANY_ELLIPSES { 0.0 } else { 0.35 },
         );
         for (rank, t) in ts.iter().enumerate() {
-            let color = trajectory_color(rank);
+            let color = color_of(data, rank, t);
             let star = t_star_index(t, t.tube.len());
             for i in tube_indices(t.tube.len(), star, per) {
                 draw_region(
@@ -363,10 +381,11 @@ fn draw_workspace(data: &ReportData) -> DynResult<String> {
                 .collect();
             chart.draw_series(LineSeries::new(path, color.stroke_width(2)))?;
         }
+        draw_routes(&mut chart, data)?;
         // Markers last, so paths never hide them; small and without rings when there are many.
         let few = ts.len() <= FEW_TRAJECTORIES;
         for (rank, t) in ts.iter().enumerate() {
-            let color = trajectory_color(rank);
+            let color = color_of(data, rank, t);
             if let Some(i) = t_star_index(t, t.tube.len()) {
                 let poly = clip_to_rect(&ellipse_points(&t.tube[i], 72), &view);
                 if !poly.is_empty() {
@@ -400,6 +419,40 @@ fn draw_workspace(data: &ReportData) -> DynResult<String> {
         root.present()?;
     }
     Ok(svg)
+}
+
+/// The routes of the global search over the paths: each dashed in its colour, named at a point along
+/// it (a third of its way, so labels of routes from one seed part).
+fn draw_routes(chart: &mut Chart, data: &ReportData) -> DynResult<()> {
+    for (r, route) in data.routes.iter().enumerate() {
+        let pts: Vec<(f64, f64)> = route
+            .points
+            .iter()
+            .filter(|p| finite2(p))
+            .map(|p| (p[0], p[1]))
+            .collect();
+        if pts.len() < 2 {
+            continue;
+        }
+        let color = route_color(r);
+        chart.draw_series(std::iter::once(PathElement::new(
+            pts.clone(),
+            WHITE.mix(0.8).stroke_width(5),
+        )))?;
+        chart.draw_series(DashedLineSeries::new(
+            pts.clone(),
+            9,
+            5,
+            color.stroke_width(3),
+        ))?;
+        let at = pts[(pts.len() / 3).min(pts.len() - 1)];
+        chart.draw_series(std::iter::once(Text::new(
+            route.label.clone(),
+            at,
+            ("sans-serif", 14).into_font().color(&color),
+        )))?;
+    }
+    Ok(())
 }
 
 /// Init-plane plot (init_labels axes, equal aspect): the Init box, the certified balls' cross-sections
@@ -571,7 +624,7 @@ fn draw_input(data: &ReportData) -> DynResult<String> {
             ))?;
         }
         for (rank, (nominal, worst)) in series.drain(..).enumerate() {
-            let color = trajectory_color(rank);
+            let color = color_of(data, rank, ts[rank]);
             if envelope {
                 chart.draw_series(LineSeries::new(nominal, color.mix(0.6).stroke_width(1)))?;
             } else {

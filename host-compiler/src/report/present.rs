@@ -1,7 +1,9 @@
 //! From a synthesis run to the plot-ready [`ReportData`]: projections of sets, tubes and balls onto the
 //! plotting planes.
 
-use super::data::{Ellipse2, ReportData, Shape2, TerminalReport, TrajectoryReport, VerifySummary};
+use super::data::{
+    Ellipse2, ReportData, RouteReport, Shape2, TerminalReport, TrajectoryReport, VerifySummary,
+};
 use super::optimization::OptimizationReport;
 use crate::linalg::{spectral_norm, sym_fn, PdRoots};
 use crate::spec::sets::{Coords, SetDesc, Shape};
@@ -109,6 +111,7 @@ pub fn report_data(
         .as_ref()
         .map(|r| spectral_norm((&s.K * &r.inv_sqrt).as_ref()))
         .unwrap_or(0.0);
+    let (routes, route_of) = routes_data(s, pl);
     let trajectories = s
         .trajectories
         .iter()
@@ -146,7 +149,8 @@ pub fn report_data(
                 .unzip();
             TrajectoryReport {
                 id,
-                source: t.source.clone(),
+                source: t.source.to_string(),
+                route: route_of[id],
                 x0: t.nominal.x[0].clone(),
                 delta: c.delta_stored as f64,
                 delta_goal: c.delta_goal,
@@ -209,6 +213,7 @@ pub fn report_data(
         goal_plane,
         unsafe_plane,
         trajectories,
+        routes,
         init_labels: [label(ipl[0]), label(ipl[1])],
         init_box,
         balls,
@@ -250,6 +255,38 @@ pub fn report_data(
         pwa: None,
         terminal: Some(terminal_report(s, pl)),
     }
+}
+
+/// The routes of the cover's searches in the workspace plane `pl`, and per trajectory the route (an
+/// index into them) it came from ([`crate::cover::seeds::routes_of`]).
+fn routes_data(s: &Synthesis, pl: [usize; 2]) -> (Vec<RouteReport>, Vec<Option<usize>>) {
+    let of = crate::cover::seeds::routes_of(&s.trajectories, &s.routes);
+    let several = s.routes.len() > 1;
+    let mut first = Vec::with_capacity(s.routes.len());
+    let mut routes = Vec::new();
+    for (i, search) in s.routes.iter().enumerate() {
+        first.push(routes.len());
+        let at = |c: usize| search.coords.iter().position(|&j| j == c);
+        let plane = at(pl[0]).zip(at(pl[1]));
+        for (k, r) in search.routes.iter().enumerate() {
+            routes.push(RouteReport {
+                label: if several {
+                    format!("route {} from seed {}", k + 1, i + 1)
+                } else {
+                    format!("route {}", k + 1)
+                },
+                seed: search.seed.clone(),
+                length: r.length,
+                clearance: r.clearance,
+                points: plane.map_or_else(Vec::new, |(a, b)| {
+                    r.points.iter().map(|p| [p[a], p[b]]).collect()
+                }),
+                trajectories: (0..of.len()).filter(|&t| of[t] == Some((i, k))).collect(),
+            });
+        }
+    }
+    let index = of.iter().map(|o| o.map(|(i, k)| first[i] + k)).collect();
+    (routes, index)
 }
 
 /// The terminal law's section (issue 17): its ellipsoid {‖x − x_e‖_{P_t} ≤ 1} projected onto the plane

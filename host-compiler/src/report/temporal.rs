@@ -92,7 +92,7 @@ pub fn render(
             });
         h.push_str(&format!(
             "<tr><td>{i}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{crit}</td></tr>",
-            escape(&t.source),
+            escape(&t.source.to_string()),
             num(c.delta_samples),
             num(c.delta_continuous),
             num(c.delta_input),

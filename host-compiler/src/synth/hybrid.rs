@@ -23,6 +23,7 @@
 use crate::caf::{design_locations, Design};
 use crate::certify::internal::{certify_internal, InternalCertificate, InternalSegment};
 use crate::certify::{Loop, LoopConstants};
+use crate::cover::seeds::{Ask, Origin, Proposal, Seed, Source, Sources};
 use crate::model::hybrid::{EdgeKind, Hybrid, HybridError};
 use crate::model::Location;
 use crate::property::{input_scale, ConvexPiece, ConvexSets, PropertyError, ReachAvoid};
@@ -687,6 +688,8 @@ impl Default for HybridOptions {
 /// What a hybrid synthesis produced.
 pub struct HybridSynthesis {
     pub runs: Vec<HybridRun>,
+    /// Where each run came from (`runs[i]`'s is `sources[i]`).
+    pub sources: Vec<Source>,
     /// Seeds planned, and those that certified nothing (with the reason).
     pub seeds_tried: usize,
     pub refused: Vec<(Vec<f64>, String)>,
@@ -790,16 +793,9 @@ fn extend_working(working: &mut Vec<Vec<f64>>, tried: &mut Vec<bool>, fresh: Vec
     tried.resize(working.len(), false);
 }
 
-/// A seed of a growth round: an uncovered sample, and for Algorithm 4 the run whose ball is nearest to
-/// it with the sample projected onto that ball's boundary.
-struct Seed {
-    x: Vec<f64>,
-    grow: Option<(usize, Vec<f64>)>,
-}
-
 /// The seeds of an Algorithm 4 round (§5.4; forced switching, or internal across the guards): the
-/// untried uncovered working samples, nearest to the cover first (ties in sample order), each projected onto the boundary of its nearest
-/// ball; a batch is spread by the runs' median radius (one seed per neighbourhood). Marks them tried.
+/// untried uncovered working samples, nearest to the cover first (ties in sample order), each projected
+/// onto the boundary of its nearest ball; a batch is spread by the runs' median radius (one seed per neighbourhood). Marks them tried.
 fn algorithm4_seeds(
     task: &HybridTask,
     runs: &[HybridRun],
@@ -850,32 +846,72 @@ fn algorithm4_seeds(
     out
 }
 
-/// Plan a run for `seed`: by Algorithm 4 when it has a run to grow from, kept when certified at
-/// `min_robustness` with the seed's sample in its ball; otherwise (or when that fails) the planner from
-/// the sample itself (Algorithm 1).
-fn plan_seed(task: &HybridTask, runs: &[HybridRun], seed: &Seed) -> Result<HybridRun, String> {
-    if let Some((m, yh)) = &seed.grow {
-        let floor = task.problem.synthesis.min_robustness;
-        let grown = if task.forced {
-            forced::grow_from(task, &runs[*m], yh)
-        } else {
-            let iterations = (task.problem.synthesis.max_iterations / 2) as u64;
-            optimise::grow_from(task, &runs[*m], yh, iterations)
-        };
-        let grown = grown.ok().filter(|r| {
-            r.certificate.is_certified()
-                && r.delta() >= floor
-                && covered(task, std::slice::from_ref(r), &seed.x)
-        });
-        if let Some(r) = grown {
-            return Ok(r);
+/// An automaton's seed sources over the runs so far ([`crate::cover::seeds`]): Algorithm 4 grows a run
+/// from a ball's boundary ([`forced::grow_from`]; across internal guards [`optimise::grow_from`]); the generator is the planner
+/// from the seed ([`forced::plan_forced`], or [`plan_run`] for internal switching); no route search yet
+/// (a route through the guard would answer [`Ask::Routes`] here).
+struct HybridSources<'a> {
+    task: &'a HybridTask,
+    runs: &'a [HybridRun],
+}
+
+impl Sources for HybridSources<'_> {
+    type Candidate = Result<HybridRun, String>;
+
+    fn answer<'s>(
+        &'s self,
+        seed: &'s Seed,
+        ask: Ask,
+    ) -> Box<dyn Iterator<Item = Proposal<Self::Candidate>> + 's> {
+        let (task, runs) = (self.task, self.runs);
+        match ask {
+            Ask::Grow => Box::new(seed.grow.iter().map(move |(m, yh)| Proposal {
+                origin: Origin::Algorithm4(*m),
+                candidate: if task.forced {
+                    forced::grow_from(task, &runs[*m], yh)
+                } else {
+                    let iterations = (task.problem.synthesis.max_iterations / 2) as u64;
+                    optimise::grow_from(task, &runs[*m], yh, iterations)
+                },
+            })),
+            Ask::Generator => Box::new(std::iter::once_with(move || Proposal {
+                origin: Origin::Generator,
+                candidate: if task.forced {
+                    forced::plan_forced(task, &seed.x)
+                } else {
+                    plan_run(task, &seed.x)
+                },
+            })),
+            Ask::Routes => Box::new(std::iter::empty()),
         }
     }
-    if task.forced {
-        forced::plan_forced(task, &seed.x)
-    } else {
-        plan_run(task, &seed.x)
+}
+
+/// Plan a run for `seed`: its sources in order ([`HybridSources`]), the first run certified at
+/// `min_robustness` with the seed's sample in its ball; when there is none, the planner's answer
+/// whatever it is (the accept test [`admit`] judges it and says why).
+fn plan_seed(
+    task: &HybridTask,
+    runs: &[HybridRun],
+    seed: &Seed,
+) -> (Origin, Result<HybridRun, String>) {
+    let floor = task.problem.synthesis.min_robustness;
+    let kept = |r: &HybridRun| {
+        r.certificate.is_certified()
+            && r.delta() >= floor
+            && covered(task, std::slice::from_ref(r), &seed.x)
+    };
+    let src = HybridSources { task, runs };
+    let mut planned = None;
+    for p in src.proposals(seed) {
+        if p.candidate.as_ref().is_ok_and(kept) {
+            return (p.origin, p.candidate);
+        }
+        if p.origin == Origin::Generator {
+            planned = Some((p.origin, p.candidate));
+        }
     }
+    planned.unwrap_or((Origin::Generator, Err("no seed source answered".into())))
 }
 
 /// Algorithm 1 over hybrid runs: plan from Init's centre, then from uncovered samples of Init (the
@@ -907,6 +943,8 @@ pub fn synthesize_hybrid(
         .map(|(l, h)| 0.5 * (l + h))
         .collect();
     let mut runs: Vec<HybridRun> = Vec::new();
+    // Where each run came from (a recording, the planner, Algorithm 4 from a run).
+    let mut sources: Vec<Source> = Vec::new();
     let mut refused: Vec<(Vec<f64>, String)> = Vec::new();
     let mut tried = vec![false; working.len()];
     let mut seeds_tried = 0usize;
@@ -928,6 +966,7 @@ pub fn synthesize_hybrid(
                 rows_used += rows;
                 let d = run.delta();
                 runs.push(run);
+                sources.push(Source::import(name));
                 if let Some(f) = &opts.on_accept {
                     f(runs.len(), d);
                 }
@@ -1014,13 +1053,13 @@ pub fn synthesize_hybrid(
         }
         seeds_tried += seeds.len();
         let before = runs.len();
-        let planned: Vec<Result<HybridRun, String>> = seeds
+        let planned: Vec<(Origin, Result<HybridRun, String>)> = seeds
             .par_iter()
             .map(|seed| plan_seed(task, &runs, seed))
             .collect();
         // Why a certified run of this round no longer fits the image (the first).
         let mut left_out: Option<String> = None;
-        for (Seed { x, .. }, r) in seeds.into_iter().zip(planned) {
+        for (Seed { x, .. }, (origin, r)) in seeds.into_iter().zip(planned) {
             let full = r
                 .as_ref()
                 .ok()
@@ -1029,6 +1068,7 @@ pub fn synthesize_hybrid(
                 Ok((run, rows)) => {
                     rows_used += rows;
                     runs.push(run);
+                    sources.push(Source::new(origin, false));
                     if let Some(f) = &opts.on_accept {
                         f(runs.len(), runs.last().map_or(0.0, |r| r.delta()));
                     }
@@ -1122,6 +1162,7 @@ pub fn synthesize_hybrid(
     }
     Ok(HybridSynthesis {
         runs,
+        sources,
         seeds_tried,
         refused,
         coverage,

@@ -110,6 +110,8 @@ pub struct Synthesis {
     pub generator: Generator,
     pub optimization: Vec<OptRecord>,
     pub snapshots: Vec<CoverSnapshot>,
+    /// The route searches the growth ran (the routes the report draws).
+    pub routes: Vec<crate::cover::RouteSearch>,
     /// Working samples drawn (the denominator of the snapshots).
     pub working_samples: usize,
     pub verify: VerifyReport,
@@ -335,6 +337,7 @@ pub fn synthesize(task: &Task, opts: &SynthOptions) -> Result<Synthesis, SynthEr
         trajectories: trajs,
         records,
         snapshots,
+        routes,
         ..
     } = grown.cover;
     timings.push((
@@ -416,6 +419,7 @@ pub fn synthesize(task: &Task, opts: &SynthOptions) -> Result<Synthesis, SynthEr
         generator: opts.generator,
         optimization: records,
         snapshots,
+        routes,
         working_samples: opts.working_samples,
         verify,
         attack,

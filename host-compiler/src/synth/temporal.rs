@@ -18,11 +18,12 @@
 use crate::certify::temporal::{TemporalCertificate, TemporalLoop};
 use crate::certify::{Loop, LoopConstants};
 use crate::cover::estimate::{estimate, CoverageEstimate, SampleBox};
+use crate::cover::seeds::{Generators, Proposal, Seed, Source, Sources};
 use crate::optimize::temporal::{maximize_temporal, AscentSettings};
 use crate::property::{input_scale, TemporalTask};
 use crate::task::Task;
 use crate::trajectory::csv::Recording;
-use crate::trajectory::generate::{generate, GenProblem, GenSettings};
+use crate::trajectory::generate::GenProblem;
 use crate::trajectory::Nominal;
 use crate::verify::temporal::{
     monte_carlo_temporal, monte_carlo_temporal_fl, recheck, TemporalCheck, TemporalReport,
@@ -75,8 +76,8 @@ impl Default for TemporalOptions {
 /// One certified ball of the cover.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct TemporalTrajectory {
-    /// "replay of ball i" or "generated".
-    pub source: String,
+    /// Where it came from: Algorithm 4 from a ball (its table replayed), the generator, a recording.
+    pub source: crate::cover::Source,
     pub nominal: Nominal,
     pub certificate: TemporalCertificate,
 }
@@ -187,12 +188,16 @@ struct Planner<'a> {
     lp: &'a Loop<'a>,
     lc: &'a LoopConstants,
     tl: &'a TemporalLoop,
-    gp: &'a GenProblem<'a>,
+    /// The seed sources: the SCP generator alone (no routes; its references are not held, as the ascent
+    /// does not keep a hold).
+    gens: Generators<'a>,
     ascent: AscentSettings,
     cancel: &'a AtomicBool,
 }
 
-/// A seed's best attempt: certified, or the reason it is not.
+/// A seed's best attempt: certified, or the reason it is not. The candidates are the seed's sources in
+/// order ([`crate::cover::seeds`]): the nearest ball's table replayed from the seed itself (Algorithm 4's
+/// local variation) when `nearest` names one, then the generator; each climbed by the ascent.
 fn plan(
     p: &Planner<'_>,
     x0: &[f64],
@@ -202,34 +207,35 @@ fn plan(
         lp,
         lc,
         tl,
-        gp,
+        gens,
         ascent,
         cancel,
     } = p;
     let mut why = Vec::new();
-    let mut starts: Vec<(String, Vec<Vec<f64>>)> = Vec::new();
+    let seed = Seed {
+        x: x0.to_vec(),
+        grow: nearest.map(|(i, _)| (i, x0.to_vec())),
+    };
+    // The nearest ball's table stands at its index; the others are not asked for.
+    let mut tables: Vec<&[Vec<f64>]> = Vec::new();
     if let Some((i, v)) = nearest {
-        starts.push((format!("replay of ball {i}"), v.to_vec()));
+        tables.resize(i + 1, &[]);
+        tables[i] = v;
     }
-    let mut generated = false;
-    let mut k = 0;
-    while k < starts.len() || !generated {
-        if k == starts.len() {
-            generated = true;
-            match generate(gp, x0, &GenSettings::default()) {
-                Ok(g) => starts.push(("generated".into(), g.nominal.v)),
-                Err(e) => {
-                    why.push(format!("generator: {e}"));
-                    break;
-                }
+    let src = gens.over(tables);
+    for Proposal { origin, candidate } in src.proposals(&seed) {
+        let source = Source::new(origin, false);
+        let v = match candidate {
+            Ok(v) => v,
+            Err(e) => {
+                why.push(format!("generator: {e}"));
+                continue;
             }
-        }
-        let (source, v) = &starts[k];
-        k += 1;
-        let o = maximize_temporal(lp, lc, tl, x0, v, ascent, cancel);
+        };
+        let o = maximize_temporal(lp, lc, tl, x0, &v, ascent, cancel);
         if o.certificate.is_certified() {
             return Ok(TemporalTrajectory {
-                source: source.clone(),
+                source,
                 nominal: o.nominal,
                 certificate: o.certificate,
             });
@@ -266,7 +272,7 @@ pub fn single_ball(
         lp: &lp,
         lc: &lc,
         tl: &tl,
-        gp: &gp,
+        gens: Generators::new(&gp, 1),
         ascent: ascent_settings(task, s.max_iterations),
         cancel: &cancel,
     };
@@ -328,7 +334,7 @@ pub fn synthesize_temporal(
         lp: &lp,
         lc: &lc,
         tl: &tl,
-        gp: &gp,
+        gens: Generators::new(&gp, 1),
         ascent,
         cancel: &opts.cancel,
     };
@@ -386,7 +392,7 @@ pub fn synthesize_temporal(
             } else {
                 let d = c.delta;
                 balls.push(TemporalTrajectory {
-                    source: format!("csv:{name}"),
+                    source: Source::import(name),
                     nominal,
                     certificate: c,
                 });

@@ -70,6 +70,7 @@ mod report_clip;
 mod report_html;
 mod robustness_safety;
 mod route_search;
+mod seed_sources;
 mod spec_bounds;
 mod spec_errors;
 mod spec_examples;

@@ -49,6 +49,7 @@ fn trajectory(id: usize, source: &str, x0: [f64; 2], r0: f64, steps: usize) -> T
     TrajectoryReport {
         id,
         source: source.into(),
+        route: None,
         x0: vec![x0[0], x0[1], 0.0, 0.0],
         delta: r0 * 0.98,
         delta_goal: r0 * 1.3,
@@ -99,6 +100,7 @@ fn sample() -> ReportData {
             },
         ],
         trajectories,
+        routes: vec![],
         init_labels: ["x1 (m)".into(), "x2 (m)".into()],
         init_box: Shape2::Box {
             lo: [0.0, 0.0],

@@ -280,7 +280,7 @@ fn a_small_maze_certifies_from_a_route_where_the_plain_generator_fails() {
     )
     .unwrap();
     assert!(
-        s.trajectories[0].source.starts_with("route "),
+        s.trajectories[0].source.to_string().starts_with("route "),
         "{}",
         s.trajectories[0].source
     );
