@@ -37,6 +37,7 @@ pub mod forced;
 pub mod import;
 pub mod optimise;
 pub mod reach;
+pub mod schedule;
 
 /// How far past a guard's plane (Euclidean) a non-last segment's generated nominal must end: each is
 /// tried (a deeper target makes the nominal cross the plane more steeply, so that the tube's crossing

@@ -35,6 +35,7 @@ mod emit_image;
 mod emit_maps;
 mod emit_pwa;
 mod fallback_input;
+mod forced_schedule;
 mod fuzz_corpus;
 mod fuzz_smoke;
 mod geometry_common;

@@ -12,13 +12,19 @@
 //! accepts) and certified backwards by [`crate::certify::forced`]. The run with the largest certified δ
 //! is kept, then optimised segment by segment by §5.3 ([`optimise`]).
 //!
+//! **Many switches.** When no one-switch candidate certifies (a DC-DC boost converter switches every few
+//! samples), the candidates are the whole schedules of the schedule search ([`schedule::search`]: a beam
+//! over the locations sample by sample, scored by the plant's flow), generated and certified in the same
+//! way. A task's runs whose one-switch candidates certify are planned as before; an MTL task's runs are
+//! not searched (the search scores reach-avoid, not the formula).
+//!
 //! **Algorithm 4** (§5.4, [`grow_from`]): a run is grown from a point on another run's ball boundary by
 //! that run's feedback law (its tables, locations and switching samples), then optimised the same way.
 //!
 //! The segments' tables are shipped as f32; each segment's nominal is simulated from the previous one's
 //! shipped end, so the run is continuous across the switch as the certificate requires.
 
-use super::{gen_problem, shipped_nominal, HybridRun, HybridTask};
+use super::{gen_problem, schedule, shipped_nominal, HybridRun, HybridTask};
 use crate::certify::forced::{certify_forced, certify_forced_formula, ForcedSegment};
 use crate::certify::internal::InternalCertificate;
 use crate::model::hybrid::EdgeKind;
@@ -48,8 +54,29 @@ pub fn plan_forced(task: &HybridTask, x0: &[f64]) -> Result<HybridRun, String> {
     Ok(optimise(task, run, &edges))
 }
 
-/// The best certified candidate from `x0` as generated (before §5.3), with its edges.
+/// The best certified candidate from `x0` as generated (before §5.3), with its edges: the one-switch
+/// candidates ([`plan_one_switch`]), and when none of them certifies, the schedules of the search
+/// ([`schedule::search`], many switches).
 fn planned(task: &HybridTask, x0: &[f64]) -> Result<(HybridRun, Vec<usize>), String> {
+    let x0 = &super::f32_start(x0)[..];
+    plan_one_switch(task, x0).or_else(|one| {
+        best_of(task, x0, searched(task, x0)).map_err(|many| {
+            if many == NO_CANDIDATE {
+                one
+            } else {
+                format!("{one}; no searched schedule either: {many}")
+            }
+        })
+    })
+}
+
+/// What [`best_of`] says of no candidates.
+const NO_CANDIDATE: &str = "no candidate schedule";
+
+/// The best certified run over the one-switch candidates from `x0` (module doc: stay, or switch once per
+/// forced edge at each of [`SWITCH_FRACTIONS`], over [`HORIZONS`]), as generated, with its edges; or why
+/// none certified. The run starts at `x0` rounded to f32.
+pub fn plan_one_switch(task: &HybridTask, x0: &[f64]) -> Result<(HybridRun, Vec<usize>), String> {
     let x0 = &super::f32_start(x0)[..];
     let l0 = task.initial;
     let h = task.plant.period();
@@ -79,20 +106,52 @@ fn planned(task: &HybridTask, x0: &[f64]) -> Result<(HybridRun, Vec<usize>), Str
             }
         }
     }
-    let mut best: Option<(HybridRun, &Candidate)> = None;
-    let mut why = String::from("no candidate schedule");
-    for c in &cands {
-        match plan_schedule(task, x0, c) {
+    best_of(task, x0, cands)
+}
+
+/// The candidate whose generated run certifies the largest δ, with its edges; or the last reason one
+/// was not certified.
+fn best_of(
+    task: &HybridTask,
+    x0: &[f64],
+    cands: Vec<Candidate>,
+) -> Result<(HybridRun, Vec<usize>), String> {
+    let mut best: Option<(HybridRun, Vec<usize>)> = None;
+    let mut why = String::from(NO_CANDIDATE);
+    for c in cands {
+        match plan_schedule(task, x0, &c) {
             Ok(run) => {
                 if best.as_ref().is_none_or(|(b, _)| run.delta() > b.delta()) {
-                    best = Some((run, c));
+                    best = Some((run, c.edges));
                 }
             }
             Err(e) => why = e,
         }
     }
-    let (run, c) = best.ok_or(why)?;
-    Ok((run, c.edges.clone()))
+    best.ok_or(why)
+}
+
+/// The candidates of the schedule search ([`schedule::search`]) from `x0`, for a reach-avoid task (an
+/// MTL task's runs cover the whole horizon and are judged by its formula, which the search does not
+/// score): each whole schedule it found as segments joined by the forced edges between them.
+fn searched(task: &HybridTask, x0: &[f64]) -> Vec<Candidate> {
+    if task.formula.is_some() {
+        return Vec::new();
+    }
+    let found = schedule::search(task, x0, task.steps, &schedule::ScheduleSettings::default());
+    found
+        .iter()
+        .filter_map(|f| {
+            let (locations, lengths): (Vec<Location>, Vec<usize>) =
+                f.segments().into_iter().unzip();
+            let edges = edges_of(task, &locations)?;
+            Some(Candidate {
+                locations,
+                edges,
+                lengths,
+            })
+        })
+        .collect()
 }
 
 /// Forward sweeps of §5.3 over a run's segments ([`optimise`]).
