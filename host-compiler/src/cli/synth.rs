@@ -505,7 +505,9 @@ fn gain_summary(runs: usize, seeds: &[(f64, f64)]) -> Option<String> {
     let repaired = seeds.len() - g.len();
     let repaired = match repaired {
         0 => String::new(),
-        k => format!("; {k} started uncertified (δ 0) and were repaired, a gain without a finite ratio"),
+        k => format!(
+            "; {k} started uncertified (δ 0) and were repaired, a gain without a finite ratio"
+        ),
     };
     Some(match g.get(g.len() / 2) {
         Some(median) if g.len() == seeds.len() => {
@@ -551,7 +553,10 @@ mod tests {
         let budget = shared_types::budgets::FLASH_BYTES as usize;
         assert!(flash_warning(budget).is_none());
         let w = flash_warning(1_026_635).expect("over the budget");
-        assert!(w.contains("1026635 bytes") && w.contains(&budget.to_string()), "{w}");
+        assert!(
+            w.contains("1026635 bytes") && w.contains(&budget.to_string()),
+            "{w}"
+        );
         assert!(image_line(std::path::Path::new("c.img"), 10).contains(&budget.to_string()));
     }
 
@@ -559,7 +564,10 @@ mod tests {
     fn the_gain_summary_is_finite_and_counts_the_seeds_that_started_uncertified() {
         let line = gain_summary(4, &[(0.1, 0.2), (0.0, 0.3), (0.2, 0.3)]).expect("seeds");
         assert!(!line.contains("inf"), "{line}");
-        assert!(line.contains("median δ gain 2.000 over the 2 seeds"), "{line}");
+        assert!(
+            line.contains("median δ gain 2.000 over the 2 seeds"),
+            "{line}"
+        );
         assert!(line.contains("1 started uncertified"), "{line}");
         let line = gain_summary(1, &[(0.0, 0.3)]).unwrap();
         assert!(!line.contains("inf") && !line.contains("median"), "{line}");

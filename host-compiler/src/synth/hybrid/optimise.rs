@@ -195,9 +195,9 @@ pub fn grow_from(
         start: f32_start(y),
         scale: input_half_widths(task, m),
     };
-    let (nominals, certificate) = trial
-        .run(&vec![0.0; trial.dims()])
-        .ok_or("the parent's law from this start does not cross a guard, or the run is not certified")?;
+    let (nominals, certificate) = trial.run(&vec![0.0; trial.dims()]).ok_or(
+        "the parent's law from this start does not cross a guard, or the run is not certified",
+    )?;
     let run = HybridRun {
         nominals,
         locations: parent.locations.clone(),
@@ -292,7 +292,10 @@ mod tests {
         assert_eq!(grown.locations, parent.locations);
         assert_eq!(grown.nominals.len(), parent.nominals.len());
         assert!(grown.certificate.is_certified(), "δ {}", grown.delta());
-        assert_eq!(certify_run(task, &grown.nominals).unwrap(), grown.certificate);
+        assert_eq!(
+            certify_run(task, &grown.nominals).unwrap(),
+            grown.certificate
+        );
         // With no search the tables are the parent's: the law v = ṽ.
         assert_eq!(grown.nominals[0].v, parent.nominals[0].v);
         // A start the parent's law does not carry across the guard is refused, not certified.
