@@ -119,7 +119,7 @@ fn synth_rows(what: &str, task: &Task, budget: Option<Duration>) -> (f64, f64, f
                  ({:?}); stop: {}",
                 s.trajectories.len(),
                 s.trajectories.first().map_or(0.0, |t| t.certificate.delta),
-                s.trajectories.first().map_or("-", |t| t.source.as_str()),
+                s.trajectories.first().map_or("-".into(), |t| t.source.to_string()),
                 s.coverage.mean,
                 s.coverage.lower,
                 s.coverage.confidence,

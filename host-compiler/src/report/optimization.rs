@@ -96,9 +96,9 @@ impl OptimizationReport {
             .collect()
     }
 
-    /// Median of [`Self::gains`].
+    /// Median of the finite [`Self::gains`] (the seeds that started certified); `None` when there are none.
     pub fn median_gain(&self) -> Option<f64> {
-        let mut g = self.gains();
+        let mut g: Vec<f64> = self.gains().into_iter().filter(|g| g.is_finite()).collect();
         if g.is_empty() {
             return None;
         }
@@ -142,10 +142,9 @@ pub fn section(h: &mut String, data: &ReportData) {
         _ => "Algorithm 1 with the SCP generator per uncovered seed (no §5.3 optimisation)",
     };
     let _ = writeln!(h, "<p>Generator: {}.</p>", escape(gen));
-    let median = o
-        .median_gain()
-        .map(|g| if g.is_finite() { num(g) } else { "∞".into() })
-        .unwrap_or_else(|| "—".into());
+    let median = o.median_gain().map(num).unwrap_or_else(|| {
+        "— (no seed started certified, so no ratio is finite)".into()
+    });
     super::html::kv(
         h,
         &[
@@ -159,7 +158,7 @@ pub fn section(h: &mut String, data: &ReportData) {
                     count(gains.len() - finite.len())
                 ),
             ),
-            ("Median δ after ÷ δ before", median),
+            ("Median δ after ÷ δ before (seeds that started certified)", median),
             ("Growth rounds", count(o.frames.len())),
         ],
     );
@@ -242,7 +241,7 @@ pub fn section(h: &mut String, data: &ReportData) {
         let gain = if r.delta_before > 0.0 {
             num(r.delta_after / r.delta_before)
         } else {
-            "∞".into()
+            "— (repaired from δ 0)".into()
         };
         let _ = writeln!(
             h,

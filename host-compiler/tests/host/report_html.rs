@@ -558,6 +558,8 @@ fn optimization_section_shows_history_tubes_frames_and_seed_request() {
             run(Some(0), Some(1), 0.05, 0.15),
             run(Some(0), None, 0.02, 0.03),
             run(Some(1), Some(2), 0.04, 0.1),
+            // Started uncertified (δ 0): repaired, no finite ratio, left out of the median.
+            run(Some(1), None, 0.0, 0.08),
         ],
         showcase: Some(TubeComparison {
             trajectory: 1,
@@ -586,7 +588,7 @@ fn optimization_section_shows_history_tubes_frames_and_seed_request() {
         }),
     });
     let o = d.optimization.as_ref().unwrap();
-    // Gains of the Algorithm 4 seeds: 3, 1.5, 2.5 → median 2.5.
+    // Gains of the Algorithm 4 seeds: 3, 1.5, 2.5 and ∞ (from δ 0) → median of the finite ones 2.5.
     assert_eq!(o.median_gain(), Some(2.5));
     let html = render_html(&d);
     for id in [
@@ -606,9 +608,12 @@ fn optimization_section_shows_history_tubes_frames_and_seed_request() {
     );
     // 3 main plots + δ history + before/after + 6 frames.
     assert_eq!(html.matches("<svg").count(), 11);
-    assert_eq!(body_rows(table(&html, "optimization-table")), 4);
+    assert_eq!(body_rows(table(&html, "optimization-table")), 5);
+    assert!(html.contains("4 (1 started uncertified)"));
     assert!(
-        html.contains("<tr><th>Median δ after ÷ δ before</th><td>2.5</td></tr>"),
+        html.contains(
+            "<tr><th>Median δ after ÷ δ before (seeds that started certified)</th><td>2.5</td></tr>"
+        ),
         "{}",
         &html[html.find("id=\"optimization\"").unwrap()..][..1500]
     );

@@ -3,8 +3,8 @@
 //! (`cargo xtask test` installs both); without them each test fails and says so.
 
 mod board;
+mod feedforward;
 mod hybrid;
 mod mtl;
 mod nonlinear;
-mod planar_vehicle;
 mod pwa;
