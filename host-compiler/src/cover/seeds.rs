@@ -173,8 +173,10 @@ pub struct RouteSearch {
     pub routes: Vec<Route>,
 }
 
-/// The global search of a task: its grid, built on first use, and every search run so far.
-struct Routing<'a> {
+/// The global search of a task: its grid, built on first use, and every search run so far (one per
+/// seed, recalled when the seed asks again). Shared by every loop that asks for routes
+/// ([`Generators::with_routes`]; `synth::hybrid::route` for internal switching).
+pub struct Routing<'a> {
     convex: &'a ConvexSets,
     init: (&'a [f64], &'a [f64]),
     settings: RouteSettings,
@@ -182,15 +184,33 @@ struct Routing<'a> {
     found: Mutex<Vec<RouteSearch>>,
 }
 
-impl Routing<'_> {
-    fn map(&self) -> Option<&RouteMap> {
+impl<'a> Routing<'a> {
+    /// The search over `convex` (Goal and Unsafe in state coordinates), its grid spanning the Init box
+    /// `lo`..`hi`, with the default settings.
+    pub fn new(convex: &'a ConvexSets, lo: &'a [f64], hi: &'a [f64]) -> Self {
+        Self {
+            convex,
+            init: (lo, hi),
+            settings: RouteSettings::default(),
+            map: OnceLock::new(),
+            found: Mutex::new(Vec::new()),
+        }
+    }
+
+    /// The search's settings.
+    pub fn settings(&self) -> &RouteSettings {
+        &self.settings
+    }
+
+    /// The grid (built on first use); `None` when the sets constrain no coordinate.
+    pub fn map(&self) -> Option<&RouteMap> {
         self.map
             .get_or_init(|| RouteMap::new(self.convex, self.init.0, self.init.1, &self.settings))
             .as_ref()
     }
 
     /// The routes from `x0` (searched once per seed, then recalled).
-    fn routes(&self, map: &RouteMap, x0: &[f64]) -> Vec<Route> {
+    pub fn routes(&self, map: &RouteMap, x0: &[f64]) -> Vec<Route> {
         let lock = || self.found.lock().unwrap_or_else(|e| e.into_inner());
         if let Some(s) = lock().iter().find(|s| s.seed == x0) {
             return s.routes.clone();
@@ -205,6 +225,20 @@ impl Routing<'_> {
             });
         }
         routes
+    }
+
+    /// Every route search run so far, ordered by seed (so independent of the thread count).
+    pub fn searches(&self) -> Vec<RouteSearch> {
+        let mut found = self.found.lock().unwrap_or_else(|e| e.into_inner()).clone();
+        found.sort_by(|a, b| {
+            a.seed
+                .iter()
+                .zip(&b.seed)
+                .map(|(x, y)| x.total_cmp(y))
+                .find(|o| o.is_ne())
+                .unwrap_or(std::cmp::Ordering::Equal)
+        });
+        found
     }
 }
 
@@ -230,13 +264,7 @@ impl<'a> Generators<'a> {
 
     /// With the routes of the global search over `convex`, its grid spanning the Init box `lo`..`hi`.
     pub fn with_routes(mut self, convex: &'a ConvexSets, lo: &'a [f64], hi: &'a [f64]) -> Self {
-        self.routing = Some(Routing {
-            convex,
-            init: (lo, hi),
-            settings: RouteSettings::default(),
-            map: OnceLock::new(),
-            found: Mutex::new(Vec::new()),
-        });
+        self.routing = Some(Routing::new(convex, lo, hi));
         self
     }
 
@@ -284,19 +312,9 @@ impl<'a> Generators<'a> {
 
     /// Every route search run so far, ordered by seed (so independent of the thread count).
     pub fn searches(&self) -> Vec<RouteSearch> {
-        let Some(r) = &self.routing else {
-            return Vec::new();
-        };
-        let mut found = r.found.lock().unwrap_or_else(|e| e.into_inner()).clone();
-        found.sort_by(|a, b| {
-            a.seed
-                .iter()
-                .zip(&b.seed)
-                .map(|(x, y)| x.total_cmp(y))
-                .find(|o| o.is_ne())
-                .unwrap_or(std::cmp::Ordering::Equal)
-        });
-        found
+        self.routing
+            .as_ref()
+            .map_or_else(Vec::new, Routing::searches)
     }
 
     /// These sources over a cover whose balls have these reference tables (Algorithm 4's).

@@ -19,17 +19,22 @@
 //! automaton, split at its events into the path's segments and certified by the same [`certify_run`]
 //! ([`import`]); an accepted one joins the runs through the same accept test ([`admit`]) before the
 //! growth starts.
+//!
+//! **Routes.** Once a round certifies no run, a seed the other sources give nothing from asks the routes
+//! of the global search through the guards ([`route`]: a route from the seed to Goal split where it
+//! enters each guard, each piece a segment's first linearisation point), which reach classes the
+//! planner's first iterate does not (Example 5.6's runs under the wall).
 
 use crate::caf::{design_locations, Design};
 use crate::certify::internal::{certify_internal, InternalCertificate, InternalSegment};
 use crate::certify::{Loop, LoopConstants};
-use crate::cover::seeds::{Ask, Origin, Proposal, Seed, Source, Sources};
+use crate::cover::seeds::{Ask, Origin, Proposal, RouteSearch, Routing, Seed, Source, Sources};
 use crate::model::hybrid::{EdgeKind, Hybrid, HybridError};
 use crate::model::Location;
 use crate::property::{input_scale, ConvexPiece, ConvexSets, PropertyError, ReachAvoid};
 use crate::spec::Problem;
 use crate::synth::Generator;
-use crate::trajectory::generate::{generate, GenProblem, GenSettings};
+use crate::trajectory::generate::{generate, generate_from, GenProblem, GenSettings};
 use crate::trajectory::Nominal;
 use faer::Mat;
 
@@ -37,6 +42,7 @@ pub mod forced;
 pub mod import;
 pub mod optimise;
 pub mod reach;
+pub mod route;
 pub mod schedule;
 
 /// How far past a guard's plane (Euclidean) a non-last segment's generated nominal must end: each is
@@ -398,6 +404,29 @@ fn gen_problem<'a>(
 /// (§5.3, [`optimise`], with half the spec's `max_iterations` per search), or why none. The run starts at
 /// `x0` rounded to f32 ([`f32_start`]).
 pub fn plan_run(task: &HybridTask, x0: &[f64]) -> Result<HybridRun, String> {
+    plan_guided(task, x0, &DURATIONS, &|_: &Leg<'_>| None)
+}
+
+/// One segment [`plan_guided`] is about to generate: its index on the path, its start, its samples, its
+/// sets (Goal: the guard `depth` deep, or the task's Goal for the last segment) and for a segment but
+/// the last that depth.
+pub struct Leg<'a> {
+    pub segment: usize,
+    pub start: &'a [f64],
+    pub steps: usize,
+    pub convex: &'a ConvexSets,
+    pub depth: Option<f64>,
+}
+
+/// [`plan_run`] over the segment durations `durations` (fractions of T) with the generator's first
+/// linearisation point per segment from `guide` (a route, [`route`]); a segment it gives none for is
+/// generated as [`plan_run`] does.
+pub fn plan_guided(
+    task: &HybridTask,
+    x0: &[f64],
+    durations: &[f64],
+    guide: &dyn Fn(&Leg<'_>) -> Option<Nominal>,
+) -> Result<HybridRun, String> {
     let x0 = &f32_start(x0)[..];
     let gs = GenSettings::default();
     let h = task.plant.period();
@@ -406,7 +435,7 @@ pub fn plan_run(task: &HybridTask, x0: &[f64]) -> Result<HybridRun, String> {
     let mut best: Option<HybridRun> = None;
     let mut why = String::from("no duration tried");
     // Segments but the last: towards the guard, each duration; then the last segment from the landing.
-    for (&f0, &depth) in DURATIONS
+    for (&f0, &depth) in durations
         .iter()
         .flat_map(|f| GUARD_DEPTHS.iter().map(move |d| (f, d)))
     {
@@ -438,7 +467,18 @@ pub fn plan_run(task: &HybridTask, x0: &[f64]) -> Result<HybridRun, String> {
             };
             let conv = convex.as_ref().unwrap_or(&task.convex);
             let gp = gen_problem(task, loc, conv, steps);
-            let v = match generate(&gp, &x, &gs) {
+            let leg = Leg {
+                segment: i,
+                start: &x,
+                steps,
+                convex: conv,
+                depth: (!last).then_some(depth),
+            };
+            let generated = match guide(&leg) {
+                Some(guess) => generate_from(&gp, &x, &gs, &guess),
+                None => generate(&gp, &x, &gs),
+            };
+            let v = match generated {
                 Ok(g) => g.nominal.v,
                 Err(e) => {
                     why = format!("segment {i} ({}): {e}", task.plant.modes()[loc].name);
@@ -669,6 +709,10 @@ pub struct HybridOptions {
     /// sample). [`Generator::Algorithm4`] grows a run from the nearest ball ([`forced::grow_from`]; across
     /// internal guards [`optimise::grow_from`]), falling back to the planner where that fails.
     pub generator: Generator,
+    /// Whether, once a round certified no run (the growth stalls, as `cover::grow` asks its routes), a
+    /// seed the other sources certify nothing from asks the routes of the global search ([`route`];
+    /// internal switching only). Default true.
+    pub routes: bool,
 }
 
 impl Default for HybridOptions {
@@ -682,6 +726,7 @@ impl Default for HybridOptions {
             on_accept: None,
             imports: Vec::new(),
             generator: Generator::Scp,
+            routes: true,
         }
     }
 }
@@ -702,6 +747,8 @@ pub struct HybridSynthesis {
     pub verify: crate::verify::hybrid::HybridReport,
     /// Every run's certificate re-proved from the image bytes.
     pub recheck: Vec<crate::verify::hybrid::RunCheck>,
+    /// Every route search run (by seed), for the report.
+    pub routes: Vec<RouteSearch>,
     /// Why the growth stopped.
     pub stop: String,
     pub seconds: f64,
@@ -849,11 +896,12 @@ fn algorithm4_seeds(
 
 /// An automaton's seed sources over the runs so far ([`crate::cover::seeds`]): Algorithm 4 grows a run
 /// from a ball's boundary ([`forced::grow_from`]; across internal guards [`optimise::grow_from`]); the generator is the planner
-/// from the seed ([`forced::plan_forced`], or [`plan_run`] for internal switching); no route search yet
-/// (a route through the guard would answer [`Ask::Routes`] here).
+/// from the seed ([`forced::plan_forced`], or [`plan_run`] for internal switching); the routes of the
+/// global search through the guards ([`route::routed_runs`]; internal switching only).
 struct HybridSources<'a> {
     task: &'a HybridTask,
     runs: &'a [HybridRun],
+    routing: Option<&'a Routing<'a>>,
 }
 
 impl Sources for HybridSources<'_> {
@@ -883,7 +931,10 @@ impl Sources for HybridSources<'_> {
                     plan_run(task, &seed.x)
                 },
             })),
-            Ask::Routes => Box::new(std::iter::empty()),
+            Ask::Routes => match self.routing {
+                Some(routing) => route::routed_runs(task, routing, &seed.x),
+                None => Box::new(std::iter::empty()),
+            },
         }
     }
 }
@@ -894,6 +945,7 @@ impl Sources for HybridSources<'_> {
 fn plan_seed(
     task: &HybridTask,
     runs: &[HybridRun],
+    routing: Option<&Routing<'_>>,
     seed: &Seed,
 ) -> (Origin, Result<HybridRun, String>) {
     let floor = task.problem.synthesis.min_robustness;
@@ -902,7 +954,11 @@ fn plan_seed(
             && r.delta() >= floor
             && covered(task, std::slice::from_ref(r), &seed.x)
     };
-    let src = HybridSources { task, runs };
+    let src = HybridSources {
+        task,
+        runs,
+        routing,
+    };
     let mut planned = None;
     for p in src.proposals(seed) {
         if p.candidate.as_ref().is_ok_and(kept) {
@@ -943,6 +999,9 @@ pub fn synthesize_hybrid(
         .zip(&init.hi)
         .map(|(l, h)| 0.5 * (l + h))
         .collect();
+    // The global route search (internal switching; [`HybridOptions::routes`]).
+    let routing = (opts.routes && !task.forced)
+        .then(|| Routing::new(&task.convex, &task.problem.init.lo, &task.problem.init.hi));
     let mut runs: Vec<HybridRun> = Vec::new();
     // Where each run came from (a recording, the planner, Algorithm 4 from a run).
     let mut sources: Vec<Source> = Vec::new();
@@ -1056,7 +1115,14 @@ pub fn synthesize_hybrid(
         let before = runs.len();
         let planned: Vec<(Origin, Result<HybridRun, String>)> = seeds
             .par_iter()
-            .map(|seed| plan_seed(task, &runs, seed))
+            .map(|seed| {
+                plan_seed(
+                    task,
+                    &runs,
+                    routing.as_ref().filter(|_| empty_rounds > 0),
+                    seed,
+                )
+            })
             .collect();
         // Why a certified run of this round no longer fits the image (the first).
         let mut left_out: Option<String> = None;
@@ -1170,6 +1236,7 @@ pub fn synthesize_hybrid(
         image,
         verify,
         recheck,
+        routes: routing.as_ref().map_or_else(Vec::new, Routing::searches),
         stop,
         imported,
         seconds: t0.elapsed().as_secs_f64(),

@@ -43,6 +43,7 @@ mod geometry_ellipsoid;
 mod geometry_polytope;
 mod geometry_regions;
 mod hybrid_import;
+mod hybrid_routes;
 mod image_exits;
 mod inspect_certificate;
 mod maze_vehicle;
