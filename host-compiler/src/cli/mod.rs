@@ -187,10 +187,16 @@ pub struct SynthArgs {
     /// closest ball and maximise δ by §5.3; the default for a single-location plant) or `scp` (Algorithm
     /// 1: the generator from each uncovered seed; the default for a hybrid plant, whose planner tries
     /// every switching schedule and, for forced switching, maximises δ by §5.3 over the segments).
-    /// Algorithm 4 on a hybrid plant is for forced switching: a run keeps its parent's locations and
-    /// switching samples.
+    /// Algorithm 4 on a hybrid plant keeps its parent's locations and, for forced switching, its
+    /// switching samples; across an internal guard it follows the parent's law through the crossing.
     #[arg(long, value_enum)]
     pub generator: Option<crate::synth::Generator>,
+    /// A hybrid plant with internal switching: once a round of seeds certifies no run, ask the global
+    /// route search for routes from the seed to Goal through the guards (in other homotopy classes, e.g.
+    /// under an obstacle the planner passes over) and plan along each. Minutes per seed. Single-location
+    /// plants ask their routes whenever the growth stalls, without this flag.
+    #[arg(long)]
+    pub guard_routes: bool,
     /// Hide progress bars.
     #[arg(long)]
     pub quiet: bool,

@@ -56,6 +56,7 @@ pub fn run(a: &SynthArgs, problem: crate::spec::Problem) -> Outcome {
         }),
         imports,
         generator,
+        routes: a.guard_routes,
         ..HybridOptions::default()
     };
     let s = synthesize_hybrid(&task, &opts).map_err(|e| Failure {

@@ -711,7 +711,8 @@ pub struct HybridOptions {
     pub generator: Generator,
     /// Whether, once a round certified no run (the growth stalls, as `cover::grow` asks its routes), a
     /// seed the other sources certify nothing from asks the routes of the global search ([`route`];
-    /// internal switching only). Default true.
+    /// internal switching only). Default false: each route is a continuation of generator calls over
+    /// every duration and guard depth, minutes per seed, so `synth --guard-routes` asks for it.
     pub routes: bool,
 }
 
@@ -726,7 +727,7 @@ impl Default for HybridOptions {
             on_accept: None,
             imports: Vec::new(),
             generator: Generator::Scp,
-            routes: true,
+            routes: false,
         }
     }
 }
