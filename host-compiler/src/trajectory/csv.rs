@@ -92,18 +92,12 @@ pub enum CsvError {
          samples at least"
     )]
     OneState { path: String },
-    #[error(
-        "{path}:1: {reason}; a recording's header names the references `v1…v{m}`, or the applied inputs \
-         `{input}1…{input}{m}` (with the `# x0` line or the states `{state}1…{state}{n}`), or the states \
-         `{state}1…{state}{n}` alone"
-    )]
+    #[error("{path}:1: {reason}; {expected}")]
     Header {
         path: String,
         reason: String,
-        n: usize,
-        m: usize,
-        state: &'static str,
-        input: &'static str,
+        /// What a header may name, in the plant's dimensions and coordinates.
+        expected: String,
     },
     #[error(
         "{path}:{line}: more than {max} rows of inputs; the horizon has {max} samples (horizon / period), \
@@ -196,6 +190,14 @@ struct Layout {
     run: bool,
 }
 
+/// The columns `prefix1…prefixk` as a message names them (`u1` alone when k = 1).
+fn columns(prefix: &str, k: usize) -> String {
+    match k {
+        1 => format!("`{prefix}1`"),
+        _ => format!("`{prefix}1…{prefix}{k}`"),
+    }
+}
+
 /// Whether a header field is `prefix` followed by a number (`u3`, `xi1`).
 fn numbered(h: &str, prefix: &str) -> bool {
     h.strip_prefix(prefix)
@@ -275,14 +277,16 @@ impl Layout {
         if c == Coordinates::Linearized && (any("x") || any("u")) && !any(s) && !any(u) {
             return Err(format!(
                 "the plant is feedback linearizable or flat: its recordings are in its linear model's \
-                 coordinates, the states `{s}1…{s}{n}` (ξ) and the inputs `{u}1…{u}{m}` (w), or the \
-                 references `v1…v{m}`; the columns `x…`, `u…` (the plant's own, as `simulate` writes \
-                 them) are not read"
+                 coordinates, the states {} (ξ) and the inputs {} (w); the columns `x…`, `u…` (the \
+                 plant's own, as `simulate` writes them) are not read",
+                columns(s, n),
+                columns(u, m)
             ));
         }
         if any(s) && states.is_none() {
             return Err(format!(
-                "the header names some of the states `{s}1…{s}{n}` but not all {n}"
+                "the header names some of the states {} but not all {n}",
+                columns(s, n)
             ));
         }
         if let Some(inputs) = Self::named(header, u, m) {
@@ -296,7 +300,9 @@ impl Layout {
         }
         if any(u) || any("v") {
             return Err(format!(
-                "the header names some inputs but not all m = {m} of `{u}1…{u}{m}` or `v1…v{m}`"
+                "the header names some inputs but not all m = {m} of {} or {}",
+                columns(u, m),
+                columns("v", m)
             ));
         }
         if states.is_some() {
@@ -370,10 +376,14 @@ fn parse_rows(
         Some(c) => Layout::import(&cols, n, m, c).map_err(|reason| CsvError::Header {
             path: path.into(),
             reason,
-            n,
-            m,
-            state: c.state(),
-            input: c.input(),
+            expected: format!(
+                "a recording's header names the references {}, or the applied inputs {} (with the `# x0` \
+                 line or the states {}), or the states {} alone",
+                columns("v", m),
+                columns(c.input(), m),
+                columns(c.state(), n),
+                columns(c.state(), n)
+            ),
         })?,
     };
     let mut locations = layout.location.map(|_| Vec::new());
@@ -986,7 +996,9 @@ mod tests {
         // A run `simulate` wrote of such a plant: the plant's own x and u, no references.
         let e = imp("# x0 = 0, 0\nt,x1,x2,u1,status\n0,0,0,1,ok\n0.1,0,0,1,ok\n").unwrap_err();
         assert!(
-            matches!(e, CsvError::Header { .. }) && e.to_string().contains("`xi1…xi2` (ξ)"),
+            matches!(e, CsvError::Header { .. })
+                && e.to_string()
+                    .contains("`xi1…xi2` (ξ) and the inputs `w1` (w)"),
             "{e}"
         );
         // Its references are read as before.

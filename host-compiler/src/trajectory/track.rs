@@ -17,7 +17,9 @@
 //!   in one step is never corrected (a one-step deadbeat law, unstable where the sampled plant has an
 //!   unstable inverse). The inputs found are projected into the bound and replayed; a sample whose replay
 //!   is further than [`TRACK_TOLERANCE`] of the recording's extent from the recorded state refuses the
-//!   recording, naming the sample and the residual. Then they are applied inputs as above.
+//!   recording, naming the first sample the bound cannot reach and the residual, and saying whether the
+//!   bound is the cause or the states are no run of the model at all (the same fit without the bound
+//!   misses too). Then they are applied inputs as above.
 
 use super::csv::{Given, Recording};
 use crate::model::DiscretePlant;
@@ -32,8 +34,10 @@ use faer::MatRef;
 
 /// How far the replay of a states-only recording may be from a recorded state, as a fraction of the
 /// recording's extent (its largest spread over one state coordinate; its largest |x̄| when every
-/// coordinate is constant, and at least 1 then): a route followed to within a thousandth of its size.
-pub const TRACK_TOLERANCE: f64 = 1e-3;
+/// coordinate is constant, and at least 1 then): a route followed to within a hundredth of its size. A
+/// route planned on another discretisation of the same plant (an Euler step at the spec's period) is
+/// followed within it; one that asks more than the input bound, or moves unlike the plant, is not.
+pub const TRACK_TOLERANCE: f64 = 1e-2;
 
 /// Weight of Σ‖u‖² in the least squares, against the states' residual: a tie-breaker (inputs B does not
 /// see), far below what changes the replay.
@@ -69,6 +73,21 @@ pub enum TrackError {
         tolerance: f64,
         worst: f64,
         worst_sample: usize,
+    },
+    #[error(
+        "its states are not a run of the plant's sampled model from sample {sample} on (t = {time:.3} s \
+         after the first row): no inputs at all, within the input bound or not, bring the replay within \
+         the tolerance {tolerance:.3e} ({frac} of the recording's extent) of every state up to sample \
+         {sample} (the least-squares fit misses by {residual:.3e}): the states may come from another \
+         model or discretisation; give the applied inputs (`u1…um`), or states of this model sampled at \
+         the spec's period",
+        frac = TRACK_TOLERANCE
+    )]
+    NotAModelRun {
+        sample: usize,
+        time: f64,
+        residual: f64,
+        tolerance: f64,
     },
     #[error("the least squares of its states did not solve: {0:?}")]
     Solver(SolverStatus),
@@ -160,7 +179,7 @@ pub fn track_states(
         });
     }
     let tolerance = TRACK_TOLERANCE * extent(states);
-    let (u, residual) = fit(model, input, x0, states)?;
+    let (u, residual) = fit(model, Some(input), x0, states)?;
     let (worst_sample, worst) = largest(&residual);
     if worst <= tolerance {
         return Ok(Tracked {
@@ -174,13 +193,23 @@ pub fn track_states(
     let mut at_hi = worst;
     while hi - lo > 1 {
         let mid = lo + (hi - lo) / 2;
-        let (_, r) = fit(model, input, x0, &states[..=mid])?;
+        let (_, r) = fit(model, Some(input), x0, &states[..=mid])?;
         let w = largest(&r).1;
         if w <= tolerance {
             lo = mid;
         } else {
             (hi, at_hi) = (mid, w);
         }
+    }
+    // Whether the bound is what stops it: the same states without it.
+    let free = largest(&fit(model, None, x0, &states[..=hi])?.1).1;
+    if free > tolerance {
+        return Err(TrackError::NotAModelRun {
+            sample: hi,
+            time: hi as f64 * model.period,
+            residual: free,
+            tolerance,
+        });
     }
     Err(TrackError::Untrackable {
         sample: hi,
@@ -201,10 +230,10 @@ fn largest(r: &[f64]) -> (usize, f64) {
 }
 
 /// The least squares of the module doc over `states` (0…N): the inputs, projected into the bound, and
-/// their replay's distance from each recorded state.
+/// their replay's distance from each recorded state (`input` `None`: without a bound).
 fn fit(
     model: &DiscretePlant,
-    input: &InputBound,
+    input: Option<&InputBound>,
     x0: &[f64],
     states: &[Vec<f64>],
 ) -> Result<(Vec<Vec<f64>>, Vec<f64>), TrackError> {
@@ -248,7 +277,8 @@ fn fit(
     }
     cones.push(ZeroConeT(N * n));
     match input {
-        InputBound::Box { lo, hi } => {
+        None => {}
+        Some(InputBound::Box { lo, hi }) => {
             let start = b.len();
             for k in 0..N {
                 for i in 0..m {
@@ -264,11 +294,11 @@ fn fit(
                 cones.push(NonnegativeConeT(b.len() - start));
             }
         }
-        InputBound::Norm2 { center, max } => {
+        Some(InputBound::Norm2 { center, max }) => {
             for k in 0..N {
                 row(&[], *max, &mut b);
-                for i in 0..m {
-                    row(&[(ui(k, i), -1.0)], -center[i], &mut b);
+                for (i, c) in center.iter().enumerate().take(m) {
+                    row(&[(ui(k, i), -1.0)], -c, &mut b);
                 }
                 cones.push(SecondOrderConeT(m + 1));
             }
@@ -301,7 +331,13 @@ fn fit(
     }
     let z = &solver.solution.x;
     let u: Vec<Vec<f64>> = (0..N)
-        .map(|k| project(input, (0..m).map(|i| z[ui(k, i)]).collect()))
+        .map(|k| {
+            let uk: Vec<f64> = (0..m).map(|i| z[ui(k, i)]).collect();
+            match input {
+                Some(b) => project(b, uk),
+                None => uk,
+            }
+        })
         .collect();
     // The replay of what is returned is judged, not the solver's states.
     let x = replay(model, x0, &u);
@@ -451,6 +487,13 @@ mod tests {
         let t = track_states(&model, &bound, &[0.0, 0.0], &x).expect("tracked");
         assert!(t.worst < 1e-6, "{}", t.worst);
         assert!(t.u.iter().zip(&u).all(|(a, b)| (a[0] - b[0]).abs() < 1e-4));
+        // The same within a norm bound (a second-order cone per step).
+        let ball = InputBound::Norm2 {
+            center: vec![0.0],
+            max: 1.0,
+        };
+        let t = track_states(&model, &ball, &[0.0, 0.0], &x).expect("tracked in the ball");
+        assert!(t.worst < 1e-6, "{}", t.worst);
         // Twice the acceleration from sample 10 on: the bound cannot follow it.
         let fast: Vec<Vec<f64>> = (0..30)
             .map(|k| vec![if k < 10 { 0.5 } else { 2.0 }])
@@ -460,7 +503,16 @@ mod tests {
         let TrackError::Untrackable { sample, .. } = e else {
             panic!("{e}")
         };
-        // The input of step 10 is the first beyond the bound: sample 11 is the first it cannot reach.
-        assert_eq!(sample, 11);
+        // The input of step 10 is the first beyond the bound: from sample 11 on the replay falls behind,
+        // past the tolerance (a hundredth of this fast route's extent) a sample later.
+        assert_eq!(sample, 12);
+        // States that move the position at zero velocity are no run of the model, whatever the bound.
+        let euler: Vec<Vec<f64>> = (0..30).map(|k| vec![0.05 * k as f64, 0.0]).collect();
+        let wide = InputBound::Box {
+            lo: vec![-100.0],
+            hi: vec![100.0],
+        };
+        let e = track_states(&model, &wide, &[0.0, 0.0], &euler).unwrap_err();
+        assert!(matches!(e, TrackError::NotAModelRun { .. }), "{e}");
     }
 }

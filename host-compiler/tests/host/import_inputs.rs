@@ -262,3 +262,65 @@ fn a_hybrid_plant_refuses_applied_inputs_and_states_with_a_reason() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn a_feedback_linearizable_plant_s_recording_is_in_its_linear_model_s_coordinates() {
+    let p = host_compiler::spec::parse(&example("fl-pendulum.toml"), "spec.toml").unwrap();
+    let ol = OwnedLoop::from_problem(&p).unwrap();
+    let (lp, lc) = (ol.lp(), ol.constants().unwrap());
+    let model = lp.model();
+    let (n, m, h) = (model.A.nrows(), model.B.ncols(), model.period);
+    let init = &ol.task.problem.init;
+    let x0: Vec<f64> = (0..n)
+        .map(|i| (0.5 * (init.lo[i] + init.hi[i])) as f32 as f64)
+        .collect();
+    // The states ξ and the inputs w of the linear model; x0 is the first row's state.
+    let w: Vec<Vec<f64>> = (0..20)
+        .map(|k| vec![0.05 * (k as f64 * 0.3).sin(); m])
+        .collect();
+    let mut csv = "t".to_string();
+    (1..=n).for_each(|i| csv.push_str(&format!(",xi{i}")));
+    (1..=m).for_each(|j| csv.push_str(&format!(",w{j}")));
+    csv.push('\n');
+    let x = host_compiler::trajectory::track::replay(model, &x0, &w);
+    for (k, xk) in x.iter().enumerate() {
+        let wk = w.get(k).map_or(vec![0.0; m], Clone::clone);
+        let fields: Vec<String> = xk.iter().chain(&wk).map(|v| v.to_string()).collect();
+        csv.push_str(&format!("{},{}\n", k as f64 * h, fields.join(",")));
+    }
+    let rec = parse_import(&csv, "xi.csv", n, m, h, 800, Coordinates::Linearized).unwrap();
+    assert!(matches!(rec.given, Given::Applied(_)));
+    let (nom, _) = certify_recording(&lp, &lc, &rec).unwrap();
+    for (a, b) in nom.x.iter().zip(&x) {
+        assert!(
+            a.iter().zip(b).all(|(p, q)| (p - q).abs() < 1e-6),
+            "{a:?} {b:?}"
+        );
+    }
+    for (a, b) in nom.u.iter().zip(&w) {
+        assert!(
+            a.iter().zip(b).all(|(p, q)| (p - q).abs() < 1e-6),
+            "{a:?} {b:?}"
+        );
+    }
+    // `synth --import` reads such a plant's recordings in ξ: the plant's own x and u are refused.
+    let dir = std::env::temp_dir().join(format!("import-inputs-fl-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let file = dir.join("plant.csv");
+    std::fs::write(&file, "# x0 = 0, 0\nt,x1,x2,u1\n0,0,0,0\n0.005,0,0,0\n").unwrap();
+    let spec = format!(
+        "{}/../examples/fl-pendulum.toml",
+        env!("CARGO_MANIFEST_DIR")
+    );
+    let out = Command::new(env!("CARGO_BIN_EXE_host-compiler"))
+        .args(["synth", &spec, "--quiet", "--import"])
+        .arg(&file)
+        .arg("--out")
+        .arg(dir.join("out"))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains("linear model's"), "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
