@@ -176,11 +176,18 @@ pub struct SynthArgs {
     /// (`verify::MAX_RUNS`).
     #[arg(long, default_value_t = 10_000, value_parser = clap::value_parser!(u64).range(..=crate::verify::MAX_RUNS))]
     pub verify_runs: u64,
-    /// A recorded trajectory to certify and use before any is generated (repeatable): CSV with a comment
-    /// line `# x0 = …` giving the initial state, a header `t,v1,…,vm` and one row of reference inputs per
-    /// sample period; at most as many rows as the spec's horizon has samples. A directory imports all its
-    /// `*.csv` files in sorted order (e.g. the runs `host-compiler play` wrote). For a hybrid plant the
-    /// run is replayed on the automaton and split at its events into the location path's segments.
+    /// A recorded trajectory (a route planned elsewhere, a run `play` wrote) to certify and use before any
+    /// is generated (repeatable). CSV, one row per sample period, the time first, at most as many steps
+    /// as the spec's horizon has samples; the columns give one of: the references `v1…vm` of the loop
+    /// u = K̂x + v, with a comment line `# x0 = …` before the header (what `play` and `simulate` write;
+    /// `v` columns are read whenever present); the applied inputs `u1…um`, with the `# x0` line or the
+    /// states `x1…xn` (then the last row is the final state), v derived along their replay once K̂ is
+    /// designed; or the states `x1…xn` alone, the inputs found by least squares within the input bound
+    /// (a recording the plant cannot follow within it is refused, naming the sample). For a
+    /// feedback-linearizable or flat plant the states and inputs are its linear model's, `xi1…xin` and
+    /// `w1…wm`. A directory imports all its `*.csv` files in sorted order. For a hybrid plant (references
+    /// only) the run is replayed on the automaton and split at its events into the location path's
+    /// segments.
     #[arg(long = "import", value_name = "FILE.csv|DIR")]
     pub imports: Vec<PathBuf>,
     /// How trajectories after the first are made: `algorithm4` (§5.4: grow from the boundary of the

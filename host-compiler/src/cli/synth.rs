@@ -87,11 +87,38 @@ pub(crate) fn coverage_exit(
 
 /// The recordings `--import` names (a file, or a directory's `*.csv` in sorted order: `host-compiler
 /// play` writes its runs there), each at most the horizon long (which `spec::limits` keeps within the
-/// table capacity); a file that does not read is bad input.
+/// table capacity); a file that does not read is bad input. A recording gives the references, the
+/// applied inputs or the states alone (`trajectory::csv`), for a feedback-linearizable or flat plant in
+/// its linear model's coordinates ([`load_task_imports`]); a hybrid plant's must give the references.
 pub(crate) fn load_imports(
     a: &SynthArgs,
     problem: &crate::spec::Problem,
 ) -> Result<Vec<(String, crate::trajectory::csv::Recording)>, Failure> {
+    load_imports_in(a, problem, crate::trajectory::csv::Coordinates::Plant)
+}
+
+/// [`load_imports`] for a one-location task: states and inputs in the coordinates of the model its
+/// nominals live in (ξ and w for a feedback-linearizable or flat plant, whose `task.problem` is already
+/// the model in ξ).
+pub(crate) fn load_task_imports(
+    a: &SynthArgs,
+    task: &crate::task::Task,
+) -> Result<Vec<(String, crate::trajectory::csv::Recording)>, Failure> {
+    use crate::trajectory::csv::Coordinates;
+    let coords = if task.plant.linearization().is_some() {
+        Coordinates::Linearized
+    } else {
+        Coordinates::Plant
+    };
+    load_imports_in(a, &task.problem, coords)
+}
+
+fn load_imports_in(
+    a: &SynthArgs,
+    problem: &crate::spec::Problem,
+    coords: crate::trajectory::csv::Coordinates,
+) -> Result<Vec<(String, crate::trajectory::csv::Recording)>, Failure> {
+    use crate::trajectory::csv::Given;
     let (n, m, h) = (problem.plant.n(), problem.plant.m(), problem.plant.period);
     let max_rows = problem.horizon_steps();
     let mut imports = Vec::new();
@@ -106,9 +133,22 @@ pub(crate) fn load_imports(
             )));
         }
         for p in files {
-            let rec = crate::trajectory::csv::load_recording(&p, n, m, h, max_rows)
+            let rec = crate::trajectory::csv::load_import(&p, n, m, h, max_rows, coords)
                 .map_err(|e| miette::miette!("{e}"))
                 .bad_input()?;
+            if problem.hybrid.is_some() && rec.given != Given::References {
+                let what = match rec.given {
+                    Given::Applied(_) => "applied inputs `u1…um`",
+                    _ => "states alone",
+                };
+                return Err(Failure::bad_input(miette::miette!(
+                    "{}: the recording gives {what}, not the references `v1…vm`: a hybrid plant's \
+                     recordings must give the references v = u − K̂x of each sample's location (as `play` \
+                     and `simulate` write them); deriving them from applied inputs or states is built for \
+                     one-location plants only",
+                    p.display()
+                )));
+            }
             imports.push((p.display().to_string(), rec));
         }
     }
@@ -140,7 +180,7 @@ pub fn run(a: &SynthArgs) -> Outcome {
     // A feedback-linearizable plant's task is the linear model in ξ; its recordings are in the task's
     // coordinates (x0 = ξ(0), rows the reference of w = K ξ + v), which `play` writes.
     let task = task_of(problem)?;
-    let imports = load_imports(a, &task.problem)?;
+    let imports = load_task_imports(a, &task)?;
     // Ctrl-C: the first stops the growth loop cleanly (what is certified so far is verified, written
     // and reported); a second one ends the process at once.
     let cancel = Arc::new(AtomicBool::new(false));

@@ -63,7 +63,7 @@ pub fn run(a: &SynthArgs, problem: crate::spec::Problem) -> Outcome {
     let ts = temporal_task(problem)?;
     let (tt, task) = (&ts.tt, &ts.task);
     // Recordings in the task's coordinates, each the whole horizon long (the formula is judged over T).
-    let imports = super::synth::load_imports(a, &task.problem)?;
+    let imports = super::synth::load_task_imports(a, task)?;
     let cancel = Arc::new(AtomicBool::new(false));
     {
         let cancel = cancel.clone();

@@ -8,7 +8,9 @@
 //! a fixed batch collected in order, so the cover does not depend on the number of threads.
 
 use super::estimate::{self, CoverageEstimate, SampleBox};
-use super::seeds::{certify_recording, Ask, Generators, Origin, Seed, Source, Sources};
+use super::seeds::{
+    certify_recording, recording_refusal, Ask, Generators, Origin, Seed, Source, Sources,
+};
 use super::{
     alg4, feedforward_image, AcceptHook, Cover, CoverTrajectory, Generator, OptStart, StopReason,
 };
@@ -92,6 +94,11 @@ pub struct Attempts {
     /// Seeds from which the generator found no trajectory to certify, and its first reason.
     pub not_generated: usize,
     pub first_refusal: Option<GenError>,
+    /// The recordings given (`--import`) that were refused, and why.
+    pub imports: Vec<(String, String)>,
+    /// Set when the search stopped after its first round of seeds because every recording given was
+    /// refused ([`grow`]): the seeds that round tried.
+    pub stopped_after: Option<usize>,
 }
 
 impl Attempts {
@@ -130,6 +137,38 @@ impl Attempts {
         }
     }
 
+    /// A recording given that was refused, and why.
+    fn import(&mut self, name: &str, why: String) {
+        self.imports.push((name.to_string(), why));
+    }
+
+    /// The refused recordings, first in the message: the route given is what a user mends.
+    fn imports_text(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        if self.imports.is_empty() {
+            return Ok(());
+        }
+        write!(f, "every recording given was refused:")?;
+        for (name, why) in &self.imports {
+            write!(f, " {name}: {why};")?;
+        }
+        write!(f, " and from Init: ")
+    }
+
+    /// The early stop, last in the message.
+    fn stop_text(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self.stopped_after {
+            Some(seeds) => write!(
+                f,
+                "; the search stopped after its first round ({seeds} seeds from Init, each through the \
+                 local generator and the routes of the global search) rather than try the rest of \
+                 Init's samples for minutes: the route given is the one to mend (why it was refused is \
+                 above; `play` shows a run's margins as it goes), or run without --import to let the \
+                 search go on over Init"
+            ),
+            None => Ok(()),
+        }
+    }
+
     /// Whether some trajectory tried reached Goal within T with a positive margin (δ_Goal > 0).
     pub fn goal_reached(&self) -> bool {
         self.best_goal > 0.0
@@ -139,6 +178,7 @@ impl Attempts {
 impl std::fmt::Display for Attempts {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         let t = self.horizon;
+        self.imports_text(f)?;
         match &self.best {
             Some(best) => {
                 write!(
@@ -175,17 +215,20 @@ impl std::fmt::Display for Attempts {
                         self.not_generated
                     )?;
                 }
-                Ok(())
+                self.stop_text(f)
             }
-            None => match &self.first_refusal {
-                Some(e) => write!(
-                    f,
-                    "from every seed ({}) the generator found no trajectory to certify, so Goal was not \
-                     reached within T = {t} s from any sample tried (first: {e})",
-                    self.not_generated
-                ),
-                None => write!(f, "no trajectory was tried"),
-            },
+            None => {
+                match &self.first_refusal {
+                    Some(e) => write!(
+                        f,
+                        "from every seed ({}) the generator found no trajectory to certify, so Goal was \
+                         not reached within T = {t} s from any sample tried (first: {e})",
+                        self.not_generated
+                    ),
+                    None => write!(f, "no trajectory was tried"),
+                }?;
+                self.stop_text(f)
+            }
         }
     }
 }
@@ -361,24 +404,42 @@ pub fn grow(
                 m,
             });
         }
-        let (nom, cert) = certify_recording(lp, lc, rec);
-        if cert.is_certified() {
-            cover.push(
+        match certify_recording(lp, lc, rec) {
+            Ok((nom, cert)) if cert.is_certified() => cover.push(
                 CoverTrajectory {
                     source: Source::import(name),
                     nominal: nom,
                     certificate: cert,
                 },
                 None,
-            );
-        } else {
-            attempts.certificate(&cert);
-            warnings.push(format!(
-                "{name}: not used, its certified robustness is not positive (δ_Goal {:.3e}, δ_Unsafe {:.3e}, δ_Input {:.3e}, r_crit {:.3e})",
-                cert.delta_goal, cert.delta_unsafe_intersample, cert.delta_input, cert.r_crit
-            ));
+            ),
+            Ok((_, cert)) => {
+                attempts.certificate(&cert);
+                let why = recording_refusal(&cert, lp.model().period);
+                warnings.push(format!(
+                    "{name}: not used, its certified robustness is not positive: {why}"
+                ));
+                attempts.import(name, why);
+            }
+            Err(crate::trajectory::track::TrackError::Dimension { .. }) => {
+                return Err(GrowError::Recording {
+                    name: name.clone(),
+                    n,
+                    m,
+                });
+            }
+            Err(e) => {
+                warnings.push(format!("{name}: not used: {e}"));
+                attempts.import(name, e.to_string());
+            }
         }
     }
+    // When recordings were given and every one was refused, the route given is the one to mend: the
+    // search stops after its first round of seeds if that round certifies nothing either. Its first
+    // round is the centre of Init and a batch of working samples, each through the local generator,
+    // §5.3 and the routes of the global search; later rounds only move the start across Init, from
+    // which the same generator and routes rarely do better, at tens of seconds a seed.
+    let imports_refused = !opts.imports.is_empty() && cover.trajectories.is_empty();
     let mut failed = 0usize;
     let budget = problem.synthesis.max_trajectories;
     // A fixed batch size: the seeds of a round, and so the result, must not depend on the thread count.
@@ -646,7 +707,10 @@ pub fn grow(
                     got = true;
                 }
             }
-            if !got && work.is_empty() {
+            if !got && (work.is_empty() || imports_refused) {
+                if imports_refused {
+                    attempts.stopped_after = Some(failed);
+                }
                 bars.clear();
                 return Err(GrowError::NoSeed {
                     failed,
@@ -829,7 +893,13 @@ pub fn grow(
                         }
                     }
                 }
-                if !progress && work.is_empty() && cover.trajectories.is_empty() {
+                if !progress
+                    && cover.trajectories.is_empty()
+                    && (work.is_empty() || imports_refused)
+                {
+                    if imports_refused {
+                        attempts.stopped_after = Some(failed);
+                    }
                     bars.clear();
                     return Err(GrowError::NoSeed {
                         failed,

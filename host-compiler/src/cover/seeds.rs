@@ -24,6 +24,7 @@ use crate::property::ConvexSets;
 use crate::trajectory::csv::Recording;
 use crate::trajectory::generate::{generate, generate_from, GenError, GenProblem, GenSettings};
 use crate::trajectory::route::{timed_guess, Route, RouteMap, RouteSettings};
+use crate::trajectory::track::{references, TrackError};
 use crate::trajectory::Nominal;
 use std::sync::{Mutex, OnceLock};
 
@@ -361,16 +362,52 @@ impl Sources for OneLocation<'_> {
 }
 
 /// The one path from a recording (a person's run: `synth --import`, `host-compiler play`) to its nominal
-/// and certificate on a one-location plant: the initial state rounded to f32 (what the image stores),
-/// then [`certify::shipped`] with the recorded reference inputs. A recording is accepted when the
-/// certificate is certified; its trajectory's source is [`Source::import`].
+/// and certificate on a one-location plant: the initial state rounded to f32 (what the image stores), the
+/// references as recorded or derived from the recording's applied inputs or states along the replay of
+/// the loop's model (`trajectory::track::references`, with the shipped gain), then [`certify::shipped`].
+/// A recording is accepted when the certificate is certified; its trajectory's source is
+/// [`Source::import`]. `Err`: why the recording gives no references (its states cannot be followed
+/// within the input bound, or it does not fit the model).
 pub fn certify_recording(
     lp: &Loop<'_>,
     lc: &LoopConstants,
     rec: &Recording,
-) -> (Nominal, Certificate) {
+) -> Result<(Nominal, Certificate), TrackError> {
     let x0: Vec<f64> = rec.x0.iter().map(|&v| round32(v)).collect();
-    certify::shipped(lp, lc, &x0, &rec.v)
+    let v = references(lp.model(), lp.K, lp.input, &x0, rec)?;
+    Ok(certify::shipped(lp, lc, &x0, &v))
+}
+
+/// Why a recording's certificate refuses it, for the messages that name it: the binding part with the
+/// sample where it binds and what it asks of the route (`period`: seconds per sample).
+pub fn recording_refusal(c: &Certificate, period: f64) -> String {
+    use crate::certify::Binding;
+    let at = |k: usize| format!("sample {k}, t = {:.3} s", k as f64 * period);
+    let what = match c.binding() {
+        Binding::Goal(_) => format!(
+            "it does not end inside Goal with room to spare (closest at {}): the run must end deeper in \
+             Goal within the horizon",
+            at(c.k_star)
+        ),
+        Binding::Unsafe(_) => format!(
+            "it passes too close to Unsafe for its speed (nearest at the samples at {}; between samples \
+             the margin also pays for the motion over a period): keep further off, or slow down there",
+            at(c.k_unsafe)
+        ),
+        Binding::Input(_) => format!(
+            "its inputs come too close to the input bound (at {}): the tube needs room in the inputs too",
+            at(c.k_input)
+        ),
+        Binding::RCrit { .. } | Binding::NotComputed => String::from("see the binding part"),
+    };
+    format!(
+        "bound by {}: {what} (δ_Goal {:.3e}, δ_Unsafe {:.3e} between samples, δ_Input {:.3e}, r_crit {:.3e})",
+        c.binding(),
+        c.delta_goal,
+        c.delta_unsafe_intersample,
+        c.delta_input,
+        c.r_crit
+    )
 }
 
 /// The route (an index into `searches`) each trajectory of a cover came from: its own route, or for

@@ -365,10 +365,8 @@ impl Played {
             }
             Played::One {
                 task, design, lc, ..
-            } => {
-                let (nominal, cert) =
-                    crate::cover::certify_recording(&Loop::new(task, design), lc, rec);
-                Judged {
+            } => match crate::cover::certify_recording(&Loop::new(task, design), lc, rec) {
+                Ok((nominal, cert)) => Judged {
                     centre: nominal.x[0].clone(),
                     delta: cert.delta,
                     delta_stored: cert.delta_stored,
@@ -379,8 +377,16 @@ impl Played {
                         Err(String::new())
                     },
                     certificate: Some(cert),
-                }
-            }
+                },
+                Err(why) => Judged {
+                    centre: rec.x0.clone(),
+                    delta: 0.0,
+                    delta_stored: 0.0,
+                    path: Vec::new(),
+                    verdict: Err(why.to_string()),
+                    certificate: None,
+                },
+            },
             Played::Hybrid { task, .. } => match import::certify_recording(task, rec) {
                 // A forced run's map path is its segments' states (each ends where the next begins).
                 Ok(run) if task.forced => Judged {

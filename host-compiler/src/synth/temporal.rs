@@ -121,16 +121,20 @@ pub fn certify_recording(
             rec.v.first().map_or(0, Vec::len)
         ));
     }
-    if rec.v.len() != steps {
+    if rec.steps() != steps {
         return Err(format!(
             "the task is a formula, judged over the whole horizon of {steps} samples; the recording \
              has {} rows",
-            rec.v.len()
+            rec.steps()
         ));
     }
     let f32s = |r: &[f64]| -> Vec<f64> { r.iter().map(|&a| a as f32 as f64).collect() };
-    let v: Vec<Vec<f64>> = rec.v.iter().map(|r| f32s(r)).collect();
-    let nominal = lp.simulate(&f32s(&rec.x0), &v);
+    // As recorded, or derived from the applied inputs or the states (`trajectory::track`).
+    let x0 = f32s(&rec.x0);
+    let v = crate::trajectory::track::references(lp.model(), lp.K, lp.input, &x0, rec)
+        .map_err(|e| e.to_string())?;
+    let v: Vec<Vec<f64>> = v.iter().map(|r| f32s(r)).collect();
+    let nominal = lp.simulate(&x0, &v);
     let certificate = crate::certify::temporal::certify_temporal(lp, lc, tl, &nominal);
     Ok((nominal, certificate))
 }

@@ -1,12 +1,33 @@
-//! CSV import of a recorded reference-input sequence (how a person's trajectories come in).
+//! CSV import of a recorded run (how a person's trajectories, and routes planned outside the tool, come
+//! in).
 //!
 //! Format: the tools' one CSV dialect ([`crate::csv`]: byte-order mark, comments, the `# x0` line, the
-//! `status` column skipped); a header `t,v1,…,vm` (or `k,…`), then one row per sample period with the
-//! reference input v(κ) of the closed loop u = K x + v. Times must increase by the plant's sample period.
-//! A recording also names its initial state in a comment line `# x0 = a, b, …` before the header. The
-//! inputs are the columns named `v1…vm` when the header has them, so a run `simulate` wrote (`t`, the
-//! states `x1…xn`, the applied inputs `u1…um`, the references `v1…vm`, `status`) is a recording as it is:
-//! its last row is the final state, whose input no step applies, and is not read.
+//! `status` column skipped); a header whose first column is the time, then one row per sample period.
+//! Times must increase by the plant's sample period. What the loop takes is the reference input v(κ) of
+//! the closed loop u = K̂ x + v; a recording gives it, or what a user has (read by [`parse_import`]):
+//!
+//! * **References** `v1…vm`: v(κ) per row, with the initial state in a comment line `# x0 = a, b, …`
+//!   before the header. The columns named `v1…vm` are read when the header has them all, whatever else
+//!   it has, so a run `simulate` wrote (`t`, the states `x1…xn`, the applied inputs `u1…um`, the
+//!   references `v1…vm`, `status`) is a recording as it is: its last row is the final state, whose input
+//!   no step applies, and is not read. A header without any column named like a state or an input reads
+//!   every column after `t` as v (m of them).
+//! * **Applied inputs** `u1…um` (no `v` columns): the input applied over each period, with the `# x0`
+//!   line or the state columns `x1…xn` (then the first row's state is x0, the last row the final state
+//!   whose inputs are not read, and the other states are not read: the replay decides). Once the CAF is
+//!   designed the plant's sampled model is stepped from x0 under u, and v(κ) = u(κ) − K̂ x(κ) along that
+//!   replay, so the nominal is the run of the applied inputs (`trajectory::track::references`).
+//! * **States alone** `x1…xn` (no input columns): the states at the samples 0…N, the first being x0
+//!   (one row more than steps). The inputs are found by least squares within the input bound, one
+//!   problem over the whole horizon (`trajectory::track::track_states`), and then used as applied
+//!   inputs; a recording the replay cannot follow within the input bound is refused, naming the sample
+//!   and the residual.
+//!
+//! The states and inputs are those of the model the task's nominals live in: for a linear plant its own
+//! (`x`, `u`); for a feedback-linearizable or flat plant those of its linear model in ξ, named `xi1…xin`
+//! and `w1…wm` ([`Coordinates`]), so that a run `simulate` wrote of such a plant (the plant's own x and
+//! u, no references) is refused rather than read as the model's. A hybrid plant's recordings give
+//! references only (its gain changes with the location; `synth --import` refuses the others).
 //!
 //! A recording of a hybrid plant with forced switching (§4.2.1) also names, per row, the location the
 //! controller chose for that sample: a column [`LOCATION`] of location names (`host-compiler play` writes
@@ -67,6 +88,18 @@ pub enum CsvError {
     #[error("{path}: no samples after the header")]
     NoRows { path: String },
     #[error(
+        "{path}: one row of states is no step; a recording of states alone gives the states at two \
+         samples at least"
+    )]
+    OneState { path: String },
+    #[error("{path}:1: {reason}; {expected}")]
+    Header {
+        path: String,
+        reason: String,
+        /// What a header may name, in the plant's dimensions and coordinates.
+        expected: String,
+    },
+    #[error(
         "{path}:{line}: more than {max} rows of inputs; the horizon has {max} samples (horizon / period), \
          and a recording cannot be longer"
     )]
@@ -107,33 +140,93 @@ pub use crate::csv::LOCATION;
 /// Longest location name a recording's row may give (characters).
 pub const MAX_LOCATION_NAME: usize = 64;
 
-/// Where a file's reference inputs are: the field index of `v1…vm`, and whether the file is a run.
+/// The coordinates a recording's state and input columns are named in ([`parse_import`]): the plant's
+/// own (`x1…xn`, `u1…um`), or for a feedback-linearizable or flat plant those of its linear model in ξ,
+/// which the task and its nominals live in (`xi1…xin`, `w1…wm`). Distinct names, so that a run
+/// `simulate` wrote of such a plant (the plant's own x and u) is never read as the model's.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Coordinates {
+    Plant,
+    Linearized,
+}
+
+impl Coordinates {
+    /// The prefix of the state columns.
+    pub fn state(self) -> &'static str {
+        match self {
+            Coordinates::Plant => "x",
+            Coordinates::Linearized => "xi",
+        }
+    }
+    /// The prefix of the applied-input columns.
+    pub fn input(self) -> &'static str {
+        match self {
+            Coordinates::Plant => "u",
+            Coordinates::Linearized => "w",
+        }
+    }
+}
+
+/// What a file's rows give.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Kind {
+    References,
+    Applied,
+    States,
+}
+
+/// Where a file's columns are: the inputs (references `v1…vm` or applied inputs), the states, and
+/// whether the file is a run.
 struct Layout {
-    /// Field index of each input, in input order.
+    kind: Kind,
+    /// Field index of each input, in input order (none for [`Kind::States`]).
     inputs: Vec<usize>,
+    /// Field index of each state, when the file's states are read (applied inputs or states alone).
+    states: Option<Vec<usize>>,
     /// Field index of the [`LOCATION`] column, when the header has one.
     location: Option<usize>,
-    /// The header names the state columns `x1…xn` (a run `simulate` wrote): its last row is the final
-    /// state, whose input no step applies.
+    /// The header names state columns (a run `simulate` wrote, or a user's states): its last row is the
+    /// final state, whose input no step applies.
     run: bool,
 }
 
+/// The columns `prefix1…prefixk` as a message names them (`u1` alone when k = 1).
+fn columns(prefix: &str, k: usize) -> String {
+    match k {
+        1 => format!("`{prefix}1`"),
+        _ => format!("`{prefix}1…{prefix}{k}`"),
+    }
+}
+
+/// Whether a header field is `prefix` followed by a number (`u3`, `xi1`).
+fn numbered(h: &str, prefix: &str) -> bool {
+    h.strip_prefix(prefix)
+        .is_some_and(|d| !d.is_empty() && d.bytes().all(|b| b.is_ascii_digit()))
+}
+
 impl Layout {
-    /// The inputs are the columns named `v1`…`vm` when the header has them all (the other columns, such
-    /// as a run's states and applied inputs, are not read); otherwise every column after `t` but
-    /// [`crate::csv::STATUS`], which must be m. `None`: neither (or a run without `v1…vm`).
-    fn of(header: &[(usize, &str)], m: usize) -> Option<Layout> {
-        let run = header.iter().any(|&(_, h)| h == "x1");
-        let location = header.iter().position(|&(_, h)| h == LOCATION);
-        let named: Option<Vec<usize>> = (1..=m)
+    /// The field indices of `prefix1…prefixk`, when the header has them all.
+    fn named(header: &[(usize, &str)], prefix: &str, k: usize) -> Option<Vec<usize>> {
+        (1..=k)
             .map(|j| {
-                let name = format!("v{j}");
+                let name = format!("{prefix}{j}");
                 header.iter().position(|&(_, h)| h == name)
             })
-            .collect();
-        if let Some(inputs) = named {
+            .collect()
+    }
+
+    /// References only (`parse_recording`): the columns named `v1`…`vm` when the header has them all
+    /// (the other columns, such as a run's states and applied inputs, are not read); otherwise every
+    /// column after `t` but [`crate::csv::STATUS`], which must be m. `None`: neither (or a run without
+    /// `v1…vm`).
+    fn references(header: &[(usize, &str)], m: usize) -> Option<Layout> {
+        let run = header.iter().any(|&(_, h)| h == "x1");
+        let location = header.iter().position(|&(_, h)| h == LOCATION);
+        if let Some(inputs) = Self::named(header, "v", m) {
             return Some(Layout {
+                kind: Kind::References,
                 inputs,
+                states: None,
                 location,
                 run,
             });
@@ -150,9 +243,84 @@ impl Layout {
             })
             .collect();
         (inputs.len() == m).then_some(Layout {
+            kind: Kind::References,
             inputs,
+            states: None,
             location,
             run,
+        })
+    }
+
+    /// An import's layout (module doc): the references `v1…vm` when the header has them all (as
+    /// [`Layout::references`]); else the applied inputs `u1…um` (in `c`'s names), with the states
+    /// `x1…xn` when it has them all; else the states alone; else, when no column is named like a state
+    /// or an input, every column after `t` as references. `Err`: why the header is none of these.
+    fn import(
+        header: &[(usize, &str)],
+        n: usize,
+        m: usize,
+        c: Coordinates,
+    ) -> Result<Layout, String> {
+        let (s, u) = (c.state(), c.input());
+        let location = header.iter().position(|&(_, h)| h == LOCATION);
+        let states = Self::named(header, s, n);
+        let any = |prefix: &str| header.iter().skip(1).any(|&(_, h)| numbered(h, prefix));
+        if let Some(inputs) = Self::named(header, "v", m) {
+            return Ok(Layout {
+                kind: Kind::References,
+                inputs,
+                states: None,
+                location,
+                run: any(s) || header.iter().any(|&(_, h)| h == "x1"),
+            });
+        }
+        if c == Coordinates::Linearized && (any("x") || any("u")) && !any(s) && !any(u) {
+            return Err(format!(
+                "the plant is feedback linearizable or flat: its recordings are in its linear model's \
+                 coordinates, the states {} (ξ) and the inputs {} (w); the columns `x…`, `u…` (the \
+                 plant's own, as `simulate` writes them) are not read",
+                columns(s, n),
+                columns(u, m)
+            ));
+        }
+        if any(s) && states.is_none() {
+            return Err(format!(
+                "the header names some of the states {} but not all {n}",
+                columns(s, n)
+            ));
+        }
+        if let Some(inputs) = Self::named(header, u, m) {
+            return Ok(Layout {
+                kind: Kind::Applied,
+                inputs,
+                run: states.is_some(),
+                states,
+                location,
+            });
+        }
+        if any(u) || any("v") {
+            return Err(format!(
+                "the header names some inputs but not all m = {m} of {} or {}",
+                columns(u, m),
+                columns("v", m)
+            ));
+        }
+        if states.is_some() {
+            return Ok(Layout {
+                kind: Kind::States,
+                inputs: Vec::new(),
+                run: true,
+                states,
+                location,
+            });
+        }
+        Self::references(header, m).ok_or_else(|| {
+            let found = header
+                .iter()
+                .skip(1)
+                .filter(|&&(_, h)| h != crate::csv::STATUS && h != LOCATION)
+                .count();
+            format!("header has {found} input columns, the plant has m = {m}")
         })
     }
 }
@@ -167,47 +335,73 @@ pub fn parse_inputs(
     period: f64,
     max_rows: usize,
 ) -> Result<Vec<Vec<f64>>, CsvError> {
-    parse_rows(text, path, m, period, max_rows).map(|(v, _)| v)
+    parse_rows(text, path, 0, m, period, max_rows, None).map(|r| r.inputs)
 }
 
-/// The reference inputs of a file's rows, and their [`LOCATION`] names when the header has the column.
-type Rows = (Vec<Vec<f64>>, Option<Vec<String>>);
+/// A file's rows: the inputs (references or applied, one row per step), the states (per sample, the
+/// final one included) when read, and the [`LOCATION`] names when the header has the column.
+struct Rows {
+    kind: Kind,
+    inputs: Vec<Vec<f64>>,
+    states: Option<Vec<Vec<f64>>>,
+    locations: Option<Vec<String>>,
+}
 
-/// [`parse_inputs`], and the [`LOCATION`] column's names when the header has one.
+/// The rows of a file: references only ([`Layout::references`]) when `import` is `None`, else any
+/// import layout in those coordinates ([`Layout::import`]).
 fn parse_rows(
     text: &str,
     path: &str,
+    n: usize,
     m: usize,
     period: f64,
     max_rows: usize,
+    import: Option<Coordinates>,
 ) -> Result<Rows, CsvError> {
     let mut lines = crate::csv::data_lines(text);
     let (_, header) = lines
         .next()
         .ok_or_else(|| CsvError::Empty { path: path.into() })?;
     let cols = crate::csv::split(header);
-    let layout = Layout::of(&cols, m).ok_or_else(|| CsvError::Columns {
-        path: path.into(),
-        expected: m,
-        found: cols
-            .iter()
-            .skip(1)
-            .filter(|&&(_, h)| h != crate::csv::STATUS && h != LOCATION)
-            .count(),
-    })?;
+    let layout = match import {
+        None => Layout::references(&cols, m).ok_or_else(|| CsvError::Columns {
+            path: path.into(),
+            expected: m,
+            found: cols
+                .iter()
+                .skip(1)
+                .filter(|&&(_, h)| h != crate::csv::STATUS && h != LOCATION)
+                .count(),
+        })?,
+        Some(c) => Layout::import(&cols, n, m, c).map_err(|reason| CsvError::Header {
+            path: path.into(),
+            reason,
+            expected: format!(
+                "a recording's header names the references {}, or the applied inputs {} (with the `# x0` \
+                 line or the states {}), or the states {} alone",
+                columns("v", m),
+                columns(c.input(), m),
+                columns(c.state(), n),
+                columns(c.state(), n)
+            ),
+        })?,
+    };
     let mut locations = layout.location.map(|_| Vec::new());
+    let mut states = layout.states.as_ref().map(|_| Vec::new());
     // A run has one row more than inputs: its final state.
     let limit = max_rows.saturating_add(usize::from(layout.run));
     let mut out = Vec::new();
+    let mut rows = 0usize;
     let mut prev_t: Option<f64> = None;
     for (lineno, line) in lines {
-        if out.len() >= limit {
+        if rows >= limit {
             return Err(CsvError::TooLong {
                 path: path.into(),
                 line: lineno,
                 max: max_rows,
             });
         }
+        rows += 1;
         let fields = crate::csv::split(line);
         if fields.len() != cols.len() {
             let col = fields.last().map_or(1, |&(c, _)| c);
@@ -256,13 +450,22 @@ fn parse_rows(
             }
             names.push(f.to_string());
         }
-        out.push(
-            layout
-                .inputs
-                .iter()
-                .map(|&i| number(i))
-                .collect::<Result<Vec<f64>, _>>()?,
-        );
+        if let (Some(idx), Some(states)) = (layout.states.as_ref(), states.as_mut()) {
+            states.push(
+                idx.iter()
+                    .map(|&i| number(i))
+                    .collect::<Result<Vec<f64>, _>>()?,
+            );
+        }
+        if layout.kind != Kind::States {
+            out.push(
+                layout
+                    .inputs
+                    .iter()
+                    .map(|&i| number(i))
+                    .collect::<Result<Vec<f64>, _>>()?,
+            );
+        }
     }
     if layout.run {
         out.pop();
@@ -270,10 +473,37 @@ fn parse_rows(
             names.pop();
         }
     }
-    if out.is_empty() {
-        return Err(CsvError::NoRows { path: path.into() });
+    let steps = match layout.kind {
+        Kind::States => states.as_ref().map_or(0, |s| s.len().saturating_sub(1)),
+        _ => out.len(),
+    };
+    if steps == 0 {
+        return Err(if rows == 0 || layout.kind != Kind::States {
+            CsvError::NoRows { path: path.into() }
+        } else {
+            CsvError::OneState { path: path.into() }
+        });
     }
-    Ok((out, locations))
+    Ok(Rows {
+        kind: layout.kind,
+        inputs: out,
+        states,
+        locations,
+    })
+}
+
+/// What a recording's rows give (module doc): the references the loop takes, or what a user has, from
+/// which the references are derived once the CAF and its gain K̂ are designed
+/// (`trajectory::track::references`).
+#[derive(Clone, Debug, PartialEq, Default)]
+pub enum Given {
+    /// The references v(κ) themselves, in [`Recording::v`].
+    #[default]
+    References,
+    /// The inputs u(κ) applied over each period (one row per step; [`Recording::v`] is empty).
+    Applied(Vec<Vec<f64>>),
+    /// The states at the samples 0…N alone, the first being x0 ([`Recording::v`] is empty).
+    States(Vec<Vec<f64>>),
 }
 
 /// A recording: the initial state and the reference inputs, and for forced switching the location of
@@ -281,12 +511,62 @@ fn parse_rows(
 #[derive(Clone, Debug, PartialEq)]
 pub struct Recording {
     pub x0: Vec<f64>,
+    /// The references, one row per step; empty until derived when the file gives applied inputs or
+    /// states ([`Given`]).
     pub v: Vec<Vec<f64>>,
     /// The [`LOCATION`] column, one name per row of `v`, when the file has it.
     pub locations: Option<Vec<String>>,
+    /// What the file's rows give.
+    pub given: Given,
 }
 
-/// Parse a recording: the `# x0 = …` comment (n values) and the input rows.
+impl Recording {
+    /// The number of steps the recording gives.
+    pub fn steps(&self) -> usize {
+        match &self.given {
+            Given::References => self.v.len(),
+            Given::Applied(u) => u.len(),
+            Given::States(x) => x.len().saturating_sub(1),
+        }
+    }
+}
+
+/// The `# x0 = …` comment's n values, with its line, when the file has one.
+fn x0_line(text: &str, path: &str, n: usize) -> Result<Option<(usize, Vec<f64>)>, CsvError> {
+    let Some((line, rest)) = crate::csv::x0_comment(text) else {
+        return Ok(None);
+    };
+    let err = |reason: String| CsvError::X0 {
+        path: path.into(),
+        line,
+        reason,
+    };
+    let rest = rest
+        .trim_start()
+        .strip_prefix('=')
+        .ok_or_else(|| err("has no `=`".into()))?;
+    let vals: Result<Vec<f64>, _> = rest.split(',').map(|f| f.trim().parse::<f64>()).collect();
+    let vals = vals.map_err(|e| err(format!("has a field that is not a number ({e})")))?;
+    if vals.len() != n || vals.iter().any(|v| !v.is_finite()) {
+        return Err(err(format!(
+            "must give {n} finite values, found {}",
+            vals.len()
+        )));
+    }
+    Ok(Some((line, vals)))
+}
+
+/// The `# x0` line is missing.
+fn x0_missing(path: &str) -> CsvError {
+    CsvError::X0 {
+        path: path.into(),
+        line: 1,
+        reason: "is missing".into(),
+    }
+}
+
+/// Parse a recording of references: the `# x0 = …` comment (n values) and the rows of `v1…vm` (what
+/// `play` writes and reads back; [`parse_import`] reads what a user has too).
 pub fn parse_recording(
     text: &str,
     path: &str,
@@ -295,34 +575,85 @@ pub fn parse_recording(
     period: f64,
     max_rows: usize,
 ) -> Result<Recording, CsvError> {
-    let mut x0 = None;
-    if let Some((line, rest)) = crate::csv::x0_comment(text) {
-        let err = |reason: String| CsvError::X0 {
-            path: path.into(),
-            line,
-            reason,
-        };
-        let rest = rest
-            .trim_start()
-            .strip_prefix('=')
-            .ok_or_else(|| err("has no `=`".into()))?;
-        let vals: Result<Vec<f64>, _> = rest.split(',').map(|f| f.trim().parse::<f64>()).collect();
-        let vals = vals.map_err(|e| err(format!("has a field that is not a number ({e})")))?;
-        if vals.len() != n || vals.iter().any(|v| !v.is_finite()) {
-            return Err(err(format!(
-                "must give {n} finite values, found {}",
-                vals.len()
-            )));
+    let x0 = x0_line(text, path, n)?.ok_or_else(|| x0_missing(path))?.1;
+    let rows = parse_rows(text, path, n, m, period, max_rows, None)?;
+    Ok(Recording {
+        x0,
+        v: rows.inputs,
+        locations: rows.locations,
+        given: Given::References,
+    })
+}
+
+/// Parse a recording `synth --import` reads (module doc): references, applied inputs, or states alone,
+/// with state and input columns named in the coordinates `c`. The initial state is the `# x0` line, or
+/// when the file has none the first row's states; when it has both they must agree.
+pub fn parse_import(
+    text: &str,
+    path: &str,
+    n: usize,
+    m: usize,
+    period: f64,
+    max_rows: usize,
+    c: Coordinates,
+) -> Result<Recording, CsvError> {
+    let line = x0_line(text, path, n)?;
+    let rows = parse_rows(text, path, n, m, period, max_rows, Some(c))?;
+    let first = rows.states.as_ref().and_then(|s| s.first());
+    let x0 = match (line, first) {
+        (Some((line, x0)), Some(s0)) => {
+            let off = x0
+                .iter()
+                .zip(s0)
+                .position(|(a, b)| (a - b).abs() > X0_AGREEMENT * a.abs().max(1.0));
+            if let Some(i) = off {
+                return Err(CsvError::X0 {
+                    path: path.into(),
+                    line,
+                    reason: format!(
+                        "gives {}{} = {}, the first row's state column says {}",
+                        c.state(),
+                        i + 1,
+                        x0[i],
+                        s0[i]
+                    ),
+                });
+            }
+            x0
         }
-        x0 = Some(vals);
-    }
-    let x0 = x0.ok_or_else(|| CsvError::X0 {
-        path: path.into(),
-        line: 1,
-        reason: "is missing".into(),
-    })?;
-    let (v, locations) = parse_rows(text, path, m, period, max_rows)?;
-    Ok(Recording { x0, v, locations })
+        (Some((_, x0)), None) => x0,
+        (None, Some(s0)) if rows.kind != Kind::References => s0.clone(),
+        (None, _) => return Err(x0_missing(path)),
+    };
+    let (v, given) = match rows.kind {
+        Kind::References => (rows.inputs, Given::References),
+        Kind::Applied => (Vec::new(), Given::Applied(rows.inputs)),
+        Kind::States => (Vec::new(), Given::States(rows.states.unwrap_or_default())),
+    };
+    Ok(Recording {
+        x0,
+        v,
+        locations: rows.locations,
+        given,
+    })
+}
+
+/// How far (relative, at least absolute) the `# x0` line and the first row's states may differ: the
+/// digits a file prints, not a tolerance of the model.
+pub const X0_AGREEMENT: f64 = 1e-6;
+
+/// Read and parse a recording `synth --import` reads ([`parse_import`]) of at most `max_rows` steps.
+pub fn load_import(
+    path: &Path,
+    n: usize,
+    m: usize,
+    period: f64,
+    max_rows: usize,
+    c: Coordinates,
+) -> Result<Recording, CsvError> {
+    let p = path.display().to_string();
+    let text = read_bounded(path, &p, n + 2 * m + 2, max_rows)?;
+    parse_import(&text, &p, n, m, period, max_rows, c)
 }
 
 /// Read and parse a recording of at most `max_rows` rows.
@@ -572,5 +903,105 @@ mod tests {
                 max: 2
             }
         );
+    }
+
+    #[test]
+    fn an_import_reads_references_applied_inputs_or_states_alone() {
+        let imp = |t: &str| parse_import(t, "r.csv", 2, 1, 0.1, 9, Coordinates::Plant);
+        // The references win when the file has them (a run `simulate` wrote): as before.
+        let r = imp(RUN).unwrap();
+        assert_eq!(r.given, Given::References);
+        assert_eq!(r.v, vec![vec![0.25], vec![0.125]]);
+        // Applied inputs with the `# x0` line: every row an input.
+        let r = imp("# x0 = 1, 2\nt,u1\n0,0.5\n0.1,-0.5\n").unwrap();
+        assert_eq!(r.x0, vec![1.0, 2.0]);
+        assert!(r.v.is_empty());
+        assert_eq!(r.given, Given::Applied(vec![vec![0.5], vec![-0.5]]));
+        assert_eq!(r.steps(), 2);
+        // Applied inputs with the states and no `# x0` line: x0 is the first row's, the last row the
+        // final state (its input not read).
+        let r = imp("t,x1,x2,u1,status\n0,1,2,0.5,ok\n0.1,1,2,0.25,ok\n0.2,1,2,9,ok\n").unwrap();
+        assert_eq!(r.x0, vec![1.0, 2.0]);
+        assert_eq!(r.given, Given::Applied(vec![vec![0.5], vec![0.25]]));
+        // States alone: one row more than steps.
+        let r = imp("t,x1,x2\n0,0,0\n0.1,0.1,1\n0.2,0.3,2\n").unwrap();
+        assert_eq!(r.x0, vec![0.0, 0.0]);
+        assert_eq!(r.steps(), 2);
+        let Given::States(x) = &r.given else {
+            panic!("{r:?}")
+        };
+        assert_eq!(x.len(), 3);
+        // The `# x0` line and the first row's states must agree.
+        let e = imp("# x0 = 5, 0\nt,x1,x2\n0,0,0\n0.1,0,0\n").unwrap_err();
+        assert!(
+            matches!(e, CsvError::X0 { line: 1, .. }) && e.to_string().contains("x1 = 5"),
+            "{e}"
+        );
+        // One row of states is no step; applied inputs without x0 are refused as before.
+        assert!(matches!(
+            imp("t,x1,x2\n0,0,0\n"),
+            Err(CsvError::OneState { .. })
+        ));
+        assert!(matches!(imp("t,u1\n0,1\n"), Err(CsvError::X0 { .. })));
+        // Some states or some inputs named, not all: said.
+        let e = imp("# x0 = 0, 0\nt,x1,u1\n0,0,1\n0.1,0,1\n").unwrap_err();
+        assert!(e.to_string().contains("some of the states `x1…x2`"), "{e}");
+        let e = parse_import(
+            "# x0 = 0, 0\nt,u1\n0,1\n",
+            "r.csv",
+            2,
+            2,
+            0.1,
+            9,
+            Coordinates::Plant,
+        )
+        .unwrap_err();
+        assert!(
+            e.to_string().contains("some inputs but not all m = 2"),
+            "{e}"
+        );
+        // The references-only reader refuses what it did before.
+        assert!(matches!(
+            parse_recording(
+                "# x0 = 0, 0\nt,x1,x2,u1\n0,0,0,1\n0.1,0,0,1\n",
+                "a.csv",
+                2,
+                1,
+                0.1,
+                9
+            ),
+            Err(CsvError::Columns { .. })
+        ));
+        // Too long: the states' final row is not counted.
+        assert!(imp("t,x1,x2\n0,0,0\n0.1,0,0\n").is_ok());
+        let e = parse_import(
+            "t,x1,x2\n0,0,0\n0.1,0,0\n0.2,0,0\n",
+            "r.csv",
+            2,
+            1,
+            0.1,
+            1,
+            Coordinates::Plant,
+        )
+        .unwrap_err();
+        assert!(matches!(e, CsvError::TooLong { line: 4, .. }), "{e}");
+    }
+
+    #[test]
+    fn a_linearized_plant_s_recording_names_its_model_s_coordinates() {
+        let imp = |t: &str| parse_import(t, "r.csv", 2, 1, 0.1, 9, Coordinates::Linearized);
+        let r = imp("t,xi1,xi2,w1\n0,1,2,0.5\n0.1,1,2,0\n").unwrap();
+        assert_eq!(r.x0, vec![1.0, 2.0]);
+        assert_eq!(r.given, Given::Applied(vec![vec![0.5]]));
+        // A run `simulate` wrote of such a plant: the plant's own x and u, no references.
+        let e = imp("# x0 = 0, 0\nt,x1,x2,u1,status\n0,0,0,1,ok\n0.1,0,0,1,ok\n").unwrap_err();
+        assert!(
+            matches!(e, CsvError::Header { .. })
+                && e.to_string()
+                    .contains("`xi1…xi2` (ξ) and the inputs `w1` (w)"),
+            "{e}"
+        );
+        // Its references are read as before.
+        assert_eq!(imp("# x0 = 0, 0\nt,v1\n0,1\n").unwrap().v, vec![vec![1.0]]);
     }
 }

@@ -127,7 +127,41 @@ pub struct Schedule<'a> {
     pub P: Vec<MatRef<'a, f64>>,
 }
 
+/// What [`GenError::Infeasible`] says: what the search it ran can and cannot find, and what to do. The
+/// generator is local (module doc): an infeasible subproblem proves nothing about the task.
+fn infeasible_text(
+    x0: &[f64],
+    steps: &usize,
+    status: &SubproblemStatus,
+    switches: &Option<usize>,
+) -> String {
+    let along = match switches {
+        Some(k) => format!(
+            " along a schedule of {k} location switch{} (the forced planner tries staying, then one switch \
+             per forced edge, and many-switch schedules only when none of those certifies and its \
+             schedule search runs)",
+            if *k == 1 { "" } else { "es" }
+        ),
+        None => String::new(),
+    };
+    format!(
+        "the local generator found no trajectory from x0 = {x0:?} into Goal in {steps} steps within the \
+         input bounds{along} (solver: {status}). This is not a proof that none exists: each of its \
+         subproblems keeps the run on the side of every Unsafe piece that its previous iterate was on, \
+         starting from a run that ignores Unsafe, so a way around a wall that run crosses is not found. \
+         To go on: give a route with `synth --import` (its states, applied inputs or references), play \
+         one with `host-compiler play`, allow a longer horizon T, or let the routes of the global search \
+         (one-location tasks) propose the way"
+    )
+}
+
 impl GenProblem<'_> {
+    /// The number of location switches of the schedule, when there is one.
+    fn switches(&self) -> Option<usize> {
+        self.schedule
+            .map(|s| s.loc.windows(2).filter(|w| w[0] != w[1]).count())
+    }
+
     /// The location of step κ (the last step's for κ ≥ N).
     fn loc_at(&self, k: usize) -> crate::model::Location {
         match self.schedule {
@@ -283,11 +317,14 @@ pub enum SubproblemStatus {
 pub enum GenError {
     #[error(transparent)]
     Settings(#[from] SettingError),
-    #[error("no trajectory from x0 = {x0:?} reaches Goal in {steps} steps within the input bounds (solver: {status})")]
+    #[error("{}", infeasible_text(.x0, .steps, .status, .switches))]
     Infeasible {
         x0: Vec<f64>,
         steps: usize,
         status: SubproblemStatus,
+        /// The number of location switches of the schedule searched along (forced switching); `None`
+        /// for one location.
+        switches: Option<usize>,
     },
     #[error("the CAF matrix P is not positive definite")]
     BadMetric,
@@ -434,6 +471,7 @@ fn iterate(
                     x0: x0.to_vec(),
                     steps: prob.steps,
                     status,
+                    switches: prob.switches(),
                 });
             }
         }
@@ -442,6 +480,7 @@ fn iterate(
         x0: x0.to_vec(),
         steps: prob.steps,
         status: SubproblemStatus::NoUnsafeIterate,
+        switches: prob.switches(),
     })
 }
 
@@ -845,6 +884,35 @@ pub fn supporting_halfspace(piece: &ConvexPiece, x: &[f64]) -> (Vec<f64>, f64) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn an_infeasible_search_says_it_proves_nothing_what_limits_it_and_what_to_do() {
+        let e = |switches| GenError::Infeasible {
+            x0: vec![0.5, 0.0],
+            steps: 40,
+            status: SubproblemStatus::Solver(SolverStatus::PrimalInfeasible),
+            switches,
+        };
+        let one = e(None).to_string();
+        for what in [
+            "the local generator found no trajectory from x0 = [0.5, 0.0] into Goal in 40 steps",
+            "(solver: PrimalInfeasible)",
+            "not a proof that none exists",
+            "the side of every Unsafe piece that its previous iterate was on",
+            "`synth --import`",
+            "`host-compiler play`",
+            "longer horizon T",
+        ] {
+            assert!(one.contains(what), "`{what}` not in: {one}");
+        }
+        assert!(!one.contains("schedule"), "{one}");
+        let forced = e(Some(1)).to_string();
+        assert!(
+            forced.contains("along a schedule of 1 location switch (the forced planner tries staying, then one switch per forced edge")
+                && forced.contains("its schedule search runs"),
+            "{forced}"
+        );
+    }
     use crate::geometry::Ball;
     use crate::linalg::from_row_major;
     use crate::model::LinearAffine;

@@ -1,10 +1,12 @@
 //! Nominal trajectories of the closed loop u = K x + v(κ): the common form every trajectory source
-//! produces (CSV import of a recorded v sequence, or the automatic generator), and their simulation.
+//! produces (CSV import of a recorded run, its references derived by `track` when it gives applied inputs
+//! or states, or the automatic generator), and their simulation.
 
 pub mod csv;
 pub mod generate;
 pub mod hold;
 pub mod route;
+pub mod track;
 
 use crate::model::DiscretePlant;
 use faer::MatRef;

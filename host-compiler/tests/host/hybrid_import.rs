@@ -62,6 +62,7 @@ pub fn recording_of(t: &HybridTask, run: &HybridRun) -> Recording {
         x0: run.nominals[0].x[0].clone(),
         v,
         locations: None,
+        given: Default::default(),
     }
 }
 
@@ -153,6 +154,7 @@ fn recordings_that_do_not_cross_or_cross_into_unsafe_are_refused_with_the_reason
         x0: rec.x0.clone(),
         v: rec.v[..20].to_vec(),
         locations: None,
+        given: Default::default(),
     };
     let e = import::certify_recording(t, &short).unwrap_err();
     assert!(
@@ -177,6 +179,7 @@ fn recordings_that_do_not_cross_or_cross_into_unsafe_are_refused_with_the_reason
         x0: rec.x0.clone(),
         v: rec.v[..=ke].to_vec(),
         locations: None,
+        given: Default::default(),
     };
     let e = import::certify_recording(t, &cut).unwrap_err();
     assert!(
@@ -188,6 +191,7 @@ fn recordings_that_do_not_cross_or_cross_into_unsafe_are_refused_with_the_reason
         x0: vec![0.0; 2],
         v: rec.v.clone(),
         locations: None,
+        given: Default::default(),
     };
     assert!(matches!(
         import::certify_recording(t, &bad),
@@ -198,6 +202,7 @@ fn recordings_that_do_not_cross_or_cross_into_unsafe_are_refused_with_the_reason
         x0: unsafe_start(t, &rec),
         v: rec.v.clone(),
         locations: None,
+        given: Default::default(),
     };
     let e = import::certify_recording(t, &into).unwrap_err();
     let why = e.to_string();
@@ -220,6 +225,7 @@ fn unsafe_start(t: &HybridTask, rec: &Recording) -> Vec<f64> {
                     x0: x0.clone(),
                     v: rec.v.clone(),
                     locations: None,
+                    given: Default::default(),
                 };
                 let Ok(r) = import::replay(t, &into) else {
                     continue;
@@ -273,6 +279,7 @@ fn synth_import_takes_a_hybrid_spec() {
         x0: rec.x0.clone(),
         v: rec.v[..20].to_vec(),
         locations: None,
+        given: Default::default(),
     };
     std::fs::write(dir.join("b.csv"), csv_of(&far, t.plant.period())).unwrap();
     let src = std::fs::read_to_string(spec_path())

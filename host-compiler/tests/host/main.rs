@@ -45,6 +45,7 @@ mod geometry_regions;
 mod hybrid_import;
 mod hybrid_routes;
 mod image_exits;
+mod import_inputs;
 mod inspect_certificate;
 mod maze_vehicle;
 mod messages;

@@ -66,6 +66,7 @@ fn recording_of(t: &HybridTask, run: &HybridRun) -> Recording {
         x0: run.nominals[0].x[0].clone(),
         v,
         locations: Some(names),
+        given: Default::default(),
     }
 }
 
@@ -129,6 +130,7 @@ fn a_forced_recording_with_its_locations_certifies_as_planned_and_bad_ones_are_r
         x0: rec.x0.clone(),
         v: rec.v[..10].to_vec(),
         locations: Some(rec.locations.clone().unwrap()[..10].to_vec()),
+        given: Default::default(),
     };
     let e = import::certify_recording(&tf, &short).unwrap_err();
     assert_eq!(
@@ -351,7 +353,7 @@ fn the_game_flows_a_feedback_linearizable_plant_and_its_runs_import() {
     let design = host_compiler::caf::design(&task).unwrap();
     let lp = Loop::new(&task, &design);
     let lc = LoopConstants::new(&lp).unwrap();
-    let (_, cert) = host_compiler::cover::certify_recording(&lp, &lc, &rec);
+    let (_, cert) = host_compiler::cover::certify_recording(&lp, &lc, &rec).unwrap();
     assert_eq!(cert.delta, delta);
 
     // `synth --import` takes the directory (a budget of one trajectory: the imported run, then exit 3).

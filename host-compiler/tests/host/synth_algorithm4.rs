@@ -121,6 +121,7 @@ fn unreachable_floor_asks_for_a_new_seed_trajectory() {
         x0: t.nominal.x[0].clone(),
         v: t.nominal.v.clone(),
         locations: None,
+        given: Default::default(),
     };
     p.synthesis.min_robustness = 10.0;
     let opts = SynthOptions {
