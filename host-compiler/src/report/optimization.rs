@@ -142,9 +142,10 @@ pub fn section(h: &mut String, data: &ReportData) {
         _ => "Algorithm 1 with the SCP generator per uncovered seed (no §5.3 optimisation)",
     };
     let _ = writeln!(h, "<p>Generator: {}.</p>", escape(gen));
-    let median = o.median_gain().map(num).unwrap_or_else(|| {
-        "— (no seed started certified, so no ratio is finite)".into()
-    });
+    let median = o
+        .median_gain()
+        .map(num)
+        .unwrap_or_else(|| "— (no seed started certified, so no ratio is finite)".into());
     super::html::kv(
         h,
         &[
@@ -158,7 +159,10 @@ pub fn section(h: &mut String, data: &ReportData) {
                     count(gains.len() - finite.len())
                 ),
             ),
-            ("Median δ after ÷ δ before (seeds that started certified)", median),
+            (
+                "Median δ after ÷ δ before (seeds that started certified)",
+                median,
+            ),
             ("Growth rounds", count(o.frames.len())),
         ],
     );
