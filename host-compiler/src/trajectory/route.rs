@@ -955,7 +955,8 @@ impl RouteMap {
     }
 }
 
-fn dist(a: &[f64], b: &[f64]) -> f64 {
+/// Euclidean distance between two points of the route coordinates.
+pub(crate) fn dist(a: &[f64], b: &[f64]) -> f64 {
     a.iter()
         .zip(b)
         .map(|(x, y)| (x - y) * (x - y))

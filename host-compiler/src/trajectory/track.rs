@@ -97,19 +97,10 @@ pub enum TrackError {
 
 /// The states of the sampled model stepped from `x0` under the inputs `u` (N + 1 samples).
 pub fn replay(model: &DiscretePlant, x0: &[f64], u: &[Vec<f64>]) -> Vec<Vec<f64>> {
-    let (A, B, g) = (model.A.as_ref(), model.B.as_ref(), &model.g);
-    let (n, m) = (A.nrows(), B.ncols());
     let mut x = Vec::with_capacity(u.len() + 1);
     x.push(x0.to_vec());
     for uk in u {
-        let xk = x.last().expect("x holds x0");
-        let xn: Vec<f64> = (0..n)
-            .map(|i| {
-                (0..n).map(|j| A[(i, j)] * xk[j]).sum::<f64>()
-                    + (0..m).map(|j| B[(i, j)] * uk[j]).sum::<f64>()
-                    + g[i]
-            })
-            .collect();
+        let xn = model.step(x.last().expect("x holds x0"), uk);
         x.push(xn);
     }
     x

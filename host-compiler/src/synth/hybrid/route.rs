@@ -42,7 +42,7 @@ use super::{gen_problem, plan_guided, HybridRun, HybridTask, Leg, DURATIONS};
 use crate::cover::seeds::{Origin, Proposal, Routing};
 use crate::property::{ConvexPiece, ConvexSets};
 use crate::trajectory::generate::{generate_from, GenSettings};
-use crate::trajectory::route::{timed_guess, Route};
+use crate::trajectory::route::{dist, timed_guess, Route};
 use crate::trajectory::Nominal;
 
 /// The sizes of Unsafe (fractions, about each ellipsoid's centre) a route's first linearisation point
@@ -191,12 +191,4 @@ fn lift(route: &Route, coords: &[usize], x0: &[f64]) -> Vec<Vec<f64>> {
             x
         })
         .collect()
-}
-
-fn dist(a: &[f64], b: &[f64]) -> f64 {
-    a.iter()
-        .zip(b)
-        .map(|(x, y)| (x - y) * (x - y))
-        .sum::<f64>()
-        .sqrt()
 }
