@@ -4,7 +4,8 @@
 //!   1. adds the rustup target `thumbv7em-none-eabihf` if missing;
 //!   2. installs `qemu-system-arm` and `chromium` (the headless browser of `host-compiler play`'s
 //!      end-to-end test) with apt-get if missing (as root; otherwise prints the command);
-//!   3. `cargo test --workspace --exclude qemu-tests` (host crates, with that browser test);
+//!   3. `cargo test --workspace --features qemu-tests/skip-hil` (host crates, with that browser test; the
+//!      HIL test binary compiled empty);
 //!   4. the firmware's control loop on the host: `cargo test --target <host triple> -p control-loop` in
 //!      `firmware/` (the loop crate is `no_std` but tested with std against a mock board; the explicit
 //!      `--target` overrides the firmware workspace's default `thumbv7em-none-eabihf`);
@@ -16,7 +17,8 @@
 //!      (`llvm-objdump`, `llvm-symbolizer`) to its origin and chain of inlined callers, and fails naming
 //!      every origin not listed in `firmware/panic-allowlist.txt` (paths inside dependencies that remain,
 //!      each with why);
-//!   7. the QEMU hardware-in-the-loop suite: `cargo test -p qemu-tests` (it synthesises the shipped
+//!   7. the QEMU hardware-in-the-loop suite: `cargo test --workspace --test hil` (the same package
+//!      selection as step 3, so the same dependency features and no second compile; it synthesises the shipped
 //!      examples' images and records every session's stack high-water mark);
 //!   8. board budgets: every board built with the longest shipped example's image, its flash and its RAM
 //!      (static + the HIL suite's largest stack mark) against [`boards::BUDGETS`]; fails naming the board
@@ -343,14 +345,14 @@ fn test() -> ExitCode {
         ensure_chromium,
     );
     steps.run(
-        "host tests: cargo test --workspace --exclude qemu-tests --no-fail-fast",
+        "host tests: cargo test --workspace --features qemu-tests/skip-hil --no-fail-fast",
         || {
             let mut c = cargo();
             c.args([
                 "test",
                 "--workspace",
-                "--exclude",
-                "qemu-tests",
+                "--features",
+                "qemu-tests/skip-hil",
                 "--no-fail-fast",
             ]);
             run(c)
@@ -389,7 +391,9 @@ fn test() -> ExitCode {
             steps.skip(&name, "the target is missing");
         }
     }
-    let hil = "HIL: cargo test -p qemu-tests --no-fail-fast";
+    // The same package selection as the host tests' (`--workspace`), so that the dependencies resolve to
+    // the same features and nothing the host step compiled is compiled again (qemu-tests' `skip-hil`).
+    let hil = "HIL: cargo test --workspace --test hil --no-fail-fast";
     let hil_ok = match (target_ok, qemu_ok) {
         (true, true) => steps.run(hil, || {
             // Figures of an earlier run would be mistaken for this run's.
@@ -399,7 +403,7 @@ fn test() -> ExitCode {
                     .map_err(|e| format!("removing {}: {e}", peaks.display()))?;
             }
             let mut c = cargo();
-            c.args(["test", "-p", "qemu-tests", "--no-fail-fast"]);
+            c.args(["test", "--workspace", "--test", "hil", "--no-fail-fast"]);
             run(c)
         }),
         (false, _) => {
