@@ -164,7 +164,21 @@ pub fn run_with(
     x0: &[f64],
     first_seq: u32,
     steps: usize,
+    plant: impl FnMut(&[f64], &[f64]) -> Result<Vec<f64>, String>,
+) -> Result<Trace, HilError> {
+    run_until(q, host, x0, first_seq, steps, plant, |_, _| false)
+}
+
+/// [`run_with`] that also ends after the first sample at which `done(x, controller states)` holds (the
+/// start included): a test that judges a run only up to Goal need not exchange the periods after it.
+pub fn run_until(
+    q: &mut Qemu,
+    host: &mut HostEvaluator<'_>,
+    x0: &[f64],
+    first_seq: u32,
+    steps: usize,
     mut plant: impl FnMut(&[f64], &[f64]) -> Result<Vec<f64>, String>,
+    mut done: impl FnMut(&[f64], &[f64]) -> bool,
 ) -> Result<Trace, HilError> {
     let mut trace = Trace {
         states: vec![x0.to_vec()],
@@ -173,6 +187,9 @@ pub fn run_with(
     };
     let mut x = x0.to_vec();
     for k in 0..steps {
+        if done(&x, &host.extension()) {
+            break;
+        }
         let seq = first_seq.wrapping_add(k as u32);
         let reply = exchange(q, seq, &x, |xf| host.step(xf))?;
         let u: Vec<f64> = reply.u.as_slice().iter().map(|&v| v as f64).collect();

@@ -7,8 +7,8 @@
 //!
 //! Then the certified image as `synth` makes it from `examples/fl-4-9.toml` (its maps derived by
 //! `model::feedback_linearizable`), from 50 seeded initial states in Init: every run meets the spec on the
-//! plant (Goal within T; Unsafe never entered and every input in ‖F‖ ≤ 2 before Goal), bit for bit with
-//! the host, and the worst step cost is printed. The same for the torque-driven pendulum
+//! plant (Goal within T; Unsafe never entered and every input in ‖F‖ ≤ 2 before Goal; each run ends at
+//! Goal), bit for bit with the host, and the worst step cost is printed. The same for the torque-driven pendulum
 //! (`examples/fl-pendulum.toml`, a law that depends on ξ, bounded over its operating region), whose runs
 //! must also stay inside that region. And the differentially flat planar quadrotor
 //! (`examples/flat-quadrotor.toml`): the firmware keeps the thrust and its rate as states of its own, the
@@ -26,7 +26,7 @@
 
 use host_compiler::property::input_bound;
 use host_compiler::verify::input_slack;
-use qemu_tests::closed_loop::{run_with, HostEvaluator};
+use qemu_tests::closed_loop::{run_until, run_with, HostEvaluator};
 use qemu_tests::firmware::{self, FirmwareConfig};
 use qemu_tests::images::{
     accepted_starts, fl_4_9, fl_4_9_certified, fl_pendulum_certified, flat_quadrotor_certified,
@@ -120,7 +120,8 @@ fn flat_quadrotor_certified_image_meets_the_spec_from_50_starts() {
 
 /// 50 seeded starts in Init that the image accepts, each run on the firmware against the plant's flow:
 /// Goal within T; before it, no sample in Unsafe or outside the operating region, every reply `Ok`
-/// with its input in the plant's input set, bit for bit with the host evaluator (`run_with`).
+/// with its input in the plant's input set, bit for bit with the host evaluator; each run ends at the
+/// first sample in Goal (`run_until`).
 fn certified_image_meets_the_spec_from_50_starts(
     name: &str,
     task: &host_compiler::task::Task,
@@ -156,9 +157,16 @@ fn certified_image_meets_the_spec_from_50_starts(
     for (r, x0) in starts.iter().enumerate() {
         let mut q = Qemu::launch(&elf, Duration::from_secs(120)).unwrap_or_else(|e| panic!("{e}"));
         let mut host = HostEvaluator::new(img);
-        let trace = run_with(&mut q, &mut host, x0, 0, task.steps, |x, u| {
-            PlantFlow::flow(&maps.plant, x, u, h)
-        })
+        // The run is judged up to Goal (below), so it ends there.
+        let trace = run_until(
+            &mut q,
+            &mut host,
+            x0,
+            0,
+            task.steps,
+            |x, u| PlantFlow::flow(&maps.plant, x, u, h),
+            |x, z| goal.contains(&maps.xi_at(x, z)),
+        )
         .unwrap_or_else(|e| panic!("{name} run {r} from {x0:?}: {e}"));
         // ξ of each sample, read with the controller's states there (a flat plant's thrust and its rate).
         let xi: Vec<Vec<f64>> = trace
