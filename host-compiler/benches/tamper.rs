@@ -15,36 +15,43 @@
 //! The images are synthesised here by `host-compiler synth` from the examples that take seconds; the
 //! others are skipped, and the bench prints which and why.
 //!
-//! `cargo bench -p host-compiler --bench tamper` (`TAMPER_QUICK=1`: one example, a few hundred tamperings).
+//! `cargo bench -p host-compiler --bench tamper` (`TAMPER_QUICK=1`: one example, a few hundred tamperings;
+//! `TAMPER_EXAMPLES=double-integrator,fl-pendulum`: only those examples, by file stem).
 
 use host_compiler::benchkit::{write_rows, Row};
 use host_compiler::verification::tamper::{campaign, Campaign};
 use std::path::PathBuf;
 use std::process::Command;
 
-/// An example the bench synthesises: its file and the edits (each `from` occurs once) that keep its
-/// synthesis within seconds.
+/// An example the bench synthesises: its file, the edits (each `from` occurs once) that keep its
+/// synthesis within seconds, and about how many tamperings to verify (every word of a small image is
+/// perturbed whatever the budget; a nonlinear plant's verifications integrate its flow and cost most).
 struct Example {
     file: &'static str,
     edits: &'static [(&'static str, &'static str)],
+    budget: usize,
 }
 
 const EXAMPLES: &[Example] = &[
     Example {
         file: "double-integrator.toml",
         edits: &[],
+        budget: 4_000,
     },
     Example {
         file: "planar-vehicle.toml",
         edits: &[("max_trajectories = 64", "max_trajectories = 4")],
+        budget: 6_000,
     },
     Example {
         file: "fl-pendulum.toml",
         edits: &[("max_trajectories = 32", "max_trajectories = 4")],
+        budget: 1_500,
     },
     Example {
         file: "hybrid-forced-cart.toml",
         edits: &[],
+        budget: 4_000,
     },
 ];
 
@@ -94,13 +101,23 @@ fn main() {
     for (what, why) in SKIPPED {
         println!("skipped {what}: {why}");
     }
-    for ex in EXAMPLES.iter().take(if quick { 1 } else { EXAMPLES.len() }) {
+    let only: Option<Vec<String>> = std::env::var("TAMPER_EXAMPLES")
+        .ok()
+        .map(|v| v.split(',').map(|s| s.trim().to_string()).collect());
+    let chosen = EXAMPLES
+        .iter()
+        .filter(|ex| {
+            only.as_ref()
+                .is_none_or(|o| o.iter().any(|n| ex.file.trim_end_matches(".toml") == n))
+        })
+        .take(if quick { 1 } else { EXAMPLES.len() });
+    for ex in chosen {
         let Some((spec, bytes)) = synth(ex, &dir) else {
             println!("skipped {}: its synthesis failed", ex.file);
             continue;
         };
         let problem = host_compiler::spec::load(&spec).expect("the synthesised spec loads");
-        let budget = if quick { 300 } else { 4_000 };
+        let budget = if quick { 300 } else { ex.budget };
         let t = std::time::Instant::now();
         let c = campaign(&problem, &bytes, budget, 42);
         println!(
