@@ -122,15 +122,53 @@ pub fn drift_against(
     a_p: f64,
 ) -> f64 {
     let dot = |x: &[f64]| -> f64 { n.iter().zip(x).map(|(a, b)| a * b).sum() };
+    (h * (-dot(f)).max(0.0) + 0.5 * h * h * (-dot(a_f)).max(0.0) + n_dual * f_p * chi3(h, a_p))
+        * (1.0 + 1e-9)
+}
+
+/// χ₃(h) of the module doc for a = `a_p` = ‖A‖_P: the remainder's weight in [`drift_against`], rounded
+/// up (the series' tail is bounded by its next terms' geometric majorant where the subtraction would
+/// cancel).
+pub fn chi3(h: f64, a_p: f64) -> f64 {
     let t = a_p * h;
     // χ₃(h) = h (e^t − 1 − t − t²/2)/t, by its series where the subtraction would cancel.
-    let chi3 = if t < 1e-2 {
+    if t < 1e-2 {
         h * t * t / 6.0 * (1.0 + t / 4.0 + t * t / 20.0 + t * t * t / 100.0)
     } else {
         h * (t.exp_m1() - t - 0.5 * t * t) / t
-    };
-    (h * (-dot(f)).max(0.0) + 0.5 * h * h * (-dot(a_f)).max(0.0) + n_dual * f_p * chi3)
-        * (1.0 + 1e-9)
+    }
+}
+
+/// The gradient of [`drift_against`] with respect to f, the direction n held fixed: its terms are
+/// convex in f (a positive part of a linear form, and a norm), and this is the subgradient that takes
+/// each positive part's side at f (0 on the tie). `a` is A as a row-major n×n slice, `pf` = P f/‖f‖_P
+/// (the gradient of ‖f‖_P; zeros at f = 0).
+#[allow(clippy::too_many_arguments)]
+pub fn drift_against_grad(
+    n: &[f64],
+    f: &[f64],
+    a_f: &[f64],
+    a: &[f64],
+    h: f64,
+    n_dual: f64,
+    pf: &[f64],
+    a_p: f64,
+) -> Vec<f64> {
+    let dim = n.len();
+    let dot = |x: &[f64]| -> f64 { n.iter().zip(x).map(|(a, b)| a * b).sum() };
+    let c3 = n_dual * chi3(h, a_p);
+    let mut g: Vec<f64> = pf.iter().map(|v| c3 * v).collect();
+    if dot(f) < 0.0 {
+        g.iter_mut().zip(n).for_each(|(g, ni)| *g -= h * ni);
+    }
+    if dot(a_f) < 0.0 {
+        // ∇_f (−nᵀA f) = −Aᵀn.
+        for (j, gj) in g.iter_mut().enumerate() {
+            let atn: f64 = (0..dim).map(|i| a[i * dim + j] * n[i]).sum();
+            *gj -= 0.5 * h * h * atn;
+        }
+    }
+    g.iter().map(|v| v * (1.0 + 1e-9)).collect()
 }
 
 #[cfg(test)]

@@ -145,8 +145,7 @@ impl HybridTask {
                     .map_err(|e| HybridSynthError::Certify {
                         loc,
                         reason: e.to_string(),
-                    })?
-                    .with_directional_unsafe(),
+                    })?,
             );
         }
         let kind_of = |k: EdgeKind| plant.edges().iter().position(|e| e.kind == k);

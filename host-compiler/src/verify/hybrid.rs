@@ -426,11 +426,7 @@ pub fn recheck(
         .collect();
     let lcs: Vec<Option<LoopConstants>> = lps
         .iter()
-        .map(|lp| {
-            LoopConstants::new(lp)
-                .ok()
-                .map(LoopConstants::with_directional_unsafe)
-        })
+        .map(|lp| LoopConstants::new(lp).ok())
         .collect();
     let f32s = |b: &[u8]| -> Vec<f64> {
         b.chunks_exact(4)

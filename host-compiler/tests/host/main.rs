@@ -44,6 +44,7 @@ mod geometry_polytope;
 mod geometry_regions;
 mod hybrid_import;
 mod hybrid_routes;
+mod intersample_directional;
 mod image_exits;
 mod import_inputs;
 mod inspect_certificate;
