@@ -316,6 +316,7 @@ impl<'a, 'b> Pieces<'a, 'b> {
                 let c = &cl[j];
                 gx = c.dist_grad.clone();
                 let gf = c.base_grad_f(
+                    self.lp.P,
                     &f,
                     cp.A.as_ref(),
                     self.lc.a_norm,
@@ -424,10 +425,12 @@ pub struct PieceClearance {
 }
 
 impl PieceClearance {
-    /// ∂base/∂f with the normal and the tilt held fixed: −∇_f drift_n − c_w·φ·P f/‖f‖_P (`pf` = P f/‖f‖_P).
-    /// The optimiser's ascent direction only; the value is what is certified.
+    /// ∂base/∂f with the normal and the tilt held fixed: −∇_f drift_n − c_w·φ·P f/‖f‖_P (`pf` = P f/‖f‖_P,
+    /// zeros at f = 0). The optimiser's ascent direction only; the value is what is certified.
+    #[allow(clippy::too_many_arguments)]
     pub fn base_grad_f(
         &self,
+        P: faer::MatRef<'_, f64>,
         f: &[f64],
         a: faer::MatRef<'_, f64>,
         a_p: f64,
@@ -437,6 +440,23 @@ impl PieceClearance {
     ) -> Vec<f64> {
         let a_f = mat_vec(a, f);
         let a_rows = crate::linalg::to_row_major(a);
+        // The gradient of the remainder's weight ([`remainder_weight`]): of ‖f‖_P, or of ‖A²f‖_P/a²
+        // where that is the smaller.
+        let f_p = p_norm(P, f);
+        let a2f = mat_vec(a, &a_f);
+        let a2f_p = p_norm(P, &a2f);
+        let gw: Vec<f64> = if a_p > 0.0 && a2f_p / (a_p * a_p) < f_p {
+            if a2f_p > 0.0 {
+                // ∇ ‖A²f‖_P = (A²)ᵀ P A²f / ‖A²f‖_P.
+                let pa = mat_vec(P, &a2f);
+                let t = mat_t_vec(a, &mat_t_vec(a, &pa));
+                t.iter().map(|v| v / (a2f_p * a_p * a_p)).collect()
+            } else {
+                vec![0.0; f.len()]
+            }
+        } else {
+            pf.to_vec()
+        };
         let gd = crate::model::drift_against_grad(
             &self.normal,
             f,
@@ -444,7 +464,7 @@ impl PieceClearance {
             &a_rows,
             h,
             self.n_dual,
-            pf,
+            &gw,
             a_p,
         );
         gd.iter()
@@ -452,6 +472,20 @@ impl PieceClearance {
             .map(|(g, p)| -g - self.c_w * phi * p)
             .collect()
     }
+}
+
+/// The weight of the third-order remainder in the drift along a direction
+/// ([`crate::model::drift_against`]'s `f_p`): ‖f‖_P, or ‖A²f‖_P/a² where smaller (`a_f` = A f, `a_p` = a ≥
+/// ‖A‖_P). The remainder is R₃(τ)f = Σ_{i≥0} A^i(A²f) τ^{i+3}/(i+3)!, so ‖R₃(τ)f‖_P ≤ ‖A²f‖_P·χ₃(τ)/a²
+/// as well as ‖f‖_P·χ₃(τ) (`model::intersample`'s module doc); χ₃(τ)/a² = τ³ Σ_i (aτ)^i/(i+3)! grows with
+/// a, so a rounded up stays an upper bound. For a chain of integrators (A² f = 0 on a double integrator)
+/// the remainder vanishes and the drift is exact to second order.
+fn remainder_weight(P: faer::MatRef<'_, f64>, a: faer::MatRef<'_, f64>, a_f: &[f64], f_p: f64, a_p: f64) -> f64 {
+    if !(a_p > 0.0) {
+        return f_p;
+    }
+    let a2f_p = p_norm(P, &mat_vec(a, a_f));
+    f_p.min(a2f_p / (a_p * a_p) * (1.0 + 1e-12))
 }
 
 /// The convex pieces of `set` at the sample x̃ with the held vector field f (module doc, "Between samples
@@ -474,6 +508,7 @@ pub fn piece_clearances(
     let pieces = set.convex_pieces()?;
     let a_f = mat_vec(a, f);
     let f_p = p_norm(P, f);
+    let weight = remainder_weight(P, a, &a_f, f_p, a_p);
     let mut out = Vec::with_capacity(pieces.len());
     for piece in pieces {
         let w = piece.try_dist(x, metric).ok()?;
@@ -500,7 +535,7 @@ pub fn piece_clearances(
         let tilt = ((g + eps_p).powi(2) - dj * dj).max(0.0).sqrt();
         let c_w = 2.0 * (tilt + eps_p) / g.min(dj) * (1.0 + 1e-9);
         let n_dual = roots.dual_norm(&normal);
-        let drift = crate::model::drift_against(&normal, f, &a_f, h, n_dual, f_p, a_p);
+        let drift = crate::model::drift_against(&normal, f, &a_f, h, n_dual, weight, a_p);
         let base = dj - drift - c_w * phi * f_p * (1.0 + 1e-9);
         if !base.is_finite() {
             return None;

@@ -24,7 +24,9 @@
 //!   −nᵀd(τ) ≤ h·max(0, −nᵀf) + (h²/2)·max(0, −nᵀAf) + ‖n‖_{P⁻¹}‖f‖_P·χ₃(h),
 //!
 //! each term being largest at τ = h. The first two are exact for a chain of integrators' leading terms;
-//! the last is third order in h.
+//! the last is third order in h. Since R₃(τ)f = Σ_{i≥0} A^i(A²f)τ^{i+3}/(i+3)!, also
+//! ‖R₃(τ)f‖_P ≤ ‖A²f‖_P·χ₃(τ)/a², so ‖f‖_P in the last term may be replaced by min(‖f‖_P, ‖A²f‖_P/a²)
+//! (`f_p` of [`drift_against`]): on a double integrator A²f = 0 and the bound is exact to second order.
 
 use super::{check_finite, check_len, ContinuousPlant, ModelError};
 use faer::{Mat, MatRef, Side};
@@ -110,7 +112,8 @@ impl ContinuousPlant {
 
 /// The directional bound of the module doc: an upper bound on sup_{τ∈[0,h]} −nᵀd(τ), how far the held
 /// plant moves against `n` within one period, for the vector field `f` at the sample and `a_f` = A f.
-/// `n_dual` = ‖n‖_{P⁻¹}, `f_p` = ‖f‖_P and `a_p` = ‖A‖_P (the induced norm) in the caller's metric. Each
+/// `n_dual` = ‖n‖_{P⁻¹}, `f_p` = ‖f‖_P (or min(‖f‖_P, ‖A²f‖_P/a²), module doc) and `a_p` = a ≥ ‖A‖_P (the
+/// induced norm) in the caller's metric. Each
 /// term is rounded up by a relative 10⁻⁹.
 pub fn drift_against(
     n: &[f64],
@@ -207,6 +210,15 @@ mod directional_tests {
                     crate::linalg::p_norm(P.as_ref(), &f),
                     a_p,
                 );
+                // The remainder weighted by ‖A²f‖_P/a² where smaller (module doc).
+                let a2f = [
+                    A[(0, 0)] * a_f[0] + A[(0, 1)] * a_f[1],
+                    A[(1, 0)] * a_f[0] + A[(1, 1)] * a_f[1],
+                ];
+                let weight = crate::linalg::p_norm(P.as_ref(), &f)
+                    .min(crate::linalg::p_norm(P.as_ref(), &a2f) / (a_p * a_p));
+                let tight =
+                    drift_against(&n, &f, &a_f, h, roots.dual_norm(&n), weight, a_p);
                 // d(τ) = Φ(τ) f with Φ(τ) the (1,2) block of expm([[A, I], [0, 0]] τ).
                 let mut worst = f64::NEG_INFINITY;
                 for i in 0..=200 {
@@ -223,6 +235,7 @@ mod directional_tests {
                     worst = worst.max(-(n[0] * d[0] + n[1] * d[1]));
                 }
                 assert!(worst <= bound, "{A:?} f {f:?} n {n:?}: {worst} > {bound}");
+                assert!(worst <= tight, "{A:?} f {f:?} n {n:?}: {worst} > {tight}");
             }
         }
     }
