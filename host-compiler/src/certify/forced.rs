@@ -280,8 +280,8 @@ pub fn certify_forced_formula(
     segments: &[ForcedSegment<'_>],
     task: &crate::property::TemporalTask,
 ) -> Result<ForcedFormulaCertificate, ForcedError> {
-    use crate::robustness::mtl::{Margins, Trace, TubeFormula};
     use super::pieces::PieceClearance;
+    use crate::robustness::mtl::{Margins, Trace, TubeFormula};
     let formula = |e: String| ForcedError::Formula(e);
     let last = check_chain(segments)?;
     if let Some(i) = segments

@@ -249,18 +249,16 @@ impl<'a, 'b> Pieces<'a, 'b> {
     /// "Between samples along a direction"), so it misses piece j while base_j − slope_j·w > 0:
     ///   r < (base_j − slope_j·held) / (γ·slope_j),
     /// and Unsafe for r below the least of these over its pieces.
-    pub fn directional_margin(
-        &self,
-        nom: &Nominal,
-        k: usize,
-        held: f64,
-    ) -> Option<(f64, usize)> {
+    pub fn directional_margin(&self, nom: &Nominal, k: usize, held: f64) -> Option<(f64, usize)> {
         let cl = self.clearances(self.lp.unsafe_set()?, nom, k)?;
         let (j, least) = cl
             .iter()
             .map(|c| (c.base - c.slope * held) / (self.lc.gamma * c.slope))
             .enumerate()
-            .fold((0, f64::INFINITY), |b, (j, m)| if m < b.1 { (j, m) } else { b });
+            .fold(
+                (0, f64::INFINITY),
+                |b, (j, m)| if m < b.1 { (j, m) } else { b },
+            );
         if least.is_nan() {
             return None;
         }
@@ -480,12 +478,19 @@ impl PieceClearance {
 /// as well as ‖f‖_P·χ₃(τ) (`model::intersample`'s module doc); χ₃(τ)/a² = τ³ Σ_i (aτ)^i/(i+3)! grows with
 /// a, so a rounded up stays an upper bound. For a chain of integrators (A² f = 0 on a double integrator)
 /// the remainder vanishes and the drift is exact to second order.
-fn remainder_weight(P: faer::MatRef<'_, f64>, a: faer::MatRef<'_, f64>, a_f: &[f64], f_p: f64, a_p: f64) -> f64 {
-    if !(a_p > 0.0) {
-        return f_p;
+fn remainder_weight(
+    P: faer::MatRef<'_, f64>,
+    a: faer::MatRef<'_, f64>,
+    a_f: &[f64],
+    f_p: f64,
+    a_p: f64,
+) -> f64 {
+    if a_p > 0.0 {
+        let a2f_p = p_norm(P, &mat_vec(a, a_f));
+        f_p.min(a2f_p / (a_p * a_p) * (1.0 + 1e-12))
+    } else {
+        f_p
     }
-    let a2f_p = p_norm(P, &mat_vec(a, a_f));
-    f_p.min(a2f_p / (a_p * a_p) * (1.0 + 1e-12))
 }
 
 /// The convex pieces of `set` at the sample x̃ with the held vector field f (module doc, "Between samples

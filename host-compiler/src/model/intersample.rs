@@ -217,8 +217,7 @@ mod directional_tests {
                 ];
                 let weight = crate::linalg::p_norm(P.as_ref(), &f)
                     .min(crate::linalg::p_norm(P.as_ref(), &a2f) / (a_p * a_p));
-                let tight =
-                    drift_against(&n, &f, &a_f, h, roots.dual_norm(&n), weight, a_p);
+                let tight = drift_against(&n, &f, &a_f, h, roots.dual_norm(&n), weight, a_p);
                 // d(τ) = Φ(τ) f with Φ(τ) the (1,2) block of expm([[A, I], [0, 0]] τ).
                 let mut worst = f64::NEG_INFINITY;
                 for i in 0..=200 {

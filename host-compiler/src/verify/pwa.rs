@@ -392,9 +392,7 @@ pub fn recheck(judge: &Judge<'_>, image: &Image<'_>) -> Result<PwaRecheck, Reche
                 Some(us) => {
                     let d = -us.signed_dist(c, &metric).value;
                     let field = judge.plant.vector_field(0, c, &u);
-                    let exc = field
-                        .as_ref()
-                        .map_or(0.0, |f| phi * p_norm(P.as_ref(), f));
+                    let exc = field.as_ref().map_or(0.0, |f| phi * p_norm(P.as_ref(), f));
                     // A run deviates from the centre's held flow by at most w over the period.
                     let w = L.gamma * r + phi * beta * eps_round;
                     let directional = match (&field, continuous) {

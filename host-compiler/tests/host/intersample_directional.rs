@@ -41,7 +41,13 @@ fn nominal(ol: &OwnedLoop, x0: &[f64], u: &[[f64; 2]]) -> Nominal {
 
 /// The least P-distance from Unsafe over one period of the exact flow (x' = v, v' = u held), from the
 /// sample state `x` under the input `u`, at 400 instants.
-fn exact_least(us: &dyn host_compiler::geometry::Region, metric: &Metric, x: &[f64], u: &[f64], h: f64) -> f64 {
+fn exact_least(
+    us: &dyn host_compiler::geometry::Region,
+    metric: &Metric,
+    x: &[f64],
+    u: &[f64],
+    h: f64,
+) -> f64 {
     (0..=400)
         .map(|i| {
             let t = h * i as f64 / 400.0;
@@ -88,16 +94,19 @@ fn the_certified_clearance_never_exceeds_the_exact_flows_least_distance() {
     for (i, (x0, u)) in cases.iter().enumerate() {
         let nom = nominal(&ol, x0, &[*u, *u]);
         let d = -us.signed_dist(&nom.x[0], &metric).value;
-        if !(d > 0.0) {
+        if d.is_nan() || d <= 0.0 {
             continue;
         }
         let r = pc.unsafe_margin(&nom, 0, d, eps);
-        if !(r > 0.0) {
+        if r.is_nan() || r <= 0.0 {
             continue;
         }
         let (iso, dir) = pc.unsafe_clearance(&nom, 0, r, eps).unwrap();
         let certified = iso.max(dir.unwrap_or(f64::NEG_INFINITY));
-        assert!(certified >= -1e-9 * d, "case {i}: the margin's clearance {certified}");
+        assert!(
+            certified >= -1e-9 * d,
+            "case {i}: the margin's clearance {certified}"
+        );
         if i == 0 {
             let dir = dir.expect("the maze's walls are convex pieces");
             assert!(
@@ -105,7 +114,10 @@ fn the_certified_clearance_never_exceeds_the_exact_flows_least_distance() {
                 "along the wall the directional clearance {dir} should beat the isotropic {iso}"
             );
             let (_, dir0) = pc.unsafe_clearance(&nom, 0, 0.0, eps).unwrap();
-            let fp = p_norm(lp.P, &lp.plant.vector_field(0, &nom.x[0], &nom.u[0]).unwrap());
+            let fp = p_norm(
+                lp.P,
+                &lp.plant.vector_field(0, &nom.x[0], &nom.u[0]).unwrap(),
+            );
             assert!(
                 dir0.unwrap() > d - lc.phi * fp,
                 "the directional clearance of the nominal itself should beat d − φ‖f‖_P"
@@ -139,10 +151,16 @@ fn the_certified_clearance_never_exceeds_the_exact_flows_least_distance() {
             "case {i} (x0 {x0:?}, u {u:?}): certified clearance {certified} (iso {iso}, dir {dir:?}) \
              above the exact flow's least distance {least}"
         );
-        assert!(least > 0.0, "case {i}: a run from the certified ball entered Unsafe");
+        assert!(
+            least > 0.0,
+            "case {i}: a run from the certified ball entered Unsafe"
+        );
     }
     assert!(checked >= 30, "only {checked} cases with a positive margin");
-    assert!(better >= 5, "the directional clearance won in only {better} of {checked}");
+    assert!(
+        better >= 5,
+        "the directional clearance won in only {better} of {checked}"
+    );
 }
 
 /// Remark 2.29's view: `G !Unsafe` through the MTL tube certifies the radius Theorem 4.7's Unsafe piece
@@ -155,7 +173,11 @@ fn the_mtl_tube_certifies_theorem_4_7s_unsafe_radius_along_a_wall() {
     let nom = nominal(&ol, &[1.7, 3.0, 0.0, 0.6], &[[0.0, 0.0]; 6]);
     let c = certify(&lp, &lc, &nom);
     // The isotropic bound alone at the first sample, against which the directional one is needed.
-    let d0 = -lp.unsafe_set().unwrap().signed_dist(&nom.x[0], pc.metric()).value;
+    let d0 = -lp
+        .unsafe_set()
+        .unwrap()
+        .signed_dist(&nom.x[0], pc.metric())
+        .value;
     let f = lp.plant.vector_field(0, &nom.x[0], &nom.u[0]).unwrap();
     let held = lc.held_disturbance(c.eps_f32);
     let iso = pc.isotropic_margin(d0, p_norm(lp.P, &f), held);
@@ -187,20 +209,37 @@ fn the_unsafe_gradient_follows_the_directional_margin() {
     let nom = nominal(&ol, &[1.7, 3.0, 0.0, 0.6], &[[0.2, 0.1], [0.0, 0.0]]);
     let eps = 1e-6;
     let (val, g) = pc.unsafe_grad(&nom, 0, eps);
-    let d = -lp.unsafe_set().unwrap().signed_dist(&nom.x[0], pc.metric()).value;
+    let d = -lp
+        .unsafe_set()
+        .unwrap()
+        .signed_dist(&nom.x[0], pc.metric())
+        .value;
     assert_eq!(val, pc.unsafe_margin(&nom, 0, d, eps));
     let f = lp.plant.vector_field(0, &nom.x[0], &nom.u[0]).unwrap();
     let iso = pc.isotropic_margin(d, p_norm(lp.P, &f), lc.held_disturbance(eps));
-    assert!(val > iso, "the directional margin should bind: {val} vs {iso}");
+    assert!(
+        val > iso,
+        "the directional margin should bind: {val} vs {iso}"
+    );
     let value_at = |dv: [f64; 2]| {
         let v: Vec<Vec<f64>> = nom
             .v
             .iter()
             .enumerate()
-            .map(|(k, v)| if k == 0 { vec![v[0] + dv[0], v[1] + dv[1]] } else { v.clone() })
+            .map(|(k, v)| {
+                if k == 0 {
+                    vec![v[0] + dv[0], v[1] + dv[1]]
+                } else {
+                    v.clone()
+                }
+            })
             .collect();
         let n2 = lp.simulate(&nom.x[0], &v);
-        let d = -lp.unsafe_set().unwrap().signed_dist(&n2.x[0], pc.metric()).value;
+        let d = -lp
+            .unsafe_set()
+            .unwrap()
+            .signed_dist(&n2.x[0], pc.metric())
+            .value;
         pc.unsafe_margin(&n2, 0, d, eps)
     };
     let hstep = 1e-5;

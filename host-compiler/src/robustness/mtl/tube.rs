@@ -219,15 +219,12 @@ impl<'m, 's> TubeFormula<'m, 's> {
                             s_hi: d.iter().map(|v| v + m.r).collect(),
                             // The closed interval: its inside from x̃(k), its ends from their samples.
                             l_lo: (0..ni)
-                                .map(|k| {
-                                    (d[k] - m.between[k]).min(d[k] - m.r).min(d[k + 1] - m.r)
-                                })
+                                .map(|k| (d[k] - m.between[k]).min(d[k] - m.r).min(d[k + 1] - m.r))
                                 .collect(),
                             l_hi: (0..ni)
                                 .map(|k| {
-                                    let iso = (d[k] + m.between[k])
-                                        .max(d[k] + m.r)
-                                        .max(d[k + 1] + m.r);
+                                    let iso =
+                                        (d[k] + m.between[k]).max(d[k] + m.r).max(d[k + 1] + m.r);
                                     // Outside the set by at least c over the whole interval.
                                     match clear.and_then(|c| c.get(k)) {
                                         Some(&c) if c > 0.0 => iso.min(-c),
