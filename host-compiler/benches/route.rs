@@ -9,6 +9,17 @@
 //!   ≥ 0.99;
 //! * `route_maze_violations`: violations the Monte Carlo and the falsifier found (must be 0).
 //!
+//! * `maze_pointmass_T_s` (issue 47): the shortest horizon T (s) at which the point mass's synthesis
+//!   certifies ≥ 0.99 of Init (the coverage lower bound), target ≤ 80 s: the example's spec with only
+//!   `horizon` replaced, scanned downwards in steps of `T_STEP` from the example's T while it certifies,
+//!   then the last step halved once (each run with a short Monte Carlo and no falsifier, cancelled after
+//!   `T_BUDGET`; the example's own run above keeps those);
+//! * `intersample_margin_ratio`: on the first certified trajectory at that T, the certified lower bound
+//!   on the nominal's distance from Unsafe between samples (the larger of the isotropic and the
+//!   directional bound of `certify::pieces`, at r = 0 with the certificate's ε̄), least over the route,
+//!   ÷ the least distance of the exact flow (the continuous plant, the input held, 400 instants per
+//!   period). At most 1; the isotropic bound's ratio is printed beside it.
+//!
 //! The SCOTS vehicle (`examples/maze-scots-vehicle.toml`, feedback linearizable in its position):
 //! * `route_maze_vehicle_synth_s`: its whole `synthesize` (or the time until it is refused), target
 //!   ≤ 300 s; cancelled at 300 s (as by Ctrl-C), when what it certified by then is what counts;
@@ -80,12 +91,178 @@ fn pointmass() -> Vec<Row> {
         search * 1e3
     );
     let (secs, coverage, violations) = synth_rows("maze", &task, None);
-    vec![
+    let mut rows = vec![
         Row::new("route_search_ms", search * 1e3, "ms"),
         Row::new("route_maze_synth_s", secs, "s"),
         Row::new("route_maze_coverage", coverage, "lower bound, 99 %"),
         Row::new("route_maze_violations", violations, "runs"),
+    ];
+    rows.extend(shortest_horizon(&path));
+    rows
+}
+
+/// The horizon scan's step, seconds.
+const T_STEP: f64 = 10.0;
+/// The shortest horizon tried, seconds.
+const T_MIN: f64 = 40.0;
+/// Each horizon's synthesis is cancelled after this long.
+const T_BUDGET: Duration = Duration::from_secs(150);
+
+/// The spec text with its `horizon = …` line set to `t`.
+fn with_horizon(src: &str, t: f64) -> String {
+    src.lines()
+        .map(|l| {
+            if l.trim_start().starts_with("horizon =") {
+                format!("horizon = {t:.1}")
+            } else {
+                l.to_string()
+            }
+        })
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
+/// `maze_pointmass_T_s` and `intersample_margin_ratio` (module doc).
+fn shortest_horizon(path: &str) -> Vec<Row> {
+    let src = std::fs::read_to_string(path).expect("the shipped example");
+    let t0 = host_compiler::spec::parse(&src, path)
+        .expect("the shipped example")
+        .horizon;
+    let opts = SynthOptions {
+        progress: false,
+        verify_interior: 1000,
+        verify_per_ball: 4,
+        attack: None,
+        ..SynthOptions::default()
+    };
+    let mut best: Option<(f64, host_compiler::synth::Synthesis, Task)> = None;
+    let mut t = t0;
+    let mut failed = None;
+    while t >= T_MIN - 1e-9 {
+        match certifies(&src, path, t, &opts) {
+            Some((s, task)) => best = Some((t, s, task)),
+            None => {
+                failed = Some(t);
+                break;
+            }
+        }
+        t -= T_STEP;
+    }
+    // One halving of the last step, between the last horizon that certified and the first that did not.
+    if let (Some(bad), Some((good, ..))) = (failed, &best) {
+        let mid = 0.5 * (bad + good);
+        if let Some((s, task)) = certifies(&src, path, mid, &opts) {
+            best = Some((mid, s, task));
+        }
+    }
+    let Some((t, s, task)) = best else {
+        println!("the maze certifies at no horizon tried (from {t0} s down)");
+        return vec![Row::new("maze_pointmass_T_s", f64::INFINITY, "s")];
+    };
+    let (ratio, iso) = margin_ratio(&task, &s);
+    println!(
+        "maze_pointmass_T_s = {t:.1} s; intersample_margin_ratio = {ratio:.4} (the isotropic bound alone: \
+         {iso:.4})"
+    );
+    vec![
+        Row::new("maze_pointmass_T_s", t, "s, coverage ≥ 0.99"),
+        Row::new(
+            "intersample_margin_ratio",
+            ratio,
+            "certified ÷ exact least distance",
+        ),
     ]
+}
+
+/// The example's synthesis with its horizon set to `t`, if it certifies ≥ 0.99 of Init (the coverage
+/// lower bound) with no violation; cancelled (as by Ctrl-C) after `T_BUDGET`.
+fn certifies(
+    src: &str,
+    path: &str,
+    t: f64,
+    opts: &SynthOptions,
+) -> Option<(host_compiler::synth::Synthesis, Task)> {
+    let task = Task::new(host_compiler::spec::parse(&with_horizon(src, t), path).unwrap())
+        .expect("its task");
+    let opts = SynthOptions {
+        cancel: Default::default(),
+        ..opts.clone()
+    };
+    let cancel = opts.cancel.clone();
+    let done = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let finished = done.clone();
+    std::thread::spawn(move || {
+        let start = Instant::now();
+        while start.elapsed() < T_BUDGET && !finished.load(std::sync::atomic::Ordering::Relaxed) {
+            std::thread::sleep(Duration::from_millis(200));
+        }
+        cancel.store(true, std::sync::atomic::Ordering::Relaxed);
+    });
+    let start = Instant::now();
+    let s = synthesize(&task, &opts);
+    done.store(true, std::sync::atomic::Ordering::Relaxed);
+    let secs = start.elapsed().as_secs_f64();
+    match s {
+        Ok(s) => {
+            println!(
+                "horizon {t:.1} s: {} trajectories, coverage lower bound {:.5}, {} violations, \
+                 {secs:.1} s; stop: {}",
+                s.trajectories.len(),
+                s.coverage.lower,
+                s.verify.violations,
+                s.stop
+            );
+            (s.coverage.lower >= 0.99 && s.verify.violations == 0).then_some((s, task))
+        }
+        Err(e) => {
+            println!("horizon {t:.1} s: refused after {secs:.1} s: {e}");
+            None
+        }
+    }
+}
+
+/// The certified least distance from Unsafe between samples of the first trajectory's nominal ÷ the
+/// exact flow's (module doc): (with the directional bound, the isotropic bound alone).
+fn margin_ratio(task: &Task, s: &host_compiler::synth::Synthesis) -> (f64, f64) {
+    use host_compiler::certify::Pieces;
+    let tr = &s.trajectories[0];
+    let lp = Loop {
+        plant: &*task.plant,
+        loc: 0,
+        K: s.K.as_ref(),
+        P: s.P.as_ref(),
+        goal: task.property.goal.as_ref(),
+        unsafe_set: task.property.unsafe_region(),
+        input: &task.property.input,
+    };
+    let pc = Pieces::new(&lp, &s.constants);
+    let us = lp.unsafe_set().expect("the maze has walls");
+    let cp = lp.continuous().expect("a continuous plant");
+    const SUB: usize = 400;
+    let h = lp.plant.period();
+    let fine = host_compiler::model::zoh(cp, h / SUB as f64).expect("a fine step");
+    let nom = &tr.nominal;
+    let (mut cert, mut iso_least, mut exact) = (f64::INFINITY, f64::INFINITY, f64::INFINITY);
+    // Up to the critical sample, where the run is handed over or ends.
+    for k in 0..tr.certificate.k_star.min(nom.steps()) {
+        let (iso, dir) = pc
+            .unsafe_clearance(nom, k, 0.0, tr.certificate.eps_f32)
+            .expect("a continuous plant with Unsafe");
+        cert = cert.min(iso.max(dir.unwrap_or(f64::NEG_INFINITY)));
+        iso_least = iso_least.min(iso);
+        let mut x = nom.x[k].clone();
+        for _ in 0..SUB {
+            x = fine.step(&x, &nom.u[k]);
+            exact = exact.min(-us.signed_dist(&x, pc.metric()).value);
+        }
+        exact = exact.min(-us.signed_dist(&nom.x[k], pc.metric()).value);
+    }
+    println!(
+        "along the first trajectory ({} samples to κ*): certified least distance between samples \
+         {cert:.4e} (isotropic {iso_least:.4e}), exact flow's {exact:.4e}",
+        tr.certificate.k_star
+    );
+    (cert / exact, iso_least / exact)
 }
 
 /// The whole `synthesize` of a task: (seconds, coverage lower bound, violations); a refusal is printed

@@ -267,7 +267,9 @@ const FORMULA_BISECTION: usize = 40;
 /// ([`GoalAt::Free`]), and each earlier rᵢ = min(t, its certificate against the safe transition into the
 /// ball of radius rᵢ₊₁), so Lemma 4.16's chain holds as in [`certify_forced`]. Every run from the first
 /// ball then stays, at the samples of segment i, within cᵢrᵢ of the nominal in P₀, and between samples
-/// within cᵢ(γᵢrᵢ + φᵢ‖fₖ‖_{Pᵢ} + φᵢβᵢε̄ᵢ) of the sample before; the formula holds for it when ρ(0) of the
+/// within cᵢ(γᵢrᵢ + φᵢ‖fₖ‖_{Pᵢ} + φᵢβᵢε̄ᵢ) of the sample before (and, for an atom whose set is a union of
+/// convex pieces, at least min_j (base_j − slope_j·cᵢ(γᵢrᵢ + φᵢβᵢε̄ᵢ)) from it, the directional bound of
+/// [`super::pieces`] taken in P₀ with segment i's plant); the formula holds for it when ρ(0) of the
 /// concatenated nominal exceeds maxᵢ cᵢrᵢ (the samples) and the tube's lower bound
 /// ([`crate::robustness::mtl::TubeFormula`]) with those margins is positive (between samples). Both
 /// margins grow with t; the largest admitted t is sought on a grid and refined by bisection, keeping only
@@ -278,6 +280,7 @@ pub fn certify_forced_formula(
     segments: &[ForcedSegment<'_>],
     task: &crate::property::TemporalTask,
 ) -> Result<ForcedFormulaCertificate, ForcedError> {
+    use super::pieces::PieceClearance;
     use crate::robustness::mtl::{Margins, Trace, TubeFormula};
     let formula = |e: String| ForcedError::Formula(e);
     let last = check_chain(segments)?;
@@ -341,6 +344,60 @@ pub fn certify_forced_formula(
             s.lc.phi * crate::linalg::p_norm(s.lp.P, &f)
         })
         .collect();
+    // Each set atom's convex pieces between samples, in P₀ (`certify::pieces`' module doc, "Between
+    // samples along a direction", taken in P₀ for segment i's plant: its φ and ‖A‖ in P₀, and a deviation
+    // from the nominal's held flow of at most cᵢ(γᵢrᵢ + held) there).
+    let metric0 = crate::geometry::Metric {
+        n,
+        R: crate::linalg::to_row_major(segments[0].lp.P),
+    };
+    let roots0 = &segments[0].lc.roots;
+    let seg_consts: Vec<Option<(f64, f64)>> = segments
+        .iter()
+        .map(|s| {
+            let cp = s.lp.continuous()?;
+            let (phi0, _) = crate::certify::intersample_phi_beta(roots0, cp, s.lp.plant.period());
+            Some((phi0, roots0.induced_norm(cp.A.as_ref()) * (1.0 + 1e-9)))
+        })
+        .collect();
+    let pieces: Vec<Option<Vec<Option<Vec<PieceClearance>>>>> = if continuous {
+        tube.atom_sets()
+            .into_iter()
+            .map(|set| {
+                let set = set?;
+                set.region.convex_pieces()?;
+                Some(
+                    at[..at.len() - 1]
+                        .iter()
+                        .map(|&(i, k)| {
+                            let sg = &segments[i];
+                            let cp = sg.lp.continuous()?;
+                            let (phi0, a0) = seg_consts[i]?;
+                            let f = sg.lp.plant.vector_field(
+                                sg.lp.loc,
+                                &sg.nominal.x[k],
+                                &sg.nominal.u[k],
+                            )?;
+                            crate::certify::pieces::piece_clearances(
+                                set.region.as_ref(),
+                                &metric0,
+                                segments[0].lp.P,
+                                roots0,
+                                cp.A.as_ref(),
+                                a0,
+                                sg.lp.plant.period(),
+                                phi0,
+                                &sg.nominal.x[k],
+                                &f,
+                            )
+                        })
+                        .collect(),
+                )
+            })
+            .collect()
+    } else {
+        Vec::new()
+    };
     // The radii for a bound t, backwards, with each segment's certificate.
     let radii = |t: f64| -> Result<(Vec<f64>, Vec<Certificate>), ForcedError> {
         let mut r = vec![0.0; segments.len()];
@@ -381,10 +438,39 @@ pub fn certify_forced_formula(
                 c[i] * (lc.gamma * r[i] + d + lc.held_disturbance(certs[i].eps_f32))
             })
             .collect();
-        tube.lower_at_start(&Margins {
-            r: reach,
-            between: &between,
-        }) > 0.0
+        // The deviation from the nominal's held flow over each interval, in P₀.
+        let w: Vec<f64> = at[..at.len() - 1]
+            .iter()
+            .map(|&(i, _)| {
+                let lc = segments[i].lc;
+                c[i] * (lc.gamma * r[i] + lc.held_disturbance(certs[i].eps_f32))
+            })
+            .collect();
+        let clear: Vec<Option<Vec<f64>>> = pieces
+            .iter()
+            .map(|p| {
+                p.as_ref().map(|per_k| {
+                    per_k
+                        .iter()
+                        .zip(&w)
+                        .map(|(pk, &w)| match pk {
+                            Some(v) => v
+                                .iter()
+                                .map(|q| q.base - q.slope * w)
+                                .fold(f64::INFINITY, f64::min),
+                            None => f64::NAN,
+                        })
+                        .collect()
+                })
+            })
+            .collect();
+        tube.lower_at_start_with(
+            &Margins {
+                r: reach,
+                between: &between,
+            },
+            &clear,
+        ) > 0.0
     };
     let mut best: Option<(f64, Vec<f64>, Vec<Certificate>)> = None;
     if rho0 > 0.0 && rho0.is_finite() {

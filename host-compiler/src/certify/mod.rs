@@ -207,12 +207,11 @@ pub struct LoopConstants {
     /// far they move the state per period in the P-metric, φ Σ_j b_j √P_jj + Σ_j J_j √P_jj (a
     /// disturbance d_j e_j has P-norm |d_j|√P_jj); 0 for every other plant.
     pub state_step: f64,
-    /// Whether the Unsafe piece between samples also takes the drift against each convex piece of Unsafe
-    /// ([`Pieces::unsafe_margin`]). Off by default: hybrid plants turn it on
-    /// ([`LoopConstants::with_directional_unsafe`]); a one-location task keeps the isotropic margin until
-    /// the MTL tube (Remark 2.29's embedding must certify the same δ) and the optimiser's gradient carry
-    /// the directional one too.
-    pub directional_unsafe: bool,
+    /// ‖A_c‖_P, the P-induced norm of the continuous plant's A (0 for discrete-time plants): the
+    /// third-order term of the drift along a direction ([`crate::model::drift_against`]) that the Unsafe
+    /// margin between samples takes against each convex piece of Unsafe ([`Pieces::unsafe_margin`], for
+    /// every loop).
+    pub a_norm: f64,
     /// A set every run must stay in, at the samples and between them, from the first sample at which the
     /// whole tube lies in it until the critical sample κ*: the task's Goal, where the loop's own goal is a
     /// terminal law's handover region inside it (`certify::terminal`'s module doc, issue 42 item 4);
@@ -276,6 +275,9 @@ impl LoopConstants {
                 (phi, 1.0 + phi * roots.induced_norm(Acl.as_ref()), beta)
             }
         };
+        let a_norm = lp
+            .continuous()
+            .map_or(0.0, |cp| roots.induced_norm(cp.A.as_ref()) * (1.0 + 1e-9));
         let n = lp.P.nrows();
         let axis = (0..n).map(|j| roots.inv[(j, j)].max(0.0).sqrt()).collect();
         let mismatch = lp.plant.model_mismatch();
@@ -305,19 +307,10 @@ impl LoopConstants {
             axis,
             mismatch,
             state_step,
-            directional_unsafe: false,
+            a_norm,
             stay_in: None,
             power_norms: std::sync::OnceLock::new(),
         })
-    }
-
-    /// These constants with the directional Unsafe margin between samples on
-    /// ([`LoopConstants::directional_unsafe`]).
-    pub fn with_directional_unsafe(self) -> Self {
-        Self {
-            directional_unsafe: true,
-            ..self
-        }
     }
 
     /// These constants with a set the runs must stay in from the first sample at which the whole tube

@@ -11,7 +11,11 @@
 //!    and negation, so a run within r of the nominal at every sample has robustness ≥ ρ(0) − r: the
 //!    discrete-time semantics the `mtl` monitor computes on the samples;
 //! 2. **in continuous time**: the lower bound of [`crate::robustness::mtl::tube`] with margins (r, e_κ(r))
-//!    is positive; it is non-increasing in r, and its root is found by bisection;
+//!    is positive; it is non-increasing in r, and its root is found by bisection. An atom whose set is a
+//!    union of known convex pieces also gets its directional clearance over each interval,
+//!    min_j (base_j − slope_j·(γr + φβ(ε̄ + D))) ([`super::pieces`]' module doc, "Between samples along a
+//!    direction"), the bound Theorem 4.7's Unsafe piece takes, so Remark 2.29's embedding certifies the
+//!    same δ;
 //! 3. **inputs**: δ_Input of Theorem 4.7 (4.15) over the whole table, with the rounding margin;
 //! 4. r_crit < r (Theorem 3.21).
 //!
@@ -28,6 +32,7 @@
 //! deviation (part 2 takes it as its r), so every part holds for δ = min(1–3) − S_N·(…), without r_crit.
 //! δ_φ is the larger of the two.
 
+use super::pieces::PieceClearance;
 use super::{rounding_over_table, selection_radius, Loop, LoopConstants, Pieces};
 use crate::geometry::Metric;
 use crate::linalg::p_norm;
@@ -197,15 +202,51 @@ pub fn try_certify(
                     lc.phi * p_norm(lp.P, &f) + lc.held_disturbance(eps_f32)
                 })
                 .collect();
+            // Each set atom's convex pieces between samples (the directional bound of
+            // `certify::pieces`' module doc), where its set is a union of known convex pieces.
+            let held = lc.held_disturbance(eps_f32);
+            let pieces: Vec<Option<Vec<Option<Vec<PieceClearance>>>>> = tube
+                .atom_sets()
+                .into_iter()
+                .map(|set| {
+                    let set = set?;
+                    set.region.convex_pieces()?;
+                    Some(
+                        (0..N)
+                            .map(|k| pc.clearances(set.region.as_ref(), nom, k))
+                            .collect(),
+                    )
+                })
+                .collect();
             let mut between = vec![0.0; N];
+            let mut clear: Vec<Option<Vec<f64>>> = vec![None; pieces.len()];
             let mut positive = |r: f64| {
                 for (b, ck) in between.iter_mut().zip(&c) {
                     *b = lc.gamma * r + ck;
                 }
-                tube.lower_at_start(&Margins {
-                    r,
-                    between: &between,
-                }) > 0.0
+                // A run deviates from the nominal's held flow by at most w = γr + held.
+                let w = lc.gamma * r + held;
+                for (cl, p) in clear.iter_mut().zip(&pieces) {
+                    *cl = p.as_ref().map(|per_k| {
+                        per_k
+                            .iter()
+                            .map(|pk| match pk {
+                                Some(v) => v
+                                    .iter()
+                                    .map(|q| q.base - q.slope * w)
+                                    .fold(f64::INFINITY, f64::min),
+                                None => f64::NAN,
+                            })
+                            .collect()
+                    });
+                }
+                tube.lower_at_start_with(
+                    &Margins {
+                        r,
+                        between: &between,
+                    },
+                    &clear,
+                ) > 0.0
             };
             if !(rho0 > 0.0) || !positive(0.0) {
                 0.0

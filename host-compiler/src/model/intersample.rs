@@ -24,7 +24,9 @@
 //!   −nᵀd(τ) ≤ h·max(0, −nᵀf) + (h²/2)·max(0, −nᵀAf) + ‖n‖_{P⁻¹}‖f‖_P·χ₃(h),
 //!
 //! each term being largest at τ = h. The first two are exact for a chain of integrators' leading terms;
-//! the last is third order in h.
+//! the last is third order in h. Since R₃(τ)f = Σ_{i≥0} A^i(A²f)τ^{i+3}/(i+3)!, also
+//! ‖R₃(τ)f‖_P ≤ ‖A²f‖_P·χ₃(τ)/a², so ‖f‖_P in the last term may be replaced by min(‖f‖_P, ‖A²f‖_P/a²)
+//! (`f_p` of [`drift_against`]): on a double integrator A²f = 0 and the bound is exact to second order.
 
 use super::{check_finite, check_len, ContinuousPlant, ModelError};
 use faer::{Mat, MatRef, Side};
@@ -110,7 +112,8 @@ impl ContinuousPlant {
 
 /// The directional bound of the module doc: an upper bound on sup_{τ∈[0,h]} −nᵀd(τ), how far the held
 /// plant moves against `n` within one period, for the vector field `f` at the sample and `a_f` = A f.
-/// `n_dual` = ‖n‖_{P⁻¹}, `f_p` = ‖f‖_P and `a_p` = ‖A‖_P (the induced norm) in the caller's metric. Each
+/// `n_dual` = ‖n‖_{P⁻¹}, `f_p` = ‖f‖_P (or min(‖f‖_P, ‖A²f‖_P/a²), module doc) and `a_p` = a ≥ ‖A‖_P (the
+/// induced norm) in the caller's metric. Each
 /// term is rounded up by a relative 10⁻⁹.
 pub fn drift_against(
     n: &[f64],
@@ -122,15 +125,53 @@ pub fn drift_against(
     a_p: f64,
 ) -> f64 {
     let dot = |x: &[f64]| -> f64 { n.iter().zip(x).map(|(a, b)| a * b).sum() };
+    (h * (-dot(f)).max(0.0) + 0.5 * h * h * (-dot(a_f)).max(0.0) + n_dual * f_p * chi3(h, a_p))
+        * (1.0 + 1e-9)
+}
+
+/// χ₃(h) of the module doc for a = `a_p` = ‖A‖_P: the remainder's weight in [`drift_against`], rounded
+/// up (the series' tail is bounded by its next terms' geometric majorant where the subtraction would
+/// cancel).
+pub fn chi3(h: f64, a_p: f64) -> f64 {
     let t = a_p * h;
     // χ₃(h) = h (e^t − 1 − t − t²/2)/t, by its series where the subtraction would cancel.
-    let chi3 = if t < 1e-2 {
+    if t < 1e-2 {
         h * t * t / 6.0 * (1.0 + t / 4.0 + t * t / 20.0 + t * t * t / 100.0)
     } else {
         h * (t.exp_m1() - t - 0.5 * t * t) / t
-    };
-    (h * (-dot(f)).max(0.0) + 0.5 * h * h * (-dot(a_f)).max(0.0) + n_dual * f_p * chi3)
-        * (1.0 + 1e-9)
+    }
+}
+
+/// The gradient of [`drift_against`] with respect to f, the direction n held fixed: its terms are
+/// convex in f (a positive part of a linear form, and a norm), and this is the subgradient that takes
+/// each positive part's side at f (0 on the tie). `a` is A as a row-major n×n slice, `pf` = P f/‖f‖_P
+/// (the gradient of ‖f‖_P; zeros at f = 0).
+#[allow(clippy::too_many_arguments)]
+pub fn drift_against_grad(
+    n: &[f64],
+    f: &[f64],
+    a_f: &[f64],
+    a: &[f64],
+    h: f64,
+    n_dual: f64,
+    pf: &[f64],
+    a_p: f64,
+) -> Vec<f64> {
+    let dim = n.len();
+    let dot = |x: &[f64]| -> f64 { n.iter().zip(x).map(|(a, b)| a * b).sum() };
+    let c3 = n_dual * chi3(h, a_p);
+    let mut g: Vec<f64> = pf.iter().map(|v| c3 * v).collect();
+    if dot(f) < 0.0 {
+        g.iter_mut().zip(n).for_each(|(g, ni)| *g -= h * ni);
+    }
+    if dot(a_f) < 0.0 {
+        // ∇_f (−nᵀA f) = −Aᵀn.
+        for (j, gj) in g.iter_mut().enumerate() {
+            let atn: f64 = (0..dim).map(|i| a[i * dim + j] * n[i]).sum();
+            *gj -= 0.5 * h * h * atn;
+        }
+    }
+    g.iter().map(|v| v * (1.0 + 1e-9)).collect()
 }
 
 #[cfg(test)]
@@ -169,6 +210,14 @@ mod directional_tests {
                     crate::linalg::p_norm(P.as_ref(), &f),
                     a_p,
                 );
+                // The remainder weighted by ‖A²f‖_P/a² where smaller (module doc).
+                let a2f = [
+                    A[(0, 0)] * a_f[0] + A[(0, 1)] * a_f[1],
+                    A[(1, 0)] * a_f[0] + A[(1, 1)] * a_f[1],
+                ];
+                let weight = crate::linalg::p_norm(P.as_ref(), &f)
+                    .min(crate::linalg::p_norm(P.as_ref(), &a2f) / (a_p * a_p));
+                let tight = drift_against(&n, &f, &a_f, h, roots.dual_norm(&n), weight, a_p);
                 // d(τ) = Φ(τ) f with Φ(τ) the (1,2) block of expm([[A, I], [0, 0]] τ).
                 let mut worst = f64::NEG_INFINITY;
                 for i in 0..=200 {
@@ -185,6 +234,7 @@ mod directional_tests {
                     worst = worst.max(-(n[0] * d[0] + n[1] * d[1]));
                 }
                 assert!(worst <= bound, "{A:?} f {f:?} n {n:?}: {worst} > {bound}");
+                assert!(worst <= tight, "{A:?} f {f:?} n {n:?}: {worst} > {tight}");
             }
         }
     }

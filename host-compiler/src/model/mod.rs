@@ -22,7 +22,7 @@ mod plant;
 mod sim;
 
 pub use expm::expm;
-pub use intersample::{drift_against, InterSampleBound};
+pub use intersample::{chi3, drift_against, drift_against_grad, InterSampleBound};
 pub use linear::{zoh, ContinuousPlant, DiscretePlant, LinearAffine};
 pub use plant::{Location, Plant};
 pub use sim::{reference_inputs, simulate_closed_loop, ClosedLoopRun};

@@ -34,7 +34,11 @@
 //!   vector field at the sample is `f = f̃ + (A_c + B_c K_j) e + B_c ε` (f̃ = A_c x̃ + B_c ũ + c), hence
 //!   `‖x(κh+s) − x̃(κ)‖_P ≤ γ_j δ_i + φ‖f̃‖_P + φβε̄` on [0, h] with γ_j = 1 + φ(h)‖A_c + B_c K_j‖_P,
 //!   φ(h) = (e^{μh} − 1)/μ and β = ‖P^{1/2}B_c‖. The law is accepted on the ball only if this stays below
-//!   dist_P(x̃_i(κ), Unsafe). (For discrete plants φ = 0, γ_j = 1 and the check is the sample one.)
+//!   dist_P(x̃_i(κ), Unsafe), or, where Unsafe is a union of known convex pieces, if the run misses each
+//!   piece by the drift against its normal: the run deviates from the nominal's held flow by at most
+//!   w = γ_j δ_i + φβε̄, and min_j (base_j − slope_j·w) > 0 (`certify::pieces`' module doc, "Between
+//!   samples along a direction", the bound the feedforward certificate takes). (For discrete plants
+//!   φ = 0, γ_j = 1 and the check is the sample one.)
 //!
 //! Goal and Unsafe at the samples need no new check: the balls are the feedforward certificate's balls
 //! (Theorem 4.7), which lie outside Unsafe, and the ball at κ*_i lies in Goal.
@@ -299,6 +303,9 @@ pub struct DataPoint {
     pub unsafe_dist: f64,
     /// φ(h)‖A_c x̃ + B_c ũ + c‖_P: the nominal's inter-sample excursion (0 for discrete plants).
     pub excursion: f64,
+    /// Unsafe's convex pieces as seen over the period from x̃_i(κ) under the nominal's held input
+    /// ([`crate::certify::pieces::piece_clearances`]; module doc, "Between samples"), where known.
+    pub pieces: Option<Vec<crate::certify::pieces::PieceClearance>>,
 }
 
 /// Inter-sample constants of a continuous-time plant (module doc, "Between samples").
@@ -373,12 +380,28 @@ impl PwaContext {
                 let x = &t.nominal.x[k];
                 let unsafe_dist =
                     unsafe_set.map_or(f64::INFINITY, |us| -us.signed_dist(x, &metric).value);
-                let excursion = match (task.plant.vector_field(0, x, &t.nominal.u[k]), &intersample)
-                {
-                    (Some(f), Some(is)) => is.phi * crate::linalg::p_norm(syn.P.as_ref(), &f),
+                let field = task.plant.vector_field(0, x, &t.nominal.u[k]);
+                let excursion = match (&field, &intersample) {
+                    (Some(f), Some(is)) => is.phi * crate::linalg::p_norm(syn.P.as_ref(), f),
                     _ => 0.0,
                 };
+                let pieces = match (&field, &intersample, unsafe_set) {
+                    (Some(f), Some(is), Some(us)) => crate::certify::pieces::piece_clearances(
+                        us,
+                        &metric,
+                        syn.P.as_ref(),
+                        &roots,
+                        is.Ac.as_ref(),
+                        roots.induced_norm(is.Ac.as_ref()) * (1.0 + 1e-9),
+                        task.plant.period(),
+                        is.phi,
+                        x,
+                        f,
+                    ),
+                    _ => None,
+                };
                 points.push(DataPoint {
+                    pieces,
                     unsafe_dist,
                     excursion,
                     traj: i,
@@ -573,7 +596,15 @@ pub fn check_point(ctx: &PwaContext, law: &StoredLaw, k: usize) -> PointCheck {
         .intersample
         .as_ref()
         .map_or((0.0, 0.0), |is| (is.phi, is.beta));
-    let clearance = p.unsafe_dist - (law.gamma_is * p.delta + p.excursion + phi * beta * eps);
+    // A run deviates from the nominal's held flow by at most w = γ_j δ_i + φβε̄ over the period.
+    let w = law.gamma_is * p.delta + phi * beta * eps;
+    let isotropic = p.unsafe_dist - (w + p.excursion);
+    let directional = p.pieces.as_ref().map_or(f64::NEG_INFINITY, |v| {
+        v.iter()
+            .map(|c| c.base - c.slope * w)
+            .fold(f64::INFINITY, f64::min)
+    });
+    let clearance = isotropic.max(directional);
     let ok = law.sigma > 0.0
         && r_crit < p.rho
         && reach <= p.reach_limit

@@ -141,12 +141,10 @@ impl HybridTask {
         for (loc, d) in designs.iter().enumerate() {
             let lp = Loop::reach_avoid(&plant, loc, d, &property);
             constants.push(
-                LoopConstants::new(&lp)
-                    .map_err(|e| HybridSynthError::Certify {
-                        loc,
-                        reason: e.to_string(),
-                    })?
-                    .with_directional_unsafe(),
+                LoopConstants::new(&lp).map_err(|e| HybridSynthError::Certify {
+                    loc,
+                    reason: e.to_string(),
+                })?,
             );
         }
         let kind_of = |k: EdgeKind| plant.edges().iter().position(|e| e.kind == k);

@@ -424,14 +424,8 @@ pub fn recheck(
             input: &property.input,
         })
         .collect();
-    let lcs: Vec<Option<LoopConstants>> = lps
-        .iter()
-        .map(|lp| {
-            LoopConstants::new(lp)
-                .ok()
-                .map(LoopConstants::with_directional_unsafe)
-        })
-        .collect();
+    let lcs: Vec<Option<LoopConstants>> =
+        lps.iter().map(|lp| LoopConstants::new(lp).ok()).collect();
     let f32s = |b: &[u8]| -> Vec<f64> {
         b.chunks_exact(4)
             .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]) as f64)

@@ -40,7 +40,9 @@
 //!   a state the f32 handover test accepts within T, and the law (its certificate rechecked apart) keeps
 //!   it in Goal from there; the Monte Carlo judges the whole run of 2T ([`super`]'s module doc).
 //! * **Input** over every listed ball, and **Unsafe between samples** for continuous plants (the bound of
-//!   [`crate::certify`] item 2 with the law's gain).
+//!   [`crate::certify`] item 2 with the law's gain, or, where larger, the drift against each convex piece
+//!   of Unsafe of `certify::pieces`' module doc, for the centre's held flow and a deviation from it of at
+//!   most γ_j r + φβε̄).
 
 use super::{input_slack, Judge, RunOutcome};
 use crate::certify::{evaluator_error_bound, input_distance, intersample_phi_beta};
@@ -261,6 +263,7 @@ pub fn recheck(judge: &Judge<'_>, image: &Image<'_>) -> Result<PwaRecheck, Reche
     let (phi, beta) = continuous.map_or((0.0, 0.0), |cp| {
         intersample_phi_beta(&roots, cp, judge.plant.period())
     });
+    let a_norm = continuous.map_or(0.0, |cp| roots.induced_norm(cp.A.as_ref()) * (1.0 + 1e-9));
     // Per law: gain, offset, Ã_j, σ_j, ‖Ã_j‖_P, r̃_crit(ε = 1), γ_j.
     struct Law {
         K: Mat<f64>,
@@ -388,11 +391,31 @@ pub fn recheck(judge: &Judge<'_>, image: &Image<'_>) -> Result<PwaRecheck, Reche
                 None => f64::INFINITY,
                 Some(us) => {
                     let d = -us.signed_dist(c, &metric).value;
-                    let exc = judge
-                        .plant
-                        .vector_field(0, c, &u)
-                        .map_or(0.0, |f| phi * p_norm(P.as_ref(), &f));
-                    d - (L.gamma * r + exc + phi * beta * eps_round)
+                    let field = judge.plant.vector_field(0, c, &u);
+                    let exc = field.as_ref().map_or(0.0, |f| phi * p_norm(P.as_ref(), f));
+                    // A run deviates from the centre's held flow by at most w over the period.
+                    let w = L.gamma * r + phi * beta * eps_round;
+                    let directional = match (&field, continuous) {
+                        (Some(f), Some(cp)) => crate::certify::pieces::piece_clearances(
+                            us,
+                            &metric,
+                            P.as_ref(),
+                            &roots,
+                            cp.A.as_ref(),
+                            a_norm,
+                            judge.plant.period(),
+                            phi,
+                            c,
+                            f,
+                        )
+                        .map_or(f64::NEG_INFINITY, |v| {
+                            v.iter()
+                                .map(|q| q.base - q.slope * w)
+                                .fold(f64::INFINITY, f64::min)
+                        }),
+                        _ => f64::NEG_INFINITY,
+                    };
+                    (d - (w + exc)).max(directional)
                 }
             };
             PairCheck {

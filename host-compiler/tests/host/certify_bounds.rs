@@ -449,9 +449,7 @@ fn the_directional_unsafe_margin_keeps_every_run_out_between_samples() {
             unsafe_set: Some(us),
             input: &property.input,
         };
-        let lc = LoopConstants::new(&lp)
-            .expect("a Lyapunov metric contracts")
-            .with_directional_unsafe();
+        let lc = LoopConstants::new(&lp).expect("a Lyapunov metric contracts");
         let pc = Pieces::new(&lp, &lc);
         let metric = Metric {
             n: 4,

@@ -47,6 +47,7 @@ mod hybrid_routes;
 mod image_exits;
 mod import_inputs;
 mod inspect_certificate;
+mod intersample_directional;
 mod maze_vehicle;
 mod messages;
 mod model_hybrid;

@@ -27,6 +27,14 @@
 //!   φ₁. Upper: F_[a,b] φ₂'s (dropping the φ₁ requirement only raises the value).
 //! * φ₁ R φ₂ = ¬(¬φ₁ U ¬φ₂).
 //!
+//! **Directional clearance.** The interval bound d_k ∓ e_k takes the whole excursion from x̃(k) in every
+//! direction. Where the caller knows more, a lower bound c_k > 0 on the distance from an atom's set of
+//! every trajectory of the tube over I_k (for a union of convex pieces, the drift against each piece's
+//! normal, `certify::pieces`' module doc), every such trajectory is outside the set over I_k with
+//! signed distance ≤ −c_k, so l_hi(k) ≤ −c_k; the bound is the smaller of the two. The lower bound
+//! l_lo is unchanged. With c_k non-increasing in r (as the caller's bounds are), l_hi stays
+//! non-decreasing in r and the root keeps its monotonicity.
+//!
 //! Each bound passes values through min and max only, so a bound at the root equals one atom's bound at
 //! one sample or interval (or ±∞). The windowed extrema are sliding min/max over index ranges whose
 //! ends move forward (a monotone deque, O(N) per operator); the until's lower bound is a scan per start
@@ -46,6 +54,10 @@ pub struct Margins<'m> {
     pub r: f64,
     pub between: &'m [f64],
 }
+
+/// The margins of a tube and the atoms' clearances between samples
+/// ([`TubeFormula::lower_at_start_with`]).
+type Tubed<'a, 'm> = (&'a Margins<'m>, &'a [Option<Vec<f64>>]);
 
 /// Bounds of one node's robustness (module doc).
 #[derive(Clone, Debug)]
@@ -155,13 +167,32 @@ impl<'m, 's> TubeFormula<'m, 's> {
 
     /// A lower bound on ⟦φ⟧(x, 0) for every trajectory x of the tube: continuous-time semantics on [0, t_N].
     pub fn lower_at_start(&self, m: &Margins<'_>) -> f64 {
+        self.lower_at_start_with(m, &[])
+    }
+
+    /// [`TubeFormula::lower_at_start`] with what is known of the atoms' sets between samples: `clear[i]`
+    /// for the i-th atom in evaluation order ([`TubeFormula::atom_sets`]), where given, a lower bound on
+    /// the distance from the atom's set of every trajectory of the tube over each interval I_k (a value
+    /// ≤ 0 or NaN says nothing). Where positive, the atom's upper bound over I_k is at most −clear[i][k]
+    /// (module doc, "Directional clearance").
+    pub fn lower_at_start_with(&self, m: &Margins<'_>, clear: &[Option<Vec<f64>>]) -> f64 {
         let mut next = 0;
-        let b = self.eval(&self.monitor.root, &mut next, Some(m));
+        let b = self.eval(&self.monitor.root, &mut next, Some((m, clear)));
         b.s_lo[0]
     }
 
+    /// The set of each atom in evaluation order (`None` for a linear predicate over signals that are
+    /// not a set): the order of [`TubeFormula::lower_at_start_with`]'s `clear`.
+    pub fn atom_sets(&self) -> Vec<Option<&'s NamedSet>> {
+        let mut sets = Vec::new();
+        atom_sets(&self.monitor.root, &mut sets);
+        sets.into_iter()
+            .map(|i| i.and_then(|i| self.monitor.sets.get(i).copied()))
+            .collect()
+    }
+
     /// The bounds of the root signal for the margins (all four, for tests and reports).
-    fn eval(&self, node: &Node, next: &mut usize, m: Option<&Margins<'_>>) -> Bounds {
+    fn eval(&self, node: &Node, next: &mut usize, m: Option<Tubed<'_, '_>>) -> Bounds {
         let (ns, ni) = (self.intervals + 1, self.intervals);
         match node {
             Node::Const(c) => Bounds {
@@ -181,17 +212,28 @@ impl<'m, 's> TubeFormula<'m, 's> {
                         l_lo: d[..ni].to_vec(),
                         l_hi: d[..ni].to_vec(),
                     },
-                    Some(m) => Bounds {
-                        s_lo: d.iter().map(|v| v - m.r).collect(),
-                        s_hi: d.iter().map(|v| v + m.r).collect(),
-                        // The closed interval: its inside from x̃(k), its ends from their samples.
-                        l_lo: (0..ni)
-                            .map(|k| (d[k] - m.between[k]).min(d[k] - m.r).min(d[k + 1] - m.r))
-                            .collect(),
-                        l_hi: (0..ni)
-                            .map(|k| (d[k] + m.between[k]).max(d[k] + m.r).max(d[k + 1] + m.r))
-                            .collect(),
-                    },
+                    Some((m, clear)) => {
+                        let clear = clear.get(*next - 1).and_then(|c| c.as_ref());
+                        Bounds {
+                            s_lo: d.iter().map(|v| v - m.r).collect(),
+                            s_hi: d.iter().map(|v| v + m.r).collect(),
+                            // The closed interval: its inside from x̃(k), its ends from their samples.
+                            l_lo: (0..ni)
+                                .map(|k| (d[k] - m.between[k]).min(d[k] - m.r).min(d[k + 1] - m.r))
+                                .collect(),
+                            l_hi: (0..ni)
+                                .map(|k| {
+                                    let iso =
+                                        (d[k] + m.between[k]).max(d[k] + m.r).max(d[k + 1] + m.r);
+                                    // Outside the set by at least c over the whole interval.
+                                    match clear.and_then(|c| c.get(k)) {
+                                        Some(&c) if c > 0.0 => iso.min(-c),
+                                        _ => iso,
+                                    }
+                                })
+                                .collect(),
+                        }
+                    }
                 }
             }
             Node::Not(x) => self.eval(x, next, m).negate(),
@@ -222,7 +264,7 @@ impl<'m, 's> TubeFormula<'m, 's> {
         &self,
         v: &[Node],
         next: &mut usize,
-        m: Option<&Margins<'_>>,
+        m: Option<Tubed<'_, '_>>,
         op: fn(f64, f64) -> f64,
     ) -> Bounds {
         let mut acc: Option<Bounds> = None;
