@@ -163,6 +163,13 @@ pub fn run(a: &SynthArgs) -> Outcome {
     if problem.hybrid.is_some() {
         return crate::cli::synth_hybrid::run(a, problem);
     }
+    if a.guard_routes {
+        return Err(Failure::bad_input(miette::miette!(
+            "--guard-routes: {} has no hybrid automaton, so there is no guard to route through \
+             (a one-location plant asks the route search by itself whenever its cover stalls)",
+            a.spec.display()
+        )));
+    }
     if problem.mtl.is_some() {
         return crate::cli::synth_temporal::run(a, problem);
     }

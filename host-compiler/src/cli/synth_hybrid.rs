@@ -23,6 +23,14 @@ pub fn run(a: &SynthArgs, problem: crate::spec::Problem) -> Outcome {
     let task = HybridTask::new(problem)
         .map_err(|e| miette::miette!("{e}"))
         .bad_input()?;
+    if a.guard_routes && task.forced {
+        return Err(Failure::bad_input(miette::miette!(
+            "--guard-routes: {} switches by the controller's choice (forced switching), and its \
+             planner already tries every switching schedule; routes through guards are for internal \
+             switching",
+            a.spec.display()
+        )));
+    }
     let generator = a.generator.unwrap_or(Generator::Scp);
     let cancel = Arc::new(AtomicBool::new(false));
     {

@@ -108,3 +108,29 @@ fn forced_switching_proposes_no_route_runs() {
         .collect();
     assert!(proposals.is_empty(), "{proposals:?}");
 }
+
+/// `--guard-routes` where there is no internal guard is refused with exit 2, saying why, before any
+/// work: a spec without a hybrid automaton, and one with forced switching.
+#[test]
+fn guard_routes_without_internal_switching_is_refused() {
+    for (file, why) in [
+        ("double-integrator.toml", "has no hybrid automaton"),
+        ("hybrid-forced-cart.toml", "forced switching"),
+    ] {
+        let spec = format!("{}/../examples/{file}", env!("CARGO_MANIFEST_DIR"));
+        let out =
+            std::env::temp_dir().join(format!("hc-guard-routes-{}-{file}", std::process::id()));
+        let o = std::process::Command::new(env!("CARGO_BIN_EXE_host-compiler"))
+            .args(["synth", &spec, "--guard-routes", "--quiet", "--out"])
+            .arg(&out)
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{file}: {stderr}");
+        assert!(
+            stderr.contains("--guard-routes") && stderr.contains(why),
+            "{file}: {stderr}"
+        );
+        std::fs::remove_dir_all(&out).ok();
+    }
+}
