@@ -201,7 +201,8 @@ pub struct SynthArgs {
     /// A hybrid plant with internal switching: once a round of seeds certifies no run, ask the global
     /// route search for routes from the seed to Goal through the guards (in other homotopy classes, e.g.
     /// under an obstacle the planner passes over) and plan along each. Minutes per seed. Single-location
-    /// plants ask their routes whenever the growth stalls, without this flag.
+    /// plants ask their routes whenever the growth stalls, without this flag. Refused (exit 2) for a spec
+    /// without internal switching.
     #[arg(long)]
     pub guard_routes: bool,
     /// Hide progress bars.

@@ -165,8 +165,7 @@ pub fn run(a: &SynthArgs) -> Outcome {
     }
     if a.guard_routes {
         return Err(Failure::bad_input(miette::miette!(
-            "--guard-routes: {} has no hybrid automaton, so there is no guard to route through \
-             (a one-location plant asks the route search by itself whenever its cover stalls)",
+            "--guard-routes: {} has no hybrid automaton, so there is no guard to route through",
             a.spec.display()
         )));
     }
