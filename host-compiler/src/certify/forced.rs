@@ -449,19 +449,8 @@ pub fn certify_forced_formula(
         let clear: Vec<Option<Vec<f64>>> = pieces
             .iter()
             .map(|p| {
-                p.as_ref().map(|per_k| {
-                    per_k
-                        .iter()
-                        .zip(&w)
-                        .map(|(pk, &w)| match pk {
-                            Some(v) => v
-                                .iter()
-                                .map(|q| q.base - q.slope * w)
-                                .fold(f64::INFINITY, f64::min),
-                            None => f64::NAN,
-                        })
-                        .collect()
-                })
+                p.as_ref()
+                    .map(|per_k| super::pieces::least_clearances(per_k, w.iter().copied()))
             })
             .collect();
         tube.lower_at_start_with(

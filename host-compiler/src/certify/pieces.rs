@@ -204,11 +204,7 @@ impl<'a, 'b> Pieces<'a, 'b> {
         let held = self.lc.held_disturbance(eps_f32);
         let w = self.lc.gamma * r + held;
         let isotropic = d - (w + self.lc.phi * p_norm(self.lp.P, &f));
-        let directional = self.clearances(us, nom, k).map(|v| {
-            v.iter()
-                .map(|c| c.base - c.slope * w)
-                .fold(f64::INFINITY, f64::min)
-        });
+        let directional = self.clearances(us, nom, k).map(|v| least_clearance(&v, w));
         Some((isotropic, directional))
     }
 
@@ -470,6 +466,28 @@ impl PieceClearance {
             .map(|(g, p)| -g - self.c_w * phi * p)
             .collect()
     }
+}
+
+/// The least clearance over the convex pieces `pieces` for a run whose deviation from the nominal's
+/// held flow is at most `w` (each piece stays at least base − slope·w away; +∞ without pieces).
+pub fn least_clearance(pieces: &[PieceClearance], w: f64) -> f64 {
+    pieces
+        .iter()
+        .map(|c| c.base - c.slope * w)
+        .fold(f64::INFINITY, f64::min)
+}
+
+/// [`least_clearance`] at each sample with its deviation bound from `ws` (paired in order, the shorter
+/// one ending it); NaN where the sample's pieces are unknown.
+pub fn least_clearances(
+    per_k: &[Option<Vec<PieceClearance>>],
+    ws: impl IntoIterator<Item = f64>,
+) -> Vec<f64> {
+    per_k
+        .iter()
+        .zip(ws)
+        .map(|(pk, w)| pk.as_ref().map_or(f64::NAN, |v| least_clearance(v, w)))
+        .collect()
 }
 
 /// The weight of the third-order remainder in the drift along a direction

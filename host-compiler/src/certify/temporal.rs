@@ -227,18 +227,9 @@ pub fn try_certify(
                 // A run deviates from the nominal's held flow by at most w = γr + held.
                 let w = lc.gamma * r + held;
                 for (cl, p) in clear.iter_mut().zip(&pieces) {
-                    *cl = p.as_ref().map(|per_k| {
-                        per_k
-                            .iter()
-                            .map(|pk| match pk {
-                                Some(v) => v
-                                    .iter()
-                                    .map(|q| q.base - q.slope * w)
-                                    .fold(f64::INFINITY, f64::min),
-                                None => f64::NAN,
-                            })
-                            .collect()
-                    });
+                    *cl = p
+                        .as_ref()
+                        .map(|per_k| super::pieces::least_clearances(per_k, std::iter::repeat(w)));
                 }
                 tube.lower_at_start_with(
                     &Margins {

@@ -600,9 +600,7 @@ pub fn check_point(ctx: &PwaContext, law: &StoredLaw, k: usize) -> PointCheck {
     let w = law.gamma_is * p.delta + phi * beta * eps;
     let isotropic = p.unsafe_dist - (w + p.excursion);
     let directional = p.pieces.as_ref().map_or(f64::NEG_INFINITY, |v| {
-        v.iter()
-            .map(|c| c.base - c.slope * w)
-            .fold(f64::INFINITY, f64::min)
+        crate::certify::pieces::least_clearance(v, w)
     });
     let clearance = isotropic.max(directional);
     let ok = law.sigma > 0.0

@@ -409,9 +409,7 @@ pub fn recheck(judge: &Judge<'_>, image: &Image<'_>) -> Result<PwaRecheck, Reche
                             f,
                         )
                         .map_or(f64::NEG_INFINITY, |v| {
-                            v.iter()
-                                .map(|q| q.base - q.slope * w)
-                                .fold(f64::INFINITY, f64::min)
+                            crate::certify::pieces::least_clearance(&v, w)
                         }),
                         _ => f64::NEG_INFINITY,
                     };
