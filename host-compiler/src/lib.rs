@@ -19,6 +19,7 @@ pub mod fuzz;
 pub mod geometry;
 pub mod linalg;
 pub mod model;
+pub mod monitor;
 pub mod optimize;
 pub mod play;
 pub mod property;

@@ -15,6 +15,8 @@
 //! * [`maps`]: the model maps section (`coords: x ↦ ξ`, `input_map: (x, w) ↦ u`) of a
 //!   feedback-linearizable plant's image;
 //! * [`selection`]: the optional whitened selection test of an image with model maps;
+//! * [`monitor`]: the task's bounded MTL formula evaluated online with its robustness bounds and verdict
+//!   (the program of the optional monitor section and its streaming evaluator over a sized arena);
 //! * [`terminal`]: the optional terminal law, a certified law with its invariant ellipsoid in Goal for
 //!   after the task;
 //! * [`protocol`]: the UART protocol between plant and firmware.
@@ -29,6 +31,7 @@ pub mod image;
 pub mod layout;
 mod linalg;
 pub mod maps;
+pub mod monitor;
 pub mod program;
 pub mod protocol;
 pub mod pwa;

@@ -52,6 +52,7 @@ mod maze_vehicle;
 mod messages;
 mod model_hybrid;
 mod model_zoh;
+mod monitor_program;
 mod mtl_cli;
 mod mtl_depth;
 mod mtl_errors;

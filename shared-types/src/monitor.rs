@@ -1,0 +1,1145 @@
+//! The task monitored online (issue 46): a bounded MTL formula over signed distances to sets, evaluated
+//! on the measured state every step, with the running lower and upper bound of its robustness at time 0
+//! and the verdict at the step it is decided. The optional section 14 of an image stores the program
+//! ([`MonitorProgram`]); the evaluator's state ([`Monitor`]) lives in a caller-provided word arena whose
+//! size the program fixes ([`MonitorProgram::words`]), so a firmware sizes it at build time and a firmware
+//! built without a monitor links none of this.
+//!
+//! # Semantics (Def 2.17 on the sampled run, windows in samples)
+//! The run's samples are x(0), x(1), …, x(N) (N, the horizon in samples, is stored); the formula is in
+//! negation normal form (the host pushes every negation to the atoms), so every operator is monotone:
+//! * an atom is a signed distance, positive inside: a half-space `b − aᵀy` (‖a‖ = 1 by the host), a box
+//!   (inside the least distance to a face, outside minus the Euclidean distance), a ball `r − ‖y − c‖`,
+//!   a polytope by its rows (`min_i b_i − a_iᵀy`, exact inside, a lower bound of the distance outside),
+//!   each over listed state coordinates y; a negated atom is its opposite; −0 is stored as +0, so every
+//!   value is a zero-free-of-sign f32 and min and max are exact selections;
+//! * F[a,b] φ (t) = max over j ∈ [t+a, min(t+b, N)] of φ(j) (−∞ over an empty window), G its dual (min,
+//!   +∞);
+//! * φ U[a,b] ψ (t) = max over j ∈ [t+a, min(t+b, N)] of min(ψ(j), min over t < i < j of φ(i)), R its dual.
+//!
+//! # Online evaluation, exact with delay
+//! Each node emits its exact value at t as soon as it is decided by the samples so far, one value per
+//! step in the steady state: at step k = t + hor (the node's horizon: 0 for an atom; the larger of the
+//! children's for ∧ and ∨; b + the child's for F and G; b + max(hor ψ, hor φ − 1) for U and R, or hor ψ when
+//! b = 0), and every remaining value at step N (the windows then end at N). F and G keep a monotone deque
+//! of the window (amortised O(1) per step); U and R keep the sliding minimum of φ over (t, t + a) and a
+//! two-stack queue of the clamp maps f_j(y) = max(ψ(j), min(φ(j), y)) of j ∈ [t + a, e − 1], whose
+//! composition applied to ψ(e) is the until over the window (the host's `mtl` derivation, streamed). A
+//! node emits only the values its parent reads (`need`), so at step N the work is bounded by the formula's
+//! windows.
+//!
+//! # Bounds before the verdict
+//! The root's value at 0 is bracketed every step by sound bounds (every unknown sample may be anything):
+//! ∧ and ∨ combine their children's bounds at the same time (an emitted child value is exact); F's lower
+//! bound is the largest value of its window emitted so far and its upper bound +∞ (G dually); U's bounds
+//! are the composed maps applied to −∞ (or to the next ψ already emitted) and to +∞, each capped by the
+//! known part of the minimum of φ over (t, t + a). A temporal node does not look into its children's own
+//! bounds, so the bracket is sound but not always the tightest; it closes on the exact value at the step
+//! the root emits it. The verdict is `Satisfied` once the lower bound is positive, `Violated` once the
+//! upper bound is negative, and `Boundary` if the decided value is 0.
+//!
+//! All arithmetic is f32: the atoms' sums, products and square roots (libm's `sqrtf`, correctly rounded),
+//! and otherwise min, max and negation, which are exact. The host's reference of the same semantics
+//! (computed by definition, not incrementally) gives the same bits.
+
+use crate::capacity::MAX_N;
+use crate::raw::{f32_at, u32_at};
+
+/// Largest number of atoms of a monitor program.
+pub const MAX_MONITOR_ATOMS: usize = 32;
+/// Largest number of nodes of a monitor program.
+pub const MAX_MONITOR_NODES: usize = 64;
+/// Largest horizon N in samples.
+pub const MAX_MONITOR_SAMPLES: usize = 1 << 16;
+/// Largest number of rows of a polytope atom.
+pub const MAX_MONITOR_ROWS: usize = 64;
+/// Largest arena a program may ask for, in 32-bit words (256 KiB).
+pub const MAX_MONITOR_WORDS: usize = 1 << 16;
+
+/// Words of the section's fixed header: n, N, atoms, nodes, atom words.
+const HEADER_WORDS: usize = 5;
+/// Words of one node record: op, first child (or atom), second child (or negation), a, b.
+pub const NODE_WORDS: usize = 5;
+
+/// Atom kinds (the first word of an atom record).
+pub const ATOM_HALFSPACE: u32 = 1;
+/// A box over listed coordinates.
+pub const ATOM_BOX: u32 = 2;
+/// A Euclidean ball over listed coordinates.
+pub const ATOM_BALL: u32 = 3;
+/// A polytope by its rows over listed coordinates.
+pub const ATOM_POLYTOPE: u32 = 4;
+
+/// Node operators (the first word of a node record).
+pub const OP_ATOM: u32 = 1;
+/// ⊤ (+∞).
+pub const OP_TRUE: u32 = 2;
+/// ⊥ (−∞).
+pub const OP_FALSE: u32 = 3;
+/// Binary ∧ (min).
+pub const OP_AND: u32 = 4;
+/// Binary ∨ (max).
+pub const OP_OR: u32 = 5;
+/// F[a,b].
+pub const OP_EVENTUALLY: u32 = 6;
+/// G[a,b].
+pub const OP_ALWAYS: u32 = 7;
+/// U[a,b] (first child φ, second ψ).
+pub const OP_UNTIL: u32 = 8;
+/// R[a,b] (first child φ, second ψ).
+pub const OP_RELEASE: u32 = 9;
+
+/// Why a monitor section is refused.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum MonitorError {
+    /// The body is shorter than its header says, or longer.
+    Length,
+    /// The state dimension differs from the image's, or a count is out of its range.
+    Dims,
+    /// Atom `i` is malformed (kind, coordinates, values).
+    Atom(u16),
+    /// Node `i` is malformed (operator, children, window), or the nodes are not one tree rooted at the
+    /// last node.
+    Node(u16),
+    /// The arena given to [`Monitor::new`] is smaller than [`MonitorProgram::words`].
+    Arena,
+}
+
+impl core::fmt::Display for MonitorError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            MonitorError::Length => {
+                f.write_str("the monitor section's length disagrees with its header")
+            }
+            MonitorError::Dims => f.write_str("the monitor's dimensions are out of range"),
+            MonitorError::Atom(i) => write!(f, "monitor atom {i} is malformed"),
+            MonitorError::Node(i) => write!(f, "monitor node {i} is malformed or not in one tree"),
+            MonitorError::Arena => f.write_str("the monitor's arena is too small"),
+        }
+    }
+}
+
+/// The verdict on the task so far.
+#[repr(u8)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Verdict {
+    /// Not decided yet.
+    Pending = 0,
+    /// The robustness is certainly positive.
+    Satisfied = 1,
+    /// The robustness is certainly negative.
+    Violated = 2,
+    /// Decided, and exactly 0.
+    Boundary = 3,
+}
+
+/// What the monitor reports after a step.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Report {
+    /// Lower bound of the robustness at time 0.
+    pub lo: f32,
+    /// Upper bound of the robustness at time 0.
+    pub hi: f32,
+    /// The verdict.
+    pub verdict: Verdict,
+}
+
+/// A validated monitor program, borrowed from its section body.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MonitorProgram<'a> {
+    body: &'a [u8],
+    n: usize,
+    horizon: usize,
+    atoms: usize,
+    nodes: usize,
+    /// Word offset of each atom's record (atoms ≤ MAX_MONITOR_ATOMS).
+    atom_at: [u32; MAX_MONITOR_ATOMS],
+    /// Word offset of the first node record.
+    nodes_at: usize,
+}
+
+#[inline(always)]
+fn word(body: &[u8], i: usize) -> usize {
+    u32_at(body, i) as usize
+}
+
+/// Words of atom record `kind` with `d` coordinates and, for a polytope, `rows` rows (0 if unknown).
+fn atom_len(kind: u32, d: usize, rows: usize) -> Option<usize> {
+    match kind {
+        ATOM_HALFSPACE => Some(2 + 2 * d + 1),
+        ATOM_BOX => Some(2 + 3 * d),
+        ATOM_BALL => Some(2 + 2 * d + 1),
+        ATOM_POLYTOPE => Some(3 + d + rows * d + rows),
+        _ => None,
+    }
+}
+
+/// A node's static description, decoded once.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+struct Op {
+    op: u32,
+    c1: usize,
+    c2: usize,
+    a: usize,
+    b: usize,
+}
+
+impl<'a> MonitorProgram<'a> {
+    /// The program a section body holds, validated for an image of state dimension `n` (module doc;
+    /// refused with the first thing wrong).
+    pub fn decode(body: &'a [u8], n: usize) -> Result<Self, MonitorError> {
+        if !body.len().is_multiple_of(4) || body.len() < 4 * HEADER_WORDS {
+            return Err(MonitorError::Length);
+        }
+        let total = body.len() / 4;
+        let (dn, horizon, atoms, nodes, atom_words) = (
+            word(body, 0),
+            word(body, 1),
+            word(body, 2),
+            word(body, 3),
+            word(body, 4),
+        );
+        if dn != n
+            || n == 0
+            || n > MAX_N
+            || horizon >= MAX_MONITOR_SAMPLES
+            || atoms > MAX_MONITOR_ATOMS
+            || nodes == 0
+            || nodes > MAX_MONITOR_NODES
+        {
+            return Err(MonitorError::Dims);
+        }
+        let nodes_at = HEADER_WORDS.saturating_add(atom_words);
+        if nodes_at.saturating_add(nodes * NODE_WORDS) != total {
+            return Err(MonitorError::Length);
+        }
+        let mut p = MonitorProgram {
+            body,
+            n,
+            horizon,
+            atoms,
+            nodes,
+            atom_at: [0; MAX_MONITOR_ATOMS],
+            nodes_at,
+        };
+        // Atoms, back to back.
+        let mut at = HEADER_WORDS;
+        for i in 0..atoms {
+            let bad = MonitorError::Atom(i as u16);
+            let kind = u32_at(body, at);
+            let d = word(body, at + 1);
+            if d == 0 || d > n {
+                return Err(bad);
+            }
+            let rows = if kind == ATOM_POLYTOPE {
+                word(body, at + 2 + d)
+            } else {
+                0
+            };
+            if kind == ATOM_POLYTOPE && (rows == 0 || rows > MAX_MONITOR_ROWS) {
+                return Err(bad);
+            }
+            let len = atom_len(kind, d, rows).ok_or(bad)?;
+            if at + len > nodes_at {
+                return Err(bad);
+            }
+            for j in 0..d {
+                if word(body, at + 2 + j) >= n {
+                    return Err(bad);
+                }
+            }
+            let floats_from = at + 2 + d + usize::from(kind == ATOM_POLYTOPE);
+            for j in floats_from..at + len {
+                if !f32_at(body, j).is_finite() {
+                    return Err(bad);
+                }
+            }
+            match kind {
+                ATOM_BOX => {
+                    for j in 0..d {
+                        if f32_at(body, floats_from + j) > f32_at(body, floats_from + d + j) {
+                            return Err(bad);
+                        }
+                    }
+                }
+                ATOM_BALL => {
+                    if f32_at(body, floats_from + d) < 0.0 {
+                        return Err(bad);
+                    }
+                }
+                _ => {}
+            }
+            if let Some(slot) = p.atom_at.get_mut(i) {
+                *slot = at as u32;
+            }
+            at += len;
+        }
+        if at != nodes_at {
+            return Err(MonitorError::Length);
+        }
+        // Nodes: children before parents, each node but the last read by exactly one parent.
+        let mut read = [false; MAX_MONITOR_NODES];
+        for i in 0..nodes {
+            let bad = MonitorError::Node(i as u16);
+            let o = p.op(i);
+            let child =
+                |c: usize, read: &mut [bool; MAX_MONITOR_NODES]| -> Result<(), MonitorError> {
+                    match read.get_mut(c) {
+                        Some(r) if c < i && !*r => {
+                            *r = true;
+                            Ok(())
+                        }
+                        _ => Err(bad),
+                    }
+                };
+            match o.op {
+                OP_ATOM => {
+                    if o.c1 >= atoms || o.c2 > 1 || o.a != 0 || o.b != 0 {
+                        return Err(bad);
+                    }
+                }
+                OP_TRUE | OP_FALSE => {
+                    if o.c1 != 0 || o.c2 != 0 || o.a != 0 || o.b != 0 {
+                        return Err(bad);
+                    }
+                }
+                OP_AND | OP_OR => {
+                    if o.c1 == o.c2 || o.a != 0 || o.b != 0 {
+                        return Err(bad);
+                    }
+                    child(o.c1, &mut read)?;
+                    child(o.c2, &mut read)?;
+                }
+                OP_EVENTUALLY | OP_ALWAYS => {
+                    if o.c2 != 0 || o.a > o.b || o.b >= MAX_MONITOR_SAMPLES {
+                        return Err(bad);
+                    }
+                    child(o.c1, &mut read)?;
+                }
+                OP_UNTIL | OP_RELEASE => {
+                    if o.c1 == o.c2 || o.a > o.b || o.b >= MAX_MONITOR_SAMPLES {
+                        return Err(bad);
+                    }
+                    child(o.c1, &mut read)?;
+                    child(o.c2, &mut read)?;
+                }
+                _ => return Err(bad),
+            }
+        }
+        for (i, r) in read.iter().enumerate().take(nodes.saturating_sub(1)) {
+            if !*r {
+                return Err(MonitorError::Node(i as u16));
+            }
+        }
+        if p.words() > MAX_MONITOR_WORDS {
+            return Err(MonitorError::Dims);
+        }
+        Ok(p)
+    }
+
+    /// The section body.
+    pub fn body(&self) -> &'a [u8] {
+        self.body
+    }
+
+    /// The horizon N in samples.
+    pub fn horizon(&self) -> usize {
+        self.horizon
+    }
+
+    /// Number of atoms.
+    pub fn atoms(&self) -> usize {
+        self.atoms
+    }
+
+    /// Number of nodes.
+    pub fn nodes(&self) -> usize {
+        self.nodes
+    }
+
+    fn op(&self, i: usize) -> Op {
+        let at = self.nodes_at + i * NODE_WORDS;
+        Op {
+            op: u32_at(self.body, at),
+            c1: word(self.body, at + 1),
+            c2: word(self.body, at + 2),
+            a: word(self.body, at + 3),
+            b: word(self.body, at + 4),
+        }
+    }
+
+    /// Atom `i`'s signed distance at the state `x` (module doc), −0 as +0; 0 for a bad index.
+    pub fn atom(&self, i: usize, x: &[f32]) -> f32 {
+        let at = self.atom_at.get(i).copied().unwrap_or(0) as usize;
+        let body = self.body;
+        let kind = u32_at(body, at);
+        let d = word(body, at + 1).min(MAX_N);
+        let y = |j: usize| x.get(word(body, at + 2 + j)).copied().unwrap_or(0.0);
+        let f = at + 2 + d;
+        let v = match kind {
+            ATOM_HALFSPACE => {
+                let mut s = 0.0f32;
+                for j in 0..d {
+                    s += f32_at(body, f + j) * y(j);
+                }
+                f32_at(body, f + d) - s
+            }
+            ATOM_BOX => {
+                let (mut depth, mut out2, mut outside) = (f32::INFINITY, 0.0f32, false);
+                for j in 0..d {
+                    let (lo, hi, v) = (f32_at(body, f + j), f32_at(body, f + d + j), y(j));
+                    let e = if v < lo {
+                        lo - v
+                    } else if v > hi {
+                        v - hi
+                    } else {
+                        0.0
+                    };
+                    if e > 0.0 {
+                        outside = true;
+                        out2 += e * e;
+                    }
+                    depth = depth.min((v - lo).min(hi - v));
+                }
+                if outside {
+                    -libm::sqrtf(out2)
+                } else {
+                    depth
+                }
+            }
+            ATOM_BALL => {
+                let mut s = 0.0f32;
+                for j in 0..d {
+                    let e = y(j) - f32_at(body, f + j);
+                    s += e * e;
+                }
+                f32_at(body, f + d) - libm::sqrtf(s)
+            }
+            ATOM_POLYTOPE => {
+                let rows = word(body, f).min(MAX_MONITOR_ROWS);
+                let (a0, b0) = (f + 1, f + 1 + rows * d);
+                let mut least = f32::INFINITY;
+                for r in 0..rows {
+                    let mut s = 0.0f32;
+                    for j in 0..d {
+                        s += f32_at(body, a0 + r * d + j) * y(j);
+                    }
+                    least = least.min(f32_at(body, b0 + r) - s);
+                }
+                least
+            }
+            _ => 0.0,
+        };
+        v + 0.0
+    }
+
+    /// The static plan of every node: horizon, values needed, buffer sizes (module doc).
+    fn plan(&self) -> ([Plan; MAX_MONITOR_NODES], usize) {
+        let mut plans = [Plan::default(); MAX_MONITOR_NODES];
+        let cap = self.horizon + 1;
+        // Horizons, children first.
+        for i in 0..self.nodes {
+            let o = self.op(i);
+            let hor = |c: usize| plans.get(c).map_or(0, |p| p.hor);
+            let h = match o.op {
+                OP_AND | OP_OR => hor(o.c1).max(hor(o.c2)),
+                OP_EVENTUALLY | OP_ALWAYS => o.b.saturating_add(hor(o.c1)),
+                OP_UNTIL | OP_RELEASE => until_hor(o.a, o.b, hor(o.c1), hor(o.c2)),
+                _ => 0,
+            };
+            if let Some(p) = plans.get_mut(i) {
+                p.hor = h.min(2 * MAX_MONITOR_SAMPLES);
+                p.parent = NONE;
+                p.back = IDENTITY;
+            }
+        }
+        // Values needed, root first: the root's value at 0.
+        if let Some(p) = plans.get_mut(self.nodes.saturating_sub(1)) {
+            p.need = 1;
+        }
+        for i in (0..self.nodes).rev() {
+            let o = self.op(i);
+            let need = plans.get(i).map_or(0, |p| p.need);
+            let set = |c: usize, need: usize, plans: &mut [Plan; MAX_MONITOR_NODES]| {
+                if let Some(p) = plans.get_mut(c) {
+                    p.need = need.min(cap);
+                    p.parent = i;
+                }
+            };
+            match o.op {
+                OP_AND | OP_OR => {
+                    set(o.c1, need, &mut plans);
+                    set(o.c2, need, &mut plans);
+                }
+                OP_EVENTUALLY | OP_ALWAYS => set(o.c1, need + o.b, &mut plans),
+                OP_UNTIL | OP_RELEASE => {
+                    let l = if phi_unread(o.a, o.b) {
+                        0
+                    } else {
+                        (need + o.b).saturating_sub(1)
+                    };
+                    set(o.c1, l, &mut plans);
+                    set(o.c2, need + o.b, &mut plans);
+                }
+                _ => {}
+            }
+        }
+        // Buffers.
+        let mut words = 0usize;
+        for i in 0..self.nodes {
+            let o = self.op(i);
+            let (h1, h2) = (
+                plans.get(o.c1).map_or(0, |p| p.hor),
+                plans.get(o.c2).map_or(0, |p| p.hor),
+            );
+            let Some(p) = plans.get_mut(i) else { break };
+            let mut alloc = |entries: usize, per: usize| {
+                let b = Buf {
+                    off: words as u32,
+                    cap: entries as u32,
+                    head: 0,
+                    len: 0,
+                };
+                words += entries * per;
+                b
+            };
+            match o.op {
+                OP_AND | OP_OR => {
+                    p.b1 = alloc((h2.saturating_sub(h1)).min(cap) + 2, 1);
+                    p.b2 = alloc((h1.saturating_sub(h2)).min(cap) + 2, 1);
+                }
+                OP_EVENTUALLY | OP_ALWAYS => {
+                    p.b1 = alloc((o.b - o.a).min(cap) + 2, 2);
+                }
+                OP_UNTIL | OP_RELEASE => {
+                    let h = p.hor;
+                    let (hl, hr) = (h1, h2);
+                    let slack_l = (h + 1).saturating_sub(o.b + hl);
+                    let slack_r = h.saturating_sub(o.b + hr);
+                    // φ's history (t, e − 1 + slack], ψ's [t + a, e + slack], the minimum of φ over (t, t + a),
+                    // the two stacks of maps over [t + a, e − 1].
+                    p.b1 = alloc((o.b + slack_l).min(cap) + 2, 1);
+                    p.b2 = alloc((o.b - o.a + slack_r).min(cap) + 2, 1);
+                    p.b3 = alloc(o.a.min(cap) + 2, 2);
+                    let w = (o.b - o.a).min(cap) + 2;
+                    p.b4 = alloc(w, 4);
+                    p.b5 = alloc(w, 2);
+                }
+                _ => {}
+            }
+        }
+        (plans, words)
+    }
+
+    /// The arena [`Monitor::new`] needs, in 32-bit words.
+    pub fn words(&self) -> usize {
+        self.plan().1
+    }
+
+    /// The arena in bytes plus the evaluator's own state ([`Monitor`]), what `inspect` reports as the
+    /// monitor's RAM.
+    pub fn ram_bytes(&self) -> usize {
+        4 * self.words() + core::mem::size_of::<Monitor<'static>>()
+    }
+}
+
+/// U, R: b + max(ψ's, φ's − 1), or b + ψ's when φ is never read ([`phi_unread`]; module doc).
+pub(crate) fn until_hor(a: usize, b: usize, hl: usize, hr: usize) -> usize {
+    if phi_unread(a, b) {
+        b.saturating_add(hr)
+    } else {
+        b.saturating_add(hr.max(hl.saturating_sub(1)))
+    }
+}
+
+/// U[a,b], R[a,b] read no value of φ when no witness j has a sample strictly between t and j (b ≤ 1).
+pub(crate) fn phi_unread(a: usize, b: usize) -> bool {
+    a <= 1 && b <= 1
+}
+
+/// The first map of U's queue at t: φ(i) counts only for t < i, so with a = 0 the witness t itself is a
+/// separate head term ψ(t) and the maps start at t + 1.
+fn first_map(t: usize, a: usize) -> usize {
+    t + a.max(1)
+}
+
+const NONE: usize = usize::MAX;
+
+/// A ring buffer in the arena: `cap` entries of a fixed number of words from word `off`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+struct Buf {
+    off: u32,
+    cap: u32,
+    head: u32,
+    len: u32,
+}
+
+/// A node's static plan and running state.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct Plan {
+    hor: usize,
+    need: usize,
+    parent: usize,
+    /// Values emitted (the next t).
+    emitted: usize,
+    /// The value emitted in this pass, if any.
+    out: Option<f32>,
+    /// Children's values received (F, G: fed; U, R: φ and ψ; ∧, ∨: unused).
+    got1: usize,
+    got2: usize,
+    /// U, R: the next φ index fed to the minimum over (t, t + a), the next map index.
+    m_next: usize,
+    map_next: usize,
+    /// U, R: the first map index in the queue; the back stack's composed map.
+    q_lo: usize,
+    back: (f32, f32),
+    b1: Buf,
+    b2: Buf,
+    b3: Buf,
+    b4: Buf,
+    b5: Buf,
+}
+
+/// The evaluator's state over a borrowed arena (module doc).
+pub struct Monitor<'a> {
+    prog: MonitorProgram<'a>,
+    arena: &'a mut [u32],
+    plans: [Plan; MAX_MONITOR_NODES],
+    /// The next sample index.
+    k: usize,
+    atom_vals: [f32; MAX_MONITOR_ATOMS],
+    /// The root's value at 0 once emitted.
+    root: Option<f32>,
+    last: Report,
+}
+
+#[inline(always)]
+fn neg(x: f32) -> f32 {
+    -x + 0.0
+}
+
+/// The clamp map y ↦ max(α, min(β, y)) composed: (outer ∘ inner).
+#[inline(always)]
+fn compose(outer: (f32, f32), inner: (f32, f32)) -> (f32, f32) {
+    let c = |y: f32| outer.0.max(outer.1.min(y));
+    (c(inner.0), c(inner.1))
+}
+
+#[inline(always)]
+fn apply(m: (f32, f32), y: f32) -> f32 {
+    m.0.max(m.1.min(y))
+}
+
+const IDENTITY: (f32, f32) = (f32::NEG_INFINITY, f32::INFINITY);
+
+impl Buf {
+    fn slot(&self, i: usize, per: usize) -> usize {
+        let cap = (self.cap as usize).max(1);
+        self.off as usize + ((self.head as usize + i) % cap) * per
+    }
+}
+
+fn get(arena: &[u32], at: usize) -> f32 {
+    f32::from_bits(arena.get(at).copied().unwrap_or(0))
+}
+
+fn put(arena: &mut [u32], at: usize, v: f32) {
+    if let Some(w) = arena.get_mut(at) {
+        *w = v.to_bits();
+    }
+}
+
+fn push(arena: &mut [u32], b: &mut Buf, per: usize, vals: &[f32]) {
+    if b.len >= b.cap {
+        return;
+    }
+    let at = b.slot(b.len as usize, per);
+    for (j, &v) in vals.iter().enumerate().take(per) {
+        put(arena, at + j, v);
+    }
+    b.len += 1;
+}
+
+fn at(arena: &[u32], b: &Buf, i: usize, per: usize, j: usize) -> f32 {
+    get(arena, b.slot(i, per) + j)
+}
+
+fn pop_front(b: &mut Buf) {
+    if b.len > 0 {
+        b.head = (b.head + 1) % b.cap.max(1);
+        b.len -= 1;
+    }
+}
+
+fn pop_back(b: &mut Buf) {
+    b.len = b.len.saturating_sub(1);
+}
+
+/// A monotone deque of (index, value) for the sliding maximum: pop stale indices below `from`, dominated
+/// values at the back, then push.
+fn deque_push_max(arena: &mut [u32], b: &mut Buf, from: usize, idx: usize, v: f32) {
+    deque_drop_below(arena, b, from);
+    while b.len > 0 && at(arena, b, b.len as usize - 1, 2, 1) <= v {
+        pop_back(b);
+    }
+    push(arena, b, 2, &[f32::from_bits(idx as u32), v]);
+}
+
+fn deque_drop_below(arena: &[u32], b: &mut Buf, from: usize) {
+    while b.len > 0 && (at(arena, b, 0, 2, 0).to_bits() as usize) < from {
+        pop_front(b);
+    }
+}
+
+/// The front value of a max-deque after dropping indices below `from`, or −∞.
+fn deque_max(arena: &[u32], b: &mut Buf, from: usize) -> f32 {
+    deque_drop_below(arena, b, from);
+    if b.len > 0 {
+        at(arena, b, 0, 2, 1)
+    } else {
+        f32::NEG_INFINITY
+    }
+}
+
+impl<'a> Monitor<'a> {
+    /// A monitor at its first sample over `arena` (at least [`MonitorProgram::words`] words).
+    pub fn new(prog: MonitorProgram<'a>, arena: &'a mut [u32]) -> Result<Self, MonitorError> {
+        let (plans, words) = prog.plan();
+        if arena.len() < words {
+            return Err(MonitorError::Arena);
+        }
+        Ok(Monitor {
+            prog,
+            arena,
+            plans,
+            k: 0,
+            atom_vals: [0.0; MAX_MONITOR_ATOMS],
+            root: None,
+            last: Report {
+                lo: f32::NEG_INFINITY,
+                hi: f32::INFINITY,
+                verdict: Verdict::Pending,
+            },
+        })
+    }
+
+    /// The program.
+    pub fn program(&self) -> &MonitorProgram<'a> {
+        &self.prog
+    }
+
+    /// The sample index the next [`Monitor::update`] takes.
+    pub fn samples(&self) -> usize {
+        self.k
+    }
+
+    /// The last report.
+    pub fn report(&self) -> Report {
+        self.last
+    }
+
+    /// Back to the first sample.
+    pub fn reset(&mut self) {
+        let (plans, _) = self.prog.plan();
+        self.plans = plans;
+        self.k = 0;
+        self.root = None;
+        self.last = Report {
+            lo: f32::NEG_INFINITY,
+            hi: f32::INFINITY,
+            verdict: Verdict::Pending,
+        };
+    }
+
+    /// Take the sample x(k) (n values, the plant's state) and report. After sample N the report stays.
+    pub fn update(&mut self, x: &[f32]) -> Report {
+        let horizon = self.prog.horizon;
+        if self.k > horizon {
+            return self.last;
+        }
+        for i in 0..self.prog.atoms {
+            if let Some(v) = self.atom_vals.get_mut(i) {
+                *v = self.prog.atom(i, x);
+            }
+        }
+        let end = self.k == horizon;
+        // One pass in the steady state; at the end, passes until nothing is emitted (each emits at most
+        // one value per node, bounded by the values needed).
+        let mut passes = 0usize;
+        loop {
+            let mut any = false;
+            for i in 0..self.prog.nodes {
+                any |= self.process(i, passes == 0);
+            }
+            passes += 1;
+            if !end || !any || passes > 2 * MAX_MONITOR_SAMPLES + 2 {
+                break;
+            }
+        }
+        self.k += 1;
+        let root = self.prog.nodes.saturating_sub(1);
+        let (lo, hi) = match self.root {
+            Some(v) => (v, v),
+            None => self.bounds(root, 0),
+        };
+        let verdict = if lo > 0.0 {
+            Verdict::Satisfied
+        } else if hi < 0.0 {
+            Verdict::Violated
+        } else if lo == hi {
+            Verdict::Boundary
+        } else {
+            Verdict::Pending
+        };
+        self.last = Report { lo, hi, verdict };
+        self.last
+    }
+
+    fn plan(&self, i: usize) -> Plan {
+        self.plans.get(i).copied().unwrap_or_default()
+    }
+
+    /// Whether node `c`'s parent accepts `c`'s next value (backpressure, module doc).
+    fn room(&self, c: usize) -> bool {
+        let pc = self.plan(c);
+        let Some(p) = self.plans.get(pc.parent).copied() else {
+            return true;
+        };
+        let o = self.prog.op(pc.parent);
+        let j = pc.emitted;
+        let e = |p: &Plan| (p.emitted + o.b).min(self.prog.horizon);
+        match o.op {
+            OP_AND | OP_OR => {
+                let b = if c == o.c1 { p.b1 } else { p.b2 };
+                b.len < b.cap
+            }
+            OP_EVENTUALLY | OP_ALWAYS => j <= e(&p),
+            OP_UNTIL | OP_RELEASE => {
+                let b = if c == o.c1 { p.b1 } else { p.b2 };
+                b.len < b.cap
+            }
+            _ => true,
+        }
+    }
+
+    /// One node's turn in a pass: take its children's values, emit at most one of its own. Returns
+    /// whether it emitted.
+    fn process(&mut self, i: usize, first: bool) -> bool {
+        let o = self.prog.op(i);
+        let mut p = self.plan(i);
+        p.out = None;
+        let k = self.k;
+        let horizon = self.prog.horizon;
+        let t = p.emitted;
+        let can = t < p.need && t <= horizon;
+        let child_out = |c: usize| self.plans.get(c).and_then(|q| q.out);
+        let mut emit: Option<f32> = None;
+        match o.op {
+            OP_ATOM | OP_TRUE | OP_FALSE => {
+                if first && can && t == k {
+                    let v = match o.op {
+                        OP_TRUE => f32::INFINITY,
+                        OP_FALSE => f32::NEG_INFINITY,
+                        _ => {
+                            let v = self.atom_vals.get(o.c1).copied().unwrap_or(0.0);
+                            if o.c2 == 1 {
+                                neg(v)
+                            } else {
+                                v
+                            }
+                        }
+                    };
+                    emit = Some(v);
+                }
+            }
+            OP_AND | OP_OR => {
+                if let Some(v) = child_out(o.c1) {
+                    push(self.arena, &mut p.b1, 1, &[v]);
+                }
+                if let Some(v) = child_out(o.c2) {
+                    push(self.arena, &mut p.b2, 1, &[v]);
+                }
+                if can && p.b1.len > 0 && p.b2.len > 0 {
+                    let (x, y) = (
+                        at(self.arena, &p.b1, 0, 1, 0),
+                        at(self.arena, &p.b2, 0, 1, 0),
+                    );
+                    emit = Some(if o.op == OP_AND { x.min(y) } else { x.max(y) });
+                }
+            }
+            OP_EVENTUALLY | OP_ALWAYS => {
+                let dual = o.op == OP_ALWAYS;
+                if let Some(v) = child_out(o.c1) {
+                    let v = if dual { neg(v) } else { v };
+                    deque_push_max(self.arena, &mut p.b1, t + o.a, p.got1, v);
+                    p.got1 += 1;
+                }
+                if can {
+                    let e = (t + o.b).min(horizon);
+                    // An empty window is decided at N, as the schedule of the module doc says.
+                    let empty = t + o.a > horizon;
+                    if (empty && k == horizon) || (!empty && p.got1 > e) {
+                        let v = if empty {
+                            f32::NEG_INFINITY
+                        } else {
+                            deque_max(self.arena, &mut p.b1, t + o.a)
+                        };
+                        emit = Some(if dual { neg(v) } else { v });
+                    }
+                }
+            }
+            OP_UNTIL | OP_RELEASE => {
+                let dual = o.op == OP_RELEASE;
+                let d = |v: f32| if dual { neg(v) } else { v };
+                // Histories: φ from index t + 1, ψ from t + a (earlier values are never read).
+                if let Some(v) = child_out(o.c1) {
+                    if p.got1 > t {
+                        push(self.arena, &mut p.b1, 1, &[d(v)]);
+                    }
+                    p.got1 += 1;
+                }
+                if let Some(v) = child_out(o.c2) {
+                    if p.got2 >= t + o.a {
+                        push(self.arena, &mut p.b2, 1, &[d(v)]);
+                    }
+                    p.got2 += 1;
+                }
+                self.until_feed(&o, &mut p);
+                if can {
+                    let e = (t + o.b).min(horizon);
+                    if t + o.a > horizon {
+                        if k == horizon {
+                            emit = Some(d(f32::NEG_INFINITY));
+                        }
+                    } else if p.got2 > e && (phi_unread(o.a, o.b) || p.got1 >= e) && p.map_next >= e
+                    {
+                        let m = deque_max(self.arena, &mut p.b3, t + 1);
+                        let q = if e >= first_map(t, o.a) {
+                            apply(self.queue_agg(&p), self.history(&p.b2, p.got2, e))
+                        } else {
+                            f32::NEG_INFINITY
+                        };
+                        let head = if o.a == 0 {
+                            self.history(&p.b2, p.got2, t)
+                        } else {
+                            f32::NEG_INFINITY
+                        };
+                        // m is kept negated (a max-deque of −φ): the minimum is −max.
+                        emit = Some(d(neg(m).min(head.max(q))));
+                    }
+                }
+            }
+            _ => {}
+        }
+        let mut emitted = false;
+        if let Some(v) = emit {
+            // Store p first: `room` reads the parent's buffers, which this node does not touch.
+            if let Some(slot) = self.plans.get_mut(i) {
+                *slot = p;
+            }
+            if self.room(i) {
+                if i + 1 == self.prog.nodes {
+                    self.root = Some(v);
+                }
+                p.out = Some(v);
+                p.emitted += 1;
+                emitted = true;
+                match o.op {
+                    OP_AND | OP_OR => {
+                        pop_front(&mut p.b1);
+                        pop_front(&mut p.b2);
+                    }
+                    OP_UNTIL | OP_RELEASE => self.until_advance(&o, &mut p),
+                    _ => {}
+                }
+            }
+        }
+        if let Some(slot) = self.plans.get_mut(i) {
+            *slot = p;
+        }
+        emitted
+    }
+
+    /// History value at index `j` of a buffer whose last entry is index `got − 1`.
+    fn history(&self, b: &Buf, got: usize, j: usize) -> f32 {
+        let first = got.saturating_sub(b.len as usize);
+        if j < first || j >= got {
+            return f32::NEG_INFINITY;
+        }
+        at(self.arena, b, j - first, 1, 0)
+    }
+
+    /// U, R: feed φ into the minimum over (t, t + a) up to t + a − 1 and push maps f_j up to e − 1, from
+    /// the histories (values as stored: negated for R).
+    fn until_feed(&mut self, o: &Op, p: &mut Plan) {
+        let t = p.emitted;
+        let horizon = self.prog.horizon;
+        let e = (t + o.b).min(horizon);
+        if p.m_next < t + 1 {
+            p.m_next = t + 1;
+        }
+        while p.m_next < t + o.a && p.m_next < p.got1 {
+            let v = self.history(&p.b1, p.got1, p.m_next);
+            // A max-deque of −φ keeps the minimum of φ.
+            deque_push_max(self.arena, &mut p.b3, t + 1, p.m_next, neg(v));
+            p.m_next += 1;
+        }
+        let q0 = first_map(t, o.a);
+        if p.map_next < q0 {
+            p.map_next = q0;
+            p.q_lo = p.q_lo.max(q0);
+        }
+        while p.map_next < e && p.map_next < p.got1 && p.map_next < p.got2 {
+            let l = self.history(&p.b1, p.got1, p.map_next);
+            let r = self.history(&p.b2, p.got2, p.map_next);
+            let f = (r, r.max(l));
+            push(self.arena, &mut p.b5, 2, &[f.0, f.1]);
+            p.back = compose(p.back, f);
+            p.map_next += 1;
+        }
+    }
+
+    /// U, R: the composed maps of the queue (front stack's top aggregate ∘ back aggregate).
+    fn queue_agg(&self, p: &Plan) -> (f32, f32) {
+        let front = if p.b4.len > 0 {
+            let i = p.b4.len as usize - 1;
+            (
+                at(self.arena, &p.b4, i, 4, 2),
+                at(self.arena, &p.b4, i, 4, 3),
+            )
+        } else {
+            IDENTITY
+        };
+        compose(front, p.back)
+    }
+
+    /// U, R after emitting t (now t + 1): drop the map of index t + a from the queue, φ ≤ t + 1 and ψ
+    /// below t + 1 + a from the histories.
+    fn until_advance(&mut self, o: &Op, p: &mut Plan) {
+        let t = p.emitted; // already advanced
+        let q0 = first_map(t, o.a);
+        while p.q_lo < q0 && p.q_lo < p.map_next {
+            if p.b4.len == 0 {
+                // Move the back stack onto the front stack, last first, composing towards the front.
+                let mut agg = IDENTITY;
+                let n = p.b5.len as usize;
+                for r in (0..n).rev() {
+                    let f = (
+                        at(self.arena, &p.b5, r, 2, 0),
+                        at(self.arena, &p.b5, r, 2, 1),
+                    );
+                    agg = compose(f, agg);
+                    push(self.arena, &mut p.b4, 4, &[f.0, f.1, agg.0, agg.1]);
+                }
+                p.b5.len = 0;
+                p.b5.head = 0;
+                p.back = IDENTITY;
+            }
+            pop_back(&mut p.b4);
+            p.q_lo += 1;
+        }
+        p.q_lo = p.q_lo.max(q0);
+        // φ history from t + 1, ψ history from t + a.
+        while p.b1.len > 0 && p.got1 - (p.b1.len as usize) < t + 1 {
+            pop_front(&mut p.b1);
+        }
+        while p.b2.len > 0 && p.got2 - (p.b2.len as usize) < t + o.a {
+            pop_front(&mut p.b2);
+        }
+    }
+
+    /// Sound bounds of node `i` at its pending time (module doc); exact when it was emitted (the value
+    /// then sits in its parent's buffer or was the root's last output).
+    fn bounds(&mut self, i: usize, t: usize) -> (f32, f32) {
+        self.bounds_at(i, t, 0)
+    }
+
+    fn bounds_at(&mut self, i: usize, t: usize, depth: usize) -> (f32, f32) {
+        const UNKNOWN: (f32, f32) = (f32::NEG_INFINITY, f32::INFINITY);
+        if depth > MAX_MONITOR_NODES {
+            return UNKNOWN;
+        }
+        let o = self.prog.op(i);
+        let mut p = self.plan(i);
+        if p.emitted > t {
+            // Never asked: a parent reads an emitted child's value from its own buffer.
+            return UNKNOWN;
+        }
+        let r = match o.op {
+            OP_TRUE => (f32::INFINITY, f32::INFINITY),
+            OP_FALSE => (f32::NEG_INFINITY, f32::NEG_INFINITY),
+            OP_ATOM => UNKNOWN,
+            OP_AND | OP_OR => {
+                let c1 = if p.b1.len > 0 {
+                    let v = at(self.arena, &p.b1, 0, 1, 0);
+                    (v, v)
+                } else {
+                    self.bounds_at(o.c1, t, depth + 1)
+                };
+                let c2 = if p.b2.len > 0 {
+                    let v = at(self.arena, &p.b2, 0, 1, 0);
+                    (v, v)
+                } else {
+                    self.bounds_at(o.c2, t, depth + 1)
+                };
+                if o.op == OP_AND {
+                    (c1.0.min(c2.0), c1.1.min(c2.1))
+                } else {
+                    (c1.0.max(c2.0), c1.1.max(c2.1))
+                }
+            }
+            OP_EVENTUALLY | OP_ALWAYS => {
+                let lo = deque_max(self.arena, &mut p.b1, t + o.a);
+                if o.op == OP_ALWAYS {
+                    (f32::NEG_INFINITY, neg(lo))
+                } else {
+                    (lo, f32::INFINITY)
+                }
+            }
+            OP_UNTIL | OP_RELEASE => {
+                let known = p.m_next >= (t + o.a).min(self.prog.horizon + 1);
+                let m = neg(deque_max(self.arena, &mut p.b3, t + 1));
+                let agg = self.queue_agg(&p);
+                let j = p.map_next;
+                let e = (t + o.b).min(self.prog.horizon);
+                let maps = e >= first_map(t, o.a);
+                let next = if j < p.got2 && j <= e {
+                    self.history(&p.b2, p.got2, j)
+                } else {
+                    f32::NEG_INFINITY
+                };
+                let (q_lo, q_hi) = if maps {
+                    (apply(agg, next), apply(agg, f32::INFINITY))
+                } else {
+                    (f32::NEG_INFINITY, f32::NEG_INFINITY)
+                };
+                let head = if o.a > 0 {
+                    (f32::NEG_INFINITY, f32::NEG_INFINITY)
+                } else if p.got2 > t {
+                    let v = self.history(&p.b2, p.got2, t);
+                    (v, v)
+                } else {
+                    (f32::NEG_INFINITY, f32::INFINITY)
+                };
+                let lo = if known {
+                    m.min(head.0.max(q_lo))
+                } else {
+                    f32::NEG_INFINITY
+                };
+                let hi = m.min(head.1.max(q_hi));
+                if o.op == OP_RELEASE {
+                    (neg(hi), neg(lo))
+                } else {
+                    (lo, hi)
+                }
+            }
+            _ => UNKNOWN,
+        };
+        if let Some(slot) = self.plans.get_mut(i) {
+            *slot = p;
+        }
+        r
+    }
+}
