@@ -213,6 +213,8 @@ pub struct ImageBuilder {
     pub terminal_law: Option<StoredTerminal>,
     /// The whitened selection test (section 13, only with model maps), if any.
     pub selection_test: Option<SelectionTestSpec>,
+    /// The task's monitor section body (section 14, [`crate::monitor`]), if any.
+    pub monitor: Option<Vec<u8>>,
 }
 
 /// The whitened selection test of an image with model maps (`shared_types::selection`), as f32 values in
@@ -375,6 +377,7 @@ impl ImageBuilder {
             terminal_law: None,
             model_maps: None,
             selection_test: None,
+            monitor: None,
         }
     }
 
@@ -664,7 +667,12 @@ impl ImageBuilder {
             Some(body) => img.with_selection_test(body)?,
             None => img,
         };
-        encode_to_vec(&with_optional(img, &self.fingerprint, terminal.as_ref())?)
+        encode_to_vec(&with_optional(
+            img,
+            &self.fingerprint,
+            terminal.as_ref(),
+            self.monitor.as_deref(),
+        )?)
     }
 
     /// [`ImageBuilder::to_bytes`], then writes the file.
@@ -741,6 +749,7 @@ impl ImageBuilder {
                     .collect();
                 SelectionTestSpec { factors, records }
             }),
+            monitor: img.monitor().map(|p| p.body().to_vec()),
         }
     }
 }
@@ -847,6 +856,8 @@ pub struct PwaImageBuilder {
     pub fingerprint: Option<Vec<u8>>,
     /// The certified terminal law (section 11), if any.
     pub terminal_law: Option<StoredTerminal>,
+    /// The task's monitor section body (section 14, [`crate::monitor`]), if any.
+    pub monitor: Option<Vec<u8>>,
 }
 
 fn invalid(what: String, reason: &'static str) -> EmitError {
@@ -956,6 +967,7 @@ impl PwaImageBuilder {
             input_box: None,
             fingerprint: None,
             terminal_law: None,
+            monitor: None,
         }
     }
 
@@ -1200,7 +1212,12 @@ impl PwaImageBuilder {
         };
         let img = Image::new_pwa(dims, period, payload)?;
         let terminal = self.terminal_law.as_ref().map(terminal_body);
-        encode_to_vec(&with_optional(img, &self.fingerprint, terminal.as_ref())?)
+        encode_to_vec(&with_optional(
+            img,
+            &self.fingerprint,
+            terminal.as_ref(),
+            self.monitor.as_deref(),
+        )?)
     }
 
     /// [`PwaImageBuilder::to_bytes`], then writes the file.
@@ -1275,23 +1292,29 @@ impl PwaImageBuilder {
             terminal_law: img
                 .terminal_law()
                 .map(|t| stored_terminal(&t, img.n(), img.m())),
+            monitor: img.monitor().map(|p| p.body().to_vec()),
         })
     }
 }
 
-/// `img` with the terminal law's section body and the spec fingerprint, each if given (validated by the
-/// image).
+/// `img` with the terminal law's section body, the spec fingerprint and the monitor's section body, each
+/// if given (validated by the image).
 fn with_optional<'a>(
     img: Image<'a>,
     fp: &'a Option<Vec<u8>>,
     terminal: Option<&'a Vec<u8>>,
+    monitor: Option<&'a [u8]>,
 ) -> Result<Image<'a>, EmitError> {
     let img = match terminal {
         Some(body) => img.with_terminal_law(body)?,
         None => img,
     };
-    match fp {
-        Some(f) => Ok(img.with_fingerprint(f)?),
+    let img = match fp {
+        Some(f) => img.with_fingerprint(f)?,
+        None => img,
+    };
+    match monitor {
+        Some(body) => Ok(img.with_monitor(body)?),
         None => Ok(img),
     }
 }

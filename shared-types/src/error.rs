@@ -377,6 +377,11 @@ pub enum ImageError {
     TerminalWithModelMaps,
     /// A selection test section in an image without model maps (only the model-maps step reads it).
     SelectionWithoutModelMaps,
+    /// The monitor section is malformed ([`crate::monitor::MonitorProgram::decode`]).
+    BadMonitor {
+        /// What is wrong.
+        why: crate::monitor::MonitorError,
+    },
     /// An image with model maps (or a selection test) given to a decoder built without the model-maps
     /// step ([`crate::image::decode_without_model_maps`]).
     ModelMapsNotSupported,
@@ -791,6 +796,7 @@ impl fmt::Display for ImageError {
             SelectionWithoutModelMaps => f.write_str(
                 "a selection test section in an image without model maps (only the model-maps step reads it)",
             ),
+            BadMonitor { why } => write!(f, "monitor section: {why}"),
             FallbackOutsideBox { input } => write!(
                 f,
                 "fallback input component {input}: outside the input box"

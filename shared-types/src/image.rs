@@ -43,6 +43,7 @@
 //! | 11  | `TerminalLaw`           | raw, [`crate::terminal`]   | both, optional, not with model maps |
 //! | 12  | `SpecFingerprint`       | [`SpecFingerprintSection`] | both, optional |
 //! | 13  | `SelectionTest`         | raw, [`crate::selection`]  | feedforward with model maps, optional |
+//! | 14  | `Monitor`               | raw, [`crate::monitor`]    | both, optional |
 //!
 //! Every section a mode lists is required, exactly once; a known section of the other mode is refused.
 //! Two bodies are not postcard. The model maps section's layout is [`crate::maps`]'s (two model
@@ -687,6 +688,8 @@ pub struct Image<'a> {
     pub(crate) terminal_law: Option<(TerminalLaw<'a>, &'a [u8])>,
     /// The selection test (section 13), if the image has one.
     pub(crate) selection: Option<SelectionTest<'a>>,
+    /// The task's monitor (section 14), if the image has one.
+    pub(crate) monitor: Option<crate::monitor::MonitorProgram<'a>>,
 }
 
 impl<'a> Image<'a> {
@@ -747,6 +750,7 @@ impl<'a> Image<'a> {
             maps,
             terminal_law: None,
             selection: None,
+            monitor: None,
         })
     }
 
@@ -776,6 +780,7 @@ impl<'a> Image<'a> {
             maps: None,
             terminal_law: None,
             selection: None,
+            monitor: None,
         })
     }
 
@@ -820,6 +825,20 @@ impl<'a> Image<'a> {
     /// The selection test (section 13), if the image has one.
     pub fn selection_test(&self) -> Option<SelectionTest<'a>> {
         self.selection
+    }
+
+    /// This image with the monitor whose section body is `body` (section 14), decoded and validated for
+    /// the plant's state dimension ([`crate::monitor::MonitorProgram::decode`]).
+    pub fn with_monitor(mut self, body: &'a [u8]) -> Result<Self, ImageError> {
+        let p = crate::monitor::MonitorProgram::decode(body, self.plant_n())
+            .map_err(|why| ImageError::BadMonitor { why })?;
+        self.monitor = Some(p);
+        Ok(self)
+    }
+
+    /// The task's monitor (section 14), if the image has one.
+    pub fn monitor(&self) -> Option<crate::monitor::MonitorProgram<'a>> {
+        self.monitor
     }
 
     /// The terminal law (section 11), if the image has one.
@@ -1139,23 +1158,31 @@ impl<'a> Image<'a> {
             kind: SectionKind::SelectionTest as u16,
             body: self.selection.as_ref().map_or(&[][..], SelectionTest::body),
         };
+        let monitor = RawSection {
+            kind: SectionKind::Monitor as u16,
+            body: self
+                .monitor
+                .as_ref()
+                .map_or(&[][..], crate::monitor::MonitorProgram::body),
+        };
         let feedforward: [&dyn SectionWrite; 5] =
             [&locations, &fallback, &trajectories, &segments, &steps];
         let pwa: [&dyn SectionWrite; 5] = [&locations, &fallback, &laws, &tree, &balls];
         let ff = self.mode == Mode::Feedforward;
         let base: &[&dyn SectionWrite] = if ff { &feedforward } else { &pwa };
         // The optional sections, in kind order, only when present.
-        let optional: [(bool, &dyn SectionWrite); 5] = [
+        let optional: [(bool, &dyn SectionWrite); 6] = [
             (ff && !p.exits.is_empty(), &exits),
             (ff && self.maps.is_some(), &maps),
             (self.terminal_law.is_some(), &terminal),
             (!self.fingerprint.is_empty(), &fingerprint),
             (ff && self.selection.is_some(), &selection),
+            (self.monitor.is_some(), &monitor),
         ];
         let present = optional.iter().filter(|(on, _)| *on).map(|(_, s)| *s);
-        // At most 9 sections (feedforward with exits, maps or a terminal law (never both), a
-        // fingerprint, and with maps a selection test).
-        let mut list: [&dyn SectionWrite; 9] = [&locations; 9];
+        // At most 10 sections (feedforward with exits, maps or a terminal law (never both), a
+        // fingerprint, with maps a selection test, and a monitor).
+        let mut list: [&dyn SectionWrite; 10] = [&locations; 10];
         let mut count = 0;
         for (slot, s) in list.iter_mut().zip(base.iter().copied().chain(present)) {
             *slot = s;
@@ -1261,18 +1288,22 @@ fn decode_sections<const MAPS: bool>(bytes: &[u8]) -> Result<Image<'_>, ImageErr
     }
 }
 
-/// `img` with the directory's optional sections of both modes (terminal law, spec fingerprint),
+/// `img` with the directory's optional sections of both modes (terminal law, spec fingerprint, monitor),
 /// validated.
 fn with_stored_optional<'a>(dir: &Directory<'a>, img: Image<'a>) -> Result<Image<'a>, ImageError> {
     let img = match dir.section(SectionKind::TerminalLaw) {
         Some(body) => img.with_terminal_law(body)?,
         None => img,
     };
-    match dir.section(SectionKind::SpecFingerprint) {
+    let img = match dir.section(SectionKind::SpecFingerprint) {
         Some(_) => {
             let fp: SpecFingerprintSection<'a> = parse_section(dir, SectionKind::SpecFingerprint)?;
-            img.with_fingerprint(fp.hash)
+            img.with_fingerprint(fp.hash)?
         }
+        None => img,
+    };
+    match dir.section(SectionKind::Monitor) {
+        Some(body) => img.with_monitor(body),
         None => Ok(img),
     }
 }

@@ -103,7 +103,7 @@ impl Mode {
 
     /// Whether a section of `kind` belongs in an image of this mode: the required ones, the optional
     /// segment exits, model maps and selection test of a feedforward image, and the optional terminal
-    /// law and spec fingerprint of either mode.
+    /// law, spec fingerprint and monitor of either mode.
     pub fn admits(self, kind: SectionKind) -> bool {
         self.required_sections().contains(&kind)
             || (self == Mode::Feedforward
@@ -113,7 +113,7 @@ impl Mode {
                 ))
             || matches!(
                 kind,
-                SectionKind::TerminalLaw | SectionKind::SpecFingerprint
+                SectionKind::TerminalLaw | SectionKind::SpecFingerprint | SectionKind::Monitor
             )
     }
 }
@@ -178,11 +178,16 @@ pub enum SectionKind {
     /// Cholesky factor `R̂_ℓ` of `P_ℓ`, per trajectory the whitened centre and squared threshold of its
     /// ball, which the model-maps step selects with ([`crate::selection`]).
     SelectionTest = 13,
+    /// The task's monitor (optional, both modes): the spec's formula (or a reach-avoid task as
+    /// `!Unsafe U[0,T] Goal`) as a bounded MTL program over signed distances, which a firmware built with
+    /// the monitor evaluates on the measured state every step ([`crate::monitor`]). Not part of the
+    /// control law or its certificate.
+    Monitor = 14,
 }
 
 impl SectionKind {
     /// Every kind this build knows, in tag order.
-    pub const ALL: [SectionKind; 13] = [
+    pub const ALL: [SectionKind; 14] = [
         SectionKind::Locations,
         SectionKind::Fallback,
         SectionKind::Trajectories,
@@ -196,6 +201,7 @@ impl SectionKind {
         SectionKind::TerminalLaw,
         SectionKind::SpecFingerprint,
         SectionKind::SelectionTest,
+        SectionKind::Monitor,
     ];
 
     /// The kind with this tag, if this build knows it.
@@ -214,6 +220,7 @@ impl SectionKind {
             11 => Some(SectionKind::TerminalLaw),
             12 => Some(SectionKind::SpecFingerprint),
             13 => Some(SectionKind::SelectionTest),
+            14 => Some(SectionKind::Monitor),
             _ => None,
         }
     }
@@ -246,6 +253,7 @@ impl SectionKind {
             SectionKind::TerminalLaw => "terminal_law",
             SectionKind::SpecFingerprint => "spec_fingerprint",
             SectionKind::SelectionTest => "selection_test",
+            SectionKind::Monitor => "monitor",
         }
     }
 }

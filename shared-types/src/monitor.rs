@@ -47,8 +47,8 @@ use crate::raw::{f32_at, u32_at};
 
 /// Largest number of atoms of a monitor program.
 pub const MAX_MONITOR_ATOMS: usize = 32;
-/// Largest number of nodes of a monitor program.
-pub const MAX_MONITOR_NODES: usize = 64;
+/// Largest number of nodes of a monitor program (each keeps a small state in [`Monitor`]).
+pub const MAX_MONITOR_NODES: usize = 32;
 /// Largest horizon N in samples.
 pub const MAX_MONITOR_SAMPLES: usize = 1 << 16;
 /// Largest number of rows of a polytope atom.
@@ -435,53 +435,54 @@ impl<'a> MonitorProgram<'a> {
         v + 0.0
     }
 
-    /// The static plan of every node: horizon, values needed, buffer sizes (module doc).
-    fn plan(&self) -> ([Plan; MAX_MONITOR_NODES], usize) {
-        let mut plans = [Plan::default(); MAX_MONITOR_NODES];
+    /// The static plan of every node (horizon, values needed, parent, buffers in the arena), written into
+    /// `plans` when given; returns the arena's words. Only small per-node arrays live on the stack.
+    fn plan_into(&self, mut plans: Option<&mut [Plan; MAX_MONITOR_NODES]>) -> usize {
+        let mut hor = [0usize; MAX_MONITOR_NODES];
+        let mut need = [0usize; MAX_MONITOR_NODES];
+        let mut parent = [NONE; MAX_MONITOR_NODES];
         let cap = self.horizon + 1;
+        let get = |a: &[usize; MAX_MONITOR_NODES], i: usize| a.get(i).copied().unwrap_or(0);
         // Horizons, children first.
         for i in 0..self.nodes {
             let o = self.op(i);
-            let hor = |c: usize| plans.get(c).map_or(0, |p| p.hor);
             let h = match o.op {
-                OP_AND | OP_OR => hor(o.c1).max(hor(o.c2)),
-                OP_EVENTUALLY | OP_ALWAYS => o.b.saturating_add(hor(o.c1)),
-                OP_UNTIL | OP_RELEASE => until_hor(o.a, o.b, hor(o.c1), hor(o.c2)),
+                OP_AND | OP_OR => get(&hor, o.c1).max(get(&hor, o.c2)),
+                OP_EVENTUALLY | OP_ALWAYS => o.b.saturating_add(get(&hor, o.c1)),
+                OP_UNTIL | OP_RELEASE => until_hor(o.a, o.b, get(&hor, o.c1), get(&hor, o.c2)),
                 _ => 0,
             };
-            if let Some(p) = plans.get_mut(i) {
-                p.hor = h.min(2 * MAX_MONITOR_SAMPLES);
-                p.parent = NONE;
-                p.back = IDENTITY;
+            if let Some(x) = hor.get_mut(i) {
+                *x = h.min(2 * MAX_MONITOR_SAMPLES);
             }
         }
         // Values needed, root first: the root's value at 0.
-        if let Some(p) = plans.get_mut(self.nodes.saturating_sub(1)) {
-            p.need = 1;
+        if let Some(x) = need.get_mut(self.nodes.saturating_sub(1)) {
+            *x = 1;
         }
         for i in (0..self.nodes).rev() {
             let o = self.op(i);
-            let need = plans.get(i).map_or(0, |p| p.need);
-            let set = |c: usize, need: usize, plans: &mut [Plan; MAX_MONITOR_NODES]| {
-                if let Some(p) = plans.get_mut(c) {
-                    p.need = need.min(cap);
-                    p.parent = i;
+            let n = get(&need, i);
+            let mut set = |c: usize, v: usize| {
+                if let (Some(x), Some(p)) = (need.get_mut(c), parent.get_mut(c)) {
+                    *x = v.min(cap);
+                    *p = i;
                 }
             };
             match o.op {
                 OP_AND | OP_OR => {
-                    set(o.c1, need, &mut plans);
-                    set(o.c2, need, &mut plans);
+                    set(o.c1, n);
+                    set(o.c2, n);
                 }
-                OP_EVENTUALLY | OP_ALWAYS => set(o.c1, need + o.b, &mut plans),
+                OP_EVENTUALLY | OP_ALWAYS => set(o.c1, n + o.b),
                 OP_UNTIL | OP_RELEASE => {
                     let l = if phi_unread(o.a, o.b) {
                         0
                     } else {
-                        (need + o.b).saturating_sub(1)
+                        (n + o.b).saturating_sub(1)
                     };
-                    set(o.c1, l, &mut plans);
-                    set(o.c2, need + o.b, &mut plans);
+                    set(o.c1, l);
+                    set(o.c2, n + o.b);
                 }
                 _ => {}
             }
@@ -490,56 +491,64 @@ impl<'a> MonitorProgram<'a> {
         let mut words = 0usize;
         for i in 0..self.nodes {
             let o = self.op(i);
-            let (h1, h2) = (
-                plans.get(o.c1).map_or(0, |p| p.hor),
-                plans.get(o.c2).map_or(0, |p| p.hor),
-            );
-            let Some(p) = plans.get_mut(i) else { break };
-            let mut alloc = |entries: usize, per: usize| {
-                let b = Buf {
-                    off: words as u32,
-                    cap: entries as u32,
-                    head: 0,
-                    len: 0,
-                };
+            let (h, h1, h2) = (get(&hor, i), get(&hor, o.c1), get(&hor, o.c2));
+            let mut bufs = [Buf::default(); 5];
+            let mut alloc = |slot: usize, entries: usize, per: usize| {
+                if let Some(b) = bufs.get_mut(slot) {
+                    *b = Buf {
+                        off: words as u32,
+                        cap: entries as u32,
+                        head: 0,
+                        len: 0,
+                    };
+                }
                 words += entries * per;
-                b
             };
             match o.op {
                 OP_AND | OP_OR => {
-                    p.b1 = alloc((h2.saturating_sub(h1)).min(cap) + 2, 1);
-                    p.b2 = alloc((h1.saturating_sub(h2)).min(cap) + 2, 1);
+                    alloc(0, (h2.saturating_sub(h1)).min(cap) + 2, 1);
+                    alloc(1, (h1.saturating_sub(h2)).min(cap) + 2, 1);
                 }
-                OP_EVENTUALLY | OP_ALWAYS => {
-                    p.b1 = alloc((o.b - o.a).min(cap) + 2, 2);
-                }
+                OP_EVENTUALLY | OP_ALWAYS => alloc(0, (o.b - o.a).min(cap) + 2, 2),
                 OP_UNTIL | OP_RELEASE => {
-                    let h = p.hor;
-                    let (hl, hr) = (h1, h2);
-                    let slack_l = (h + 1).saturating_sub(o.b + hl);
-                    let slack_r = h.saturating_sub(o.b + hr);
-                    // φ's history (t, e − 1 + slack], ψ's [t + a, e + slack], the minimum of φ over (t, t + a),
-                    // the two stacks of maps over [t + a, e − 1].
-                    p.b1 = alloc((o.b + slack_l).min(cap) + 2, 1);
-                    p.b2 = alloc((o.b - o.a + slack_r).min(cap) + 2, 1);
-                    p.b3 = alloc(o.a.min(cap) + 2, 2);
+                    let slack_l = (h + 1).saturating_sub(o.b + h1);
+                    let slack_r = h.saturating_sub(o.b + h2);
+                    // φ's history (t, e − 1 + slack], ψ's [t + a, e + slack], the minimum of φ over
+                    // (t, t + a), the two stacks of maps over [t + max(a, 1), e − 1].
+                    alloc(0, (o.b + slack_l).min(cap) + 2, 1);
+                    alloc(1, (o.b - o.a + slack_r).min(cap) + 2, 1);
+                    alloc(2, o.a.min(cap) + 2, 2);
                     let w = (o.b - o.a).min(cap) + 2;
-                    p.b4 = alloc(w, 4);
-                    p.b5 = alloc(w, 2);
+                    alloc(3, w, 4);
+                    alloc(4, w, 2);
                 }
                 _ => {}
             }
+            if let Some(p) = plans.as_deref_mut().and_then(|ps| ps.get_mut(i)) {
+                *p = Plan {
+                    hor: h,
+                    need: get(&need, i),
+                    parent: parent.get(i).copied().unwrap_or(NONE),
+                    back: IDENTITY,
+                    b1: bufs[0],
+                    b2: bufs[1],
+                    b3: bufs[2],
+                    b4: bufs[3],
+                    b5: bufs[4],
+                    ..Plan::default()
+                };
+            }
         }
-        (plans, words)
+        words
     }
 
     /// The arena [`Monitor::new`] needs, in 32-bit words.
     pub fn words(&self) -> usize {
-        self.plan().1
+        self.plan_into(None)
     }
 
-    /// The arena in bytes plus the evaluator's own state ([`Monitor`]), what `inspect` reports as the
-    /// monitor's RAM.
+    /// The arena in bytes plus the evaluator's own state ([`Monitor`], in this build's layout: a 32-bit
+    /// target's is smaller, its `usize` being 4 bytes), what `inspect` reports as the monitor's RAM.
     pub fn ram_bytes(&self) -> usize {
         4 * self.words() + core::mem::size_of::<Monitor<'static>>()
     }
@@ -706,14 +715,13 @@ fn deque_max(arena: &[u32], b: &mut Buf, from: usize) -> f32 {
 impl<'a> Monitor<'a> {
     /// A monitor at its first sample over `arena` (at least [`MonitorProgram::words`] words).
     pub fn new(prog: MonitorProgram<'a>, arena: &'a mut [u32]) -> Result<Self, MonitorError> {
-        let (plans, words) = prog.plan();
-        if arena.len() < words {
+        if arena.len() < prog.words() {
             return Err(MonitorError::Arena);
         }
-        Ok(Monitor {
+        let mut m = Monitor {
             prog,
             arena,
-            plans,
+            plans: [Plan::default(); MAX_MONITOR_NODES],
             k: 0,
             atom_vals: [0.0; MAX_MONITOR_ATOMS],
             root: None,
@@ -722,7 +730,9 @@ impl<'a> Monitor<'a> {
                 hi: f32::INFINITY,
                 verdict: Verdict::Pending,
             },
-        })
+        };
+        m.prog.plan_into(Some(&mut m.plans));
+        Ok(m)
     }
 
     /// The program.
@@ -742,8 +752,7 @@ impl<'a> Monitor<'a> {
 
     /// Back to the first sample.
     pub fn reset(&mut self) {
-        let (plans, _) = self.prog.plan();
-        self.plans = plans;
+        self.prog.plan_into(Some(&mut self.plans));
         self.k = 0;
         self.root = None;
         self.last = Report {

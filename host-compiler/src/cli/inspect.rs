@@ -484,6 +484,20 @@ struct Report {
     terminal_law: Option<TerminalLawJson>,
     /// What the image does after Goal, in one line ([`crate::report::after_goal_line`]).
     after_goal: String,
+    /// The task's monitor (section 14; `null`: the image has none).
+    monitor: Option<MonitorJson>,
+}
+
+/// The monitor's capacities: what a firmware sizes its arena by.
+#[derive(Serialize)]
+struct MonitorJson {
+    atoms: usize,
+    nodes: usize,
+    /// The horizon N: samples 0..=N are monitored.
+    horizon: usize,
+    /// The evaluator's arena in 32-bit words, and its RAM in bytes (arena and state).
+    arena_words: usize,
+    ram_bytes: usize,
 }
 
 /// The terminal law as stored (f32 values): its equilibrium, law u = K_t x + v_t and the ellipsoid
@@ -629,6 +643,13 @@ impl Report {
                     radius: t.radius,
                 }
             }),
+            monitor: img.monitor().map(|p| MonitorJson {
+                atoms: p.atoms(),
+                nodes: p.nodes(),
+                horizon: p.horizon(),
+                arena_words: p.words(),
+                ram_bytes: p.ram_bytes(),
+            }),
             model_maps: img.model_maps().map(|mm| MapsJson {
                 n_plant: mm.n_plant(),
                 m_plant: mm.m_plant(),
@@ -741,6 +762,13 @@ fn summary(r: &Report, path: &str) -> String {
         );
     }
     let _ = writeln!(s, "{}", r.after_goal);
+    if let Some(m) = &r.monitor {
+        let _ = writeln!(
+            s,
+            "monitor: {} atoms, {} nodes, samples 0..={}; arena {} words, {} bytes of RAM",
+            m.atoms, m.nodes, m.horizon, m.arena_words, m.ram_bytes
+        );
+    }
     match &r.fallback {
         FallbackJson::Hold => {
             let _ = writeln!(s, "fallback: hold the last applied input");

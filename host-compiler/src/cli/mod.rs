@@ -205,9 +205,54 @@ pub struct SynthArgs {
     /// without internal switching.
     #[arg(long)]
     pub guard_routes: bool,
+    /// Add the task's online monitor to the image (section 14): the firmware evaluates the spec's
+    /// [mtl] formula, or a reach-avoid task as `!Unsafe U[0,T] Goal`, on the measured state every step
+    /// and reports the running lower and upper bound of its robustness and the verdict once decided.
+    /// The sets must be boxes, balls, polytopes or half-spaces over state coordinates (refused, exit 2,
+    /// before synthesis otherwise). The control law and its certificate are unchanged.
+    #[arg(long)]
+    pub monitor: bool,
     /// Hide progress bars.
     #[arg(long)]
     pub quiet: bool,
+}
+
+/// The monitor section of the spec `a.spec` as written ([`crate::monitor::Program::for_problem`]) when
+/// `--monitor` asks for one; a spec it cannot monitor is bad input saying why.
+pub(crate) fn monitor_section(
+    a: &SynthArgs,
+    problem: &crate::spec::Problem,
+) -> Result<Option<crate::monitor::Program>, Failure> {
+    if !a.monitor {
+        return Ok(None);
+    }
+    crate::monitor::Program::for_problem(problem)
+        .map(Some)
+        .map_err(|e| miette::miette!("--monitor: {e}"))
+        .bad_input()
+}
+
+/// `image` with the spec's monitor attached when `--monitor` asks for it (and a line on it), else the
+/// image itself.
+pub(crate) fn monitored(a: &SynthArgs, image: &[u8]) -> Result<Vec<u8>, Failure> {
+    if !a.monitor {
+        return Ok(image.to_vec());
+    }
+    let problem = crate::spec::load(&a.spec).bad_input()?;
+    let Some(prog) = monitor_section(a, &problem)? else {
+        return Ok(image.to_vec());
+    };
+    let (words, ram) = prog.footprint();
+    println!(
+        "monitor: {} atoms, {} nodes over {} samples; arena {words} words, {ram} bytes of RAM",
+        prog.atoms.len(),
+        prog.nodes.len(),
+        prog.horizon + 1
+    );
+    crate::monitor::attach(image, &prog.encode()).map_err(|e| Failure {
+        exit: Exit::Failed,
+        report: miette::miette!("attaching the monitor: {e}"),
+    })
 }
 
 /// The bytes of an image file; an unreadable file is bad input naming the file.

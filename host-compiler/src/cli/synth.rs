@@ -159,6 +159,8 @@ pub fn run(a: &SynthArgs) -> Outcome {
     // First of all, even before the spec is read: whatever happens next, no earlier result is left.
     prepare_out(&a.out)?;
     let problem = crate::spec::load(&a.spec).bad_input()?;
+    // A spec the monitor cannot read is refused before any synthesis.
+    super::monitor_section(a, &problem)?;
     // A hybrid plant first: its task takes an [mtl] formula with forced switching (Def 4.18).
     if problem.hybrid.is_some() {
         return crate::cli::synth_hybrid::run(a, problem);
@@ -232,8 +234,9 @@ pub fn run(a: &SynthArgs) -> Outcome {
     // An image the verification refutes is not written (the report says why).
     let attack_violations = s.attack.as_ref().map_or(0, |a| a.violations);
     let certified = s.verify.violations == 0 && attack_violations == 0;
+    let image = super::monitored(a, &s.image)?;
     if certified {
-        write_atomic(&img_path, &s.image)?;
+        write_atomic(&img_path, &image)?;
     }
     let data = report_data(
         problem,
@@ -246,7 +249,7 @@ pub fn run(a: &SynthArgs) -> Outcome {
         .wrap_err("writing the report")?;
     let cert = serde_json::json!({
         "task": "reach_avoid",
-        "image": super::image_identity(&img_path, &s.image),
+        "image": super::image_identity(&img_path, &image),
         "spec": a.spec.display().to_string(),
         "seed": problem.seed,
         "stop": s.stop.to_string(),
@@ -315,8 +318,8 @@ pub fn run(a: &SynthArgs) -> Outcome {
     }
     print_terminal(&s.terminal, &s.verify, s.handover_radius, &s.image);
     if certified {
-        println!("{}", image_line(&img_path, s.image.len()));
-        if let Some(w) = flash_warning(s.image.len()) {
+        println!("{}", image_line(&img_path, image.len()));
+        if let Some(w) = flash_warning(image.len()) {
             eprintln!("warning: {w}");
         }
     } else {

@@ -80,12 +80,13 @@ pub fn run(a: &SynthArgs, problem: crate::spec::Problem) -> Outcome {
     let img_path = a.out.join("controller.img");
     let unproved: Vec<&str> = s.recheck.iter().filter_map(|r| r.why.as_deref()).collect();
     let verified = s.verify.violations == 0 && unproved.is_empty();
+    let image = super::monitored(a, &s.image)?;
     if verified {
-        write_atomic(&img_path, &s.image)?;
+        write_atomic(&img_path, &image)?;
     }
     let cert = serde_json::json!({
         "task": "hybrid",
-        "image": super::image_identity(&img_path, &s.image),
+        "image": super::image_identity(&img_path, &image),
         "spec": a.spec.display().to_string(),
         "seed": task.problem.seed,
         "plant": "hybrid",
@@ -160,8 +161,8 @@ pub fn run(a: &SynthArgs, problem: crate::spec::Problem) -> Outcome {
         s.verify.violations,
         s.verify.first_violation.as_deref(),
     )?;
-    println!("{}", super::synth::image_line(&img_path, s.image.len()));
-    if let Some(w) = super::synth::flash_warning(s.image.len()) {
+    println!("{}", super::synth::image_line(&img_path, image.len()));
+    if let Some(w) = super::synth::flash_warning(image.len()) {
         eprintln!("warning: {w}");
     }
     super::synth::coverage_exit(

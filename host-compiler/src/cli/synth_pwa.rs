@@ -54,8 +54,9 @@ pub fn run(a: &SynthArgs, task: &Task, s: &Synthesis) -> Outcome {
     let certified = summary.recheck.failures == 0
         && summary.monte_carlo.violations == 0
         && summary.stats.dropped == 0;
+    let image = super::monitored(a, &pwa.image)?;
     if certified {
-        write_atomic(&img_path, &pwa.image)?;
+        write_atomic(&img_path, &image)?;
     }
     if s.verify.violations == 0 {
         write_atomic(&a.out.join("feedforward.img"), &s.image)?;
@@ -66,14 +67,14 @@ pub fn run(a: &SynthArgs, task: &Task, s: &Synthesis) -> Outcome {
         s,
         &img_path.display().to_string(),
     );
-    data.image_bytes = pwa.image.len();
+    data.image_bytes = image.len();
     data.pwa = Some(crate::report::pwa::pwa_report(&pwa, &img, &summary));
     let report = crate::report::write_report(&data, &a.out)
         .into_diagnostic()
         .wrap_err("writing the report")?;
     let cert = serde_json::json!({
         "task": "pwa",
-        "image": super::image_identity(&img_path, &pwa.image),
+        "image": super::image_identity(&img_path, &image),
         "spec": a.spec.display().to_string(),
         "seed": problem.seed,
         "mode": "pwa",

@@ -127,14 +127,15 @@ pub fn run(a: &SynthArgs, problem: crate::spec::Problem) -> Outcome {
         })
         .collect();
     let verified = s.verify.violations == 0 && unproved.is_empty();
+    let image = super::monitored(a, &s.image)?;
     if verified {
-        write_atomic(&img_path, &s.image)?;
+        write_atomic(&img_path, &image)?;
     }
     let cert = serde_json::json!({
         "spec": a.spec.display().to_string(),
         "seed": task.problem.seed,
         "task": "mtl",
-        "image": super::image_identity(&img_path, &s.image),
+        "image": super::image_identity(&img_path, &image),
         "formula": ts.written,
         "formula_in_task_coordinates": ts.rewritten(),
         "stop": s.stop,
@@ -216,8 +217,8 @@ pub fn run(a: &SynthArgs, problem: crate::spec::Problem) -> Outcome {
         s.verify.violations,
         s.verify.first_violation.as_deref(),
     )?;
-    println!("{}", super::synth::image_line(&img_path, s.image.len()));
-    if let Some(w) = super::synth::flash_warning(s.image.len()) {
+    println!("{}", super::synth::image_line(&img_path, image.len()));
+    if let Some(w) = super::synth::flash_warning(image.len()) {
         eprintln!("warning: {w}");
     }
     super::synth::coverage_exit(

@@ -7,13 +7,24 @@
 //! as a half-space; rows and half-spaces are normalised (‖a‖ = 1) in f64 before rounding. `Unsafe` (a
 //! union) is the disjunction of its pieces, so `!Unsafe` the conjunction of their complements. An
 //! ellipsoid is refused (its Euclidean distance has no closed form the firmware evaluates in bounded
-//! time), as are sets over output coordinates.
+//! time), as are sets over outputs other than state coordinates (an output whose rows of C are unit
+//! vectors is read as those coordinates).
 //!
 //! Time bounds become samples of the period h: a → ⌈a/h − 10⁻⁹⌉, b → ⌊b/h + 10⁻⁹⌋ (the tolerance absorbs
 //! the representation error of a/h), an unbounded b → N, and every bound above N → N + 1 (a window that
 //! starts past the last sample stays empty). N is the task's horizon in samples, the samples being 0..=N.
 
 pub mod reference;
+
+/// `image` with the monitor section `body` added (section 14; any monitor it had is replaced). The
+/// control law's sections, and so its certificate, are unchanged; the bytes are re-encoded (a new CRC).
+pub fn attach(image: &[u8], body: &[u8]) -> Result<Vec<u8>, shared_types::error::ImageError> {
+    let img = shared_types::image::decode(image)?.with_monitor(body)?;
+    let mut out = vec![0u8; image.len() + body.len() + 64];
+    let len = shared_types::image::encode(&img, &mut out)?;
+    out.truncate(len);
+    Ok(out)
+}
 
 use crate::robustness::mtl::{Expr, Interval};
 use crate::spec::{Coords, SetDesc, Shape};
@@ -64,12 +75,14 @@ pub struct Program {
 pub enum MonitorCompileError {
     #[error("set `{0}` is an ellipsoid: the monitor evaluates boxes, balls, polytopes and half-spaces (an ellipsoid's Euclidean distance has no closed form the firmware evaluates in bounded time)")]
     Ellipsoid(String),
-    #[error("set `{0}` is over output coordinates: the monitor reads the state")]
+    #[error("set `{0}` is over output coordinates that are not state coordinates (a row of C that is not a unit vector): the monitor reads the state")]
     OutputCoords(String),
     #[error("the formula names `{0}`, which is not one of the task's sets")]
     UnknownSet(String),
     #[error("the formula has a linear predicate over signals other than the state's")]
     Predicate,
+    #[error("the spec's formula: {0}")]
+    Formula(String),
     #[error("the monitor program has {what} {found}, more than the firmware's {max}")]
     Capacity {
         what: &'static str,
@@ -102,7 +115,17 @@ fn atom_words(name: &str, set: &SetDesc, n: usize) -> Result<Vec<u32>, MonitorCo
     let idx: Vec<usize> = match &set.coords {
         Coords::State => (0..n).collect(),
         Coords::StateIndices(v) => v.clone(),
-        Coords::Output { .. } => return Err(MonitorCompileError::OutputCoords(name.into())),
+        // An output that reads state coordinates (each row of C a unit vector) is those coordinates.
+        Coords::Output { C } => (0..C.rows)
+            .map(|r| {
+                let row = &C.data[r * C.cols..(r + 1) * C.cols];
+                let ones: Vec<usize> = (0..C.cols).filter(|&j| row[j] != 0.0).collect();
+                match ones.as_slice() {
+                    [j] if row[*j] == 1.0 => Ok(*j),
+                    _ => Err(MonitorCompileError::OutputCoords(name.into())),
+                }
+            })
+            .collect::<Result<_, _>>()?,
     };
     let d = idx.len() as u32;
     let head = |kind: u32| {
@@ -338,6 +361,38 @@ impl Program {
         );
         // The period is irrelevant for [0, ∞): every bound is 0 or N.
         Self::compile(&expr, &sets, n, 1.0, horizon)
+    }
+
+    /// The monitor of a spec as written (for a nonlinear plant the original spec, whose sets are over the
+    /// plant's state): its `[mtl]` formula if it has one, else its reach-avoid task; N = the horizon's
+    /// samples.
+    pub fn for_problem(problem: &crate::spec::Problem) -> Result<Self, MonitorCompileError> {
+        let n = problem.plant.n();
+        let horizon = problem.horizon_steps();
+        match &problem.mtl {
+            Some(_) => {
+                let task = crate::property::temporal::TemporalTask::from_problem(problem)
+                    .map_err(|e| MonitorCompileError::Formula(e.to_string()))?;
+                Self::compile(
+                    task.formula().expr(),
+                    &task.atom_sets(),
+                    n,
+                    problem.plant.period,
+                    horizon,
+                )
+            }
+            None => Self::reach_avoid(&problem.goal, &problem.unsafe_sets, n, horizon),
+        }
+    }
+
+    /// The words of the evaluator's arena and the RAM the monitor takes (arena and state), as the
+    /// firmware sizes them.
+    pub fn footprint(&self) -> (usize, usize) {
+        let body = self.encode();
+        match sm::MonitorProgram::decode(&body, self.n) {
+            Ok(p) => (p.words(), p.ram_bytes()),
+            Err(_) => (0, 0),
+        }
     }
 
     /// The section body ([`shared_types::monitor`]'s layout).

@@ -104,6 +104,27 @@ impl TemporalTask {
         self.n
     }
 
+    /// Every set the formula may name as the monitor reads it ([`crate::monitor`]): a spec set, the union
+    /// of Unsafe, or a predicate's half-space.
+    pub fn atom_sets(&self) -> Vec<(String, crate::monitor::AtomSet)> {
+        use crate::monitor::AtomSet;
+        self.atoms
+            .iter()
+            .map(|(name, atom)| {
+                let set = match atom {
+                    Atom::Set(d) => AtomSet::Set(d.clone()),
+                    Atom::Goal => AtomSet::Set(self.goal.clone()),
+                    Atom::Unsafe => AtomSet::Union(self.unsafe_sets.clone()),
+                    Atom::HalfSpace { a, b } => AtomSet::HalfSpace {
+                        a: a.clone(),
+                        b: *b,
+                    },
+                };
+                (name.clone(), set)
+            })
+            .collect()
+    }
+
     /// Every set the formula may name, as regions on the state space with the given metric (n×n).
     pub fn sets(&self, metric: &Metric) -> Result<Vec<NamedSet>, TemporalError> {
         let signals = state_signals(self.n);

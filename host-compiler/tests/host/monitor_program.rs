@@ -3,7 +3,7 @@
 //! runs; the final value against the f64 `mtl` within the stated rounding bound; the decoder's refusals.
 
 use host_compiler::monitor::reference::{atom_rounding_bound, reports};
-use host_compiler::monitor::{AtomSet, Program};
+use host_compiler::monitor::{AtomSet, MonitorCompileError, Program};
 use host_compiler::robustness::mtl::{Expr, Interval, NamedSet, Span, Trace};
 use host_compiler::spec::{Coords, Matrix, SetDesc, Shape};
 use rand::{Rng, SeedableRng};
@@ -121,6 +121,7 @@ fn sets_for(rng: &mut ChaCha8Rng, polytopes: bool) -> Vec<(String, AtomSet)> {
 fn the_streaming_monitor_equals_the_reference_bit_for_bit_at_every_step() {
     let mut rng = ChaCha8Rng::seed_from_u64(46);
     let mut compared = 0usize;
+    let mut skipped = 0usize;
     let mut decided = [0usize; 4];
     for case in 0..700 {
         let sets = sets_for(&mut rng, true);
@@ -129,6 +130,11 @@ fn the_streaming_monitor_equals_the_reference_bit_for_bit_at_every_step() {
         let horizon = rng.random_range(0..28);
         let prog = match Program::compile(&expr, &sets, 2, 1.0, horizon) {
             Ok(p) => p,
+            // Deep random formulas may exceed the firmware's node capacity: refused, and skipped here.
+            Err(MonitorCompileError::Capacity { .. }) => {
+                skipped += 1;
+                continue;
+            }
             Err(e) => panic!("case {case}: {e} for {expr}"),
         };
         let body = prog.encode();
@@ -159,6 +165,10 @@ fn the_streaming_monitor_equals_the_reference_bit_for_bit_at_every_step() {
         "{decided:?}"
     );
     assert!(compared > 10_000, "{compared}");
+    assert!(
+        skipped > 0 && skipped < 100,
+        "{skipped} formulas over the capacity"
+    );
 }
 
 #[test]
@@ -177,7 +187,11 @@ fn the_monitor_agrees_with_the_f64_mtl_within_the_stated_rounding_bound() {
         // Windows in seconds at h = 0.25 (exact in binary, so the f64 windows are the monitor's).
         scale(&mut expr, h);
         let horizon = rng.random_range(1..24);
-        let prog = Program::compile(&expr, &sets, 2, h, horizon).expect("compiles");
+        let prog = match Program::compile(&expr, &sets, 2, h, horizon) {
+            Ok(p) => p,
+            Err(MonitorCompileError::Capacity { .. }) => continue,
+            Err(e) => panic!("case {case}: {e}"),
+        };
         let body = prog.encode();
         let section = MonitorProgram::decode(&body, 2).expect("decodes");
         let run = random_run(&mut rng, horizon + 1);
