@@ -13,6 +13,10 @@
 //!    without maps is the same function (`step_plant` is `step` there), and the interpreter stays out
 //!    of flash. The image is fixed at build time, so the choice cannot disagree with what boots.
 //!
+//! 4. sets `cfg(monitor)` when the embedded image carries the task's monitor (section 14,
+//!    `shared_types::monitor`), or when `CONTROLLER_MONITOR=1`, and writes the words of its arena
+//!    (`MONITOR_WORDS`, from the image's program); without it the monitor's evaluator is not linked.
+//!
 //! Each board's own build script places its memory map (`memory.x`).
 //!
 //! The default image is generated rather than committed so that it always matches the current image format
@@ -35,6 +39,8 @@ fn main() {
     println!("cargo:rerun-if-env-changed=CONTROLLER_REJECTED_M");
     println!("cargo:rerun-if-env-changed=CONTROLLER_MODEL_MAPS");
     println!("cargo::rustc-check-cfg=cfg(model_maps)");
+    println!("cargo:rerun-if-env-changed=CONTROLLER_MONITOR");
+    println!("cargo::rustc-check-cfg=cfg(monitor)");
 
     let bytes = match std::env::var_os("CONTROLLER_IMAGE") {
         Some(p) => {
@@ -61,6 +67,18 @@ fn main() {
         println!("cargo:rustc-cfg=model_maps");
     }
 
+    // The task's monitor: linked only when the image carries one (or CONTROLLER_MONITOR=1, for the
+    // no-panic check), with its arena sized by the image's program.
+    let monitor_words = image::decode(&bytes)
+        .ok()
+        .and_then(|img| img.monitor())
+        .map(|p| p.words());
+    let force_monitor = std::env::var("CONTROLLER_MONITOR").is_ok_and(|v| v.trim() == "1");
+    if monitor_words.is_some() || force_monitor {
+        println!("cargo:rustc-cfg=monitor");
+    }
+    let monitor_words = monitor_words.unwrap_or(0);
+
     let rejected_m = match std::env::var("CONTROLLER_REJECTED_M") {
         Ok(s) => s
             .trim()
@@ -76,7 +94,10 @@ fn main() {
         out.join("build_config.rs"),
         format!(
             "/// Input dimension of the zero input applied when the image is rejected (set by build.rs).\n\
-             pub const REJECTED_M: usize = {rejected_m};\n"
+             pub const REJECTED_M: usize = {rejected_m};\n\
+             /// Words of the monitor's arena (0 without a monitor; set by build.rs).\n\
+             #[allow(dead_code)]\n\
+             pub const MONITOR_WORDS: usize = {monitor_words};\n"
         ),
     )
     .expect("write build_config.rs");

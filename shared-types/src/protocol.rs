@@ -1,6 +1,6 @@
 //! UART protocol between the plant (host) and the firmware: COBS-framed postcard messages carrying a
-//! sequence number and the state, answered by the input, a status, the step's cost and the location the
-//! input belongs to.
+//! sequence number and the state, answered by the input, a status, the step's cost, the location the
+//! input belongs to and, from a firmware with the task's monitor, its bounds and verdict.
 //!
 //! # Wire format
 //! Every message is one frame: the postcard encoding of a [`Request`] (host → firmware) or a [`Reply`]
@@ -182,6 +182,45 @@ pub struct Reply {
     /// The location of the table row the input came from (`Controller::location`): the discrete input
     /// of a plant with forced switching (§4.2.1). 0 for one-location and PWA images.
     pub location: u8,
+    /// The task's monitor after this step ([`crate::monitor`]), from a firmware built with one whose
+    /// image carries one; `None` otherwise, and for a frame that carried no state.
+    pub monitor: Option<MonitorReply>,
+}
+
+/// What the monitor says after a step: the running bounds of the robustness at time 0, the verdict, and
+/// the cost of the monitor's update alone.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct MonitorReply {
+    /// The lower bound's bits (`f32::to_bits`, so that equality is bitwise).
+    pub lo: u32,
+    /// The upper bound's bits.
+    pub hi: u32,
+    /// [`crate::monitor::Verdict`] as its code.
+    pub verdict: u8,
+    /// Cost of the monitor's update in guest instructions.
+    pub cost: u32,
+}
+
+impl MonitorReply {
+    /// The reply of a report and its cost.
+    pub fn new(r: &crate::monitor::Report, cost: u32) -> Self {
+        Self {
+            lo: r.lo.to_bits(),
+            hi: r.hi.to_bits(),
+            verdict: r.verdict as u8,
+            cost,
+        }
+    }
+
+    /// The lower bound.
+    pub fn lo(&self) -> f32 {
+        f32::from_bits(self.lo)
+    }
+
+    /// The upper bound.
+    pub fn hi(&self) -> f32 {
+        f32::from_bits(self.hi)
+    }
 }
 
 /// [`Status`] on the wire: its `#[repr(u8)]` code.
@@ -205,8 +244,10 @@ mod status_code {
 const VARINT_U32_MAX: usize = 5;
 /// Largest postcard encoding of a [`Request`]: tag, seq, length (one byte while `MAX_N < 128`), elements.
 pub const MAX_REQUEST_LEN: usize = 1 + VARINT_U32_MAX + 1 + 4 * MAX_N;
-/// Largest postcard encoding of a [`Reply`]: seq, status, length, elements, cost, location.
-pub const MAX_REPLY_LEN: usize = VARINT_U32_MAX + 1 + 1 + 4 * MAX_M + VARINT_U32_MAX + 1;
+/// Largest postcard encoding of a [`Reply`]: seq, status, length, elements, cost, location, and the
+/// monitor's tag, bounds' bits, verdict and cost.
+pub const MAX_REPLY_LEN: usize =
+    VARINT_U32_MAX + 1 + 1 + 4 * MAX_M + VARINT_U32_MAX + 1 + 1 + 3 * VARINT_U32_MAX + 1;
 const MAX_MESSAGE_LEN: usize = if MAX_REQUEST_LEN > MAX_REPLY_LEN {
     MAX_REQUEST_LEN
 } else {
@@ -384,6 +425,12 @@ mod tests {
             u,
             cost: u32::MAX,
             location: 0,
+            monitor: Some(MonitorReply {
+                lo: u32::MAX,
+                hi: u32::MAX,
+                verdict: u8::MAX,
+                cost: u32::MAX,
+            }),
         };
         let mut buf = [0u8; MAX_FRAME];
         assert!(encode_frame(&rep, &mut buf).is_ok());
@@ -411,6 +458,7 @@ mod tests {
             u,
             cost: 1234,
             location: 0,
+            monitor: None,
         };
         let mut buf = [0u8; MAX_FRAME];
         let f = encode_frame(&rep, &mut buf).unwrap();
@@ -492,17 +540,21 @@ mod tests {
 
     #[test]
     fn unknown_status_code_is_malformed() {
-        // seq 1, status 3, u [], cost 0, location 0 is valid; status 9 is not.
+        // seq 1, status 3, u [], cost 0, location 0, no monitor is valid; status 9 is not.
         let ok = Reply {
             seq: 1,
             status: Status::ImageRejected,
             u: InputVec::new(),
             cost: 0,
             location: 0,
+            monitor: None,
         };
-        assert_eq!(decode_frame::<Reply>(&frame_raw(&[1, 3, 0, 0, 0])), Ok(ok));
         assert_eq!(
-            decode_frame::<Reply>(&frame_raw(&[1, 9, 0, 0, 0])),
+            decode_frame::<Reply>(&frame_raw(&[1, 3, 0, 0, 0, 0])),
+            Ok(ok)
+        );
+        assert_eq!(
+            decode_frame::<Reply>(&frame_raw(&[1, 9, 0, 0, 0, 0])),
             Err(FrameError::Malformed)
         );
     }

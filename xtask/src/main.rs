@@ -616,11 +616,13 @@ const PANIC_ALLOWLIST: &str = "firmware/panic-allowlist.txt";
 fn no_panic_check(board: &str) -> Result<(), String> {
     let mut c = boards::board_cargo(board);
     c.args(["build", "--release", "--features", "panic-never"]);
-    // Every path of the loop, the model maps' (program interpreter, libm) included, whatever the image.
+    // Every path of the loop, the model maps' (program interpreter, libm) and the task monitor's
+    // included, whatever the image.
     c.env_remove("CONTROLLER_IMAGE")
         .env_remove("CONTROLLER_REJECTED_M")
         .env_remove("FIRMWARE_FAULT_INJECTION")
-        .env("CONTROLLER_MODEL_MAPS", "1");
+        .env("CONTROLLER_MODEL_MAPS", "1")
+        .env("CONTROLLER_MONITOR", "1");
     let what = show(&c);
     println!("xtask: $ {what}");
     let out = c

@@ -22,11 +22,53 @@
 //!
 //! The cost reported is that of the evaluation (step, and fallback when the step failed), in instructions;
 //! 0 when nothing was evaluated.
+//!
+//! With `cfg(monitor)` (the image carries the task's monitor, `build.rs`), every step answered `Ok` or
+//! `OutOfEnvelope` also updates the monitor with the state and replies its bounds, verdict and the
+//! update's own cost; frames that carry no state leave it alone.
 
 use crate::board::Meter;
 use shared_types::eval::{rejected_image_input, Controller, Input, Status};
 use shared_types::image::{Image, ImageError};
-use shared_types::protocol::{decode_frame, FrameEvent, InputVec, Reply, Request, State};
+use shared_types::protocol::{
+    decode_frame, FrameEvent, InputVec, MonitorReply, Reply, Request, State,
+};
+
+/// The task's monitor, when the embedded image carries one (`build.rs`, `cfg(monitor)`).
+#[cfg(monitor)]
+type TaskMonitor<'a> = Option<shared_types::monitor::Monitor<'a>>;
+/// Without `cfg(monitor)` the monitor is not linked.
+#[cfg(not(monitor))]
+type TaskMonitor<'a> = core::marker::PhantomData<&'a ()>;
+
+/// The monitor over the image's program and the arena `build.rs` sized, if both are there.
+#[cfg(monitor)]
+fn task_monitor<'a>(img: Option<&Image<'a>>) -> TaskMonitor<'a> {
+    let prog = img?.monitor()?;
+    shared_types::monitor::Monitor::new(prog, crate::image::monitor_arena()?).ok()
+}
+
+#[cfg(not(monitor))]
+fn task_monitor<'a>(_: Option<&Image<'a>>) -> TaskMonitor<'a> {
+    core::marker::PhantomData
+}
+
+/// The monitor's update on an accepted state, measured on its own.
+#[cfg(monitor)]
+fn monitor_step<M: Meter>(
+    m: &mut TaskMonitor<'_>,
+    x: &[f32],
+    meter: &mut M,
+) -> Option<MonitorReply> {
+    let m = m.as_mut()?;
+    let (r, cost) = meter.measure(|| m.update(x));
+    Some(MonitorReply::new(&r, cost))
+}
+
+#[cfg(not(monitor))]
+fn monitor_step<M: Meter>(_: &mut TaskMonitor<'_>, _: &[f32], _: &mut M) -> Option<MonitorReply> {
+    None
+}
 
 /// The image decoder (module doc): every image where the image may have model maps.
 #[cfg(model_maps)]
@@ -88,6 +130,7 @@ pub struct App<'a> {
     last_x: Option<State>,
     last_u: Input,
     stats: Stats,
+    monitor: TaskMonitor<'a>,
 }
 
 fn to_wire(u: &Input) -> InputVec {
@@ -116,6 +159,7 @@ impl<'a> App<'a> {
             last_x: None,
             last_u,
             stats: Stats::default(),
+            monitor: task_monitor(decoded.as_ref().ok()),
         };
         (app, decoded)
     }
@@ -162,6 +206,7 @@ impl<'a> App<'a> {
             u: to_wire(&u),
             cost: 0,
             location: self.location(),
+            monitor: None,
         })
     }
 
@@ -202,6 +247,7 @@ impl<'a> App<'a> {
             Status::ImageRejected => {}
         }
         self.stats.max_cost = self.stats.max_cost.max(cost);
+        let monitor = monitor_step(&mut self.monitor, x.as_slice(), meter);
         self.expected_seq = self.expected_seq.wrapping_add(1);
         self.last_x = Some(x);
         self.last_u = u;
@@ -211,6 +257,7 @@ impl<'a> App<'a> {
             u: to_wire(&u),
             cost,
             location: self.location(),
+            monitor,
         })
     }
 }

@@ -18,3 +18,21 @@ static ALIGNED: &Aligned<[u8]> = &Aligned(*include_bytes!(concat!(env!("OUT_DIR"
 pub fn image() -> &'static [u8] {
     &ALIGNED.0
 }
+
+/// The monitor's arena (`build.rs`: sized by the embedded image's program), handed out once.
+#[cfg(monitor)]
+pub fn monitor_arena() -> Option<&'static mut [u32]> {
+    use core::sync::atomic::{AtomicBool, Ordering};
+    const WORDS: usize = if build_config::MONITOR_WORDS == 0 {
+        1
+    } else {
+        build_config::MONITOR_WORDS
+    };
+    static TAKEN: AtomicBool = AtomicBool::new(false);
+    static mut ARENA: [u32; WORDS] = [0; WORDS];
+    if TAKEN.swap(true, Ordering::AcqRel) {
+        return None;
+    }
+    // SAFETY: the flag hands the array out at most once, so this is its only reference.
+    Some(unsafe { &mut *core::ptr::addr_of_mut!(ARENA) })
+}

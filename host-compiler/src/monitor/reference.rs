@@ -15,6 +15,8 @@ const POS: f32 = f32::INFINITY;
 
 struct Eval<'a> {
     prog: &'a Program,
+    /// Exact values found so far: a known value never changes as samples arrive.
+    memo: std::cell::RefCell<std::collections::HashMap<(usize, usize), f32>>,
     /// Atom values per sample known so far.
     atoms: Vec<Vec<f32>>,
     hor: Vec<usize>,
@@ -37,6 +39,15 @@ impl Eval<'_> {
 
     /// The exact value (only called where known).
     fn val(&self, i: usize, t: usize) -> f32 {
+        if let Some(&v) = self.memo.borrow().get(&(i, t)) {
+            return v;
+        }
+        let v = self.val_uncached(i, t);
+        self.memo.borrow_mut().insert((i, t), v);
+        v
+    }
+
+    fn val_uncached(&self, i: usize, t: usize) -> f32 {
         match self.prog.nodes[i] {
             Node::Atom(a, n) => {
                 let v = self.atoms[t][a];
@@ -207,6 +218,7 @@ fn horizons(prog: &Program) -> Vec<usize> {
 pub fn reports(prog: &Program, section: &MonitorProgram<'_>, trace: &[Vec<f32>]) -> Vec<Report> {
     let mut ev = Eval {
         prog,
+        memo: Default::default(),
         atoms: Vec::new(),
         hor: horizons(prog),
         k: 0,

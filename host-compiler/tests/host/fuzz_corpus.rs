@@ -155,6 +155,7 @@ fn write_seeds() {
                     u: InputVec::from_slice(&[0.25, -0.5]).unwrap(),
                     cost: 1234,
                     location: 0,
+                    monitor: None,
                 },
                 &mut buf,
             )

@@ -27,6 +27,15 @@
 //! `qemu_tests::images::fl_4_9` (u = R(θ)w) from its five starts; `model_program_bytes` is the size of
 //! that image's two programs.
 //!
+//! `monitor_step_instructions_max`: the largest cost of the task monitor's update alone (issue 46; the
+//! reply's own monitor cost, measured apart from the step) on `examples/planar-vehicle-waypoints.toml`'s
+//! formula, over closed loops of its one-ball image (`synth::temporal::single_ball`) with the monitor
+//! attached, from 8 seeded starts in Init, each over the horizon (samples 0..=N, the last one deciding
+//! every pending value). `monitor_mismatches_target`: samples of those runs where the firmware's bounds
+//! or verdict differ from the host's f32 reference (target 0). `monitor_ram_bytes` and
+//! `monitor_flash_bytes`: the firmware's static RAM and flash with the monitor less without it (same
+//! image otherwise).
+//!
 //! `firmware_stack_bytes_bound`: the worst-case stack of the control loop, as the measured high-water mark
 //! of the painted stack over every run of every image mode here (the feedforward double-integrator image
 //! and the two PWA images, from inside and outside the envelope, so the law, the envelope test and the
@@ -57,6 +66,12 @@ fn main() -> ExitCode {
 }
 
 fn run() -> Result<(), Box<dyn std::error::Error>> {
+    // `HIL_BENCH_ONLY=monitor`: the monitor's rows alone, in their own rows file.
+    if std::env::var("HIL_BENCH_ONLY").is_ok_and(|v| v == "monitor") {
+        let mon = monitor_step_max()?;
+        write_rows("hil_monitor", &monitor_rows(&mon))?;
+        return Ok(());
+    }
     let img = images::double_integrator()?;
     let elf = firmware_with("double_integrator", &img.bytes)?;
     let plant = img.discrete_plant();
@@ -99,6 +114,7 @@ fn run() -> Result<(), Box<dyn std::error::Error>> {
     )?;
     let (hybrid_max, hybrid_stack) = hybrid_step_max()?;
     let nl = nonlinear_step_max()?;
+    let mon = monitor_step_max()?;
     let size = qemu_tests::elf_size(&std::fs::read(&elf)?)?;
     let rows = [
         Row::new(
@@ -161,12 +177,40 @@ fn run() -> Result<(), Box<dyn std::error::Error>> {
                 .max(pwa_stack)
                 .max(pwa_di_stack)
                 .max(hybrid_stack)
-                .max(nl.stack) as f64,
+                .max(nl.stack)
+                .max(mon.stack) as f64,
             "bytes (measured: painted-stack high-water mark, every image mode)",
         ),
     ];
+    let rows: Vec<Row> = rows.into_iter().chain(monitor_rows(&mon)).collect();
     write_rows("hil", &rows)?;
     Ok(())
+}
+
+/// The monitor's rows (module doc).
+fn monitor_rows(mon: &MonitorCosts) -> Vec<Row> {
+    vec![
+        Row::new(
+            "monitor_step_instructions_max",
+            mon.max as f64,
+            "instructions (planar-vehicle-waypoints' formula, update alone)",
+        ),
+        Row::new(
+            "monitor_mismatches_target",
+            mon.mismatches as f64,
+            "samples (firmware vs host f32 reference)",
+        ),
+        Row::new(
+            "monitor_ram_bytes",
+            mon.ram as f64,
+            "bytes (planar-vehicle-waypoints; with the monitor less without)",
+        ),
+        Row::new(
+            "monitor_flash_bytes",
+            mon.flash as f64,
+            "bytes (with the monitor less without)",
+        ),
+    ]
 }
 
 /// One PWA row (module doc): the largest cost of any reply, `Ok` and out-of-envelope alike, over closed
@@ -384,6 +428,104 @@ fn certified_runs(
         stack,
         maps.coords.bytes.len() + maps.input_map.bytes.len(),
     ))
+}
+
+/// What [`monitor_step_max`] measures (module doc).
+struct MonitorCosts {
+    max: u32,
+    mismatches: usize,
+    ram: i64,
+    flash: i64,
+    stack: u64,
+}
+
+/// The monitor rows (module doc).
+fn monitor_step_max() -> Result<MonitorCosts, Box<dyn std::error::Error>> {
+    use host_compiler::monitor::{reference, Program};
+    use rand::{Rng, SeedableRng};
+    let spec = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../examples/planar-vehicle-waypoints.toml"
+    );
+    let problem = host_compiler::spec::load(spec)?;
+    let tt = host_compiler::property::TemporalTask::from_problem(&problem)?;
+    let prog = Program::for_problem(&problem)?;
+    let body = prog.encode();
+    let task = host_compiler::task::Task::new(problem.clone())?;
+    let centre: Vec<f64> = task
+        .init()
+        .lo
+        .iter()
+        .zip(&task.init().hi)
+        .map(|(l, h)| 0.5 * (l + h))
+        .collect();
+    let (_, bytes) = host_compiler::synth::temporal::single_ball(&task, &tt, &centre)?;
+    let with = host_compiler::monitor::attach(&bytes, &body)?;
+    let elf = firmware_with("monitor_waypoints_bench", &with)?;
+    let plain = firmware_with("monitor_waypoints_plain_bench", &bytes)?;
+    let (a, b) = (
+        qemu_tests::elf_size(&std::fs::read(&elf)?)?,
+        qemu_tests::elf_size(&std::fs::read(&plain)?)?,
+    );
+    let img = decode(&with).map_err(qemu_tests::HilError::Image)?;
+    let section = shared_types::monitor::MonitorProgram::decode(&body, task.plant.n())
+        .map_err(|e| format!("{e}"))?;
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(problem.seed ^ 0x46);
+    let (mut max, mut mismatches, mut stack) = (0u32, 0usize, 0u64);
+    for run in 0..8 {
+        let x0: Vec<f64> = if run == 0 {
+            centre.clone()
+        } else {
+            task.init()
+                .lo
+                .iter()
+                .zip(&task.init().hi)
+                .map(|(&l, &h)| if h > l { rng.random_range(l..=h) } else { l })
+                .collect()
+        };
+        let mut q = Qemu::launch(&elf, Duration::from_secs(300))?;
+        let mut host = HostEvaluator::new(img);
+        let (mut x, mut trace, mut got) = (x0, Vec::new(), Vec::new());
+        for k in 0..=prog.horizon {
+            let reply = closed_loop::exchange(&mut q, k as u32, &x, |xf| host.step(xf))?;
+            let m = reply.monitor.ok_or("a reply without the monitor")?;
+            max = max.max(m.cost);
+            trace.push(x.iter().map(|&v| v as f32).collect::<Vec<f32>>());
+            got.push(m);
+            let u: Vec<f64> = reply.u.as_slice().iter().map(|&v| v as f64).collect();
+            x = task.plant.step(0, &x, &u);
+        }
+        let want = reference::reports(&prog, &section, &trace);
+        mismatches += got
+            .iter()
+            .zip(&want)
+            .filter(|(m, w)| m.lo != w.lo.to_bits() || m.hi != w.hi.to_bits() || m.verdict != w.verdict as u8)
+            .count();
+        let exit = q.shutdown()?;
+        if exit.code != Some(0) {
+            return Err(format!("firmware exited with {:?}", exit.code).into());
+        }
+        let peak =
+            qemu_tests::logs::stack_peak(&exit.logs).ok_or("no stack_peak in the shutdown log")?;
+        stack = stack.max(peak);
+    }
+    let (ram, flash) = (
+        a.ram as i64 - b.ram as i64,
+        a.flash as i64 - b.flash as i64,
+    );
+    println!(
+        "monitor (planar-vehicle-waypoints' formula: {} atoms, {} nodes, N = {}): 8 runs, max update          {max} instructions, {mismatches} mismatching samples; RAM +{ram} bytes, flash +{flash} bytes",
+        prog.atoms.len(),
+        prog.nodes.len(),
+        prog.horizon
+    );
+    Ok(MonitorCosts {
+        max,
+        mismatches,
+        ram,
+        flash,
+        stack,
+    })
 }
 
 /// What [`nonlinear_step_max`] measures (module doc).

@@ -8,6 +8,7 @@
 mod board;
 mod feedforward;
 mod hybrid;
+mod monitor;
 mod mtl;
 mod nonlinear;
 mod pwa;

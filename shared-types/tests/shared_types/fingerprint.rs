@@ -128,7 +128,7 @@ fn decoder_refuses_a_malformed_fingerprint() {
                 section: SectionKind::SpecFingerprint
             })
         );
-        // Twice, and a tag after the last known one (14), which this build does not know.
+        // Twice, and a tag after the last known one (15), which this build does not know.
         assert_eq!(
             with(&[(tag, body(&hash())), (tag, body(&hash()))]),
             Err(ImageError::DuplicateSection {
@@ -136,8 +136,8 @@ fn decoder_refuses_a_malformed_fingerprint() {
             })
         );
         assert_eq!(
-            with(&[(14, body(&hash()))]),
-            Err(ImageError::UnknownSection { kind: 14 })
+            with(&[(15, body(&hash()))]),
+            Err(ImageError::UnknownSection { kind: 15 })
         );
     }
 }
