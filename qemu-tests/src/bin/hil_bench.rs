@@ -499,7 +499,9 @@ fn monitor_step_max() -> Result<MonitorCosts, Box<dyn std::error::Error>> {
         mismatches += got
             .iter()
             .zip(&want)
-            .filter(|(m, w)| m.lo != w.lo.to_bits() || m.hi != w.hi.to_bits() || m.verdict != w.verdict as u8)
+            .filter(|(m, w)| {
+                m.lo != w.lo.to_bits() || m.hi != w.hi.to_bits() || m.verdict != w.verdict as u8
+            })
             .count();
         let exit = q.shutdown()?;
         if exit.code != Some(0) {
@@ -509,10 +511,7 @@ fn monitor_step_max() -> Result<MonitorCosts, Box<dyn std::error::Error>> {
             qemu_tests::logs::stack_peak(&exit.logs).ok_or("no stack_peak in the shutdown log")?;
         stack = stack.max(peak);
     }
-    let (ram, flash) = (
-        a.ram as i64 - b.ram as i64,
-        a.flash as i64 - b.flash as i64,
-    );
+    let (ram, flash) = (a.ram as i64 - b.ram as i64, a.flash as i64 - b.flash as i64);
     println!(
         "monitor (planar-vehicle-waypoints' formula: {} atoms, {} nodes, N = {}): 8 runs, max update          {max} instructions, {mismatches} mismatching samples; RAM +{ram} bytes, flash +{flash} bytes",
         prog.atoms.len(),
