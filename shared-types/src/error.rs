@@ -377,6 +377,9 @@ pub enum ImageError {
     TerminalWithModelMaps,
     /// A selection test section in an image without model maps (only the model-maps step reads it).
     SelectionWithoutModelMaps,
+    /// An image with the task's monitor given to a decoder built without it
+    /// ([`crate::image::decode_for`]).
+    MonitorNotSupported,
     /// The monitor section is malformed ([`crate::monitor::MonitorProgram::decode`]).
     BadMonitor {
         /// What is wrong.
@@ -797,6 +800,9 @@ impl fmt::Display for ImageError {
                 "a selection test section in an image without model maps (only the model-maps step reads it)",
             ),
             BadMonitor { why } => write!(f, "monitor section: {why}"),
+            MonitorNotSupported => {
+                f.write_str("an image with the task's monitor, for a firmware built without it")
+            }
             FallbackOutsideBox { input } => write!(
                 f,
                 "fallback input component {input}: outside the input box"

@@ -1198,7 +1198,7 @@ impl<'a> Image<'a> {
 /// period, the section directory ([`Directory::parse`]), each section's postcard structure (no trailing
 /// bytes, canonical form), then the content (see module docs).
 pub fn decode(bytes: &[u8]) -> Result<Image<'_>, ImageError> {
-    decode_sections::<true>(bytes)
+    decode_sections::<true, true>(bytes)
 }
 
 /// [`decode`] for a firmware built without the model-maps step (it calls [`crate::eval::Controller::step`],
@@ -1207,12 +1207,25 @@ pub fn decode(bytes: &[u8]) -> Result<Image<'_>, ImageError> {
 /// the model programs' decoder nor the selection test's is linked. Otherwise the same checks and the
 /// same image as [`decode`].
 pub fn decode_without_model_maps(bytes: &[u8]) -> Result<Image<'_>, ImageError> {
-    decode_sections::<false>(bytes)
+    decode_sections::<false, true>(bytes)
+}
+
+/// [`decode`] for a firmware, choosing at build time what it links: with `MAPS` false, as
+/// [`decode_without_model_maps`]; with `MONITOR` false, an image carrying the task's monitor (section 14)
+/// is refused with [`ImageError::MonitorNotSupported`] (a firmware builds the monitor in exactly when its
+/// image carries one), and the monitor's decoder is not linked. Otherwise the same checks and the same
+/// image as [`decode`].
+pub fn decode_for<const MAPS: bool, const MONITOR: bool>(
+    bytes: &[u8],
+) -> Result<Image<'_>, ImageError> {
+    decode_sections::<MAPS, MONITOR>(bytes)
 }
 
 /// [`decode`], with the model maps and selection test sections admitted only when `MAPS`.
 #[inline(always)]
-fn decode_sections<const MAPS: bool>(bytes: &[u8]) -> Result<Image<'_>, ImageError> {
+fn decode_sections<const MAPS: bool, const MONITOR: bool>(
+    bytes: &[u8],
+) -> Result<Image<'_>, ImageError> {
     let h = Header::parse(bytes)?;
     let payload_bytes = bytes.get(HEADER_LEN..).unwrap_or(&[]);
     if payload_bytes.len() != h.payload_len as usize {
@@ -1269,7 +1282,7 @@ fn decode_sections<const MAPS: bool>(bytes: &[u8]) -> Result<Image<'_>, ImageErr
                 Some(body) if MAPS => img.with_selection_test(body)?,
                 _ => img,
             };
-            with_stored_optional(&dir, img)
+            with_stored_optional::<MONITOR>(&dir, img)
         }
         Mode::PwaFeedback => {
             let laws: PwaLaws<'_> = parse_section(&dir, SectionKind::PwaLaws)?;
@@ -1283,14 +1296,17 @@ fn decode_sections<const MAPS: bool>(bytes: &[u8]) -> Result<Image<'_>, ImageErr
                 input_box: fallback.input_box,
             };
             let img = Image::new_pwa(d, h.period, payload)?;
-            with_stored_optional(&dir, img)
+            with_stored_optional::<MONITOR>(&dir, img)
         }
     }
 }
 
 /// `img` with the directory's optional sections of both modes (terminal law, spec fingerprint, monitor),
 /// validated.
-fn with_stored_optional<'a>(dir: &Directory<'a>, img: Image<'a>) -> Result<Image<'a>, ImageError> {
+fn with_stored_optional<'a, const MONITOR: bool>(
+    dir: &Directory<'a>,
+    img: Image<'a>,
+) -> Result<Image<'a>, ImageError> {
     let img = match dir.section(SectionKind::TerminalLaw) {
         Some(body) => img.with_terminal_law(body)?,
         None => img,
@@ -1303,7 +1319,8 @@ fn with_stored_optional<'a>(dir: &Directory<'a>, img: Image<'a>) -> Result<Image
         None => img,
     };
     match dir.section(SectionKind::Monitor) {
-        Some(body) => img.with_monitor(body),
+        Some(body) if MONITOR => img.with_monitor(body),
+        Some(_) => Err(ImageError::MonitorNotSupported),
         None => Ok(img),
     }
 }

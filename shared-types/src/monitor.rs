@@ -435,9 +435,10 @@ impl<'a> MonitorProgram<'a> {
         v + 0.0
     }
 
-    /// The static plan of every node (horizon, values needed, parent, buffers in the arena), written into
-    /// `plans` when given; returns the arena's words. Only small per-node arrays live on the stack.
-    fn plan_into(&self, mut plans: Option<&mut [Plan; MAX_MONITOR_NODES]>) -> usize {
+    /// The static plan of every node (horizon, values needed, parent, buffers in the arena), its state
+    /// written to the front of `arena` when given ([`PLAN_WORDS`] per node, the buffers after); returns
+    /// the arena's words. Only small per-node arrays live on the stack.
+    fn plan_into(&self, mut arena: Option<&mut [u32]>) -> usize {
         let mut hor = [0usize; MAX_MONITOR_NODES];
         let mut need = [0usize; MAX_MONITOR_NODES];
         let mut parent = [NONE; MAX_MONITOR_NODES];
@@ -487,8 +488,8 @@ impl<'a> MonitorProgram<'a> {
                 _ => {}
             }
         }
-        // Buffers.
-        let mut words = 0usize;
+        // The nodes' states, then their buffers.
+        let mut words = self.nodes * PLAN_WORDS;
         for i in 0..self.nodes {
             let o = self.op(i);
             let (h, h1, h2) = (get(&hor, i), get(&hor, o.c1), get(&hor, o.c2));
@@ -524,8 +525,8 @@ impl<'a> MonitorProgram<'a> {
                 }
                 _ => {}
             }
-            if let Some(p) = plans.as_deref_mut().and_then(|ps| ps.get_mut(i)) {
-                *p = Plan {
+            if let Some(a) = arena.as_deref_mut() {
+                let p = Plan {
                     hor: h,
                     need: get(&need, i),
                     parent: parent.get(i).copied().unwrap_or(NONE),
@@ -537,6 +538,7 @@ impl<'a> MonitorProgram<'a> {
                     b5: bufs[4],
                     ..Plan::default()
                 };
+                p.store(a, i);
             }
         }
         words
@@ -611,11 +613,93 @@ struct Plan {
     b5: Buf,
 }
 
-/// The evaluator's state over a borrowed arena (module doc).
+/// Words of one node's state in the arena ([`Plan::load`], [`Plan::store`]).
+const PLAN_WORDS: usize = 33;
+
+impl Plan {
+    /// Node `i`'s state from the arena (zeros outside it).
+    fn load(arena: &[u32], i: usize) -> Plan {
+        let w = |j: usize| arena.get(i * PLAN_WORDS + j).copied().unwrap_or(0);
+        let z = |j: usize| w(j) as usize;
+        let buf = |j: usize| Buf {
+            off: w(j),
+            cap: w(j + 1),
+            head: w(j + 2),
+            len: w(j + 3),
+        };
+        Plan {
+            hor: z(0),
+            need: z(1),
+            parent: if w(2) == u32::MAX { NONE } else { z(2) },
+            emitted: z(3),
+            out: (w(4) == 1).then(|| f32::from_bits(w(5))),
+            got1: z(6),
+            got2: z(7),
+            m_next: z(8),
+            map_next: z(9),
+            q_lo: z(10),
+            back: (f32::from_bits(w(11)), f32::from_bits(w(12))),
+            b1: buf(13),
+            b2: buf(17),
+            b3: buf(21),
+            b4: buf(25),
+            b5: buf(29),
+        }
+    }
+
+    /// Node `i`'s state into the arena (counters are below 2¹⁷, so they fit a word).
+    fn store(&self, arena: &mut [u32], i: usize) {
+        let u = |v: usize| u32::try_from(v).unwrap_or(u32::MAX);
+        let words: [u32; PLAN_WORDS] = [
+            u(self.hor),
+            u(self.need),
+            if self.parent == NONE {
+                u32::MAX
+            } else {
+                u(self.parent)
+            },
+            u(self.emitted),
+            u32::from(self.out.is_some()),
+            self.out.map_or(0, f32::to_bits),
+            u(self.got1),
+            u(self.got2),
+            u(self.m_next),
+            u(self.map_next),
+            u(self.q_lo),
+            self.back.0.to_bits(),
+            self.back.1.to_bits(),
+            self.b1.off,
+            self.b1.cap,
+            self.b1.head,
+            self.b1.len,
+            self.b2.off,
+            self.b2.cap,
+            self.b2.head,
+            self.b2.len,
+            self.b3.off,
+            self.b3.cap,
+            self.b3.head,
+            self.b3.len,
+            self.b4.off,
+            self.b4.cap,
+            self.b4.head,
+            self.b4.len,
+            self.b5.off,
+            self.b5.cap,
+            self.b5.head,
+            self.b5.len,
+        ];
+        if let Some(dst) = arena.get_mut(i * PLAN_WORDS..(i + 1) * PLAN_WORDS) {
+            dst.copy_from_slice(&words);
+        }
+    }
+}
+
+/// The evaluator's state over a borrowed arena (module doc): the nodes' states and buffers live in the
+/// arena, so this struct stays small whatever the program.
 pub struct Monitor<'a> {
     prog: MonitorProgram<'a>,
     arena: &'a mut [u32],
-    plans: [Plan; MAX_MONITOR_NODES],
     /// The next sample index.
     k: usize,
     atom_vals: [f32; MAX_MONITOR_ATOMS],
@@ -718,10 +802,10 @@ impl<'a> Monitor<'a> {
         if arena.len() < prog.words() {
             return Err(MonitorError::Arena);
         }
-        let mut m = Monitor {
+        prog.plan_into(Some(arena));
+        Ok(Monitor {
             prog,
             arena,
-            plans: [Plan::default(); MAX_MONITOR_NODES],
             k: 0,
             atom_vals: [0.0; MAX_MONITOR_ATOMS],
             root: None,
@@ -730,9 +814,7 @@ impl<'a> Monitor<'a> {
                 hi: f32::INFINITY,
                 verdict: Verdict::Pending,
             },
-        };
-        m.prog.plan_into(Some(&mut m.plans));
-        Ok(m)
+        })
     }
 
     /// The program.
@@ -752,7 +834,8 @@ impl<'a> Monitor<'a> {
 
     /// Back to the first sample.
     pub fn reset(&mut self) {
-        self.prog.plan_into(Some(&mut self.plans));
+        let prog = self.prog;
+        prog.plan_into(Some(self.arena));
         self.k = 0;
         self.root = None;
         self.last = Report {
@@ -807,15 +890,20 @@ impl<'a> Monitor<'a> {
     }
 
     fn plan(&self, i: usize) -> Plan {
-        self.plans.get(i).copied().unwrap_or_default()
+        Plan::load(self.arena, i)
+    }
+
+    fn set_plan(&mut self, i: usize, p: &Plan) {
+        p.store(self.arena, i);
     }
 
     /// Whether node `c`'s parent accepts `c`'s next value (backpressure, module doc).
     fn room(&self, c: usize) -> bool {
         let pc = self.plan(c);
-        let Some(p) = self.plans.get(pc.parent).copied() else {
+        if pc.parent == NONE || pc.parent >= self.prog.nodes {
             return true;
-        };
+        }
+        let p = self.plan(pc.parent);
         let o = self.prog.op(pc.parent);
         let j = pc.emitted;
         let e = |p: &Plan| (p.emitted + o.b).min(self.prog.horizon);
@@ -843,7 +931,8 @@ impl<'a> Monitor<'a> {
         let horizon = self.prog.horizon;
         let t = p.emitted;
         let can = t < p.need && t <= horizon;
-        let child_out = |c: usize| self.plans.get(c).and_then(|q| q.out);
+        let (out1, out2) = (self.plan(o.c1).out, self.plan(o.c2).out);
+        let child_out = |c: usize| if c == o.c1 { out1 } else { out2 };
         let mut emit: Option<f32> = None;
         match o.op {
             OP_ATOM | OP_TRUE | OP_FALSE => {
@@ -945,9 +1034,7 @@ impl<'a> Monitor<'a> {
         let mut emitted = false;
         if let Some(v) = emit {
             // Store p first: `room` reads the parent's buffers, which this node does not touch.
-            if let Some(slot) = self.plans.get_mut(i) {
-                *slot = p;
-            }
+            self.set_plan(i, &p);
             if self.room(i) {
                 if i + 1 == self.prog.nodes {
                     self.root = Some(v);
@@ -965,9 +1052,7 @@ impl<'a> Monitor<'a> {
                 }
             }
         }
-        if let Some(slot) = self.plans.get_mut(i) {
-            *slot = p;
-        }
+        self.set_plan(i, &p);
         emitted
     }
 
@@ -1146,9 +1231,7 @@ impl<'a> Monitor<'a> {
             }
             _ => UNKNOWN,
         };
-        if let Some(slot) = self.plans.get_mut(i) {
-            *slot = p;
-        }
+        self.set_plan(i, &p);
         r
     }
 }

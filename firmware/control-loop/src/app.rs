@@ -70,13 +70,12 @@ fn monitor_step<M: Meter>(_: &mut TaskMonitor<'_>, _: &[f32], _: &mut M) -> Opti
     None
 }
 
-/// The image decoder (module doc): every image where the image may have model maps.
-#[cfg(model_maps)]
-use shared_types::image::decode;
-
-/// The image decoder (module doc): the embedded image has no model maps, and one that has is refused.
-#[cfg(not(model_maps))]
-use shared_types::image::decode_without_model_maps as decode;
+/// The image decoder (module doc), built for what the embedded image carries: model maps
+/// (`cfg(model_maps)`) and the task's monitor (`cfg(monitor)`); an image with either that this build
+/// lacks is refused, and the decoder of what it lacks is not linked.
+fn decode(bytes: &[u8]) -> Result<Image<'_>, ImageError> {
+    shared_types::image::decode_for::<{ cfg!(model_maps) }, { cfg!(monitor) }>(bytes)
+}
 
 /// One control period of the plant (module doc): `step_plant` where the image may have model maps.
 #[cfg(model_maps)]
