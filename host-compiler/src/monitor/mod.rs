@@ -30,16 +30,7 @@ use crate::robustness::mtl::{Expr, Interval};
 use crate::spec::{Coords, SetDesc, Shape};
 use shared_types::monitor as sm;
 
-/// A set a formula names, as the monitor reads it.
-#[derive(Clone, Debug)]
-pub enum AtomSet {
-    /// One set.
-    Set(SetDesc),
-    /// A union of sets (the spec's Unsafe).
-    Union(Vec<SetDesc>),
-    /// aᵀx ≤ b over the whole state.
-    HalfSpace { a: Vec<f64>, b: f64 },
-}
+pub use crate::property::temporal::AtomSet;
 
 /// A node of the compiled formula (negation normal form, binary ∧ and ∨, windows in samples), children
 /// before parents, the root last.

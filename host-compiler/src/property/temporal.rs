@@ -24,6 +24,18 @@ enum Atom {
     HalfSpace { a: Vec<f64>, b: f64 },
 }
 
+/// A set an atom of a formula names, as written in the spec (what the on-target monitor reads,
+/// [`crate::monitor`]).
+#[derive(Clone, Debug)]
+pub enum AtomSet {
+    /// One set.
+    Set(SetDesc),
+    /// A union of sets (the spec's Unsafe).
+    Union(Vec<SetDesc>),
+    /// aᵀx ≤ b over the whole state.
+    HalfSpace { a: Vec<f64>, b: f64 },
+}
+
 /// The formula of a spec with its sets, ready to be bound in a metric.
 pub struct TemporalTask {
     /// The formula as written (for messages and the report).
@@ -104,10 +116,9 @@ impl TemporalTask {
         self.n
     }
 
-    /// Every set the formula may name as the monitor reads it ([`crate::monitor`]): a spec set, the union
-    /// of Unsafe, or a predicate's half-space.
-    pub fn atom_sets(&self) -> Vec<(String, crate::monitor::AtomSet)> {
-        use crate::monitor::AtomSet;
+    /// Every set the formula may name as written: a spec set, the union of Unsafe, or a predicate's
+    /// half-space.
+    pub fn atom_sets(&self) -> Vec<(String, AtomSet)> {
         self.atoms
             .iter()
             .map(|(name, atom)| {
