@@ -898,27 +898,35 @@ impl<'a> Monitor<'a> {
     }
 
     /// Whether node `c`'s parent accepts `c`'s next value (backpressure, module doc).
-    fn room(&self, c: usize) -> bool {
-        let pc = self.plan(c);
-        if pc.parent == NONE || pc.parent >= self.prog.nodes {
+    fn room(&self, c: usize, pc: &Plan) -> bool {
+        let parent = pc.parent;
+        if parent == NONE || parent >= self.prog.nodes {
             return true;
         }
-        let p = self.plan(pc.parent);
-        let o = self.prog.op(pc.parent);
-        let j = pc.emitted;
-        let e = |p: &Plan| (p.emitted + o.b).min(self.prog.horizon);
+        let o = self.prog.op(parent);
+        // The parent's words read in place ([`Plan::store`]'s layout): emitted, and the buffer of this
+        // child (b1 for the first child, b2 for the second: cap, len).
+        let w = |j: usize| self.word(parent, j) as usize;
+        let (cap, len) = if c == o.c1 {
+            (w(14), w(16))
+        } else {
+            (w(18), w(20))
+        };
         match o.op {
-            OP_AND | OP_OR => {
-                let b = if c == o.c1 { p.b1 } else { p.b2 };
-                b.len < b.cap
-            }
-            OP_EVENTUALLY | OP_ALWAYS => j <= e(&p),
-            OP_UNTIL | OP_RELEASE => {
-                let b = if c == o.c1 { p.b1 } else { p.b2 };
-                b.len < b.cap
-            }
+            OP_AND | OP_OR | OP_UNTIL | OP_RELEASE => len < cap,
+            OP_EVENTUALLY | OP_ALWAYS => pc.emitted <= (w(3) + o.b).min(self.prog.horizon),
             _ => true,
         }
+    }
+
+    /// Word `j` of node `i`'s state in the arena.
+    fn word(&self, i: usize, j: usize) -> u32 {
+        self.arena.get(i * PLAN_WORDS + j).copied().unwrap_or(0)
+    }
+
+    /// The value node `c` emitted in this pass, if any (its state's words 4 and 5).
+    fn out_of(&self, c: usize) -> Option<f32> {
+        (self.word(c, 4) == 1).then(|| f32::from_bits(self.word(c, 5)))
     }
 
     /// One node's turn in a pass: take its children's values, emit at most one of its own. Returns
@@ -931,7 +939,7 @@ impl<'a> Monitor<'a> {
         let horizon = self.prog.horizon;
         let t = p.emitted;
         let can = t < p.need && t <= horizon;
-        let (out1, out2) = (self.plan(o.c1).out, self.plan(o.c2).out);
+        let (out1, out2) = (self.out_of(o.c1), self.out_of(o.c2));
         let child_out = |c: usize| if c == o.c1 { out1 } else { out2 };
         let mut emit: Option<f32> = None;
         match o.op {
@@ -1033,9 +1041,7 @@ impl<'a> Monitor<'a> {
         }
         let mut emitted = false;
         if let Some(v) = emit {
-            // Store p first: `room` reads the parent's buffers, which this node does not touch.
-            self.set_plan(i, &p);
-            if self.room(i) {
+            if self.room(i, &p) {
                 if i + 1 == self.prog.nodes {
                     self.root = Some(v);
                 }
