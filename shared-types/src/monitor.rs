@@ -510,7 +510,24 @@ impl<'a> MonitorProgram<'a> {
                     alloc(0, (h2.saturating_sub(h1)).min(cap) + 2, 1);
                     alloc(1, (h1.saturating_sub(h2)).min(cap) + 2, 1);
                 }
+                // A node read at t = 0 only (`need` 1, every top-level operator) never slides its window:
+                // the front of F's deque is all it needs, and U needs neither stack of maps (only their
+                // composition), nor more of its histories than the children's lag.
+                OP_EVENTUALLY | OP_ALWAYS if get(&need, i) <= 1 => alloc(0, 2, 2),
                 OP_EVENTUALLY | OP_ALWAYS => alloc(0, (o.b - o.a).min(cap) + 2, 2),
+                OP_UNTIL | OP_RELEASE if get(&need, i) <= 1 => {
+                    alloc(0, h2.saturating_sub(h1).min(cap) + 3, 1);
+                    let psi = if o.a == 0 {
+                        // The head ψ(0) stays in the history, so it keeps the window.
+                        (o.b + h.saturating_sub(o.b + h2)).min(cap) + 2
+                    } else {
+                        h1.saturating_sub(h2).min(cap) + 3
+                    };
+                    alloc(1, psi, 1);
+                    alloc(2, 2, 2);
+                    alloc(3, 0, 4);
+                    alloc(4, 0, 2);
+                }
                 OP_UNTIL | OP_RELEASE => {
                     let slack_l = (h + 1).saturating_sub(o.b + h1);
                     let slack_r = h.saturating_sub(o.b + h2);
@@ -1098,6 +1115,22 @@ impl<'a> Monitor<'a> {
             push(self.arena, &mut p.b5, 2, &[f.0, f.1]);
             p.back = compose(p.back, f);
             p.map_next += 1;
+        }
+        if p.need <= 1 {
+            // Read at t = 0 only: what the minimum over (0, a) and the maps have taken is not read again
+            // (ψ(0), the head when a = 0, is; and ψ(map_next), the next witness).
+            // φ below t + a feeds the minimum (until m_next), φ from there the maps (until map_next).
+            let used = if p.m_next >= t + o.a {
+                p.map_next
+            } else {
+                p.m_next
+            };
+            while p.b1.len > 0 && p.got1 - (p.b1.len as usize) < used {
+                pop_front(&mut p.b1);
+            }
+            while o.a > 0 && p.b2.len > 0 && p.got2 - (p.b2.len as usize) < p.map_next {
+                pop_front(&mut p.b2);
+            }
         }
     }
 
