@@ -26,7 +26,9 @@
 //! two-stack queue of the clamp maps f_j(y) = max(ψ(j), min(φ(j), y)) of j ∈ [t + a, e − 1], whose
 //! composition applied to ψ(e) is the until over the window (the host's `mtl` derivation, streamed). A
 //! node emits only the values its parent reads (`need`), so at step N the work is bounded by the formula's
-//! windows.
+//! windows. A node read at t = 0 only (every top-level operator) never slides: F and G keep the front of
+//! the deque, U and R the composition of their maps and no more of φ and ψ than the children's lag (ψ's
+//! history from 0 when a = 0, whose head ψ(0) is read at the end).
 //!
 //! # Bounds before the verdict
 //! The root's value at 0 is bracketed every step by sound bounds (every unknown sample may be anything):
