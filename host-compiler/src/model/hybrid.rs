@@ -127,6 +127,9 @@ pub struct Hybrid {
     growth: Vec<f64>,
     /// Each location sampled with the period (exact ZOH).
     sampled: Vec<LinearAffine>,
+    /// Per location, the exact ZOH of each sub-step [`Hybrid::flow`] probes a period with when it starts
+    /// at the sample (keyed by the length's bits, so a hit is the very matrix `zoh` would compute).
+    probes: Vec<Vec<(u64, DiscretePlant)>>,
 }
 
 /// Why an automaton is malformed.
@@ -301,13 +304,47 @@ impl Hybrid {
             .iter()
             .map(|m| LinearAffine::sampled(m.flow.clone(), period))
             .collect::<Result<_, _>>()?;
+        let lengths = Self::probe_lengths(period);
+        let probes = modes
+            .iter()
+            .map(|m| {
+                let mut v: Vec<(u64, DiscretePlant)> = Vec::new();
+                for &s in &lengths {
+                    if s > 0.0 && !v.iter().any(|(b, _)| *b == s.to_bits()) {
+                        v.push((s.to_bits(), m.flow.zoh(s)?));
+                    }
+                }
+                Ok(v)
+            })
+            .collect::<Result<_, ModelError>>()?;
         Ok(Self {
             modes,
             edges,
             period,
             growth,
             sampled,
+            probes,
         })
+    }
+
+    /// The sub-step lengths [`Hybrid::flow`] probes a period with from its start, computed as it
+    /// computes them.
+    fn probe_lengths(h: f64) -> Vec<f64> {
+        let t = 0.0f64;
+        let probe = (h - t) / Self::PROBES as f64;
+        let mut s0 = t;
+        (1..=Self::PROBES)
+            .map(|i| {
+                let s1 = if i == Self::PROBES {
+                    h
+                } else {
+                    t + i as f64 * probe
+                };
+                let d = s1 - s0;
+                s0 = s1;
+                d
+            })
+            .collect()
     }
 
     /// The forced edge `from` → `to`, the one a controller that moves to location `to` takes (§4.2.1).
@@ -344,8 +381,11 @@ impl Hybrid {
         if s <= 0.0 {
             return Ok(x.to_vec());
         }
-        let d = self.modes[loc].flow.zoh(s)?;
-        let y = d.step(x, u);
+        let cached = self.probes[loc].iter().find(|(b, _)| *b == s.to_bits());
+        let y = match cached {
+            Some((_, d)) => d.step(x, u),
+            None => self.modes[loc].flow.zoh(s)?.step(x, u),
+        };
         if y.iter().all(|v| v.is_finite()) {
             Ok(y)
         } else {
