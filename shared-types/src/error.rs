@@ -383,7 +383,7 @@ pub enum ImageError {
     /// The monitor section is malformed ([`crate::monitor::MonitorProgram::decode`]).
     BadMonitor {
         /// What is wrong.
-        why: crate::monitor::MonitorError,
+        why: MonitorError,
     },
     /// An image with model maps (or a selection test) given to a decoder built without the model-maps
     /// step ([`crate::image::decode_without_model_maps`]).
@@ -911,3 +911,34 @@ impl fmt::Display for ImageError {
 }
 
 impl core::error::Error for ImageError {}
+
+/// Why a monitor section is refused ([`crate::monitor::MonitorProgram::decode`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum MonitorError {
+    /// The body is shorter than its header says, or longer.
+    Length,
+    /// The state dimension differs from the image's, or a count is out of its range.
+    Dims,
+    /// Atom `i` is malformed (kind, coordinates, values).
+    Atom(u16),
+    /// Node `i` is malformed (operator, children, window), or the nodes are not one tree rooted at the
+    /// last node.
+    Node(u16),
+    /// The arena given to [`Monitor::new`] is smaller than [`MonitorProgram::words`].
+    Arena,
+}
+
+impl fmt::Display for MonitorError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            MonitorError::Length => {
+                f.write_str("the monitor section's length disagrees with its header")
+            }
+            MonitorError::Dims => f.write_str("the monitor's dimensions are out of range"),
+            MonitorError::Atom(i) => write!(f, "monitor atom {i} is malformed"),
+            MonitorError::Node(i) => write!(f, "monitor node {i} is malformed or not in one tree"),
+            MonitorError::Arena => f.write_str("the monitor's arena is too small"),
+        }
+    }
+}

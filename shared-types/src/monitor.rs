@@ -91,36 +91,7 @@ pub const OP_UNTIL: u32 = 8;
 /// R[a,b] (first child φ, second ψ).
 pub const OP_RELEASE: u32 = 9;
 
-/// Why a monitor section is refused.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum MonitorError {
-    /// The body is shorter than its header says, or longer.
-    Length,
-    /// The state dimension differs from the image's, or a count is out of its range.
-    Dims,
-    /// Atom `i` is malformed (kind, coordinates, values).
-    Atom(u16),
-    /// Node `i` is malformed (operator, children, window), or the nodes are not one tree rooted at the
-    /// last node.
-    Node(u16),
-    /// The arena given to [`Monitor::new`] is smaller than [`MonitorProgram::words`].
-    Arena,
-}
-
-impl core::fmt::Display for MonitorError {
-    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        match self {
-            MonitorError::Length => {
-                f.write_str("the monitor section's length disagrees with its header")
-            }
-            MonitorError::Dims => f.write_str("the monitor's dimensions are out of range"),
-            MonitorError::Atom(i) => write!(f, "monitor atom {i} is malformed"),
-            MonitorError::Node(i) => write!(f, "monitor node {i} is malformed or not in one tree"),
-            MonitorError::Arena => f.write_str("the monitor's arena is too small"),
-        }
-    }
-}
+pub use crate::error::MonitorError;
 
 /// The verdict on the task so far.
 #[repr(u8)]
@@ -146,6 +117,23 @@ pub struct Report {
     pub hi: f32,
     /// The verdict.
     pub verdict: Verdict,
+}
+
+impl Report {
+    /// The report of the bounds `lo ≤ hi`: satisfied once `lo` is positive, violated once `hi` is
+    /// negative, `Boundary` when decided at exactly 0 (module doc).
+    pub fn of_bounds(lo: f32, hi: f32) -> Self {
+        let verdict = if lo > 0.0 {
+            Verdict::Satisfied
+        } else if hi < 0.0 {
+            Verdict::Violated
+        } else if lo == hi {
+            Verdict::Boundary
+        } else {
+            Verdict::Pending
+        };
+        Report { lo, hi, verdict }
+    }
 }
 
 /// A validated monitor program, borrowed from its section body.
@@ -895,16 +883,7 @@ impl<'a> Monitor<'a> {
             Some(v) => (v, v),
             None => self.bounds(root, 0),
         };
-        let verdict = if lo > 0.0 {
-            Verdict::Satisfied
-        } else if hi < 0.0 {
-            Verdict::Violated
-        } else if lo == hi {
-            Verdict::Boundary
-        } else {
-            Verdict::Pending
-        };
-        self.last = Report { lo, hi, verdict };
+        self.last = Report::of_bounds(lo, hi);
         self.last
     }
 

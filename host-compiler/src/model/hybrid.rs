@@ -330,21 +330,24 @@ impl Hybrid {
     /// The sub-step lengths [`Hybrid::flow`] probes a period with from its start, computed as it
     /// computes them.
     fn probe_lengths(h: f64) -> Vec<f64> {
-        let t = 0.0f64;
-        let probe = (h - t) / Self::PROBES as f64;
-        let mut s0 = t;
+        let mut s0 = 0.0;
         (1..=Self::PROBES)
             .map(|i| {
-                let s1 = if i == Self::PROBES {
-                    h
-                } else {
-                    t + i as f64 * probe
-                };
+                let s1 = Self::probe_end(h, 0.0, i);
                 let d = s1 - s0;
                 s0 = s1;
                 d
             })
             .collect()
+    }
+
+    /// The end of probe `i` (1..=PROBES) of the rest [t, h] of a period, as [`Hybrid::flow`] steps it.
+    fn probe_end(h: f64, t: f64, i: usize) -> f64 {
+        if i == Self::PROBES {
+            h
+        } else {
+            t + i as f64 * ((h - t) / Self::PROBES as f64)
+        }
     }
 
     /// The forced edge `from` → `to`, the one a controller that moves to location `to` takes (§4.2.1).
@@ -458,14 +461,9 @@ impl Hybrid {
                 .iter()
                 .map(|&e| self.edges[e].guard.margin(&x) > 0.0)
                 .collect();
-            let probe = (h - t) / Self::PROBES as f64;
             let (mut s0, mut x0) = (t, x.clone());
             for i in 1..=Self::PROBES {
-                let s1 = if i == Self::PROBES {
-                    h
-                } else {
-                    t + i as f64 * probe
-                };
+                let s1 = Self::probe_end(h, t, i);
                 let x1 = self.advance(loc, &x0, u, s1 - s0)?;
                 // The earliest entry over the armed edges in [s0, s1] (ties: the first edge listed).
                 let mut hit: Option<(f64, Vec<f64>, usize)> = None;

@@ -8,7 +8,7 @@
 //! before that its bounds follow the operator rules stated there.
 
 use super::{Node, Program};
-use shared_types::monitor::{MonitorProgram, Report, Verdict};
+use shared_types::monitor::{MonitorProgram, Report};
 
 const NEG: f32 = f32::NEG_INFINITY;
 const POS: f32 = f32::INFINITY;
@@ -236,16 +236,7 @@ pub fn reports(prog: &Program, section: &MonitorProgram<'_>, trace: &[Vec<f32>])
             .push((0..prog.atoms.len()).map(|a| section.atom(a, x)).collect());
         ev.k = k;
         let (lo, hi) = ev.bounds(root, 0);
-        let verdict = if lo > 0.0 {
-            Verdict::Satisfied
-        } else if hi < 0.0 {
-            Verdict::Violated
-        } else if lo == hi {
-            Verdict::Boundary
-        } else {
-            Verdict::Pending
-        };
-        out.push(Report { lo, hi, verdict });
+        out.push(Report::of_bounds(lo, hi));
     }
     out
 }
