@@ -626,26 +626,31 @@ const PLAN_WORDS: usize = 33;
 impl Plan {
     /// Node `i`'s state from the arena (zeros outside it).
     fn load(arena: &[u32], i: usize) -> Plan {
-        let w = |j: usize| arena.get(i * PLAN_WORDS + j).copied().unwrap_or(0);
-        let z = |j: usize| w(j) as usize;
+        const ZERO: [u32; PLAN_WORDS] = [0; PLAN_WORDS];
+        // One slice of the node's words, so each field below is read without a bounds check.
+        let w: &[u32; PLAN_WORDS] = arena
+            .get(i * PLAN_WORDS..(i + 1) * PLAN_WORDS)
+            .and_then(|s| s.try_into().ok())
+            .unwrap_or(&ZERO);
+        let z = |j: usize| w[j] as usize;
         let buf = |j: usize| Buf {
-            off: w(j),
-            cap: w(j + 1),
-            head: w(j + 2),
-            len: w(j + 3),
+            off: w[j],
+            cap: w[j + 1],
+            head: w[j + 2],
+            len: w[j + 3],
         };
         Plan {
             hor: z(0),
             need: z(1),
-            parent: if w(2) == u32::MAX { NONE } else { z(2) },
+            parent: if w[2] == u32::MAX { NONE } else { z(2) },
             emitted: z(3),
-            out: (w(4) == 1).then(|| f32::from_bits(w(5))),
+            out: (w[4] == 1).then(|| f32::from_bits(w[5])),
             got1: z(6),
             got2: z(7),
             m_next: z(8),
             map_next: z(9),
             q_lo: z(10),
-            back: (f32::from_bits(w(11)), f32::from_bits(w(12))),
+            back: (f32::from_bits(w[11]), f32::from_bits(w[12])),
             b1: buf(13),
             b2: buf(17),
             b3: buf(21),
@@ -656,48 +661,35 @@ impl Plan {
 
     /// Node `i`'s state into the arena (counters are below 2¹⁷, so they fit a word).
     fn store(&self, arena: &mut [u32], i: usize) {
+        let Some(w) = arena
+            .get_mut(i * PLAN_WORDS..(i + 1) * PLAN_WORDS)
+            .and_then(|s| <&mut [u32; PLAN_WORDS]>::try_from(s).ok())
+        else {
+            return;
+        };
         let u = |v: usize| u32::try_from(v).unwrap_or(u32::MAX);
-        let words: [u32; PLAN_WORDS] = [
-            u(self.hor),
-            u(self.need),
-            if self.parent == NONE {
-                u32::MAX
-            } else {
-                u(self.parent)
-            },
-            u(self.emitted),
-            u32::from(self.out.is_some()),
-            self.out.map_or(0, f32::to_bits),
-            u(self.got1),
-            u(self.got2),
-            u(self.m_next),
-            u(self.map_next),
-            u(self.q_lo),
-            self.back.0.to_bits(),
-            self.back.1.to_bits(),
-            self.b1.off,
-            self.b1.cap,
-            self.b1.head,
-            self.b1.len,
-            self.b2.off,
-            self.b2.cap,
-            self.b2.head,
-            self.b2.len,
-            self.b3.off,
-            self.b3.cap,
-            self.b3.head,
-            self.b3.len,
-            self.b4.off,
-            self.b4.cap,
-            self.b4.head,
-            self.b4.len,
-            self.b5.off,
-            self.b5.cap,
-            self.b5.head,
-            self.b5.len,
-        ];
-        if let Some(dst) = arena.get_mut(i * PLAN_WORDS..(i + 1) * PLAN_WORDS) {
-            dst.copy_from_slice(&words);
+        w[0] = u(self.hor);
+        w[1] = u(self.need);
+        w[2] = if self.parent == NONE {
+            u32::MAX
+        } else {
+            u(self.parent)
+        };
+        w[3] = u(self.emitted);
+        w[4] = u32::from(self.out.is_some());
+        w[5] = self.out.map_or(0, f32::to_bits);
+        w[6] = u(self.got1);
+        w[7] = u(self.got2);
+        w[8] = u(self.m_next);
+        w[9] = u(self.map_next);
+        w[10] = u(self.q_lo);
+        w[11] = self.back.0.to_bits();
+        w[12] = self.back.1.to_bits();
+        for (j, b) in [self.b1, self.b2, self.b3, self.b4, self.b5].iter().enumerate() {
+            w[13 + 4 * j] = b.off;
+            w[14 + 4 * j] = b.cap;
+            w[15 + 4 * j] = b.head;
+            w[16 + 4 * j] = b.len;
         }
     }
 }
@@ -707,6 +699,8 @@ impl Plan {
 pub struct Monitor<'a> {
     prog: MonitorProgram<'a>,
     arena: &'a mut [u32],
+    /// The nodes' records, decoded once (read every pass).
+    ops: [Op; MAX_MONITOR_NODES],
     /// The next sample index.
     k: usize,
     atom_vals: [f32; MAX_MONITOR_ATOMS],
@@ -735,9 +729,14 @@ fn apply(m: (f32, f32), y: f32) -> f32 {
 const IDENTITY: (f32, f32) = (f32::NEG_INFINITY, f32::INFINITY);
 
 impl Buf {
+    /// Word of entry `i` (i < len ≤ cap, head < cap, so one wrap at most: no division).
+    #[inline(always)]
     fn slot(&self, i: usize, per: usize) -> usize {
-        let cap = (self.cap as usize).max(1);
-        self.off as usize + ((self.head as usize + i) % cap) * per
+        let mut s = self.head as usize + i;
+        if s >= self.cap as usize {
+            s -= self.cap as usize;
+        }
+        self.off as usize + s * per
     }
 }
 
@@ -768,7 +767,10 @@ fn at(arena: &[u32], b: &Buf, i: usize, per: usize, j: usize) -> f32 {
 
 fn pop_front(b: &mut Buf) {
     if b.len > 0 {
-        b.head = (b.head + 1) % b.cap.max(1);
+        b.head += 1;
+        if b.head >= b.cap {
+            b.head = 0;
+        }
         b.len -= 1;
     }
 }
@@ -793,6 +795,17 @@ fn deque_drop_below(arena: &[u32], b: &mut Buf, from: usize) {
     }
 }
 
+/// The front value of a max-deque among indices from `from`, or −∞, leaving the deque as it is (the
+/// bounds read it; the next [`deque_max`] drops what this skips).
+fn deque_peek(arena: &[u32], b: &Buf, from: usize) -> f32 {
+    for i in 0..b.len as usize {
+        if (at(arena, b, i, 2, 0).to_bits() as usize) >= from {
+            return at(arena, b, i, 2, 1);
+        }
+    }
+    f32::NEG_INFINITY
+}
+
 /// The front value of a max-deque after dropping indices below `from`, or −∞.
 fn deque_max(arena: &[u32], b: &mut Buf, from: usize) -> f32 {
     deque_drop_below(arena, b, from);
@@ -810,9 +823,14 @@ impl<'a> Monitor<'a> {
             return Err(MonitorError::Arena);
         }
         prog.plan_into(Some(arena));
+        let mut ops = [Op::default(); MAX_MONITOR_NODES];
+        for (i, o) in ops.iter_mut().enumerate().take(prog.nodes) {
+            *o = prog.op(i);
+        }
         Ok(Monitor {
             prog,
             arena,
+            ops,
             k: 0,
             atom_vals: [0.0; MAX_MONITOR_ATOMS],
             root: None,
@@ -887,6 +905,12 @@ impl<'a> Monitor<'a> {
         self.last
     }
 
+    /// Node `i`'s record (a default one past the program's nodes).
+    #[inline(always)]
+    fn op(&self, i: usize) -> Op {
+        self.ops.get(i).copied().unwrap_or_default()
+    }
+
     fn plan(&self, i: usize) -> Plan {
         Plan::load(self.arena, i)
     }
@@ -901,7 +925,7 @@ impl<'a> Monitor<'a> {
         if parent == NONE || parent >= self.prog.nodes {
             return true;
         }
-        let o = self.prog.op(parent);
+        let o = self.op(parent);
         // The parent's words read in place ([`Plan::store`]'s layout): emitted, and the buffer of this
         // child (b1 for the first child, b2 for the second: cap, len).
         let w = |j: usize| self.word(parent, j) as usize;
@@ -930,7 +954,7 @@ impl<'a> Monitor<'a> {
     /// One node's turn in a pass: take its children's values, emit at most one of its own. Returns
     /// whether it emitted.
     fn process(&mut self, i: usize, first: bool) -> bool {
-        let o = self.prog.op(i);
+        let o = self.op(i);
         let mut p = self.plan(i);
         p.out = None;
         let k = self.k;
@@ -1166,17 +1190,17 @@ impl<'a> Monitor<'a> {
 
     /// Sound bounds of node `i` at its pending time (module doc); exact when it was emitted (the value
     /// then sits in its parent's buffer or was the root's last output).
-    fn bounds(&mut self, i: usize, t: usize) -> (f32, f32) {
+    fn bounds(&self, i: usize, t: usize) -> (f32, f32) {
         self.bounds_at(i, t, 0)
     }
 
-    fn bounds_at(&mut self, i: usize, t: usize, depth: usize) -> (f32, f32) {
+    fn bounds_at(&self, i: usize, t: usize, depth: usize) -> (f32, f32) {
         const UNKNOWN: (f32, f32) = (f32::NEG_INFINITY, f32::INFINITY);
         if depth > MAX_MONITOR_NODES {
             return UNKNOWN;
         }
-        let o = self.prog.op(i);
-        let mut p = self.plan(i);
+        let o = self.op(i);
+        let p = self.plan(i);
         if p.emitted > t {
             // Never asked: a parent reads an emitted child's value from its own buffer.
             return UNKNOWN;
@@ -1205,7 +1229,7 @@ impl<'a> Monitor<'a> {
                 }
             }
             OP_EVENTUALLY | OP_ALWAYS => {
-                let lo = deque_max(self.arena, &mut p.b1, t + o.a);
+                let lo = deque_peek(self.arena, &p.b1, t + o.a);
                 if o.op == OP_ALWAYS {
                     (f32::NEG_INFINITY, neg(lo))
                 } else {
@@ -1214,7 +1238,7 @@ impl<'a> Monitor<'a> {
             }
             OP_UNTIL | OP_RELEASE => {
                 let known = p.m_next >= (t + o.a).min(self.prog.horizon + 1);
-                let m = neg(deque_max(self.arena, &mut p.b3, t + 1));
+                let m = neg(deque_peek(self.arena, &p.b3, t + 1));
                 let agg = self.queue_agg(&p);
                 let j = p.map_next;
                 let e = (t + o.b).min(self.prog.horizon);
@@ -1251,7 +1275,6 @@ impl<'a> Monitor<'a> {
             }
             _ => UNKNOWN,
         };
-        self.set_plan(i, &p);
         r
     }
 }
