@@ -17,6 +17,10 @@
 //!    `shared_types::monitor`), or when `CONTROLLER_MONITOR=1`, and writes the words of its arena
 //!    (`MONITOR_WORDS`, from the image's program); without it the monitor's evaluator is not linked.
 //!
+//! 5. sets `cfg(pwa)` when the embedded image's header says PWA feedback (Ch. 6), or when
+//!    `CONTROLLER_PWA=1` (the no-panic check); without it the decoder refuses a PWA image and the loop
+//!    steps with `step_for::<false>`, so the PWA tables' validation and point location take no flash.
+//!
 //! Each board's own build script places its memory map (`memory.x`).
 //!
 //! The default image is generated rather than committed so that it always matches the current image format
@@ -41,6 +45,8 @@ fn main() {
     println!("cargo::rustc-check-cfg=cfg(model_maps)");
     println!("cargo:rerun-if-env-changed=CONTROLLER_MONITOR");
     println!("cargo::rustc-check-cfg=cfg(monitor)");
+    println!("cargo:rerun-if-env-changed=CONTROLLER_PWA");
+    println!("cargo::rustc-check-cfg=cfg(pwa)");
 
     let bytes = match std::env::var_os("CONTROLLER_IMAGE") {
         Some(p) => {
@@ -78,6 +84,14 @@ fn main() {
         println!("cargo:rustc-cfg=monitor");
     }
     let monitor_words = monitor_words.unwrap_or(0);
+
+    // PWA feedback: read from the header, so that an image refused for anything else is still refused
+    // for that reason at boot.
+    let is_pwa = Header::parse(&bytes).is_ok_and(|h| h.mode == Mode::PwaFeedback as u8);
+    let force_pwa = std::env::var("CONTROLLER_PWA").is_ok_and(|v| v.trim() == "1");
+    if is_pwa || force_pwa {
+        println!("cargo:rustc-cfg=pwa");
+    }
 
     let rejected_m = match std::env::var("CONTROLLER_REJECTED_M") {
         Ok(s) => s

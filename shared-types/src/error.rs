@@ -380,6 +380,8 @@ pub enum ImageError {
     /// An image with the task's monitor given to a decoder built without it
     /// ([`crate::image::decode_for`]).
     MonitorNotSupported,
+    /// A PWA-feedback image given to a decoder built without the PWA step ([`crate::image::decode_for`]).
+    PwaNotSupported,
     /// The monitor section is malformed ([`crate::monitor::MonitorProgram::decode`]).
     BadMonitor {
         /// What is wrong.
@@ -802,6 +804,9 @@ impl fmt::Display for ImageError {
             BadMonitor { why } => write!(f, "monitor section: {why}"),
             MonitorNotSupported => {
                 f.write_str("an image with the task's monitor, for a firmware built without it")
+            }
+            PwaNotSupported => {
+                f.write_str("a PWA-feedback image, for a firmware built without the PWA step")
             }
             FallbackOutsideBox { input } => write!(
                 f,

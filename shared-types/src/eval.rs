@@ -376,13 +376,24 @@ impl<'a> Controller<'a> {
     /// This is the law in the image's own coordinates: for an image with model maps, `x` is ξ and the
     /// answer is w; the plant's loop calls [`Controller::step_plant`].
     pub fn step(&mut self, x: &[f32]) -> Result<Input, Status> {
+        self.step_for::<true>(x)
+    }
+
+    /// [`Controller::step`], choosing at build time whether the PWA step is linked: with `PWA` false (a
+    /// firmware whose decoder refuses PWA images, [`crate::image::decode_for`]), a PWA image, which then
+    /// cannot have been decoded, gets `Err(OutOfEnvelope)` and point location takes no flash.
+    pub fn step_for<const PWA: bool>(&mut self, x: &[f32]) -> Result<Input, Status> {
         if let Some(law) = self.image.terminal_law() {
             if let Some(answer) = self.step_terminal(&law, x) {
                 return answer;
             }
         }
         if self.image.mode() != Mode::Feedforward {
-            return self.step_pwa(x);
+            return if PWA {
+                self.step_pwa(x)
+            } else {
+                Err(Status::OutOfEnvelope)
+            };
         }
         if x.len() != self.image.n() || !x.iter().all(|v| v.is_finite()) {
             return Err(Status::BadFrame);
@@ -407,8 +418,13 @@ impl<'a> Controller<'a> {
     /// image's fallback is applied to the plant directly and ζ is left as it is. κ and the remembered
     /// input as for `step`; an error changes neither κ nor ζ.
     pub fn step_plant(&mut self, x: &[f32]) -> Result<Input, Status> {
+        self.step_plant_for::<true>(x)
+    }
+
+    /// [`Controller::step_plant`] with the PWA step linked only when `PWA` ([`Controller::step_for`]).
+    pub fn step_plant_for<const PWA: bool>(&mut self, x: &[f32]) -> Result<Input, Status> {
         match self.image.maps {
-            None => self.step(x),
+            None => self.step_for::<PWA>(x),
             Some(maps) => self.step_maps(&maps, x),
         }
     }

@@ -1198,7 +1198,7 @@ impl<'a> Image<'a> {
 /// period, the section directory ([`Directory::parse`]), each section's postcard structure (no trailing
 /// bytes, canonical form), then the content (see module docs).
 pub fn decode(bytes: &[u8]) -> Result<Image<'_>, ImageError> {
-    decode_sections::<true, true>(bytes)
+    decode_sections::<true, true, true>(bytes)
 }
 
 /// [`decode`] for a firmware built without the model-maps step (it calls [`crate::eval::Controller::step`],
@@ -1207,23 +1207,27 @@ pub fn decode(bytes: &[u8]) -> Result<Image<'_>, ImageError> {
 /// the model programs' decoder nor the selection test's is linked. Otherwise the same checks and the
 /// same image as [`decode`].
 pub fn decode_without_model_maps(bytes: &[u8]) -> Result<Image<'_>, ImageError> {
-    decode_sections::<false, true>(bytes)
+    decode_sections::<false, true, true>(bytes)
 }
 
 /// [`decode`] for a firmware, choosing at build time what it links: with `MAPS` false, as
 /// [`decode_without_model_maps`]; with `MONITOR` false, an image carrying the task's monitor (section 14)
 /// is refused with [`ImageError::MonitorNotSupported`] (a firmware builds the monitor in exactly when its
 /// image carries one), and the monitor's decoder is not linked. Otherwise the same checks and the same
-/// image as [`decode`].
-pub fn decode_for<const MAPS: bool, const MONITOR: bool>(
+/// image as [`decode`]. With `PWA` false, a PWA-feedback image is refused with
+/// [`ImageError::PwaNotSupported`] (after the checks before the content) and the PWA tables' validation
+/// is not linked; such a firmware steps with [`crate::eval::Controller::step_for`]`::<false>`, which
+/// links no point location either.
+pub fn decode_for<const MAPS: bool, const MONITOR: bool, const PWA: bool>(
     bytes: &[u8],
 ) -> Result<Image<'_>, ImageError> {
-    decode_sections::<MAPS, MONITOR>(bytes)
+    decode_sections::<MAPS, MONITOR, PWA>(bytes)
 }
 
-/// [`decode`], with the model maps and selection test sections admitted only when `MAPS`.
+/// [`decode`], with the model maps and selection test sections admitted only when `MAPS`, the monitor
+/// only when `MONITOR`, a PWA-feedback image only when `PWA`.
 #[inline(always)]
-fn decode_sections<const MAPS: bool, const MONITOR: bool>(
+fn decode_sections<const MAPS: bool, const MONITOR: bool, const PWA: bool>(
     bytes: &[u8],
 ) -> Result<Image<'_>, ImageError> {
     let h = Header::parse(bytes)?;
@@ -1284,6 +1288,7 @@ fn decode_sections<const MAPS: bool, const MONITOR: bool>(
             };
             with_stored_optional::<MONITOR>(&dir, img)
         }
+        Mode::PwaFeedback if !PWA => Err(ImageError::PwaNotSupported),
         Mode::PwaFeedback => {
             let laws: PwaLaws<'_> = parse_section(&dir, SectionKind::PwaLaws)?;
             let tree: PwaTree<'_> = parse_section(&dir, SectionKind::PwaTree)?;

@@ -685,7 +685,10 @@ impl Plan {
         w[10] = u(self.q_lo);
         w[11] = self.back.0.to_bits();
         w[12] = self.back.1.to_bits();
-        for (j, b) in [self.b1, self.b2, self.b3, self.b4, self.b5].iter().enumerate() {
+        for (j, b) in [self.b1, self.b2, self.b3, self.b4, self.b5]
+            .iter()
+            .enumerate()
+        {
             w[13 + 4 * j] = b.off;
             w[14 + 4 * j] = b.cap;
             w[15 + 4 * j] = b.head;

@@ -10,9 +10,12 @@
 //! `firmware_stack_bytes_bound`. Both are measured on mps2-an386; the loop and the evaluator are the same
 //! code on every board, so the figure stands for each.
 //!
-//! The image is a byte array in flash and nothing else depends on it, so a board's flash grows with the
-//! image's length alone: each board is built with the longest of the shipped examples' images (the ones
-//! the HIL suite synthesises from `examples/*.toml`, [`SHIPPED_IMAGES`]), which bounds the others.
+//! What a firmware links depends on its image (`firmware/control-loop/build.rs`): the PWA step, the model
+//! maps' interpreter and the task's monitor only when the image has them. Among images of one such
+//! configuration the code is the same and flash grows with the image's length alone, so each board is
+//! built with the longest image of each configuration among the shipped examples' images (the ones the
+//! HIL suite synthesises from `examples/*.toml`, [`SHIPPED_IMAGES`]), which bounds the others of that
+//! configuration.
 
 use crate::{root, run, target_dir, TARGET};
 use std::path::{Path, PathBuf};
@@ -54,7 +57,37 @@ pub const SHIPPED_IMAGES: &[(&str, &str)] = &[
         "hybrid_forced_cart_mtl",
         "examples/hybrid-forced-cart-mtl.toml",
     ),
+    (
+        "monitor_double_integrator",
+        "examples/double-integrator.toml, with the task's monitor",
+    ),
+    (
+        "planar_vehicle_monitor",
+        "examples/planar-vehicle.toml, with the task's monitor",
+    ),
 ];
+
+/// What a firmware built for `bytes` links beyond the feedforward law: "feedforward", or the optional
+/// paths its image needs joined by `+` ("PWA", "model maps", "monitor"); `None` if the image does not
+/// decode (the firmware would refuse it; nothing is checked for it).
+pub fn configuration(bytes: &[u8]) -> Option<String> {
+    let img = shared_types::image::decode(bytes).ok()?;
+    let mut parts = Vec::new();
+    if img.mode() == shared_types::image::Mode::PwaFeedback {
+        parts.push("PWA");
+    }
+    if img.model_maps().is_some() {
+        parts.push("model maps");
+    }
+    if img.monitor().is_some() {
+        parts.push("monitor");
+    }
+    Some(if parts.is_empty() {
+        "feedforward".to_string()
+    } else {
+        parts.join("+")
+    })
+}
 
 /// A cargo command in a board's folder (cargo reads the `.cargo/config.toml` there and in `firmware/`),
 /// without the host's target settings.
@@ -80,8 +113,9 @@ pub fn elf(board: &str) -> PathBuf {
 }
 
 /// `cargo build --release` of `board` with `image` embedded (`None`: the default test image); with
-/// `all_paths`, the model maps' path linked whatever the image (`CONTROLLER_MODEL_MAPS=1`, see
-/// `firmware/control-loop/build.rs`).
+/// `all_paths`, every optional path linked whatever the image (model maps, the task's monitor, PWA
+/// feedback: `CONTROLLER_MODEL_MAPS=1`, `CONTROLLER_MONITOR=1`, `CONTROLLER_PWA=1`, see
+/// `firmware/control-loop/build.rs`); without, exactly what the image needs.
 pub fn build(board: &str, image: Option<&Path>, all_paths: bool) -> Result<(), String> {
     let mut c = board_cargo(board);
     c.args(["build", "--release"]);
@@ -91,10 +125,16 @@ pub fn build(board: &str, image: Option<&Path>, all_paths: bool) -> Result<(), S
     };
     c.env_remove("CONTROLLER_REJECTED_M")
         .env_remove("FIRMWARE_FAULT_INJECTION");
-    match all_paths {
-        true => c.env("CONTROLLER_MODEL_MAPS", "1"),
-        false => c.env_remove("CONTROLLER_MODEL_MAPS"),
-    };
+    for var in [
+        "CONTROLLER_MODEL_MAPS",
+        "CONTROLLER_MONITOR",
+        "CONTROLLER_PWA",
+    ] {
+        match all_paths {
+            true => c.env(var, "1"),
+            false => c.env_remove(var),
+        };
+    }
     run(c)
 }
 
@@ -139,6 +179,8 @@ pub fn elf_size(elf: &[u8]) -> Result<ElfSize, String> {
 #[derive(Clone, Debug, PartialEq)]
 pub struct Figure {
     pub board: &'static str,
+    /// What the firmware links for that image ([`configuration`]).
+    pub config: String,
     /// The image it was built with (file name) and that image's length.
     pub image: String,
     pub image_bytes: u64,
@@ -150,51 +192,65 @@ pub struct Figure {
     pub ram: u64,
 }
 
-/// The longest of the shipped examples' images present in `<target>/hil/images/`.
-pub fn longest_shipped_image() -> Result<(PathBuf, u64), String> {
+/// The longest shipped image of each configuration ([`configuration`]) present in
+/// `<target>/hil/images/`: (configuration, path, length), in the order of [`SHIPPED_IMAGES`]' first of
+/// each.
+pub fn longest_shipped_images() -> Result<Vec<(String, PathBuf, u64)>, String> {
     let dir = target_dir().join("hil").join("images");
-    let mut best: Option<(PathBuf, u64)> = None;
+    let mut best: Vec<(String, PathBuf, u64)> = Vec::new();
     for (stem, _) in SHIPPED_IMAGES {
         let p = dir.join(format!("{stem}.bin"));
-        if let Ok(m) = std::fs::metadata(&p) {
-            if best.as_ref().is_none_or(|(_, len)| m.len() > *len) {
-                best = Some((p, m.len()));
-            }
+        let Ok(bytes) = std::fs::read(&p) else {
+            continue;
+        };
+        let Some(config) = configuration(&bytes) else {
+            continue;
+        };
+        let len = bytes.len() as u64;
+        match best.iter_mut().find(|(c, _, _)| *c == config) {
+            Some(b) if len > b.2 => *b = (config, p, len),
+            Some(_) => {}
+            None => best.push((config, p, len)),
         }
     }
-    best.ok_or_else(|| {
-        format!(
+    if best.is_empty() {
+        return Err(format!(
             "no shipped example's image in {} (the HIL suite writes them: cargo test -p qemu-tests)",
             dir.display()
-        )
-    })
+        ));
+    }
+    Ok(best)
 }
 
-/// Builds every board with the longest shipped image and sizes it; `stack` is the loop's worst-case stack.
+/// Builds every board with the longest shipped image of each configuration and sizes it; `stack` is the
+/// loop's worst-case stack.
 pub fn measure(stack: u64) -> Result<Vec<Figure>, String> {
-    let (image, image_bytes) = longest_shipped_image()?;
-    let name = image
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    println!(
-        "xtask: every board with the longest shipped example's image, {name} ({image_bytes} bytes)"
-    );
     let mut figures = Vec::new();
-    for &board in BOARDS {
-        build(board, Some(&image), false)?;
-        let path = elf(board);
-        let bytes = std::fs::read(&path).map_err(|e| format!("reading {}: {e}", path.display()))?;
-        let size = elf_size(&bytes).map_err(|e| format!("{}: {e}", path.display()))?;
-        figures.push(Figure {
-            board,
-            image: name.clone(),
-            image_bytes,
-            flash: size.flash,
-            static_ram: size.ram,
-            stack,
-            ram: size.ram + stack,
-        });
+    for (config, image, image_bytes) in longest_shipped_images()? {
+        let name = image
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        println!(
+            "xtask: every board with the longest shipped {config} image, {name} ({image_bytes} bytes)"
+        );
+        for &board in BOARDS {
+            build(board, Some(&image), false)?;
+            let path = elf(board);
+            let bytes =
+                std::fs::read(&path).map_err(|e| format!("reading {}: {e}", path.display()))?;
+            let size = elf_size(&bytes).map_err(|e| format!("{}: {e}", path.display()))?;
+            figures.push(Figure {
+                board,
+                config: config.clone(),
+                image: name.clone(),
+                image_bytes,
+                flash: size.flash,
+                static_ram: size.ram,
+                stack,
+                ram: size.ram + stack,
+            });
+        }
     }
     Ok(figures)
 }
@@ -203,14 +259,15 @@ pub fn measure(stack: u64) -> Result<Vec<Figure>, String> {
 pub fn check(figures: &[Figure]) -> Result<(), String> {
     let b = &BUDGETS;
     println!(
-        "xtask: {:<14} {:>12} {:>12} {:>11} {:>10}  image",
-        "board", "flash", "ram", "static ram", "stack"
+        "xtask: {:<14} {:<24} {:>12} {:>12} {:>11} {:>10}  image",
+        "board", "configuration", "flash", "ram", "static ram", "stack"
     );
     let mut over = Vec::new();
     for f in figures {
         println!(
-            "xtask: {:<14} {:>12} {:>12} {:>11} {:>10}  {} ({} bytes)",
+            "xtask: {:<14} {:<24} {:>12} {:>12} {:>11} {:>10}  {} ({} bytes)",
             f.board,
+            f.config,
             format!("{}/{}", f.flash, b.flash_bytes),
             format!("{}/{}", f.ram, b.ram_bytes),
             f.static_ram,
@@ -220,14 +277,14 @@ pub fn check(figures: &[Figure]) -> Result<(), String> {
         );
         if f.flash > b.flash_bytes {
             over.push(format!(
-                "{}: flash {} bytes > budget {} (with image {})",
-                f.board, f.flash, b.flash_bytes, f.image
+                "{}: flash {} bytes > budget {} (with image {}, {})",
+                f.board, f.flash, b.flash_bytes, f.image, f.config
             ));
         }
         if f.ram > b.ram_bytes {
             over.push(format!(
-                "{}: RAM {} bytes (static {} + stack {}) > budget {}",
-                f.board, f.ram, f.static_ram, f.stack, b.ram_bytes
+                "{}: RAM {} bytes (static {} + stack {}) > budget {} (with image {}, {})",
+                f.board, f.ram, f.static_ram, f.stack, b.ram_bytes, f.image, f.config
             ));
         }
     }
@@ -270,22 +327,39 @@ pub fn stack_peaks_file() -> PathBuf {
     target_dir().join("hil").join("stack-peaks.txt")
 }
 
-/// The bench rows `board_<name>_flash_bytes` and `board_<name>_ram_bytes` (name with `_` for `-`).
+/// The bench rows `board_<name>_flash_bytes` and `board_<name>_ram_bytes` (name with `_` for `-`): each
+/// board's largest figure over the configurations.
 pub fn rows(figures: &[Figure]) -> Vec<serde_json::Value> {
     let mut rows = Vec::new();
+    let mut boards: Vec<&str> = Vec::new();
     for f in figures {
-        let name = f.board.replace('-', "_");
+        if !boards.contains(&f.board) {
+            boards.push(f.board);
+        }
+    }
+    for board in boards {
+        let mine = || figures.iter().filter(move |f| f.board == board);
+        let (Some(fl), Some(ra)) = (mine().max_by_key(|f| f.flash), mine().max_by_key(|f| f.ram))
+        else {
+            continue;
+        };
+        let name = board.replace('-', "_");
+        let f = fl;
         rows.push(serde_json::json!({
             "name": format!("board_{name}_flash_bytes"),
             "value": f.flash,
-            "unit": format!("bytes (image {}; budget {})", f.image, BUDGETS.flash_bytes),
+            "unit": format!(
+                "bytes (image {}, {}; budget {})",
+                f.image, f.config, BUDGETS.flash_bytes
+            ),
         }));
+        let f = ra;
         rows.push(serde_json::json!({
             "name": format!("board_{name}_ram_bytes"),
             "value": f.ram,
             "unit": format!(
-                "bytes (static {} + stack bound {}; budget {})",
-                f.static_ram, f.stack, BUDGETS.ram_bytes
+                "bytes (static {} + stack bound {}, image {}, {}; budget {})",
+                f.static_ram, f.stack, f.image, f.config, BUDGETS.ram_bytes
             ),
         }));
     }
@@ -299,6 +373,7 @@ mod tests {
     fn figure(board: &'static str, flash: u64, static_ram: u64, stack: u64) -> Figure {
         Figure {
             board,
+            config: "feedforward".into(),
             image: "x.bin".into(),
             image_bytes: 1,
             flash,
@@ -324,6 +399,17 @@ mod tests {
         assert!(!e.contains("mps2-an386"), "{e}");
         let e = check(&[figure("a", 1, 1, 9000)]).unwrap_err();
         assert!(e.contains("stack: 9000 bytes > budget 8192"), "{e}");
+    }
+
+    #[test]
+    fn rows_give_each_board_its_largest_figure_over_the_configurations() {
+        let mut big = figure("a", 30, 5, 1);
+        big.config = "PWA".into();
+        let r = rows(&[figure("a", 10, 20, 30), big]);
+        assert_eq!(r.len(), 2);
+        assert_eq!(r[0]["value"], 30);
+        assert!(r[0]["unit"].as_str().unwrap().contains("PWA"), "{}", r[0]);
+        assert_eq!(r[1]["value"], 50);
     }
 
     #[test]

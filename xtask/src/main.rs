@@ -324,7 +324,7 @@ fn no_panic_step(board: &str) -> String {
 }
 
 const BUDGET_STEP: &str =
-    "board budgets: every board, longest shipped example image, flash and RAM + stack (xtask/src/boards.rs)";
+    "board budgets: every board, the longest shipped image of each configuration, flash and RAM + stack (xtask/src/boards.rs)";
 
 /// Step 8: every board against the budgets, with the HIL suite's largest stack mark.
 fn budget_check() -> Result<(), String> {
@@ -616,13 +616,14 @@ const PANIC_ALLOWLIST: &str = "firmware/panic-allowlist.txt";
 fn no_panic_check(board: &str) -> Result<(), String> {
     let mut c = boards::board_cargo(board);
     c.args(["build", "--release", "--features", "panic-never"]);
-    // Every path of the loop, the model maps' (program interpreter, libm) and the task monitor's
-    // included, whatever the image.
+    // Every path of the loop, the model maps' (program interpreter, libm), the task monitor's and PWA
+    // feedback's included, whatever the image.
     c.env_remove("CONTROLLER_IMAGE")
         .env_remove("CONTROLLER_REJECTED_M")
         .env_remove("FIRMWARE_FAULT_INJECTION")
         .env("CONTROLLER_MODEL_MAPS", "1")
-        .env("CONTROLLER_MONITOR", "1");
+        .env("CONTROLLER_MONITOR", "1")
+        .env("CONTROLLER_PWA", "1");
     let what = show(&c);
     println!("xtask: $ {what}");
     let out = c

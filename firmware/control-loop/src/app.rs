@@ -71,24 +71,24 @@ fn monitor_step<M: Meter>(_: &mut TaskMonitor<'_>, _: &[f32], _: &mut M) -> Opti
 }
 
 /// The image decoder (module doc), built for what the embedded image carries: model maps
-/// (`cfg(model_maps)`) and the task's monitor (`cfg(monitor)`); an image with either that this build
-/// lacks is refused, and the decoder of what it lacks is not linked.
+/// (`cfg(model_maps)`), the task's monitor (`cfg(monitor)`) and PWA feedback (`cfg(pwa)`); an image with
+/// any of them that this build lacks is refused, and the decoder of what it lacks is not linked.
 fn decode(bytes: &[u8]) -> Result<Image<'_>, ImageError> {
-    shared_types::image::decode_for::<{ cfg!(model_maps) }, { cfg!(monitor) }>(bytes)
+    shared_types::image::decode_for::<{ cfg!(model_maps) }, { cfg!(monitor) }, { cfg!(pwa) }>(bytes)
 }
 
 /// One control period of the plant (module doc): `step_plant` where the image may have model maps.
 #[cfg(model_maps)]
 #[inline(always)]
 fn step(c: &mut Controller<'_>, x: &[f32]) -> Result<Input, Status> {
-    c.step_plant(x)
+    c.step_plant_for::<{ cfg!(pwa) }>(x)
 }
 
 /// One control period of the plant: the embedded image has no model maps, so `step_plant` is `step`.
 #[cfg(not(model_maps))]
 #[inline(always)]
 fn step(c: &mut Controller<'_>, x: &[f32]) -> Result<Input, Status> {
-    c.step(x)
+    c.step_for::<{ cfg!(pwa) }>(x)
 }
 
 /// What to do after a frame.

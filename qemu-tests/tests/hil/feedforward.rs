@@ -61,6 +61,13 @@ fn on_target(spec: &str, tag: &str, salt: u64) {
     let s = synthesize(&task, &opts).expect("synthesis succeeds");
     assert_eq!(s.verify.violations, 0);
     let path = firmware::write_image(tag, &s.image).expect("image written");
+    // The same image with the task's monitor (what `synth --monitor` writes), for the boards' budgets
+    // (`cargo xtask budgets` builds the longest image of each configuration).
+    let monitor =
+        host_compiler::monitor::Program::for_problem(problem).expect("a monitorable task");
+    let with_monitor =
+        host_compiler::monitor::attach(&s.image, &monitor.encode()).expect("the monitor attaches");
+    firmware::write_image(&format!("{tag}_monitor"), &with_monitor).expect("image written");
     let elf = firmware::build(
         tag,
         &FirmwareConfig {

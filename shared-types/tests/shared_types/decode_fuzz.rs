@@ -85,6 +85,15 @@ fn exercise(bytes: &[u8], rng: &mut ChaCha8Rng, stats: &mut BTreeMap<&'static st
         Ok(img) => assert_eq!(without, Ok(img)),
         Err(e) => assert!(without.is_err(), "{e}"),
     }
+    // The decoder of a firmware without the PWA step agrees, except that it refuses PWA images.
+    let without_pwa = shared_types::image::decode_for::<true, true, false>(bytes);
+    match decode(bytes) {
+        Ok(img) if img.mode() == Mode::PwaFeedback => {
+            assert_eq!(without_pwa, Err(ImageError::PwaNotSupported))
+        }
+        Ok(img) => assert_eq!(without_pwa, Ok(img)),
+        Err(e) => assert!(without_pwa.is_err(), "{e}"),
+    }
     match decode(bytes) {
         Err(e) => {
             // Display must work for every error.
@@ -103,12 +112,18 @@ fn exercise(bytes: &[u8], rng: &mut ChaCha8Rng, stats: &mut BTreeMap<&'static st
                 "decoded image does not re-encode to the same bytes"
             );
             let mut ctl = Controller::new(img);
+            // A feedforward image steps the same with the PWA step left out (`step_for::<false>`).
+            let mut ff_only = (img.mode() == Mode::Feedforward).then(|| Controller::new(img));
             let n = img.n();
             for k in 0..8 {
                 let len = if k == 3 { n + 1 } else { n };
                 let x: Vec<f32> = (0..len).map(|_| rng.random_range(-3.0f32..3.0)).collect();
                 let located = ctl.locate(&x);
-                match ctl.step(&x) {
+                let answer = ctl.step(&x);
+                if let Some(c) = ff_only.as_mut() {
+                    assert_eq!(c.step_for::<false>(&x), answer);
+                }
+                match answer {
                     Ok(u) => {
                         assert_eq!(u.len(), img.m());
                         assert!(u.as_slice().iter().all(|v| v.is_finite()));
