@@ -62,6 +62,8 @@ pub fn run(a: &SynthArgs, problem: crate::spec::Problem) -> Outcome {
             Arc::new(|count: usize, delta: f64| eprintln!("certified run {count} (δ = {delta:.4})"))
                 as Arc<dyn Fn(usize, f64) + Send + Sync>
         }),
+        on_progress: (!quiet)
+            .then(|| Arc::new(|line: &str| eprintln!("{line}")) as Arc<dyn Fn(&str) + Send + Sync>),
         imports,
         generator,
         routes: a.guard_routes,

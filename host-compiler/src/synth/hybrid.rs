@@ -700,6 +700,9 @@ pub struct HybridOptions {
     pub cancel: std::sync::Arc<std::sync::atomic::AtomicBool>,
     /// Called with the count after each accepted run.
     pub on_accept: Option<std::sync::Arc<dyn Fn(usize, f64) + Send + Sync>>,
+    /// Called with a line after each round of the growth (its seeds, the runs it certified, the working
+    /// samples covered) and at each stage after it (image, re-proof, coverage, Monte Carlo).
+    pub on_progress: Option<std::sync::Arc<dyn Fn(&str) + Send + Sync>>,
     /// Recordings (name, recording) certified first ([`import::certify_recording`]); those accepted
     /// join the runs before the growth (default none).
     pub imports: Vec<(String, crate::trajectory::csv::Recording)>,
@@ -723,6 +726,7 @@ impl Default for HybridOptions {
             batch: 4,
             cancel: Default::default(),
             on_accept: None,
+            on_progress: None,
             imports: Vec::new(),
             generator: Generator::Scp,
             routes: false,
@@ -785,7 +789,34 @@ pub fn admit(
     if let Some(why) = no_room(task, runs, rows_used, run) {
         return Err(why);
     }
+    reproved(task, run)?;
     Ok(rows)
+}
+
+/// `Ok` when `run` re-proves from the bytes of an image holding it alone, as the final image's re-proof
+/// ([`crate::verify::hybrid::recheck`]) will judge it (its stored tables, starts, guards and thresholds,
+/// with the same K̂ and P̂); otherwise why not, so that a run the image would not certify is refused
+/// when it is planned rather than at the end.
+fn reproved(task: &HybridTask, run: &HybridRun) -> Result<(), String> {
+    let bytes = image(task, std::slice::from_ref(run)).map_err(|e| format!("image: {e}"))?;
+    let img = shared_types::image::decode(&bytes).map_err(|e| format!("image: {e}"))?;
+    let lps: Vec<Loop<'_>> = (0..task.designs.len()).map(|l| task.lp(l)).collect();
+    let lcs: Vec<Option<&LoopConstants>> = task.constants.iter().map(Some).collect();
+    let checks = crate::verify::hybrid::recheck_runs(
+        &task.plant,
+        task.formula.as_ref(),
+        task.steps,
+        &img,
+        &lps,
+        &lcs,
+    );
+    match checks.into_iter().find(|c| !c.ok) {
+        Some(c) => Err(format!(
+            "its image bytes do not re-prove it: {}",
+            c.why.unwrap_or_default()
+        )),
+        None => Ok(()),
+    }
 }
 
 /// Why `run` does not fit the image after `runs` (their kept rows `rows_used`): its rows beyond the
@@ -1036,6 +1067,14 @@ pub fn synthesize_hybrid(
     // Rounds in a row that certified nothing: after MAX_EMPTY_ROUNDS of them the growth stops and asks
     // for a new seed trajectory (planning a refused seed costs as much as an accepted one).
     let mut empty_rounds = 0usize;
+    let progress = |line: String| {
+        if let Some(f) = &opts.on_progress {
+            f(&format!("{line} ({:.0} s)", t0.elapsed().as_secs_f64()));
+        }
+    };
+    // The last round's seeds and the runs it certified, reported with the cover it left.
+    let mut round: Option<(usize, usize, usize)> = None;
+    let mut rounds = 0usize;
     loop {
         if opts.cancel.load(Ordering::Relaxed) {
             stop = "interrupted".to_string();
@@ -1045,6 +1084,14 @@ pub fn synthesize_hybrid(
             xs.iter().filter(|x| covered(task, &runs, x)).count() as f64 / xs.len() as f64
         };
         let frac = fraction(&working);
+        if let Some((k, tried_now, certified)) = round.take() {
+            progress(format!(
+                "round {k}: {tried_now} seed(s), {certified} certified; {} runs, {:.1} % of {} working samples covered",
+                runs.len(),
+                100.0 * frac,
+                working.len()
+            ));
+        }
         if frac >= target.min(1.0) {
             // The seeds were working samples, so the working set flatters the cover: confirm on fresh
             // samples, which join the working set when they fall short.
@@ -1112,6 +1159,8 @@ pub fn synthesize_hybrid(
         }
         seeds_tried += seeds.len();
         let before = runs.len();
+        rounds += 1;
+        let round_seeds = seeds.len();
         let planned: Vec<(Origin, Result<HybridRun, String>)> = seeds
             .par_iter()
             .map(|seed| {
@@ -1151,6 +1200,7 @@ pub fn synthesize_hybrid(
             stop = format!("the image is full: a certified run of this round does not fit ({why})");
             break;
         }
+        round = Some((rounds, round_seeds, runs.len() - before));
         empty_rounds = if runs.len() > before {
             0
         } else {
@@ -1164,7 +1214,16 @@ pub fn synthesize_hybrid(
             refused.first().map_or("none", |r| r.1.as_str())
         ));
     }
+    progress(format!(
+        "growth stopped after {rounds} rounds, {} runs: {stop}",
+        runs.len()
+    ));
     let image = image(task, &runs).map_err(|e| format!("image: {e}"))?;
+    progress(format!(
+        "image: {} bytes; re-proving {} runs from its bytes",
+        image.len(),
+        runs.len()
+    ));
     let recheck = crate::verify::hybrid::recheck(
         &task.plant,
         &task.property,
@@ -1182,6 +1241,7 @@ pub fn synthesize_hybrid(
         ctl.select(&x32).is_some()
     };
     let n_cov = s.coverage_samples();
+    progress(format!("coverage from {n_cov} samples of Init"));
     let coverage =
         crate::cover::estimate::estimate(&init, n_cov, s.confidence, &mut rng, |x| accepted(x));
     // Monte Carlo: covered samples of Init, and the boundary of every ball.
@@ -1204,6 +1264,7 @@ pub fn synthesize_hybrid(
         );
         starts.extend(b);
     }
+    progress(format!("Monte Carlo: {} closed-loop runs", starts.len()));
     let chunks: Vec<&[Vec<f64>]> = starts.chunks(64).collect();
     let reports: Vec<Result<crate::verify::hybrid::HybridReport, String>> = chunks
         .par_iter()

@@ -393,11 +393,8 @@ pub fn recheck(
     steps: usize,
     bytes: &[u8],
 ) -> Result<Vec<RunCheck>, String> {
-    use crate::certify::forced::{certify_forced, certify_forced_formula, ForcedSegment};
-    use crate::certify::internal::{certify_internal, InternalSegment};
-    use crate::certify::{selection_radius, Loop, LoopConstants};
+    use crate::certify::{Loop, LoopConstants};
     use faer::Mat;
-    use shared_types::image::Exit;
     let img = shared_types::image::decode(bytes).map_err(|e| format!("image: {e}"))?;
     let (n, m) = (img.n(), img.m());
     if img.n_locations() != plant.modes().len() {
@@ -426,6 +423,27 @@ pub fn recheck(
         .collect();
     let lcs: Vec<Option<LoopConstants>> =
         lps.iter().map(|lp| LoopConstants::new(lp).ok()).collect();
+    let lcs: Vec<Option<&LoopConstants>> = lcs.iter().map(Option::as_ref).collect();
+    Ok(recheck_runs(plant, formula, steps, &img, &lps, &lcs))
+}
+
+/// [`recheck`] of every run of the decoded image `img` with each location's loop `lps` (its K̂, P̂ and
+/// the task's sets) and constants `lcs` (`None`: the location certifies nothing) given: from the image's
+/// own K̂ and P̂ ([`recheck`]), or from the synthesis's designs when it checks a run before admitting it
+/// (`synth::hybrid::admit`, the same K̂ and P̂ the image stores).
+pub fn recheck_runs(
+    plant: &Hybrid,
+    formula: Option<&crate::property::TemporalTask>,
+    steps: usize,
+    img: &shared_types::image::Image<'_>,
+    lps: &[crate::certify::Loop<'_>],
+    lcs: &[Option<&crate::certify::LoopConstants>],
+) -> Vec<RunCheck> {
+    use crate::certify::forced::{certify_forced, certify_forced_formula, ForcedSegment};
+    use crate::certify::internal::{certify_internal, InternalSegment};
+    use crate::certify::selection_radius;
+    use shared_types::image::Exit;
+    let (n, m) = (img.n(), img.m());
     let f32s = |b: &[u8]| -> Vec<f64> {
         b.chunks_exact(4)
             .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]) as f64)
@@ -515,7 +533,7 @@ pub fn recheck(
                 .enumerate()
                 .map(|(i, (&l, nom))| ForcedSegment {
                     lp: lps[l],
-                    lc: lcs[l].as_ref().expect("checked"),
+                    lc: lcs[l].expect("checked"),
                     nominal: nom,
                     switch: edges.get(i).map(|&e| &plant.edges()[e]),
                     invariant: plant.modes()[l].invariant.as_ref(),
@@ -538,7 +556,7 @@ pub fn recheck(
                 .zip(&noms)
                 .map(|(&l, nom)| InternalSegment {
                     lp: lps[l],
-                    lc: lcs[l].as_ref().expect("checked"),
+                    lc: lcs[l].expect("checked"),
                     nominal: nom,
                 })
                 .collect();
@@ -568,10 +586,10 @@ pub fn recheck(
                 }
             }
         }
-        let P0 = &Ps[locs[0]];
+        let P0 = &lps[locs[0]].P;
         let x0: Vec<f64> = (0..n).map(|i| img.centre(t, i) as f64).collect();
-        let certified = selection_radius(P0.as_ref(), &x0, cert.delta());
-        let tol = super::feedforward::tolerance(P0.as_ref());
+        let certified = selection_radius(*P0, &x0, cert.delta());
+        let tol = super::feedforward::tolerance(*P0);
         if why.is_none()
             && !((stored as f64) <= certified as f64 * (1.0 + tol) && cert.delta() > 0.0)
         {
@@ -587,7 +605,7 @@ pub fn recheck(
             why,
         });
     }
-    Ok(out)
+    out
 }
 
 /// Monte Carlo starts for a hybrid image (and a temporal task's): `interior` uniform samples of Init that
