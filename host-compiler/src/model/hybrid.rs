@@ -130,6 +130,8 @@ pub struct Hybrid {
     /// Per location, the exact ZOH of each sub-step [`Hybrid::flow`] probes a period with when it starts
     /// at the sample (keyed by the length's bits, so a hit is the very matrix `zoh` would compute).
     probes: Vec<Vec<(u64, DiscretePlant)>>,
+    /// Per location, its internal edges in the spec's order (the ones [`Hybrid::flow`] watches).
+    internal: Vec<Vec<usize>>,
 }
 
 /// Why an automaton is malformed.
@@ -317,6 +319,13 @@ impl Hybrid {
                 Ok(v)
             })
             .collect::<Result<_, ModelError>>()?;
+        let internal = (0..modes.len())
+            .map(|l| {
+                (0..edges.len())
+                    .filter(|&e| edges[e].from == l && edges[e].kind == EdgeKind::Internal)
+                    .collect()
+            })
+            .collect();
         Ok(Self {
             modes,
             edges,
@@ -324,6 +333,7 @@ impl Hybrid {
             growth,
             sampled,
             probes,
+            internal,
         })
     }
 
@@ -381,16 +391,31 @@ impl Hybrid {
 
     /// The state after `s` seconds of location `loc`'s flow from `x` with `u` held (exact ZOH of length s).
     fn advance(&self, loc: Location, x: &[f64], u: &[f64], s: f64) -> Result<Vec<f64>, FlowError> {
+        let mut y = vec![0.0; x.len()];
+        self.advance_into(loc, x, u, s, &mut y)?;
+        Ok(y)
+    }
+
+    /// [`Hybrid::advance`] into `y` (n values).
+    fn advance_into(
+        &self,
+        loc: Location,
+        x: &[f64],
+        u: &[f64],
+        s: f64,
+        y: &mut [f64],
+    ) -> Result<(), FlowError> {
         if s <= 0.0 {
-            return Ok(x.to_vec());
+            y.copy_from_slice(x);
+            return Ok(());
         }
         let cached = self.probes[loc].iter().find(|(b, _)| *b == s.to_bits());
-        let y = match cached {
-            Some((_, d)) => d.step(x, u),
-            None => self.modes[loc].flow.zoh(s)?.step(x, u),
+        match cached {
+            Some((_, d)) => d.step_into(x, u, y),
+            None => self.modes[loc].flow.zoh(s)?.step_into(x, u, y),
         };
         if y.iter().all(|v| v.is_finite()) {
-            Ok(y)
+            Ok(())
         } else {
             Err(FlowError::NonFinite(loc))
         }
@@ -413,8 +438,7 @@ impl Hybrid {
             return Ok(Some((s0, x0.to_vec())));
         }
         let dt = s1 - s0;
-        let speed = self.modes[loc].flow.f(x0, u);
-        let speed = speed.iter().map(|v| v * v).sum::<f64>().sqrt();
+        let speed = self.modes[loc].flow.f_norm(x0, u);
         let lip = speed * (self.growth[loc] * dt).exp();
         if (p0 + p1 - lip * dt) / 2.0 > 0.0 {
             return Ok(None);
@@ -453,10 +477,10 @@ impl Hybrid {
         let (mut loc, mut x, mut t) = (loc, x.to_vec(), 0.0f64);
         let mut events = Vec::new();
         let mut budget = Self::MAX_PROBES_PER_PERIOD;
+        // The probe's ends, kept across probes (swapped, not reallocated).
+        let mut x1 = vec![0.0; x.len()];
         'segment: loop {
-            let internal: Vec<usize> = (0..self.edges.len())
-                .filter(|&e| self.edges[e].from == loc && self.edges[e].kind == EdgeKind::Internal)
-                .collect();
+            let internal = &self.internal[loc];
             let mut armed: Vec<bool> = internal
                 .iter()
                 .map(|&e| self.edges[e].guard.margin(&x) > 0.0)
@@ -464,7 +488,7 @@ impl Hybrid {
             let (mut s0, mut x0) = (t, x.clone());
             for i in 1..=Self::PROBES {
                 let s1 = Self::probe_end(h, t, i);
-                let x1 = self.advance(loc, &x0, u, s1 - s0)?;
+                self.advance_into(loc, &x0, u, s1 - s0, &mut x1)?;
                 // The earliest entry over the armed edges in [s0, s1] (ties: the first edge listed).
                 let mut hit: Option<(f64, Vec<f64>, usize)> = None;
                 for (j, &e) in internal.iter().enumerate() {
@@ -503,7 +527,8 @@ impl Hybrid {
                     }
                     continue 'segment;
                 }
-                (s0, x0) = (s1, x1);
+                s0 = s1;
+                std::mem::swap(&mut x0, &mut x1);
             }
             x = x0;
             break;

@@ -63,12 +63,23 @@ fn check_AB(A: MatRef<'_, f64>, B: MatRef<'_, f64>) -> Result<(), ModelError> {
 /// then adding them and c, the order every other evaluation of the plant uses.
 fn affine(A: MatRef<'_, f64>, B: MatRef<'_, f64>, c: &[f64], x: &[f64], u: &[f64]) -> Vec<f64> {
     (0..A.nrows())
-        .map(|i| {
-            let ax: f64 = (0..A.ncols()).map(|j| A[(i, j)] * x[j]).sum();
-            let bu: f64 = (0..B.ncols()).map(|j| B[(i, j)] * u[j]).sum();
-            ax + bu + c[i]
-        })
+        .map(|i| affine_row(A, B, c, x, u, i))
         .collect()
+}
+
+/// Row `i` of `A x + B u + c` (the one summation order [`affine`] and the in-place forms share).
+#[inline]
+fn affine_row(
+    A: MatRef<'_, f64>,
+    B: MatRef<'_, f64>,
+    c: &[f64],
+    x: &[f64],
+    u: &[f64],
+    i: usize,
+) -> f64 {
+    let ax: f64 = (0..A.ncols()).map(|j| A[(i, j)] * x[j]).sum();
+    let bu: f64 = (0..B.ncols()).map(|j| B[(i, j)] * u[j]).sum();
+    ax + bu + c[i]
 }
 
 impl ContinuousPlant {
@@ -92,6 +103,17 @@ impl ContinuousPlant {
     /// The vector field A x + B u + c.
     pub fn f(&self, x: &[f64], u: &[f64]) -> Vec<f64> {
         affine(self.A.as_ref(), self.B.as_ref(), &self.c, x, u)
+    }
+
+    /// ‖f(x, u)‖₂, the squares summed in index order, without forming f.
+    pub fn f_norm(&self, x: &[f64], u: &[f64]) -> f64 {
+        (0..self.A.nrows())
+            .map(|i| {
+                let v = affine_row(self.A.as_ref(), self.B.as_ref(), &self.c, x, u, i);
+                v * v
+            })
+            .sum::<f64>()
+            .sqrt()
     }
 
     /// One classical Runge–Kutta step of length `dt` with u held constant (a reference integrator for tests and
@@ -176,6 +198,13 @@ impl DiscretePlant {
     /// x⁺ = A x + B u + g.
     pub fn step(&self, x: &[f64], u: &[f64]) -> Vec<f64> {
         affine(self.A.as_ref(), self.B.as_ref(), &self.g, x, u)
+    }
+
+    /// [`DiscretePlant::step`] into `out` (n values), the same values.
+    pub fn step_into(&self, x: &[f64], u: &[f64], out: &mut [f64]) {
+        for (i, o) in out.iter_mut().enumerate().take(self.A.nrows()) {
+            *o = affine_row(self.A.as_ref(), self.B.as_ref(), &self.g, x, u, i);
+        }
     }
 }
 

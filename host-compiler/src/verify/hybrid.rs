@@ -123,6 +123,11 @@ pub fn run_hybrid(
     }
     let (mut x, mut loc) = (x0.to_vec(), initial);
     let mut why: Option<String> = None;
+    // Unsafe's distance at every sub-sample, compiled once for the run (the same values, bit for bit, as
+    // `Region::dist`, without a witness or an allocation per point; a set without a compiled form is
+    // asked directly).
+    let unsafe_region = property.unsafe_region();
+    let mut unsafe_fn = unsafe_region.and_then(|us| us.compile(&euclid));
     for k in 0..=steps {
         visit(&x);
         if !formula && property.goal.contains(&x) {
@@ -171,10 +176,16 @@ pub fn run_hybrid(
                 }
                 return Ok(());
             }
-            if let Some(us) = property.unsafe_region() {
-                let d = us.dist(s.x, &euclid).value;
+            if let Some(us) = unsafe_region {
+                let (inside, d) = match unsafe_fn.as_mut() {
+                    Some(f) => {
+                        let r = f.eval(s.x);
+                        (r.inside, if r.inside { 0.0 } else { r.value })
+                    }
+                    None => (us.contains(s.x), us.dist(s.x, &euclid).value),
+                };
                 out.min_unsafe_distance = out.min_unsafe_distance.min(d);
-                if us.contains(s.x) {
+                if inside {
                     return Err(format!("sample {k}: in Unsafe at x = {:?}", s.x));
                 }
             }
