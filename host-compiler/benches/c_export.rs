@@ -4,11 +4,17 @@
 //! several locations), compared bit for bit.
 //!
 //! Rows: `c_export_mismatches` (steps whose status or an input bit differed; 0 expected) and
-//! `c_export_states` (steps compared, all modes; the note gives each mode's count, ≥ 10⁵ each).
+//! `c_export_states` (steps compared, all modes; the note gives each mode's count, ≥ 10⁵ each);
+//! `monitor_c_mismatches` (the task's monitor, section 14: updates whose lo bits, hi bits or verdict
+//! differed between the exported `sc_monitor_update` and `shared_types::monitor::Monitor`; 0 expected)
+//! over ≥ 10⁴ seeded traces of the synthetic programs (`harness::MONITOR_FORMULAS`: every operator and
+//! atom kind) and of the monitors of `planar-vehicle-waypoints` and `double-integrator`, half of them
+//! with NaN, infinite, huge or wrongly sized states; the note gives the traces and updates compared.
 
 use host_compiler::benchkit::{write_rows, Row};
 use host_compiler::export::harness::{
-    exits_image, feedforward_image, pwa_image, scenario, CHarness,
+    double_integrator_run, exits_image, feedforward_image, monitor_image, monitor_scenario,
+    planar_waypoints_run, pwa_image, scenario, CHarness, MonitorPath, Op, MONITOR_FORMULAS,
 };
 use shared_types::image::{decode, Terminal};
 
@@ -50,6 +56,7 @@ fn main() {
         mismatches += c.mismatches;
         per_mode[i / 4] += c.states;
     }
+    let (traces, updates, monitor_mismatches) = monitors(&dir);
     let rows = [
         Row::new(
             "c_export_mismatches",
@@ -66,6 +73,71 @@ fn main() {
                 per_mode[0], per_mode[1], per_mode[2]
             ),
         ),
+        Row::new(
+            "monitor_c_mismatches",
+            monitor_mismatches as f64,
+            &format!(
+                "monitor updates of {updates} in {traces} traces (synthetic programs, planar-vehicle-waypoints, double-integrator)"
+            ),
+        ),
     ];
     write_rows("c_export", &rows).expect("rows written");
+}
+
+/// The exported monitor against the Rust one: (traces, updates, mismatching updates, counting a differing
+/// init as one).
+fn monitors(dir: &std::path::Path) -> (usize, usize, usize) {
+    let ff = feedforward_image(940, 3, 1, 1, 4, Terminal::HoldLast, 1);
+    let h = CHarness::build(
+        &monitor_image(&ff, MONITOR_FORMULAS[0].0, 12),
+        &dir.join("monitor"),
+    )
+    .expect("the exported C compiles");
+    // (image, traces, path): the synthetic programs, then the examples' runs and paths through their
+    // sets.
+    let mut cases: Vec<(Vec<u8>, usize, Option<MonitorPath<'_>>)> = MONITOR_FORMULAS
+        .iter()
+        .map(|&(text, horizon)| (monitor_image(&ff, text, horizon), 400, None))
+        .collect();
+    for (k, (name, path, runs)) in [
+        (
+            "planar-vehicle-waypoints.toml",
+            &planar_waypoints_run as MonitorPath<'_>,
+            300,
+        ),
+        ("double-integrator.toml", &double_integrator_run, 3000),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let spec = format!("{}/../examples/{name}", env!("CARGO_MANIFEST_DIR"));
+        let problem = host_compiler::spec::load(&spec).expect("the example loads");
+        let prog = host_compiler::monitor::Program::for_problem(&problem).expect("compiles");
+        let base = feedforward_image(
+            941 + k as u64,
+            problem.plant.n(),
+            problem.plant.m(),
+            1,
+            4,
+            Terminal::Fallback,
+            1,
+        );
+        let image = host_compiler::monitor::attach(&base, &prog.encode()).expect("attaches");
+        cases.push((image.clone(), runs, Some(path)));
+        cases.push((image, runs / 4, None));
+    }
+    let (mut traces, mut updates, mut mismatches) = (0usize, 0usize, 0usize);
+    for (i, (image, n, path)) in cases.iter().enumerate() {
+        let img = decode(image).expect("valid image");
+        let mut ops = monitor_scenario(&img, 5000 + i as u64, *n, *path);
+        ops[0] = Op::InitBytes(image.clone());
+        let c = h.compare(&ops).expect("the C driver runs");
+        if let Some(first) = &c.first {
+            eprintln!("monitor case {i}: {first}");
+        }
+        traces += c.monitor_traces;
+        updates += c.monitor_updates;
+        mismatches += c.monitor_mismatches + c.monitor_init_mismatches + c.init_mismatches;
+    }
+    (traces, updates, mismatches)
 }

@@ -3,8 +3,9 @@
 //! Writes four files into the output directory:
 //! * `controller.h`, `controller.c`: the evaluator (templates `export/c/controller.{h,c}`, with the
 //!   capacities of `shared_types::capacity` and the format version filled in, so they cannot drift);
-//! * `controller_image.h`, `controller_image.c`: `sc_image_bytes` (the image bytes, unchanged) and
-//!   `sc_image_len`.
+//! * `controller_image.h`, `controller_image.c`: `sc_image_bytes` (the image bytes, unchanged),
+//!   `sc_image_len`, and `SC_IMAGE_MONITOR_WORDS`, the arena the image's monitor needs (section 14,
+//!   `MonitorProgram::words`; 0 without one), so that a C firmware sizes it statically.
 //!
 //! The image is decoded before anything is written, so a rejected image writes nothing; an image with a
 //! section the C evaluator does not implement ([`C_SECTION_KINDS`]) is refused too, since the C would
@@ -12,19 +13,21 @@
 
 use std::path::{Path, PathBuf};
 
-use shared_types::capacity;
 use shared_types::image::{decode, directory, ImageError, Mode, FORMAT_VERSION};
+use shared_types::{capacity, monitor};
 
 /// The evaluator's header template.
 pub const CONTROLLER_H: &str = include_str!("c/controller.h");
 /// The evaluator's source template.
 pub const CONTROLLER_C: &str = include_str!("c/controller.c");
 
-/// The section kinds `controller.c` decodes and evaluates (tags 1–10: locations, fallback, trajectories,
-/// segments, steps, PWA laws, tree and balls, segment exits, model maps; 12: the spec fingerprint, whose
-/// length it checks and which it does not evaluate). A section kind added to the format must be added to
-/// the C (decoder and evaluator, and the harness's images) before it is added here.
-pub const C_SECTION_KINDS: [u16; 13] = [1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13];
+/// The section kinds `controller.c` decodes and evaluates (tags 1–11: locations, fallback, trajectories,
+/// segments, steps, PWA laws, tree and balls, segment exits, model maps, terminal law; 12: the spec
+/// fingerprint, whose length it checks and which it does not evaluate; 13: the selection test; 14: the
+/// task's monitor, validated by `sc_init` and evaluated by `sc_monitor_update`). A section kind added to
+/// the format must be added to the C (decoder and evaluator, and the harness's images) before it is added
+/// here.
+pub const C_SECTION_KINDS: [u16; 14] = [1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14];
 
 /// Why an export failed.
 #[derive(Debug, thiserror::Error)]
@@ -34,7 +37,7 @@ pub enum ExportError {
     Rejected(ImageError),
     /// The image has a section the C evaluator does not implement.
     #[error(
-        "the image has a section of kind {kind}, which the C evaluator does not implement (it knows kinds 1 to 13)"
+        "the image has a section of kind {kind}, which the C evaluator does not implement (it knows kinds 1 to 14)"
     )]
     UnsupportedSection {
         /// The section's kind tag.
@@ -61,7 +64,7 @@ pub struct CFile {
 
 /// The template with every `@NAME@` placeholder replaced.
 fn fill(template: &str) -> String {
-    let values: [(&str, usize); 25] = [
+    let values: [(&str, usize); 30] = [
         ("FORMAT_VERSION", FORMAT_VERSION as usize),
         ("MAX_N", capacity::MAX_N),
         ("MAX_M", capacity::MAX_M),
@@ -93,6 +96,11 @@ fn fill(template: &str) -> String {
             "MAX_PROGRAM_POWI",
             capacity::MAX_PROGRAM_POWI.unsigned_abs() as usize,
         ),
+        ("MAX_MONITOR_ATOMS", monitor::MAX_MONITOR_ATOMS),
+        ("MAX_MONITOR_NODES", monitor::MAX_MONITOR_NODES),
+        ("MAX_MONITOR_SAMPLES", monitor::MAX_MONITOR_SAMPLES),
+        ("MAX_MONITOR_ROWS", monitor::MAX_MONITOR_ROWS),
+        ("MAX_MONITOR_WORDS", monitor::MAX_MONITOR_WORDS),
     ];
     let mut out = template.to_string();
     for (name, v) in values {
@@ -129,8 +137,18 @@ pub fn files(image: &[u8]) -> Result<Vec<CFile>, ExportError> {
         ),
         None => String::new(),
     };
+    let monitor_words = img.monitor().map_or(0, |p| p.words());
+    let monitor_note = match img.monitor() {
+        Some(p) => format!(
+            ", a monitor ({} atom(s), {} node(s), N = {}, arena {monitor_words} words)",
+            p.atoms(),
+            p.nodes(),
+            p.horizon()
+        ),
+        None => String::new(),
+    };
     let summary = format!(
-        "{} bytes, {mode}, n = {}, m = {}{maps}, {} location(s), CRC-32 {:#010x}",
+        "{} bytes, {mode}, n = {}, m = {}{maps}{monitor_note}, {} location(s), CRC-32 {:#010x}",
         image.len(),
         img.n(),
         img.m(),
@@ -143,7 +161,9 @@ pub fn files(image: &[u8]) -> Result<Vec<CFile>, ExportError> {
          #ifndef SC_CONTROLLER_IMAGE_H\n#define SC_CONTROLLER_IMAGE_H\n\n#include <stdint.h>\n\n\
          /* The image bytes, exactly as the Rust toolchain wrote them; pass them to sc_init. */\n\
          extern const uint8_t sc_image_bytes[{len}];\n\
-         extern const uint32_t sc_image_len;\n\n#endif /* SC_CONTROLLER_IMAGE_H */\n",
+         extern const uint32_t sc_image_len;\n\n\
+         /* The arena the image's monitor needs, in 32-bit words (sc_monitor_words; 0: no monitor). */\n\
+         #define SC_IMAGE_MONITOR_WORDS {monitor_words}u\n\n#endif /* SC_CONTROLLER_IMAGE_H */\n",
         len = image.len()
     );
     let mut image_c = format!(

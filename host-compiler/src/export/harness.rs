@@ -15,6 +15,12 @@
 //! A step's answer is its status and all `MAX_M` input values: on `Ok` the input, otherwise the image's
 //! fallback at that state given the last applied input (what the firmware applies). An init's answer is
 //! whether the image was accepted (the C error codes are coarser than `ImageError`).
+//!
+//! The task's monitor (section 14) is driven by its own ops ([`Op::MonitorInit`], [`Op::MonitorReset`],
+//! [`Op::MonitorUpdate`]) against `shared_types::monitor::Monitor`: the init's outcome and the arena's
+//! words, and every update's bounds (bits) and verdict; [`monitor_scenario`] makes seeded traces for an
+//! image with a monitor (paths through its atoms' sets and across their boundaries, or a caller's paths,
+//! with NaN, infinite, huge and wrongly sized states mixed in).
 #![allow(non_snake_case)]
 
 use std::collections::BTreeSet;
@@ -28,6 +34,10 @@ use rand_distr::{Distribution, StandardNormal};
 use shared_types::capacity::MAX_M;
 use shared_types::eval::{Controller, Input, Status};
 use shared_types::image::{decode, Exit, Image, Mode, Terminal};
+use shared_types::monitor::{Monitor, MonitorProgram, ATOM_BALL, ATOM_BOX, ATOM_POLYTOPE};
+
+use crate::monitor::AtomSet;
+use crate::spec::{Coords, Matrix, SetDesc, Shape};
 
 use crate::emit::{
     CertifiedBall, Child, FallbackLaw, ImageBuilder, PwaImageBuilder, PwaLaw, PwaLeaf, SegmentExit,
@@ -51,6 +61,13 @@ pub enum Op {
     Reset,
     /// One period with this state (any length, any values).
     Step(Vec<f32>),
+    /// The monitor of the current image (section 14) over an arena of `MonitorProgram::words` plus this
+    /// many words (negative: too small); it lives until the next init of either kind.
+    MonitorInit(i32),
+    /// The monitor back to its first sample.
+    MonitorReset,
+    /// One monitor update with this state (at most 16 values, any values).
+    MonitorUpdate(Vec<f32>),
 }
 
 /// One answer.
@@ -61,6 +78,12 @@ pub enum Answer {
     /// Status (wire value), the bits of the `MAX_M` input values, and the location of the row used
     /// (`Controller::location`, forced switching's discrete input).
     Step(u8, [u32; MAX_M], u8),
+    /// The monitor's init: 0 accepted, 1 no monitor, 2 arena too small (3: another refusal, which Rust
+    /// never gives), and the arena words the image's program needs (0 without one).
+    MonitorInit(u8, u32),
+    /// An update's report: the bits of lo and hi and the verdict's wire code (0xFF and zero bits without
+    /// a monitor).
+    Monitor(u32, u32, u8),
 }
 
 /// What a comparison found.
@@ -83,6 +106,20 @@ pub struct Comparison {
     pub inexact: usize,
     /// The largest difference in ulps between the two sides' inputs on steps whose status agreed.
     pub ulp_max: u32,
+    /// Monitor inits compared, and those whose outcome or arena words differed.
+    pub monitor_inits: usize,
+    pub monitor_init_mismatches: usize,
+    /// Monitor traces compared (the updates after an accepted init or a reset, if any), and those with
+    /// an update that differed.
+    pub monitor_traces: usize,
+    pub monitor_trace_mismatches: usize,
+    /// Monitor updates compared (with a monitor), and those whose lo bits, hi bits or verdict differed.
+    pub monitor_updates: usize,
+    pub monitor_mismatches: usize,
+    /// Updates per verdict (pending, satisfied, violated, boundary), Rust side.
+    pub monitor_verdicts: [usize; 4],
+    /// Traces per verdict of their last update, Rust side.
+    pub monitor_decided: [usize; 4],
 }
 
 /// Distance in ulps between two f32 bit patterns, counted along the ordered line of floats: 0 for equal
@@ -188,17 +225,29 @@ impl CHarness {
                 }
                 Op::InitEmbedded => input.push(b'E'),
                 Op::Reset => input.push(b'R'),
-                Op::Step(x) => {
+                Op::Step(x) | Op::MonitorUpdate(x) => {
                     let k = u8::try_from(x.len())
                         .ok()
                         .filter(|&k| k <= 16)
                         .ok_or_else(|| HarnessError::Driver("state longer than 16".into()))?;
-                    input.push(b'S');
+                    input.push(if matches!(op, Op::Step(_)) {
+                        b'S'
+                    } else {
+                        b'U'
+                    });
                     input.push(k);
                     for v in x {
                         input.extend_from_slice(&v.to_le_bytes());
                     }
                 }
+                Op::MonitorInit(slack) => {
+                    if *slack > 64 {
+                        return Err(HarnessError::Driver("arena slack over 64 words".into()));
+                    }
+                    input.push(b'M');
+                    input.extend_from_slice(&slack.to_le_bytes());
+                }
+                Op::MonitorReset => input.push(b'Z'),
             }
         }
         let mut child = Command::new(&self.exe)
@@ -230,26 +279,36 @@ impl CHarness {
         let mut answers = Vec::new();
         let mut bytes = out.stdout.as_slice();
         for op in ops {
+            let mut take = |k: usize| -> Result<&[u8], HarnessError> {
+                let (head, rest) = bytes
+                    .split_at_checked(k)
+                    .ok_or_else(|| HarnessError::Driver("short answer".into()))?;
+                bytes = rest;
+                Ok(head)
+            };
+            let word = |b: &[u8]| u32::from_le_bytes([b[0], b[1], b[2], b[3]]);
             match op {
-                Op::Reset => {}
+                Op::Reset | Op::MonitorReset => {}
+                Op::MonitorInit(_) => {
+                    let a = take(5)?;
+                    answers.push(Answer::MonitorInit(a[0], word(&a[1..])));
+                }
+                Op::MonitorUpdate(_) => {
+                    let a = take(9)?;
+                    answers.push(Answer::Monitor(word(a), word(&a[4..]), a[8]));
+                }
                 Op::InitBytes(_) | Op::InitEmbedded => {
-                    let (&e, rest) = bytes
-                        .split_first()
-                        .ok_or_else(|| HarnessError::Driver("short answer".into()))?;
-                    answers.push(Answer::Init(e == 0));
-                    bytes = rest;
+                    let a = take(1)?;
+                    answers.push(Answer::Init(a[0] == 0));
                 }
                 Op::Step(_) => {
                     let rec = 1 + 4 * MAX_M + 1;
-                    let (head, rest) = bytes
-                        .split_at_checked(rec)
-                        .ok_or_else(|| HarnessError::Driver("short answer".into()))?;
+                    let head = take(rec)?;
                     let mut u = [0u32; MAX_M];
                     for (j, c) in head[1..rec - 1].chunks_exact(4).enumerate() {
-                        u[j] = u32::from_le_bytes([c[0], c[1], c[2], c[3]]);
+                        u[j] = word(c);
                     }
                     answers.push(Answer::Step(head[0], u, head[rec - 1]));
-                    bytes = rest;
                 }
             }
         }
@@ -283,9 +342,67 @@ impl CHarness {
             )));
         }
         let mut step = 0usize;
+        let starts = trace_starts(ops);
+        // The monitor trace being compared: whether an update differed, and the last verdict (Rust).
+        let mut trace: Option<(bool, u8)> = None;
+        let finish = |out: &mut Comparison, t: Option<(bool, u8)>| {
+            if let Some((differed, verdict)) = t {
+                out.monitor_traces += 1;
+                out.monitor_trace_mismatches += usize::from(differed);
+                if let Some(k) = out.monitor_decided.get_mut(verdict as usize) {
+                    *k += 1;
+                }
+            }
+        };
         for (i, (a, b)) in c.iter().zip(&r).enumerate() {
             match (a, b) {
+                (Answer::MonitorInit(ca, wa), Answer::MonitorInit(cb, wb)) => {
+                    finish(&mut out, trace.take());
+                    out.monitor_inits += 1;
+                    if ca != cb || wa != wb {
+                        out.monitor_init_mismatches += 1;
+                        out.first.get_or_insert_with(|| {
+                            format!(
+                                "answer {i}: monitor init: C {ca} ({wa} words), Rust {cb} ({wb} words)"
+                            )
+                        });
+                    }
+                }
+                (Answer::Monitor(la, ha, va), Answer::Monitor(lb, hb, vb)) => {
+                    let differs = la != lb || ha != hb || va != vb;
+                    if *vb == u8::MAX && !differs {
+                        // No monitor on either side.
+                        continue;
+                    }
+                    if starts.contains(&i) {
+                        finish(&mut out, trace.take());
+                        trace = Some((false, *vb));
+                    }
+                    out.monitor_updates += 1;
+                    if let Some(k) = out.monitor_verdicts.get_mut(*vb as usize) {
+                        *k += 1;
+                    }
+                    if differs {
+                        out.monitor_mismatches += 1;
+                        out.first.get_or_insert_with(|| {
+                            format!(
+                                "answer {i}: monitor update {}: C lo {:?} ({la:#010x}) hi {:?} ({ha:#010x}) verdict {va}, \
+                                 Rust lo {:?} ({lb:#010x}) hi {:?} ({hb:#010x}) verdict {vb}",
+                                out.monitor_updates - 1,
+                                f32::from_bits(*la),
+                                f32::from_bits(*ha),
+                                f32::from_bits(*lb),
+                                f32::from_bits(*hb),
+                            )
+                        });
+                    }
+                    if let Some(t) = trace.as_mut() {
+                        t.0 |= differs;
+                        t.1 = *vb;
+                    }
+                }
                 (Answer::Init(x), Answer::Init(y)) => {
+                    finish(&mut out, trace.take());
                     out.inits += 1;
                     if x != y {
                         out.init_mismatches += 1;
@@ -326,51 +443,134 @@ impl CHarness {
                 _ => return Err(HarnessError::Driver(format!("answer {i}: kinds differ"))),
             }
         }
+        finish(&mut out, trace.take());
         Ok(out)
     }
 }
 
-/// The Rust evaluator's answers to `ops` (`InitEmbedded` uses `image`).
-pub fn reference(image: &[u8], ops: &[Op]) -> Vec<Answer> {
-    let mut ctl: Option<Controller<'_>> = None;
-    let mut applied = Input::zero(0);
-    let mut answers = Vec::new();
+/// The indices of the answers to `ops` that begin a monitor trace: the first update after a monitor init
+/// or reset.
+fn trace_starts(ops: &[Op]) -> BTreeSet<usize> {
+    let mut starts = BTreeSet::new();
+    let (mut answer, mut pending) = (0usize, false);
     for op in ops {
+        match op {
+            Op::Reset => continue,
+            Op::MonitorReset => {
+                pending = true;
+                continue;
+            }
+            Op::MonitorInit(_) => pending = true,
+            Op::InitBytes(_) | Op::InitEmbedded => pending = false,
+            Op::MonitorUpdate(_) => {
+                if pending {
+                    starts.insert(answer);
+                }
+                pending = false;
+            }
+            Op::Step(_) => {}
+        }
+        answer += 1;
+    }
+    starts
+}
+
+/// The Rust side of [`reference`]: the controller, the last applied input and the answers so far.
+struct Reference<'a> {
+    ctl: Option<Controller<'a>>,
+    applied: Input,
+    answers: Vec<Answer>,
+}
+
+impl<'a> Reference<'a> {
+    /// One op other than [`Op::MonitorInit`], with the monitor initialised since the last init, if any.
+    fn apply(&mut self, image: &'a [u8], op: &'a Op, mon: Option<&mut Monitor<'_>>) {
         match op {
             Op::InitBytes(_) | Op::InitEmbedded => {
                 let bytes: &[u8] = match op {
                     Op::InitBytes(b) => b,
                     _ => image,
                 };
-                ctl = decode(bytes).ok().map(Controller::new);
-                applied = Input::zero(ctl.as_ref().map_or(0, |c| c.image().plant_m()));
-                answers.push(Answer::Init(ctl.is_some()));
+                self.ctl = decode(bytes).ok().map(Controller::new);
+                self.applied = Input::zero(self.ctl.as_ref().map_or(0, |c| c.image().plant_m()));
+                self.answers.push(Answer::Init(self.ctl.is_some()));
             }
             Op::Reset => {
-                if let Some(c) = ctl.as_mut() {
+                if let Some(c) = self.ctl.as_mut() {
                     c.reset();
-                    applied = Input::zero(c.image().plant_m());
+                    self.applied = Input::zero(c.image().plant_m());
                 }
             }
             Op::Step(x) => {
-                let (status, u) = match ctl.as_mut() {
+                let (status, u) = match self.ctl.as_mut() {
                     None => (Status::ImageRejected, Input::zero(0)),
                     Some(c) => match c.step_plant(x) {
                         Ok(u) => (Status::Ok, u),
-                        Err(s) => (s, c.fallback(x, &applied)),
+                        Err(s) => (s, c.fallback(x, &self.applied)),
                     },
                 };
-                applied = u;
-                let location = ctl.as_ref().map_or(0, |c| c.location() as u8);
-                answers.push(Answer::Step(
+                self.applied = u;
+                let location = self.ctl.as_ref().map_or(0, |c| c.location() as u8);
+                self.answers.push(Answer::Step(
                     status as u8,
                     u.values().map(f32::to_bits),
                     location,
                 ));
             }
+            Op::MonitorReset => {
+                if let Some(m) = mon {
+                    m.reset();
+                }
+            }
+            Op::MonitorUpdate(x) => self.answers.push(match mon {
+                Some(m) => {
+                    let r = m.update(x);
+                    Answer::Monitor(r.lo.to_bits(), r.hi.to_bits(), r.verdict as u8)
+                }
+                None => Answer::Monitor(0, 0, u8::MAX),
+            }),
+            Op::MonitorInit(_) => {}
         }
     }
-    answers
+}
+
+/// The Rust evaluator's answers to `ops` (`InitEmbedded` uses `image`); the monitor's are
+/// `shared_types::monitor::Monitor`'s, over an arena of exactly the words asked for.
+pub fn reference(image: &[u8], ops: &[Op]) -> Vec<Answer> {
+    let mut r = Reference {
+        ctl: None,
+        applied: Input::zero(0),
+        answers: Vec::new(),
+    };
+    let mut i = 0usize;
+    while let Some(op) = ops.get(i) {
+        i += 1;
+        let Op::MonitorInit(slack) = op else {
+            r.apply(image, op, None);
+            continue;
+        };
+        let prog: Option<MonitorProgram<'_>> = r.ctl.as_ref().and_then(|c| c.image().monitor());
+        let words = prog.map_or(0, |p| p.words());
+        let len = (words as i64 + i64::from(*slack)).max(0) as usize;
+        let mut arena = vec![0u32; len];
+        let mut mon = match prog {
+            None => Err(1u8),
+            Some(p) => Monitor::new(p, &mut arena).map_err(|_| 2u8),
+        };
+        r.answers.push(Answer::MonitorInit(
+            mon.as_ref().err().copied().unwrap_or(0),
+            words as u32,
+        ));
+        // The monitor lives until the next init of either kind.
+        while let Some(op) = ops.get(i) {
+            if matches!(op, Op::InitBytes(_) | Op::InitEmbedded | Op::MonitorInit(_)) {
+                break;
+            }
+            r.apply(image, op, mon.as_mut().ok());
+            i += 1;
+        }
+    }
+    r.answers
 }
 
 // ---------------------------------------------------------------------------------------------------------
@@ -1284,4 +1484,417 @@ pub fn with_terminal_law(image: &[u8], seed: u64) -> Vec<u8> {
         b.terminal_law = Some(law);
         b.to_bytes().expect("a valid PWA image with a terminal law")
     }
+}
+
+// ---------------------------------------------------------------------------------------------------------
+// Monitor traces.
+
+/// One atom of a monitor program as its section stores it: kind, the state coordinates it reads, rows (a
+/// polytope's; 0 otherwise) and its values.
+#[derive(Clone, Debug)]
+struct AtomRecord {
+    kind: u32,
+    idx: Vec<usize>,
+    rows: usize,
+    vals: Vec<f32>,
+}
+
+/// The atoms of a validated program, read from its section body (`shared_types::monitor`'s layout).
+fn atom_records(prog: &MonitorProgram<'_>) -> Vec<AtomRecord> {
+    let b = prog.body();
+    let w = |i: usize| {
+        b.get(4 * i..4 * i + 4)
+            .map_or(0, |c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+    };
+    let mut at = 5;
+    (0..prog.atoms())
+        .map(|_| {
+            let (kind, d) = (w(at), w(at + 1) as usize);
+            let idx = (0..d).map(|j| w(at + 2 + j) as usize).collect();
+            let poly = kind == ATOM_POLYTOPE;
+            let rows = if poly { w(at + 2 + d) as usize } else { 0 };
+            let len = match kind {
+                ATOM_BOX => 2 + 3 * d,
+                ATOM_POLYTOPE => 3 + d + rows * d + rows,
+                _ => 2 + 2 * d + 1,
+            };
+            let from = at + 2 + d + usize::from(poly);
+            let vals = (from..at + len).map(|j| f32::from_bits(w(j))).collect();
+            at += len;
+            AtomRecord {
+                kind,
+                idx,
+                rows,
+                vals,
+            }
+        })
+        .collect()
+}
+
+/// A point of an atom's coordinates: with `exact`, on its set's boundary as the f32 arithmetic sees it
+/// where the kind allows (a box's face, exactly; a half-space's or a polytope row's plane and a ball's
+/// sphere, to rounding); otherwise inside or outside, at a random depth.
+fn atom_point(rng: &mut ChaCha8Rng, a: &AtomRecord, exact: bool) -> Vec<f64> {
+    let d = a.idx.len();
+    let v = |j: usize| a.vals.get(j).copied().unwrap_or(0.0) as f64;
+    match a.kind {
+        ATOM_BOX => {
+            let mut y: Vec<f64> = (0..d)
+                .map(|j| {
+                    let (lo, hi) = (v(j), v(d + j));
+                    let u: f64 = rng.random_range(-0.3..1.3);
+                    lo + (hi - lo) * u
+                })
+                .collect();
+            if exact {
+                let j = rng.random_range(0..d);
+                y[j] = if rng.random::<bool>() { v(j) } else { v(d + j) };
+            }
+            y
+        }
+        ATOM_BALL => {
+            let e: Vec<f64> = (0..d).map(|_| normal(rng)).collect();
+            let q = e.iter().map(|x| x * x).sum::<f64>().sqrt().max(1e-300);
+            let rho = if exact {
+                1.0
+            } else {
+                rng.random_range(0.0..1.6)
+            };
+            (0..d).map(|j| v(j) + v(d) * rho * e[j] / q).collect()
+        }
+        _ => {
+            // A half-space's plane, or a polytope row's (‖a‖ = 1 as the host stores them).
+            let (a0, b) = if a.kind == ATOM_POLYTOPE {
+                let r = rng.random_range(0..a.rows.max(1));
+                (r * d, v(a.rows * d + r))
+            } else {
+                (0, v(d))
+            };
+            let off = if exact { 0.0 } else { 0.4 * normal(rng) };
+            (0..d).map(|j| (b + off) * v(a0 + j)).collect()
+        }
+    }
+}
+
+/// A base path of `len` states for the monitor `prog` over a plant of `n` states: from a random start,
+/// piecewise linear through 2 to 5 waypoints at random samples, each placing the coordinates of a random
+/// atom at a point of its set ([`atom_point`]: inside, outside, or, three times in ten, on its boundary),
+/// the other coordinates kept; with no noise (half the paths, so the waypoints are met exactly) or a
+/// little.
+pub fn anchor_path(
+    prog: &MonitorProgram<'_>,
+    n: usize,
+    rng: &mut ChaCha8Rng,
+    len: usize,
+) -> Vec<Vec<f32>> {
+    let atoms = atom_records(prog);
+    let start: Vec<f64> = (0..n).map(|_| normal(rng)).collect();
+    let mut way: Vec<(usize, Vec<f64>)> = vec![(0, start)];
+    let mut times: Vec<usize> = (0..rng.random_range(2..=5))
+        .map(|_| rng.random_range(0..len.max(1)))
+        .collect();
+    times.sort_unstable();
+    for t in times {
+        let mut p = way.last().map(|w| w.1.clone()).unwrap_or_default();
+        if let Some(a) = atoms.get(rng.random_range(0..atoms.len().max(1))) {
+            let exact = rng.random_bool(0.3);
+            let y = atom_point(rng, a, exact);
+            for (&c, v) in a.idx.iter().zip(y) {
+                if let Some(slot) = p.get_mut(c) {
+                    *slot = v;
+                }
+            }
+        }
+        way.push((t, p));
+    }
+    let noise = [0.0, 0.0, 0.003, 0.05][rng.random_range(0..4)];
+    (0..len)
+        .map(|t| {
+            let i = way.iter().rposition(|w| w.0 <= t).unwrap_or(0);
+            let (t0, p0) = &way[i];
+            let x: Vec<f64> = match way.get(i + 1) {
+                Some((t1, p1)) => {
+                    let s = (t - t0) as f64 / (t1 - t0) as f64;
+                    p0.iter().zip(p1).map(|(a, b)| a + s * (b - a)).collect()
+                }
+                None => p0.clone(),
+            };
+            x.iter().map(|v| (v + noise * normal(rng)) as f32).collect()
+        })
+        .collect()
+}
+
+/// With probability `rate`, an unusual state instead of `x`: NaN, +∞ or −∞ in one component, a mix of
+/// them in several or in every one, every component NaN, a huge component (±3·10³⁸, whose squares overflow), or the
+/// wrong number of values (shorter: the missing coordinates read as 0; longer; none).
+pub fn perturb_monitor_state(rng: &mut ChaCha8Rng, x: Vec<f32>, rate: f64) -> Vec<f32> {
+    if x.is_empty() || !rng.random_bool(rate) {
+        return x;
+    }
+    let n = x.len();
+    let mut y = x;
+    let special = [f32::NAN, f32::INFINITY, f32::NEG_INFINITY];
+    match rng.random_range(0..9) {
+        0..=2 => {
+            let k = rng.random_range(0..3);
+            y[rng.random_range(0..n)] = special[k];
+        }
+        3 => {
+            for _ in 0..rng.random_range(2..=3) {
+                y[rng.random_range(0..n)] = special[rng.random_range(0..3)];
+            }
+        }
+        4 => {
+            // Every component NaN, or each NaN, ±∞ or kept (so that NaNs of both signs meet: an atom's
+            // inf − inf or 0·inf is a NaN of the other sign than the input's).
+            let all = rng.random::<bool>();
+            for v in y.iter_mut() {
+                *v = if all {
+                    f32::NAN
+                } else {
+                    [f32::NAN, f32::INFINITY, f32::NEG_INFINITY, *v][rng.random_range(0..4)]
+                };
+            }
+        }
+        5 => {
+            let s = if rng.random::<bool>() {
+                3.0e38
+            } else {
+                -3.0e38
+            };
+            y[rng.random_range(0..n)] = s;
+        }
+        6 => y.truncate(rng.random_range(0..n)),
+        7 => {
+            while y.len() < 16 && rng.random_bool(0.7) {
+                y.push(normal(rng) as f32);
+            }
+        }
+        _ => y.clear(),
+    }
+    y
+}
+
+/// A base path generator for [`monitor_scenario`]: the trace's `len` states from its random source.
+pub type MonitorPath<'p> = &'p dyn Fn(&mut ChaCha8Rng, usize) -> Vec<Vec<f32>>;
+
+/// A seeded scenario for the task's monitor of `image` (which must carry one, section 14):
+/// [`Op::InitEmbedded`], an [`Op::MonitorInit`] with one word too few (refused) and one with exactly the
+/// program's words, then `traces` traces, each after an [`Op::MonitorReset`] (one time in twenty a new
+/// init with 0 to 3 spare words) but the first. A trace has N + 1 to N + 4 updates (past N the report
+/// stays; one in ten is cut short at random), its states from `path` or, without one, [`anchor_path`];
+/// half the traces clean, the others with 1 %, 5 % or 30 % of their states perturbed
+/// ([`perturb_monitor_state`]).
+pub fn monitor_scenario(
+    image: &Image<'_>,
+    seed: u64,
+    traces: usize,
+    path: Option<MonitorPath<'_>>,
+) -> Vec<Op> {
+    let prog = image.monitor().expect("an image with a monitor");
+    let n = image.plant_n();
+    let horizon = prog.horizon();
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let mut ops = vec![Op::InitEmbedded, Op::MonitorInit(-1), Op::MonitorInit(0)];
+    for k in 0..traces {
+        if k > 0 {
+            ops.push(if rng.random_bool(0.05) {
+                Op::MonitorInit(rng.random_range(0..=3))
+            } else {
+                Op::MonitorReset
+            });
+        }
+        let len = horizon + 1 + rng.random_range(0..=3);
+        let len = if rng.random_bool(0.1) {
+            rng.random_range(1..=len)
+        } else {
+            len
+        };
+        let base = match path {
+            Some(p) => p(&mut rng, len),
+            None => anchor_path(&prog, n, &mut rng, len),
+        };
+        let rate = if rng.random::<bool>() {
+            0.0
+        } else {
+            [0.01, 0.05, 0.3][rng.random_range(0..3)]
+        };
+        for x in base {
+            ops.push(Op::MonitorUpdate(perturb_monitor_state(&mut rng, x, rate)));
+        }
+    }
+    ops
+}
+
+/// The sets of the synthetic monitor programs, over a plant of 3 states: one of every atom kind (a box
+/// over two coordinates, a ball over all three, a polytope by three rows over two, a half-space) and an
+/// `Unsafe` union of a box and a ball (so its negation is an ∧ of negated atoms), all on dyadic values
+/// (their faces are met exactly by dyadic states).
+pub fn monitor_sets() -> Vec<(String, AtomSet)> {
+    let set = |shape: Shape, coords: Coords| SetDesc { shape, coords };
+    vec![
+        (
+            "B".into(),
+            AtomSet::Set(set(
+                Shape::Box {
+                    lo: vec![-1.0, -0.5],
+                    hi: vec![0.5, 1.0],
+                },
+                Coords::StateIndices(vec![0, 1]),
+            )),
+        ),
+        (
+            "S".into(),
+            AtomSet::Set(set(
+                Shape::Ball {
+                    center: vec![0.5, 0.0, -0.5],
+                    radius: 0.75,
+                },
+                Coords::State,
+            )),
+        ),
+        (
+            "P".into(),
+            AtomSet::Set(set(
+                Shape::Polytope {
+                    A: Matrix {
+                        rows: 3,
+                        cols: 2,
+                        data: vec![1.0, 0.0, -1.0, 1.0, 0.0, -1.0],
+                    },
+                    b: vec![1.0, 0.5, 0.75],
+                },
+                Coords::StateIndices(vec![1, 2]),
+            )),
+        ),
+        (
+            "H".into(),
+            AtomSet::HalfSpace {
+                a: vec![1.0, -1.0, 0.5],
+                b: 0.25,
+            },
+        ),
+        (
+            "Unsafe".into(),
+            AtomSet::Union(vec![
+                set(
+                    Shape::Box {
+                        lo: vec![1.0],
+                        hi: vec![2.0],
+                    },
+                    Coords::StateIndices(vec![2]),
+                ),
+                set(
+                    Shape::Ball {
+                        center: vec![-1.0, 1.0],
+                        radius: 0.5,
+                    },
+                    Coords::StateIndices(vec![0, 2]),
+                ),
+            ]),
+        ),
+    ]
+}
+
+/// The synthetic monitor programs (formula, horizon N in samples; windows in samples, h = 1): every
+/// operator (F, G, U, R with a = 0 and a > 0, windows of b ≤ 1 where U and R read no φ, an unbounded
+/// window, an empty one past N), ∧ and ∨ (and →), negated atoms and a negated union, an atom
+/// alone at the root, nested windows that exceed N, so the end-of-trace flush decides them, and ∧ and ∨
+/// of atoms that are NaN on states with NaN or infinite components (a ball's NaN has the input's sign, a
+/// half-space's or a polytope's inf − inf the other one).
+pub const MONITOR_FORMULAS: [(&str, usize); 19] = [
+    ("F[0,4] B & G[2,6] !S", 12),
+    ("(B U[0,5] S) | (H R[2,7] !P)", 15),
+    ("G[0,8] F[1,5] (S & !Unsafe)", 10),
+    ("!Unsafe U (B & F[0,3] H)", 20),
+    ("(S R[0,4] B) & (P U[3,9] !H)", 14),
+    ("F[0,20] G[0,20] (B | H)", 25),
+    ("G (F[0,3] S -> G[1,2] !P)", 16),
+    (
+        "(true U[0,3] P) & (false R[1,1] B) & (S U[1,1] H) & (P R[0,1] !B)",
+        8,
+    ),
+    ("F[0,0] B | G[0,1] S | F[1,1] !H", 6),
+    ("F[50,60] B | G[40,41] S", 30),
+    ("S", 5),
+    ("!H", 5),
+    ("P & !B", 7),
+    ("F[0,2] G[0,2] F[1,3] (B U[0,4] (S R[0,3] H))", 12),
+    ("(!Unsafe U[2,9] (P | S)) R[1,6] (B -> F[0,4] !H)", 18),
+    ("G[0,30] (B | F[0,5] S) & F[3,40] (P & G[0,6] !Unsafe)", 36),
+    ("!(F[0,3] B) | (H U[2,2] S)", 9),
+    ("G !Unsafe & F[0,4] (B & F[0,5] (S & F[0,5] H))", 12),
+    ("(S & H) | (P & !S)", 3),
+];
+
+/// `image` (of a plant of 3 states) with the monitor of `formula` over [`monitor_sets`] (windows in
+/// samples, h = 1) and horizon N = `horizon` samples (section 14).
+pub fn monitor_image(image: &[u8], formula: &str, horizon: usize) -> Vec<u8> {
+    let expr = crate::robustness::mtl::parse(formula).expect("the formula parses");
+    let prog = crate::monitor::Program::compile(&expr, &monitor_sets(), 3, 1.0, horizon)
+        .expect("the formula compiles");
+    crate::monitor::attach(image, &prog.encode()).expect("the program attaches")
+}
+
+/// A run of `len` samples of the planar vehicle of `examples/planar-vehicle-waypoints.toml` (period
+/// 0.01 s): from Init through W1 (reached by a random sample around the 2 s deadline), over the obstacle
+/// (or, one time in five, straight through it), through W2 (within about its 2.5 s) and into Goal (within
+/// about its 2.5 s), each aimed at a random point within 0.2 to 1.4 times the set's radius, then held
+/// with a jitter; positions with a little noise, velocities their differences.
+pub fn planar_waypoints_run(rng: &mut ChaCha8Rng, len: usize) -> Vec<Vec<f32>> {
+    let aim = |rng: &mut ChaCha8Rng, c: [f64; 2], r: f64| {
+        let a: f64 = rng.random_range(0.0..std::f64::consts::TAU);
+        let rho = r * rng.random_range(0.2..1.4);
+        [c[0] + rho * a.cos(), c[1] + rho * a.sin()]
+    };
+    let start = [rng.random_range(-0.2..0.2), rng.random_range(-0.2..0.2)];
+    let t1 = rng.random_range(60..230usize);
+    let t2 = t1 + rng.random_range(80..280usize);
+    let t3 = t2 + rng.random_range(50..280usize);
+    let mut way = vec![(0usize, start), (t1, aim(rng, [0.5, 1.0], 0.25))];
+    if rng.random_bool(0.8) {
+        way.push(((t1 + t2) / 2, [1.0, rng.random_range(1.35..1.7)]));
+    }
+    way.push((t2, aim(rng, [3.0, 0.9], 0.3)));
+    way.push((t3, aim(rng, [2.0, 0.0], 0.1)));
+    let noise = [0.0, 0.001, 0.01][rng.random_range(0..3)];
+    let mut prev: Option<[f64; 2]> = None;
+    (0..len)
+        .map(|t| {
+            let i = way.iter().rposition(|w| w.0 <= t).unwrap_or(0);
+            let (t0, p0) = way[i];
+            let p = match way.get(i + 1) {
+                Some(&(t1, p1)) => {
+                    let s = (t - t0) as f64 / (t1 - t0) as f64;
+                    [p0[0] + s * (p1[0] - p0[0]), p0[1] + s * (p1[1] - p0[1])]
+                }
+                None => p0,
+            };
+            let p = [
+                p[0] + noise * rng.random_range(-1.0..1.0),
+                p[1] + noise * rng.random_range(-1.0..1.0),
+            ];
+            let v = prev.map_or([0.0, 1.0], |q| [(p[0] - q[0]) / 0.01, (p[1] - q[1]) / 0.01]);
+            prev = Some(p);
+            vec![p[0] as f32, p[1] as f32, v[0] as f32, v[1] as f32]
+        })
+        .collect()
+}
+
+/// A run of `len` samples of `examples/double-integrator.toml` (x⁺ = A x + B u, period 0.1 s) from Init
+/// under a saturated PD law towards a target near Goal's centre, with random gains and input bound (up to
+/// 3, past the spec's 1, so that the velocity sometimes exceeds Unsafe's 1.5).
+pub fn double_integrator_run(rng: &mut ChaCha8Rng, len: usize) -> Vec<Vec<f32>> {
+    let (kp, kd) = (rng.random_range(0.3..6.0), rng.random_range(0.3..4.0));
+    let umax = [1.0, 1.0, 2.0, 3.0][rng.random_range(0..4)];
+    let target = 1.0 + rng.random_range(-0.08..0.08);
+    let mut x = [rng.random_range(-0.1..0.1), 0.0f64];
+    (0..len)
+        .map(|_| {
+            let s = vec![x[0] as f32, x[1] as f32];
+            let u = (kp * (target - x[0]) - kd * x[1]).clamp(-umax, umax);
+            x = [x[0] + 0.1 * x[1] + 0.005 * u, x[1] + 0.1 * u];
+            s
+        })
+        .collect()
 }

@@ -11,16 +11,25 @@
 //! model maps with controller states (a dynamic extension) bit for bit, ζ carried, reset and left on the
 //! fallback and on errors as Rust does, and their corrupted sections refused as Rust refuses them;
 //! model maps with the selection test section (tag 13) bit for bit, including states at its whitened
-//! balls' boundaries and ties, and its corrupted or misplaced sections refused as Rust refuses them; and
-//! the subcommand's exit codes.
+//! balls' boundaries and ties, and its corrupted or misplaced sections refused as Rust refuses them; the
+//! task's monitor (section 14): `sc_monitor_update` against `shared_types::monitor::Monitor`, lo, hi
+//! (bits) and the verdict at every update, on synthetic programs of every operator and atom kind, on the
+//! monitors of `planar-vehicle-waypoints` and `double-integrator`, and on states with NaN and infinite
+//! components; corrupted monitor sections refused exactly when Rust refuses them, and `export --c` of an
+//! image with a monitor; and the subcommand's exit codes.
 
 use std::path::PathBuf;
 use std::process::Command;
 
 use host_compiler::export::harness::{
-    exits_image, exits_scenario, ext_image, feedforward_image, maps_image, pwa_image, scenario,
-    with_terminal_law, Answer, CHarness, Comparison, ExitCoverage, Op,
+    double_integrator_run, exits_image, exits_scenario, ext_image, feedforward_image, maps_image,
+    monitor_image, monitor_scenario, monitor_sets, planar_waypoints_run, pwa_image, scenario,
+    with_terminal_law, Answer, CHarness, Comparison, ExitCoverage, MonitorPath, Op,
+    MONITOR_FORMULAS,
 };
+use host_compiler::monitor::{AtomSet, Program};
+use host_compiler::robustness::mtl::parse;
+use host_compiler::spec::{Coords, SetDesc, Shape};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use shared_types::image::{compute_crc, decode, directory, Terminal, SPEC_FINGERPRINT_LEN};
@@ -546,7 +555,7 @@ fn corrupted_arrays_are_refused_as_the_rust_decoder_refuses_them() {
         ),
     ];
     for (name, image) in images {
-        let dir = scratch(&format!("corrupt_{name}"));
+        let dir = scratch(&format!("corrupt_array_{name}"));
         let h = CHarness::build(&image, &dir).expect("harness");
         let img = decode(&image).expect("valid");
         let probe: Vec<Op> = scenario(&img, 5, 40)
@@ -1613,4 +1622,788 @@ fn corrupted_selection_tests_are_refused_as_the_rust_decoder_refuses_them() {
     assert_eq!(c.init_mismatches, 0, "{:?}", c.first);
     assert_eq!(c.mismatches, 0, "{:?}", c.first);
     assert!(accepted > 10 && accepted < c.inits, "{accepted}");
+}
+
+// ---------------------------------------------------------------------------------------------------------
+// The task's monitor (section 14).
+
+/// `image` with the monitor section of `prog` (section 14).
+fn with_program(image: &[u8], prog: &Program) -> Vec<u8> {
+    host_compiler::monitor::attach(image, &prog.encode()).expect("the program attaches")
+}
+
+/// [`monitor_scenario`] for `image`, initialised from its bytes ([`Op::InitBytes`]) so that one harness
+/// runs every image.
+fn monitor_ops(image: &[u8], seed: u64, traces: usize, path: Option<MonitorPath<'_>>) -> Vec<Op> {
+    let img = decode(image).expect("a valid image");
+    let mut ops = monitor_scenario(&img, seed, traces, path);
+    assert_eq!(ops[0], Op::InitEmbedded);
+    ops[0] = Op::InitBytes(image.to_vec());
+    ops
+}
+
+/// Monitor updates in `ops` whose state has a NaN or an infinite component, and whose state has not the
+/// plant's n values.
+fn unusual_states(ops: &[Op], n: usize) -> (usize, usize) {
+    let mut non_finite = 0;
+    let mut wrong_len = 0;
+    for op in ops {
+        if let Op::MonitorUpdate(x) = op {
+            non_finite += usize::from(x.iter().any(|v| !v.is_finite()));
+            wrong_len += usize::from(x.len() != n);
+        }
+    }
+    (non_finite, wrong_len)
+}
+
+/// Checks a monitor comparison: something compared, nothing differed.
+fn check_monitor(name: &str, c: &Comparison) {
+    eprintln!(
+        "{name}: {} traces, {} updates, verdicts per update (pending, satisfied, violated, boundary) {:?}, \
+         per trace {:?}; {} monitor inits; mismatches: {} updates, {} traces, {} inits",
+        c.monitor_traces,
+        c.monitor_updates,
+        c.monitor_verdicts,
+        c.monitor_decided,
+        c.monitor_inits,
+        c.monitor_mismatches,
+        c.monitor_trace_mismatches,
+        c.monitor_init_mismatches
+    );
+    assert!(c.monitor_traces > 0 && c.monitor_updates > 0, "{name}");
+    assert_eq!(c.init_mismatches, 0, "{name}: {:?}", c.first);
+    assert_eq!(c.monitor_init_mismatches, 0, "{name}: {:?}", c.first);
+    assert_eq!(c.monitor_mismatches, 0, "{name}: {:?}", c.first);
+    assert_eq!(c.monitor_trace_mismatches, 0, "{name}");
+}
+
+/// The exported monitor against `shared_types::monitor::Monitor`, lo and hi bit for bit and the verdict
+/// at every update, on the synthetic programs of [`MONITOR_FORMULAS`] (in a feedforward image, and the
+/// first ones in a PWA image too), 160 seeded traces each: paths through and across the atoms' sets
+/// (waypoints exactly on a box's face among them, so values of exactly 0 and ties occur), half with NaN,
+/// ±∞, huge or wrongly sized states mixed in; inits with an arena one word short (refused by both), exact
+/// and with spare words.
+#[test]
+fn monitors_match_the_rust_evaluator_bit_for_bit() {
+    let sets = monitor_sets();
+    let n = 3;
+    let ff = feedforward_image(900, n, 1, 1, 4, Terminal::HoldLast, 1);
+    let pwa = pwa_image(901, n, 2, 1, 2, 10, 0);
+    let mut images = Vec::new();
+    for (i, &(text, horizon)) in MONITOR_FORMULAS.iter().enumerate() {
+        let expr = parse(text).unwrap_or_else(|e| panic!("{text}: {e}"));
+        let prog = Program::compile(&expr, &sets, n, 1.0, horizon)
+            .unwrap_or_else(|e| panic!("{text}: {e}"));
+        images.push((text, with_program(&ff, &prog)));
+        if i < 4 {
+            images.push((text, with_program(&pwa, &prog)));
+        }
+    }
+    // Every operator and atom kind is there.
+    let mut ops_seen = std::collections::BTreeSet::new();
+    let mut kinds_seen = std::collections::BTreeSet::new();
+    for (_, image) in &images {
+        let p = decode(image).unwrap().monitor().expect("a monitor");
+        let body = p.body();
+        let w = |i: usize| u32::from_le_bytes(body[4 * i..4 * i + 4].try_into().unwrap());
+        let nodes_at = 5 + w(4) as usize;
+        for k in 0..p.nodes() {
+            ops_seen.insert(w(nodes_at + 5 * k));
+        }
+        let mut at = 5;
+        while at < nodes_at {
+            let (kind, d) = (w(at), w(at + 1) as usize);
+            kinds_seen.insert(kind);
+            at += match kind {
+                1 | 3 => 2 + 2 * d + 1,
+                2 => 2 + 3 * d,
+                _ => {
+                    let rows = w(at + 2 + d) as usize;
+                    3 + d + rows * d + rows
+                }
+            };
+        }
+    }
+    assert_eq!(ops_seen.len(), 9, "operators {ops_seen:?}");
+    assert_eq!(kinds_seen.len(), 4, "atom kinds {kinds_seen:?}");
+    let h = CHarness::build(&images[0].1, &scratch("monitor_synthetic")).expect("harness");
+    let (mut traces, mut updates, mut odd) = (0usize, 0usize, (0usize, 0usize));
+    let (mut decided, mut verdicts) = ([0usize; 4], [0usize; 4]);
+    for (i, (text, image)) in images.iter().enumerate() {
+        let ops = monitor_ops(image, 2000 + i as u64, 160, None);
+        let u = unusual_states(&ops, n);
+        odd = (odd.0 + u.0, odd.1 + u.1);
+        let c = h.compare(&ops).expect("driver");
+        check_monitor(text, &c);
+        assert_eq!(
+            c.monitor_inits,
+            ops.iter()
+                .filter(|o| matches!(o, Op::MonitorInit(_)))
+                .count()
+        );
+        traces += c.monitor_traces;
+        updates += c.monitor_updates;
+        for k in 0..4 {
+            decided[k] += c.monitor_decided[k];
+            verdicts[k] += c.monitor_verdicts[k];
+        }
+    }
+    eprintln!(
+        "synthetic monitors: {} images, {traces} traces, {updates} updates bit for bit ({} states with a \
+         NaN or infinite component, {} of the wrong length); verdicts per update {verdicts:?}, per trace \
+         {decided:?}",
+        images.len(),
+        odd.0,
+        odd.1
+    );
+    assert!(
+        traces >= 3000 && updates >= 50_000,
+        "{traces} traces, {updates} updates"
+    );
+    assert!(odd.0 > 1000 && odd.1 > 300, "{odd:?}");
+    // Every verdict occurs, as a trace's decided verdict and at some update.
+    assert!(decided[1] > 100 && decided[2] > 100, "{decided:?}");
+    assert!(
+        decided[3] > 0 && verdicts[0] > 1000,
+        "{decided:?} {verdicts:?}"
+    );
+}
+
+/// A spec of `examples/`.
+fn example(name: &str) -> host_compiler::spec::Problem {
+    let path = format!("{}/../examples/{name}", env!("CARGO_MANIFEST_DIR"));
+    host_compiler::spec::load(&path).unwrap_or_else(|e| panic!("{path}: {e}"))
+}
+
+/// The monitors of two real examples, compiled by `Program::for_problem` and attached to a synthetic
+/// image of the plant's dimensions: the waypoint formula of `planar-vehicle-waypoints` (G !Unsafe ∧ nested
+/// F over 200, 250 and 250 samples on a 500-sample horizon, so the end-of-trace flush decides the nested
+/// windows) on runs through its waypoints, and the reach-avoid `!Unsafe U[0,T] Goal` of
+/// `double-integrator` on closed-loop runs; plus paths through their sets. Bit for bit at every update,
+/// with NaN, ±∞, huge or wrongly sized states mixed into half the traces.
+#[test]
+fn example_monitors_match_the_rust_evaluator_bit_for_bit() {
+    let cases: [(&str, MonitorPath<'_>, usize); 2] = [
+        ("planar-vehicle-waypoints.toml", &planar_waypoints_run, 200),
+        ("double-integrator.toml", &double_integrator_run, 800),
+    ];
+    let mut harness: Option<CHarness> = None;
+    let (mut traces, mut updates) = (0usize, 0usize);
+    for (k, (name, path, runs)) in cases.into_iter().enumerate() {
+        let problem = example(name);
+        let prog = Program::for_problem(&problem).unwrap_or_else(|e| panic!("{name}: {e}"));
+        let (n, m) = (problem.plant.n(), problem.plant.m());
+        let image = with_program(
+            &feedforward_image(910 + k as u64, n, m, 1, 4, Terminal::Fallback, 1),
+            &prog,
+        );
+        let h = harness.get_or_insert_with(|| {
+            CHarness::build(&image, &scratch("monitor_examples")).expect("harness")
+        });
+        for (what, ops) in [
+            (
+                "runs",
+                monitor_ops(&image, 3000 + k as u64, runs, Some(path)),
+            ),
+            (
+                "set paths",
+                monitor_ops(&image, 3100 + k as u64, runs / 4, None),
+            ),
+        ] {
+            let c = h.compare(&ops).expect("driver");
+            let label = format!("{name} {what} (N = {})", prog.horizon);
+            check_monitor(&label, &c);
+            if what == "runs" {
+                // The runs both satisfy and violate the task.
+                assert!(
+                    c.monitor_decided[1] > runs / 20 && c.monitor_decided[2] > runs / 20,
+                    "{label}: {:?}",
+                    c.monitor_decided
+                );
+            }
+            traces += c.monitor_traces;
+            updates += c.monitor_updates;
+        }
+    }
+    eprintln!("example monitors: {traces} traces, {updates} updates bit for bit");
+    assert!(traces >= 1000 && updates >= 100_000, "{traces} {updates}");
+}
+
+/// Word `i` of a section body set to `v`.
+fn set_word(body: &[u8], i: usize, v: u32) -> Vec<u8> {
+    let mut b = body.to_vec();
+    b[4 * i..4 * i + 4].copy_from_slice(&v.to_le_bytes());
+    b
+}
+
+/// Corrupted monitor sections (tag 14, added by hand to a valid image): the header's dimensions and
+/// lengths, every atom kind's fields (kind, dimension, coordinates, non-finite values, a box with lo >
+/// hi, a negative radius, a polytope's rows), the nodes (operator, children, windows, a node read twice or
+/// not at all), an arena over the largest, the section cut, lengthened, empty or twice, in a PWA image and
+/// in an image with model maps (the program is over the plant's state); then 1 500 random changes: one to
+/// three words (random, small, special floats) or bits, a word replaced by a finite float, the section cut
+/// or lengthened. The C init accepts exactly what `decode` accepts, and every accepted program
+/// then runs a trace in both, bit for bit.
+#[test]
+fn corrupted_monitor_sections_are_refused_as_the_rust_decoder_refuses_them() {
+    use host_compiler::monitor::Node;
+    let sets = monitor_sets();
+    let text = "((B U[0,5] S) | (H R[2,7] !P)) & G[1,3] !Unsafe";
+    let prog = Program::compile(&parse(text).unwrap(), &sets, 3, 1.0, 15).expect("compiles");
+    let body = prog.encode();
+    let ff = feedforward_image(920, 3, 2, 1, 4, Terminal::HoldLast, 1);
+    let pwa = pwa_image(921, 3, 2, 1, 2, 10, 1);
+    let maps = maps_image(922, 5, 2, 3, 2, 4, Terminal::Fallback, 3, false, 0);
+    let tag = SectionKind::Monitor as u16;
+    // Word offsets: each atom's record, each node's.
+    let mut atom_at = Vec::new();
+    let mut at = 5;
+    for a in &prog.atoms {
+        atom_at.push(at);
+        at += a.len();
+    }
+    let nodes_at = at;
+    let node = |pred: &dyn Fn(&Node) -> bool| {
+        nodes_at + 5 * prog.nodes.iter().position(pred).expect("the node is there")
+    };
+    let kind_at = |kind: u32| {
+        atom_at[prog
+            .atoms
+            .iter()
+            .position(|a| a[0] == kind)
+            .expect("the atom kind is there")]
+    };
+    let (bx, ball, half, poly) = (kind_at(2), kind_at(3), kind_at(1), kind_at(4));
+    let until = node(&|x| matches!(x, Node::Until(..)));
+    let always = node(&|x| matches!(x, Node::Always(..)));
+    let and = node(&|x| matches!(x, Node::And(..)));
+    let atom0 = node(&|x| matches!(x, Node::Atom(..)));
+    let root = nodes_at + 5 * (prog.nodes.len() - 1);
+    let f = |v: f32| v.to_bits();
+    let mut long = body.clone();
+    long.extend_from_slice(&0u32.to_le_bytes());
+    // An arena over MAX_MONITOR_WORDS (a G read at 101 samples keeps 65 002 entries of 2 words), and
+    // one under it.
+    let big = |outer: usize, inner: usize, horizon: usize| {
+        let e = parse(&format!("F[0,{outer}] G[0,{inner}] B")).unwrap();
+        Program::compile(&e, &sets, 3, 1.0, horizon)
+            .expect("compiles")
+            .encode()
+    };
+    let five = {
+        // The same formula over the maps image's plant (5 states).
+        let mut s = sets.clone();
+        s.retain(|(n, _)| n != "H" && n != "S");
+        s.push((
+            "S".into(),
+            AtomSet::Set(SetDesc {
+                shape: Shape::Ball {
+                    center: vec![0.5, 0.0, -0.5],
+                    radius: 0.75,
+                },
+                coords: Coords::StateIndices(vec![0, 1, 2]),
+            }),
+        ));
+        s.push((
+            "H".into(),
+            AtomSet::HalfSpace {
+                a: vec![1.0, -1.0, 0.5, 0.0, 0.25],
+                b: 0.25,
+            },
+        ));
+        Program::compile(&parse(text).unwrap(), &s, 5, 1.0, 15)
+            .expect("compiles")
+            .encode()
+    };
+    let cases: Vec<(&str, Vec<u8>, bool)> = vec![
+        ("valid", with_section(&ff, tag, &body), true),
+        ("in a PWA image", with_section(&pwa, tag, &body), true),
+        (
+            "over the plant of a maps image",
+            with_section(&maps, tag, &five),
+            true,
+        ),
+        (
+            "over ξ of a maps image",
+            with_section(&maps, tag, &body),
+            false,
+        ),
+        (
+            "after a fingerprint",
+            with_section(
+                &with_section(&ff, 12, &postcard(&fingerprint())),
+                tag,
+                &body,
+            ),
+            true,
+        ),
+        (
+            "twice",
+            with_section(&with_section(&ff, tag, &body), tag, &body),
+            false,
+        ),
+        ("empty", with_section(&ff, tag, &[]), false),
+        ("header only", with_section(&ff, tag, &body[..20]), false),
+        (
+            "one word short",
+            with_section(&ff, tag, &body[..body.len() - 4]),
+            false,
+        ),
+        (
+            "one byte short",
+            with_section(&ff, tag, &body[..body.len() - 1]),
+            false,
+        ),
+        ("one word long", with_section(&ff, tag, &long), false),
+        (
+            "n = 4",
+            with_section(&ff, tag, &set_word(&body, 0, 4)),
+            false,
+        ),
+        (
+            "n = 0",
+            with_section(&ff, tag, &set_word(&body, 0, 0)),
+            false,
+        ),
+        (
+            "N = 65536",
+            with_section(&ff, tag, &set_word(&body, 1, 65_536)),
+            false,
+        ),
+        (
+            "N = 0",
+            with_section(&ff, tag, &set_word(&body, 1, 0)),
+            true,
+        ),
+        (
+            "N = 65535",
+            with_section(&ff, tag, &set_word(&body, 1, 65_535)),
+            true,
+        ),
+        (
+            "33 atoms",
+            with_section(&ff, tag, &set_word(&body, 2, 33)),
+            false,
+        ),
+        (
+            "one atom fewer",
+            with_section(&ff, tag, &set_word(&body, 2, prog.atoms.len() as u32 - 1)),
+            false,
+        ),
+        (
+            "no nodes",
+            with_section(&ff, tag, &set_word(&body, 3, 0)),
+            false,
+        ),
+        (
+            "33 nodes",
+            with_section(&ff, tag, &set_word(&body, 3, 33)),
+            false,
+        ),
+        (
+            "atom words + 1",
+            with_section(&ff, tag, &set_word(&body, 4, (nodes_at - 5) as u32 + 1)),
+            false,
+        ),
+        (
+            "atom kind 0",
+            with_section(&ff, tag, &set_word(&body, bx, 0)),
+            false,
+        ),
+        (
+            "atom kind 5",
+            with_section(&ff, tag, &set_word(&body, ball, 5)),
+            false,
+        ),
+        (
+            "a ball as a half-space",
+            with_section(&ff, tag, &set_word(&body, ball, 1)),
+            true,
+        ),
+        (
+            "d = 0",
+            with_section(&ff, tag, &set_word(&body, half + 1, 0)),
+            false,
+        ),
+        (
+            "d = n + 1",
+            with_section(&ff, tag, &set_word(&body, ball + 1, 4)),
+            false,
+        ),
+        (
+            "coordinate n",
+            with_section(&ff, tag, &set_word(&body, bx + 2, 3)),
+            false,
+        ),
+        (
+            "coordinate n - 1",
+            with_section(&ff, tag, &set_word(&body, bx + 2, 2)),
+            true,
+        ),
+        (
+            "a NaN weight",
+            with_section(&ff, tag, &set_word(&body, half + 2 + 3, f(f32::NAN))),
+            false,
+        ),
+        (
+            "an infinite offset",
+            with_section(&ff, tag, &set_word(&body, half + 2 + 6, f(f32::INFINITY))),
+            false,
+        ),
+        (
+            "box lo > hi",
+            with_section(&ff, tag, &set_word(&body, bx + 4, f(0.75))),
+            false,
+        ),
+        (
+            "box lo = hi",
+            with_section(&ff, tag, &set_word(&body, bx + 4, f(0.5))),
+            true,
+        ),
+        (
+            "ball radius < 0",
+            with_section(&ff, tag, &set_word(&body, ball + 2 + 3 + 3, f(-1e-30))),
+            false,
+        ),
+        (
+            "ball radius -0",
+            with_section(&ff, tag, &set_word(&body, ball + 2 + 3 + 3, f(-0.0))),
+            true,
+        ),
+        (
+            "ball radius 0",
+            with_section(&ff, tag, &set_word(&body, ball + 2 + 3 + 3, 0)),
+            true,
+        ),
+        (
+            "polytope rows 0",
+            with_section(&ff, tag, &set_word(&body, poly + 4, 0)),
+            false,
+        ),
+        (
+            "polytope rows 65",
+            with_section(&ff, tag, &set_word(&body, poly + 4, 65)),
+            false,
+        ),
+        (
+            "polytope rows 2",
+            with_section(&ff, tag, &set_word(&body, poly + 4, 2)),
+            false,
+        ),
+        (
+            "operator 0",
+            with_section(&ff, tag, &set_word(&body, until, 0)),
+            false,
+        ),
+        (
+            "operator 10",
+            with_section(&ff, tag, &set_word(&body, until, 10)),
+            false,
+        ),
+        (
+            "U as R",
+            with_section(&ff, tag, &set_word(&body, until, 9)),
+            true,
+        ),
+        (
+            "G as F",
+            with_section(&ff, tag, &set_word(&body, always, 6)),
+            true,
+        ),
+        (
+            "∧ as ∨",
+            with_section(&ff, tag, &set_word(&body, and, 5)),
+            true,
+        ),
+        (
+            "an atom past the atoms",
+            with_section(
+                &ff,
+                tag,
+                &set_word(&body, atom0 + 1, prog.atoms.len() as u32),
+            ),
+            false,
+        ),
+        (
+            "negation 2",
+            with_section(&ff, tag, &set_word(&body, atom0 + 2, 2)),
+            false,
+        ),
+        (
+            "an atom with a window",
+            with_section(&ff, tag, &set_word(&body, atom0 + 4, 1)),
+            false,
+        ),
+        (
+            "an unnegated atom as ⊤ (its atom unread)",
+            with_section(&ff, tag, &set_word(&body, atom0, 2)),
+            true,
+        ),
+        (
+            "∧ of one child twice",
+            {
+                let c1 = u32::from_le_bytes(body[4 * (and + 1)..4 * (and + 2)].try_into().unwrap());
+                with_section(&ff, tag, &set_word(&body, and + 2, c1))
+            },
+            false,
+        ),
+        (
+            "the root reading itself",
+            with_section(
+                &ff,
+                tag,
+                &set_word(&body, root + 1, prog.nodes.len() as u32 - 1),
+            ),
+            false,
+        ),
+        (
+            "a node read twice, one unread",
+            {
+                let c1 =
+                    u32::from_le_bytes(body[4 * (root + 1)..4 * (root + 2)].try_into().unwrap());
+                with_section(&ff, tag, &set_word(&body, root + 2, c1.saturating_sub(1)))
+            },
+            false,
+        ),
+        (
+            "U with a > b",
+            with_section(&ff, tag, &set_word(&body, until + 3, 6)),
+            false,
+        ),
+        (
+            "U with b = 65536",
+            with_section(&ff, tag, &set_word(&body, until + 4, 65_536)),
+            false,
+        ),
+        (
+            "U with b = 65535",
+            with_section(&ff, tag, &set_word(&body, until + 4, 65_535)),
+            true,
+        ),
+        (
+            "U with a = b = 0",
+            with_section(&ff, tag, &set_word(&body, until + 4, 0)),
+            true,
+        ),
+        (
+            "G with a second child",
+            with_section(&ff, tag, &set_word(&body, always + 2, 1)),
+            false,
+        ),
+        (
+            "G with a > b",
+            with_section(&ff, tag, &set_word(&body, always + 3, 4)),
+            false,
+        ),
+        (
+            "an arena over the largest",
+            with_section(&ff, tag, &big(100, 65_000, 65_535)),
+            false,
+        ),
+        (
+            "an arena under the largest",
+            with_section(&ff, tag, &big(10, 30_000, 40_000)),
+            true,
+        ),
+    ];
+    // The probe: a trace of N + 3 updates through the base program's sets (perturbed), run after every
+    // init (accepted programs run to their end; after a refusal the updates have no monitor).
+    let base = decode(&cases[0].1).unwrap();
+    let probe: Vec<Op> = monitor_scenario(&base, 31, 3, None)
+        .into_iter()
+        .skip_while(|op| !matches!(op, Op::MonitorUpdate(_)))
+        .collect();
+    assert!(probe.len() >= 20, "{}", probe.len());
+    let mut ops = Vec::new();
+    for (what, bytes, ok) in &cases {
+        assert_eq!(
+            decode(bytes).is_ok(),
+            *ok,
+            "{what}: {:?}",
+            decode(bytes).err()
+        );
+        ops.push(Op::InitBytes(bytes.clone()));
+        ops.push(Op::MonitorInit(0));
+        ops.extend(probe.iter().cloned());
+    }
+    let h = CHarness::build(&cases[0].1, &scratch("monitor_corrupt")).expect("harness");
+    let c = h.compare(&ops).expect("driver");
+    check_monitor("targeted corruptions", &c);
+    assert_eq!(c.inits, cases.len());
+    let accepted = cases.iter().filter(|c| c.2).count();
+    assert!(c.monitor_traces >= 2 * accepted, "{}", c.monitor_traces);
+    // Random corruption of the body (the section is the last): the C refuses exactly what Rust refuses.
+    let valid = &cases[0].1;
+    let (off, len) = (valid.len() - body.len(), body.len());
+    let mut rng = ChaCha8Rng::seed_from_u64(1446);
+    let mut ops = Vec::new();
+    for k in 0..1500 {
+        let mut b = body.clone();
+        let words = b.len() / 4;
+        match k % 6 {
+            // One to three words: random, small, or a special float.
+            0..=2 => {
+                for _ in 0..rng.random_range(1..=3) {
+                    let w = rng.random_range(0..words);
+                    let v: u32 = match rng.random_range(0..4) {
+                        0 => rng.random(),
+                        1 | 2 => rng.random_range(0..40),
+                        _ => [f32::NAN, f32::INFINITY, -1.0, 0.0][rng.random_range(0..4)].to_bits(),
+                    };
+                    b[4 * w..4 * w + 4].copy_from_slice(&v.to_le_bytes());
+                }
+            }
+            // One to three bits.
+            3 => {
+                for _ in 0..rng.random_range(1..=3) {
+                    let i = rng.random_range(0..b.len());
+                    b[i] ^= 1 << rng.random_range(0..8);
+                }
+            }
+            // A word (a value, most often) replaced by a random finite float.
+            4 => {
+                let w = rng.random_range(0..words);
+                let v = (4.0 * rng.random::<f32>() - 2.0).to_bits();
+                b[4 * w..4 * w + 4].copy_from_slice(&v.to_le_bytes());
+            }
+            // Cut or lengthened.
+            _ => {
+                if rng.random::<bool>() {
+                    b.truncate(rng.random_range(0..b.len()));
+                } else {
+                    for _ in 0..rng.random_range(1..=8) {
+                        b.push(rng.random());
+                    }
+                }
+            }
+        }
+        ops.push(Op::InitBytes(with_section_body(valid, off, len, &b)));
+        ops.push(Op::MonitorInit(0));
+        ops.extend(probe.iter().cloned());
+    }
+    let c = h.compare(&ops).expect("driver");
+    let accepted = h
+        .run_rust(&ops)
+        .iter()
+        .filter(|a| matches!(a, Answer::MonitorInit(0, _)))
+        .count();
+    eprintln!(
+        "random corruptions: {accepted} of {} accepted by Rust",
+        c.inits
+    );
+    check_monitor("random corruptions", &c);
+    assert!(accepted > 100 && accepted < c.inits - 100, "{accepted}");
+}
+
+/// `export --c` on an image with a monitor (tag 14) succeeds, `controller_image.h` states its arena,
+/// and the exported array, initialised by `sc_init`, steps the controller as Rust does and as the same
+/// image without the monitor does, and runs the monitor bit for bit (`sc_monitor_init` on the embedded
+/// image).
+#[test]
+fn export_of_an_image_with_a_monitor() {
+    let sets = monitor_sets();
+    let prog = Program::compile(&parse(MONITOR_FORMULAS[3].0).unwrap(), &sets, 3, 1.0, 20).unwrap();
+    let plain = feedforward_image(930, 3, 2, 2, 6, Terminal::Fallback, 2);
+    let image = with_program(&plain, &prog);
+    let img = decode(&image).expect("valid");
+    let words = img.monitor().expect("a monitor").words();
+    let files = host_compiler::export::c::files(&image).expect("exports");
+    let image_h = &files
+        .iter()
+        .find(|f| f.name == "controller_image.h")
+        .unwrap()
+        .text;
+    assert!(
+        image_h.contains(&format!("#define SC_IMAGE_MONITOR_WORDS {words}u")),
+        "{image_h}"
+    );
+    let plain_h = host_compiler::export::c::files(&plain).unwrap();
+    assert!(plain_h[2]
+        .text
+        .contains("#define SC_IMAGE_MONITOR_WORDS 0u"));
+    // The subcommand.
+    let dir = scratch("monitor_cli");
+    let img_path = dir.join("controller.img");
+    std::fs::write(&img_path, &image).unwrap();
+    let out = host_compiler()
+        .args(["export", "--c"])
+        .arg(&img_path)
+        .arg("--out")
+        .arg(dir.join("c"))
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(0), "{out:?}");
+    assert!(dir.join("c").join("controller.c").is_file());
+    // The controller steps alike, with and without the monitor; the monitor runs alike.
+    let mut ops = scenario(&img, 77, 3000);
+    let steps: Vec<Op> = ops.clone();
+    assert!(
+        host_compiler::export::harness::reference(&plain, &steps)
+            == host_compiler::export::harness::reference(&image, &steps),
+        "the monitor changes the controller's answers"
+    );
+    ops.extend(monitor_scenario(&img, 78, 200, None));
+    let h = CHarness::build(&image, &dir.join("harness")).expect("harness");
+    let c = h.compare(&ops).expect("driver");
+    check_monitor("embedded", &c);
+    assert_eq!(c.mismatches, 0, "{:?}", c.first);
+    assert!(
+        c.states >= 3000 && c.by_status[0] > 300,
+        "{:?}",
+        c.by_status
+    );
+}
+
+/// States whose every component is NaN, +∞, −∞, ±3·10³⁸, 0 or an ordinary value, at every sample: the
+/// atoms' sums then meet NaNs of both signs (the input's, and inf − inf's or 0·∞'s of the other sign),
+/// which the monitor's ∧, ∨, windows and negations then combine. Bit for bit with Rust, NaN signs
+/// included, on programs of ∧ and ∨ of such atoms and of windows over them.
+#[test]
+fn non_finite_states_match_bit_for_bit() {
+    let odd = |rng: &mut ChaCha8Rng, len: usize| -> Vec<Vec<f32>> {
+        (0..len)
+            .map(|_| {
+                (0..3)
+                    .map(|_| match rng.random_range(0..7) {
+                        0 => f32::NAN,
+                        1 => f32::INFINITY,
+                        2 => f32::NEG_INFINITY,
+                        3 => [3.0e38, -3.0e38][rng.random_range(0..2)],
+                        4 => 0.0,
+                        _ => rng.random_range(-2.0f32..2.0),
+                    })
+                    .collect()
+            })
+            .collect()
+    };
+    let ff = feedforward_image(950, 3, 1, 1, 4, Terminal::HoldLast, 1);
+    let formulas = [
+        ("(S & H) | (P & !S)", 3),
+        ("S & !H", 2),
+        ("!P | H", 2),
+        ("F[0,3] (S & H) | G[0,2] (!P | S)", 8),
+        ("(H U[0,3] S) & (P R[1,4] !S)", 9),
+        ("!Unsafe U[0,5] (H & P)", 6),
+    ];
+    let h = CHarness::build(&ff, &scratch("monitor_non_finite")).expect("harness");
+    let (mut updates, mut nan_reports) = (0usize, 0usize);
+    for (i, (text, horizon)) in formulas.into_iter().enumerate() {
+        let image = monitor_image(&ff, text, horizon);
+        let ops = monitor_ops(&image, 4000 + i as u64, 400, Some(&odd));
+        let c = h.compare(&ops).expect("driver");
+        check_monitor(text, &c);
+        updates += c.monitor_updates;
+        nan_reports += h
+            .run_rust(&ops)
+            .iter()
+            .filter(|a| matches!(a, Answer::Monitor(lo, _, v) if *v != u8::MAX && f32::from_bits(*lo).is_nan()))
+            .count();
+    }
+    eprintln!(
+        "non-finite states: {updates} updates bit for bit, {nan_reports} reporting a NaN bound"
+    );
+    assert!(
+        updates > 10_000 && nan_reports > 100,
+        "{updates} {nan_reports}"
+    );
 }

@@ -16,10 +16,11 @@
 #define SC_FORMAT_VERSION @FORMAT_VERSION@u
 #define SC_LEAF_BASE 0x8000u
 #define SC_OUTSIDE 0xFFFFu
-#define SC_N_KINDS 13u /* highest known tag */
+#define SC_N_KINDS 14u /* highest known tag */
 #define SC_KIND_TERMINAL_LAW 11u
 #define SC_KIND_SPEC_FINGERPRINT 12u
 #define SC_KIND_SELECTION_TEST 13u
+#define SC_KIND_MONITOR 14u
 #define SC_MAPS_HEADER_LEN 12u
 #define SC_PROGRAM_HEADER_LEN 8u
 #define SC_EXIT_TABLE 0u
@@ -844,6 +845,381 @@ static sc_error parse_maps(sc_image *im, sc_bytes s) {
     return SC_E_NONE;
 }
 
+/* ------------------------------------------------------------------------------------------------ */
+/* The task's monitor program (shared_types::monitor::MonitorProgram, section 14): the validating
+ * decoder and the plan of the evaluator's arena. Word indices are 64-bit so that no sum overflows. */
+
+#define SC_MON_HEADER_WORDS 5u
+#define SC_MON_NODE_WORDS 5u
+#define SC_MON_PLAN_WORDS 33u /* words of one node's state in the arena (Plan::load, Plan::store) */
+#define SC_MON_NONE 0xFFFFFFFFu
+#define SC_ATOM_HALFSPACE 1u
+#define SC_ATOM_BOX 2u
+#define SC_ATOM_BALL 3u
+#define SC_ATOM_POLYTOPE 4u
+#define SC_MOP_ATOM 1u
+#define SC_MOP_TRUE 2u
+#define SC_MOP_FALSE 3u
+#define SC_MOP_AND 4u
+#define SC_MOP_OR 5u
+#define SC_MOP_EVENTUALLY 6u
+#define SC_MOP_ALWAYS 7u
+#define SC_MOP_UNTIL 8u
+#define SC_MOP_RELEASE 9u
+
+/* u32 word i of b (raw::u32_at); 0 out of range. */
+static uint32_t u32_word(sc_bytes b, uint64_t i) {
+    if (i >= (uint64_t)(b.len / 4u)) return 0;
+    return le32(b.p + 4u * (uint32_t)i);
+}
+
+static uint64_t min_u64(uint64_t a, uint64_t b) { return a < b ? a : b; }
+static uint64_t max_u64(uint64_t a, uint64_t b) { return a > b ? a : b; }
+static uint64_t sat_sub(uint64_t a, uint64_t b) { return a > b ? a - b : 0u; }
+
+/* A node record: op, first child (or atom), second child (or negation), a, b (monitor::Op). */
+typedef struct {
+    uint32_t op, c1, c2, a, b;
+} sc_mop;
+
+static sc_mop mon_op(const sc_monitor_program *p, uint32_t i) {
+    uint64_t at = (uint64_t)p->nodes_at + (uint64_t)i * SC_MON_NODE_WORDS;
+    sc_mop o;
+    o.op = u32_word(p->body, at);
+    o.c1 = u32_word(p->body, at + 1u);
+    o.c2 = u32_word(p->body, at + 2u);
+    o.a = u32_word(p->body, at + 3u);
+    o.b = u32_word(p->body, at + 4u);
+    return o;
+}
+
+/* monitor::atom_len: words of an atom record, 0 for an unknown kind. */
+static uint64_t atom_len(uint32_t kind, uint64_t d, uint64_t rows) {
+    switch (kind) {
+    case SC_ATOM_HALFSPACE: return 2u + 2u * d + 1u;
+    case SC_ATOM_BOX: return 2u + 3u * d;
+    case SC_ATOM_BALL: return 2u + 2u * d + 1u;
+    case SC_ATOM_POLYTOPE: return 3u + d + rows * d + rows;
+    default: return 0u;
+    }
+}
+
+/* monitor::phi_unread: U[a,b], R[a,b] read no value of phi when b <= 1 (and so a <= 1). */
+static int phi_unread(uint64_t a, uint64_t b) { return a <= 1u && b <= 1u; }
+
+/* monitor::until_hor. */
+static uint64_t until_hor(uint64_t a, uint64_t b, uint64_t hl, uint64_t hr) {
+    if (phi_unread(a, b)) return b + hr;
+    return b + max_u64(hr, sat_sub(hl, 1u));
+}
+
+/* monitor::first_map: the first map of U's queue at t. */
+static uint64_t first_map(uint64_t t, uint64_t a) { return t + max_u64(a, 1u); }
+
+/* A ring buffer in the arena (monitor::Buf): cap entries of a fixed number of words from word off. */
+typedef struct {
+    uint32_t off, cap, head, len;
+} sc_buf;
+
+/* A node's static plan and running state (monitor::Plan), as stored in the arena. */
+typedef struct {
+    uint32_t hor, need, parent, emitted;
+    uint32_t has_out, out; /* the value emitted in this pass (its bits), if has_out */
+    uint32_t got1, got2, m_next, map_next, q_lo;
+    float back0, back1; /* U, R: the back stack's composed map */
+    sc_buf b[5];
+} sc_plan;
+
+/* Plan::load: node i's state from the arena (zeros outside it). */
+static void plan_load(const uint32_t *arena, uint32_t words, uint32_t i, sc_plan *p) {
+    uint32_t w[SC_MON_PLAN_WORDS], j;
+    uint64_t base = (uint64_t)i * SC_MON_PLAN_WORDS;
+    for (j = 0; j < SC_MON_PLAN_WORDS; j++) w[j] = base + j < words ? arena[base + j] : 0u;
+    p->hor = w[0];
+    p->need = w[1];
+    p->parent = w[2];
+    p->emitted = w[3];
+    p->has_out = w[4] == 1u;
+    p->out = p->has_out ? w[5] : 0u;
+    p->got1 = w[6];
+    p->got2 = w[7];
+    p->m_next = w[8];
+    p->map_next = w[9];
+    p->q_lo = w[10];
+    p->back0 = bits_f32(w[11]);
+    p->back1 = bits_f32(w[12]);
+    for (j = 0; j < 5u; j++) {
+        p->b[j].off = w[13u + 4u * j];
+        p->b[j].cap = w[14u + 4u * j];
+        p->b[j].head = w[15u + 4u * j];
+        p->b[j].len = w[16u + 4u * j];
+    }
+}
+
+/* Plan::store: node i's state into the arena (all of it, or nothing if it does not fit). */
+static void plan_store(uint32_t *arena, uint32_t words, uint32_t i, const sc_plan *p) {
+    uint32_t *w, j;
+    uint64_t base = (uint64_t)i * SC_MON_PLAN_WORDS;
+    if (base + SC_MON_PLAN_WORDS > words) return;
+    w = arena + base;
+    w[0] = p->hor;
+    w[1] = p->need;
+    w[2] = p->parent;
+    w[3] = p->emitted;
+    w[4] = p->has_out ? 1u : 0u;
+    w[5] = p->has_out ? p->out : 0u;
+    w[6] = p->got1;
+    w[7] = p->got2;
+    w[8] = p->m_next;
+    w[9] = p->map_next;
+    w[10] = p->q_lo;
+    w[11] = f32_bits(p->back0);
+    w[12] = f32_bits(p->back1);
+    for (j = 0; j < 5u; j++) {
+        w[13u + 4u * j] = p->b[j].off;
+        w[14u + 4u * j] = p->b[j].cap;
+        w[15u + 4u * j] = p->b[j].head;
+        w[16u + 4u * j] = p->b[j].len;
+    }
+}
+
+/* MonitorProgram::plan_into: the static plan of every node (horizon, values needed, parent, buffers in
+ * the arena), its state written to the front of arena[0..words) when arena is not null
+ * (SC_MON_PLAN_WORDS per node, the buffers after); returns the arena's words. */
+static uint64_t mon_plan(const sc_monitor_program *pr, uint32_t *arena, uint32_t arena_words) {
+    uint64_t hor[SC_MAX_MONITOR_NODES], need[SC_MAX_MONITOR_NODES];
+    uint32_t parent[SC_MAX_MONITOR_NODES];
+    uint64_t cap = (uint64_t)pr->horizon + 1u, words;
+    uint32_t nodes = pr->nodes < SC_MAX_MONITOR_NODES ? pr->nodes : SC_MAX_MONITOR_NODES, i, s;
+#define SC_GET(arr, k) ((k) < SC_MAX_MONITOR_NODES ? (arr)[k] : 0u)
+    for (i = 0; i < SC_MAX_MONITOR_NODES; i++) {
+        hor[i] = 0;
+        need[i] = 0;
+        parent[i] = SC_MON_NONE;
+    }
+    /* Horizons, children first. */
+    for (i = 0; i < nodes; i++) {
+        sc_mop o = mon_op(pr, i);
+        uint64_t h;
+        switch (o.op) {
+        case SC_MOP_AND:
+        case SC_MOP_OR: h = max_u64(SC_GET(hor, o.c1), SC_GET(hor, o.c2)); break;
+        case SC_MOP_EVENTUALLY:
+        case SC_MOP_ALWAYS: h = (uint64_t)o.b + SC_GET(hor, o.c1); break;
+        case SC_MOP_UNTIL:
+        case SC_MOP_RELEASE: h = until_hor(o.a, o.b, SC_GET(hor, o.c1), SC_GET(hor, o.c2)); break;
+        default: h = 0; break;
+        }
+        hor[i] = min_u64(h, 2u * (uint64_t)SC_MAX_MONITOR_SAMPLES);
+    }
+    /* Values needed, root first: the root's value at 0. */
+    if (nodes > 0) need[nodes - 1u] = 1;
+    for (s = 0; s < nodes; s++) {
+        uint32_t k = nodes - 1u - s;
+        sc_mop o = mon_op(pr, k);
+        uint64_t n = need[k];
+#define SC_SET(c, v)                                                                               \
+    do {                                                                                           \
+        if ((c) < SC_MAX_MONITOR_NODES) {                                                          \
+            need[c] = min_u64((v), cap);                                                           \
+            parent[c] = k;                                                                         \
+        }                                                                                          \
+    } while (0)
+        switch (o.op) {
+        case SC_MOP_AND:
+        case SC_MOP_OR:
+            SC_SET(o.c1, n);
+            SC_SET(o.c2, n);
+            break;
+        case SC_MOP_EVENTUALLY:
+        case SC_MOP_ALWAYS: SC_SET(o.c1, n + o.b); break;
+        case SC_MOP_UNTIL:
+        case SC_MOP_RELEASE: {
+            uint64_t l = phi_unread(o.a, o.b) ? 0u : sat_sub(n + o.b, 1u);
+            SC_SET(o.c1, l);
+            SC_SET(o.c2, n + o.b);
+            break;
+        }
+        default: break;
+        }
+#undef SC_SET
+    }
+    /* The nodes' states, then their buffers. */
+    words = (uint64_t)pr->nodes * SC_MON_PLAN_WORDS;
+    for (i = 0; i < nodes; i++) {
+        sc_mop o = mon_op(pr, i);
+        uint64_t h = hor[i], h1 = SC_GET(hor, o.c1), h2 = SC_GET(hor, o.c2);
+        uint64_t a = o.a, b = o.b;
+        sc_buf bufs[5];
+        uint32_t slot;
+        memset(bufs, 0, sizeof bufs);
+        slot = 0;
+#define SC_ALLOC(entries, per)                                                                     \
+    do {                                                                                           \
+        bufs[slot].off = (uint32_t)words;                                                          \
+        bufs[slot].cap = (uint32_t)(entries);                                                      \
+        words += (uint64_t)(entries) * (per);                                                      \
+        slot++;                                                                                    \
+    } while (0)
+        switch (o.op) {
+        case SC_MOP_AND:
+        case SC_MOP_OR:
+            SC_ALLOC(min_u64(sat_sub(h2, h1), cap) + 2u, 1u);
+            SC_ALLOC(min_u64(sat_sub(h1, h2), cap) + 2u, 1u);
+            break;
+        case SC_MOP_EVENTUALLY:
+        case SC_MOP_ALWAYS:
+            /* A node read at t = 0 only never slides its window: the front of its deque. */
+            if (need[i] <= 1u)
+                SC_ALLOC(2u, 2u);
+            else
+                SC_ALLOC(min_u64(b - a, cap) + 2u, 2u);
+            break;
+        case SC_MOP_UNTIL:
+        case SC_MOP_RELEASE:
+            if (need[i] <= 1u) {
+                uint64_t psi = a == 0u ? min_u64(b + sat_sub(h, b + h2), cap) + 2u
+                                       : min_u64(sat_sub(h1, h2), cap) + 3u;
+                SC_ALLOC(min_u64(sat_sub(h2, h1), cap) + 3u, 1u);
+                SC_ALLOC(psi, 1u);
+                SC_ALLOC(2u, 2u);
+                SC_ALLOC(0u, 4u);
+                SC_ALLOC(0u, 2u);
+            } else {
+                uint64_t slack_l = sat_sub(h + 1u, b + h1), slack_r = sat_sub(h, b + h2);
+                uint64_t w = min_u64(b - a, cap) + 2u;
+                /* phi's history (t, e - 1 + slack], psi's [t + a, e + slack], the minimum of phi over
+                 * (t, t + a), the two stacks of maps over [t + max(a, 1), e - 1]. */
+                SC_ALLOC(min_u64(b + slack_l, cap) + 2u, 1u);
+                SC_ALLOC(min_u64(b - a + slack_r, cap) + 2u, 1u);
+                SC_ALLOC(min_u64(a, cap) + 2u, 2u);
+                SC_ALLOC(w, 4u);
+                SC_ALLOC(w, 2u);
+            }
+            break;
+        default: break;
+        }
+#undef SC_ALLOC
+        if (arena != 0) {
+            sc_plan p;
+            memset(&p, 0, sizeof p);
+            p.hor = (uint32_t)h;
+            p.need = (uint32_t)need[i];
+            p.parent = parent[i];
+            p.back0 = bits_f32(0xFF800000u); /* the identity map (-inf, +inf) */
+            p.back1 = bits_f32(0x7F800000u);
+            memcpy(p.b, bufs, sizeof bufs);
+            plan_store(arena, arena_words, i, &p);
+        }
+    }
+#undef SC_GET
+    return words;
+}
+
+/* MonitorProgram::decode: the section body, validated for an image whose plant has n states. */
+static sc_error monitor_decode(sc_monitor_program *p, sc_bytes body, uint32_t n) {
+    uint8_t read[SC_MAX_MONITOR_NODES];
+    uint32_t total, dn, horizon, atoms, nodes, atom_words, i, j;
+    uint64_t nodes_at, at;
+    memset(p, 0, sizeof *p);
+    if (body.len % 4u != 0 || body.len < 4u * SC_MON_HEADER_WORDS) return SC_E_MONITOR;
+    total = body.len / 4u;
+    dn = u32_word(body, 0);
+    horizon = u32_word(body, 1);
+    atoms = u32_word(body, 2);
+    nodes = u32_word(body, 3);
+    atom_words = u32_word(body, 4);
+    if (dn != n || n == 0 || n > SC_MAX_N || horizon >= SC_MAX_MONITOR_SAMPLES ||
+        atoms > SC_MAX_MONITOR_ATOMS || nodes == 0 || nodes > SC_MAX_MONITOR_NODES)
+        return SC_E_MONITOR;
+    nodes_at = (uint64_t)SC_MON_HEADER_WORDS + atom_words;
+    if (nodes_at + (uint64_t)nodes * SC_MON_NODE_WORDS != total) return SC_E_MONITOR;
+    p->body = body;
+    p->n = n;
+    p->horizon = horizon;
+    p->atoms = atoms;
+    p->nodes = nodes;
+    p->nodes_at = (uint32_t)nodes_at;
+    /* Atoms, back to back. */
+    at = SC_MON_HEADER_WORDS;
+    for (i = 0; i < atoms; i++) {
+        uint32_t kind = u32_word(body, at);
+        uint64_t d = u32_word(body, at + 1u), rows = 0, len, floats_from, q;
+        if (d == 0 || d > n) return SC_E_MONITOR;
+        if (kind == SC_ATOM_POLYTOPE) {
+            rows = u32_word(body, at + 2u + d);
+            if (rows == 0 || rows > SC_MAX_MONITOR_ROWS) return SC_E_MONITOR;
+        }
+        len = atom_len(kind, d, rows);
+        if (len == 0) return SC_E_MONITOR;
+        if (at + len > nodes_at) return SC_E_MONITOR;
+        for (j = 0; j < d; j++)
+            if (u32_word(body, at + 2u + j) >= n) return SC_E_MONITOR;
+        floats_from = at + 2u + d + (kind == SC_ATOM_POLYTOPE ? 1u : 0u);
+        for (q = floats_from; q < at + len; q++)
+            if (!finite_f32(f32_at(body, q))) return SC_E_MONITOR;
+        if (kind == SC_ATOM_BOX) {
+            for (j = 0; j < d; j++)
+                if (f32_at(body, floats_from + j) > f32_at(body, floats_from + d + j))
+                    return SC_E_MONITOR;
+        } else if (kind == SC_ATOM_BALL) {
+            if (f32_at(body, floats_from + d) < 0.0f) return SC_E_MONITOR;
+        }
+        p->atom_at[i] = (uint32_t)at;
+        at += len;
+    }
+    if (at != nodes_at) return SC_E_MONITOR;
+    /* Nodes: children before parents, each node but the last read by exactly one parent. */
+    memset(read, 0, sizeof read);
+    for (i = 0; i < nodes; i++) {
+        sc_mop o = mon_op(p, i);
+        int ok = 1;
+        /* A child: an earlier node not read yet (monitor's `child`). */
+#define SC_CHILD(c)                                                                                \
+    do {                                                                                           \
+        if (ok) {                                                                                  \
+            if ((c) < SC_MAX_MONITOR_NODES && (c) < i && !read[c])                                 \
+                read[c] = 1;                                                                       \
+            else                                                                                   \
+                ok = 0;                                                                            \
+        }                                                                                          \
+    } while (0)
+        switch (o.op) {
+        case SC_MOP_ATOM:
+            if (o.c1 >= atoms || o.c2 > 1u || o.a != 0 || o.b != 0) ok = 0;
+            break;
+        case SC_MOP_TRUE:
+        case SC_MOP_FALSE:
+            if (o.c1 != 0 || o.c2 != 0 || o.a != 0 || o.b != 0) ok = 0;
+            break;
+        case SC_MOP_AND:
+        case SC_MOP_OR:
+            if (o.c1 == o.c2 || o.a != 0 || o.b != 0) ok = 0;
+            SC_CHILD(o.c1);
+            SC_CHILD(o.c2);
+            break;
+        case SC_MOP_EVENTUALLY:
+        case SC_MOP_ALWAYS:
+            if (o.c2 != 0 || o.a > o.b || o.b >= SC_MAX_MONITOR_SAMPLES) ok = 0;
+            SC_CHILD(o.c1);
+            break;
+        case SC_MOP_UNTIL:
+        case SC_MOP_RELEASE:
+            if (o.c1 == o.c2 || o.a > o.b || o.b >= SC_MAX_MONITOR_SAMPLES) ok = 0;
+            SC_CHILD(o.c1);
+            SC_CHILD(o.c2);
+            break;
+        default: ok = 0; break;
+        }
+#undef SC_CHILD
+        if (!ok) return SC_E_MONITOR;
+    }
+    for (i = 0; i + 1u < nodes; i++)
+        if (!read[i]) return SC_E_MONITOR;
+    if (mon_plan(p, 0, 0) > SC_MAX_MONITOR_WORDS) return SC_E_MONITOR;
+    return SC_E_NONE;
+}
+
 /* image::decode. */
 static sc_error decode(sc_image *im, const uint8_t *bytes, uint32_t len) {
     sc_bytes body[SC_N_KINDS];
@@ -895,8 +1271,9 @@ static sc_error decode(sc_image *im, const uint8_t *bytes, uint32_t len) {
         if (kind < 1 || kind > SC_N_KINDS) return SC_E_DIRECTORY;
         /* admitted by the mode (layout::Mode::admits): kinds 1-5, 9 (segment exits), 10 (model
          * maps) and 13 (selection test), all three optional, feedforward; 1, 2 and 6-8 PWA; 11
-         * (terminal law) and 12 (spec fingerprint), optional, both */
+         * (terminal law), 12 (spec fingerprint) and 14 (monitor), optional, both */
         if (kind != SC_KIND_SPEC_FINGERPRINT && kind != SC_KIND_TERMINAL_LAW &&
+            kind != SC_KIND_MONITOR &&
             (im->mode == 1 ? (kind > 5 && kind < 9) : ((kind >= 3 && kind <= 5) || kind >= 9)))
             return SC_E_DIRECTORY;
         body[kind - 1].p = bytes + next;
@@ -954,6 +1331,13 @@ static sc_error decode(sc_image *im, const uint8_t *bytes, uint32_t len) {
     if (present & (1u << (SC_KIND_SELECTION_TEST - 1u))) {
         if ((e = parse_selection(im, body[SC_KIND_SELECTION_TEST - 1u])) != SC_E_NONE) return e;
         im->has_selection = 1;
+    }
+    /* the task's monitor (optional, both modes; image::with_stored_optional), over the plant's state */
+    im->has_monitor = 0;
+    if (present & (1u << (SC_KIND_MONITOR - 1u))) {
+        if ((e = monitor_decode(&im->monitor, body[SC_KIND_MONITOR - 1u], im->n_plant)) != SC_E_NONE)
+            return e;
+        im->has_monitor = 1;
     }
     return SC_E_NONE;
 }
@@ -1495,4 +1879,721 @@ static sc_status feedforward(sc_controller *c, const float *x, float w[SC_MAX_M]
         }
         return SC_OK;
     }
+}
+
+/* ------------------------------------------------------------------------------------------------ */
+/* The task's monitor (shared_types::monitor::Monitor): each function names the Rust one it mirrors. */
+
+#define SC_NEG_INF bits_f32(0xFF800000u)
+#define SC_POS_INF bits_f32(0x7F800000u)
+
+/* monitor::neg, -x + 0 (so that -0 never appears), written as the optimised Rust build computes it:
+ * 0 - x (LLVM folds -x + 0 into 0 - x, as GCC does). The two are equal for every value but a NaN, whose
+ * sign 0 - x keeps. */
+static float neg_f32(float x) { return 0.0f - x; }
+
+/* A clamp map y -> max(m0, min(m1, y)) (monitor::compose, monitor::apply). */
+typedef struct {
+    float m0, m1;
+} sc_map;
+
+static sc_map map_identity(void) {
+    sc_map m;
+    m.m0 = SC_NEG_INF;
+    m.m1 = SC_POS_INF;
+    return m;
+}
+
+static float map_apply(sc_map m, float y) { return max_f32(m.m0, min_f32(m.m1, y)); }
+
+/* outer o inner. */
+static sc_map map_compose(sc_map outer, sc_map inner) {
+    sc_map r;
+    r.m0 = map_apply(outer, inner.m0);
+    r.m1 = map_apply(outer, inner.m1);
+    return r;
+}
+
+/* The arena's word at (0 outside it), and its f32. */
+static uint32_t mon_word(const sc_monitor *m, uint64_t at) {
+    return at < (uint64_t)m->arena_words ? m->arena[at] : 0u;
+}
+
+static float mon_get(const sc_monitor *m, uint64_t at) { return bits_f32(mon_word(m, at)); }
+
+static void mon_put(sc_monitor *m, uint64_t at, uint32_t bits) {
+    if (at < (uint64_t)m->arena_words) m->arena[at] = bits;
+}
+
+/* Buf::slot: the first word of entry i (i < len <= cap and head < cap, so it wraps once at most). */
+static uint64_t buf_slot(const sc_buf *b, uint64_t i, uint32_t per) {
+    uint64_t s = (uint64_t)b->head + i;
+    if (s >= b->cap) s -= b->cap;
+    return (uint64_t)b->off + s * per;
+}
+
+/* monitor::push: one entry of `per` words (their bits), unless the buffer is full. */
+static void buf_push(sc_monitor *m, sc_buf *b, uint32_t per, const uint32_t *vals) {
+    uint64_t at;
+    uint32_t j;
+    if (b->len >= b->cap) return;
+    at = buf_slot(b, b->len, per);
+    for (j = 0; j < per; j++) mon_put(m, at + j, vals[j]);
+    b->len++;
+}
+
+static void buf_push1(sc_monitor *m, sc_buf *b, float v) {
+    uint32_t w = f32_bits(v);
+    buf_push(m, b, 1u, &w);
+}
+
+/* monitor::at: word j of entry i. */
+static float buf_at(const sc_monitor *m, const sc_buf *b, uint64_t i, uint32_t per, uint32_t j) {
+    return mon_get(m, buf_slot(b, i, per) + j);
+}
+
+static void pop_front(sc_buf *b) {
+    if (b->len > 0) {
+        b->head++;
+        if (b->head >= b->cap) b->head = 0;
+        b->len--;
+    }
+}
+
+static void pop_back(sc_buf *b) {
+    if (b->len > 0) b->len--;
+}
+
+/* monitor::deque_drop_below: a monotone deque of (index, value) entries; pop indices below `from`. */
+static void deque_drop_below(const sc_monitor *m, sc_buf *b, uint64_t from) {
+    while (b->len > 0 && (uint64_t)mon_word(m, buf_slot(b, 0, 2u)) < from) pop_front(b);
+}
+
+/* monitor::deque_push_max: pop stale indices, dominated values at the back, then push. */
+static void deque_push_max(sc_monitor *m, sc_buf *b, uint64_t from, uint64_t idx, float v) {
+    uint32_t e[2];
+    deque_drop_below(m, b, from);
+    while (b->len > 0 && buf_at(m, b, b->len - 1u, 2u, 1u) <= v) pop_back(b);
+    e[0] = (uint32_t)idx;
+    e[1] = f32_bits(v);
+    buf_push(m, b, 2u, e);
+}
+
+/* monitor::deque_peek: the front value among indices from `from`, or -inf, leaving the deque as it is
+ * (the bounds read it; the next deque_max drops what this skips). */
+static float deque_peek(const sc_monitor *m, const sc_buf *b, uint64_t from) {
+    uint32_t i;
+    for (i = 0; i < b->len; i++)
+        if ((uint64_t)mon_word(m, buf_slot(b, i, 2u)) >= from) return buf_at(m, b, i, 2u, 1u);
+    return SC_NEG_INF;
+}
+
+/* monitor::deque_max: the front value after dropping indices below `from`, or -inf. */
+static float deque_max(const sc_monitor *m, sc_buf *b, uint64_t from) {
+    deque_drop_below(m, b, from);
+    return b->len > 0 ? buf_at(m, b, 0, 2u, 1u) : SC_NEG_INF;
+}
+
+/* MonitorProgram::atom: atom i's signed distance at x (coordinates past n_x read as 0), -0 as +0. */
+static float mon_atom(const sc_monitor_program *pr, uint32_t i, const float *x, uint32_t n_x) {
+    sc_bytes body = pr->body;
+    uint64_t at = i < SC_MAX_MONITOR_ATOMS ? pr->atom_at[i] : 0u, f;
+    uint32_t kind = u32_word(body, at), d = u32_word(body, at + 1u), j, r;
+    float y[SC_MAX_N], v;
+    if (d > SC_MAX_N) d = SC_MAX_N;
+    for (j = 0; j < d; j++) {
+        uint32_t c = u32_word(body, at + 2u + j);
+        y[j] = c < n_x ? x[c] : 0.0f;
+    }
+    f = at + 2u + d;
+    switch (kind) {
+    case SC_ATOM_HALFSPACE: {
+        float s = 0.0f;
+        for (j = 0; j < d; j++) s += f32_at(body, f + j) * y[j];
+        v = f32_at(body, f + d) - s;
+        break;
+    }
+    case SC_ATOM_BOX: {
+        float depth = SC_POS_INF, out2 = 0.0f;
+        int outside = 0;
+        for (j = 0; j < d; j++) {
+            float lo = f32_at(body, f + j), hi = f32_at(body, f + d + j), vj = y[j], e;
+            if (vj < lo)
+                e = lo - vj;
+            else if (vj > hi)
+                e = vj - hi;
+            else
+                e = 0.0f;
+            if (e > 0.0f) {
+                outside = 1;
+                out2 += e * e;
+            }
+            depth = min_f32(depth, min_f32(vj - lo, hi - vj));
+        }
+        v = outside ? -sqrtf(out2) : depth;
+        break;
+    }
+    case SC_ATOM_BALL: {
+        float s = 0.0f;
+        for (j = 0; j < d; j++) {
+            float e = y[j] - f32_at(body, f + j);
+            s += e * e;
+        }
+        v = f32_at(body, f + d) - sqrtf(s);
+        break;
+    }
+    case SC_ATOM_POLYTOPE: {
+        uint32_t rows = u32_word(body, f);
+        uint64_t a0 = f + 1u, b0;
+        float least = SC_POS_INF;
+        if (rows > SC_MAX_MONITOR_ROWS) rows = SC_MAX_MONITOR_ROWS;
+        b0 = f + 1u + (uint64_t)rows * d;
+        for (r = 0; r < rows; r++) {
+            float s = 0.0f;
+            for (j = 0; j < d; j++) s += f32_at(body, a0 + (uint64_t)r * d + j) * y[j];
+            least = min_f32(least, f32_at(body, b0 + r) - s);
+        }
+        v = least;
+        break;
+    }
+    default: v = 0.0f; break;
+    }
+    return v + 0.0f;
+}
+
+/* Monitor::word: word j of node i's state in the arena. */
+static uint32_t node_word(const sc_monitor *m, uint32_t i, uint32_t j) {
+    return mon_word(m, (uint64_t)i * SC_MON_PLAN_WORDS + j);
+}
+
+/* Monitor::out_of: the value node c emitted in this pass, if any (its state's words 4 and 5). */
+static int out_of(const sc_monitor *m, uint32_t c, float *v) {
+    if (node_word(m, c, 4u) != 1u) return 0;
+    *v = bits_f32(node_word(m, c, 5u));
+    return 1;
+}
+
+/* Monitor::room: whether node c's parent accepts c's next value (the parent's words read in place:
+ * emitted, and the buffer of this child, b1 or b2: cap, len). */
+static int mon_room(const sc_monitor *m, uint32_t c, const sc_plan *pc) {
+    uint32_t parent = pc->parent;
+    uint64_t cap, len;
+    sc_mop o;
+    if (parent == SC_MON_NONE || parent >= m->prog.nodes) return 1;
+    o = mon_op(&m->prog, parent);
+    if (c == o.c1) {
+        cap = node_word(m, parent, 14u);
+        len = node_word(m, parent, 16u);
+    } else {
+        cap = node_word(m, parent, 18u);
+        len = node_word(m, parent, 20u);
+    }
+    switch (o.op) {
+    case SC_MOP_AND:
+    case SC_MOP_OR:
+    case SC_MOP_UNTIL:
+    case SC_MOP_RELEASE: return len < cap;
+    case SC_MOP_EVENTUALLY:
+    case SC_MOP_ALWAYS:
+        return (uint64_t)pc->emitted <=
+               min_u64((uint64_t)node_word(m, parent, 3u) + o.b, m->prog.horizon);
+    default: return 1;
+    }
+}
+
+/* Monitor::history: the value at index j of a history buffer whose last entry is index got - 1. */
+static float mon_history(const sc_monitor *m, const sc_buf *b, uint64_t got, uint64_t j) {
+    uint64_t first = sat_sub(got, b->len);
+    if (j < first || j >= got) return SC_NEG_INF;
+    return buf_at(m, b, j - first, 1u, 0u);
+}
+
+/* Monitor::until_feed: U, R: feed phi into the minimum over (t, t + a) up to t + a - 1 and push the
+ * maps f_j up to e - 1, from the histories (values as stored: negated for R). */
+static void until_feed(sc_monitor *m, const sc_mop *o, sc_plan *p) {
+    uint64_t t = p->emitted, horizon = m->prog.horizon, e = min_u64(t + o->b, horizon), q0;
+    if (p->m_next < t + 1u) p->m_next = (uint32_t)(t + 1u);
+    while (p->m_next < t + o->a && p->m_next < p->got1) {
+        float v = mon_history(m, &p->b[0], p->got1, p->m_next);
+        /* A max-deque of -phi keeps the minimum of phi. */
+        deque_push_max(m, &p->b[2], t + 1u, p->m_next, neg_f32(v));
+        p->m_next++;
+    }
+    q0 = first_map(t, o->a);
+    if (p->map_next < q0) {
+        p->map_next = (uint32_t)q0;
+        p->q_lo = (uint32_t)max_u64(p->q_lo, q0);
+    }
+    while (p->map_next < e && p->map_next < p->got1 && p->map_next < p->got2) {
+        float l = mon_history(m, &p->b[0], p->got1, p->map_next);
+        float r = mon_history(m, &p->b[1], p->got2, p->map_next);
+        sc_map f;
+        uint32_t w[2];
+        f.m0 = r;
+        f.m1 = max_f32(r, l);
+        w[0] = f32_bits(f.m0);
+        w[1] = f32_bits(f.m1);
+        buf_push(m, &p->b[4], 2u, w);
+        {
+            sc_map back;
+            back.m0 = p->back0;
+            back.m1 = p->back1;
+            back = map_compose(back, f);
+            p->back0 = back.m0;
+            p->back1 = back.m1;
+        }
+        p->map_next++;
+    }
+    if (p->need <= 1u) {
+        /* Read at t = 0 only: what the minimum over (0, a) and the maps have taken is not read again. */
+        uint64_t used = (uint64_t)p->m_next >= t + o->a ? p->map_next : p->m_next;
+        while (p->b[0].len > 0 && (uint64_t)(p->got1 - p->b[0].len) < used) pop_front(&p->b[0]);
+        while (o->a > 0 && p->b[1].len > 0 && p->got2 - p->b[1].len < p->map_next)
+            pop_front(&p->b[1]);
+    }
+}
+
+/* Monitor::queue_agg: U, R: the composed maps of the queue (front stack's top aggregate o back). */
+static sc_map queue_agg(const sc_monitor *m, const sc_plan *p) {
+    sc_map front, back;
+    if (p->b[3].len > 0) {
+        uint64_t i = p->b[3].len - 1u;
+        front.m0 = buf_at(m, &p->b[3], i, 4u, 2u);
+        front.m1 = buf_at(m, &p->b[3], i, 4u, 3u);
+    } else {
+        front = map_identity();
+    }
+    back.m0 = p->back0;
+    back.m1 = p->back1;
+    return map_compose(front, back);
+}
+
+/* Monitor::until_advance: U, R after emitting t (now t + 1): drop the map of index t + a from the
+ * queue, phi <= t + 1 and psi below t + 1 + a from the histories. */
+static void until_advance(sc_monitor *m, const sc_mop *o, sc_plan *p) {
+    uint64_t t = p->emitted, q0 = first_map(t, o->a);
+    while (p->q_lo < q0 && p->q_lo < p->map_next) {
+        if (p->b[3].len == 0) {
+            /* Move the back stack onto the front stack, last first, composing towards the front. */
+            sc_map agg = map_identity();
+            uint32_t nb = p->b[4].len, s;
+            for (s = 0; s < nb; s++) {
+                uint32_t r = nb - 1u - s, w[4];
+                sc_map f;
+                f.m0 = buf_at(m, &p->b[4], r, 2u, 0u);
+                f.m1 = buf_at(m, &p->b[4], r, 2u, 1u);
+                agg = map_compose(f, agg);
+                w[0] = f32_bits(f.m0);
+                w[1] = f32_bits(f.m1);
+                w[2] = f32_bits(agg.m0);
+                w[3] = f32_bits(agg.m1);
+                buf_push(m, &p->b[3], 4u, w);
+            }
+            p->b[4].len = 0;
+            p->b[4].head = 0;
+            p->back0 = SC_NEG_INF;
+            p->back1 = SC_POS_INF;
+        }
+        pop_back(&p->b[3]);
+        p->q_lo++;
+    }
+    p->q_lo = (uint32_t)max_u64(p->q_lo, q0);
+    /* phi's history from t + 1, psi's from t + a. */
+    while (p->b[0].len > 0 && (uint64_t)(p->got1 - p->b[0].len) < t + 1u) pop_front(&p->b[0]);
+    while (p->b[1].len > 0 && (uint64_t)(p->got2 - p->b[1].len) < t + o->a) pop_front(&p->b[1]);
+}
+
+/* Monitor::process: node i's turn in a pass: take its children's values, emit at most one of its
+ * own. Returns whether it emitted. */
+static int mon_process(sc_monitor *m, uint32_t i, int first) {
+    sc_mop o = mon_op(&m->prog, i);
+    sc_plan p;
+    uint64_t k = m->k, horizon = m->prog.horizon, t;
+    int can, has1, has2, emit = 0, emitted = 0;
+    float out1 = 0.0f, out2 = 0.0f, v = 0.0f;
+    plan_load(m->arena, m->arena_words, i, &p);
+    p.has_out = 0;
+    p.out = 0;
+    t = p.emitted;
+    can = t < p.need && t <= horizon;
+    has1 = out_of(m, o.c1, &out1);
+    has2 = out_of(m, o.c2, &out2);
+    switch (o.op) {
+    case SC_MOP_ATOM:
+    case SC_MOP_TRUE:
+    case SC_MOP_FALSE:
+        if (first && can && t == k) {
+            if (o.op == SC_MOP_TRUE) {
+                v = SC_POS_INF;
+            } else if (o.op == SC_MOP_FALSE) {
+                v = SC_NEG_INF;
+            } else {
+                v = o.c1 < SC_MAX_MONITOR_ATOMS ? m->atom_vals[o.c1] : 0.0f;
+                if (o.c2 == 1u) v = neg_f32(v);
+            }
+            emit = 1;
+        }
+        break;
+    case SC_MOP_AND:
+    case SC_MOP_OR:
+        if (has1) buf_push1(m, &p.b[0], out1);
+        if (has2) buf_push1(m, &p.b[1], out2);
+        if (can && p.b[0].len > 0 && p.b[1].len > 0) {
+            float x = buf_at(m, &p.b[0], 0, 1u, 0u), y = buf_at(m, &p.b[1], 0, 1u, 0u);
+            v = o.op == SC_MOP_AND ? min_f32(x, y) : max_f32(x, y);
+            emit = 1;
+        }
+        break;
+    case SC_MOP_EVENTUALLY:
+    case SC_MOP_ALWAYS: {
+        int dual = o.op == SC_MOP_ALWAYS;
+        if (has1) {
+            deque_push_max(m, &p.b[0], t + o.a, p.got1, dual ? neg_f32(out1) : out1);
+            p.got1++;
+        }
+        if (can) {
+            uint64_t e = min_u64(t + o.b, horizon);
+            /* An empty window is decided at N. */
+            int empty = t + o.a > horizon;
+            if ((empty && k == horizon) || (!empty && p.got1 > e)) {
+                v = empty ? SC_NEG_INF : deque_max(m, &p.b[0], t + o.a);
+                if (dual) v = neg_f32(v);
+                emit = 1;
+            }
+        }
+        break;
+    }
+    case SC_MOP_UNTIL:
+    case SC_MOP_RELEASE: {
+        int dual = o.op == SC_MOP_RELEASE;
+        /* Histories: phi from index t + 1, psi from t + a (earlier values are never read). */
+        if (has1) {
+            if (p.got1 > t) buf_push1(m, &p.b[0], dual ? neg_f32(out1) : out1);
+            p.got1++;
+        }
+        if (has2) {
+            if (p.got2 >= t + o.a) buf_push1(m, &p.b[1], dual ? neg_f32(out2) : out2);
+            p.got2++;
+        }
+        until_feed(m, &o, &p);
+        if (can) {
+            uint64_t e = min_u64(t + o.b, horizon);
+            if (t + o.a > horizon) {
+                if (k == horizon) {
+                    v = dual ? neg_f32(SC_NEG_INF) : SC_NEG_INF;
+                    emit = 1;
+                }
+            } else if (p.got2 > e && (phi_unread(o.a, o.b) || p.got1 >= e) && p.map_next >= e) {
+                float mm = deque_max(m, &p.b[2], t + 1u), q, head;
+                q = e >= first_map(t, o.a)
+                        ? map_apply(queue_agg(m, &p), mon_history(m, &p.b[1], p.got2, e))
+                        : SC_NEG_INF;
+                head = o.a == 0 ? mon_history(m, &p.b[1], p.got2, t) : SC_NEG_INF;
+                /* mm is kept negated (a max-deque of -phi): the minimum is -max. */
+                v = min_f32(neg_f32(mm), max_f32(head, q));
+                if (dual) v = neg_f32(v);
+                emit = 1;
+            }
+        }
+        break;
+    }
+    default: break;
+    }
+    if (emit && mon_room(m, i, &p)) {
+        if (i + 1u == m->prog.nodes) {
+            m->has_root = 1;
+            m->root = v;
+        }
+        p.has_out = 1;
+        p.out = f32_bits(v);
+        p.emitted++;
+        emitted = 1;
+        if (o.op == SC_MOP_AND || o.op == SC_MOP_OR) {
+            pop_front(&p.b[0]);
+            pop_front(&p.b[1]);
+        } else if (o.op == SC_MOP_UNTIL || o.op == SC_MOP_RELEASE) {
+            until_advance(m, &o, &p);
+        }
+    }
+    plan_store(m->arena, m->arena_words, i, &p);
+    return emitted;
+}
+
+/* One frame of the bounds' walk down the tree of AND and OR nodes (Monitor::bounds_at, which recurses
+ * to depth SC_MAX_MONITOR_NODES at most; here an explicit stack). */
+typedef struct {
+    uint32_t i, depth, stage;
+    float lo1, hi1, lo2, hi2;
+} sc_bframe;
+
+#define SC_BF_ENTER 0u
+#define SC_BF_FIRST 1u     /* the first child's bounds: from the buffer or a call */
+#define SC_BF_FIRST_RET 2u /* waiting for the first child's call */
+#define SC_BF_SECOND 3u
+#define SC_BF_SECOND_RET 4u
+#define SC_BF_COMBINE 5u
+
+/* Monitor::bounds_at for a node that does not recurse (all but AND and OR), at its pending time t:
+ * sound bounds, written to lo, hi (the state is only read). Returns 0 for AND and OR (nothing done). */
+static int bounds_leaf(const sc_monitor *m, uint32_t i, uint64_t t, float *lo, float *hi) {
+    sc_mop o = mon_op(&m->prog, i);
+    sc_plan p;
+    uint64_t horizon = m->prog.horizon;
+    plan_load(m->arena, m->arena_words, i, &p);
+    if (p.emitted > t) {
+        /* Never asked: a parent reads an emitted child's value from its own buffer. */
+        *lo = SC_NEG_INF;
+        *hi = SC_POS_INF;
+        return 1;
+    }
+    switch (o.op) {
+    case SC_MOP_AND:
+    case SC_MOP_OR: return 0;
+    case SC_MOP_TRUE:
+        *lo = SC_POS_INF;
+        *hi = SC_POS_INF;
+        break;
+    case SC_MOP_FALSE:
+        *lo = SC_NEG_INF;
+        *hi = SC_NEG_INF;
+        break;
+    case SC_MOP_EVENTUALLY:
+    case SC_MOP_ALWAYS: {
+        float l = deque_peek(m, &p.b[0], t + o.a);
+        if (o.op == SC_MOP_ALWAYS) {
+            *lo = SC_NEG_INF;
+            *hi = neg_f32(l);
+        } else {
+            *lo = l;
+            *hi = SC_POS_INF;
+        }
+        break;
+    }
+    case SC_MOP_UNTIL:
+    case SC_MOP_RELEASE: {
+        int known = (uint64_t)p.m_next >= min_u64(t + o.a, horizon + 1u);
+        float mm = neg_f32(deque_peek(m, &p.b[2], t + 1u));
+        sc_map agg = queue_agg(m, &p);
+        uint64_t j = p.map_next, e = min_u64(t + o.b, horizon);
+        int maps = e >= first_map(t, o.a);
+        float next = (j < p.got2 && j <= e) ? mon_history(m, &p.b[1], p.got2, j) : SC_NEG_INF;
+        float q_lo = maps ? map_apply(agg, next) : SC_NEG_INF;
+        float q_hi = maps ? map_apply(agg, SC_POS_INF) : SC_NEG_INF;
+        float head_lo, head_hi, l, h;
+        if (o.a > 0) {
+            head_lo = SC_NEG_INF;
+            head_hi = SC_NEG_INF;
+        } else if (p.got2 > t) {
+            head_lo = mon_history(m, &p.b[1], p.got2, t);
+            head_hi = head_lo;
+        } else {
+            head_lo = SC_NEG_INF;
+            head_hi = SC_POS_INF;
+        }
+        l = known ? min_f32(mm, max_f32(head_lo, q_lo)) : SC_NEG_INF;
+        h = min_f32(mm, max_f32(head_hi, q_hi));
+        if (o.op == SC_MOP_RELEASE) {
+            *lo = neg_f32(h);
+            *hi = neg_f32(l);
+        } else {
+            *lo = l;
+            *hi = h;
+        }
+        break;
+    }
+    default: /* an atom, whose value is not known before it is emitted */
+        *lo = SC_NEG_INF;
+        *hi = SC_POS_INF;
+        break;
+    }
+    return 1;
+}
+
+/* Monitor::bounds: sound bounds of node root at its pending time t (the module doc), by a post-order
+ * walk: an AND or OR node takes a child's value from its own buffer when the child emitted it, else the
+ * child's bounds; then the minimum (AND) or maximum (OR) of the lower and of the upper bounds. Each node
+ * of the tree is entered at most once and takes at most 4 turns of the walk. */
+static void mon_bounds(const sc_monitor *m, uint32_t root, uint64_t t, float *lo, float *hi) {
+    sc_bframe st[SC_MAX_MONITOR_NODES + 2];
+    uint32_t sp = 0, turn;
+    float rlo = SC_NEG_INF, rhi = SC_POS_INF; /* the bounds of the last frame that returned */
+    st[0].i = root;
+    st[0].depth = 0;
+    st[0].stage = SC_BF_ENTER;
+    sp = 1;
+    for (turn = 0; sp > 0 && turn < 8u * (SC_MAX_MONITOR_NODES + 2u); turn++) {
+        sc_bframe *f = &st[sp - 1u];
+        int ret = 0;
+        switch (f->stage) {
+        case SC_BF_ENTER:
+            if (f->depth > SC_MAX_MONITOR_NODES) {
+                rlo = SC_NEG_INF;
+                rhi = SC_POS_INF;
+                ret = 1;
+            } else if (bounds_leaf(m, f->i, t, &rlo, &rhi)) {
+                ret = 1;
+            } else {
+                f->stage = SC_BF_FIRST;
+            }
+            break;
+        case SC_BF_FIRST:
+        case SC_BF_SECOND: {
+            int second = f->stage == SC_BF_SECOND;
+            sc_mop o = mon_op(&m->prog, f->i);
+            uint64_t base = (uint64_t)f->i * SC_MON_PLAN_WORDS + (second ? 17u : 13u);
+            sc_buf b;
+            b.off = mon_word(m, base);
+            b.cap = mon_word(m, base + 1u);
+            b.head = mon_word(m, base + 2u);
+            b.len = mon_word(m, base + 3u);
+            if (b.len > 0) {
+                float v = buf_at(m, &b, 0, 1u, 0u);
+                if (second) {
+                    f->lo2 = v;
+                    f->hi2 = v;
+                } else {
+                    f->lo1 = v;
+                    f->hi1 = v;
+                }
+                f->stage = second ? SC_BF_COMBINE : SC_BF_SECOND;
+            } else if (sp < SC_MAX_MONITOR_NODES + 2u) {
+                f->stage = second ? SC_BF_SECOND_RET : SC_BF_FIRST_RET;
+                st[sp].i = second ? o.c2 : o.c1;
+                st[sp].depth = f->depth + 1u;
+                st[sp].stage = SC_BF_ENTER;
+                sp++;
+            } else {
+                /* Deeper than any tree of SC_MAX_MONITOR_NODES nodes: unknown. */
+                if (second) {
+                    f->lo2 = SC_NEG_INF;
+                    f->hi2 = SC_POS_INF;
+                } else {
+                    f->lo1 = SC_NEG_INF;
+                    f->hi1 = SC_POS_INF;
+                }
+                f->stage = second ? SC_BF_COMBINE : SC_BF_SECOND;
+            }
+            break;
+        }
+        case SC_BF_COMBINE: {
+            sc_mop o = mon_op(&m->prog, f->i);
+            if (o.op == SC_MOP_AND) {
+                rlo = min_f32(f->lo1, f->lo2);
+                rhi = min_f32(f->hi1, f->hi2);
+            } else {
+                rlo = max_f32(f->lo1, f->lo2);
+                rhi = max_f32(f->hi1, f->hi2);
+            }
+            ret = 1;
+            break;
+        }
+        default: ret = 1; break;
+        }
+        if (ret) {
+            sp--;
+            if (sp > 0) {
+                sc_bframe *pf = &st[sp - 1u];
+                if (pf->stage == SC_BF_FIRST_RET) {
+                    pf->lo1 = rlo;
+                    pf->hi1 = rhi;
+                    pf->stage = SC_BF_SECOND;
+                } else if (pf->stage == SC_BF_SECOND_RET) {
+                    pf->lo2 = rlo;
+                    pf->hi2 = rhi;
+                    pf->stage = SC_BF_COMBINE;
+                }
+            }
+        }
+    }
+    *lo = rlo;
+    *hi = rhi;
+}
+
+/* Report::of_bounds. */
+static sc_monitor_report of_bounds(float lo, float hi) {
+    sc_monitor_report r;
+    r.lo = lo;
+    r.hi = hi;
+    if (lo > 0.0f)
+        r.verdict = SC_SATISFIED;
+    else if (hi < 0.0f)
+        r.verdict = SC_VIOLATED;
+    else if (lo == hi)
+        r.verdict = SC_BOUNDARY;
+    else
+        r.verdict = SC_PENDING;
+    return r;
+}
+
+static sc_monitor_report report_unknown(void) {
+    sc_monitor_report r;
+    r.lo = SC_NEG_INF;
+    r.hi = SC_POS_INF;
+    r.verdict = SC_PENDING;
+    return r;
+}
+
+uint32_t sc_monitor_words(const sc_controller *c) {
+    if (c == 0 || !c->image.has_monitor) return 0;
+    return (uint32_t)mon_plan(&c->image.monitor, 0, 0);
+}
+
+sc_error sc_monitor_init(sc_monitor *m, const sc_controller *c, uint32_t *arena,
+                         uint32_t arena_words) {
+    uint64_t words;
+    if (m == 0) return SC_E_ARGUMENT;
+    memset(m, 0, sizeof *m);
+    m->last = report_unknown();
+    if (c == 0) return SC_E_ARGUMENT;
+    if (!c->image.has_monitor) return SC_E_NO_MONITOR;
+    words = mon_plan(&c->image.monitor, 0, 0);
+    if ((uint64_t)arena_words < words) return SC_E_MONITOR_ARENA;
+    if (arena == 0 && arena_words > 0) return SC_E_ARGUMENT;
+    m->prog = c->image.monitor;
+    m->arena = arena;
+    m->arena_words = arena_words;
+    sc_monitor_reset(m);
+    return SC_E_NONE;
+}
+
+void sc_monitor_reset(sc_monitor *m) {
+    if (m == 0) return;
+    if (m->prog.nodes != 0) mon_plan(&m->prog, m->arena, m->arena_words);
+    m->k = 0;
+    m->has_root = 0;
+    m->root = 0.0f;
+    m->last = report_unknown();
+}
+
+sc_verdict sc_monitor_update(sc_monitor *m, const float *x, uint32_t n_x, sc_monitor_report *r) {
+    uint32_t i, passes, root;
+    int end;
+    float lo, hi;
+    if (m == 0) return SC_PENDING;
+    if (x == 0) n_x = 0;
+    if (m->prog.nodes != 0 && m->k <= m->prog.horizon) {
+        for (i = 0; i < m->prog.atoms && i < SC_MAX_MONITOR_ATOMS; i++)
+            m->atom_vals[i] = mon_atom(&m->prog, i, x, n_x);
+        end = m->k == m->prog.horizon;
+        /* One pass in the steady state; at the end, passes until nothing is emitted (each emits at
+         * most one value per node, bounded by the values needed). */
+        passes = 0;
+        for (;;) {
+            int any = 0;
+            for (i = 0; i < m->prog.nodes; i++) any |= mon_process(m, i, passes == 0);
+            passes++;
+            if (!end || !any || passes > 2u * SC_MAX_MONITOR_SAMPLES + 2u) break;
+        }
+        m->k++;
+        root = m->prog.nodes - 1u;
+        if (m->has_root) {
+            lo = m->root;
+            hi = m->root;
+        } else {
+            mon_bounds(m, root, 0, &lo, &hi);
+        }
+        m->last = of_bounds(lo, hi);
+    }
+    if (r != 0) *r = m->last;
+    return (sc_verdict)m->last.verdict;
 }

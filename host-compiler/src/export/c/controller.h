@@ -59,6 +59,30 @@
  *     (ties: lowest index). sc_step, and sc_step_plant without the section, use the P-metric test.
  * On any status but SC_OK the firmware applies sc_fallback (the Rust firmware passes the last input it
  * applied as last_u).
+ *
+ * The task's monitor (optional section 14, either mode; shared-types/src/monitor.rs, whose module doc
+ * states the semantics): a bounded MTL formula over signed distances to half-spaces, boxes, balls and
+ * polytopes, evaluated online on the plant's state every step. sc_init validates the section as Rust's
+ * MonitorProgram::decode does (an invalid one -> SC_E_MONITOR); the controller ignores it otherwise.
+ * Its state lives in a caller-provided arena of uint32_t words whose size the program fixes:
+ * sc_monitor_words(c) (MonitorProgram::words; controller_image.h gives the embedded image's as
+ * SC_IMAGE_MONITOR_WORDS, so the arena can be a static array). sc_monitor_init(m, c, arena, words)
+ * -> SC_E_NO_MONITOR without the section (or on a controller whose image was refused),
+ * SC_E_MONITOR_ARENA if the arena is smaller than sc_monitor_words(c). sc_monitor_update(m, x, n_x, r)
+ * takes the sample x(k) (coordinates past n_x read as 0; any values, NaN and infinities included) and
+ * reports the running bounds lo <= hi of the robustness at time 0 and the verdict (the firmware
+ * protocol's codes: 0 pending, 1 satisfied (lo > 0), 2 violated (hi < 0), 3 boundary (decided at 0));
+ * after sample N (the program's horizon) the report stays. lo, hi and the verdict are the Rust
+ * evaluator's (shared_types::monitor::Monitor::update) bit for bit at every update: the same arena
+ * layout, the same f32 operations in the same order, min and max as Rust's f32::min and f32::max (a NaN
+ * operand gives the other; two NaNs, the second), the negation -x + 0 as the optimised Rust computes it
+ * (0 - x, which keeps a NaN's sign), sqrtf correctly rounded. A state with NaN or infinite components
+ * may make bounds NaN (a root decided as NaN stays pending, as in Rust); which NaN two NaNs of opposite
+ * signs give in an atom's sum is the compiler's choice of operand order, the same here for GCC and
+ * rustc on x86-64 (the c_export tests). The firmware feeds only finite states. No recursion (the bounds of the formula tree use a
+ * stack of SC_MAX_MONITOR_NODES + 2 frames, about 1 KiB); every loop is bounded by the program's
+ * validated sizes (at sample N, at most 2 SC_MAX_MONITOR_SAMPLES + 3 passes over the nodes). The
+ * monitor reads the image bytes, which must outlive it, and only its own arena.
  */
 #ifndef SC_CONTROLLER_H
 #define SC_CONTROLLER_H
@@ -95,6 +119,12 @@ extern "C" {
 #define SC_MAX_PROGRAM_REGS @MAX_PROGRAM_REGS@
 #define SC_MAX_PROGRAM_POWI @MAX_PROGRAM_POWI@
 #define SC_MAX_EXT @MAX_EXT@
+/* Monitor capacities (shared-types/src/monitor.rs). */
+#define SC_MAX_MONITOR_ATOMS @MAX_MONITOR_ATOMS@
+#define SC_MAX_MONITOR_NODES @MAX_MONITOR_NODES@
+#define SC_MAX_MONITOR_SAMPLES @MAX_MONITOR_SAMPLES@
+#define SC_MAX_MONITOR_ROWS @MAX_MONITOR_ROWS@
+#define SC_MAX_MONITOR_WORDS @MAX_MONITOR_WORDS@ /* the largest arena a program may ask for, in words */
 
 /* Status of one step: the wire values of shared_types::eval::Status. */
 typedef enum {
@@ -135,8 +165,14 @@ typedef enum {
                                   depth, outputs stored once */
     SC_E_TERMINAL = 23,        /* terminal law (section 11): P_t not symmetric positive definite, radius
                                   negative or not finite, or with model maps */
-    SC_E_SELECTION = 24        /* selection test (section 13): a factor not upper triangular or with a
+    SC_E_SELECTION = 24,       /* selection test (section 13): a factor not upper triangular or with a
                                   non-positive diagonal, a negative threshold, or without model maps */
+    SC_E_MONITOR = 25,         /* the task's monitor (section 14): lengths, dimensions, an atom (kind,
+                                  coordinates, a non-finite value, a box with lo > hi, a negative
+                                  radius), a node (operator, children, window) or not one tree, or an
+                                  arena over SC_MAX_MONITOR_WORDS */
+    SC_E_NO_MONITOR = 26,      /* sc_monitor_init: the image has no monitor (or was refused) */
+    SC_E_MONITOR_ARENA = 27    /* sc_monitor_init: the arena is smaller than sc_monitor_words */
 } sc_error;
 
 typedef struct {
@@ -149,6 +185,14 @@ typedef struct {
     uint32_t n_inputs, n_outputs, max_stack;
     sc_bytes consts, code;
 } sc_program;
+
+/* A validated monitor program (shared_types::monitor::MonitorProgram): a view into the image. */
+typedef struct {
+    sc_bytes body;
+    uint32_t n, horizon, atoms, nodes;
+    uint32_t nodes_at;                        /* word offset of the first node record */
+    uint32_t atom_at[SC_MAX_MONITOR_ATOMS];   /* word offset of each atom's record */
+} sc_monitor_program;
 
 /* The validated image: views into the caller's array (which must outlive it). Read-only after sc_init. */
 typedef struct {
@@ -184,6 +228,9 @@ typedef struct {
        f32) and per trajectory [cz_0 .. cz_{n-1}, s] (n_trajectories*(n+1) f32) */
     uint8_t has_selection;
     sc_bytes sel_R, sel_test;
+    /* the task's monitor (optional section 14, either mode), for the plant's state */
+    uint8_t has_monitor;
+    sc_monitor_program monitor;
 } sc_image;
 
 /* Controller state (shared_types::eval::Controller). */
@@ -239,6 +286,49 @@ uint32_t sc_m(const sc_controller *c);
 /* State and input dimensions of the plant (n_plant, m_plant; n, m without model maps). */
 uint32_t sc_plant_n(const sc_controller *c);
 uint32_t sc_plant_m(const sc_controller *c);
+
+/* The monitor's verdict: the wire codes of shared_types::monitor::Verdict. */
+typedef enum {
+    SC_PENDING = 0,
+    SC_SATISFIED = 1,
+    SC_VIOLATED = 2,
+    SC_BOUNDARY = 3
+} sc_verdict;
+
+/* What the monitor reports after a sample (shared_types::monitor::Report). */
+typedef struct {
+    float lo, hi;    /* bounds of the robustness at time 0 */
+    uint8_t verdict; /* an sc_verdict */
+} sc_monitor_report;
+
+/* The monitor's state (shared_types::monitor::Monitor): the nodes' states live in the arena. */
+typedef struct {
+    sc_monitor_program prog;
+    uint32_t *arena;
+    uint32_t arena_words;
+    uint32_t k;                             /* the next sample index */
+    float atom_vals[SC_MAX_MONITOR_ATOMS];
+    uint8_t has_root;                       /* the root's value at 0 is known */
+    float root;
+    sc_monitor_report last;
+} sc_monitor;
+
+/* The arena the image's monitor needs, in 32-bit words (MonitorProgram::words); 0 without a monitor. */
+uint32_t sc_monitor_words(const sc_controller *c);
+
+/* The monitor of the image c was initialised with, over arena[0..arena_words), at its first sample.
+ * Returns SC_E_NONE, SC_E_ARGUMENT (a null pointer), SC_E_NO_MONITOR or SC_E_MONITOR_ARENA; on refusal
+ * the monitor reports lo = -inf, hi = +inf, pending. The image bytes and the arena must outlive m. */
+sc_error sc_monitor_init(sc_monitor *m, const sc_controller *c, uint32_t *arena,
+                         uint32_t arena_words);
+
+/* Back to the first sample (Monitor::reset). */
+void sc_monitor_reset(sc_monitor *m);
+
+/* Takes the sample x(k), x[0..n_x) (the plant's state; a coordinate past n_x reads as 0, x may be null
+ * with n_x = 0), writes the report to *r (if r is not null) and returns its verdict (Monitor::update).
+ * After sample N the report stays. */
+sc_verdict sc_monitor_update(sc_monitor *m, const float *x, uint32_t n_x, sc_monitor_report *r);
 
 #ifdef __cplusplus
 }
