@@ -1208,7 +1208,7 @@ impl<'a> Monitor<'a> {
             // Never asked: a parent reads an emitted child's value from its own buffer.
             return UNKNOWN;
         }
-        let r = match o.op {
+        match o.op {
             OP_TRUE => (f32::INFINITY, f32::INFINITY),
             OP_FALSE => (f32::NEG_INFINITY, f32::NEG_INFINITY),
             OP_ATOM => UNKNOWN,
@@ -1277,7 +1277,6 @@ impl<'a> Monitor<'a> {
                 }
             }
             _ => UNKNOWN,
-        };
-        r
+        }
     }
 }
