@@ -32,9 +32,12 @@
 //! * `bench`: `cargo bench -p host-compiler`, then the HIL measurement (`hil-bench`), then the boards' rows
 //!   `board_<name>_flash_bytes` and `board_<name>_ram_bytes` (RAM with hil-bench's
 //!   `firmware_stack_bytes_bound`), then merges every `target/bench/rows/*.json` into
-//!   `target/bench/summary.json` and prints one table.
+//!   `target/bench/summary.json` and prints one table; then keeps its `examples_*` rows in
+//!   `docs/figures.json` and renders examples/README.md's table of figures from them (`figures`).
+//! * `figures`: examples/README.md's table of figures rendered again from `docs/figures.json`.
 
 mod boards;
+mod figures;
 
 use serde_json::Value;
 use std::ffi::OsStr;
@@ -52,6 +55,16 @@ fn main() -> ExitCode {
     match args.first().map(String::as_str) {
         Some("test") | Some("ci") => test(),
         Some("bench") => bench(),
+        Some("figures") => {
+            let mut steps = Steps {
+                results: Vec::new(),
+            };
+            steps.run(
+                "examples/README.md's figures from docs/figures.json",
+                || figures::render_readme(&root()),
+            );
+            steps.finish()
+        }
         Some("no-panic") => {
             let mut steps = Steps {
                 results: Vec::new(),
@@ -465,6 +478,16 @@ fn bench() -> ExitCode {
     steps.run("merge rows into target/bench/summary.json", || {
         merge(&rows_dir)
     });
+    steps.run(
+        "examples/README.md's figures: docs/figures.json from the summary, the table from it",
+        || {
+            let summary = target_dir().join("bench").join("summary.json");
+            let text = std::fs::read_to_string(&summary)
+                .map_err(|e| format!("reading {}: {e}", summary.display()))?;
+            let rows: Vec<Value> = serde_json::from_str(&text).map_err(|e| e.to_string())?;
+            figures::write(&root(), &rows)
+        },
+    );
     steps.finish()
 }
 

@@ -7,9 +7,10 @@
 //! where κᵢ is the sample at which the controller entered the segment. Its exit is the half-space guard
 //! G = {x : âᵀx ≤ b̂} (‖â‖ = 1) of edge ℓᵢ → ℓᵢ₊₁, with the identity reset. At every sample of segment i
 //! the evaluator computes g = fl(Σⱼ âⱼx̂ⱼ − b̂) in f32 and moves to segment i+1, row 0, when g ≤ −θ. The
-//! stored threshold θ is twice the largest rounding error of g over the states the certificate allows
-//! (`guard_eval_bound`), so a state outside G is never taken for switched ("no early detection"), and one
-//! deeper than θ_eff = θ + that error always is.
+//! stored threshold θ is at least twice the largest rounding error of g over the states the certificate
+//! allows (`guard_eval_bound`; synthesis stores [`THETA_SLACK`] times that, so a re-proof from the bytes
+//! accepts it), so a state outside G is never taken for switched ("no early detection"), and one deeper
+//! than θ_eff = θ + that error always is.
 //!
 //! **The certificate, backwards** (segment N is judged against Goal, as one location, [`super::certify`]).
 //! For segment i < N with radius r, every quantity below is an affine bound in r, so the largest r is found
@@ -71,6 +72,11 @@ use faer::{Mat, MatRef};
 pub const GRID: usize = 33;
 /// s_late as a fraction of the period (item 5): the required transversality rate is θ_eff / s_late.
 pub const LATE_FRACTION: f64 = 0.01;
+/// The detection threshold a synthesis stores, over the least sound one (twice the guard test's rounding
+/// bound). That bound is taken over the nominal's extent and the next ball's radius, which a re-proof from
+/// the stored rows (shortened to κ_f, started from f32 points) computes a little differently; the slack
+/// lets it accept the stored θ whenever its own bound is at most this factor larger.
+pub const THETA_SLACK: f64 = 1.25;
 
 /// One segment of a run with internal switching.
 #[derive(Clone, Copy)]
@@ -82,6 +88,12 @@ pub struct InternalSegment<'a> {
     /// The nominal: for a segment with an exit, continued past the guard in its own location (the extended
     /// segment of §4.2.2) far enough that the tube lies inside the guard.
     pub nominal: &'a Nominal,
+    /// The detection threshold θ of the segment's exit as an image stores it, when re-proving one; `None`
+    /// when synthesising. The firmware tests against the stored θ, so a re-proof certifies that one
+    /// whenever it is at least the least sound threshold, twice the bound on the f32 guard test's
+    /// rounding (any such θ is sound: it enters every condition through θ_eff); else it certifies its own
+    /// choice, which the stored one then fails to match.
+    pub theta_stored: Option<f32>,
 }
 
 /// The f32 guard test a segment exits by (module doc).
@@ -803,11 +815,17 @@ pub fn certify_internal(
             })
             .collect();
         let bound_g = guard_eval_bound(&exit.a, exit.b, &X);
-        let theta = super::round_down_f32(2.0 * bound_g);
-        let theta = if (theta as f64) < 2.0 * bound_g {
-            f32::from_bits(theta.to_bits() + 1)
-        } else {
-            theta
+        let required = 2.0 * bound_g;
+        let theta = match s.theta_stored {
+            Some(stored) if stored as f64 >= required => stored,
+            _ => {
+                let t = super::round_down_f32(THETA_SLACK * required);
+                if (t as f64) < THETA_SLACK * required {
+                    f32::from_bits(t.to_bits() + 1)
+                } else {
+                    t
+                }
+            }
         };
         let theta_eff = theta as f64 + bound_g;
         let s_late = LATE_FRACTION * h;

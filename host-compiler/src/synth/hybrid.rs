@@ -318,6 +318,7 @@ pub fn certify_run(task: &HybridTask, nominals: &[Nominal]) -> Result<InternalCe
             lp: task.lp(loc),
             lc: &task.constants[loc],
             nominal: nom,
+            theta_stored: None,
         })
         .collect();
     certify_internal(&task.plant, &segs, &task.edges, task.steps).map_err(|e| e.to_string())

@@ -565,10 +565,15 @@ pub fn recheck_runs(
             let segs: Vec<InternalSegment> = locs
                 .iter()
                 .zip(&noms)
-                .map(|(&l, nom)| InternalSegment {
+                .zip(&exits)
+                .map(|((&l, nom), ex)| InternalSegment {
                     lp: lps[l],
                     lc: lcs[l].expect("checked"),
                     nominal: nom,
+                    theta_stored: match ex {
+                        Exit::Guard { theta, .. } => Some(*theta),
+                        Exit::Table => None,
+                    },
                 })
                 .collect();
             match certify_internal(plant, &segs, &edges, steps) {
@@ -583,9 +588,14 @@ pub fn recheck_runs(
         for (i, (c, ex)) in cert.segments.iter().zip(&exits).enumerate() {
             if let (Some(g), Exit::Guard { a, b, theta, .. }) = (&c.exit, ex) {
                 let a: Vec<f32> = f32s(a).iter().map(|&v| v as f32).collect();
-                if a != g.a || *b != g.b || *theta < g.theta {
+                if a != g.a || *b != g.b {
                     why = Some(format!(
-                        "segment {i}: the stored guard or threshold is not the certified one"
+                        "segment {i}: the stored guard is not the plant's edge's"
+                    ));
+                } else if *theta != g.theta {
+                    why = Some(format!(
+                        "segment {i}: the stored threshold θ = {theta:e} is below what the guard test's rounding requires ({:e} certified)",
+                        g.theta
                     ));
                 }
                 if c.rows > noms[i].steps() {

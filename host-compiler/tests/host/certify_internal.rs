@@ -36,6 +36,26 @@ fn example_4_25_run_is_certified() {
         host_compiler::verify::hybrid::recheck(&t.plant, &t.property, None, t.steps, &bytes_big)
             .unwrap();
     assert!(!rc_big[0].ok, "{rc_big:?}");
+    // The stored detection threshold θ is what the firmware tests, so the re-proof certifies that one: a
+    // θ still above twice the guard test's rounding bound (synthesis stores 1.25 times it) is re-proved
+    // as stored, one below it is refused, naming the threshold.
+    let theta = run.certificate.segments[0].exit.as_ref().unwrap().theta;
+    let reproof = |scale: f32| {
+        let mut r = run.clone();
+        r.certificate.segments[0].exit.as_mut().unwrap().theta = theta * scale;
+        let b = image(&t, std::slice::from_ref(&r)).unwrap();
+        host_compiler::verify::hybrid::recheck(&t.plant, &t.property, None, t.steps, &b)
+            .unwrap()
+            .remove(0)
+    };
+    let lower = reproof(0.9);
+    assert!(lower.ok, "{lower:?}");
+    let too_low = reproof(0.5);
+    assert!(!too_low.ok, "{too_low:?}");
+    assert!(
+        too_low.why.as_deref().unwrap_or("").contains("threshold"),
+        "{too_low:?}"
+    );
     let starts = ball_starts(&t, &run, 40, 40, 7);
     let rep = monte_carlo_hybrid(
         &t.plant,
