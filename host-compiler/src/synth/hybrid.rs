@@ -53,6 +53,9 @@ pub const GUARD_DEPTHS: [f64; 3] = [0.05, 0.2, 0.45];
 /// own flow past the guard runs into Unsafe (Example 5.5: the left location's equilibria for |u| ≤ 3 lie
 /// inside the wall), so the extended segment must end soon after its crossing.
 pub const DURATIONS: [f64; 6] = [0.04, 0.05, 0.07, 0.1, 0.2, 0.35];
+/// The tolerance of the KKT solves' iterative refinement in the planner's generator calls
+/// ([`GenSettings::refinement_tol`]).
+pub const PLAN_REFINEMENT_TOL: f64 = 1e-10;
 /// The last segment's duration at most, as a fraction of T (what is left of T after the earlier
 /// segments, if less).
 pub const LAST_DURATION: f64 = 0.4;
@@ -427,7 +430,12 @@ pub fn plan_guided(
     guide: &dyn Fn(&Leg<'_>) -> Option<Nominal>,
 ) -> Result<HybridRun, String> {
     let x0 = &f32_start(x0)[..];
-    let gs = GenSettings::default();
+    // The planner's generator calls (durations × guard depths per seed) are most of a hybrid synthesis,
+    // and the KKT solves' refinement a large part of them: a looser one changes only what is proposed.
+    let gs = GenSettings {
+        refinement_tol: Some(PLAN_REFINEMENT_TOL),
+        ..GenSettings::default()
+    };
     let h = task.plant.period();
     let horizon = task.problem.horizon;
     let steps_of = |f: f64| ((f * horizon / h).round() as usize).clamp(2, task.steps);

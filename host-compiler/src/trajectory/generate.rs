@@ -55,6 +55,11 @@ pub struct GenSettings {
     pub smooth_weight: f64,
     /// Upper bound on δ in the subproblems, keeping them bounded. Finite, > 0. Default 10.
     pub delta_max: f64,
+    /// The tolerance (relative and absolute) at which clarabel's iterative refinement of each KKT solve
+    /// stops; `None`: clarabel's defaults (10⁻¹³ relative, 10⁻¹² absolute). A subproblem only proposes a
+    /// trajectory, which is certified afterwards, so a looser refinement changes proposals, never what
+    /// is certified. Finite, > 0 when given. Default `None`.
+    pub refinement_tol: Option<f64>,
 }
 
 impl Default for GenSettings {
@@ -64,6 +69,7 @@ impl Default for GenSettings {
             tol: 1e-4,
             smooth_weight: 1e-4,
             delta_max: 10.0,
+            refinement_tol: None,
         }
     }
 }
@@ -75,7 +81,11 @@ impl GenSettings {
         c.at_least_one("max_iter", self.max_iter)?;
         c.non_negative("tol", self.tol)?;
         c.non_negative("smooth_weight", self.smooth_weight)?;
-        c.positive("delta_max", self.delta_max)
+        c.positive("delta_max", self.delta_max)?;
+        match self.refinement_tol {
+            Some(t) => c.positive("refinement_tol", t),
+            None => Ok(()),
+        }
     }
 }
 
@@ -86,6 +96,7 @@ settings_builder!(
         tol: f64,
         smooth_weight: f64,
         delta_max: f64,
+        refinement_tol: Option<f64>,
     }
 );
 
@@ -677,11 +688,15 @@ fn solve_subproblem(
     let mut q = vec![0.0; nvar];
     q[d] = -1.0;
     let Am = CscMatrix::new_from_triplets(rows.b.len(), nvar, rows.I, rows.J, rows.V);
-    let st = DefaultSettingsBuilder::default()
-        .verbose(false)
-        .max_iter(200)
-        .build()
-        .expect("verbose and max_iter = 200 are in clarabel's valid range");
+    let mut b = DefaultSettingsBuilder::default();
+    b.verbose(false).max_iter(200);
+    if let Some(t) = settings.refinement_tol {
+        b.iterative_refinement_reltol(t)
+            .iterative_refinement_abstol(t);
+    }
+    let st = b.build().expect(
+        "verbose, max_iter = 200 and a validated refinement tolerance are in clarabel's range",
+    );
     let mut solver = DefaultSolver::new(&Pm, &q, &Am, &rows.b, &rows.cones, st)
         .map_err(|e| SubproblemStatus::Setup(e.into()))?;
     solver.solve();
