@@ -2323,7 +2323,7 @@ static int mon_process(sc_monitor *m, uint32_t i, int first) {
  * to depth SC_MAX_MONITOR_NODES at most; here an explicit stack). */
 typedef struct {
     uint32_t i, depth, stage;
-    float lo1, hi1, lo2, hi2;
+    float lo[2], hi[2]; /* the first and second child's bounds */
 } sc_bframe;
 
 #define SC_BF_ENTER 0u
@@ -2448,13 +2448,8 @@ static void mon_bounds(const sc_monitor *m, uint32_t root, uint64_t t, float *lo
             b.len = mon_word(m, base + 3u);
             if (b.len > 0) {
                 float v = buf_at(m, &b, 0, 1u, 0u);
-                if (second) {
-                    f->lo2 = v;
-                    f->hi2 = v;
-                } else {
-                    f->lo1 = v;
-                    f->hi1 = v;
-                }
+                f->lo[second] = v;
+                f->hi[second] = v;
                 f->stage = second ? SC_BF_COMBINE : SC_BF_SECOND;
             } else if (sp < SC_MAX_MONITOR_NODES + 2u) {
                 f->stage = second ? SC_BF_SECOND_RET : SC_BF_FIRST_RET;
@@ -2464,13 +2459,8 @@ static void mon_bounds(const sc_monitor *m, uint32_t root, uint64_t t, float *lo
                 sp++;
             } else {
                 /* Deeper than any tree of SC_MAX_MONITOR_NODES nodes: unknown. */
-                if (second) {
-                    f->lo2 = SC_NEG_INF;
-                    f->hi2 = SC_POS_INF;
-                } else {
-                    f->lo1 = SC_NEG_INF;
-                    f->hi1 = SC_POS_INF;
-                }
+                f->lo[second] = SC_NEG_INF;
+                f->hi[second] = SC_POS_INF;
                 f->stage = second ? SC_BF_COMBINE : SC_BF_SECOND;
             }
             break;
@@ -2478,11 +2468,11 @@ static void mon_bounds(const sc_monitor *m, uint32_t root, uint64_t t, float *lo
         case SC_BF_COMBINE: {
             sc_mop o = mon_op(&m->prog, f->i);
             if (o.op == SC_MOP_AND) {
-                rlo = min_f32(f->lo1, f->lo2);
-                rhi = min_f32(f->hi1, f->hi2);
+                rlo = min_f32(f->lo[0], f->lo[1]);
+                rhi = min_f32(f->hi[0], f->hi[1]);
             } else {
-                rlo = max_f32(f->lo1, f->lo2);
-                rhi = max_f32(f->hi1, f->hi2);
+                rlo = max_f32(f->lo[0], f->lo[1]);
+                rhi = max_f32(f->hi[0], f->hi[1]);
             }
             ret = 1;
             break;
@@ -2493,14 +2483,11 @@ static void mon_bounds(const sc_monitor *m, uint32_t root, uint64_t t, float *lo
             sp--;
             if (sp > 0) {
                 sc_bframe *pf = &st[sp - 1u];
-                if (pf->stage == SC_BF_FIRST_RET) {
-                    pf->lo1 = rlo;
-                    pf->hi1 = rhi;
-                    pf->stage = SC_BF_SECOND;
-                } else if (pf->stage == SC_BF_SECOND_RET) {
-                    pf->lo2 = rlo;
-                    pf->hi2 = rhi;
-                    pf->stage = SC_BF_COMBINE;
+                if (pf->stage == SC_BF_FIRST_RET || pf->stage == SC_BF_SECOND_RET) {
+                    int second = pf->stage == SC_BF_SECOND_RET;
+                    pf->lo[second] = rlo;
+                    pf->hi[second] = rhi;
+                    pf->stage = second ? SC_BF_COMBINE : SC_BF_SECOND;
                 }
             }
         }
