@@ -31,17 +31,19 @@ pub fn examples_rows(summary: &[Value]) -> Vec<Value> {
         .collect()
 }
 
-fn value(rows: &[Value], name: &str) -> Option<f64> {
+/// Field `key` of the row named `name`.
+fn field<'r>(rows: &'r [Value], name: &str, key: &str) -> Option<&'r Value> {
     rows.iter()
         .find(|r| r.get("name").and_then(Value::as_str) == Some(name))
-        .and_then(|r| r.get("value"))
-        .and_then(Value::as_f64)
+        .and_then(|r| r.get(key))
+}
+
+fn value(rows: &[Value], name: &str) -> Option<f64> {
+    field(rows, name, "value").and_then(Value::as_f64)
 }
 
 fn unit(rows: &[Value], name: &str) -> Option<String> {
-    rows.iter()
-        .find(|r| r.get("name").and_then(Value::as_str) == Some(name))
-        .and_then(|r| r.get("unit"))
+    field(rows, name, "unit")
         .and_then(Value::as_str)
         .map(str::to_string)
 }
