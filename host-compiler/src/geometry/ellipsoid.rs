@@ -7,7 +7,15 @@ use super::cache::MetricCache;
 use super::ellipsoid_distance::EllipsoidBoundaryDistance;
 use super::linalg::{self, SymEig};
 use super::{check_query, GeometryError, Metric, Region, SignedDistanceFn, Witness};
+use std::cell::RefCell;
 use std::sync::Arc;
+
+thread_local! {
+    /// One boundary workspace per thread for [`Ellipsoid`]'s distance and depth queries, which the
+    /// certificates and the optimisers ask millions of times ([`EllipsoidBoundaryDistance::workspace_in`]).
+    static BOUNDARY_WORKSPACE: RefCell<Option<super::ellipsoid_distance::BoundaryWorkspace>> =
+        const { RefCell::new(None) };
+}
 
 /// {x ∈ ℝⁿ : (x − c)ᵀQ(x − c) ≤ 1}, Q symmetric PSD and nonzero.
 ///
@@ -101,9 +109,13 @@ impl Ellipsoid {
 
     fn boundary(&self, x: &[f64], metric: &Metric) -> Result<Witness, GeometryError> {
         let f = self.factored(metric)?;
-        let mut ws = f.workspace();
         let mut point = vec![0.0; x.len()];
-        let s = f.solve(x, &mut ws, &mut point)?;
+        // The thread's workspace (every value in it is written before it is read, so reuse changes no
+        // result); a fresh one if it is in use further up this thread's stack.
+        let s = BOUNDARY_WORKSPACE.with(|cell| match cell.try_borrow_mut() {
+            Ok(mut slot) => f.solve(x, f.workspace_in(&mut slot), &mut point),
+            Err(_) => f.solve(x, &mut f.workspace(), &mut point),
+        })?;
         Ok(Witness {
             value: s.value,
             point,
