@@ -110,8 +110,8 @@ pub fn run(a: &SynthArgs, problem: crate::spec::Problem) -> Outcome {
         "locations": task.designs.iter().map(|d| serde_json::json!({
             "K": crate::linalg::to_rows(d.K.as_ref()), "P": crate::linalg::to_rows(d.P.as_ref()),
         })).collect::<Vec<_>>(),
-        "runs": s.runs.iter().map(|r| serde_json::json!({
-            "x0": r.nominals[0].x[0], "certificate": r.certificate,
+        "runs": s.runs.iter().zip(&s.sources).map(|(r, src)| serde_json::json!({
+            "x0": r.nominals[0].x[0], "certificate": r.certificate, "source": src,
             "locations": r.locations.iter().map(|&l| &task.plant.modes()[l].name).collect::<Vec<_>>(),
             "nominal_segments": r.nominals.iter().map(|n| &n.x).collect::<Vec<_>>(),
         })).collect::<Vec<_>>(),

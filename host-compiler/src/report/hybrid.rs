@@ -3,7 +3,14 @@
 //! (the P_ℓ-balls of radius δᵢ around the samples, projected), the guard of the edge taken, the next
 //! segment's start ball that the landings must hit (the "hole" of Lemma 4.23's safe transition, drawn
 //! dashed: its section by the guard plane is the hole), and the cover of Init by the runs' first balls;
-//! then a table of every run's segments (δᵢ, what binds it, the event samples, the rows kept).
+//! then a table of every run's segments (δᵢ, what binds it, the event samples, the rows kept, where the run
+//! came from).
+//!
+//! **Where the cover came from** (in the manner of the text's Figure 5.5): each run's first ball is filled
+//! in the colour of its origin (the planner from a seed, Algorithm 4 grown from another ball, a route of
+//! the global search, a recording), darker when its radius is below δε (`min_robustness`, the balls
+//! Algorithm 4 no longer grows from), and a run grown by Algorithm 4 is joined by a thin line to the centre
+//! of the ball it grew from.
 //!
 //! The planes pair the guard's main coordinate (the largest component of the first edge's normal) with
 //! each other state coordinate, at most [`PLANES`] of them. Sets are projected: an ellipsoid or ball to
@@ -12,6 +19,7 @@
 use super::format::{escape, num};
 use super::plots::{css_color, padded_span, trajectory_color, DynResult, GOAL_COLOR, UNSAFE_COLOR};
 use super::present::root2;
+use crate::cover::seeds::{Origin, Source};
 use crate::model::hybrid::EdgeKind;
 use crate::spec::sets::{Coords, SetDesc, Shape};
 use crate::synth::hybrid::{HybridSynthesis, HybridTask};
@@ -28,6 +36,60 @@ const TUBES: usize = 10;
 /// Colour of location `loc` (the trajectory palette; a run's start dot takes its rank's colour).
 fn location_color(loc: usize) -> RGBColor {
     trajectory_color(loc)
+}
+
+/// The cover's fill for a run of this origin (module doc).
+fn origin_color(o: &Origin) -> RGBColor {
+    match o {
+        Origin::Generator => RGBColor(60, 110, 220),
+        Origin::Algorithm4(_) => RGBColor(0, 150, 150),
+        Origin::Route(_) => RGBColor(230, 140, 20),
+        Origin::Import(_) => RGBColor(140, 70, 170),
+    }
+}
+
+/// The origin classes in the legend's order, with their names.
+const ORIGINS: [(Origin, &str); 4] = [
+    (Origin::Generator, "the planner from a seed"),
+    (Origin::Algorithm4(0), "Algorithm 4 (grown from a ball)"),
+    (Origin::Route(0), "a route of the global search"),
+    (Origin::Import(String::new()), "a recording"),
+];
+
+/// Whether two origins are of one class (the legend's).
+fn same_class(a: &Origin, b: &Origin) -> bool {
+    std::mem::discriminant(a) == std::mem::discriminant(b)
+}
+
+/// The cover's legend: a key and a count per origin class present, and how many balls are below δε.
+fn origin_legend(s: &HybridSynthesis, delta_eps: f64) -> String {
+    let mut h = String::from("<p id=\"cover-origins\">The cover by origin:");
+    for (o, name) in &ORIGINS {
+        let count = s
+            .sources
+            .iter()
+            .filter(|x| same_class(&x.origin, o))
+            .count();
+        if count > 0 {
+            h.push_str(&format!(
+                "<span class=key style=\"background:{}\"></span>{}: {}",
+                css_color(origin_color(o)),
+                escape(name),
+                count
+            ));
+        }
+    }
+    let low = s
+        .runs
+        .iter()
+        .filter(|r| (r.certificate.delta_stored as f64) < delta_eps)
+        .count();
+    h.push_str(&format!(
+        "; {low} of {} balls have a radius below δε = {} (drawn darker; Algorithm 4 does not grow from them). A thin line joins a ball grown by Algorithm 4 to the ball it grew from.</p>",
+        s.runs.len(),
+        num(delta_eps)
+    ));
+    h
 }
 
 /// The page, self-contained (inline SVG).
@@ -138,6 +200,7 @@ pub fn render(task: &HybridTask, spec: &str, s: &HybridSynthesis) -> String {
     } else {
         "<h2>Runs in the state space</h2><p>Nominal segments in their location's colour, with tubes (the certified ball of each segment around its samples, projected); the guard of the edge taken (black line); the next segment's start ball, dashed: every run near the nominal lands inside it (Lemma 4.23; its section by the guard is the safe hole); the runs' first balls over Init (blue, the cover). Goal green, Unsafe red, Init grey.</p>"
     });
+    h.push_str(&origin_legend(s, problem.synthesis.min_robustness));
     for pl in planes(task) {
         match plane_plot(task, s, pl) {
             Ok(svg) => h.push_str(&svg),
@@ -145,8 +208,9 @@ pub fn render(task: &HybridTask, spec: &str, s: &HybridSynthesis) -> String {
         }
     }
 
-    h.push_str("<h2>Segments</h2><table><tr><th>run</th><th>x̃(0)</th><th>δ stored</th><th>segment</th><th>location</th><th>δᵢ</th><th>what binds δᵢ</th><th>events (samples)</th><th>rows</th></tr>");
+    h.push_str("<h2>Segments</h2><table><tr><th>run</th><th>x̃(0)</th><th>δ stored</th><th>segment</th><th>location</th><th>δᵢ</th><th>what binds δᵢ</th><th>events (samples)</th><th>rows</th><th>origin</th></tr>");
     for (i, r) in s.runs.iter().enumerate() {
+        let origin = s.sources.get(i).map_or(String::new(), Source::to_string);
         for (j, (seg, &loc)) in r.certificate.segments.iter().zip(&r.locations).enumerate() {
             let head = if j == 0 {
                 format!(
@@ -159,12 +223,13 @@ pub fn render(task: &HybridTask, spec: &str, s: &HybridSynthesis) -> String {
                 "<td></td><td></td><td></td>".to_string()
             };
             h.push_str(&format!(
-                "<tr>{head}<td>{j}</td><td class=l>{}</td><td>{}</td><td class=l>{}</td><td>{}</td><td>{}</td></tr>",
+                "<tr>{head}<td>{j}</td><td class=l>{}</td><td>{}</td><td class=l>{}</td><td>{}</td><td>{}</td><td class=l>{}</td></tr>",
                 escape(&modes[loc].name),
                 num(seg.delta),
                 escape(seg.binding),
                 seg.events.map_or("—".to_string(), |(a, b)| format!("{a}–{b}")),
                 seg.rows,
+                if j == 0 { escape(&origin) } else { String::new() },
             ));
         }
     }
@@ -357,16 +422,27 @@ fn plane_plot(task: &HybridTask, s: &HybridSynthesis, pl: [usize; 2]) -> DynResu
                 chart.draw_series([Polygon::new(poly, color.mix(0.25).filled())])?;
             }
         }
-        // The cover: every run's first ball.
-        let cover = RGBColor(60, 110, 220);
-        for r in &s.runs {
-            let poly = shadow(
-                inv(task.path[0]),
-                &r.nominals[0].x[0],
-                r.certificate.delta_stored as f64,
-                pl,
-            );
-            chart.draw_series([Polygon::new(poly, cover.mix(0.18).filled())])?;
+        // The cover: every run's first ball in its origin's colour, darker below δε, and Algorithm 4's
+        // links to the ball each run grew from (module doc).
+        let delta_eps = problem.synthesis.min_robustness;
+        let centre = |r: &crate::synth::hybrid::HybridRun| {
+            let x = &r.nominals[0].x[0];
+            (x[pl[0]], x[pl[1]])
+        };
+        for (i, r) in s.runs.iter().enumerate() {
+            let origin = s.sources.get(i).map_or(&Origin::Generator, |x| &x.origin);
+            let delta = r.certificate.delta_stored as f64;
+            let poly = shadow(inv(task.path[0]), &r.nominals[0].x[0], delta, pl);
+            let alpha = if delta < delta_eps { 0.45 } else { 0.18 };
+            chart.draw_series([Polygon::new(poly, origin_color(origin).mix(alpha).filled())])?;
+            if let Origin::Algorithm4(m) = origin {
+                if let Some(parent) = s.runs.get(*m) {
+                    chart.draw_series(LineSeries::new(
+                        [centre(parent), centre(r)],
+                        RGBColor(90, 90, 90).mix(0.6).stroke_width(1),
+                    ))?;
+                }
+            }
         }
         // The guard of each edge taken, where its normal lies in the plane.
         for &e in &task.edges {

@@ -766,25 +766,26 @@ pub struct HybridSynthesis {
     pub seconds: f64,
 }
 
-/// The one accept test of a certified run (planned or imported): its δ is at least the spec's
-/// `min_robustness` (and positive), the trajectory budget has room, and its kept rows and its segments fit
+/// The one accept test of a certified run (planned or imported): its δ is at least `floor` (and
+/// positive; [`admission_floor`]), the trajectory budget has room, and its kept rows and its segments fit
 /// the image with the `rows_used` so far ([`no_room`]). `Err` says why not.
 pub fn admit(
     task: &HybridTask,
     runs: &[HybridRun],
     rows_used: usize,
     run: &HybridRun,
+    floor: f64,
 ) -> Result<usize, String> {
     let s = &task.problem.synthesis;
     if !run.certificate.is_certified() {
         return Err(import::refusal(task, &run.locations, &run.certificate));
     }
     // δ > 0 and finite here (certified).
-    if run.delta() < s.min_robustness {
+    if run.delta() < floor {
         return Err(format!(
             "δ = {:.3e} is below min_robustness = {:.3e} ({})",
             run.delta(),
-            s.min_robustness,
+            floor,
             import::bindings(task, &run.locations, &run.certificate)
         ));
     }
@@ -800,6 +801,19 @@ pub fn admit(
     }
     reproved(task, run)?;
     Ok(rows)
+}
+
+/// The least δ a certified run needs to join the cover. With the planner from each uncovered sample
+/// ([`Generator::Scp`]) that is δε (`min_robustness`): a smaller ball is not worth its table rows. With
+/// Algorithm 4 (§5.4) δε instead bounds where the growth goes on: a sample whose projection falls on a
+/// ball of radius below δε is discarded ([`algorithm4_seeds`]), and every certified run (δ > 0) joins the
+/// cover, as the text's Example 5.6 keeps its 388 runs, those below δε among them (Figure 5.5 draws them
+/// darker).
+pub fn admission_floor(task: &HybridTask, generator: Generator) -> f64 {
+    match generator {
+        Generator::Algorithm4 => 0.0,
+        _ => task.problem.synthesis.min_robustness,
+    }
 }
 
 /// `Ok` when `run` re-proves from the bytes of an image holding it alone, as the final image's re-proof
@@ -882,7 +896,9 @@ fn extend_working(working: &mut Vec<Vec<f64>>, tried: &mut Vec<bool>, fresh: Vec
 
 /// The seeds of an Algorithm 4 round (§5.4; forced switching, or internal across the guards): the
 /// untried uncovered working samples, nearest to the cover first (ties in sample order), each projected
-/// onto the boundary of its nearest ball; a batch is spread by the runs' median radius (one seed per neighbourhood). Marks them tried.
+/// onto the boundary of its nearest ball; a sample whose nearest ball has a radius below δε
+/// (`min_robustness`) is discarded instead; a batch is spread by the runs' median radius (one seed per
+/// neighbourhood). Marks them tried.
 fn algorithm4_seeds(
     task: &HybridTask,
     runs: &[HybridRun],
@@ -903,11 +919,18 @@ fn algorithm4_seeds(
         .collect();
     pool.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.2.cmp(&b.2)));
     let mut out: Vec<Seed> = Vec::new();
+    let delta_eps = task.problem.synthesis.min_robustness;
     for (_, m, i) in pool {
         if out.len() == batch {
             break;
         }
         let r = &runs[m];
+        // §5.4: y nearest a ball of radius below δε lies where local variation no longer reaches;
+        // it is discarded (it may still be covered later by a ball grown elsewhere).
+        if (r.certificate.delta_stored as f64) < delta_eps {
+            tried[i] = true;
+            continue;
+        }
         let Some(yh) = crate::cover::alg4::project_onto_boundary(
             P,
             &working[i],
@@ -979,15 +1002,15 @@ impl Sources for HybridSources<'_> {
 }
 
 /// Plan a run for `seed`: its sources in order ([`HybridSources`]), the first run certified at
-/// `min_robustness` with the seed's sample in its ball; when there is none, the planner's answer
+/// `floor` ([`admission_floor`]) with the seed's sample in its ball; when there is none, the planner's answer
 /// whatever it is (the accept test [`admit`] judges it and says why).
 fn plan_seed(
     task: &HybridTask,
     runs: &[HybridRun],
     routing: Option<&Routing<'_>>,
     seed: &Seed,
+    floor: f64,
 ) -> (Origin, Result<HybridRun, String>) {
-    let floor = task.problem.synthesis.min_robustness;
     let kept = |r: &HybridRun| {
         r.certificate.is_certified()
             && r.delta() >= floor
@@ -1026,6 +1049,7 @@ pub fn synthesize_hybrid(
     let t0 = std::time::Instant::now();
     let s = &task.problem.synthesis;
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(task.problem.seed);
+    let floor = admission_floor(task, opts.generator);
     let init = crate::cover::estimate::SampleBox {
         lo: task.problem.init.lo.clone(),
         hi: task.problem.init.hi.clone(),
@@ -1058,7 +1082,7 @@ pub fn synthesize_hybrid(
     for (name, rec) in &opts.imports {
         let r = import::certify_recording(task, rec)
             .map_err(|e| e.to_string())
-            .and_then(|run| admit(task, &runs, rows_used, &run).map(|rows| (run, rows)));
+            .and_then(|run| admit(task, &runs, rows_used, &run, floor).map(|rows| (run, rows)));
         imported.push((
             name.clone(),
             r.map(|(run, rows)| {
@@ -1178,6 +1202,7 @@ pub fn synthesize_hybrid(
                     &runs,
                     routing.as_ref().filter(|_| empty_rounds > 0),
                     seed,
+                    floor,
                 )
             })
             .collect();
@@ -1188,11 +1213,15 @@ pub fn synthesize_hybrid(
                 .as_ref()
                 .ok()
                 .and_then(|run| no_room(task, &runs, rows_used, run));
-            match r.and_then(|run| admit(task, &runs, rows_used, &run).map(|rows| (run, rows))) {
+            match r
+                .and_then(|run| admit(task, &runs, rows_used, &run, floor).map(|rows| (run, rows)))
+            {
                 Ok((run, rows)) => {
                     rows_used += rows;
                     runs.push(run);
-                    sources.push(Source::new(origin, false));
+                    // Every planned, routed or grown run went through §5.3 (`plan_guided`,
+                    // `forced::plan_forced`, the two `grow_from`).
+                    sources.push(Source::new(origin, true));
                     if let Some(f) = &opts.on_accept {
                         f(runs.len(), runs.last().map_or(0.0, |r| r.delta()));
                     }

@@ -49,6 +49,26 @@ fn hybrid_synth_then_verify() {
         "the table shows segment 0's δ {delta}"
     );
     assert!(page.contains("Theorem 4.7 (Goal, Unsafe, Input)"));
+    // Where the cover came from (Figure 5.5's manner): the one run is the planner's, its ball above δε,
+    // and the segments table names its origin.
+    let legend = page
+        .split("<p id=\"cover-origins\">")
+        .nth(1)
+        .and_then(|t| t.split("</p>").next())
+        .expect("the cover's origin legend");
+    assert!(
+        legend.contains("the planner from a seed: 1") && !legend.contains("Algorithm 4 ("),
+        "{legend}"
+    );
+    assert!(
+        legend.contains("0 of 1 balls have a radius below δε"),
+        "{legend}"
+    );
+    assert!(
+        page.contains("<th>origin</th>")
+            && page.contains("<td class=l>generated (SCP) + §5.3</td>")
+    );
+    assert_eq!(cert["runs"][0]["source"], "generated (SCP) + §5.3");
 
     verify_attack_and_enlarged_radius(&dir, &spec, &img);
     let _ = std::fs::remove_dir_all(&dir);
