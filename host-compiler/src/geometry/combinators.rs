@@ -1,7 +1,7 @@
 //! Sets built from other sets: finite unions, complements, and sets given in output coordinates
 //! ({x : Cx ∈ S_y}), each with distance and depth (Def 2.16) in a state metric ‖·‖_R.
 
-use super::cache::MetricCache;
+use super::cache::{Cached, MetricCache};
 use super::linalg::{self, SymEig};
 use super::{check_query, GeometryError, Metric, Region, SignedDistanceFn, Witness};
 
@@ -358,7 +358,7 @@ impl InOutput {
         Ok(self.induced(metric)?.Ry.clone())
     }
 
-    fn induced(&self, metric: &Metric) -> Result<std::sync::Arc<OutputMetric>, GeometryError> {
+    fn induced(&self, metric: &Metric) -> Result<Cached<'_, OutputMetric>, GeometryError> {
         let (n, p) = (self.n, self.p);
         self.cache.get_or_try_insert(metric, || {
             let (_, er) = metric.validated()?;

@@ -12,7 +12,6 @@ use super::combinators::{Complement, InOutput, Union};
 use super::ellipsoid::Ellipsoid;
 use super::ellipsoid_distance::{BoundaryWorkspace, EllipsoidBoundaryDistance};
 use super::{linalg, Metric, Region};
-use std::sync::Arc;
 
 /// One point's answer: membership, and the depth inside or the distance outside (≥ 0; NaN for a point
 /// of the wrong length or with a non-finite entry, where [`Region::signed_dist`] reports NaN too).
@@ -53,7 +52,7 @@ fn valid(x: &[f64], n: usize) -> bool {
 /// [`Ellipsoid`]: membership by its level, the depth or distance by the cached boundary solve (7.2).
 struct EllipsoidFn<'a> {
     set: &'a Ellipsoid,
-    f: Arc<EllipsoidBoundaryDistance>,
+    f: super::Cached<'a, EllipsoidBoundaryDistance>,
     ws: BoundaryWorkspace,
     point: Vec<f64>,
 }

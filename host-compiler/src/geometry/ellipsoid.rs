@@ -3,12 +3,11 @@
 //! [`Region`]s. Distance and depth both come from the boundary problem (7.2) solved by
 //! [`EllipsoidBoundaryDistance`], factored once per metric and cached.
 
-use super::cache::MetricCache;
+use super::cache::{Cached, MetricCache};
 use super::ellipsoid_distance::EllipsoidBoundaryDistance;
 use super::linalg::{self, SymEig};
 use super::{check_query, GeometryError, Metric, Region, SignedDistanceFn, Witness};
 use std::cell::RefCell;
-use std::sync::Arc;
 
 thread_local! {
     /// One boundary workspace per thread for [`Ellipsoid`]'s distance and depth queries, which the
@@ -103,7 +102,7 @@ impl Ellipsoid {
     pub fn factored(
         &self,
         metric: &Metric,
-    ) -> Result<Arc<EllipsoidBoundaryDistance>, GeometryError> {
+    ) -> Result<Cached<'_, EllipsoidBoundaryDistance>, GeometryError> {
         self.cache.get_or_try_insert(metric, || self.factor(metric))
     }
 

@@ -27,6 +27,7 @@ pub mod polytope;
 mod cache;
 pub(crate) mod linalg;
 
+pub use cache::Cached;
 pub use combinators::{Complement, Empty, InOutput, Intersection, Union};
 pub use compiled::{Signed, SignedDistanceFn};
 pub use ellipsoid::{Ball, Ellipsoid};

@@ -17,7 +17,7 @@
 //!   R with eigenvalue ≤ 1e-13·λmax(R). The witness is the first boundary crossing on the segment from x to the
 //!   minimising step (which is the step's end point whenever the depth is positive).
 
-use super::cache::MetricCache;
+use super::cache::{Cached, MetricCache};
 use super::linalg::{self, SymEig};
 use super::{check_query, GeometryError, Metric, Region, Witness};
 use clarabel::algebra::CscMatrix;
@@ -168,7 +168,7 @@ impl Polytope {
         }
     }
 
-    fn steps(&self, metric: &Metric) -> Result<std::sync::Arc<FacetSteps>, GeometryError> {
+    fn steps(&self, metric: &Metric) -> Result<Cached<'_, FacetSteps>, GeometryError> {
         self.cache.get_or_try_insert(metric, || {
             let (R, er) = metric.validated()?;
             let Rp = er.pinv();

@@ -42,7 +42,6 @@ use crate::geometry::{
     Ball, BoundaryWorkspace, Ellipsoid, EllipsoidBoundaryDistance, GeometryError, Metric, Region,
     Witness,
 };
-use std::sync::Arc;
 
 /// Errors of the safety robustness computation: bad trajectories, mismatched dimensions and sets whose
 /// distance routines return NaN.
@@ -291,7 +290,7 @@ enum Prepared<'a> {
     Region(&'a dyn Region),
     Ellipsoid {
         e: &'a Ellipsoid,
-        f: Arc<EllipsoidBoundaryDistance>,
+        f: crate::geometry::Cached<'a, EllipsoidBoundaryDistance>,
         ws: BoundaryWorkspace,
         bounds: EllipsoidBounds,
     },
