@@ -6,7 +6,8 @@
 //! then a table of every run's segments (δᵢ, what binds it, the event samples, the rows kept, where the run
 //! came from).
 //!
-//! **Where the cover came from** (in the manner of the text's Figure 5.5): each run's first ball is filled
+//! **Where the cover came from** (in the manner of the text's Figure 5.5, one plot per plane framed on Init):
+//! each run's first ball is filled
 //! in the colour of its origin (the planner from a seed, Algorithm 4 grown from another ball, a route of
 //! the global search, a recording), darker when its radius is below δε (`min_robustness`, the balls
 //! Algorithm 4 no longer grows from), and a run grown by Algorithm 4 is joined by a thin line to the centre
@@ -196,13 +197,21 @@ pub fn render(task: &HybridTask, spec: &str, s: &HybridSynthesis) -> String {
     h.push_str("</p>");
 
     h.push_str(if task.forced {
-        "<h2>Runs in the state space</h2><p>Nominal segments in their location's colour, with tubes (the certified ball of each segment around its samples, projected); the next segment's start ball, dashed: the controller switches by its table, and every run near the nominal is, at the switching sample, inside the edge's guard and within that ball (the safe transition, Theorem 4.17); the runs' first balls over Init (blue, the cover). Goal green, Unsafe red, Init grey.</p>"
+        "<h2>Runs in the state space</h2><p>Nominal segments in their location's colour, with tubes (the certified ball of each segment around its samples, projected); the next segment's start ball, dashed: the controller switches by its table, and every run near the nominal is, at the switching sample, inside the edge's guard and within that ball (the safe transition, Theorem 4.17); the runs' first balls over Init (the cover, coloured by origin as below). Goal green, Unsafe red, Init grey.</p>"
     } else {
-        "<h2>Runs in the state space</h2><p>Nominal segments in their location's colour, with tubes (the certified ball of each segment around its samples, projected); the guard of the edge taken (black line); the next segment's start ball, dashed: every run near the nominal lands inside it (Lemma 4.23; its section by the guard is the safe hole); the runs' first balls over Init (blue, the cover). Goal green, Unsafe red, Init grey.</p>"
+        "<h2>Runs in the state space</h2><p>Nominal segments in their location's colour, with tubes (the certified ball of each segment around its samples, projected); the guard of the edge taken (black line); the next segment's start ball, dashed: every run near the nominal lands inside it (Lemma 4.23; its section by the guard is the safe hole); the runs' first balls over Init (the cover, coloured by origin as below). Goal green, Unsafe red, Init grey.</p>"
     });
-    h.push_str(&origin_legend(s, problem.synthesis.min_robustness));
     for pl in planes(task) {
         match plane_plot(task, s, pl) {
+            Ok(svg) => h.push_str(&svg),
+            Err(e) => h.push_str(&format!("<p>(plot failed: {})</p>", escape(&e.to_string()))),
+        }
+    }
+
+    h.push_str("<h2>Cover of Init</h2><p>Each run's first ball over Init (grey), projected, in the manner of the text's Figure 5.5.</p>");
+    h.push_str(&origin_legend(s, problem.synthesis.min_robustness));
+    for pl in planes(task) {
+        match cover_plot(task, s, pl) {
             Ok(svg) => h.push_str(&svg),
             Err(e) => h.push_str(&format!("<p>(plot failed: {})</p>", escape(&e.to_string()))),
         }
@@ -372,6 +381,80 @@ fn init_box(b: &crate::spec::InitBox, pl: [usize; 2]) -> Vec<(f64, f64)> {
     ]
 }
 
+/// The cover on a plane's chart: every run's first ball in its origin's colour, darker below δε, and
+/// Algorithm 4's links to the ball each run grew from (module doc).
+fn draw_cover<DB: DrawingBackend>(
+    chart: &mut ChartContext<
+        '_,
+        DB,
+        Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>,
+    >,
+    task: &HybridTask,
+    s: &HybridSynthesis,
+    pl: [usize; 2],
+) -> DynResult<()>
+where
+    DB::ErrorType: 'static,
+{
+    let inv = &task.constants[task.path[0]].roots.inv;
+    let delta_eps = task.problem.synthesis.min_robustness;
+    let centre = |r: &crate::synth::hybrid::HybridRun| {
+        let x = &r.nominals[0].x[0];
+        (x[pl[0]], x[pl[1]])
+    };
+    for (i, r) in s.runs.iter().enumerate() {
+        let origin = s.sources.get(i).map_or(&Origin::Generator, |x| &x.origin);
+        let delta = r.certificate.delta_stored as f64;
+        let poly = shadow(inv, &r.nominals[0].x[0], delta, pl);
+        let alpha = if delta < delta_eps { 0.45 } else { 0.18 };
+        chart.draw_series([Polygon::new(poly, origin_color(origin).mix(alpha).filled())])?;
+        if let Origin::Algorithm4(m) = origin {
+            if let Some(parent) = s.runs.get(*m) {
+                chart.draw_series(LineSeries::new(
+                    [centre(parent), centre(r)],
+                    RGBColor(90, 90, 90).mix(0.6).stroke_width(1),
+                ))?;
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The cover of Init on a plane, framed on Init and the balls (the text's Figure 5.5): Init grey, the
+/// balls and links of [`draw_cover`].
+fn cover_plot(task: &HybridTask, s: &HybridSynthesis, pl: [usize; 2]) -> DynResult<String> {
+    let init = init_box(&task.problem.init, pl);
+    let (mut xs, mut ys): (Vec<f64>, Vec<f64>) = init.iter().copied().unzip();
+    for r in &s.runs {
+        let x = &r.nominals[0].x[0];
+        xs.push(x[pl[0]]);
+        ys.push(x[pl[1]]);
+    }
+    let ((x0, x1), (y0, y1)) = (padded_span(&xs, 0.08), padded_span(&ys, 0.08));
+    let width = 600u32;
+    let height = ((width as f64) * (y1 - y0) / (x1 - x0)).clamp(300.0, 700.0) as u32;
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, (width, height)).into_drawing_area();
+        root.fill(&WHITE)?;
+        let mut chart = ChartBuilder::on(&root)
+            .margin(10)
+            .x_label_area_size(30)
+            .y_label_area_size(45)
+            .build_cartesian_2d(x0..x1, y0..y1)?;
+        chart
+            .configure_mesh()
+            .x_desc(format!("x{}", pl[0] + 1))
+            .y_desc(format!("x{}", pl[1] + 1))
+            .draw()?;
+        let grey = RGBColor(120, 120, 120);
+        chart.draw_series([Polygon::new(init, grey.mix(0.25).filled())])?;
+        draw_cover(&mut chart, task, s, pl)?;
+        root.present()?;
+    }
+    Ok(svg)
+}
+
 fn plane_plot(task: &HybridTask, s: &HybridSynthesis, pl: [usize; 2]) -> DynResult<String> {
     let problem = &task.problem;
     let n = task.plant.modes()[0].flow.n();
@@ -422,28 +505,7 @@ fn plane_plot(task: &HybridTask, s: &HybridSynthesis, pl: [usize; 2]) -> DynResu
                 chart.draw_series([Polygon::new(poly, color.mix(0.25).filled())])?;
             }
         }
-        // The cover: every run's first ball in its origin's colour, darker below δε, and Algorithm 4's
-        // links to the ball each run grew from (module doc).
-        let delta_eps = problem.synthesis.min_robustness;
-        let centre = |r: &crate::synth::hybrid::HybridRun| {
-            let x = &r.nominals[0].x[0];
-            (x[pl[0]], x[pl[1]])
-        };
-        for (i, r) in s.runs.iter().enumerate() {
-            let origin = s.sources.get(i).map_or(&Origin::Generator, |x| &x.origin);
-            let delta = r.certificate.delta_stored as f64;
-            let poly = shadow(inv(task.path[0]), &r.nominals[0].x[0], delta, pl);
-            let alpha = if delta < delta_eps { 0.45 } else { 0.18 };
-            chart.draw_series([Polygon::new(poly, origin_color(origin).mix(alpha).filled())])?;
-            if let Origin::Algorithm4(m) = origin {
-                if let Some(parent) = s.runs.get(*m) {
-                    chart.draw_series(LineSeries::new(
-                        [centre(parent), centre(r)],
-                        RGBColor(90, 90, 90).mix(0.6).stroke_width(1),
-                    ))?;
-                }
-            }
-        }
+        draw_cover(&mut chart, task, s, pl)?;
         // The guard of each edge taken, where its normal lies in the plane.
         for &e in &task.edges {
             for (a, &b) in task.plant.edges()[e]

@@ -162,7 +162,8 @@ fn infeasible_text(
          starting from a run that ignores Unsafe, so a way around a wall that run crosses is not found. \
          To go on: give a route with `synth --import` (its states, applied inputs or references), play \
          one with `host-compiler play`, allow a longer horizon T, or let the routes of the global search \
-         (one-location tasks) propose the way"
+         propose the way (a one-location task asks them where this generator fails; an automaton with internal \
+         switching with `synth --guard-routes`)"
     )
 }
 

@@ -31,8 +31,8 @@ fn hybrid_synth_then_verify() {
     assert!(page.contains("left → right") && page.contains("identity"));
     assert_eq!(
         page.matches("<svg").count(),
-        2,
-        "planes (x1, x2) and (x1, x3)"
+        4,
+        "planes (x1, x2) and (x1, x3), each for the runs and for the cover of Init"
     );
     assert!(
         page.contains("\nx3\n</text>"),
