@@ -891,6 +891,11 @@ impl<'a> Monitor<'a> {
         loop {
             let mut any = false;
             for i in 0..self.prog.nodes {
+                // In the passes after the first (the end's), a node that has emitted every value it
+                // owes, has no output to clear and no child output to take has nothing left to do.
+                if passes > 0 && self.idle(i) {
+                    continue;
+                }
                 any |= self.process(i, passes == 0);
             }
             passes += 1;
@@ -942,6 +947,23 @@ impl<'a> Monitor<'a> {
             OP_EVENTUALLY | OP_ALWAYS => pc.emitted <= (w(3) + o.b).min(self.prog.horizon),
             _ => true,
         }
+    }
+
+    /// Whether node `i` is done ([`Monitor::update`]'s end passes): every value it owes emitted, no value
+    /// of its own from the last pass to clear, and no child value to take. Such a node's turn changes
+    /// nothing any other node or the bounds read, so it is skipped; not skipping is always sound, so a
+    /// doubt (a child word that is not a node) keeps the turn.
+    fn idle(&self, i: usize) -> bool {
+        let o = self.op(i);
+        let (emitted, need) = (self.word(i, 3) as usize, self.word(i, 1) as usize);
+        let done = emitted >= need || emitted > self.prog.horizon;
+        let quiet = |c: usize| c < self.prog.nodes && self.word(c, 4) == 0;
+        let children = match o.op {
+            OP_ATOM | OP_TRUE | OP_FALSE => true,
+            OP_EVENTUALLY | OP_ALWAYS => quiet(o.c1),
+            _ => quiet(o.c1) && quiet(o.c2),
+        };
+        done && self.word(i, 4) == 0 && children
     }
 
     /// Word `j` of node `i`'s state in the arena.
