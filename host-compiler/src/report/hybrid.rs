@@ -6,12 +6,11 @@
 //! then a table of every run's segments (δᵢ, what binds it, the event samples, the rows kept, where the run
 //! came from).
 //!
-//! **Where the cover came from** (in the manner of the text's Figure 5.5, one plot per plane framed on Init):
-//! each run's first ball is filled
-//! in the colour of its origin (the planner from a seed, Algorithm 4 grown from another ball, a route of
-//! the global search, a recording), darker when its radius is below δε (`min_robustness`, the balls
-//! Algorithm 4 no longer grows from), and a run grown by Algorithm 4 is joined by a thin line to the centre
-//! of the ball it grew from.
+//! **Where the cover came from** (in the manner of the text's Figure 5.5, one plot per plane framed on
+//! Init): each run's first ball is filled in the colour of its origin (the planner from a seed, Algorithm 4
+//! grown from another ball, a route of the global search, a recording), darker when its radius is below
+//! δε (`min_robustness`, the balls Algorithm 4 no longer grows from), and a run grown by Algorithm 4 is
+//! joined by a thin line to the centre of the ball it grew from.
 //!
 //! The planes pair the guard's main coordinate (the largest component of the first edge's normal) with
 //! each other state coordinate, at most [`PLANES`] of them. Sets are projected: an ellipsoid or ball to
