@@ -615,7 +615,7 @@ impl EllipsoidBoundaryDistance {
                 && ws.kkt.len() == (self.n + 1) * (self.n + 1)
         });
         if !fits {
-            *slot = Some(self.workspace());
+            *slot = None;
         }
         slot.get_or_insert_with(|| self.workspace())
     }

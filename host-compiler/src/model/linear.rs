@@ -77,20 +77,16 @@ fn affine_row(
     u: &[f64],
     i: usize,
 ) -> f64 {
-    // Row iterators (no per-entry index checks), the products summed in column order as before.
-    let ax: f64 = A
-        .row(i)
-        .iter()
-        .zip(&x[..A.ncols()])
-        .map(|(a, x)| a * x)
-        .sum();
-    let bu: f64 = B
-        .row(i)
-        .iter()
-        .zip(&u[..B.ncols()])
-        .map(|(b, u)| b * u)
-        .sum();
-    ax + bu + c[i]
+    // Row i of M times v by the row's iterator (no per-entry index checks), the products summed in
+    // column order as before.
+    let row_dot = |M: MatRef<'_, f64>, v: &[f64]| -> f64 {
+        M.row(i)
+            .iter()
+            .zip(&v[..M.ncols()])
+            .map(|(m, v)| m * v)
+            .sum()
+    };
+    row_dot(A, x) + row_dot(B, u) + c[i]
 }
 
 impl ContinuousPlant {

@@ -24,6 +24,7 @@ use crate::model::hybrid::EdgeKind;
 use crate::spec::sets::{Coords, SetDesc, Shape};
 use crate::synth::hybrid::{HybridSynthesis, HybridTask};
 use faer::Mat;
+use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 
 /// Most runs whose nominals and tubes are drawn (every run's first ball is drawn in the cover).
@@ -383,11 +384,7 @@ fn init_box(b: &crate::spec::InitBox, pl: [usize; 2]) -> Vec<(f64, f64)> {
 /// The cover on a plane's chart: every run's first ball in its origin's colour, darker below δε, and
 /// Algorithm 4's links to the ball each run grew from (module doc).
 fn draw_cover<DB: DrawingBackend>(
-    chart: &mut ChartContext<
-        '_,
-        DB,
-        Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>,
-    >,
+    chart: &mut ChartContext<'_, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
     task: &HybridTask,
     s: &HybridSynthesis,
     pl: [usize; 2],
@@ -429,8 +426,26 @@ fn cover_plot(task: &HybridTask, s: &HybridSynthesis, pl: [usize; 2]) -> DynResu
         xs.push(x[pl[0]]);
         ys.push(x[pl[1]]);
     }
-    let ((x0, x1), (y0, y1)) = (padded_span(&xs, 0.08), padded_span(&ys, 0.08));
-    let width = 600u32;
+    plane_svg(600, &xs, &ys, pl, init, |chart, _| {
+        draw_cover(chart, task, s, pl)
+    })
+}
+
+/// The chart of a plane both plots draw on.
+type PlaneChart<'a, 'b> =
+    ChartContext<'a, SVGBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+
+/// An SVG `width` wide framed on the points (`xs`, `ys`) padded by 8 %, with the plane's axes and Init
+/// (grey), then `draw` on it, given the frame (x0, x1, y0, y1).
+fn plane_svg(
+    width: u32,
+    xs: &[f64],
+    ys: &[f64],
+    pl: [usize; 2],
+    init: Vec<(f64, f64)>,
+    draw: impl for<'a, 'b> FnOnce(&mut PlaneChart<'a, 'b>, [f64; 4]) -> DynResult<()>,
+) -> DynResult<String> {
+    let ((x0, x1), (y0, y1)) = (padded_span(xs, 0.08), padded_span(ys, 0.08));
     let height = ((width as f64) * (y1 - y0) / (x1 - x0)).clamp(300.0, 700.0) as u32;
     let mut svg = String::new();
     {
@@ -448,7 +463,7 @@ fn cover_plot(task: &HybridTask, s: &HybridSynthesis, pl: [usize; 2]) -> DynResu
             .draw()?;
         let grey = RGBColor(120, 120, 120);
         chart.draw_series([Polygon::new(init, grey.mix(0.25).filled())])?;
-        draw_cover(&mut chart, task, s, pl)?;
+        draw(&mut chart, [x0, x1, y0, y1])?;
         root.present()?;
     }
     Ok(svg)
@@ -478,25 +493,7 @@ fn plane_plot(task: &HybridTask, s: &HybridSynthesis, pl: [usize; 2]) -> DynResu
         xs.push(x);
         ys.push(y);
     }
-    let ((x0, x1), (y0, y1)) = (padded_span(&xs, 0.08), padded_span(&ys, 0.08));
-    let width = 900u32;
-    let height = ((width as f64) * (y1 - y0) / (x1 - x0)).clamp(300.0, 700.0) as u32;
-    let mut svg = String::new();
-    {
-        let root = SVGBackend::with_string(&mut svg, (width, height)).into_drawing_area();
-        root.fill(&WHITE)?;
-        let mut chart = ChartBuilder::on(&root)
-            .margin(10)
-            .x_label_area_size(30)
-            .y_label_area_size(45)
-            .build_cartesian_2d(x0..x1, y0..y1)?;
-        chart
-            .configure_mesh()
-            .x_desc(format!("x{}", pl[0] + 1))
-            .y_desc(format!("x{}", pl[1] + 1))
-            .draw()?;
-        let grey = RGBColor(120, 120, 120);
-        chart.draw_series([Polygon::new(init, grey.mix(0.25).filled())])?;
+    plane_svg(900, &xs, &ys, pl, init, |chart, [x0, x1, y0, y1]| {
         for (d, color) in std::iter::once((&problem.goal, GOAL_COLOR))
             .chain(problem.unsafe_sets.iter().map(|u| (u, UNSAFE_COLOR)))
         {
@@ -504,7 +501,7 @@ fn plane_plot(task: &HybridTask, s: &HybridSynthesis, pl: [usize; 2]) -> DynResu
                 chart.draw_series([Polygon::new(poly, color.mix(0.25).filled())])?;
             }
         }
-        draw_cover(&mut chart, task, s, pl)?;
+        draw_cover(chart, task, s, pl)?;
         // The guard of each edge taken, where its normal lies in the plane.
         for &e in &task.edges {
             for (a, &b) in task.plant.edges()[e]
@@ -562,7 +559,6 @@ fn plane_plot(task: &HybridTask, s: &HybridSynthesis, pl: [usize; 2]) -> DynResu
                 trajectory_color(ri).filled(),
             )])?;
         }
-        root.present()?;
-    }
-    Ok(svg)
+        Ok(())
+    })
 }
