@@ -43,6 +43,26 @@
 //!    around x̃ᵢ(κ): it must clear the next location's Unsafe, and the flow must go into G at a rate
 //!    âᵀfᵢ₊₁ ≤ −ν (*transversality*), so the run neither returns across the plane (the edge back,
 //!    armed once it leaves G) nor stays undetected for more than one sample.
+//!
+//!    *The landing through the crossing map* (a second bound; each cell keeps the smaller of the two, both
+//!    sound). The ball bound above spreads every crossing over the plane's whole slice of the tube, which
+//!    for an oblique crossing is long. The runs' deviations are not a ball, though: at sample κ,
+//!    e(κ) = Ã^κe₀ + e_d with ‖e₀‖_{Pᵢ} ≤ r and ‖e_d‖_{Pᵢ} ≤ d_κ (the rounding's and mismatch's sum over
+//!    the powers, plus η of item 5), and within the period δ(s) = x(κ + s) − x̃(κ + s) = N(s)e(κ) +
+//!    Γ(s)Bᵢε with N(s) = Φ(s) + Γ(s)BᵢKᵢ. For any direction v with âᵀv ≠ 0 and any point p,
+//!    p − p̂ = Π_v(p − x̃(κ + s_j)) + v·g(p)/(âᵀv), where p̂ = x̃(κ + s_j) − v·g(x̃(κ + s_j))/(âᵀv) is a point
+//!    of the plane and Π_v = I − vâᵀ/(âᵀv) (exact algebra: no linearisation, no remainder). A run that
+//!    crosses at s ∈ [s_j, s_j + Δτ] has its crossing point p = x̃(κ + s_j) + N(s_j)Ã^κe₀ + w with |g(p)|
+//!    ≤ θ_eff and ‖w‖_{Pᵢ} ≤ ρₓ = d_κ‖N(s_j)‖ + ‖Γ(s_j)Bᵢ‖ε̄ + Δτ(the nominal's speed + ‖Aᵢ‖(Rκ + ρκ) +
+//!    ‖BᵢKᵢ‖rκ + ‖Bᵢ‖ε̄) (N(s_j)e_d, the input rounding, and what the deviation and the nominal move within
+//!    the cell). Its landing after τ_j is then within
+//!    ‖Φ′(τ_j)p̂ + Γ′(τ_j)(B′ũ + c′) − x̃ᵢ₊₁(0)‖_{P′} + r‖P′¹ᐟ²(Φ′(τ_j)Π_vN(s_j) + Γ′(τ_j)B′Kᵢ)Ã^κPᵢ⁻¹ᐟ²‖
+//!    + ‖Φ′(τ_j)Π_v‖_{Pᵢ→P′}ρₓ + ‖Γ′B′Kᵢ‖_{Pᵢ→P′}d_κ + ‖P′¹ᐟ²Γ′B′‖ε̄ + ‖Φ′(τ_j)v‖_{P′}θ_eff/|âᵀv| + LΔτ
+//!    of the next segment's start: the crossing's first-order map (for v the flow's direction before the
+//!    plane, Π_v is the saltation matrix's part for a run re-synchronised at the plane; the flow after it
+//!    is the grid's τ_j) applied to the image of the ball, not to a ball around that image.
+//!    The same decomposition rules a cell out when |g(x̃(κ + s_j))| > θ_eff + r‖âᵀN(s_j)Ã^κPᵢ⁻¹ᐟ²‖ +
+//!    ‖â‖_{Pᵢ⁻¹}ρₓ. Two directions are tried per cell: the nominal's velocity there, and Pᵢ⁻¹â.
 //! 5. *Late detection*: a run that switched in the last s_late = θ_eff/ν of a period may be seen at the
 //!    next sample within θ_eff of the plane and not yet taken for switched; the controller then applies
 //!    row κ+1 of segment i for one more period, which is interval κ+1 with s = 0 (item 4 covers it). Its
@@ -72,6 +92,10 @@ use faer::{Mat, MatRef};
 pub const GRID: usize = 33;
 /// s_late as a fraction of the period (item 5): the required transversality rate is θ_eff / s_late.
 pub const LATE_FRACTION: f64 = 0.01;
+/// How much larger than the next segment's ball (in the metrics' ratio) a segment's start ball may be
+/// certified: the bisection's upper end. The landing is the image of the contracted tube, so it may fit a
+/// larger start ball (Example 5.5's first run: δ 0.857 with the end at the next ball, 1.13 at twice it).
+pub const LANDING_REACH: f64 = 2.0;
 /// The detection threshold a synthesis stores, over the least sound one (twice the guard test's rounding
 /// bound). That bound is taken over the nominal's extent and the next ball's radius, which a re-proof from
 /// the stored rows (shortened to κ_f, started from f32 points) computes a little differently; the slack
@@ -397,6 +421,35 @@ struct ExitSamples {
     /// ‖Ã^κ‖_P·r + S_κ·z (variation of constants), and at most r (the CAF's invariant ball).
     power: Vec<f64>,
     disturbed: Vec<f64>,
+    /// The crossing map per cell of the event grid, [κ][j] (item 4's second bound); `None` where the
+    /// ball bound already rules a crossing out at the largest radius tried.
+    cells: Vec<Vec<Option<Cell>>>,
+}
+
+/// The first-order crossing map of one cell (κ, j) of the event grid: runs that cross the plane in
+/// period κ at s ∈ [s_j, s_j + Δτ], s_j = h − τ_j (module doc, item 4's second bound).
+struct Cell {
+    /// ‖âᵀN(s_j)Ã^κP⁻¹ᐟ²‖₂: how far the image of the start ball reaches along the guard's normal.
+    sig_g: f64,
+    /// ‖N(s_j)‖_{P→P}, N(s) = Φ(s) + Γ(s)BK the deviation's flow within the period.
+    n_N: f64,
+    /// ‖Γ(s_j)B‖ into P (the input rounding's part of the deviation at s_j).
+    n_GB: f64,
+    /// The bound for each direction v the crossing point is projected along.
+    views: Vec<View>,
+}
+
+/// One projection direction v of a [`Cell`] (the nominal's own velocity there, or P⁻¹â).
+struct View {
+    /// ‖Φ′(τ_j)p̂ + Γ′(τ_j)(B′ũ + c′) − x̃ᵢ₊₁(0)‖_{P′}, p̂ the point of the plane x̃(κ + s_j) − (g/âᵀv)v.
+    centre: f64,
+    /// ‖P′¹ᐟ²(Φ′(τ_j)Π_vN(s_j) + Γ′(τ_j)B′K)Ã^κP⁻¹ᐟ²‖₂, Π_v = I − vâᵀ/(âᵀv): the landing's spread
+    /// per unit of the start ball's radius.
+    spread: f64,
+    /// ‖Φ′(τ_j)Π_v‖_{P→P′}: what a deviation at the crossing adds to the landing.
+    n_phi_pi: f64,
+    /// ‖Φ′(τ_j)v‖_{P′}/|âᵀv|: what the crossing point's distance from the plane (≤ θ_eff) adds.
+    n_phi_v: f64,
 }
 
 impl ExitSamples {
@@ -435,6 +488,10 @@ struct ExitConstants {
     eps: f64,
     delta_next: f64,
     dt: f64,
+    /// ‖Aᵢ‖_{Pᵢ}, ‖BᵢKᵢ‖_{Pᵢ} and ‖Bᵢ‖ into Pᵢ: how fast the deviation moves within a cell.
+    a_pre: f64,
+    c_BK_pre: f64,
+    c_B_pre: f64,
 }
 
 /// Outcome of checking a radius.
@@ -491,6 +548,8 @@ fn check_exit(
         // p̂ₛ (P-orthogonal parts), d the centre's distance to the slab; none crosses there if d ≥ R′.
         let L = c.grow * F_post;
         let R_sub = loc.inter(re, c.dt * d.speed[k], c.eps);
+        // The deviation at sample κ is Ã^κe₀ plus at most `dk` (rounding, mismatch, late detection).
+        let dk = d.disturbed.get(k).copied().unwrap_or(r) + eta;
         for j in 0..d.land[k].len() {
             let d_slab = ((d.sub_g[k][j].abs() - c.theta_eff).max(0.0)) / c.dn;
             if d_slab >= R_sub {
@@ -498,11 +557,39 @@ fn check_exit(
             }
             let rad_p =
                 (R_sub * R_sub - d_slab * d_slab).max(0.0).sqrt() + 2.0 * c.theta_eff / c.dn;
-            let reach = d.land[k][j]
+            let mut reach = d.land[k][j]
                 + grid.norm_Phi[j] * rad_p
                 + grid.norm_GBK[j] * re
                 + grid.norm_GB[j] * c.eps
                 + L * c.dt;
+            if let Some(cell) = d
+                .cells
+                .get(k)
+                .and_then(|row| row.get(j))
+                .and_then(Option::as_ref)
+            {
+                let rho_x = dk * cell.n_N
+                    + cell.n_GB * c.eps
+                    + c.dt
+                        * (d.speed[k]
+                            + c.a_pre * (R + d.rho[k])
+                            + c.c_BK_pre * re
+                            + c.c_B_pre * c.eps);
+                if d.sub_g[k][j].abs() > c.theta_eff + r * cell.sig_g + c.dn * rho_x {
+                    continue;
+                }
+                for v in &cell.views {
+                    reach = reach.min(
+                        v.centre
+                            + r * v.spread
+                            + v.n_phi_pi * rho_x
+                            + grid.norm_GBK[j] * dk
+                            + grid.norm_GB[j] * c.eps
+                            + v.n_phi_v * c.theta_eff
+                            + L * c.dt,
+                    );
+                }
+            }
             if !(reach < c.delta_next) {
                 return Verdict::Fail("the landing misses the next segment's ball");
             }
@@ -517,6 +604,103 @@ fn check_exit(
 
 /// Entry window (module doc): with radius r, ∃W: transversality into G at samples ≤ W, inter-sample balls
 /// inside G after W (up to `end`).
+/// What [`crossing_cells`] reads besides the samples and the constants.
+struct CellInputs<'a> {
+    pre: &'a Loc<'a>,
+    post: &'a Loc<'a>,
+    exit: &'a Half,
+    nom: &'a Nominal,
+    target: &'a [f64],
+    grid: &'a Grid,
+    /// x̃(κ + s_j): the nominal's flow within each period under its held input, [κ][j].
+    sub: &'a [Vec<Vec<f64>>],
+}
+
+/// The crossing map of every cell (κ, j), κ < `kf_max`, that the ball bound does not already rule out at
+/// the radius `r_max` (it then rules it out at every smaller radius too).
+fn crossing_cells(
+    inp: &CellInputs<'_>,
+    d: &ExitSamples,
+    c: &ExitConstants,
+    r_max: f64,
+    eta: f64,
+    kf_max: usize,
+) -> Vec<Vec<Option<Cell>>> {
+    let (pre, post, grid) = (inp.pre, inp.post, inp.grid);
+    let n = inp.exit.a.len();
+    let roots = &pre.lc.roots;
+    let a = &inp.exit.a;
+    // N(s_j) = Φ(s_j) + Γ(s_j)BᵢKᵢ, and the cell's constants that do not depend on κ.
+    let N: Vec<Mat<f64>> = (0..GRID)
+        .map(|j| &grid.pre_Phi[j] + &grid.pre_GB[j] * pre.K)
+        .collect();
+    let n_N: Vec<f64> = N.iter().map(|m| cross(roots, m.as_ref(), roots)).collect();
+    let n_GB: Vec<f64> = (0..GRID)
+        .map(|j| roots.norm_into(grid.pre_GB[j].as_ref()))
+        .collect();
+    let GBK: Vec<Mat<f64>> = (0..GRID).map(|j| &grid.GB[j] * pre.K).collect();
+    let pinv_a = mat_vec(roots.inv.as_ref(), a);
+    let mut W = roots.inv_sqrt.clone();
+    let mut cells = Vec::with_capacity(kf_max);
+    for k in 0..kf_max.min(inp.sub.len()) {
+        if k > 0 {
+            W = &pre.lc.At * &W;
+        }
+        let re = d.radius(k, r_max, eta);
+        let R = pre.inter(re, d.rho[k], c.eps);
+        let R_sub = pre.inter(re, c.dt * d.speed[k], c.eps);
+        let u = inp.nom.u.get(k).or(inp.nom.u.last()).expect("rows ≥ 1");
+        let mut row = Vec::with_capacity(GRID);
+        for j in 0..GRID {
+            let d_slab = ((d.sub_g[k][j].abs() - c.theta_eff).max(0.0)) / c.dn;
+            if d.g[k] - c.dn * R > 0.0 || d_slab >= R_sub {
+                row.push(None);
+                continue;
+            }
+            let x = &inp.sub[k][j];
+            let NW = &N[j] * &W;
+            let aNW = mat_t_vec(NW.as_ref(), a);
+            let sig_g = aNW.iter().map(|v| v * v).sum::<f64>().sqrt();
+            let f = pre.cp.f(x, u);
+            let mut views = Vec::with_capacity(2);
+            for v in [f, pinv_a.clone()] {
+                let av = dot(a, &v);
+                let nv = v.iter().map(|q| q * q).sum::<f64>().sqrt();
+                if !(av.abs() > 1e-9 * nv) {
+                    continue;
+                }
+                let t = d.sub_g[k][j] / av;
+                let p: Vec<f64> = (0..n).map(|q| x[q] - t * v[q]).collect();
+                let fx = mat_vec(grid.Phi[j].as_ref(), &p);
+                let fu = mat_vec(grid.GB[j].as_ref(), u);
+                let e: Vec<f64> = (0..n)
+                    .map(|q| fx[q] + fu[q] + grid.Gc[j][q] - inp.target[q])
+                    .collect();
+                let Pi = Mat::<f64>::from_fn(n, n, |p, q| {
+                    f64::from(u8::from(p == q)) - v[p] * a[q] / av
+                });
+                let PhiPi = &grid.Phi[j] * &Pi;
+                let M = &PhiPi * &N[j] + &GBK[j];
+                let Phiv = mat_vec(grid.Phi[j].as_ref(), &v);
+                views.push(View {
+                    centre: p_norm(post.lc.P.as_ref(), &e),
+                    spread: spectral_norm((&post.lc.roots.sqrt * &M * &W).as_ref()),
+                    n_phi_pi: cross(&post.lc.roots, PhiPi.as_ref(), roots),
+                    n_phi_v: p_norm(post.lc.P.as_ref(), &Phiv) / av.abs(),
+                });
+            }
+            row.push(Some(Cell {
+                sig_g,
+                n_N: n_N[j],
+                n_GB: n_GB[j],
+                views,
+            }));
+        }
+        cells.push(row);
+    }
+    cells
+}
+
 fn check_entry(r: f64, loc: &Loc<'_>, entry: &Half, nom: &Nominal, end: usize, eps: f64) -> bool {
     let roots = &loc.lc.roots;
     let dn = roots.dual_norm(&entry.a);
@@ -777,7 +961,9 @@ pub fn certify_internal(
         let roots = &pre.lc.roots;
         let dn = roots.dual_norm(&exit.a);
         let gs: Vec<f64> = nom.x.iter().map(|x| exit.g(x)).collect();
-        // The bisection's upper end: a Pᵢ-ball inside the next ball's P′-ball, and deep enough somewhere.
+        // The bisection's upper end: a Pᵢ-ball [`LANDING_REACH`] times the size of the next ball's P′-ball
+        // (the tube contracts before the plane, and the landing bound takes the ball's image Ã^κ·ball),
+        // and deep enough somewhere. A higher end only widens η and θ, which are taken there.
         let c_id = cross(&post.lc.roots, Mat::<f64>::identity(n, n).as_ref(), roots);
         let c_back = cross(roots, Mat::<f64>::identity(n, n).as_ref(), &post.lc.roots);
         // A run's sample-κ radius is at least ‖Ã^κ‖_P·r ([`ExitSamples::radius`]), so some sample's ball
@@ -789,7 +975,7 @@ pub fn certify_internal(
             .fold(f64::NEG_INFINITY, |a, (&g, &p)| {
                 a.max(-g / (dn * p.min(1.0)))
             });
-        let r_max = (delta_next / c_id).min(deepest);
+        let r_max = (LANDING_REACH * delta_next / c_id).min(deepest);
         if !(delta_next > 0.0) || !(r_max > 0.0) {
             let base = certify_at(&lp_of(i), s.lc, nom, GoalAt::Free(0.0));
             certs.push(empty(
@@ -860,6 +1046,9 @@ pub fn certify_internal(
             eps,
             delta_next,
             dt: h / (GRID - 1) as f64,
+            a_pre: cross(roots, pre.cp.A.as_ref(), roots),
+            c_BK_pre: cross(roots, BK1.as_ref(), roots),
+            c_B_pre: roots.norm_into(pre.cp.B.as_ref()),
         };
         let grid = Grid::new(&pre, &post, h);
         let metric2 = Metric {
@@ -903,7 +1092,7 @@ pub fn certify_internal(
             .zip(&rho)
             .map(|(f, r)| f + a_pre * r)
             .collect();
-        let samples = ExitSamples {
+        let mut samples = ExitSamples {
             g: gs.clone(),
             rho,
             f_pre: (0..=rows)
@@ -957,6 +1146,7 @@ pub fn certify_internal(
                 })
                 .collect(),
             speed,
+            cells: Vec::new(),
             disturbed: {
                 let per_step = (pre.lc.roots.norm_into(pre.lc.B.as_ref()) * eps
                     + pre.lc.mismatch_step())
@@ -985,6 +1175,22 @@ pub fn certify_internal(
         let kf_max = (1..=rows)
             .find(|&k| gs[k] + dn * samples.radius(k, r_max, eta) <= -theta_eff)
             .unwrap_or(rows);
+        samples.cells = crossing_cells(
+            &CellInputs {
+                pre: &pre,
+                post: &post,
+                exit: &exit,
+                nom,
+                target,
+                grid: &grid,
+                sub: &sub,
+            },
+            &samples,
+            &c,
+            r_max,
+            eta,
+            kf_max,
+        );
         let kept = truncate(nom, kf_max);
         let base = certify_at(&lp_of(i), s.lc, &kept, GoalAt::Free(r_max));
         let parts = base.delta_unsafe_intersample.min(base.delta_input);
@@ -1015,7 +1221,7 @@ pub fn certify_internal(
             }
         } else if r >= hi * (1.0 - 1e-12) {
             if hi + eta >= r_max {
-                "the next segment's ball"
+                "the search's upper end (LANDING_REACH times the next segment's ball, or the guard's depth)"
             } else {
                 "Theorem 4.7 (Unsafe, Input)"
             }

@@ -110,6 +110,68 @@ fn a_segment_s_runs_contract_as_the_closed_loop_s_powers_say() {
     }
 }
 
+/// Lemma 4.23's safe transition as certified (item 4's landing bound through the crossing map, module
+/// doc of `certify::internal`): runs of Example 5.5 from the first segment's certified ball (boundary and
+/// interior), under the segment's law on the exact hybrid flow, seen switched by the stored f32 guard test,
+/// are at that sample inside the second segment's certified ball. The δ this certifies is above the
+/// ball-around-the-landing bound's 0.585 (the text: 0.8387).
+#[test]
+fn example_5_5_runs_land_in_the_next_segment_s_ball() {
+    use host_compiler::linalg::p_norm;
+    let t = task("hybrid-internal-5-5.toml");
+    let run = plan_run(&t, &[-5.0, 1.0, 2.0]).unwrap();
+    let (seg0, seg1) = (&run.certificate.segments[0], &run.certificate.segments[1]);
+    eprintln!(
+        "δ = {:.4} ({}), next δ = {:.4}",
+        seg0.delta, seg0.binding, seg1.delta
+    );
+    assert!(seg0.delta > 0.7, "δ = {} ({})", seg0.delta, seg0.binding);
+    let exit = seg0.exit.as_ref().unwrap();
+    let (l0, l1) = (run.locations[0], run.locations[1]);
+    let (nom, next) = (&run.nominals[0], &run.nominals[1]);
+    let gain = &t.designs[l0].K;
+    let metric_next = t.designs[l1].P.as_ref();
+    let mut worst = 0.0f64;
+    let starts = ball_starts(&t, &run, 200, 400, 5);
+    for start in &starts {
+        let (mut x, mut loc) = (start.clone(), l0);
+        let mut landed = None;
+        for k in 0..seg0.rows {
+            // The evaluator's guard test: switched when fl(âᵀx − b̂) ≤ −θ.
+            let g = exit
+                .a
+                .iter()
+                .zip(&x)
+                .fold(0.0f32, |acc, (a, v)| acc + a * *v as f32)
+                - exit.b;
+            if g <= -exit.theta {
+                landed = Some(x.clone());
+                break;
+            }
+            let u: Vec<f64> = (0..gain.nrows())
+                .map(|p| nom.v[k][p] + (0..x.len()).map(|q| gain[(p, q)] * x[q]).sum::<f64>())
+                .collect();
+            let step = t.plant.flow(loc, &x, &u).unwrap();
+            (x, loc) = (step.x, step.loc);
+        }
+        let landed =
+            landed.unwrap_or_else(|| panic!("the run from {start:?} was not seen switched"));
+        assert_eq!(loc, l1);
+        let d = p_norm(metric_next, &sub(&landed, &next.x[0]));
+        assert!(
+            d <= seg1.delta,
+            "from {start:?}: landing {d} outside the next ball {}",
+            seg1.delta
+        );
+        worst = worst.max(d);
+    }
+    eprintln!(
+        "{} runs, farthest landing {worst:.4} of {:.4}",
+        starts.len(),
+        seg1.delta
+    );
+}
+
 fn sub(a: &[f64], b: &[f64]) -> Vec<f64> {
     a.iter().zip(b).map(|(p, q)| p - q).collect()
 }

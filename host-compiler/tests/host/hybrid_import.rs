@@ -197,7 +197,7 @@ fn recordings_that_do_not_cross_or_cross_into_unsafe_are_refused_with_the_reason
         import::certify_recording(t, &bad),
         Err(import::ImportError::Shape { x0: 2, n: 3, .. })
     ));
-    // Into Unsafe: the same inputs from another point of Init switch elsewhere and land inside the ball.
+    // Into Unsafe: the same inputs from another start switch elsewhere and land inside the ball.
     let into = Recording {
         x0: unsafe_start(t, &rec),
         v: rec.v.clone(),
@@ -214,13 +214,18 @@ fn recordings_that_do_not_cross_or_cross_into_unsafe_are_refused_with_the_reason
     assert!(why.contains("δ_Unsafe = -"), "{why}");
 }
 
-/// A start in Init from which the recording's inputs cross the plane into Unsafe: the first of a 3×3×5
-/// grid over Init whose replay lands there.
+/// A start from which the recording's inputs cross the plane into Unsafe: the first of a grid over Init
+/// and the strip beside it up to x1 = −3 (where the planned run's inputs land in the ball; a recording's
+/// start need not lie in Init) whose replay lands there.
 fn unsafe_start(t: &HybridTask, rec: &Recording) -> Vec<f64> {
-    for i in 0..3 {
-        for j in 0..3 {
-            for k in 0..5 {
-                let x0 = vec![-6.0 + i as f64, j as f64, -4.0 + 2.0 * k as f64];
+    for i in (0..13).rev() {
+        for j in 0..9 {
+            for k in 0..17 {
+                let x0 = vec![
+                    -6.0 + 0.25 * i as f64,
+                    0.25 * j as f64,
+                    -4.0 + 0.5 * k as f64,
+                ];
                 let into = Recording {
                     x0: x0.clone(),
                     v: rec.v.clone(),
