@@ -62,7 +62,10 @@
 //!    plane, Π_v is the saltation matrix's part for a run re-synchronised at the plane; the flow after it
 //!    is the grid's τ_j) applied to the image of the ball, not to a ball around that image.
 //!    The same decomposition rules a cell out when |g(x̃(κ + s_j))| > θ_eff + r‖âᵀN(s_j)Ã^κPᵢ⁻¹ᐟ²‖ +
-//!    ‖â‖_{Pᵢ⁻¹}ρₓ. Two directions are tried per cell: the nominal's velocity there, and Pᵢ⁻¹â.
+//!    ‖â‖_{Pᵢ⁻¹}ρₓ. The direction is the nominal's own velocity at the cell (the path curves between
+//!    cells, so one direction per segment would misplace p̂ far from the nominal's crossing), and
+//!    ‖Φ′(τ_j)Π_v‖_{Pᵢ→P′} is taken as ‖Φ′(τ_j)‖_{Pᵢ→P′}‖v‖_{Pᵢ}‖â‖_{Pᵢ⁻¹}/|âᵀv| (an oblique
+//!    projection's norm).
 //! 5. *Late detection*: a run that switched in the last s_late = θ_eff/ν of a period may be seen at the
 //!    next sample within θ_eff of the plane and not yet taken for switched; the controller then applies
 //!    row κ+1 of segment i for one more period, which is interval κ+1 with s = 0 (item 4 covers it). Its
@@ -422,7 +425,8 @@ struct ExitSamples {
     power: Vec<f64>,
     disturbed: Vec<f64>,
     /// The crossing map per cell of the event grid, [κ][j] (item 4's second bound); `None` where the
-    /// ball bound already rules a crossing out at the largest radius tried.
+    /// ball bound alone is taken (it rules a crossing there out at the largest radius tried), and rows
+    /// past the last κ it was computed for.
     cells: Vec<Vec<Option<Cell>>>,
 }
 
@@ -435,11 +439,36 @@ struct Cell {
     n_N: f64,
     /// ‖Γ(s_j)B‖ into P (the input rounding's part of the deviation at s_j).
     n_GB: f64,
-    /// The bound for each direction v the crossing point is projected along.
-    views: Vec<View>,
+    /// No run crosses in this cell at the largest radius tried, so at none (its view is then not
+    /// computed).
+    ruled_out: bool,
+    /// The bound with the crossing point projected along the nominal's velocity there (`None` where that
+    /// is parallel to the plane).
+    view: Option<View>,
 }
 
-/// One projection direction v of a [`Cell`] (the nominal's own velocity there, or P⁻¹â).
+impl Cell {
+    /// ρₓ of the module doc at sample κ = `k`: what besides N(s_j)Ã^κe₀ separates the crossing point from
+    /// x̃(κ + s_j) (N(s_j)e_d, the input rounding, and what the deviation and the nominal move within the
+    /// cell), for a deviation `dk` besides Ã^κe₀, an inter-sample radius `R` and a sample radius `re`.
+    fn rho_x(&self, c: &ExitConstants, d: &ExitSamples, k: usize, dk: f64, R: f64, re: f64) -> f64 {
+        dk * self.n_N
+            + self.n_GB * c.eps
+            + c.dt * (d.speed[k] + c.a_pre * (R + d.rho[k]) + c.c_BK_pre * re + c.c_B_pre * c.eps)
+    }
+}
+
+/// ‖G‖₂ of a small matrix: the square root of the largest eigenvalue of GᵀG (nalgebra's symmetric
+/// eigensolver; a third of faer's SVD's time at n = 3, which is made for large matrices).
+fn spectral_norm_small(G: &nalgebra::DMatrix<f64>) -> f64 {
+    let gram = G.transpose() * G;
+    gram.symmetric_eigenvalues()
+        .iter()
+        .fold(0.0f64, |m, &l| m.max(l))
+        .sqrt()
+}
+
+/// A [`Cell`]'s bound with the crossing point projected along v, the nominal's own velocity there.
 struct View {
     /// ‖Φ′(τ_j)p̂ + Γ′(τ_j)(B′ũ + c′) − x̃ᵢ₊₁(0)‖_{P′}, p̂ the point of the plane x̃(κ + s_j) − (g/âᵀv)v.
     centre: f64,
@@ -568,17 +597,13 @@ fn check_exit(
                 .and_then(|row| row.get(j))
                 .and_then(Option::as_ref)
             {
-                let rho_x = dk * cell.n_N
-                    + cell.n_GB * c.eps
-                    + c.dt
-                        * (d.speed[k]
-                            + c.a_pre * (R + d.rho[k])
-                            + c.c_BK_pre * re
-                            + c.c_B_pre * c.eps);
-                if d.sub_g[k][j].abs() > c.theta_eff + r * cell.sig_g + c.dn * rho_x {
+                let rho_x = cell.rho_x(c, d, k, dk, R, re);
+                if cell.ruled_out
+                    || d.sub_g[k][j].abs() > c.theta_eff + r * cell.sig_g + c.dn * rho_x
+                {
                     continue;
                 }
-                for v in &cell.views {
+                if let Some(v) = &cell.view {
                     reach = reach.min(
                         v.centre
                             + r * v.spread
@@ -616,8 +641,12 @@ struct CellInputs<'a> {
     sub: &'a [Vec<Vec<f64>>],
 }
 
-/// The crossing map of every cell (κ, j), κ < `kf_max`, that the ball bound does not already rule out at
-/// the radius `r_max` (it then rules it out at every smaller radius too).
+/// The crossing map of every cell (κ, j), κ < `kf_max`, that neither the ball bound nor the ellipsoid's
+/// reach along the normal rules out at the radius `r_max` (both then rule it out at every smaller radius
+/// too). Π_v is I minus a rank-one term, so P′¹ᐟ²(Φ′Π_vN + Γ′B′K)Ã^κPᵢ⁻¹ᐟ² is the grid point's
+/// P′¹ᐟ²(Φ′N + Γ′B′K)·Ã^κPᵢ⁻¹ᐟ² less (P′¹ᐟ²Φ′v)(Wᵀ(Nᵀâ))ᵀ/(âᵀv), and ‖Φ′Π_v‖_{Pᵢ→P′} is at most
+/// ‖Φ′‖_{Pᵢ→P′}‖v‖_{Pᵢ}‖â‖_{Pᵢ⁻¹}/|âᵀv| (in Pᵢ's whitened coordinates Π_v is a projection Q, and
+/// ‖Q‖ = ‖I − Q‖ for Q ≠ 0, I, here a rank-one matrix whose norm is that ratio).
 fn crossing_cells(
     inp: &CellInputs<'_>,
     d: &ExitSamples,
@@ -630,16 +659,21 @@ fn crossing_cells(
     let n = inp.exit.a.len();
     let roots = &pre.lc.roots;
     let a = &inp.exit.a;
-    // N(s_j) = Φ(s_j) + Γ(s_j)BᵢKᵢ, and the cell's constants that do not depend on κ.
+    // N(s_j) = Φ(s_j) + Γ(s_j)BᵢKᵢ and what depends on the grid point alone.
     let N: Vec<Mat<f64>> = (0..GRID)
         .map(|j| &grid.pre_Phi[j] + &grid.pre_GB[j] * pre.K)
         .collect();
+    let aN: Vec<Vec<f64>> = N.iter().map(|m| mat_t_vec(m.as_ref(), a)).collect();
     let n_N: Vec<f64> = N.iter().map(|m| cross(roots, m.as_ref(), roots)).collect();
     let n_GB: Vec<f64> = (0..GRID)
         .map(|j| roots.norm_into(grid.pre_GB[j].as_ref()))
         .collect();
-    let GBK: Vec<Mat<f64>> = (0..GRID).map(|j| &grid.GB[j] * pre.K).collect();
-    let pinv_a = mat_vec(roots.inv.as_ref(), a);
+    let base: Vec<Mat<f64>> = (0..GRID)
+        .map(|j| &post.lc.roots.sqrt * (&grid.Phi[j] * &N[j] + &grid.GB[j] * pre.K))
+        .collect();
+    let sqrt_phi: Vec<Mat<f64>> = (0..GRID)
+        .map(|j| &post.lc.roots.sqrt * &grid.Phi[j])
+        .collect();
     let mut W = roots.inv_sqrt.clone();
     let mut cells = Vec::with_capacity(kf_max);
     for k in 0..kf_max.min(inp.sub.len()) {
@@ -649,52 +683,64 @@ fn crossing_cells(
         let re = d.radius(k, r_max, eta);
         let R = pre.inter(re, d.rho[k], c.eps);
         let R_sub = pre.inter(re, c.dt * d.speed[k], c.eps);
+        let dk = d.disturbed.get(k).copied().unwrap_or(r_max) + eta;
         let u = inp.nom.u.get(k).or(inp.nom.u.last()).expect("rows ≥ 1");
         let mut row = Vec::with_capacity(GRID);
         for j in 0..GRID {
-            let d_slab = ((d.sub_g[k][j].abs() - c.theta_eff).max(0.0)) / c.dn;
+            let g = d.sub_g[k][j];
+            let d_slab = ((g.abs() - c.theta_eff).max(0.0)) / c.dn;
             if d.g[k] - c.dn * R > 0.0 || d_slab >= R_sub {
                 row.push(None);
                 continue;
             }
-            let x = &inp.sub[k][j];
-            let NW = &N[j] * &W;
-            let aNW = mat_t_vec(NW.as_ref(), a);
-            let sig_g = aNW.iter().map(|v| v * v).sum::<f64>().sqrt();
-            let f = pre.cp.f(x, u);
-            let mut views = Vec::with_capacity(2);
-            for v in [f, pinv_a.clone()] {
-                let av = dot(a, &v);
-                let nv = v.iter().map(|q| q * q).sum::<f64>().sqrt();
-                if !(av.abs() > 1e-9 * nv) {
-                    continue;
-                }
-                let t = d.sub_g[k][j] / av;
-                let p: Vec<f64> = (0..n).map(|q| x[q] - t * v[q]).collect();
-                let fx = mat_vec(grid.Phi[j].as_ref(), &p);
-                let fu = mat_vec(grid.GB[j].as_ref(), u);
-                let e: Vec<f64> = (0..n)
-                    .map(|q| fx[q] + fu[q] + grid.Gc[j][q] - inp.target[q])
-                    .collect();
-                let Pi = Mat::<f64>::from_fn(n, n, |p, q| {
-                    f64::from(u8::from(p == q)) - v[p] * a[q] / av
-                });
-                let PhiPi = &grid.Phi[j] * &Pi;
-                let M = &PhiPi * &N[j] + &GBK[j];
-                let Phiv = mat_vec(grid.Phi[j].as_ref(), &v);
-                views.push(View {
-                    centre: p_norm(post.lc.P.as_ref(), &e),
-                    spread: spectral_norm((&post.lc.roots.sqrt * &M * &W).as_ref()),
-                    n_phi_pi: cross(&post.lc.roots, PhiPi.as_ref(), roots),
-                    n_phi_v: p_norm(post.lc.P.as_ref(), &Phiv) / av.abs(),
-                });
-            }
-            row.push(Some(Cell {
+            // z = Wᵀ(N(s_j)ᵀâ): ‖z‖ = ‖âᵀN(s_j)Ã^κPᵢ⁻¹ᐟ²‖.
+            let z: Vec<f64> = (0..n)
+                .map(|q| (0..n).map(|p| W[(p, q)] * aN[j][p]).sum::<f64>())
+                .collect();
+            let sig_g = z.iter().map(|v| v * v).sum::<f64>().sqrt();
+            let cell = Cell {
                 sig_g,
                 n_N: n_N[j],
                 n_GB: n_GB[j],
-                views,
-            }));
+                ruled_out: false,
+                view: None,
+            };
+            if g.abs() > c.theta_eff + r_max * sig_g + c.dn * cell.rho_x(c, d, k, dk, R, re) {
+                row.push(Some(Cell {
+                    ruled_out: true,
+                    ..cell
+                }));
+                continue;
+            }
+            let x = &inp.sub[k][j];
+            // The direction: the nominal's own velocity there.
+            let v = pre.cp.f(x, u);
+            let av = dot(a, &v);
+            let nv = v.iter().map(|q| q * q).sum::<f64>().sqrt();
+            let view = (av.abs() > 1e-9 * nv).then(|| {
+                let t = g / av;
+                let fu = mat_vec(grid.GB[j].as_ref(), u);
+                let centre: Vec<f64> = (0..n)
+                    .map(|q| {
+                        let phi_p: f64 = (0..n)
+                            .map(|r| grid.Phi[j][(q, r)] * (x[r] - t * v[r]))
+                            .sum();
+                        phi_p + fu[q] + grid.Gc[j][q] - inp.target[q]
+                    })
+                    .collect();
+                let w = mat_vec(sqrt_phi[j].as_ref(), &v);
+                let G = nalgebra::DMatrix::from_fn(n, n, |p, q| {
+                    (0..n).map(|r| base[j][(p, r)] * W[(r, q)]).sum::<f64>() - w[p] * z[q] / av
+                });
+                let nw = w.iter().map(|q| q * q).sum::<f64>().sqrt();
+                View {
+                    centre: p_norm(post.lc.P.as_ref(), &centre),
+                    spread: spectral_norm_small(&G),
+                    n_phi_pi: grid.norm_Phi[j] * p_norm(pre.lc.P.as_ref(), &v) * c.dn / av.abs(),
+                    n_phi_v: nw / av.abs(),
+                }
+            });
+            row.push(Some(Cell { view, ..cell }));
         }
         cells.push(row);
     }
