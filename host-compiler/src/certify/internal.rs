@@ -23,7 +23,9 @@
 //!    rows (Theorem 4.7's Unsafe and Input parts), with the run's other guards and the faces of ℓᵢ's
 //!    invariant not implied by "outside G" counted as Unsafe.
 //! 2. *Sample 0* lies outside G by more than θ_eff: the edge is armed and nothing is detected at once.
-//! 3. *All switch by κ_f*: κ_f is the first sample whose ball lies in G at depth θ_eff; a run still in ℓᵢ
+//! 3. *All switch by κ_f*: κ_f is the first sample whose runs lie in G at depth θ_eff (the ball's reach
+//!    along â, or the image's: the deviation there is Ã^κe₀ plus at most the rounding's sum, so
+//!    âᵀ(x − x̃) ≤ r‖âᵀÃ^κPᵢ⁻¹ᐟ²‖ + ‖â‖_{Pᵢ⁻¹}(S_κz + η); the smaller counts); a run still in ℓᵢ
 //!    there would have crossed the plane of G continuously, so every run has switched (and been
 //!    detected) by κ_f. The table keeps rows 0..κ_f.
 //! 4. *Each event interval* κ < κ_f whose inter-sample ball (radius Rκ) meets G: the run crosses the
@@ -424,6 +426,8 @@ struct ExitSamples {
     /// ‖Ã^κ‖_P·r + S_κ·z (variation of constants), and at most r (the CAF's invariant ball).
     power: Vec<f64>,
     disturbed: Vec<f64>,
+    /// ‖âᵀÃ^κPᵢ⁻¹ᐟ²‖ per sample ([`ExitSamples::guard_reach`]).
+    normal_reach: Vec<f64>,
     /// The crossing map per cell of the event grid, [κ][j] (item 4's second bound); `None` where the
     /// ball bound alone is taken (it rules a crossing there out at the largest radius tried), and rows
     /// past the last κ it was computed for.
@@ -490,6 +494,17 @@ impl ExitSamples {
         };
         contracted + eta
     }
+
+    /// How far along the guard's normal the runs from the r-ball at row 0 may be from x̃(κ) at sample
+    /// κ = `k`: the ball's reach ‖â‖_{Pᵢ⁻¹}·[`ExitSamples::radius`], or the image's,
+    /// r‖âᵀÃ^κPᵢ⁻¹ᐟ²‖ + ‖â‖_{Pᵢ⁻¹}(S_κz + η) (the deviation is Ã^κe₀ plus at most that), whichever is less.
+    fn guard_reach(&self, k: usize, r: f64, eta: f64, dn: f64) -> f64 {
+        let ball = dn * self.radius(k, r, eta);
+        match (self.normal_reach.get(k), self.disturbed.get(k)) {
+            (Some(&w), Some(&z)) => ball.min(r * w + dn * (z + eta)),
+            _ => ball,
+        }
+    }
 }
 
 /// r-independent constants of a segment with an exit.
@@ -548,7 +563,8 @@ fn check_exit(
         return Verdict::Fail("the first sample's ball reaches the guard");
     }
     // 3. κ_f.
-    let Some(kappa_f) = (1..=rows).find(|&k| d.g[k] + c.dn * d.radius(k, r, eta) <= -c.theta_eff)
+    let Some(kappa_f) =
+        (1..=rows).find(|&k| d.g[k] + d.guard_reach(k, r, eta, c.dn) <= -c.theta_eff)
     else {
         return Verdict::Fail("the extended segment's tube never lies inside the guard");
     };
@@ -1015,11 +1031,30 @@ pub fn certify_internal(
         // A run's sample-κ radius is at least ‖Ã^κ‖_P·r ([`ExitSamples::radius`]), so some sample's ball
         // lies in G only if r ≤ −g(x̃(κ))/(‖â‖·‖Ã^κ‖_P) there.
         let power = pre.lc.power_norms(rows + 1);
+        // ‖âᵀÃ^κPᵢ⁻¹ᐟ²‖: how far the image of the start ball reaches along the guard's normal at κ.
+        let normal_reach: Vec<f64> = {
+            let mut W = roots.inv_sqrt.clone();
+            (0..=rows)
+                .map(|k| {
+                    if k > 0 {
+                        W = &pre.lc.At * &W;
+                    }
+                    mat_t_vec(W.as_ref(), &exit.a)
+                        .iter()
+                        .map(|v| v * v)
+                        .sum::<f64>()
+                        .sqrt()
+                })
+                .collect()
+        };
+        // The depth test of item 3 takes the smaller of the ball's and the image's reach
+        // ([`ExitSamples::guard_reach`]), so the end is where either could lie inside.
         let deepest = gs
             .iter()
             .zip(&power)
-            .fold(f64::NEG_INFINITY, |a, (&g, &p)| {
-                a.max(-g / (dn * p.min(1.0)))
+            .zip(&normal_reach)
+            .fold(f64::NEG_INFINITY, |a, ((&g, &p), &w)| {
+                a.max(-g / (dn * p.min(1.0)).min(w))
             });
         let r_max = (LANDING_REACH * delta_next / c_id).min(deepest);
         if !(delta_next > 0.0) || !(r_max > 0.0) {
@@ -1192,6 +1227,7 @@ pub fn certify_internal(
                 })
                 .collect(),
             speed,
+            normal_reach,
             cells: Vec::new(),
             disturbed: {
                 let per_step = (pre.lc.roots.norm_into(pre.lc.B.as_ref()) * eps
@@ -1219,7 +1255,7 @@ pub fn certify_internal(
         let eta = L_max * c.s_late * c.c_back;
         // Theorem 4.7's parts over the rows kept at r_max.
         let kf_max = (1..=rows)
-            .find(|&k| gs[k] + dn * samples.radius(k, r_max, eta) <= -theta_eff)
+            .find(|&k| gs[k] + samples.guard_reach(k, r_max, eta, dn) <= -theta_eff)
             .unwrap_or(rows);
         samples.cells = crossing_cells(
             &CellInputs {

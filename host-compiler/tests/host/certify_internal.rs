@@ -136,7 +136,8 @@ fn example_5_5_runs_land_in_the_next_segment_s_ball() {
     for start in &starts {
         let (mut x, mut loc) = (start.clone(), l0);
         let mut landed = None;
-        for k in 0..seg0.rows {
+        // Samples 0..=κ_f: the segment keeps rows 0..κ_f, and every run is seen switched by sample κ_f.
+        for k in 0..=seg0.rows {
             // The evaluator's guard test: switched when fl(âᵀx − b̂) ≤ −θ.
             let g = exit
                 .a
@@ -146,6 +147,9 @@ fn example_5_5_runs_land_in_the_next_segment_s_ball() {
                 - exit.b;
             if g <= -exit.theta {
                 landed = Some(x.clone());
+                break;
+            }
+            if k == seg0.rows {
                 break;
             }
             let u: Vec<f64> = (0..gain.nrows())
