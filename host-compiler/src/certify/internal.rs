@@ -463,8 +463,12 @@ impl Cell {
 }
 
 /// ‖G‖₂ of a small matrix: the square root of the largest eigenvalue of GᵀG (nalgebra's symmetric
-/// eigensolver; a third of faer's SVD's time at n = 3, which is made for large matrices).
+/// eigensolver; a third of faer's SVD's time at n = 3, which is made for large matrices); ∞ for a matrix
+/// with an entry that is not finite, as [`spectral_norm`] answers when it cannot.
 fn spectral_norm_small(G: &nalgebra::DMatrix<f64>) -> f64 {
+    if G.iter().any(|v| !v.is_finite()) {
+        return f64::INFINITY;
+    }
     let gram = G.transpose() * G;
     gram.symmetric_eigenvalues()
         .iter()
