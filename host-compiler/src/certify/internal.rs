@@ -503,11 +503,13 @@ impl ExitSamples {
     /// κ = `k`: the ball's reach ‖â‖_{Pᵢ⁻¹}·[`ExitSamples::radius`], or the image's,
     /// r‖âᵀÃ^κPᵢ⁻¹ᐟ²‖ + ‖â‖_{Pᵢ⁻¹}(S_κz + η) (the deviation is Ã^κe₀ plus at most that), whichever is less.
     fn guard_reach(&self, k: usize, r: f64, eta: f64, dn: f64) -> f64 {
-        let ball = dn * self.radius(k, r, eta);
-        match (self.normal_reach.get(k), self.disturbed.get(k)) {
-            (Some(&w), Some(&z)) => ball.min(r * w + dn * (z + eta)),
-            _ => ball,
-        }
+        (dn * self.radius(k, r, eta)).min(r * self.normal_reach[k] + dn * self.beside_image(k, eta))
+    }
+
+    /// How far a run's sample-κ deviation may be from the image Ã^κe₀ of its start (item 4's d_κ): the
+    /// rounding's and mismatch's sum S_κz, plus η.
+    fn beside_image(&self, k: usize, eta: f64) -> f64 {
+        self.disturbed[k] + eta
     }
 }
 
@@ -597,8 +599,7 @@ fn check_exit(
         // p̂ₛ (P-orthogonal parts), d the centre's distance to the slab; none crosses there if d ≥ R′.
         let L = c.grow * F_post;
         let R_sub = loc.inter(re, c.dt * d.speed[k], c.eps);
-        // The deviation at sample κ is Ã^κe₀ plus at most `dk` (rounding, mismatch, late detection).
-        let dk = d.disturbed.get(k).copied().unwrap_or(r) + eta;
+        let dk = d.beside_image(k, eta);
         for j in 0..d.land[k].len() {
             let d_slab = ((d.sub_g[k][j].abs() - c.theta_eff).max(0.0)) / c.dn;
             if d_slab >= R_sub {
@@ -647,8 +648,6 @@ fn check_exit(
     }
 }
 
-/// Entry window (module doc): with radius r, ∃W: transversality into G at samples ≤ W, inter-sample balls
-/// inside G after W (up to `end`).
 /// What [`crossing_cells`] reads besides the samples and the constants.
 struct CellInputs<'a> {
     pre: &'a Loc<'a>,
@@ -659,6 +658,8 @@ struct CellInputs<'a> {
     grid: &'a Grid,
     /// x̃(κ + s_j): the nominal's flow within each period under its held input, [κ][j].
     sub: &'a [Vec<Vec<f64>>],
+    /// Ã^κPᵢ⁻¹ᐟ² per sample: the image of the start ball's unit sphere.
+    whitened: &'a [Mat<f64>],
 }
 
 /// The crossing map of every cell (κ, j), κ < `kf_max`, that neither the ball bound nor the ellipsoid's
@@ -694,16 +695,17 @@ fn crossing_cells(
     let sqrt_phi: Vec<Mat<f64>> = (0..GRID)
         .map(|j| &post.lc.roots.sqrt * &grid.Phi[j])
         .collect();
-    let mut W = roots.inv_sqrt.clone();
     let mut cells = Vec::with_capacity(kf_max);
-    for k in 0..kf_max.min(inp.sub.len()) {
-        if k > 0 {
-            W = &pre.lc.At * &W;
-        }
+    for (k, W) in inp
+        .whitened
+        .iter()
+        .enumerate()
+        .take(kf_max.min(inp.sub.len()))
+    {
         let re = d.radius(k, r_max, eta);
         let R = pre.inter(re, d.rho[k], c.eps);
         let R_sub = pre.inter(re, c.dt * d.speed[k], c.eps);
-        let dk = d.disturbed.get(k).copied().unwrap_or(r_max) + eta;
+        let dk = d.beside_image(k, eta);
         let u = inp.nom.u.get(k).or(inp.nom.u.last()).expect("rows ≥ 1");
         let mut row = Vec::with_capacity(GRID);
         for j in 0..GRID {
@@ -767,6 +769,8 @@ fn crossing_cells(
     cells
 }
 
+/// Entry window (module doc): with radius r, ∃W: transversality into G at samples ≤ W, inter-sample balls
+/// inside G after W (up to `end`).
 fn check_entry(r: f64, loc: &Loc<'_>, entry: &Half, nom: &Nominal, end: usize, eps: f64) -> bool {
     let roots = &loc.lc.roots;
     let dn = roots.dual_norm(&entry.a);
@@ -1035,22 +1039,22 @@ pub fn certify_internal(
         // A run's sample-κ radius is at least ‖Ã^κ‖_P·r ([`ExitSamples::radius`]), so some sample's ball
         // lies in G only if r ≤ −g(x̃(κ))/(‖â‖·‖Ã^κ‖_P) there.
         let power = pre.lc.power_norms(rows + 1);
-        // ‖âᵀÃ^κPᵢ⁻¹ᐟ²‖: how far the image of the start ball reaches along the guard's normal at κ.
-        let normal_reach: Vec<f64> = {
-            let mut W = roots.inv_sqrt.clone();
-            (0..=rows)
-                .map(|k| {
-                    if k > 0 {
-                        W = &pre.lc.At * &W;
-                    }
-                    mat_t_vec(W.as_ref(), &exit.a)
-                        .iter()
-                        .map(|v| v * v)
-                        .sum::<f64>()
-                        .sqrt()
-                })
-                .collect()
-        };
+        // Ã^κPᵢ⁻¹ᐟ², and ‖âᵀÃ^κPᵢ⁻¹ᐟ²‖: how far the image of the start ball reaches along the guard's
+        // normal at κ.
+        let whitened: Vec<Mat<f64>> =
+            std::iter::successors(Some(roots.inv_sqrt.clone()), |W| Some(&pre.lc.At * W))
+                .take(rows + 1)
+                .collect();
+        let normal_reach: Vec<f64> = whitened
+            .iter()
+            .map(|W| {
+                mat_t_vec(W.as_ref(), &exit.a)
+                    .iter()
+                    .map(|v| v * v)
+                    .sum::<f64>()
+                    .sqrt()
+            })
+            .collect();
         // The depth test of item 3 takes the smaller of the ball's and the image's reach
         // ([`ExitSamples::guard_reach`]), so the end is where either could lie inside.
         let deepest = gs
@@ -1103,6 +1107,7 @@ pub fn certify_internal(
         let mu2 = log_norm(&post.lc.roots, post.cp.A.as_ref());
         let BK1 = &pre.cp.B * pre.K;
         let BK2 = &post.cp.B * pre.K;
+        let a_pre = cross(roots, pre.cp.A.as_ref(), roots);
         let c = ExitConstants {
             dn,
             theta_eff,
@@ -1131,7 +1136,7 @@ pub fn certify_internal(
             eps,
             delta_next,
             dt: h / (GRID - 1) as f64,
-            a_pre: cross(roots, pre.cp.A.as_ref(), roots),
+            a_pre,
             c_BK_pre: cross(roots, BK1.as_ref(), roots),
             c_B_pre: roots.norm_into(pre.cp.B.as_ref()),
         };
@@ -1155,7 +1160,6 @@ pub fn certify_internal(
                     .collect()
             })
             .collect();
-        let a_pre = cross(roots, pre.cp.A.as_ref(), roots);
         // ‖fᵢ(x̃(κ), ũ(κ))‖_{Pᵢ} (the last sample with the last input), and ρκ = φ·that (0 at the last).
         let f_norm: Vec<f64> = (0..=rows)
             .map(|k| {
@@ -1270,6 +1274,7 @@ pub fn certify_internal(
                 target,
                 grid: &grid,
                 sub: &sub,
+                whitened: &whitened,
             },
             &samples,
             &c,
