@@ -46,7 +46,7 @@
 //! theorem ∇ₓ ‖x − y*‖_P = P(x − y*)/‖x − y*‖_P, with the sign of the signed distance. These are the
 //! gradients at the critical points of (5.27)–(5.28).
 
-use super::{input_distance, Loop, LoopConstants};
+use super::{input_distance_scaled, InputScale, Loop, LoopConstants};
 use crate::geometry::{Metric, Region};
 use crate::linalg::{mat_t_vec, mat_vec, p_norm};
 use crate::property::InputBound;
@@ -76,6 +76,8 @@ pub struct Pieces<'a, 'b> {
     pub lp: &'a Loop<'b>,
     pub lc: &'a LoopConstants,
     metric: Metric,
+    /// The input piece's divisor for the loop's gain, computed once ([`InputScale`]).
+    input_scale: InputScale,
 }
 
 fn dot(a: &[f64], b: &[f64]) -> f64 {
@@ -91,6 +93,7 @@ impl<'a, 'b> Pieces<'a, 'b> {
                 n: lp.P.nrows(),
                 R: crate::linalg::to_row_major(lp.P),
             },
+            input_scale: InputScale::new(lp.K, &lc.roots, lp.input()),
         }
     }
 
@@ -349,7 +352,7 @@ impl<'a, 'b> Pieces<'a, 'b> {
 
     /// Input piece at step k < N.
     pub fn input_value(&self, nom: &Nominal, k: usize, eps: &[f64]) -> f64 {
-        input_distance(self.lp.K, &self.lc.roots, &nom.u[k], self.lp.input(), eps)
+        input_distance_scaled(&self.input_scale, &nom.u[k], self.lp.input(), eps)
     }
 
     /// The CAF metric the pieces are measured in.
@@ -360,17 +363,19 @@ impl<'a, 'b> Pieces<'a, 'b> {
     /// Input piece and its gradient at step k: through ũ = K̂x̃ + v, ∂/∂x = K̂ᵀ∂/∂ũ and ∂/∂v = ∂/∂ũ.
     pub fn input_grad(&self, nom: &Nominal, k: usize, eps: &[f64]) -> (f64, LocalGrad) {
         let K = self.lp.K;
-        let (m, n) = (K.nrows(), K.ncols());
+        let m = K.nrows();
         let u = &nom.u[k];
-        let val = input_distance(K, &self.lc.roots, u, self.lp.input(), eps);
+        let val = input_distance_scaled(&self.input_scale, u, self.lp.input(), eps);
         let mut gu = vec![0.0; m];
         match self.lp.input() {
             InputBound::Box { lo, hi } => {
                 // The active face: the component and side of the smallest scaled slack.
                 let mut best = (f64::INFINITY, 0usize, 0.0f64);
                 for i in 0..m {
-                    let Ki: Vec<f64> = (0..n).map(|j| K[(i, j)]).collect();
-                    let s = self.lc.roots.dual_norm(&Ki);
+                    let s = match &self.input_scale {
+                        InputScale::Rows(rows) => rows[i],
+                        InputScale::Norm(_) => f64::NAN,
+                    };
                     let s = if s > 0.0 { s } else { 1.0 };
                     let up = (hi[i] - eps[i] - u[i]) / s;
                     let dn = (u[i] - lo[i] - eps[i]) / s;
@@ -384,7 +389,10 @@ impl<'a, 'b> Pieces<'a, 'b> {
                 gu[best.1] = best.2;
             }
             InputBound::Norm2 { center, .. } => {
-                let s = self.lc.roots.norm_from(K);
+                let s = match self.input_scale {
+                    InputScale::Norm(s) => s,
+                    InputScale::Rows(_) => f64::NAN,
+                };
                 let s = if s > 0.0 { s } else { 1.0 };
                 let e: Vec<f64> = u.iter().zip(center).map(|(a, c)| a - c).collect();
                 let r = dot(&e, &e).sqrt();

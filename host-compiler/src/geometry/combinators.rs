@@ -77,6 +77,24 @@ impl Region for Union {
     fn contains(&self, x: &[f64]) -> bool {
         self.members.iter().any(|m| m.contains(x))
     }
+    /// Inside within the largest radius a member is sure to hold x; outside within the least radius of
+    /// all members sure to exclude it.
+    fn sure_radius(&self, x: &[f64]) -> Option<(bool, f64)> {
+        let (mut inside, mut outside) = (None::<f64>, f64::INFINITY);
+        let mut all_known = true;
+        for m in &self.members {
+            match m.sure_radius(x) {
+                Some((true, r)) => inside = Some(inside.map_or(r, |i| i.max(r))),
+                Some((false, r)) => outside = outside.min(r),
+                None => all_known = false,
+            }
+        }
+        match inside {
+            Some(r) => Some((true, r)),
+            None if all_known => Some((false, outside)),
+            None => None,
+        }
+    }
     fn dist(&self, x: &[f64], metric: &Metric) -> Witness {
         Witness::or_invalid(self.try_dist(x, metric))
     }
@@ -139,6 +157,9 @@ impl Region for Empty {
     fn contains(&self, _: &[f64]) -> bool {
         false
     }
+    fn sure_radius(&self, _: &[f64]) -> Option<(bool, f64)> {
+        Some((false, f64::INFINITY))
+    }
     fn dist(&self, _: &[f64], _: &Metric) -> Witness {
         Witness {
             value: f64::INFINITY,
@@ -181,6 +202,24 @@ impl Region for Intersection {
     }
     fn contains(&self, x: &[f64]) -> bool {
         self.members.iter().all(|m| m.contains(x))
+    }
+    /// The dual of the union's: outside within the largest radius a member is sure to exclude x, inside
+    /// within the least radius of all members sure to hold it.
+    fn sure_radius(&self, x: &[f64]) -> Option<(bool, f64)> {
+        let (mut outside, mut inside) = (None::<f64>, f64::INFINITY);
+        let mut all_known = true;
+        for m in &self.members {
+            match m.sure_radius(x) {
+                Some((false, r)) => outside = Some(outside.map_or(r, |o| o.max(r))),
+                Some((true, r)) => inside = inside.min(r),
+                None => all_known = false,
+            }
+        }
+        match outside {
+            Some(r) => Some((false, r)),
+            None if all_known => Some((true, inside)),
+            None => None,
+        }
     }
     fn dist(&self, x: &[f64], metric: &Metric) -> Witness {
         Witness::or_invalid(self.try_dist(x, metric))
@@ -246,6 +285,12 @@ impl Region for Complement {
     fn contains(&self, x: &[f64]) -> bool {
         x.len() == self.inner.dim() && !self.inner.contains(x)
     }
+    fn sure_radius(&self, x: &[f64]) -> Option<(bool, f64)> {
+        if x.len() != self.inner.dim() {
+            return None;
+        }
+        self.inner.sure_radius(x).map(|(inside, r)| (!inside, r))
+    }
     fn dist(&self, x: &[f64], metric: &Metric) -> Witness {
         Witness::or_invalid(self.try_dist(x, metric))
     }
@@ -275,6 +320,8 @@ pub struct InOutput {
     n: usize,
     p: usize,
     C: Vec<f64>,
+    /// ‖C‖₂ (rounded up): the Lipschitz constant of x ↦ Cx ([`Region::sure_radius`]).
+    c_norm: f64,
     inner: Box<dyn Region>,
     cache: MetricCache<OutputMetric>,
 }
@@ -328,6 +375,7 @@ impl InOutput {
             n,
             p,
             C,
+            c_norm: e.max().sqrt() * (1.0 + 1e-12),
             inner,
             cache: MetricCache::default(),
         })
@@ -457,6 +505,21 @@ impl Region for InOutput {
             }
             None => self.inner.contains(&self.output(x)),
         }
+    }
+    /// The output set's sure radius at y = Cx over ‖C‖₂: a state move of d moves y by at most ‖C‖₂‖d‖.
+    fn sure_radius(&self, x: &[f64]) -> Option<(bool, f64)> {
+        if x.len() != self.n {
+            return None;
+        }
+        let mut buf = [0.0; 8];
+        let (inside, r) = match buf.get_mut(..self.p) {
+            Some(y) => {
+                linalg::matvec(&self.C, self.p, self.n, x, y);
+                self.inner.sure_radius(y)?
+            }
+            None => self.inner.sure_radius(&self.output(x))?,
+        };
+        Some((inside, r / self.c_norm))
     }
     fn dist(&self, x: &[f64], metric: &Metric) -> Witness {
         Witness::or_invalid(self.try_dist(x, metric))

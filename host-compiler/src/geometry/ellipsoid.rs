@@ -24,6 +24,8 @@ thread_local! {
 pub struct Ellipsoid {
     c: Vec<f64>,
     Q: Vec<f64>,
+    /// √λ_max(Q): the Lipschitz constant of y ↦ ‖y − c‖_Q ([`Region::sure_radius`]).
+    sqrt_lmax: f64,
     cache: MetricCache<EllipsoidBoundaryDistance>,
 }
 
@@ -32,6 +34,7 @@ impl Clone for Ellipsoid {
         Self {
             c: self.c.clone(),
             Q: self.Q.clone(),
+            sqrt_lmax: self.sqrt_lmax,
             cache: MetricCache::default(),
         }
     }
@@ -68,6 +71,7 @@ impl Ellipsoid {
         Ok(Self {
             c,
             Q,
+            sqrt_lmax: e.max().sqrt(),
             cache: MetricCache::default(),
         })
     }
@@ -128,6 +132,22 @@ impl Region for Ellipsoid {
     }
     fn contains(&self, x: &[f64]) -> bool {
         x.len() == self.c.len() && self.level(x) <= 1.0
+    }
+    /// ‖y − c‖_Q differs from ‖x − c‖_Q by at most √λ_max(Q)‖y − x‖₂ (triangle inequality of the
+    /// seminorm), so the ball of radius |‖x − c‖_Q − 1| / √λ_max(Q) stays on x's side of the boundary.
+    fn sure_radius(&self, x: &[f64]) -> Option<(bool, f64)> {
+        if x.len() != self.c.len() {
+            return None;
+        }
+        let s = self.level(x).sqrt();
+        if !s.is_finite() {
+            return None;
+        }
+        let inside = s <= 1.0;
+        Some((
+            inside,
+            super::sure_margin((s - 1.0).abs(), s.max(1.0)) / self.sqrt_lmax,
+        ))
     }
     fn dist(&self, x: &[f64], metric: &Metric) -> Witness {
         Witness::or_invalid(self.try_dist(x, metric))
@@ -228,6 +248,9 @@ impl Region for Ball {
     }
     fn contains(&self, x: &[f64]) -> bool {
         self.inner.contains(x)
+    }
+    fn sure_radius(&self, x: &[f64]) -> Option<(bool, f64)> {
+        self.inner.sure_radius(x)
     }
     fn dist(&self, x: &[f64], metric: &Metric) -> Witness {
         self.inner.dist(x, metric)

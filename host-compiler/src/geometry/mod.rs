@@ -202,6 +202,15 @@ pub trait Region: Send + Sync {
             w
         }
     }
+    /// A cheap, conservative answer for a whole Euclidean ball about `x`: `Some((inside, r))` says that
+    /// every point y with ‖y − x‖₂ < r has `contains(y) == inside` (r ≥ 0; 0 says nothing about other
+    /// points). Closed form and allocation-free, with a relative 10⁻⁹ of the compared quantity kept back
+    /// so that `contains`' own rounding cannot disagree ([`sure_margin`]): for the verifier's check between
+    /// samples, where a period whose excursion is below r needs no test. `None` when the set has no such
+    /// bound (the caller then tests its points one by one) or `x` is not a valid point.
+    fn sure_radius(&self, _x: &[f64]) -> Option<(bool, f64)> {
+        None
+    }
     /// [`Region::signed_dist`] in `metric` compiled for many points ([`compiled`]): the same values, bit
     /// for bit, without the witness. `None` where the set has no compiled form or the metric does not
     /// fit; callers then use [`Region::signed_dist`].
@@ -233,6 +242,13 @@ pub trait Region: Send + Sync {
             Ok(w)
         }
     }
+}
+
+/// The part of a scalar test's slack `slack` (how far the compared quantity is from its threshold, both
+/// of size about `scale`) that is sure whatever `contains`' rounding: the slack less a relative 10⁻⁹ of
+/// the scale, clamped at 0 ([`Region::sure_radius`]).
+pub(crate) fn sure_margin(slack: f64, scale: f64) -> f64 {
+    (slack - 1e-9 * scale).max(0.0)
 }
 
 /// Check a query point and a metric against the ambient dimension (shape and finiteness only; the metric's

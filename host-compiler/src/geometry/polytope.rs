@@ -463,6 +463,37 @@ impl Region for Polytope {
             && (0..self.k)
                 .all(|i| linalg::dot(&self.A[i * self.n..(i + 1) * self.n], x) <= self.b[i])
     }
+    /// A row a·x ≤ b changes by at most ‖a‖‖y − x‖₂: inside, the least row slack over ‖a‖ keeps y inside;
+    /// outside, the largest violation over ‖a‖ keeps y outside (a row without coefficients is constant).
+    fn sure_radius(&self, x: &[f64]) -> Option<(bool, f64)> {
+        if x.len() != self.n || !x.iter().all(|v| v.is_finite()) {
+            return None;
+        }
+        let xn = x.iter().map(|v| v * v).sum::<f64>().sqrt();
+        let (mut inner, mut outer) = (f64::INFINITY, None::<f64>);
+        for i in 0..self.k {
+            let a = &self.A[i * self.n..(i + 1) * self.n];
+            let an = a.iter().map(|v| v * v).sum::<f64>().sqrt();
+            let ax = linalg::dot(a, x);
+            let scale = self.b[i].abs() + an * xn;
+            if ax <= self.b[i] {
+                if an > 0.0 {
+                    inner = inner.min(super::sure_margin(self.b[i] - ax, scale) / an);
+                }
+            } else {
+                let r = if an > 0.0 {
+                    super::sure_margin(ax - self.b[i], scale) / an
+                } else {
+                    f64::INFINITY
+                };
+                outer = Some(outer.map_or(r, |o| o.max(r)));
+            }
+        }
+        Some(match outer {
+            Some(r) => (false, r),
+            None => (true, inner),
+        })
+    }
     fn dist(&self, x: &[f64], metric: &Metric) -> Witness {
         Witness::or_invalid(self.try_dist(x, metric))
     }

@@ -353,8 +353,14 @@ impl Plant for FeedbackLinearized {
     fn step(&self, loc: Location, x: &[f64], u: &[f64]) -> Vec<f64> {
         self.linear.step(loc, x, u)
     }
+    fn step_into(&self, loc: Location, x: &[f64], u: &[f64], out: &mut [f64]) {
+        self.linear.step_into(loc, x, u, out)
+    }
     fn between_samples(&self, loc: Location, x: &[f64], u: &[f64], visit: &mut dyn FnMut(&[f64])) {
         self.linear.between_samples(loc, x, u, visit)
+    }
+    fn excursion(&self, loc: Location, x: &[f64], u: &[f64]) -> Option<f64> {
+        self.linear.excursion(loc, x, u)
     }
     fn model_mismatch(&self) -> f64 {
         self.maps.mismatch

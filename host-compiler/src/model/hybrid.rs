@@ -563,6 +563,9 @@ impl Plant for Hybrid {
     fn between_samples(&self, loc: Location, x: &[f64], u: &[f64], visit: &mut dyn FnMut(&[f64])) {
         self.sampled[loc].between_samples(0, x, u, visit)
     }
+    fn excursion(&self, loc: Location, x: &[f64], u: &[f64]) -> Option<f64> {
+        self.sampled[loc].excursion(0, x, u)
+    }
 }
 
 impl Hybrid {

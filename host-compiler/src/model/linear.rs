@@ -37,6 +37,9 @@ pub struct LinearAffine {
     pub continuous: Option<ContinuousPlant>,
     /// Exact ZOH over h / [`LinearAffine::SUBSTEPS`] (continuous plants only).
     sub: Option<DiscretePlant>,
+    /// γ(h) of [`InterSampleBound`] (continuous plants only): the excursion within a period is at most
+    /// γ(h)‖f‖₂ at the sample.
+    excursion_gain: Option<f64>,
 }
 
 fn check_AB(A: MatRef<'_, f64>, B: MatRef<'_, f64>) -> Result<(), ModelError> {
@@ -225,6 +228,7 @@ impl LinearAffine {
             discrete: d,
             continuous: None,
             sub: None,
+            excursion_gain: None,
         }
     }
 
@@ -232,10 +236,12 @@ impl LinearAffine {
     pub fn sampled(c: ContinuousPlant, h: f64) -> Result<Self, ModelError> {
         let discrete = c.zoh(h)?;
         let sub = Some(c.zoh(h / Self::SUBSTEPS as f64)?);
+        let excursion_gain = Some(c.inter_sample_bound(h)?.gain);
         Ok(Self {
             discrete,
             continuous: Some(c),
             sub,
+            excursion_gain,
         })
     }
 
@@ -277,6 +283,9 @@ impl Plant for LinearAffine {
     fn step(&self, _loc: Location, x: &[f64], u: &[f64]) -> Vec<f64> {
         self.discrete.step(x, u)
     }
+    fn step_into(&self, _loc: Location, x: &[f64], u: &[f64], out: &mut [f64]) {
+        self.discrete.step_into(x, u, out)
+    }
     fn between_samples(&self, _loc: Location, x: &[f64], u: &[f64], visit: &mut dyn FnMut(&[f64])) {
         let Some(sub) = &self.sub else {
             return;
@@ -290,5 +299,12 @@ impl Plant for LinearAffine {
             visit(&b);
             std::mem::swap(&mut a, &mut b);
         }
+    }
+    fn excursion(&self, _loc: Location, x: &[f64], u: &[f64]) -> Option<f64> {
+        let (c, gain) = (self.continuous.as_ref()?, self.excursion_gain?);
+        if x.len() != c.n() || u.len() != c.m() {
+            return None;
+        }
+        Some(gain * c.f_norm(x, u))
     }
 }

@@ -45,6 +45,11 @@ pub trait Plant: Send + Sync + std::fmt::Debug {
     fn continuous(&self, loc: Location) -> Option<&ContinuousPlant>;
     /// One sample period from `x` with `u` held: the state at the next sample.
     fn step(&self, loc: Location, x: &[f64], u: &[f64]) -> Vec<f64>;
+    /// [`Plant::step`] into `out` (n values, the same ones), for loops that step every run's every
+    /// sample.
+    fn step_into(&self, loc: Location, x: &[f64], u: &[f64], out: &mut [f64]) {
+        out.copy_from_slice(&self.step(loc, x, u));
+    }
     /// The vector field at the sample, ẋ(κh) with the held input, for continuous-time plants (`None` for a
     /// plant given in discrete time, which has no motion between samples).
     fn vector_field(&self, loc: Location, x: &[f64], u: &[f64]) -> Option<Vec<f64>> {
@@ -54,6 +59,13 @@ pub trait Plant: Send + Sync + std::fmt::Debug {
     /// in time order, for the verifier's check between samples (none for a discrete-time plant). A visitor
     /// rather than a list: the verifier calls this every step of every Monte Carlo run.
     fn between_samples(&self, loc: Location, x: &[f64], u: &[f64], visit: &mut dyn FnMut(&[f64]));
+    /// An upper bound on how far the plant moves from `x` within the period with `u` held,
+    /// sup over τ ∈ [0, h] of ‖x(κh + τ) − x‖₂ (`model::intersample`), which bounds every state
+    /// [`Plant::between_samples`] visits: a check those states provably pass (the sample's clearance
+    /// from a set above it) may then be skipped. `None` when the class has no such bound.
+    fn excursion(&self, _loc: Location, _x: &[f64], _u: &[f64]) -> Option<f64> {
+        None
+    }
     /// A bound on a disturbance in the input channel of the linear model, varying within the period, by
     /// which the sampled loop departs from that model (2-norm, input units): 0 when the sampled model is
     /// exact (linear affine plants); a feedback-linearizable plant's held input drifts from the

@@ -608,17 +608,21 @@ pub fn run_pwa(judge: &Judge<'_>, image: &Image<'_>, x0: &[f64]) -> (RunOutcome,
         if out.goal_step.is_some() {
             out.after_goal_input_excursion |= s < 0.0;
             out.terminal_violation |= judged && s < 0.0;
-            judge
-                .plant
-                .between_samples(0, &x, &u, &mut |xs| after(xs, &mut out));
+            if !super::between_clear(judge, &x, &u, true) {
+                judge
+                    .plant
+                    .between_samples(0, &x, &u, &mut |xs| after(xs, &mut out));
+            }
             x = judge.plant.step(0, &x, &u);
             after(&x, &mut out);
         } else {
             out.input_margin = out.input_margin.min(s);
             out.input_violation |= s < 0.0;
-            judge
-                .plant
-                .between_samples(0, &x, &u, &mut |xs| out.entered_unsafe |= hit(xs));
+            if !super::between_clear(judge, &x, &u, false) {
+                judge
+                    .plant
+                    .between_samples(0, &x, &u, &mut |xs| out.entered_unsafe |= hit(xs));
+            }
             x = judge.plant.step(0, &x, &u);
             out.entered_unsafe |= hit(&x);
         }

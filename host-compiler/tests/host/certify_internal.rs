@@ -1,4 +1,5 @@
 //! General switching (Theorem 4.24 for the sampled loop, `certify::internal`) on Example 4.25.
+#![allow(non_snake_case)]
 
 use host_compiler::synth::hybrid::{ball_starts, image, plan_run, HybridTask};
 use host_compiler::verify::hybrid::monte_carlo_hybrid;

@@ -88,6 +88,7 @@ mod synth_end_to_end;
 mod synth_fl_mtl;
 mod synth_import_dir;
 mod verify_attack;
+mod verify_between;
 mod verify_refuses;
 mod verify_semantics;
 mod verify_tamper;
