@@ -16,6 +16,7 @@
 use crate::model::hybrid::{FlowError, Hybrid};
 use crate::model::Location;
 use crate::property::ReachAvoid;
+use rayon::prelude::*;
 use shared_types::eval::Controller;
 
 /// Exact sub-periods per control period at which Unsafe is checked.
@@ -460,8 +461,8 @@ pub fn recheck_runs(
             .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]) as f64)
             .collect()
     };
-    let mut out = Vec::new();
-    for t in 0..img.n_trajectories() {
+    // Each run is re-proved on its own: in parallel, collected in the image's order.
+    let check = |t: usize| -> RunCheck {
         let (s0, count) = img.trajectory_segments(t);
         let (tstart, _) = img.trajectory_rows(t);
         let stored = img.delta(t);
@@ -524,18 +525,15 @@ pub fn recheck_runs(
             }
         }
         if let Some(why) = bad {
-            out.push(fail(why));
-            continue;
+            return fail(why);
         }
         if locs.iter().any(|&l| lcs[l].is_none()) {
-            out.push(fail("a location's stored K̂ and P̂ certify nothing".into()));
-            continue;
+            return fail("a location's stored K̂ and P̂ certify nothing".into());
         }
         if forced && exits.iter().any(|e| matches!(e, Exit::Guard { .. })) {
-            out.push(fail(
+            return fail(
                 "the run mixes forced switches and guard exits, which no certificate covers".into(),
-            ));
-            continue;
+            );
         }
         let cert = if forced {
             let segs: Vec<ForcedSegment> = locs
@@ -556,10 +554,7 @@ pub fn recheck_runs(
             };
             match cert {
                 Ok(c) => c.as_segments(&noms),
-                Err(e) => {
-                    out.push(fail(e.to_string()));
-                    continue;
-                }
+                Err(e) => return fail(e.to_string()),
             }
         } else {
             let segs: Vec<InternalSegment> = locs
@@ -578,10 +573,7 @@ pub fn recheck_runs(
                 .collect();
             match certify_internal(plant, &segs, &edges, steps) {
                 Ok(c) => c,
-                Err(e) => {
-                    out.push(fail(e.to_string()));
-                    continue;
-                }
+                Err(e) => return fail(e.to_string()),
             }
         };
         let mut why = None;
@@ -618,15 +610,18 @@ pub fn recheck_runs(
                 "the stored radius {stored:e} exceeds the {certified:e} the stored tables certify"
             ));
         }
-        out.push(RunCheck {
+        RunCheck {
             trajectory: t,
             stored,
             certified,
             ok: why.is_none(),
             why,
-        });
-    }
-    out
+        }
+    };
+    (0..img.n_trajectories())
+        .into_par_iter()
+        .map(check)
+        .collect()
 }
 
 /// Monte Carlo starts for a hybrid image (and a temporal task's): `interior` uniform samples of Init that
