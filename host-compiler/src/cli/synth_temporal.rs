@@ -96,6 +96,8 @@ pub fn run(a: &SynthArgs, problem: crate::spec::Problem) -> Outcome {
                 eprintln!("certified ball {count} (δ = {delta:.4})")
             }) as Arc<dyn Fn(usize, f64) + Send + Sync>
         }),
+        on_progress: (!quiet)
+            .then(|| Arc::new(|line: &str| eprintln!("{line}")) as Arc<dyn Fn(&str) + Send + Sync>),
         imports,
         ..TemporalOptions::default()
     };

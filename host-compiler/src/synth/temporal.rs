@@ -53,6 +53,10 @@ pub struct TemporalOptions {
     pub cancel: Arc<AtomicBool>,
     /// Called with the number of balls and the new ball's δ after each acceptance.
     pub on_accept: Option<Arc<dyn Fn(usize, f64) + Send + Sync>>,
+    /// Called with a line at each stage after the growth (the image and its re-proof, the coverage, the
+    /// Monte Carlo), ending with the seconds since the start, as the hybrid synthesis reports its own
+    /// (default none).
+    pub on_progress: Option<Arc<dyn Fn(&str) + Send + Sync>>,
     /// Recordings (name, recording) certified first ([`certify_recording`]); those certified at least
     /// `min_robustness` join the balls before any seed is planned (default none).
     pub imports: Vec<(String, Recording)>,
@@ -68,6 +72,7 @@ impl Default for TemporalOptions {
             iterations: None,
             cancel: Arc::new(AtomicBool::new(false)),
             on_accept: None,
+            on_progress: None,
             imports: Vec::new(),
         }
     }
@@ -519,6 +524,16 @@ pub fn synthesize_temporal(
     .map_err(|e| format!("image: {e}"))?;
     let decoded = shared_types::image::decode(&image).map_err(|e| format!("image: {e}"))?;
     mark("image", &mut timings);
+    let progress = |line: String| {
+        if let Some(f) = &opts.on_progress {
+            f(&format!("{line} ({:.0} s)", t0.elapsed().as_secs_f64()));
+        }
+    };
+    progress(format!(
+        "image: {} bytes; re-proving {} balls from its bytes",
+        image.len(),
+        balls.len()
+    ));
     let recheck = recheck(task, tt, &decoded).map_err(|e| e.to_string())?;
     mark("re-proof", &mut timings);
     // Coverage (§2.5.2) on fresh samples through the image's own f32 selection.
@@ -527,6 +542,10 @@ pub fn synthesize_temporal(
         let x32: Vec<f32> = x.iter().map(|&v| v as f32).collect();
         ctl.select_maps(&x32).is_some()
     };
+    progress(format!(
+        "coverage from {} samples of Init",
+        s.coverage_samples()
+    ));
     let coverage = estimate(&init, s.coverage_samples(), s.confidence, &mut rng, |x| {
         accepted(x)
     });
@@ -539,6 +558,10 @@ pub fn synthesize_temporal(
         opts.verify_per_ball,
         task.problem.seed ^ 0x7e51f1,
     )?;
+    progress(format!(
+        "Monte Carlo: {} closed-loop runs judged by the formula",
+        starts.len()
+    ));
     // A feedback-linearizable task's image runs on the nonlinear plant (its zero states drawn in Init).
     let verify = if task.plant.linearization().is_some() {
         monte_carlo_temporal_fl(task, tt, &decoded, &starts, task.problem.seed ^ 0x2e10)?

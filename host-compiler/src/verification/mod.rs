@@ -40,6 +40,46 @@ pub struct Options {
     pub coverage: bool,
     /// Stop at the first failed check (the campaign), instead of running every part for the report.
     pub stop_early: bool,
+    /// Told a line as each stage starts (the re-proof, the coverage, the Monte Carlo, the falsifier);
+    /// `None`: nothing is told.
+    pub progress: Option<Progress>,
+}
+
+/// The receiver of [`Options::progress`]' stage lines (the CLI prints them with the elapsed time).
+#[derive(Clone)]
+pub struct Progress(pub std::sync::Arc<dyn Fn(&str) + Send + Sync>);
+
+impl std::fmt::Debug for Progress {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("Progress")
+    }
+}
+
+impl Options {
+    /// Tell the receiver, if any, that stage `line` starts.
+    fn stage(&self, line: impl FnOnce() -> String) {
+        if let Some(p) = &self.progress {
+            (p.0)(&line());
+        }
+    }
+    /// The stage line of the Monte Carlo.
+    fn stage_monte_carlo(&self, balls: usize) {
+        self.stage(|| {
+            format!(
+                "Monte Carlo: {} runs from the cover, {} on each of {balls} balls' boundary",
+                self.runs, self.per_ball
+            )
+        });
+    }
+    /// The stage line of the re-proof.
+    fn stage_recheck(&self, img: &Image<'_>) {
+        self.stage(|| {
+            format!(
+                "re-proving {} balls from the image's bytes",
+                img.n_trajectories()
+            )
+        });
+    }
 }
 
 impl Default for Options {
@@ -51,6 +91,7 @@ impl Default for Options {
             attack_evals: None,
             coverage: true,
             stop_early: false,
+            progress: None,
         }
     }
 }
@@ -253,6 +294,7 @@ fn coverage(
     seed: u64,
 ) -> Option<Coverage> {
     (o.coverage && !v.stop()).then(|| {
+        o.stage(|| "coverage of the spec's Init".into());
         crate::verify::coverage::estimate(
             img,
             proved,
@@ -329,6 +371,7 @@ fn verify_feedforward(
         bytes,
         &crate::verify::stored::Expected::feedforward(task, false),
     );
+    o.stage_recheck(img);
     let rc = crate::verify::feedforward::recheck(&judge, img).map_err(|e| {
         // Not re-provable at all: a failed check about the image.
         Failed {
@@ -387,6 +430,7 @@ fn verify_feedforward(
     let mc = if v.stop() {
         None
     } else {
+        o.stage_monte_carlo(img.n_trajectories());
         let r = if linearized {
             crate::verify::nonlinear::monte_carlo_fl(task, img, o.runs, o.per_ball, seed)
         } else {
@@ -401,6 +445,9 @@ fn verify_feedforward(
         }
         Some(r)
     };
+    if o.attack_evals.is_some() && !v.stop() {
+        o.stage(|| "falsifier: a search for the least robust run over every ball".into());
+    }
     let attack = match attack_settings(o, problem.seed)? {
         Some(_) if v.stop() => None,
         Some(s) if linearized => Some(
@@ -450,6 +497,7 @@ fn verify_pwa(
         stop_early: o.stop_early,
     };
     stored(&mut v, bytes, &crate::verify::stored::Expected::pwa(task));
+    o.stage_recheck(img);
     let rc = crate::verify::pwa::recheck(&judge, img).map_err(Refusal::bad)?;
     if rc.failures > 0 {
         v.fail(Check::Recheck, true, || {
@@ -470,6 +518,7 @@ fn verify_pwa(
         None
     } else {
         // The image does not mark which balls start a trajectory: all runs start anywhere in F.
+        o.stage_monte_carlo(img.n_trajectories());
         let mc = crate::verify::pwa::monte_carlo_pwa(
             &judge,
             img,
@@ -489,6 +538,9 @@ fn verify_pwa(
         }
         Some(mc)
     };
+    if o.attack_evals.is_some() && !v.stop() {
+        o.stage(|| "falsifier: a search for the least robust run over every ball".into());
+    }
     let attack = match attack_settings(o, problem.seed)? {
         Some(s) if !v.stop() => Some(
             crate::verify::attack::attack_pwa(&judge, img, &s)
@@ -560,6 +612,7 @@ fn verify_temporal(
         bytes,
         &crate::verify::stored::Expected::feedforward(&task, true),
     );
+    o.stage_recheck(img);
     let rc = recheck(&task, &tt, img).map_err(Refusal::bad)?;
     if let Some(c) = rc.iter().find(|c| !c.ok) {
         // The stored radius within the certified one: what failed is the selection test's threshold.
@@ -594,6 +647,7 @@ fn verify_temporal(
     let mc = if v.stop() {
         None
     } else {
+        o.stage_monte_carlo(img.n_trajectories());
         let starts =
             crate::verify::hybrid::starts_from_image(bytes, &init, o.runs, o.per_ball, seed)
                 .map_err(Refusal::bad)?;
@@ -621,6 +675,9 @@ fn verify_temporal(
         }
         Some(r)
     };
+    if o.attack_evals.is_some() && !v.stop() {
+        o.stage(|| "falsifier: a search for the least robust run over every ball".into());
+    }
     let attack = match attack_settings(o, task.problem.seed)? {
         Some(_) if v.stop() => None,
         Some(s) if linearized => Some(
@@ -661,6 +718,7 @@ fn verify_hybrid(
         stop_early: o.stop_early,
     };
     stored(&mut v, bytes, &crate::verify::stored::Expected::hybrid());
+    o.stage_recheck(img);
     let rc = recheck(
         &task.plant,
         &task.property,
@@ -679,6 +737,7 @@ fn verify_hybrid(
     let mc = if v.stop() {
         None
     } else {
+        o.stage_monte_carlo(img.n_trajectories());
         let starts =
             starts_from_image(bytes, &init, o.runs, o.per_ball, seed).map_err(Refusal::bad)?;
         let parts: Vec<Result<HybridReport, String>> = starts
@@ -719,6 +778,9 @@ fn verify_hybrid(
         }
         Some(r)
     };
+    if o.attack_evals.is_some() && !v.stop() {
+        o.stage(|| "falsifier: a search for the least robust run over every ball".into());
+    }
     let attack = match attack_settings(o, task.problem.seed)? {
         Some(s) if !v.stop() => {
             let runs = crate::verify::attack::HybridRuns {

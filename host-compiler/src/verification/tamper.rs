@@ -238,6 +238,7 @@ pub fn campaign_options(seed: u64) -> Options {
         attack_evals: None,
         coverage: true,
         stop_early: true,
+        progress: None,
     }
 }
 

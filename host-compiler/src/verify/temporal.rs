@@ -135,8 +135,13 @@ impl TemporalReport {
 /// simulated step by step.
 pub struct RunRecord {
     h: f64,
-    coarse: Vec<Vec<f64>>,
-    fine: Vec<(f64, Vec<f64>)>,
+    n: usize,
+    /// The states at the samples, row after row (n values each).
+    coarse: Vec<f64>,
+    /// The instants of the finer trace and its states, row after row: one flat buffer per run rather
+    /// than a vector per state (a run at 8× is thousands of states).
+    fine_t: Vec<f64>,
+    fine: Vec<f64>,
 }
 
 impl RunRecord {
@@ -144,54 +149,65 @@ impl RunRecord {
     pub fn new(x0: &[f64], h: f64) -> Self {
         Self {
             h,
-            coarse: vec![x0.to_vec()],
-            fine: vec![(0.0, x0.to_vec())],
+            n: x0.len(),
+            coarse: x0.to_vec(),
+            fine_t: vec![0.0],
+            fine: x0.to_vec(),
         }
+    }
+    /// The sample index of the current period.
+    fn period(&self) -> usize {
+        self.coarse.len() / self.n.max(1) - 1
     }
     /// One period of the one-location `plant` from `x` under the held input `u`: records the states
     /// between the samples and the next sample, and returns it.
     pub fn step(&mut self, plant: &dyn crate::model::Plant, x: &[f64], u: &[f64]) -> Vec<f64> {
-        let k = self.coarse.len() - 1;
-        let mut sub = Vec::new();
-        plant.between_samples(0, x, u, &mut |xs| sub.push(xs.to_vec()));
-        let parts = sub.len() + 1;
-        for (s, xs) in sub.into_iter().enumerate() {
-            let t = (k as f64 + (s + 1) as f64 / parts as f64) * self.h;
-            self.fine.push((t, xs));
+        let k = self.period();
+        let first = self.fine_t.len();
+        let fine = &mut self.fine;
+        let fine_t = &mut self.fine_t;
+        plant.between_samples(0, x, u, &mut |xs| {
+            fine.extend_from_slice(xs);
+            fine_t.push(0.0);
+        });
+        let parts = self.fine_t.len() - first + 1;
+        for (s, t) in self.fine_t[first..].iter_mut().enumerate() {
+            *t = (k as f64 + (s + 1) as f64 / parts as f64) * self.h;
         }
         let next = plant.step(0, x, u);
-        self.coarse.push(next.clone());
-        self.fine.push(((k + 1) as f64 * self.h, next.clone()));
+        self.push_sample(&next);
         next
     }
     /// Records a state between samples, `tau` into the current period (a run stepped elsewhere, as
     /// [`super::hybrid`] steps an automaton's flow).
     pub fn push_between(&mut self, tau: f64, x: &[f64]) {
-        let k = self.coarse.len() - 1;
-        self.fine.push((k as f64 * self.h + tau, x.to_vec()));
+        let k = self.period();
+        self.fine_t.push(k as f64 * self.h + tau);
+        self.fine.extend_from_slice(x);
     }
     /// Records the next sample's state.
     pub fn push_sample(&mut self, x: &[f64]) {
-        let k = self.coarse.len();
-        self.coarse.push(x.to_vec());
-        self.fine.push((k as f64 * self.h, x.to_vec()));
+        let k = self.period() + 1;
+        self.coarse.extend_from_slice(x);
+        self.fine_t.push(k as f64 * self.h);
+        self.fine.extend_from_slice(x);
     }
     /// The run as traces over x1 … xn: at the samples, and sampled finer.
     pub fn traces(&self) -> Result<(Trace, Trace), crate::robustness::mtl::TraceError> {
-        let n = self.coarse[0].len();
-        let trace = |t: Vec<f64>, xs: Vec<&Vec<f64>>| {
-            let cols = (0..n).map(|i| xs.iter().map(|x| x[i]).collect()).collect();
+        let n = self.n;
+        let trace = |t: Vec<f64>, rows: &[f64]| {
+            let cols = (0..n)
+                .map(|i| rows.chunks_exact(n).map(|x| x[i]).collect())
+                .collect();
             Trace::new(t, state_signals(n), cols)
         };
+        let samples = self.coarse.len() / n.max(1);
         Ok((
             trace(
-                (0..self.coarse.len()).map(|k| k as f64 * self.h).collect(),
-                self.coarse.iter().collect(),
+                (0..samples).map(|k| k as f64 * self.h).collect(),
+                &self.coarse,
             )?,
-            trace(
-                self.fine.iter().map(|(t, _)| *t).collect(),
-                self.fine.iter().map(|(_, x)| x).collect(),
-            )?,
+            trace(self.fine_t.clone(), &self.fine)?,
         ))
     }
 }
@@ -228,6 +244,32 @@ impl crate::geometry::Region for Membership {
         crate::geometry::Witness {
             value,
             point: Vec::new(),
+        }
+    }
+    /// ±1 from one membership test (the default asks `contains` twice: once to choose, once in `depth`).
+    fn signed_dist(&self, x: &[f64], _: &crate::geometry::Metric) -> crate::geometry::Witness {
+        crate::geometry::Witness {
+            value: if self.0.contains(x) { 1.0 } else { -1.0 },
+            point: Vec::new(),
+        }
+    }
+    /// The same ±1 for a whole trace, without a witness per sample.
+    fn compile(
+        &self,
+        _: &crate::geometry::Metric,
+    ) -> Option<Box<dyn crate::geometry::SignedDistanceFn + '_>> {
+        Some(Box::new(MembershipFn(self.0.as_ref())))
+    }
+}
+
+/// [`Membership`] compiled: one membership test per point.
+struct MembershipFn<'a>(&'a dyn crate::geometry::Region);
+
+impl crate::geometry::SignedDistanceFn for MembershipFn<'_> {
+    fn eval(&mut self, x: &[f64]) -> crate::geometry::Signed {
+        crate::geometry::Signed {
+            inside: self.0.contains(x),
+            value: 1.0,
         }
     }
 }

@@ -72,6 +72,16 @@ fn mtl_synth_then_verify() {
         "{stdout}"
     );
     assert!(stdout.contains(", 0 violations"), "{stdout}");
+    // A line per stage on stderr as it starts, in order, with the seconds so far; none on stdout.
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    let stages = [
+        "re-proving 2 balls from the image's bytes (",
+        "coverage of the spec's Init (",
+        "Monte Carlo: 64 runs from the cover, 8 on each of 2 balls' boundary (",
+    ];
+    let at: Vec<Option<usize>> = stages.iter().map(|l| stderr.find(l)).collect();
+    assert!(at.iter().all(Option::is_some) && at.is_sorted(), "{stderr}");
+    assert!(!stdout.contains("Monte Carlo:"), "{stdout}");
 
     // The falsifier, scoring runs by the formula's robustness sampled finer: runs made, none violates.
     let attack = |img: &std::path::Path| {
