@@ -372,6 +372,8 @@ impl<'a, 'b> Pieces<'a, 'b> {
                 // The active face: the component and side of the smallest scaled slack.
                 let mut best = (f64::INFINITY, 0usize, 0.0f64);
                 for i in 0..m {
+                    // The scale was built from this input set (`Pieces::new`): the other arm is
+                    // never taken.
                     let s = match &self.input_scale {
                         InputScale::Rows(rows) => rows[i],
                         InputScale::Norm(_) => f64::NAN,
@@ -389,6 +391,7 @@ impl<'a, 'b> Pieces<'a, 'b> {
                 gu[best.1] = best.2;
             }
             InputBound::Norm2 { center, .. } => {
+                // Built from this input set, as above.
                 let s = match self.input_scale {
                     InputScale::Norm(s) => s,
                     InputScale::Rows(_) => f64::NAN,

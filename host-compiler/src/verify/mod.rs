@@ -549,7 +549,10 @@ pub(crate) fn between_clear(judge: &Judge<'_>, x: &[f64], u: &[f64], in_goal: bo
     if !reach.is_finite() {
         return false;
     }
-    let clear = |set: &dyn Region, inside: bool| matches!(set.sure_radius(x), Some((side, r)) if side == inside && r > reach);
+    let clear = |set: &dyn Region, inside: bool| match set.sure_radius(x) {
+        Some((side, r)) => side == inside && r > reach,
+        None => false,
+    };
     if let Some(us) = judge.unsafe_set() {
         if !clear(us, false) {
             return false;
