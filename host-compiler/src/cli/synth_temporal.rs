@@ -97,7 +97,7 @@ pub fn run(a: &SynthArgs, problem: crate::spec::Problem) -> Outcome {
             }) as Arc<dyn Fn(usize, f64) + Send + Sync>
         }),
         on_progress: (!quiet)
-            .then(|| Arc::new(|line: &str| eprintln!("{line}")) as Arc<dyn Fn(&str) + Send + Sync>),
+            .then(|| crate::cover::StageHook(Arc::new(|line: &str| eprintln!("{line}")))),
         imports,
         ..TemporalOptions::default()
     };

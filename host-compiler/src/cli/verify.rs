@@ -67,7 +67,7 @@ pub fn run(a: &VerifyArgs) -> Outcome {
         coverage: true,
         stop_early: false,
         // A line per stage on stderr, with the seconds since the start (stdout keeps the report).
-        progress: Some(crate::verification::Progress({
+        progress: Some(crate::cover::StageHook({
             let t0 = std::time::Instant::now();
             std::sync::Arc::new(move |line: &str| {
                 eprintln!("{line} ({:.0} s)", t0.elapsed().as_secs_f64())

@@ -48,6 +48,24 @@ impl std::fmt::Display for Generator {
     }
 }
 
+/// Told a line as each long stage of a run starts (the verification's Monte Carlo, the falsifier, …);
+/// the CLI prints it on stderr with the seconds so far.
+#[derive(Clone)]
+pub struct StageHook(pub Arc<dyn Fn(&str) + Send + Sync>);
+
+impl StageHook {
+    /// Tell the receiver that stage `line` starts.
+    pub fn stage(&self, line: &str) {
+        (self.0)(line)
+    }
+}
+
+impl std::fmt::Debug for StageHook {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("StageHook(..)")
+    }
+}
+
 /// Called with the number of trajectories after each one is accepted (e.g. to interrupt a run).
 #[derive(Clone)]
 pub struct AcceptHook(pub Arc<dyn Fn(usize) + Send + Sync>);

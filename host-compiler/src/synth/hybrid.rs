@@ -711,7 +711,7 @@ pub struct HybridOptions {
     pub on_accept: Option<std::sync::Arc<dyn Fn(usize, f64) + Send + Sync>>,
     /// Called with a line after each round of the growth (its seeds, the runs it certified, the working
     /// samples covered) and at each stage after it (image, re-proof, coverage, Monte Carlo).
-    pub on_progress: Option<std::sync::Arc<dyn Fn(&str) + Send + Sync>>,
+    pub on_progress: Option<crate::cover::StageHook>,
     /// Recordings (name, recording) certified first ([`import::certify_recording`]); those accepted
     /// join the runs before the growth (default none).
     pub imports: Vec<(String, crate::trajectory::csv::Recording)>,
@@ -1102,7 +1102,7 @@ pub fn synthesize_hybrid(
     let mut empty_rounds = 0usize;
     let progress = |line: String| {
         if let Some(f) = &opts.on_progress {
-            f(&format!("{line} ({:.0} s)", t0.elapsed().as_secs_f64()));
+            f.stage(&format!("{line} ({:.0} s)", t0.elapsed().as_secs_f64()));
         }
     };
     // The last round's seeds and the runs it certified, reported with the cover it left.

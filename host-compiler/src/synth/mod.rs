@@ -68,6 +68,8 @@ pub struct SynthOptions {
     /// feedback-linearizable one (default: one start of at most 40 runs per ball, seeded by the spec's
     /// seed); `None` skips it.
     pub attack: Option<AttackSettings>,
+    /// Told a line as the verification and the falsifier start (default none).
+    pub on_stage: Option<crate::cover::StageHook>,
 }
 
 impl Default for SynthOptions {
@@ -88,6 +90,7 @@ impl Default for SynthOptions {
                 evaluations_per_start: 40,
                 seed: 0,
             }),
+            on_stage: None,
         }
     }
 }
@@ -357,6 +360,17 @@ pub fn synthesize(task: &Task, opts: &SynthOptions) -> Result<Synthesis, SynthEr
     let img = shared_types::image::decode(&image).map_err(SynthError::ImageRejected)?;
     let judge = Judge::new(task);
     let linearized = task.plant.linearization().is_some();
+    let stage = |line: String| {
+        if let Some(h) = &opts.on_stage {
+            h.stage(&line);
+        }
+    };
+    stage(format!(
+        "verification: Monte Carlo of {} runs from the cover, {} on each of {} balls' boundary",
+        opts.verify_interior,
+        opts.verify_per_ball,
+        img.n_trajectories()
+    ));
     // A linearised plant is verified against the plant itself, not its linear model.
     let verify = if linearized {
         crate::verify::nonlinear::monte_carlo_fl(
@@ -384,6 +398,7 @@ pub fn synthesize(task: &Task, opts: &SynthOptions) -> Result<Synthesis, SynthEr
     }
     let attack = match &opts.attack {
         Some(a) => {
+            stage("falsifier: a search for the least robust run over every ball".into());
             let t3 = Instant::now();
             let settings = AttackSettings {
                 seed: a.seed ^ problem.seed,

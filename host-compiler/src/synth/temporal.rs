@@ -56,7 +56,7 @@ pub struct TemporalOptions {
     /// Called with a line at each stage after the growth (the image and its re-proof, the coverage, the
     /// Monte Carlo), ending with the seconds since the start, as the hybrid synthesis reports its own
     /// (default none).
-    pub on_progress: Option<Arc<dyn Fn(&str) + Send + Sync>>,
+    pub on_progress: Option<crate::cover::StageHook>,
     /// Recordings (name, recording) certified first ([`certify_recording`]); those certified at least
     /// `min_robustness` join the balls before any seed is planned (default none).
     pub imports: Vec<(String, Recording)>,
@@ -526,7 +526,7 @@ pub fn synthesize_temporal(
     mark("image", &mut timings);
     let progress = |line: String| {
         if let Some(f) = &opts.on_progress {
-            f(&format!("{line} ({:.0} s)", t0.elapsed().as_secs_f64()));
+            f.stage(&format!("{line} ({:.0} s)", t0.elapsed().as_secs_f64()));
         }
     };
     progress(format!(

@@ -42,24 +42,14 @@ pub struct Options {
     pub stop_early: bool,
     /// Told a line as each stage starts (the re-proof, the coverage, the Monte Carlo, the falsifier);
     /// `None`: nothing is told.
-    pub progress: Option<Progress>,
-}
-
-/// The receiver of [`Options::progress`]' stage lines (the CLI prints them with the elapsed time).
-#[derive(Clone)]
-pub struct Progress(pub std::sync::Arc<dyn Fn(&str) + Send + Sync>);
-
-impl std::fmt::Debug for Progress {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str("Progress")
-    }
+    pub progress: Option<crate::cover::StageHook>,
 }
 
 impl Options {
     /// Tell the receiver, if any, that stage `line` starts.
     fn stage(&self, line: impl FnOnce() -> String) {
         if let Some(p) = &self.progress {
-            (p.0)(&line());
+            p.stage(&line());
         }
     }
     /// The stage line of the Monte Carlo.
@@ -70,6 +60,12 @@ impl Options {
                 self.runs, self.per_ball
             )
         });
+    }
+    /// The stage line of the falsifier, when it runs.
+    fn stage_attack(&self, v: &Verdict) {
+        if self.attack_evals.is_some() && !v.stop() {
+            self.stage(|| "falsifier: a search for the least robust run over every ball".into());
+        }
     }
     /// The stage line of the re-proof.
     fn stage_recheck(&self, img: &Image<'_>) {
@@ -445,9 +441,7 @@ fn verify_feedforward(
         }
         Some(r)
     };
-    if o.attack_evals.is_some() && !v.stop() {
-        o.stage(|| "falsifier: a search for the least robust run over every ball".into());
-    }
+    o.stage_attack(&v);
     let attack = match attack_settings(o, problem.seed)? {
         Some(_) if v.stop() => None,
         Some(s) if linearized => Some(
@@ -518,7 +512,12 @@ fn verify_pwa(
         None
     } else {
         // The image does not mark which balls start a trajectory: all runs start anywhere in F.
-        o.stage_monte_carlo(img.n_trajectories());
+        o.stage(|| {
+            format!(
+                "Monte Carlo: {} runs from F, the PWA law's envelope",
+                o.runs
+            )
+        });
         let mc = crate::verify::pwa::monte_carlo_pwa(
             &judge,
             img,
@@ -538,9 +537,7 @@ fn verify_pwa(
         }
         Some(mc)
     };
-    if o.attack_evals.is_some() && !v.stop() {
-        o.stage(|| "falsifier: a search for the least robust run over every ball".into());
-    }
+    o.stage_attack(&v);
     let attack = match attack_settings(o, problem.seed)? {
         Some(s) if !v.stop() => Some(
             crate::verify::attack::attack_pwa(&judge, img, &s)
@@ -675,9 +672,7 @@ fn verify_temporal(
         }
         Some(r)
     };
-    if o.attack_evals.is_some() && !v.stop() {
-        o.stage(|| "falsifier: a search for the least robust run over every ball".into());
-    }
+    o.stage_attack(&v);
     let attack = match attack_settings(o, task.problem.seed)? {
         Some(_) if v.stop() => None,
         Some(s) if linearized => Some(
@@ -778,9 +773,7 @@ fn verify_hybrid(
         }
         Some(r)
     };
-    if o.attack_evals.is_some() && !v.stop() {
-        o.stage(|| "falsifier: a search for the least robust run over every ball".into());
-    }
+    o.stage_attack(&v);
     let attack = match attack_settings(o, task.problem.seed)? {
         Some(s) if !v.stop() => {
             let runs = crate::verify::attack::HybridRuns {

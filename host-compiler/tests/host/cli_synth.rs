@@ -204,6 +204,14 @@ fn sigint_keeps_a_valid_verified_image() {
         "an interrupted run exits with 130"
     );
     assert!(rest.contains("interrupted"), "{rest}");
+    // The stages after the cover each announce themselves on stderr, in order, with the seconds so far.
+    let at = |l: &str| rest.find(l);
+    let (mc, fal) = (
+        at("verification: Monte Carlo of 300 runs from the cover, 32 on each of "),
+        at("falsifier: a search for the least robust run over every ball ("),
+    );
+    assert!(mc.is_some() && fal.is_some() && mc < fal, "{rest}");
+    assert!(!stdout.contains("verification: Monte Carlo"), "{stdout}");
     assert!(
         stdout.contains("interrupted: the image holds the"),
         "{stdout}"
