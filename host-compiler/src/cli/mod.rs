@@ -256,6 +256,15 @@ pub(crate) fn monitored(a: &SynthArgs, image: &[u8]) -> Result<Vec<u8>, Failure>
 }
 
 /// The bytes of an image file; an unreadable file is bad input naming the file.
+/// The stage lines of a long command (`synth`, `verify`): each printed on stderr as it comes, with the
+/// seconds since this receiver was made (stdout keeps the report).
+pub(crate) fn stage_lines() -> crate::cover::StageHook {
+    let t0 = std::time::Instant::now();
+    crate::cover::StageHook(std::sync::Arc::new(move |line: &str| {
+        eprintln!("{line} ({:.0} s)", t0.elapsed().as_secs_f64())
+    }))
+}
+
 pub(crate) fn read_image(path: &std::path::Path) -> Result<Vec<u8>, Failure> {
     std::fs::read(path)
         .into_diagnostic()

@@ -219,14 +219,8 @@ pub fn run(a: &SynthArgs) -> Outcome {
         on_accept: log.then(|| {
             crate::synth::AcceptHook(Arc::new(|count| eprintln!("certified trajectory {count}")))
         }),
-        // A line per stage after the cover, with the seconds since the start, on a terminal too (the
-        // bars are cleared by then).
-        on_stage: (!a.quiet).then(|| {
-            let t0 = std::time::Instant::now();
-            crate::cover::StageHook(Arc::new(move |line: &str| {
-                eprintln!("{line} ({:.0} s)", t0.elapsed().as_secs_f64())
-            }))
-        }),
+        // A line per stage after the cover, on a terminal too (the bars are cleared by then).
+        on_stage: (!a.quiet).then(super::stage_lines),
         ..SynthOptions::default()
     };
     let problem = &task.problem;

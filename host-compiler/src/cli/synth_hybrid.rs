@@ -62,8 +62,7 @@ pub fn run(a: &SynthArgs, problem: crate::spec::Problem) -> Outcome {
             Arc::new(|count: usize, delta: f64| eprintln!("certified run {count} (δ = {delta:.4})"))
                 as Arc<dyn Fn(usize, f64) + Send + Sync>
         }),
-        on_progress: (!quiet)
-            .then(|| crate::cover::StageHook(Arc::new(|line: &str| eprintln!("{line}")))),
+        on_progress: (!quiet).then(super::stage_lines),
         imports,
         generator,
         routes: a.guard_routes,

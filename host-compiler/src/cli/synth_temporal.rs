@@ -96,8 +96,7 @@ pub fn run(a: &SynthArgs, problem: crate::spec::Problem) -> Outcome {
                 eprintln!("certified ball {count} (δ = {delta:.4})")
             }) as Arc<dyn Fn(usize, f64) + Send + Sync>
         }),
-        on_progress: (!quiet)
-            .then(|| crate::cover::StageHook(Arc::new(|line: &str| eprintln!("{line}")))),
+        on_progress: (!quiet).then(super::stage_lines),
         imports,
         ..TemporalOptions::default()
     };

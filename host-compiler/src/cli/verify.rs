@@ -66,13 +66,7 @@ pub fn run(a: &VerifyArgs) -> Outcome {
         attack_evals: a.attack.then_some(a.attack_evals as usize),
         coverage: true,
         stop_early: false,
-        // A line per stage on stderr, with the seconds since the start (stdout keeps the report).
-        progress: Some(crate::cover::StageHook({
-            let t0 = std::time::Instant::now();
-            std::sync::Arc::new(move |line: &str| {
-                eprintln!("{line} ({:.0} s)", t0.elapsed().as_secs_f64())
-            })
-        })),
+        progress: Some(super::stage_lines()),
     };
     let v = crate::verification::verify(problem, &bytes, &o).map_err(|r| refusal(r, a))?;
     if a.json {

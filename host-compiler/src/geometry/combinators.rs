@@ -78,22 +78,9 @@ impl Region for Union {
         self.members.iter().any(|m| m.contains(x))
     }
     /// Inside within the largest radius a member is sure to hold x; outside within the least radius of
-    /// all members sure to exclude it.
+    /// all members sure to exclude it ([`sure_radius_of`]).
     fn sure_radius(&self, x: &[f64]) -> Option<(bool, f64)> {
-        let (mut inside, mut outside) = (None::<f64>, f64::INFINITY);
-        let mut all_known = true;
-        for m in &self.members {
-            match m.sure_radius(x) {
-                Some((true, r)) => inside = Some(inside.map_or(r, |i| i.max(r))),
-                Some((false, r)) => outside = outside.min(r),
-                None => all_known = false,
-            }
-        }
-        match inside {
-            Some(r) => Some((true, r)),
-            None if all_known => Some((false, outside)),
-            None => None,
-        }
+        sure_radius_of(&self.members, x, true)
     }
     fn dist(&self, x: &[f64], metric: &Metric) -> Witness {
         Witness::or_invalid(self.try_dist(x, metric))
@@ -124,6 +111,27 @@ impl Region for Union {
     }
     fn compile(&self, metric: &Metric) -> Option<Box<dyn SignedDistanceFn + '_>> {
         self.compiled(metric)
+    }
+}
+
+/// [`Region::sure_radius`] of a union (`decisive` = true: one member holding x decides) or an
+/// intersection (`decisive` = false: one member excluding x decides): a member sure of the decisive side
+/// decides within its radius (the largest such); otherwise every member must be sure of the other side,
+/// within the least of their radii; else nothing is sure.
+fn sure_radius_of(members: &[Box<dyn Region>], x: &[f64], decisive: bool) -> Option<(bool, f64)> {
+    let (mut decided, mut other) = (None::<f64>, f64::INFINITY);
+    let mut all_known = true;
+    for m in members {
+        match m.sure_radius(x) {
+            Some((side, r)) if side == decisive => decided = Some(decided.map_or(r, |d| d.max(r))),
+            Some((_, r)) => other = other.min(r),
+            None => all_known = false,
+        }
+    }
+    match decided {
+        Some(r) => Some((decisive, r)),
+        None if all_known => Some((!decisive, other)),
+        None => None,
     }
 }
 
@@ -204,22 +212,9 @@ impl Region for Intersection {
         self.members.iter().all(|m| m.contains(x))
     }
     /// The dual of the union's: outside within the largest radius a member is sure to exclude x, inside
-    /// within the least radius of all members sure to hold it.
+    /// within the least radius of all members sure to hold it ([`sure_radius_of`]).
     fn sure_radius(&self, x: &[f64]) -> Option<(bool, f64)> {
-        let (mut outside, mut inside) = (None::<f64>, f64::INFINITY);
-        let mut all_known = true;
-        for m in &self.members {
-            match m.sure_radius(x) {
-                Some((false, r)) => outside = Some(outside.map_or(r, |o| o.max(r))),
-                Some((true, r)) => inside = inside.min(r),
-                None => all_known = false,
-            }
-        }
-        match outside {
-            Some(r) => Some((false, r)),
-            None if all_known => Some((true, inside)),
-            None => None,
-        }
+        sure_radius_of(&self.members, x, false)
     }
     fn dist(&self, x: &[f64], metric: &Metric) -> Witness {
         Witness::or_invalid(self.try_dist(x, metric))

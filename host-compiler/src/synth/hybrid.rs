@@ -1102,7 +1102,7 @@ pub fn synthesize_hybrid(
     let mut empty_rounds = 0usize;
     let progress = |line: String| {
         if let Some(f) = &opts.on_progress {
-            f.stage(&format!("{line} ({:.0} s)", t0.elapsed().as_secs_f64()));
+            f.stage(&line);
         }
     };
     // The last round's seeds and the runs it certified, reported with the cover it left.

@@ -53,9 +53,8 @@ pub struct TemporalOptions {
     pub cancel: Arc<AtomicBool>,
     /// Called with the number of balls and the new ball's δ after each acceptance.
     pub on_accept: Option<Arc<dyn Fn(usize, f64) + Send + Sync>>,
-    /// Called with a line at each stage after the growth (the image and its re-proof, the coverage, the
-    /// Monte Carlo), ending with the seconds since the start, as the hybrid synthesis reports its own
-    /// (default none).
+    /// Told a line at each stage after the growth (the image and its re-proof, the coverage, the Monte
+    /// Carlo), as the hybrid synthesis tells its own (default none).
     pub on_progress: Option<crate::cover::StageHook>,
     /// Recordings (name, recording) certified first ([`certify_recording`]); those certified at least
     /// `min_robustness` join the balls before any seed is planned (default none).
@@ -526,7 +525,7 @@ pub fn synthesize_temporal(
     mark("image", &mut timings);
     let progress = |line: String| {
         if let Some(f) = &opts.on_progress {
-            f.stage(&format!("{line} ({:.0} s)", t0.elapsed().as_secs_f64()));
+            f.stage(&line);
         }
     };
     progress(format!(
