@@ -16,6 +16,16 @@
 //!   A component counts as "in the null space" when ‖a_N‖ > 1e-12‖aᵢ‖, the null space being the eigenvectors of
 //!   R with eigenvalue ≤ 1e-13·λmax(R). The witness is the first boundary crossing on the segment from x to the
 //!   minimising step (which is the step's end point whenever the depth is positive).
+//! - **Distance from a small polytope, exactly** (k ≤ [`ENUMERATE_ROWS`] rows, every row in the range of R):
+//!   the QP (7.1)'s Lagrangian ½dᵀRd + λᵀ(Ad − rhs) is stationary at d = −R⁺Aᵀλ, and its dual is
+//!   max over λ ≥ 0 of −½λᵀHλ − λᵀrhs with H = AR⁺Aᵀ. For an active set J, λ_J solves H_JJ λ_J = −rhs_J
+//!   (λ zero off J) and d = −(R⁺Aᵀ)_J λ_J. Any λ ≥ 0 makes the dual value a lower bound on ½‖d*‖²_R, and
+//!   at this λ the dual value is ½λ_JᵀH_JJλ_J = ½‖d‖²_R; a d that is also feasible is then the optimum.
+//!   So the sets J are tried by size (then in lexicographic order), and the first whose λ_J ≥ 0 and whose
+//!   d satisfies every row (to 10⁻¹² of the right-hand side's scale, the polish's tolerance) is the
+//!   answer: the QP's unique minimiser, with no interior-point solve. A polytope of a task (a box over two
+//!   or three coordinates in a CAF's induced metric) has at most 2·3 rows and sets of at most 3; when no
+//!   set qualifies (degenerate rounding) the QP answers as before.
 
 use super::cache::{Cached, MetricCache};
 use super::linalg::{self, SymEig};
@@ -27,6 +37,10 @@ extern crate lapack_faer as _;
 
 /// A row's normal counts as having a null-space component of R when ‖a_N‖ > FREE_TOL · ‖a‖.
 const FREE_TOL: f64 = 1e-12;
+
+/// Polytopes of at most this many rows are projected onto by enumerating active sets (module doc), at
+/// most 2⁸ − 1 sets of at most 8 rows; larger ones by the QP.
+const ENUMERATE_ROWS: usize = 8;
 
 /// {x ∈ ℝⁿ : Ax ≤ b}, A row-major k×n. Nonempty, with at least one nonzero row (validated).
 pub struct Polytope {
@@ -65,6 +79,16 @@ struct FacetSteps {
     rows: Vec<FacetStep>,
     /// The symmetrised metric matrix (for the QP).
     R: Vec<f64>,
+    /// For the active-set projection (module doc), when k ≤ [`ENUMERATE_ROWS`] and every row is in the
+    /// range of R.
+    dual: Option<DualData>,
+}
+
+/// R⁺Aᵀ (n×k, row-major) and H = AR⁺Aᵀ (k×k), the data of the QP (7.1)'s dual.
+#[derive(Debug)]
+struct DualData {
+    W: Vec<f64>,
+    H: Vec<f64>,
 }
 
 #[derive(Debug)]
@@ -210,8 +234,74 @@ impl Polytope {
                     rows.push(FacetStep::Free(a.iter().map(|v| v / s).collect()));
                 }
             }
-            Ok(FacetSteps { rows, R })
+            let dual = self.dual_data(&rows);
+            Ok(FacetSteps { rows, R, dual })
         })
+    }
+
+    /// R⁺Aᵀ and AR⁺Aᵀ from the rows' steps (R⁺aᵢ = stepᵢ · dualᵢ²), or `None` when the polytope has too
+    /// many rows or a row is not in the range of R.
+    fn dual_data(&self, rows: &[FacetStep]) -> Option<DualData> {
+        let (n, k) = (self.n, self.k);
+        if k > ENUMERATE_ROWS {
+            return None;
+        }
+        let mut W = vec![0.0; n * k];
+        for (i, row) in rows.iter().enumerate() {
+            let FacetStep::Norm { dual, step } = row else {
+                return None;
+            };
+            let aRa = dual * dual;
+            for j in 0..n {
+                W[j * k + i] = step[j] * aRa;
+            }
+        }
+        let mut H = vec![0.0; k * k];
+        for i in 0..k {
+            let a = &self.A[i * n..(i + 1) * n];
+            for c in 0..k {
+                H[i * k + c] = (0..n).map(|j| a[j] * W[j * k + c]).sum();
+            }
+        }
+        Some(DualData { W, H })
+    }
+
+    /// The QP (7.1)'s minimiser by its active set (module doc), `None` when the data is missing or no set
+    /// of rows qualifies (the QP answers then).
+    fn project_active_set(&self, x: &[f64], steps: &FacetSteps) -> Option<Witness> {
+        let dual = steps.dual.as_ref()?;
+        let (n, k) = (self.n, self.k);
+        let rhs: Vec<f64> = (0..k)
+            .map(|i| self.b[i] - linalg::dot(&self.A[i * n..(i + 1) * n], x))
+            .collect();
+        let tol = 1e-12 * (1.0 + linalg::max_abs(&rhs));
+        let mut d = vec![0.0; n];
+        for size in 1..=k.min(n) {
+            for set in (0u32..1 << k).filter(|s| s.count_ones() as usize == size) {
+                let J: Vec<usize> = (0..k).filter(|&i| set & (1 << i) != 0).collect();
+                let Some(lambda) = solve_spd(&J, dual, &rhs) else {
+                    continue;
+                };
+                if lambda.iter().any(|l| !(*l >= 0.0)) {
+                    continue;
+                }
+                for (j, dj) in d.iter_mut().enumerate() {
+                    *dj = -J
+                        .iter()
+                        .zip(&lambda)
+                        .map(|(&i, l)| dual.W[j * k + i] * l)
+                        .sum::<f64>();
+                }
+                let feasible =
+                    (0..k).all(|i| linalg::dot(&self.A[i * n..(i + 1) * n], &d) <= rhs[i] + tol);
+                if feasible {
+                    let value = linalg::quad_form(&steps.R, &d).max(0.0).sqrt();
+                    let point = x.iter().zip(&d).map(|(a, b)| a + b).collect();
+                    return Some(Witness { value, point });
+                }
+            }
+        }
+        None
     }
 
     /// The QP (7.1) from an outside point: the nearest point of S in ‖·‖_R and its distance.
@@ -414,6 +504,22 @@ fn csc_from_dense(
     CscMatrix::new(m, n, colptr, rowval, nzval)
 }
 
+/// λ_J with H_JJ λ_J = −rhs_J by nalgebra's Cholesky factorisation, `None` when H_JJ is not numerically
+/// positive definite (the rows of J dependent in R⁺'s inner product, as opposite faces of a box).
+fn solve_spd(J: &[usize], dual: &DualData, rhs: &[f64]) -> Option<Vec<f64>> {
+    let k = rhs.len();
+    let m = J.len();
+    let H = nalgebra::DMatrix::from_fn(m, m, |r, c| dual.H[J[r] * k + J[c]]);
+    let scale = (0..m).map(|r| H[(r, r)]).fold(0.0, f64::max);
+    let chol = H.cholesky()?;
+    let l = chol.l_dirty();
+    if (0..m).any(|r| !(l[(r, r)] * l[(r, r)] > 1e-12 * scale)) {
+        return None;
+    }
+    let f = nalgebra::DVector::from_fn(m, |r, _| -rhs[J[r]]);
+    Some(chol.solve(&f).iter().copied().collect())
+}
+
 /// Solve min ½dᵀRd s.t. A_J d = rhs_J through the symmetric KKT system [[R, A_Jᵀ], [A_J, 0]] by a pseudo-inverse
 /// (so dependent active rows are tolerated); `None` if the system is inconsistent.
 fn polish(n: usize, R: &[f64], A: &[f64], rhs: &[f64], active: &[usize]) -> Option<Vec<f64>> {
@@ -515,6 +621,9 @@ impl Region for Polytope {
         if let Some(w) = self.dist_box(x, &steps.R) {
             return Ok(w);
         }
+        if let Some(w) = self.project_active_set(x, &steps) {
+            return Ok(w);
+        }
         self.project(x, &steps.R)
     }
     fn try_depth(&self, x: &[f64], metric: &Metric) -> Result<Witness, GeometryError> {
@@ -559,6 +668,69 @@ mod tests {
         assert!((w.value - 0.5).abs() < 1e-15);
         assert_eq!(w.point, vec![1.0, -0.2]);
         assert!((p.signed_dist(&[2.0, 0.0], &m).value + 1.0).abs() < 1e-10);
+    }
+
+    #[test]
+    fn the_active_set_projection_is_the_qp_minimiser() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(46);
+        let (mut answered, mut corners) = (0, 0);
+        for case in 0..600 {
+            let n = 2 + case % 3;
+            let k = 3 + case % 6;
+            // Rows tangent to the unit sphere at random normals (so the set is bounded and nonempty
+            // once k > n), a random positive definite metric, a start outside.
+            let mut A = vec![0.0; k * n];
+            for row in A.chunks_exact_mut(n) {
+                row.iter_mut().for_each(|v| *v = rng.gen_range(-1.0..1.0));
+            }
+            let b: Vec<f64> = A
+                .chunks_exact(n)
+                .map(|r| r.iter().map(|v| v * v).sum::<f64>().sqrt())
+                .collect();
+            let p = Polytope::new(n, A, b).unwrap();
+            let G: Vec<f64> = (0..n * n).map(|_| rng.gen_range(-1.0..1.0)).collect();
+            let mut R = vec![0.0; n * n];
+            for i in 0..n {
+                for j in 0..n {
+                    R[i * n + j] = (0..n).map(|c| G[i * n + c] * G[j * n + c]).sum::<f64>()
+                        + if i == j { 0.1 } else { 0.0 };
+                }
+            }
+            let m = Metric::new(n, R).unwrap();
+            let steps = p.steps(&m).unwrap();
+            let x: Vec<f64> = (0..n).map(|_| rng.gen_range(-4.0..4.0)).collect();
+            if p.contains(&x) {
+                continue;
+            }
+            let qp = p.project(&x, &steps.R).unwrap();
+            let Some(exact) = p.project_active_set(&x, &steps) else {
+                continue;
+            };
+            answered += 1;
+            assert!(
+                (exact.value - qp.value).abs() <= 1e-8 * (1.0 + qp.value),
+                "case {case}: {exact:?} against the QP's {qp:?}"
+            );
+            for (a, b) in exact.point.iter().zip(&qp.point) {
+                assert!((a - b).abs() < 1e-6, "case {case}: {exact:?} {qp:?}");
+            }
+            // The nearest point is a vertex (n rows active) in some cases, on a face in others.
+            let active = (0..k)
+                .filter(|&i| {
+                    (p.b[i] - linalg::dot(&p.A[i * n..(i + 1) * n], &exact.point)).abs() < 1e-9
+                })
+                .count();
+            corners += usize::from(active >= 2);
+        }
+        assert!(
+            answered > 450,
+            "{answered} of 600 answered by the active set"
+        );
+        assert!(
+            corners > 50 && corners < answered - 50,
+            "{corners} of {answered} at a corner"
+        );
     }
 
     #[test]
