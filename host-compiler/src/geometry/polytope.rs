@@ -682,14 +682,15 @@ mod tests {
             // once k > n), a random positive definite metric, a start outside.
             let mut A = vec![0.0; k * n];
             for row in A.chunks_exact_mut(n) {
-                row.iter_mut().for_each(|v| *v = rng.gen_range(-1.0..1.0));
+                row.iter_mut()
+                    .for_each(|v| *v = rng.random_range(-1.0..1.0));
             }
             let b: Vec<f64> = A
                 .chunks_exact(n)
                 .map(|r| r.iter().map(|v| v * v).sum::<f64>().sqrt())
                 .collect();
             let p = Polytope::new(n, A, b).unwrap();
-            let G: Vec<f64> = (0..n * n).map(|_| rng.gen_range(-1.0..1.0)).collect();
+            let G: Vec<f64> = (0..n * n).map(|_| rng.random_range(-1.0..1.0)).collect();
             let mut R = vec![0.0; n * n];
             for i in 0..n {
                 for j in 0..n {
@@ -699,7 +700,7 @@ mod tests {
             }
             let m = Metric::new(n, R).unwrap();
             let steps = p.steps(&m).unwrap();
-            let x: Vec<f64> = (0..n).map(|_| rng.gen_range(-4.0..4.0)).collect();
+            let x: Vec<f64> = (0..n).map(|_| rng.random_range(-4.0..4.0)).collect();
             if p.contains(&x) {
                 continue;
             }

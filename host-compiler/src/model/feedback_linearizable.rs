@@ -40,7 +40,9 @@
 //! 3. *The sampled-loop mismatch* D: with u_k held, ξ̇ of the last chain element is
 //!    a_iᵀξ + c_i + w_k,i + φ_i(x(t)) − φ_i(x_k) with φ = α_res + Γ u_k (because Γ(x_k)u_k = w_k − α_res(x_k)),
 //!    and |φ(x(t)) − φ(x_k)| ≤ h·sup‖E‖, E = the Lie derivative of φ along f + g u_k, a polynomial of degree
-//!    2 in u bounded as ‖e₀‖ + ‖M‖₂R_u + ½‖Q‖R_u² over Z × U. The input program's rounding enters the same
+//!    2 in u bounded as ‖e₀‖ + ‖M‖₂R_u + ½‖Q‖R_u² over Z, R_u the radius of the inputs a certified run
+//!    applies: the least of U's and L(sup_W ‖w‖ + A) + e_prog (the law's u for w in W, item 2;
+//!    `applied_input_radius`). The input program's rounding enters the same
 //!    channel through Γ: D = h·sup‖E‖ + sup‖Γ‖₂·e_prog. The certificate takes D as a w-channel disturbance
 //!    that varies within the period (`certify::LoopConstants::mismatch`).
 //!
@@ -440,6 +442,40 @@ pub(super) fn cancelling_law(adj: &[Vec<Expr>], det: &Expr, alpha: &[Expr]) -> V
             Expr::div(num, det.clone())
         })
         .collect()
+}
+
+/// The radius R_u over which the mismatch's quadratic in u is bounded (step 3 of the module doc): the
+/// inputs a certified run applies are u = λ(x)(w − α_res(x)) with w in W, up to the input program's
+/// rounding, so ‖u‖₂ ≤ L(sup_W ‖w‖₂ + A) + e_prog, with L ≥ ‖λ‖₂, A ≥ ‖α_res‖₂. W is built to map into
+/// U, so for a ball U about 0 this is U's radius again; for a box U it is the box's radius only when W's
+/// image fills the box's corners, and a box whose half-widths differ (a speed and a turn rate) leaves
+/// most of it unused. Each radius is sound (the other is sup over all of U), so the smaller is taken,
+/// when it is smaller by more than a relative 10⁻⁶ (else U's, so that nothing moves for a rounding's
+/// difference).
+fn applied_input_radius(
+    w: &InputSet,
+    lambda_norm: f64,
+    alpha_res_norm: f64,
+    e_prog: f64,
+    r_u: f64,
+) -> f64 {
+    let w_norm = match w {
+        InputSet::Ball { center, radius } => {
+            center.iter().map(|c| c * c).sum::<f64>().sqrt() + radius
+        }
+        InputSet::Box { lo, hi } => lo
+            .iter()
+            .zip(hi)
+            .map(|(l, h)| l.abs().max(h.abs()).powi(2))
+            .sum::<f64>()
+            .sqrt(),
+    };
+    let applied = (lambda_norm * (w_norm + alpha_res_norm) + e_prog) * (1.0 + 1e-12);
+    if applied.is_finite() && applied < r_u * (1.0 - 1e-6) {
+        applied
+    } else {
+        r_u
+    }
 }
 
 /// The interval [0, h]·a.
@@ -974,7 +1010,7 @@ pub fn linearize(problem: &Problem) -> Result<(Problem, FlMaps), FlError> {
     let mut e_refs: Vec<&Expr> = e0.iter().collect();
     e_refs.extend(mlin.iter().flatten());
     e_refs.extend(quad.iter().flatten());
-    let r_u = ub.r_u;
+    let r_u = applied_input_radius(&w_final, lambda_norm, alpha_res_norm, e_prog, ub.r_u);
     let sup_e = sup_over_grid(&base, &dims_used(&e_refs, &base), &|x| {
         let b = VarBox { x, u: &us, p: &[] };
         let mut n0 = 0.0;
@@ -1326,6 +1362,53 @@ mod tests {
             assert!((*a as f64 - b).abs() <= maps.e_prog, "{a} vs {b}");
         }
         assert_eq!(maps.coords.eval_f32(&x, &[]), vec![0.05, 0.0, -0.03, 1.0]);
+    }
+
+    /// The SCOTS vehicle (relative degree (1, 1), ξ = (x, y), Γ = R(θ)·diag(1, ½), an input box of
+    /// unequal half-widths): D bounds how far ξ̇ moves within a period under the inputs the law applies
+    /// (u from the input program at w in W), seen on the plant's own flow, and is taken over those inputs
+    /// rather than over the whole box (W's image leaves most of the box's turn rate unused).
+    #[test]
+    fn the_vehicle_s_mismatch_bounds_its_flow_under_the_applied_inputs() {
+        use rand::{Rng, SeedableRng};
+        let path = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../examples/maze-scots-vehicle.toml"
+        );
+        let p = crate::spec::load(path).expect("the shipped example");
+        let (xi, maps) = linearize(&p).expect("linearises");
+        let InputSet::Box { hi: w_hi, .. } = &xi.input else {
+            panic!("a box")
+        };
+        let h = maps.plant.period();
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(48);
+        let mut worst = 0.0f64;
+        for _ in 0..2000 {
+            let th = rng.random_range(-std::f64::consts::PI..std::f64::consts::PI);
+            let x = [rng.random_range(0.0..10.0), rng.random_range(0.0..10.0), th];
+            let w: Vec<f64> = w_hi.iter().map(|&r| rng.random_range(-r..=r)).collect();
+            let u: Vec<f64> = maps
+                .input_map
+                .eval_f32(&x, &w)
+                .iter()
+                .map(|&v| v as f64)
+                .collect();
+            let f0 = maps.plant.field(&x, &u);
+            let mut seen = |y: &[f64]| {
+                let f = maps.plant.field(y, &u);
+                worst = worst.max(((f[0] - f0[0]).powi(2) + (f[1] - f0[1]).powi(2)).sqrt());
+            };
+            let end = maps.plant.flow(&x, &u, h, 16, &mut seen).expect("flows");
+            seen(&end);
+        }
+        assert!(worst <= maps.mismatch, "{worst} > D = {}", maps.mismatch);
+        // Seen 0.046 against D = 0.296 (a bound by intervals over θ, quadratic in ‖u‖); over the whole
+        // box D was 1.015, 22 times what was seen.
+        assert!(
+            worst > 0.1 * maps.mismatch,
+            "D = {} against {worst} seen",
+            maps.mismatch
+        );
     }
 
     /// A set that constrains a zero-dynamics state is refused with the state's name.
