@@ -23,7 +23,7 @@
 //!   at this λ the dual value is ½λ_JᵀH_JJλ_J = ½‖d‖²_R; a d that is also feasible is then the optimum.
 //!   So the sets J are tried by size (then in lexicographic order), and the first whose λ_J ≥ 0 and whose
 //!   d satisfies every row (to 10⁻¹² of the right-hand side's scale, the polish's tolerance) is the
-//!   answer: the QP's unique minimiser, with no interior-point solve. A polytope of a task (a box over two
+//!   answer: the QP's minimiser (the unique one when R is definite), with no interior-point solve. A polytope of a task (a box over two
 //!   or three coordinates in a CAF's induced metric) has at most 2·3 rows and sets of at most 3; when no
 //!   set qualifies (degenerate rounding) the QP answers as before.
 
@@ -670,6 +670,9 @@ mod tests {
         assert!((p.signed_dist(&[2.0, 0.0], &m).value + 1.0).abs() < 1e-10);
     }
 
+    /// Random small polytopes (2 to 4 dimensions, 3 to 8 rows) in random definite metrics, from random
+    /// outside points: the active set's answer is the QP's to 10⁻⁸, on faces and at corners alike, and
+    /// it answers nearly every case (a case it leaves is the QP's).
     #[test]
     fn the_active_set_projection_is_the_qp_minimiser() {
         use rand::{Rng, SeedableRng};
