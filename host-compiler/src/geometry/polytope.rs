@@ -266,14 +266,20 @@ impl Polytope {
         Some(DualData { W, H })
     }
 
+    /// The rows' slacks b − Ax (each row's right-hand side for a step from x).
+    fn slacks(&self, x: &[f64]) -> Vec<f64> {
+        let n = self.n;
+        (0..self.k)
+            .map(|i| self.b[i] - linalg::dot(&self.A[i * n..(i + 1) * n], x))
+            .collect()
+    }
+
     /// The QP (7.1)'s minimiser by its active set (module doc), `None` when the data is missing or no set
     /// of rows qualifies (the QP answers then).
     fn project_active_set(&self, x: &[f64], steps: &FacetSteps) -> Option<Witness> {
         let dual = steps.dual.as_ref()?;
         let (n, k) = (self.n, self.k);
-        let rhs: Vec<f64> = (0..k)
-            .map(|i| self.b[i] - linalg::dot(&self.A[i * n..(i + 1) * n], x))
-            .collect();
+        let rhs = self.slacks(x);
         let tol = 1e-12 * (1.0 + linalg::max_abs(&rhs));
         let mut d = vec![0.0; n];
         for size in 1..=k.min(n) {
@@ -307,10 +313,8 @@ impl Polytope {
     /// The QP (7.1) from an outside point: the nearest point of S in ‖·‖_R and its distance.
     fn project(&self, x: &[f64], R: &[f64]) -> Result<Witness, GeometryError> {
         let (n, k) = (self.n, self.k);
-        // rhs = b − A x; constraint A d ≤ rhs.
-        let rhs: Vec<f64> = (0..k)
-            .map(|i| self.b[i] - linalg::dot(&self.A[i * n..(i + 1) * n], x))
-            .collect();
+        // Constraint A d ≤ rhs = b − A x.
+        let rhs = self.slacks(x);
         let P = csc_from_dense(n, n, |i, j| R[i * n + j], true);
         let Ac = csc_from_dense(k, n, |i, j| self.A[i * n + j], false);
         let q = vec![0.0; n];
@@ -423,9 +427,7 @@ impl Polytope {
 
     fn depth_inside(&self, x: &[f64], steps: &FacetSteps) -> Witness {
         let n = self.n;
-        let slack: Vec<f64> = (0..self.k)
-            .map(|i| self.b[i] - linalg::dot(&self.A[i * n..(i + 1) * n], x))
-            .collect();
+        let slack = self.slacks(x);
         let mut best: Option<(f64, usize)> = None;
         for (i, st) in steps.rows.iter().enumerate() {
             let s = slack[i].max(0.0);

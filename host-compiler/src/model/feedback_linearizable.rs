@@ -459,22 +459,26 @@ fn applied_input_radius(
     e_prog: f64,
     r_u: f64,
 ) -> f64 {
-    let w_norm = match w {
-        InputSet::Ball { center, radius } => {
-            center.iter().map(|c| c * c).sum::<f64>().sqrt() + radius
-        }
+    let applied = (lambda_norm * (sup_norm(w) + alpha_res_norm) + e_prog) * (1.0 + 1e-12);
+    if applied.is_finite() && applied < r_u * (1.0 - 1e-6) {
+        applied
+    } else {
+        r_u
+    }
+}
+
+/// sup ‖u‖₂ over an input set: a box's farthest corner from 0, a ball's centre norm plus its radius.
+fn sup_norm(u: &InputSet) -> f64 {
+    match u {
         InputSet::Box { lo, hi } => lo
             .iter()
             .zip(hi)
             .map(|(l, h)| l.abs().max(h.abs()).powi(2))
             .sum::<f64>()
             .sqrt(),
-    };
-    let applied = (lambda_norm * (w_norm + alpha_res_norm) + e_prog) * (1.0 + 1e-12);
-    if applied.is_finite() && applied < r_u * (1.0 - 1e-6) {
-        applied
-    } else {
-        r_u
+        InputSet::Ball { center, radius } => {
+            center.iter().map(|c| c * c).sum::<f64>().sqrt() + radius
+        }
     }
 }
 
@@ -501,12 +505,7 @@ impl UBound {
                     .map(|(&l, &h)| Interval::new(l, h))
                     .collect(),
                 ball: None,
-                r_u: lo
-                    .iter()
-                    .zip(hi)
-                    .map(|(l, h)| l.abs().max(h.abs()).powi(2))
-                    .sum::<f64>()
-                    .sqrt(),
+                r_u: sup_norm(u),
             },
             InputSet::Ball { center, radius } => Self {
                 boxed: center
@@ -514,7 +513,7 @@ impl UBound {
                     .map(|&c| Interval::new(c - radius, c + radius))
                     .collect(),
                 ball: Some((center.clone(), *radius)),
-                r_u: center.iter().map(|c| c * c).sum::<f64>().sqrt() + radius,
+                r_u: sup_norm(u),
             },
         }
     }
