@@ -30,13 +30,15 @@
 //!   S_N·(‖P^{1/2}B‖ε̄ + φβD) of the route's trajectory, and `route_maze_vehicle_route_delta_…` the
 //!   certificate's parts minimum less that (the δ the route would certify by the accumulated bound;
 //!   negative: refused), for the trajectory that follows the first route's timed reference exactly
-//!   (no generator, no §5.3: the route itself, what a person's route would give).
+//!   (no generator, no §5.3: the route itself, what a person's route would give);
+//!   `route_maze_vehicle_ceiling_…` the largest δ any nominal of that loop and length can have
+//!   (`certify::Ceiling`; 0: `synth` refuses the task before any seed).
 //!
 //! `ROUTE_BENCH=pointmass` or `ROUTE_BENCH=vehicle` runs one maze only (the rows file then holds its
 //! rows only).
 
 use host_compiler::benchkit::{median_time, write_rows, Row};
-use host_compiler::certify::{shipped, Loop, LoopConstants};
+use host_compiler::certify::{shipped, Ceiling, Loop, LoopConstants};
 use host_compiler::synth::{synthesize, SynthOptions};
 use host_compiler::task::Task;
 use host_compiler::trajectory::route::{timed_guess, RouteMap, RouteSettings};
@@ -328,14 +330,22 @@ fn vehicle() -> Vec<Row> {
     let mut rows = Vec::new();
     println!(
         "vehicle, the first route's timed reference followed exactly, per period h:\n\
-         {:>7} {:>6} {:>10} {:>10} {:>10} {:>10} {:>12} {:>10}",
-        "h [s]", "N", "D", "δ_Goal", "δ_Unsafe", "δ_Input", "accumulated", "δ"
+         {:>7} {:>6} {:>10} {:>10} {:>10} {:>10} {:>12} {:>10} {:>10} {:>10}",
+        "h [s]", "N", "D", "δ_Goal", "δ_Unsafe", "δ_Input", "accumulated", "δ", "input max", "ceiling"
     );
     for h in PERIODS {
         let f = route_figures(&with_period(&src, h));
         println!(
-            "{h:>7.3} {:>6} {:>10.4e} {:>10.4e} {:>10.4e} {:>10.4e} {:>12.4e} {:>10.4e}",
-            f.steps, f.mismatch, f.parts[0], f.parts[1], f.parts[2], f.accumulated, f.delta
+            "{h:>7.3} {:>6} {:>10.4e} {:>10.4e} {:>10.4e} {:>10.4e} {:>12.4e} {:>10.4e} {:>10.4e} {:>10.4e}",
+            f.steps,
+            f.mismatch,
+            f.parts[0],
+            f.parts[1],
+            f.parts[2],
+            f.accumulated,
+            f.delta,
+            f.input_max,
+            f.ceiling
         );
         rows.push(Row::new(
             &format!("route_maze_vehicle_D_h{h}"),
@@ -351,6 +361,11 @@ fn vehicle() -> Vec<Row> {
             &format!("route_maze_vehicle_route_delta_h{h}"),
             f.delta,
             "P-metric (< 0: refused)",
+        ));
+        rows.push(Row::new(
+            &format!("route_maze_vehicle_ceiling_h{h}"),
+            f.ceiling,
+            "P-metric, the largest δ any nominal can have (0: none)",
         ));
     }
     let task = Task::new(host_compiler::spec::parse(&src, &path).expect("the shipped example"))
@@ -393,6 +408,10 @@ struct Figures {
     parts: [f64; 3],
     accumulated: f64,
     delta: f64,
+    /// `certify::Ceiling` of the loop for the table: the largest input part any nominal can have, and
+    /// the largest δ any can be certified with.
+    input_max: f64,
+    ceiling: f64,
 }
 
 /// The certificate of the trajectory that follows the first route from Init's centre exactly: the
@@ -447,11 +466,14 @@ fn route_figures(src: &str) -> Figures {
     } else {
         lc.accumulation(task.steps) * lc.mismatch_step()
     };
+    let ceiling = Ceiling::of(&lp, &lc, task.steps);
     Figures {
         steps: task.steps,
         mismatch: task.plant.model_mismatch(),
         parts,
         accumulated,
         delta: c.parts_min() - accumulated,
+        input_max: ceiling.input,
+        ceiling: ceiling.value,
     }
 }

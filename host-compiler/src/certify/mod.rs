@@ -27,6 +27,7 @@
 //!    per-ball stored squared threshold, [`pwa_ball_threshold`] (from the radius [`pwa_ball_radius`], in
 //!    [`pwa_ball`]).
 
+pub mod ceiling;
 pub mod forced;
 pub mod internal;
 pub mod pieces;
@@ -34,6 +35,7 @@ pub mod pwa_ball;
 pub mod temporal;
 pub mod terminal;
 
+pub use ceiling::Ceiling;
 pub use forced::{certify_forced, ForcedCertificate, ForcedError, ForcedSegment};
 pub use pieces::Pieces;
 pub use pwa_ball::{

@@ -529,7 +529,9 @@ fn synth_failure(e: SynthError) -> Failure {
         {
             Exit::BadInput
         }
-        SynthError::Cover(GrowError::Recording { .. } | GrowError::Emit(_)) => Exit::BadInput,
+        SynthError::Cover(
+            GrowError::Recording { .. } | GrowError::Emit(_) | GrowError::Ceiling { .. },
+        ) => Exit::BadInput,
         SynthError::Cover(GrowError::InterruptedEmpty) => Exit::Interrupted,
         SynthError::Terminal(_) | SynthError::NoRoute { .. } => Exit::BadInput,
         _ => Exit::Failed,

@@ -75,6 +75,15 @@ pub enum GrowError {
     },
     #[error("no certified trajectory at all: no trajectory could be certified; {attempts}")]
     NothingCertified { attempts: Box<Attempts> },
+    #[error(
+        "no certified trajectory at all, and none can be, so no seed was tried: {ceiling}, below the \
+         admission floor δε = {floor:.3e} (min_robustness, or 0); the loop (its period, its gain, the input \
+         set) must change before any nominal trajectory can be certified"
+    )]
+    Ceiling {
+        ceiling: certify::Ceiling,
+        floor: f64,
+    },
 }
 
 /// What the attempts that certified nothing ended with, for the "no certified trajectory" errors: the
@@ -432,6 +441,17 @@ pub fn grow(
                 warnings.push(format!("{name}: not used: {e}"));
                 attempts.import(name, e.to_string());
             }
+        }
+    }
+    // Before any seed: a loop whose every certificate of this length is below the floor admits nothing
+    // (`certify::ceiling`), whatever the search proposes.
+    if cover.trajectories.is_empty() {
+        let ceiling = certify::Ceiling::of(lp, lc, steps);
+        if ceiling.below(delta_eps) {
+            return Err(GrowError::Ceiling {
+                ceiling,
+                floor: delta_eps,
+            });
         }
     }
     // When recordings were given and every one was refused, the route given is the one to mend: the

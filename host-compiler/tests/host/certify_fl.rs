@@ -35,3 +35,47 @@ fn a_generated_trajectory_of_example_4_9_is_certified_with_the_mismatch() {
     );
     assert_eq!(nom.steps(), task.steps);
 }
+
+/// `certify::Ceiling` bounds the δ of every certificate of the loop, whatever the nominal: Example 4.9's
+/// generated trajectories from several starts, their references scaled, and the loop without a
+/// reference; and it does not refuse the example, whose cover certifies (its δ is below the ceiling by
+/// the input margin the trajectories leave unused, not by orders of magnitude).
+#[test]
+fn the_ceiling_bounds_every_certificate_of_example_4_9() {
+    let task = ex49();
+    let design = host_compiler::caf::design(&task).expect("CAF");
+    let lp = Loop::new(&task, &design);
+    let lc = LoopConstants::new(&lp).expect("constants");
+    let ceiling = certify::Ceiling::of(&lp, &lc, task.steps);
+    assert!(ceiling.accumulated > 0.0, "{ceiling:?}");
+    assert!(
+        !ceiling.below(task.problem.synthesis.min_robustness),
+        "{ceiling}"
+    );
+    let gp = host_compiler::synth::temporal::gen_problem(&task, &lp, &lc);
+    let mut best = 0.0f64;
+    let mut certified = 0;
+    for x0 in [[0.0, 0.0, 0.0, 1.0], [0.2, -0.1, 0.0, 1.0], [-0.2, 0.2, 0.0, 1.0]] {
+        let x0 = x0.to_vec();
+        let g = generate(&gp, &x0, &GenSettings::default()).expect("generated");
+        for scale in [0.0, 0.5, 0.9, 1.0, 1.05, 1.3] {
+            let v: Vec<Vec<f64>> = g
+                .nominal
+                .v
+                .iter()
+                .map(|r| r.iter().map(|a| a * scale).collect())
+                .collect();
+            let (_, cert) = certify::shipped(&lp, &lc, &x0, &v);
+            assert!(
+                cert.delta <= ceiling.value,
+                "δ {} above the ceiling {ceiling}",
+                cert.delta
+            );
+            certified += usize::from(cert.is_certified());
+            best = best.max(cert.delta);
+        }
+    }
+    assert!(certified >= 3, "{certified} certified");
+    println!("best δ {best:.4e}, {ceiling:?}");
+    assert!(ceiling.value < 20.0 * best, "{ceiling:?} against δ {best}");
+}

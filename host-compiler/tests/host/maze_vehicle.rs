@@ -4,7 +4,7 @@
 //! positions, not every coordinate its operating region bounds); and what the certificate says of the
 //! trajectory that follows the first route.
 
-use host_compiler::certify::{shipped, Loop, LoopConstants};
+use host_compiler::certify::{shipped, Ceiling, Loop, LoopConstants};
 use host_compiler::spec::InputSet;
 use host_compiler::task::Task;
 use host_compiler::trajectory::route::{route_coords, timed_guess, RouteMap, RouteSettings};
@@ -165,4 +165,40 @@ fn along_the_first_route_the_accumulated_mismatch_is_what_refuses_the_vehicle() 
         c.r_crit,
         c.parts_min()
     );
+    // More: no nominal of the table's length can be certified, since even the input set's whole
+    // half-width (over the gain's scale) is below the mismatch accumulated over the table and r_crit.
+    let ceiling = Ceiling::of(&lp, &lc, task.steps);
+    assert!(ceiling.input >= c.delta_input, "{ceiling:?} against {c:?}");
+    assert!(
+        ceiling.input < ceiling.accumulated && ceiling.input < ceiling.r_crit,
+        "{ceiling:?}"
+    );
+    assert_eq!(ceiling.value, 0.0);
+    assert!(ceiling.below(task.problem.synthesis.min_robustness));
+}
+
+/// `synth` refuses the vehicle at once, before any seed, naming the input margin's ceiling, the
+/// accumulated mismatch and r_crit, with the exit code of a spec that must change (2), not after the
+/// search's budget.
+#[test]
+fn synth_refuses_the_vehicle_at_once_with_the_ceiling() {
+    let out = std::env::temp_dir().join(format!("maze-vehicle-ceiling-{}", std::process::id()));
+    let started = std::time::Instant::now();
+    let run = std::process::Command::new(env!("CARGO_BIN_EXE_host-compiler"))
+        .args(["synth", &example("maze-scots-vehicle.toml"), "--out"])
+        .arg(&out)
+        .output()
+        .expect("runs");
+    let secs = started.elapsed().as_secs_f64();
+    let err = String::from_utf8_lossy(&run.stderr).replace(['│', '\n'], " ");
+    let err = err.split_whitespace().collect::<Vec<_>>().join(" ");
+    assert_eq!(run.status.code(), Some(2), "{err}");
+    assert!(err.contains("none can be, so no seed was tried"), "{err}");
+    assert!(
+        err.contains("input margin") && err.contains("over a table of 1333 samples"),
+        "{err}"
+    );
+    assert!(secs < 30.0, "{secs} s");
+    assert!(!out.join("controller.img").exists());
+    let _ = std::fs::remove_dir_all(&out);
 }
