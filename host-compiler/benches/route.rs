@@ -331,7 +331,16 @@ fn vehicle() -> Vec<Row> {
     println!(
         "vehicle, the first route's timed reference followed exactly, per period h:\n\
          {:>7} {:>6} {:>10} {:>10} {:>10} {:>10} {:>12} {:>10} {:>10} {:>10}",
-        "h [s]", "N", "D", "δ_Goal", "δ_Unsafe", "δ_Input", "accumulated", "δ", "input max", "ceiling"
+        "h [s]",
+        "N",
+        "D",
+        "δ_Goal",
+        "δ_Unsafe",
+        "δ_Input",
+        "accumulated",
+        "δ",
+        "input max",
+        "ceiling"
     );
     for h in PERIODS {
         let f = route_figures(&with_period(&src, h));

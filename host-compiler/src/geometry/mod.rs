@@ -251,6 +251,52 @@ pub(crate) fn sure_margin(slack: f64, scale: f64) -> f64 {
     (slack - 1e-9 * scale).max(0.0)
 }
 
+/// Membership of one set asked at many nearby points in turn (a run's states between samples, a
+/// formula's trace sampled finer). Each answer is `contains`' own; where a point lies within the sure
+/// radius ([`Region::sure_radius`]) of the point that last set it, it is that point's answer, with no
+/// test. The anchor moves to a point the radius does not reach.
+#[derive(Clone, Debug, Default)]
+pub struct NearbyMembership {
+    anchor: Vec<f64>,
+    inside: bool,
+    /// 0: no anchor.
+    radius: f64,
+}
+
+impl NearbyMembership {
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// `set.contains(x)`, from the anchor's sure ball when `x` lies in it.
+    pub fn contains(&mut self, set: &dyn Region, x: &[f64]) -> bool {
+        if self.radius > 0.0 && x.len() == self.anchor.len() {
+            let d2: f64 = x
+                .iter()
+                .zip(&self.anchor)
+                .map(|(a, b)| (a - b) * (a - b))
+                .sum();
+            // The distance's own rounding (a few ulps) is kept back from the radius.
+            if d2.sqrt() < self.radius * (1.0 - 1e-12) {
+                return self.inside;
+            }
+        }
+        match set.sure_radius(x) {
+            Some((inside, r)) if r > 0.0 => {
+                self.anchor.clear();
+                self.anchor.extend_from_slice(x);
+                self.inside = inside;
+                self.radius = r;
+                inside
+            }
+            _ => {
+                self.radius = 0.0;
+                set.contains(x)
+            }
+        }
+    }
+}
+
 /// Check a query point and a metric against the ambient dimension (shape and finiteness only; the metric's
 /// symmetry and PSD are checked when a set factors it).
 pub(crate) fn check_query(n: usize, x: &[f64], metric: &Metric) -> Result<(), GeometryError> {
@@ -288,5 +334,94 @@ mod tests {
         let m = Metric::new(2, vec![1.0, 0.0, 0.0, 0.0]).unwrap();
         assert_eq!(m.distance(&[0.0, 0.0], &[0.0, 5.0]), 0.0);
         assert_eq!(m.distance(&[0.0, 0.0], &[3.0, 5.0]), 3.0);
+    }
+
+    /// A set that counts its membership tests.
+    struct Counted<'a>(&'a dyn Region, std::sync::atomic::AtomicUsize);
+
+    impl Region for Counted<'_> {
+        fn dim(&self) -> usize {
+            self.0.dim()
+        }
+        fn contains(&self, x: &[f64]) -> bool {
+            self.1.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            self.0.contains(x)
+        }
+        fn dist(&self, x: &[f64], metric: &Metric) -> Witness {
+            self.0.dist(x, metric)
+        }
+        fn depth(&self, x: &[f64], metric: &Metric) -> Witness {
+            self.0.depth(x, metric)
+        }
+        fn sure_radius(&self, x: &[f64]) -> Option<(bool, f64)> {
+            self.0.sure_radius(x)
+        }
+    }
+
+    /// Along random walks through and across a union (a polytope, an ellipsoid and a set seen through
+    /// an output map), `NearbyMembership` answers exactly as `contains` at every point, while testing
+    /// only a fraction of them; a set without sure radii is tested at every point.
+    #[test]
+    fn nearby_membership_is_contains_with_fewer_tests() {
+        use rand::{Rng, SeedableRng};
+        let square = Polytope::new(
+            2,
+            vec![1.0, 0.0, -1.0, 0.0, 0.0, 1.0, 0.0, -1.0, 1.0, 1.0],
+            vec![1.0, 1.0, 1.0, 1.0, 1.5],
+        )
+        .unwrap();
+        let disc = Ellipsoid::new(vec![2.0, 0.5], vec![4.0, 0.0, 0.0, 1.0]).unwrap();
+        let band = InOutput::new(
+            vec![1.0, -1.0],
+            1,
+            Box::new(Polytope::new(1, vec![1.0, -1.0], vec![-2.5, 3.0]).unwrap()),
+        )
+        .unwrap();
+        let union = Union::new(vec![Box::new(square), Box::new(disc), Box::new(band)]).unwrap();
+        let counted = Counted(&union, Default::default());
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(46);
+        let (mut points, mut inside) = (0usize, 0usize);
+        for walk in 0..40 {
+            let mut near = NearbyMembership::new();
+            let mut x = [rng.random_range(-4.0..4.0), rng.random_range(-4.0..4.0)];
+            let step = if walk % 2 == 0 { 0.01 } else { 0.2 };
+            for _ in 0..400 {
+                x[0] += rng.random_range(-step..step);
+                x[1] += rng.random_range(-step..step);
+                let got = near.contains(&counted, &x);
+                assert_eq!(got, union.contains(&x), "at {x:?}");
+                points += 1;
+                inside += usize::from(got);
+            }
+        }
+        let tests = counted.1.load(std::sync::atomic::Ordering::Relaxed);
+        assert!(
+            inside > points / 20 && inside < points - points / 20,
+            "{inside} of {points}"
+        );
+        assert!(tests < points / 4, "{tests} tests for {points} points");
+        // Without sure radii (the default), every point is tested.
+        struct Plain<'a>(&'a dyn Region);
+        impl Region for Plain<'_> {
+            fn dim(&self) -> usize {
+                self.0.dim()
+            }
+            fn contains(&self, x: &[f64]) -> bool {
+                self.0.contains(x)
+            }
+            fn dist(&self, x: &[f64], metric: &Metric) -> Witness {
+                self.0.dist(x, metric)
+            }
+            fn depth(&self, x: &[f64], metric: &Metric) -> Witness {
+                self.0.depth(x, metric)
+            }
+        }
+        let plain = Counted(&Plain(&union), Default::default());
+        let mut near = NearbyMembership::new();
+        for k in 0..100 {
+            let x = [0.001 * k as f64, 0.0];
+            assert_eq!(near.contains(&plain, &x), union.contains(&x));
+        }
+        assert_eq!(plain.1.load(std::sync::atomic::Ordering::Relaxed), 100);
     }
 }

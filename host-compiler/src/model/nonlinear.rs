@@ -255,7 +255,9 @@ mod tests {
                 let x: Vec<f64> = (0..n).map(|_| draw()).collect();
                 let u: Vec<f64> = (0..m).map(|_| draw()).collect();
                 let mut inside = 0;
-                let with = plant.flow(&x, &u, h, 8, &mut |_| inside += 1).expect("flows");
+                let with = plant
+                    .flow(&x, &u, h, 8, &mut |_| inside += 1)
+                    .expect("flows");
                 let without = plant.flow(&x, &u, h, 1, &mut |_| {}).expect("flows");
                 assert_eq!(inside, 7);
                 let scale = x.iter().chain(&without).fold(1.0f64, |a, v| a.max(v.abs()));

@@ -11,6 +11,7 @@
 
 use super::{ball_boundary_point, check_runs, MonteCarloError, MAX_PER_BALL, MAX_RUNS};
 use super::{input_slack, inverse_sqrt_metric, summarize, RunOutcome, VerifyReport, MARGIN_EVERY};
+use crate::geometry::NearbyMembership;
 use crate::model::feedback_linearizable::FlMaps;
 use crate::property::input_bound;
 use crate::task::Task;
@@ -66,34 +67,38 @@ fn run_fl_inner(
     // keeps them: ξ of a plant state is read with them.
     let zeta =
         |ctl: &Controller<'_>| -> Vec<f64> { ctl.extension().iter().map(|&v| v as f64).collect() };
-    let check = |x: &[f64], xi: &[f64], out: &mut RunOutcome, sample: bool| {
-        // Outside the operating region (the plant's whole state, zero dynamics included) is Unsafe.
-        if let Some(r) = &maps.region {
-            let outside = x
-                .iter()
-                .zip(r.lo.iter().zip(&r.hi))
-                .any(|(v, (l, h))| !(l < v && v < h));
-            if out.goal_step.is_some() {
-                out.after_goal_unsafe |= outside;
-            } else {
-                out.entered_unsafe |= outside;
+    // Unsafe's membership along the run: the same answers as `contains`, without the test where a point
+    // lies within the sure radius of an earlier one (most of a period's states between samples).
+    let mut near = NearbyMembership::new();
+    let check =
+        |x: &[f64], xi: &[f64], out: &mut RunOutcome, near: &mut NearbyMembership, sample: bool| {
+            // Outside the operating region (the plant's whole state, zero dynamics included) is Unsafe.
+            if let Some(r) = &maps.region {
+                let outside = x
+                    .iter()
+                    .zip(r.lo.iter().zip(&r.hi))
+                    .any(|(v, (l, h))| !(l < v && v < h));
+                if out.goal_step.is_some() {
+                    out.after_goal_unsafe |= outside;
+                } else {
+                    out.entered_unsafe |= outside;
+                }
             }
-        }
-        if let Some(us) = unsafe_set {
-            let inside = us.contains(xi);
-            if out.goal_step.is_some() {
-                out.after_goal_unsafe |= inside;
-                return;
+            if let Some(us) = unsafe_set {
+                let inside = near.contains(us, xi);
+                if out.goal_step.is_some() {
+                    out.after_goal_unsafe |= inside;
+                    return;
+                }
+                out.entered_unsafe |= inside;
+                if margins && sample {
+                    out.unsafe_margin = out.unsafe_margin.min(-us.signed_dist(xi, &metric).value);
+                }
             }
-            out.entered_unsafe |= inside;
-            if margins && sample {
-                out.unsafe_margin = out.unsafe_margin.min(-us.signed_dist(xi, &metric).value);
-            }
-        }
-    };
+        };
     let mut z = zeta(&ctl);
     let mut xi = maps.xi_at(&x, &z);
-    check(&x, &xi, &mut out, true);
+    check(&x, &xi, &mut out, &mut near, true);
     for k in 0..=task.steps {
         visit(&xi);
         if out.goal_step.is_none() && goal.contains(&xi) {
@@ -131,7 +136,7 @@ fn run_fl_inner(
                 Some(fc) => fc.zeta_within(&z, &z1, h, i as f64 * h / SUBSTEPS as f64),
                 None => Vec::new(),
             };
-            check(xs, &maps.xi_at(xs, &zs), &mut out, false)
+            check(xs, &maps.xi_at(xs, &zs), &mut out, &mut near, false)
         };
         match maps.plant.flow(&x, &u, h, SUBSTEPS, &mut between) {
             Ok(next) => x = next,
@@ -145,7 +150,7 @@ fn run_fl_inner(
         }
         z = z1;
         xi = maps.xi_at(&x, &z);
-        check(&x, &xi, &mut out, true);
+        check(&x, &xi, &mut out, &mut near, true);
     }
     out
 }

@@ -258,17 +258,24 @@ impl crate::geometry::Region for Membership {
         &self,
         _: &crate::geometry::Metric,
     ) -> Option<Box<dyn crate::geometry::SignedDistanceFn + '_>> {
-        Some(Box::new(MembershipFn(self.0.as_ref())))
+        Some(Box::new(MembershipFn(
+            self.0.as_ref(),
+            crate::geometry::NearbyMembership::new(),
+        )))
     }
 }
 
-/// [`Membership`] compiled: one membership test per point.
-struct MembershipFn<'a>(&'a dyn crate::geometry::Region);
+/// [`Membership`] compiled: one membership per point, in trace order, by
+/// [`crate::geometry::NearbyMembership`] (no test within the sure radius of an earlier point).
+struct MembershipFn<'a>(
+    &'a dyn crate::geometry::Region,
+    crate::geometry::NearbyMembership,
+);
 
 impl crate::geometry::SignedDistanceFn for MembershipFn<'_> {
     fn eval(&mut self, x: &[f64]) -> crate::geometry::Signed {
         crate::geometry::Signed {
-            inside: self.0.contains(x),
+            inside: self.1.contains(self.0, x),
             value: 1.0,
         }
     }

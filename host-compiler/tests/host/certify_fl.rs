@@ -55,7 +55,11 @@ fn the_ceiling_bounds_every_certificate_of_example_4_9() {
     let gp = host_compiler::synth::temporal::gen_problem(&task, &lp, &lc);
     let mut best = 0.0f64;
     let mut certified = 0;
-    for x0 in [[0.0, 0.0, 0.0, 1.0], [0.2, -0.1, 0.0, 1.0], [-0.2, 0.2, 0.0, 1.0]] {
+    for x0 in [
+        [0.0, 0.0, 0.0, 1.0],
+        [0.2, -0.1, 0.0, 1.0],
+        [-0.2, 0.2, 0.0, 1.0],
+    ] {
         let x0 = x0.to_vec();
         let g = generate(&gp, &x0, &GenSettings::default()).expect("generated");
         for scale in [0.0, 0.5, 0.9, 1.0, 1.05, 1.3] {
