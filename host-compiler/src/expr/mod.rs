@@ -26,6 +26,7 @@ pub mod compile;
 pub mod diff;
 pub mod interval;
 mod parse;
+pub mod tape;
 
 pub use parse::parse;
 pub use shared_types::capacity::MAX_PROGRAM_POWI;

@@ -71,6 +71,7 @@ use super::{Location, ModelError, Plant};
 use crate::expr::compile::{compile, Compiled};
 use crate::expr::diff::{derivative, gradient, lie};
 use crate::expr::interval::{enclose, rounding_bound, Interval, IntervalError, VarBox};
+use crate::expr::tape::Tape;
 use crate::expr::{Expr, ExprError, Point, Var};
 use crate::spec::sets::{Coords, Shape};
 use crate::spec::{InitBox, InputSet, Matrix, Plant as SpecPlant, Problem, SetDesc, TimeDomain};
@@ -234,6 +235,8 @@ pub struct FlMaps {
 pub struct FlatCoords {
     /// q(x, ζ) (parameters bound): the expressions the `coords` program computes.
     pub coords_exprs: Vec<Expr>,
+    /// The same expressions as one tape ([`crate::expr::tape`]): the verifier's q of a plant state.
+    pub coords_tape: Tape,
     /// The controller states' initial values ζ0.
     pub ext_init: Vec<f64>,
     /// The order of each extended input's chain in ζ, in ζ's order (its states ζ_0 … ζ_{o−1}).
@@ -300,7 +303,9 @@ impl FlMaps {
                     u: &[],
                     p: &[],
                 };
-                fc.coords_exprs.iter().map(|e| e.eval(&at)).collect()
+                let mut q = vec![0.0; fc.coords_tape.len()];
+                fc.coords_tape.eval_into(&at, &mut q);
+                q
             }
             None => self.xi_states.iter().map(|&s| x[s]).collect(),
         }
@@ -1282,6 +1287,7 @@ mod tests {
     fn the_controller_states_between_samples_follow_their_chain() {
         let fc = FlatCoords {
             coords_exprs: vec![],
+            coords_tape: Tape::new(&[]),
             ext_init: vec![9.81, 0.0],
             ext_orders: vec![2],
             q_states: vec![],

@@ -68,6 +68,7 @@ use super::nonlinear::NonlinearPlant;
 use crate::expr::compile::compile;
 use crate::expr::diff::{derivative, lie};
 use crate::expr::interval::{enclose, rounding_bound, Interval, IntervalError, VarBox};
+use crate::expr::tape::Tape;
 use crate::expr::{Expr, Var};
 use crate::spec::sets::{Coords, Shape};
 use crate::spec::{InputSet, Matrix, Plant as SpecPlant, Problem, SetDesc, TimeDomain};
@@ -684,6 +685,7 @@ pub fn flatten(problem: &Problem) -> Result<(Problem, FlMaps), FlError> {
         mismatch,
         mismatch_flow,
         flat: Some(FlatCoords {
+            coords_tape: Tape::new(&q_exprs),
             coords_exprs: q_exprs,
             ext_init: fd.ext_init(),
             ext_orders: fd.extension.iter().map(|e| e.order).collect(),

@@ -6,6 +6,7 @@
 //! disturbance (`certify::nonlinear`), and this flow is the independent judge of that.
 
 use super::ModelError;
+use crate::expr::tape::Tape;
 use crate::expr::{Expr, Point};
 use crate::spec::nonlinear::NonlinearDesc;
 use nalgebra::allocator::Allocator;
@@ -21,8 +22,10 @@ pub const ATOL: f64 = 1e-12;
 /// The plant of a nonlinear spec, parameters bound to their values.
 #[derive(Clone, Debug)]
 pub struct NonlinearPlant {
-    f: Vec<Expr>,
+    /// g's entries (which are zero, so that the field skips them).
     g: Vec<Vec<Expr>>,
+    /// f's entries, then g's row by row, as one tape ([`crate::expr::tape`]).
+    tape: Tape,
     n: usize,
     m: usize,
     period: f64,
@@ -54,13 +57,16 @@ impl NonlinearPlant {
     pub fn from_desc(desc: &NonlinearDesc) -> Self {
         let p = desc.names.param_values();
         let sys = &desc.system;
+        let f: Vec<Expr> = sys.f.iter().map(|e| e.bind_params(&p)).collect();
+        let g: Vec<Vec<Expr>> = sys
+            .g
+            .iter()
+            .map(|row| row.iter().map(|e| e.bind_params(&p)).collect())
+            .collect();
+        let tape = Tape::new(f.iter().chain(g.iter().flatten()));
         Self {
-            f: sys.f.iter().map(|e| e.bind_params(&p)).collect(),
-            g: sys
-                .g
-                .iter()
-                .map(|row| row.iter().map(|e| e.bind_params(&p)).collect())
-                .collect(),
+            g,
+            tape,
             n: sys.n(),
             m: sys.m(),
             period: desc.period,
@@ -85,14 +91,25 @@ impl NonlinearPlant {
         out
     }
 
-    /// f(x) + g(x)u into `out` (length n).
+    /// f(x) + g(x)u into `out` (length n): each entry's value as its tree gives it, summed in the order
+    /// f_i + g_i1 u_1 + … (zero entries of g skipped).
     fn field_into(&self, x: &[f64], u: &[f64], out: &mut [f64]) {
         let at = Point { x, u: &[], p: &[] };
+        let mut stack = [0.0f64; 64];
+        let mut heap = Vec::new();
+        let vals: &mut [f64] = if self.tape.len() <= stack.len() {
+            &mut stack[..self.tape.len()]
+        } else {
+            heap.resize(self.tape.len(), 0.0);
+            &mut heap
+        };
+        self.tape.eval_into(&at, vals);
+        let (f, g) = vals.split_at(self.n);
         for (i, o) in out.iter_mut().enumerate() {
-            let mut s = self.f[i].eval(&at);
-            for (gij, uj) in self.g[i].iter().zip(u) {
+            let mut s = f[i];
+            for (j, (gij, uj)) in self.g[i].iter().zip(u).enumerate() {
                 if !gij.is_zero() {
-                    s += gij.eval(&at) * uj;
+                    s += g[i * self.m + j] * uj;
                 }
             }
             *o = s;
