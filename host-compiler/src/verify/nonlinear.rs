@@ -70,35 +70,48 @@ fn run_fl_inner(
     // Unsafe's membership along the run: the same answers as `contains`, without the test where a point
     // lies within the sure radius of an earlier one (most of a period's states between samples).
     let mut near = NearbyMembership::new();
-    let check =
-        |x: &[f64], xi: &[f64], out: &mut RunOutcome, near: &mut NearbyMembership, sample: bool| {
-            // Outside the operating region (the plant's whole state, zero dynamics included) is Unsafe.
-            if let Some(r) = &maps.region {
-                let outside = x
-                    .iter()
-                    .zip(r.lo.iter().zip(&r.hi))
-                    .any(|(v, (l, h))| !(l < v && v < h));
-                if out.goal_step.is_some() {
-                    out.after_goal_unsafe |= outside;
-                } else {
-                    out.entered_unsafe |= outside;
-                }
+    let check = |x: &[f64], xi: &[f64], out: &mut RunOutcome, near: &mut NearbyMembership| {
+        // Outside the operating region (the plant's whole state, zero dynamics included) is Unsafe.
+        if let Some(r) = &maps.region {
+            let outside = x
+                .iter()
+                .zip(r.lo.iter().zip(&r.hi))
+                .any(|(v, (l, h))| !(l < v && v < h));
+            if out.goal_step.is_some() {
+                out.after_goal_unsafe |= outside;
+            } else {
+                out.entered_unsafe |= outside;
             }
-            if let Some(us) = unsafe_set {
-                let inside = near.contains(us, xi);
-                if out.goal_step.is_some() {
-                    out.after_goal_unsafe |= inside;
-                    return;
-                }
-                out.entered_unsafe |= inside;
-                if margins && sample {
-                    out.unsafe_margin = out.unsafe_margin.min(-us.signed_dist(xi, &metric).value);
-                }
+        }
+        if let Some(us) = unsafe_set {
+            let inside = near.contains(us, xi);
+            if out.goal_step.is_some() {
+                out.after_goal_unsafe |= inside;
+                return;
             }
-        };
+            out.entered_unsafe |= inside;
+        }
+    };
+    // The margins at the samples (every `MARGIN_EVERY`-th run), by the sets' signed distances compiled for
+    // the metric once per run (the same values, bit for bit, without a witness point per sample); a set
+    // without a compiled form answers directly.
+    let mut goal_dist = margins.then(|| goal.compile(&metric)).flatten();
+    let mut unsafe_dist = unsafe_set
+        .filter(|_| margins)
+        .and_then(|us| us.compile(&metric));
+    let mut unsafe_margin = |xi: &[f64], out: &mut RunOutcome| {
+        if let (true, None, Some(us)) = (margins, out.goal_step, unsafe_set) {
+            let signed = match unsafe_dist.as_mut() {
+                Some(f) => f.eval(xi).signed(),
+                None => us.signed_dist(xi, &metric).value,
+            };
+            out.unsafe_margin = out.unsafe_margin.min(-signed);
+        }
+    };
     let mut z = zeta(&ctl);
     let mut xi = maps.xi_at(&x, &z);
-    check(&x, &xi, &mut out, &mut near, true);
+    check(&x, &xi, &mut out, &mut near);
+    unsafe_margin(&xi, &mut out);
     for k in 0..=task.steps {
         visit(&xi);
         if out.goal_step.is_none() && goal.contains(&xi) {
@@ -106,7 +119,11 @@ fn run_fl_inner(
             out.goal_step = Some(k);
         }
         if margins {
-            out.goal_margin = out.goal_margin.max(goal.signed_dist(&xi, &metric).value);
+            let signed = match goal_dist.as_mut() {
+                Some(f) => f.eval(&xi).signed(),
+                None => goal.signed_dist(&xi, &metric).value,
+            };
+            out.goal_margin = out.goal_margin.max(signed);
         }
         if k == task.steps {
             break;
@@ -136,7 +153,7 @@ fn run_fl_inner(
                 Some(fc) => fc.zeta_within(&z, &z1, h, i as f64 * h / SUBSTEPS as f64),
                 None => Vec::new(),
             };
-            check(xs, &maps.xi_at(xs, &zs), &mut out, &mut near, false)
+            check(xs, &maps.xi_at(xs, &zs), &mut out, &mut near)
         };
         match maps.plant.flow(&x, &u, h, SUBSTEPS, &mut between) {
             Ok(next) => x = next,
@@ -150,7 +167,8 @@ fn run_fl_inner(
         }
         z = z1;
         xi = maps.xi_at(&x, &z);
-        check(&x, &xi, &mut out, &mut near, true);
+        check(&x, &xi, &mut out, &mut near);
+        unsafe_margin(&xi, &mut out);
     }
     out
 }
