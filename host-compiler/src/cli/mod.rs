@@ -34,7 +34,8 @@ pub mod verify;
     Exit status:\n  \
     0    success (synth: the coverage target is met and the verification passed)\n  \
     1    a check failed: a violation, a certificate the image bytes do not prove, or nothing certified\n  \
-    2    bad input: a spec, image, trace, recording or flag that is invalid, unreadable or does not match\n  \
+    2    bad input: a spec, image, trace, recording or flag that is invalid, unreadable or does not match; \
+    or (synth) a task whose loop provably certifies no trajectory, refused before any search\n  \
     3    certified and verified, but short of the coverage target (synth: the cover; verify: the image's coverage of the spec's Init)\n  \
     130  synth interrupted by Ctrl-C (the image holds what was certified so far)"
 )]
@@ -80,7 +81,8 @@ pub enum Exit {
     /// 1: a check failed: a violation, a certificate the image bytes do not prove, or nothing certified.
     Failed,
     /// 2: bad input: a spec, image, trace, recording or flag that is invalid, unreadable or does not
-    /// match the others.
+    /// match the others; or, for `synth`, a task whose loop provably certifies no trajectory
+    /// (`certify::Ceiling`), refused before any search.
     BadInput,
     /// 3: `synth` certified and verified an image, but its cover is short of the coverage target; or
     /// `verify` passed every check, but the image's coverage of the spec's Init is short of it.
