@@ -83,6 +83,20 @@ impl Tape {
         })
     }
 
+    /// `then` of every expression's value at `at`, in order, held on the stack for a short tape.
+    pub fn with_values<R>(&self, at: &Point<'_>, then: impl FnOnce(&[f64]) -> R) -> R {
+        let mut stack = [0.0f64; 64];
+        if self.len() <= stack.len() {
+            let vals = &mut stack[..self.len()];
+            self.eval_into(at, vals);
+            then(vals)
+        } else {
+            let mut vals = vec![0.0; self.len()];
+            self.eval_into(at, &mut vals);
+            then(&vals)
+        }
+    }
+
     /// Every expression's value at `at`, in order, into `out` (length [`Tape::len`]).
     pub fn eval_into(&self, at: &Point<'_>, out: &mut [f64]) {
         let mut stack = [0.0f64; STACK_SLOTS];

@@ -22,7 +22,7 @@ pub const ATOL: f64 = 1e-12;
 /// The plant of a nonlinear spec, parameters bound to their values.
 #[derive(Clone, Debug)]
 pub struct NonlinearPlant {
-    /// g's entries (which are zero, so that the field skips them).
+    /// g's entries, kept so that the field skips the zero ones.
     g: Vec<Vec<Expr>>,
     /// f's entries, then g's row by row, as one tape ([`crate::expr::tape`]).
     tape: Tape,
@@ -95,25 +95,18 @@ impl NonlinearPlant {
     /// f_i + g_i1 u_1 + … (zero entries of g skipped).
     fn field_into(&self, x: &[f64], u: &[f64], out: &mut [f64]) {
         let at = Point { x, u: &[], p: &[] };
-        let mut stack = [0.0f64; 64];
-        let mut heap = Vec::new();
-        let vals: &mut [f64] = if self.tape.len() <= stack.len() {
-            &mut stack[..self.tape.len()]
-        } else {
-            heap.resize(self.tape.len(), 0.0);
-            &mut heap
-        };
-        self.tape.eval_into(&at, vals);
-        let (f, g) = vals.split_at(self.n);
-        for (i, o) in out.iter_mut().enumerate() {
-            let mut s = f[i];
-            for (j, (gij, uj)) in self.g[i].iter().zip(u).enumerate() {
-                if !gij.is_zero() {
-                    s += g[i * self.m + j] * uj;
+        self.tape.with_values(&at, |vals| {
+            let (f, g) = vals.split_at(self.n);
+            for (i, o) in out.iter_mut().enumerate() {
+                let mut s = f[i];
+                for (j, (gij, uj)) in self.g[i].iter().zip(u).enumerate() {
+                    if !gij.is_zero() {
+                        s += g[i * self.m + j] * uj;
+                    }
                 }
+                *o = s;
             }
-            *o = s;
-        }
+        })
     }
 
     /// The state `t` seconds after `x` with `u` held, and the states at `sub − 1` equally spaced instants
@@ -188,9 +181,10 @@ impl NonlinearPlant {
             for y in solver.y_out().iter().skip(1).take(sub - 1) {
                 visit(y.as_slice());
             }
-            // One accepted step spans the whole period (the integrator's last step ends exactly at t),
-            // so the interpolant's value at t is evaluated at θ = 1 exactly: the step's own solution, to
-            // the rounding of y₀ + (y₁ − y₀). Over several steps it is not (the module's test).
+            // One accepted step spans the whole period (the integrator's last step is cut to end at t),
+            // so the interpolant's value at t is taken at θ = 1 up to the rounding of the output
+            // instants: the step's own solution, to the rounding of y₀ + (y₁ − y₀)θ. Over several steps
+            // it is not (the module's test).
             if stats.accepted_steps == 1 {
                 if let Some(y) = solver.y_out().last() {
                     return Ok(y.as_slice().to_vec());

@@ -446,13 +446,10 @@ fn run_until(
     // Judged until the first sample in Goal (module doc); after it, only recorded, except with a
     // terminal law, whose certificate covers the rest of the run.
     let judged = image.terminal_law().is_some();
-    // The margins' signed distances compiled for the metric once per run (the same values, bit for bit,
-    // without a witness point allocated per sample); a set without a compiled form answers directly.
-    let mut goal_dist = margins.then(|| judge.goal().compile(&metric)).flatten();
+    let mut goal_dist = SignedDistances::new(judge.goal(), &metric);
     let mut unsafe_dist = judge
         .unsafe_set()
-        .filter(|_| margins)
-        .and_then(|us| us.compile(&metric));
+        .map(|us| SignedDistances::new(us, &metric));
     let mut check = |x: &[f64], out: &mut RunOutcome, sample: bool| {
         if out.goal_step.is_some() && !judge.goal().contains(x) {
             out.left_goal = true;
@@ -466,12 +463,8 @@ fn run_until(
                 return;
             }
             out.entered_unsafe |= inside;
-            if margins && sample {
-                let signed = match unsafe_dist.as_mut() {
-                    Some(f) => f.eval(x).signed(),
-                    None => us.signed_dist(x, &metric).value,
-                };
-                out.unsafe_margin = out.unsafe_margin.min(-signed);
+            if let (true, true, Some(d)) = (margins, sample, unsafe_dist.as_mut()) {
+                out.unsafe_margin = out.unsafe_margin.min(-d.at(x));
             }
         }
     };
@@ -484,11 +477,7 @@ fn run_until(
             out.goal_step = Some(k);
         }
         if margins && k <= judge.steps {
-            let signed = match goal_dist.as_mut() {
-                Some(f) => f.eval(&x).signed(),
-                None => judge.goal().signed_dist(&x, &metric).value,
-            };
-            out.goal_margin = out.goal_margin.max(signed);
+            out.goal_margin = out.goal_margin.max(goal_dist.at(&x));
         }
         if k == last || (k >= judge.steps && out.goal_step.is_none()) {
             break;
@@ -559,6 +548,34 @@ pub(crate) fn between_clear(judge: &Judge<'_>, x: &[f64], u: &[f64], in_goal: bo
         }
     }
     !in_goal || clear(judge.goal(), true)
+}
+
+/// A set's signed distance in one metric at the points of a run (the margins the report gives), compiled
+/// for the metric once, when first asked ([`Region::compile`]: the same values, bit for bit, without a
+/// witness point per point); a set without a compiled form answers through [`Region::signed_dist`].
+pub(crate) struct SignedDistances<'a> {
+    set: &'a dyn Region,
+    metric: &'a crate::geometry::Metric,
+    compiled: Option<Option<Box<dyn crate::geometry::SignedDistanceFn + 'a>>>,
+}
+
+impl<'a> SignedDistances<'a> {
+    pub(crate) fn new(set: &'a dyn Region, metric: &'a crate::geometry::Metric) -> Self {
+        Self {
+            set,
+            metric,
+            compiled: None,
+        }
+    }
+
+    /// The signed distance of `x` (positive inside).
+    pub(crate) fn at(&mut self, x: &[f64]) -> f64 {
+        let (set, metric) = (self.set, self.metric);
+        match self.compiled.get_or_insert_with(|| set.compile(metric)) {
+            Some(f) => f.eval(x).signed(),
+            None => set.signed_dist(x, metric).value,
+        }
+    }
 }
 
 /// The terminal law of `image` (section 11) re-proved from its bytes against the task

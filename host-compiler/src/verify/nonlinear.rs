@@ -9,6 +9,7 @@
 //! applied input in the *plant's* input set, until the first sample in Goal), independently of how the
 //! certificate bounded the zero dynamics and the sampled-loop mismatch.
 
+use super::SignedDistances;
 use super::{ball_boundary_point, check_runs, MonteCarloError, MAX_PER_BALL, MAX_RUNS};
 use super::{input_slack, inverse_sqrt_metric, summarize, RunOutcome, VerifyReport, MARGIN_EVERY};
 use crate::geometry::NearbyMembership;
@@ -92,20 +93,12 @@ fn run_fl_inner(
             out.entered_unsafe |= inside;
         }
     };
-    // The margins at the samples (every `MARGIN_EVERY`-th run), by the sets' signed distances compiled for
-    // the metric once per run (the same values, bit for bit, without a witness point per sample); a set
-    // without a compiled form answers directly.
-    let mut goal_dist = margins.then(|| goal.compile(&metric)).flatten();
-    let mut unsafe_dist = unsafe_set
-        .filter(|_| margins)
-        .and_then(|us| us.compile(&metric));
+    // The margins at the samples (every `MARGIN_EVERY`-th run), before Goal for Unsafe.
+    let mut goal_dist = SignedDistances::new(goal, &metric);
+    let mut unsafe_dist = unsafe_set.map(|us| SignedDistances::new(us, &metric));
     let mut unsafe_margin = |xi: &[f64], out: &mut RunOutcome| {
-        if let (true, None, Some(us)) = (margins, out.goal_step, unsafe_set) {
-            let signed = match unsafe_dist.as_mut() {
-                Some(f) => f.eval(xi).signed(),
-                None => us.signed_dist(xi, &metric).value,
-            };
-            out.unsafe_margin = out.unsafe_margin.min(-signed);
+        if let (true, None, Some(d)) = (margins, out.goal_step, unsafe_dist.as_mut()) {
+            out.unsafe_margin = out.unsafe_margin.min(-d.at(xi));
         }
     };
     let mut z = zeta(&ctl);
@@ -119,11 +112,7 @@ fn run_fl_inner(
             out.goal_step = Some(k);
         }
         if margins {
-            let signed = match goal_dist.as_mut() {
-                Some(f) => f.eval(&xi).signed(),
-                None => goal.signed_dist(&xi, &metric).value,
-            };
-            out.goal_margin = out.goal_margin.max(signed);
+            out.goal_margin = out.goal_margin.max(goal_dist.at(&xi));
         }
         if k == task.steps {
             break;
