@@ -233,9 +233,8 @@ pub struct FlMaps {
 /// adds outside the w channel.
 #[derive(Clone, Debug)]
 pub struct FlatCoords {
-    /// q(x, ζ) (parameters bound): the expressions the `coords` program computes.
-    pub coords_exprs: Vec<Expr>,
-    /// The same expressions as one tape ([`crate::expr::tape`]): the verifier's q of a plant state.
+    /// q(x, ζ) (parameters bound), the expressions the `coords` program computes, as one f64 tape
+    /// ([`crate::expr::tape`]): the verifier's q of a plant state.
     pub coords_tape: Tape,
     /// The controller states' initial values ζ0.
     pub ext_init: Vec<f64>,
@@ -314,7 +313,7 @@ impl FlMaps {
     /// The dimension of ξ.
     pub fn n_xi(&self) -> usize {
         match &self.flat {
-            Some(fc) => fc.coords_exprs.len(),
+            Some(fc) => fc.coords_tape.len(),
             None => self.xi_states.len(),
         }
     }
@@ -1286,7 +1285,6 @@ mod tests {
     #[test]
     fn the_controller_states_between_samples_follow_their_chain() {
         let fc = FlatCoords {
-            coords_exprs: vec![],
             coords_tape: Tape::new(&[]),
             ext_init: vec![9.81, 0.0],
             ext_orders: vec![2],

@@ -686,7 +686,6 @@ pub fn flatten(problem: &Problem) -> Result<(Problem, FlMaps), FlError> {
         mismatch_flow,
         flat: Some(FlatCoords {
             coords_tape: Tape::new(&q_exprs),
-            coords_exprs: q_exprs,
             ext_init: fd.ext_init(),
             ext_orders: fd.extension.iter().map(|e| e.order).collect(),
             q_states: fd.q_states.clone(),

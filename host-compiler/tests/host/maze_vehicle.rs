@@ -157,7 +157,9 @@ fn along_the_first_route_the_accumulated_mismatch_is_what_refuses_the_vehicle() 
     assert!(c.delta_input > 0.0, "the route's speed fits W: {c:?}");
     assert!(!c.is_certified(), "certified: {c:?}");
     let d = task.plant.model_mismatch();
-    let accumulated = lc.accumulation(task.steps) * lc.mismatch_step();
+    // The mismatch alone, summed over the table (S_N·z, as the ceiling below takes it).
+    let ceiling = Ceiling::of(&lp, &lc, task.steps);
+    let accumulated = ceiling.accumulated;
     assert!(d > 0.0);
     assert!(
         accumulated > c.parts_min() && c.r_crit > c.parts_min(),
@@ -167,7 +169,6 @@ fn along_the_first_route_the_accumulated_mismatch_is_what_refuses_the_vehicle() 
     );
     // More: no nominal of the table's length can be certified, since even the input set's whole
     // half-width (over the gain's scale) is below the mismatch accumulated over the table and r_crit.
-    let ceiling = Ceiling::of(&lp, &lc, task.steps);
     assert!(ceiling.input >= c.delta_input, "{ceiling:?} against {c:?}");
     assert!(
         ceiling.input < ceiling.accumulated && ceiling.input < ceiling.r_crit,
