@@ -451,8 +451,24 @@ fn iterate(
     let mut best: Option<Generated> = None;
     // Without a guess, the first subproblem ignores Unsafe and only seeds the next one.
     let mut lin: Option<Nominal> = guess;
+    // δ of the subproblem that gave `lin` (0 for a given guess), where the screening measures slack.
+    let mut lin_delta = 0.0;
+    let mut solves = 0;
     for it in 0..settings.max_iter.max(1) {
-        let sol = solve_subproblem(prob, roots, x0, lin.as_ref(), settings, sides);
+        let linearised = Linearised {
+            lin: lin.as_ref(),
+            lin_delta,
+            sides,
+        };
+        let sol = solve_subproblem(
+            prob,
+            roots,
+            x0,
+            &linearised,
+            settings,
+            SCREEN_SLACK,
+            &mut solves,
+        );
 
         match sol {
             Ok((v, delta)) => {
@@ -471,6 +487,7 @@ fn iterate(
                 }
                 let done = lin.is_some() && improved.abs() <= settings.tol * delta.abs().max(1e-9);
                 lin = Some(nominal);
+                lin_delta = delta;
                 if done {
                     break;
                 }
@@ -497,6 +514,7 @@ fn iterate(
 }
 
 /// Row builder for clarabel's `A z + s = b, s ∈ K` form.
+#[derive(Default)]
 struct Rows {
     I: Vec<usize>,
     J: Vec<usize>,
@@ -517,17 +535,79 @@ impl Rows {
         }
         self.b.push(rhs);
     }
+
+    /// Appends `other`'s rows and cones after these.
+    fn extend(&mut self, other: &Rows) {
+        let r0 = self.b.len();
+        self.I.extend(other.I.iter().map(|&r| r + r0));
+        self.J.extend_from_slice(&other.J);
+        self.V.extend_from_slice(&other.V);
+        self.b.extend_from_slice(&other.b);
+        self.cones.extend(other.cones.iter().cloned());
+    }
+}
+
+/// One linear inequality `aᵀz ≤ b` of a subproblem that may be left out while it is slack
+/// ([`solve_subproblem`]'s screening).
+struct Inequality {
+    entries: Vec<(usize, f64)>,
+    rhs: f64,
+}
+
+impl Inequality {
+    /// `b − aᵀz`, over the norm of a's entries other than `skip` (δ's column): how far `z` is inside the
+    /// row, in the units of the state and the input.
+    fn slack(&self, z: &[f64], skip: usize) -> f64 {
+        let (mut dot, mut norm) = (0.0, 0.0f64);
+        for &(j, v) in &self.entries {
+            dot += v * z[j];
+            if j != skip {
+                norm = norm.hypot(v);
+            }
+        }
+        (self.rhs - dot) / norm.max(f64::MIN_POSITIVE)
+    }
+}
+
+/// Rows of a subproblem whose slack at the previous iterate exceeds this (in state and input units,
+/// [`Inequality::slack`]) are left out of its first solve (see [`solve_subproblem`]).
+const SCREEN_SLACK: f64 = 1.0;
+
+/// Where a subproblem is linearised: the previous iterate (none for the first, which ignores Unsafe),
+/// the δ of the subproblem that gave it (0 for a given guess), the rule for the Unsafe rows.
+#[derive(Clone, Copy)]
+struct Linearised<'a> {
+    lin: Option<&'a Nominal>,
+    lin_delta: f64,
+    sides: Sides,
 }
 
 /// One SOCP: returns v(0..N) and δ, or why it has none.
+///
+/// The Unsafe and input-box rows far from the previous iterate `lin` (slack above [`SCREEN_SLACK`]) are
+/// left out of a first solve; every row left out is then checked at its solution, and those it
+/// violates join for a new solve, until none is violated. The problem solved last is a relaxation of
+/// the whole one whose optimum satisfies every row, so it is the whole problem's optimum (to clarabel's
+/// tolerance), and a relaxation without a solution means the whole problem has none. Most rows of a
+/// long horizon are far from every piece (a flat plant's region faces, an input bound the run never
+/// nears), and the solve's cost grows with the rows.
+///
+/// `screen` is the slack past which a row is left out of the first solve ([`SCREEN_SLACK`];
+/// `f64::INFINITY` leaves none out); `solves` counts clarabel's solves.
 fn solve_subproblem(
     prob: &GenProblem<'_>,
     roots_of: &[PdRoots],
     x0: &[f64],
-    lin: Option<&Nominal>,
+    linearised: &Linearised<'_>,
     settings: &GenSettings,
-    sides: Sides,
+    screen: f64,
+    solves: &mut usize,
 ) -> Result<(Vec<Vec<f64>>, f64), SubproblemStatus> {
+    let Linearised {
+        lin,
+        lin_delta,
+        sides,
+    } = *linearised;
     let model = prob.model_at(0);
     let n = model.A.nrows();
     let m = model.B.ncols();
@@ -536,13 +616,7 @@ fn solve_subproblem(
     let vi = |k: usize, i: usize| n * (N + 1) + k * m + i;
     let d = n * (N + 1) + m * N;
     let nvar = d + 1;
-    let mut rows = Rows {
-        I: vec![],
-        J: vec![],
-        V: vec![],
-        b: vec![],
-        cones: vec![],
-    };
+    let mut rows = Rows::default();
 
     // Equalities: x(0) = x0; x(κ+1) − A x(κ) − B v(κ) − B K x(κ) = g (step κ's location).
     for i in 0..n {
@@ -566,11 +640,12 @@ fn solve_subproblem(
     let n_eq = rows.b.len();
     rows.cones.push(ZeroConeT(n_eq));
 
-    // Nonnegative rows.
+    // Nonnegative rows: always kept, and the screened ones (`screened`).
     let start = rows.b.len();
     rows.row(&[(d, -1.0)], 0.0); // δ ≥ 0
     rows.row(&[(d, 1.0)], settings.delta_max); // δ ≤ δmax
-                                               // Unsafe: supporting half-spaces at the previous iterate.
+    let mut screened: Vec<Inequality> = Vec::new();
+    // Unsafe: supporting half-spaces at the previous iterate.
     if let Some(nom) = lin {
         let planes: Vec<Vec<(Vec<f64>, f64)>> = prob
             .convex
@@ -604,7 +679,10 @@ fn solve_subproblem(
                 // Keep nᵀx ≥ off + γ‖n‖_{P⁻¹}δ + (how far the period's drift moves the state against n).
                 let mut e: Vec<(usize, f64)> = (0..n).map(|i| (xi(k, i), -nrm[i])).collect();
                 e.push((d, prob.gamma * dn));
-                rows.row(&e, -*off - drift.against(nrm, dn));
+                screened.push(Inequality {
+                    entries: e,
+                    rhs: -*off - drift.against(nrm, dn),
+                });
             }
         }
     }
@@ -618,11 +696,17 @@ fn solve_subproblem(
                 let mut e: Vec<(usize, f64)> = (0..n).map(|j| (xi(k, j), Ki[j])).collect();
                 e.push((vi(k, i), 1.0));
                 e.push((d, s));
-                rows.row(&e, hi[i] - prob.input_margin);
+                screened.push(Inequality {
+                    entries: e,
+                    rhs: hi[i] - prob.input_margin,
+                });
                 let mut e: Vec<(usize, f64)> = (0..n).map(|j| (xi(k, j), -Ki[j])).collect();
                 e.push((vi(k, i), -1.0));
                 e.push((d, s));
-                rows.row(&e, -lo[i] - prob.input_margin);
+                screened.push(Inequality {
+                    entries: e,
+                    rhs: -lo[i] - prob.input_margin,
+                });
             }
         }
     }
@@ -636,21 +720,21 @@ fn solve_subproblem(
             rows.row(&e, b[r]);
         }
     }
-    let n_nn = rows.b.len() - start;
-    rows.cones.push(NonnegativeConeT(n_nn));
+    let kept = rows.b.len() - start;
 
     // Second-order cones.
+    let mut cones = Rows::default();
     if let InputBound::Norm2 { center, max } = &prob.property.input {
         for k in 0..N {
             let K = prob.K_at(k);
             let sK = spectral_norm((K * &roots_of[prob.metric_at(k)].inv_sqrt).as_ref());
-            rows.row(&[(d, sK)], max - prob.input_margin);
+            cones.row(&[(d, sK)], max - prob.input_margin);
             for i in 0..m {
                 let mut e: Vec<(usize, f64)> = (0..n).map(|j| (xi(k, j), -K[(i, j)])).collect();
                 e.push((vi(k, i), -1.0));
-                rows.row(&e, -center[i]);
+                cones.row(&e, -center[i]);
             }
-            rows.cones.push(SecondOrderConeT(m + 1));
+            cones.cones.push(SecondOrderConeT(m + 1));
         }
     }
     if let ConvexPiece::Ellipsoid { C, c, Q } = &prob.convex.goal {
@@ -659,12 +743,12 @@ fn solve_subproblem(
         let sg = spectral_norm((&QhC * &roots.inv_sqrt).as_ref());
         let Qhc = mat_vec(Qh.as_ref(), c);
         let p = C.nrows();
-        rows.row(&[(d, sg)], 1.0);
+        cones.row(&[(d, sg)], 1.0);
         for i in 0..p {
             let e: Vec<(usize, f64)> = (0..n).map(|j| (xi(N, j), -QhC[(i, j)])).collect();
-            rows.row(&e, -Qhc[i]);
+            cones.row(&e, -Qhc[i]);
         }
-        rows.cones.push(SecondOrderConeT(p + 1));
+        cones.cones.push(SecondOrderConeT(p + 1));
     }
 
     // Objective: −δ + w Σ‖v(κ+1) − v(κ)‖² (+ a tiny ‖v‖² for strict convexity); clarabel takes ½zᵀPz, upper part.
@@ -688,7 +772,6 @@ fn solve_subproblem(
     let Pm = CscMatrix::new_from_triplets(nvar, nvar, PI, PJ, PV);
     let mut q = vec![0.0; nvar];
     q[d] = -1.0;
-    let Am = CscMatrix::new_from_triplets(rows.b.len(), nvar, rows.I, rows.J, rows.V);
     let mut b = DefaultSettingsBuilder::default();
     b.verbose(false).max_iter(200);
     if let Some(t) = settings.refinement_tol {
@@ -698,18 +781,70 @@ fn solve_subproblem(
     let st = b.build().expect(
         "verbose, max_iter = 200 and a validated refinement tolerance are in clarabel's range",
     );
-    let mut solver = DefaultSolver::new(&Pm, &q, &Am, &rows.b, &rows.cones, st)
-        .map_err(|e| SubproblemStatus::Setup(e.into()))?;
-    solver.solve();
-    match solver.solution.status {
-        SolverStatus::Solved | SolverStatus::AlmostSolved => {}
-        s => return Err(SubproblemStatus::Solver(s)),
+
+    // The previous iterate as a point of the subproblem's variables, for the screening.
+    let z_lin: Option<Vec<f64>> = lin.map(|nom| {
+        let mut z = vec![0.0; nvar];
+        for k in 0..=N {
+            for i in 0..n {
+                z[xi(k, i)] = nom.x[k][i];
+            }
+        }
+        for k in 0..N {
+            for i in 0..m {
+                z[vi(k, i)] = nom.v[k][i];
+            }
+        }
+        z[d] = lin_delta;
+        z
+    });
+    let mut active: Vec<bool> = match &z_lin {
+        Some(z) => screened.iter().map(|r| r.slack(z, d) <= screen).collect(),
+        None => vec![true; screened.len()],
+    };
+    loop {
+        let mut all = Rows::default();
+        all.extend(&rows);
+        for (r, _) in screened.iter().zip(&active).filter(|(_, &a)| a) {
+            all.row(&r.entries, r.rhs);
+        }
+        let n_nn = all.b.len() - start;
+        all.cones.push(NonnegativeConeT(n_nn));
+        all.extend(&cones);
+        debug_assert!(n_nn >= kept);
+        let Am = CscMatrix::new_from_triplets(all.b.len(), nvar, all.I, all.J, all.V);
+        let mut solver = DefaultSolver::new(&Pm, &q, &Am, &all.b, &all.cones, st.clone())
+            .map_err(|e| SubproblemStatus::Setup(e.into()))?;
+        solver.solve();
+        *solves += 1;
+        let status = solver.solution.status;
+        let z = &solver.solution.x;
+        let solved = matches!(status, SolverStatus::Solved | SolverStatus::AlmostSolved);
+        // Rows left out that the solution violates join the next solve.
+        let mut added = false;
+        if solved {
+            for (r, a) in screened.iter().zip(active.iter_mut()) {
+                if !*a && r.slack(z, usize::MAX) < 0.0 {
+                    *a = true;
+                    added = true;
+                }
+            }
+        } else if active.iter().any(|a| !a) && status != SolverStatus::PrimalInfeasible {
+            // A relaxation clarabel could not solve says nothing of the whole problem: solve that.
+            active.iter_mut().for_each(|a| *a = true);
+            continue;
+        }
+        if added {
+            continue;
+        }
+        if !solved {
+            return Err(SubproblemStatus::Solver(status));
+        }
+        let v: Vec<Vec<f64>> = (0..N)
+            .map(|k| (0..m).map(|i| z[vi(k, i)]).collect())
+            .collect();
+        return Ok((v, z[d].max(0.0)));
     }
-    let z = &solver.solution.x;
-    let v: Vec<Vec<f64>> = (0..N)
-        .map(|k| (0..m).map(|i| z[vi(k, i)]).collect())
-        .collect();
-    Ok((v, z[d].max(0.0)))
 }
 
 /// The supporting half-space of `piece` for every sample of an iterate `xs`, by the rule `sides`
@@ -954,6 +1089,35 @@ mod tests {
         steps: usize,
         sides: Option<Sides>,
     ) -> Result<Generated, GenError> {
+        with_problem(
+            goal,
+            goal_at,
+            unsafe_pieces,
+            input,
+            steps,
+            |prob| match sides {
+                None => generate(prob, &[0.0, 0.0], &GenSettings::default()),
+                Some(sides) => iterate(
+                    prob,
+                    &prob.roots().unwrap(),
+                    &[0.0, 0.0],
+                    &GenSettings::default(),
+                    sides,
+                    None,
+                ),
+            },
+        )
+    }
+
+    /// `f` of [`solve`]'s problem.
+    fn with_problem<R>(
+        goal: ConvexPiece,
+        goal_at: [f64; 3],
+        unsafe_pieces: Vec<ConvexPiece>,
+        input: InputBound,
+        steps: usize,
+        f: impl FnOnce(&GenProblem<'_>) -> R,
+    ) -> R {
         let A = from_row_major(2, 2, &[0.9, 0.0, 0.0, 0.9]);
         let plant = LinearAffine::discrete(
             DiscretePlant::new(A, Mat::identity(2, 2), vec![0.0, 0.0], 0.1).unwrap(),
@@ -986,17 +1150,86 @@ mod tests {
             input_margin: 0.0,
             schedule: None,
         };
-        match sides {
-            None => generate(&prob, &[0.0, 0.0], &GenSettings::default()),
-            Some(sides) => iterate(
-                &prob,
-                &prob.roots().unwrap(),
-                &[0.0, 0.0],
-                &GenSettings::default(),
-                sides,
-                None,
-            ),
-        }
+        f(&prob)
+    }
+
+    /// A subproblem linearised at a detour far above a disc on the straight path leaves out the rows of
+    /// the samples far from the disc; its solution runs straight through the disc, so the rows it
+    /// violates join a second solve. The answer is the whole subproblem's: the same δ and references, to
+    /// clarabel's tolerance.
+    #[test]
+    fn the_screened_subproblem_is_the_whole_one() {
+        let input = InputBound::Box {
+            lo: vec![-0.4, -0.4],
+            hi: vec![0.4, 0.4],
+        };
+        let (steps, on_the_way) = (30, vec![disc(1.0, 0.0, 0.3)]);
+        with_problem(
+            disc(2.0, 0.0, 0.3),
+            [2.0, 0.0, 0.3],
+            on_the_way,
+            input,
+            steps,
+            |prob| {
+                let roots = prob.roots().unwrap();
+                // Up for half the horizon, down for the other: up to 4.7 above the disc.
+                let v: Vec<Vec<f64>> = (0..steps)
+                    .map(|k| vec![0.21, if k < steps / 2 { 0.5 } else { -0.5 }])
+                    .collect();
+                let lin = prob.simulate(&[0.0, 0.0], &v);
+                let at = Linearised {
+                    lin: Some(&lin),
+                    lin_delta: 0.0,
+                    sides: Sides::Nearest,
+                };
+                let settings = GenSettings::default();
+                let solve = |screen: f64| {
+                    let mut solves = 0;
+                    let r = solve_subproblem(
+                        prob,
+                        &roots,
+                        &[0.0, 0.0],
+                        &at,
+                        &settings,
+                        screen,
+                        &mut solves,
+                    )
+                    .expect("solved");
+                    (r, solves)
+                };
+                let ((v_all, d_all), once) = solve(f64::INFINITY);
+                let ((v_scr, d_scr), more) = solve(SCREEN_SLACK);
+                assert_eq!(once, 1);
+                assert!(
+                    more >= 2,
+                    "the rows it violated joined a new solve ({more} solves)"
+                );
+                assert!(d_all > 0.05, "δ {d_all}");
+                assert!(
+                    (d_all - d_scr).abs() <= 1e-6 * d_all,
+                    "δ {d_all} against {d_scr}"
+                );
+                // The references themselves are the optimum's only to the solver's tolerance (the
+                // smoothness weight leaves them loosely held); every row holds at the screened answer.
+                assert_eq!(v_all.len(), v_scr.len());
+                let run = prob.simulate(&[0.0, 0.0], &v_scr);
+                for xk in &run.x {
+                    let gap = (xk[0] - 1.0).hypot(xk[1]) - 0.3;
+                    assert!(
+                        gap >= d_scr - 1e-6,
+                        "{xk:?} is {gap} from the disc, δ = {d_scr}"
+                    );
+                }
+                for vk in v_scr.iter().flatten() {
+                    assert!(vk.abs() <= 0.4 + 1e-6, "input {vk}");
+                }
+                let end = &run.x[steps];
+                assert!(
+                    (end[0] - 2.0).hypot(end[1]) + d_scr <= 0.3 + 1e-6,
+                    "goal {end:?}"
+                );
+            },
+        )
     }
 
     /// A disc centred on the straight path to Goal: the first iterate runs through it, and the nearest

@@ -419,7 +419,11 @@ fn a_formula_task_plays_to_the_horizon_and_its_runs_import() {
             break;
         }
     }
-    assert_eq!(last["status"], "timeout", "{last}");
+    // Ended at T, not before (the loop's check): in Goal there ("goal") or not ("timeout").
+    assert!(
+        last["status"] == "timeout" || last["status"] == "goal",
+        "{last}"
+    );
     let result = &last["result"];
     assert_eq!(result["accepted"], true, "{last}");
     let d = result["delta"].as_f64().unwrap();
