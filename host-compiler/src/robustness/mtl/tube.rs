@@ -37,11 +37,11 @@
 //!
 //! Each bound passes values through min and max only, so a bound at the root equals one atom's bound at
 //! one sample or interval (or ±∞). The windowed extrema are sliding min/max over index ranges whose
-//! ends move forward (a monotone deque, O(N) per operator); the until's lower bound is a scan per start
-//! with early exit, O(N·W) in the worst case.
+//! ends move forward (a monotone deque, O(N) per operator); the until's lower bound composes clamp maps
+//! over its sliding witness window in a two-stack queue ([`windowed_until`]), O(N) as well.
 
 use super::eval::{Atoms, Monitor, Node};
-use super::window::Wedge;
+use super::window::{Clamp, ClampQueue, Wedge};
 use super::{MtlError, NamedSet};
 
 /// Sample-count tolerance when converting operator bounds to sample offsets.
@@ -381,36 +381,13 @@ impl<'m, 's> TubeFormula<'m, 's> {
         let (n, ni) = (self.intervals, self.intervals);
         let (wa, wb) = self.witness(a, b);
         let at_zero = a / self.h <= TOL;
-        // What φ₁ must hold over between a start and a witness: intervals (tube) or the samples strictly
-        // between (discrete semantics).
-        let scan = |k: usize, first: usize| -> f64 {
-            let last = k.saturating_add(wb).min(n);
-            let mut best = f64::NEG_INFINITY;
-            // Hold: min of φ₁ over what lies between k and j.
-            let mut hold = f64::INFINITY;
-            let mut j = k;
-            while j <= last {
-                if j > k {
-                    let h = if tube {
-                        p1.l_lo[j - 1]
-                    } else if j - 1 > k {
-                        p1.s_lo[j - 1]
-                    } else {
-                        f64::INFINITY
-                    };
-                    hold = hold.min(h);
-                    if hold <= best {
-                        break;
-                    }
-                }
-                if j >= first {
-                    best = best.max(p2.s_lo[j].min(hold));
-                }
-                j += 1;
-            }
-            best
-        };
-        let s_lo: Vec<f64> = (0..=n).map(|k| scan(k, k.saturating_add(wa))).collect();
+        // What φ₁ must hold over between a start k and a witness j: the intervals k..j−1 (tube) or the
+        // samples strictly between (discrete semantics).
+        let (hold, from) = if tube { (&p1.l_lo, 0) } else { (&p1.s_lo, 1) };
+        let last = |k: usize| k.saturating_add(wb).min(n);
+        let s_lo = windowed_until(&p2.s_lo, hold, from, n + 1, |k| {
+            (k.saturating_add(wa), last(k))
+        });
         if !tube {
             return Bounds {
                 s_hi: s_lo.clone(),
@@ -419,7 +396,9 @@ impl<'m, 's> TubeFormula<'m, 's> {
                 s_lo,
             };
         }
-        let mut l_lo: Vec<f64> = (0..ni).map(|k| scan(k, k + 1 + wa)).collect();
+        let mut l_lo = windowed_until(&p2.s_lo, hold, from, ni, |k| {
+            ((k + 1).saturating_add(wa), last(k))
+        });
         if at_zero {
             l_lo.iter_mut()
                 .zip(&p2.l_lo)
@@ -433,6 +412,68 @@ impl<'m, 's> TubeFormula<'m, 's> {
             l_hi: up.l_hi,
         }
     }
+}
+
+/// For each start k < `starts` with witness window `window(k)` = (first, last) (inclusive, both
+/// non-decreasing in k): the largest over witnesses j in the window of min(ψ(j), min of φ(i) over
+/// k + `from` ≤ i ≤ j − 1), −∞ for an empty window. O(starts + window ends) in all, as
+/// [`super::eval`]'s until: with s = max(first, k + from), min distributes over max, so the value is
+/// min(min φ(k + from..s − 1), (f_s ∘ … ∘ f_last)(−∞)) for the clamp maps f_j(y) = max(ψ(j),
+/// min(φ(j), y)), plus ψ(k) when the window starts at k and the hold only after it (`from` = 1). Each
+/// value is a selection among ψ's and φ's entries by min and max, so it is the one a scan of every
+/// witness finds. φ past its end is never held (the last witness's map is applied to −∞).
+fn windowed_until(
+    psi: &[f64],
+    phi: &[f64],
+    from: usize,
+    starts: usize,
+    window: impl Fn(usize) -> (usize, usize),
+) -> Vec<f64> {
+    let mut out = Vec::with_capacity(starts);
+    // Sliding min of φ over k + from..s − 1, and the clamp maps of s..=last.
+    let (mut held, mut pushed_held) = (Wedge::new(), 0usize);
+    let (mut maps, mut pushed_maps) = (ClampQueue::new(), 0usize);
+    for k in 0..starts {
+        let (first, last) = window(k);
+        if first > last {
+            out.push(f64::NEG_INFINITY);
+            continue;
+        }
+        let at_start = if first < k + from {
+            psi[k]
+        } else {
+            f64::NEG_INFINITY
+        };
+        let s = first.max(k + from);
+        let rest = if s <= last {
+            while pushed_held < s {
+                held.push(phi, pushed_held, |x, y| x <= y);
+                pushed_held += 1;
+            }
+            held.expire(k + from);
+            let before = match held.front() {
+                Some(i) if k + from < s => phi[i],
+                _ => f64::INFINITY,
+            };
+            while pushed_maps <= last {
+                let beta = phi.get(pushed_maps).copied().unwrap_or(f64::INFINITY);
+                maps.push(
+                    pushed_maps,
+                    Clamp {
+                        alpha: psi[pushed_maps],
+                        beta,
+                    },
+                );
+                pushed_maps += 1;
+            }
+            maps.expire(s);
+            before.min(maps.aggregate().alpha)
+        } else {
+            f64::NEG_INFINITY
+        };
+        out.push(at_start.max(rest));
+    }
+    out
 }
 
 /// The atoms' nominal signals, in evaluation order.
@@ -503,4 +544,70 @@ fn range_ext(v: &[f64], ranges: impl Iterator<Item = (usize, usize)>, max: bool)
         out.push(q.front().map_or(empty, |j| v[j]));
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::windowed_until;
+    use rand::{Rng, SeedableRng};
+
+    /// The until by definition: every witness of every start scanned.
+    fn scanned(
+        psi: &[f64],
+        phi: &[f64],
+        from: usize,
+        starts: usize,
+        window: impl Fn(usize) -> (usize, usize),
+    ) -> Vec<f64> {
+        (0..starts)
+            .map(|k| {
+                let (first, last) = window(k);
+                (first..=last)
+                    .map(|j| {
+                        let hold = (k + from..j).map(|i| phi[i]).fold(f64::INFINITY, f64::min);
+                        psi[j].min(hold)
+                    })
+                    .fold(f64::NEG_INFINITY, f64::max)
+            })
+            .collect()
+    }
+
+    /// Random signals with ties and infinities, every window rule the tube's until uses (witnesses from
+    /// k + a or k + 1 + a, to k + b or the end, empty windows), both holds: the same values bit for bit.
+    #[test]
+    fn the_windowed_until_is_the_scan_of_every_witness() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(46);
+        for case in 0..400 {
+            let n = rng.random_range(1..40usize);
+            let mut draw = |len: usize| -> Vec<f64> {
+                (0..len)
+                    .map(|_| match rng.random_range(0..12) {
+                        0 => f64::INFINITY,
+                        1 => f64::NEG_INFINITY,
+                        _ => rng.random_range(-4..5) as f64 * 0.5,
+                    })
+                    .collect()
+            };
+            let psi = draw(n + 1);
+            let (tube, from) = if case % 2 == 0 { (true, 0) } else { (false, 1) };
+            let phi = draw(if tube { n } else { n + 1 });
+            let wa = rng.random_range(0..6usize);
+            let wb = if case % 7 == 0 {
+                usize::MAX / 4
+            } else {
+                rng.random_range(0..12usize)
+            };
+            let starts = if case % 3 == 0 { n } else { n + 1 };
+            let shift = (case % 3 == 0) as usize;
+            let window = |k: usize| ((k + shift).saturating_add(wa), k.saturating_add(wb).min(n));
+            let fast = windowed_until(&psi, &phi, from, starts, window);
+            let slow = scanned(&psi, &phi, from, starts, window);
+            let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert_eq!(
+                bits(&fast),
+                bits(&slow),
+                "case {case}: n {n}, a {wa}, b {wb}, tube {tube}"
+            );
+        }
+    }
 }
