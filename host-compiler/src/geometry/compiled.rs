@@ -4,13 +4,14 @@
 //!
 //! A compiled value is the one [`Region::signed_dist`] gives, bit for bit: the same operations in the
 //! same order (membership by the same test, the same boundary solve). Only the witness point is not
-//! formed. A set whose members have no compiled form ([`Region::compile`] is `None`, e.g. polytopes,
-//! whose distance is a QP) is not compiled at all, so callers fall back to [`Region::signed_dist`] for
-//! the whole set.
+//! formed. A set whose members have no compiled form ([`Region::compile`] is `None`) is not compiled at
+//! all, so callers fall back to [`Region::signed_dist`] for the whole set. A polytope's compiled form
+//! takes the same path as its own distance, the QP included where no closed form applies.
 
 use super::combinators::{Complement, InOutput, Union};
 use super::ellipsoid::Ellipsoid;
 use super::ellipsoid_distance::{BoundaryWorkspace, EllipsoidBoundaryDistance};
+use super::polytope::{FacetSteps, Polytope};
 use super::{linalg, Metric, Region};
 
 /// One point's answer: membership, and the depth inside or the distance outside (≥ 0; NaN for a point
@@ -83,6 +84,48 @@ impl Ellipsoid {
             point: vec![0.0; self.dim()],
             f,
             ws,
+        }))
+    }
+}
+
+/// [`Polytope`]: membership by its rows; inside, the depth by the facet steps; outside, the distance by
+/// [`Polytope::dist_outside`] (what its `try_dist` runs), with the metric's steps looked up once.
+struct PolytopeFn<'a> {
+    set: &'a Polytope,
+    steps: super::Cached<'a, FacetSteps>,
+}
+
+impl SignedDistanceFn for PolytopeFn<'_> {
+    fn eval(&mut self, x: &[f64]) -> Signed {
+        if !valid(x, self.set.dim()) {
+            return Signed::INVALID;
+        }
+        if self.set.contains(x) {
+            Signed {
+                inside: true,
+                value: self.set.depth_inside(x, &self.steps).value,
+            }
+        } else {
+            match self.set.dist_outside(x, &self.steps) {
+                Ok(w) => Signed {
+                    inside: false,
+                    value: w.value,
+                },
+                Err(_) => Signed::INVALID,
+            }
+        }
+    }
+}
+
+impl Polytope {
+    /// The compiled form of [`Region::signed_dist`] in `metric` (`None` if the metric does not fit).
+    pub(crate) fn compiled(&self, metric: &Metric) -> Option<Box<dyn SignedDistanceFn + '_>> {
+        if metric.n != self.dim() {
+            return None;
+        }
+        Some(Box::new(PolytopeFn {
+            set: self,
+            steps: self.steps(metric).ok()?,
         }))
     }
 }

@@ -75,7 +75,7 @@ impl std::fmt::Debug for Polytope {
 
 /// Per-metric data for the depth: for each row, how to reach its hyperplane.
 #[derive(Debug)]
-struct FacetSteps {
+pub(super) struct FacetSteps {
     rows: Vec<FacetStep>,
     /// The symmetrised metric matrix (for the QP).
     R: Vec<f64>,
@@ -192,7 +192,7 @@ impl Polytope {
         }
     }
 
-    fn steps(&self, metric: &Metric) -> Result<Cached<'_, FacetSteps>, GeometryError> {
+    pub(super) fn steps(&self, metric: &Metric) -> Result<Cached<'_, FacetSteps>, GeometryError> {
         self.cache.get_or_try_insert(metric, || {
             let (R, er) = metric.validated()?;
             let Rp = er.pinv();
@@ -425,7 +425,26 @@ impl Polytope {
         Some(Witness { value, point })
     }
 
-    fn depth_inside(&self, x: &[f64], steps: &FacetSteps) -> Witness {
+    /// The distance of a point outside (module doc): a half-space's closed form, a box's in a diagonal
+    /// metric, the active-set enumeration, else the QP.
+    pub(super) fn dist_outside(
+        &self,
+        x: &[f64],
+        steps: &FacetSteps,
+    ) -> Result<Witness, GeometryError> {
+        if self.k == 1 {
+            return Ok(self.dist_half_space(x, steps));
+        }
+        if let Some(w) = self.dist_box(x, &steps.R) {
+            return Ok(w);
+        }
+        if let Some(w) = self.project_active_set(x, steps) {
+            return Ok(w);
+        }
+        self.project(x, &steps.R)
+    }
+
+    pub(super) fn depth_inside(&self, x: &[f64], steps: &FacetSteps) -> Witness {
         let n = self.n;
         let slack = self.slacks(x);
         let mut best: Option<(f64, usize)> = None;
@@ -617,16 +636,7 @@ impl Region for Polytope {
                 point: x.to_vec(),
             });
         }
-        if self.k == 1 {
-            return Ok(self.dist_half_space(x, &steps));
-        }
-        if let Some(w) = self.dist_box(x, &steps.R) {
-            return Ok(w);
-        }
-        if let Some(w) = self.project_active_set(x, &steps) {
-            return Ok(w);
-        }
-        self.project(x, &steps.R)
+        self.dist_outside(x, &steps)
     }
     fn try_depth(&self, x: &[f64], metric: &Metric) -> Result<Witness, GeometryError> {
         check_query(self.n, x, metric)?;
@@ -641,6 +651,9 @@ impl Region for Polytope {
     }
     fn convex_pieces(&self) -> Option<Vec<&dyn Region>> {
         Some(vec![self])
+    }
+    fn compile(&self, metric: &Metric) -> Option<Box<dyn super::SignedDistanceFn + '_>> {
+        self.compiled(metric)
     }
 }
 

@@ -181,14 +181,42 @@ fn union_and_complement_of_ellipsoids() {
 }
 
 /// Every compiled set gives `signed_dist`'s value bit for bit, at random points near and far, in random
-/// metrics: ellipsoids, balls, sets over two of four coordinates (Schur-complement metrics), their unions
-/// and complements; NaN for a bad point; no compiled form for a set with a polytope in it.
+/// metrics (diagonal ones too, where a box has its closed form): ellipsoids, balls, polytopes (boxes,
+/// random rows, more rows than the active sets are enumerated for), sets over two of four coordinates
+/// (Schur-complement metrics), their unions and complements; NaN for a bad point or a metric of another
+/// dimension.
 #[test]
 fn compiled_signed_distance_equals_signed_dist() {
     let mut rng = ChaCha8Rng::seed_from_u64(14);
     let n = 4;
     for case in 0..40 {
-        let metric = Metric::new(n, random_pd(n, &mut rng, -1.0, 1.0)).unwrap();
+        let metric = if case % 4 == 0 {
+            let mut R = vec![0.0; n * n];
+            (0..n).for_each(|i| R[i * n + i] = rng.random_range(0.5..2.0));
+            Metric::new(n, R).unwrap()
+        } else {
+            Metric::new(n, random_pd(n, &mut rng, -1.0, 1.0)).unwrap()
+        };
+        // A box about a random centre, or k random rows about the origin (k up to 10).
+        let poly = |rng: &mut ChaCha8Rng, d: usize| -> Box<dyn Region> {
+            if rng.random_bool(0.5) {
+                let c = gaussian(d, rng);
+                let (mut A, mut b) = (vec![0.0; 2 * d * d], vec![0.0; 2 * d]);
+                for i in 0..d {
+                    let h = rng.random_range(0.2..1.5);
+                    A[2 * i * d + i] = 1.0;
+                    A[(2 * i + 1) * d + i] = -1.0;
+                    b[2 * i] = c[i] + h;
+                    b[2 * i + 1] = h - c[i];
+                }
+                Box::new(Polytope::new(d, A, b).unwrap())
+            } else {
+                let k = rng.random_range(d + 1..=10);
+                let A: Vec<f64> = (0..k).flat_map(|_| gaussian(d, rng)).collect();
+                let b: Vec<f64> = (0..k).map(|_| rng.random_range(0.3..1.5)).collect();
+                Box::new(Polytope::new(d, A, b).unwrap())
+            }
+        };
         let ell = |rng: &mut ChaCha8Rng, d: usize| -> Box<dyn Region> {
             let c = gaussian(d, rng);
             if rng.random_bool(0.5) {
@@ -208,6 +236,8 @@ fn compiled_signed_distance_equals_signed_dist() {
             Box::new(InOutput::new(proj(0, 2), 2, ell(&mut rng, 2)).unwrap()),
             Box::new(InOutput::new(proj(1, 3), 2, ell(&mut rng, 2)).unwrap()),
             ell(&mut rng, n),
+            Box::new(InOutput::new(proj(0, 1), 2, poly(&mut rng, 2)).unwrap()),
+            poly(&mut rng, n),
         ];
         let set: Box<dyn Region> = if case % 2 == 0 {
             Box::new(Union::new(members).unwrap())
@@ -227,5 +257,5 @@ fn compiled_signed_distance_equals_signed_dist() {
     }
     let p: Box<dyn Region> = Box::new(Polytope::new(1, vec![1.0], vec![0.0]).unwrap());
     let u = Union::new(vec![p]).unwrap();
-    assert!(u.compile(&Metric::euclidean(1)).is_none());
+    assert!(u.compile(&Metric::euclidean(2)).is_none());
 }
