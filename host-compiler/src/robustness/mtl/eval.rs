@@ -24,7 +24,7 @@ use super::ast::{Expr, Interval};
 use super::parse::{FormulaError, FormulaErrorKind};
 use super::sets::NamedSet;
 use super::trace::Trace;
-use super::window::{sliding_max, sliding_min, Clamp, ClampQueue, Wedge, WindowCursor};
+use super::window::{sliding_max, sliding_min, windowed_until, WindowCursor};
 use super::MtlError;
 
 /// A formula with names resolved: signal references are column indices into
@@ -364,48 +364,6 @@ pub(crate) fn columns(trace: &Trace) -> Vec<&[f64]> {
 /// (f_p ∘ … ∘ f_q)(−∞) for the clamp maps f_j(x) = max(ψ(j), min(φ(j), x)); these compose in closed
 /// form, so a two-stack queue gives the composition over the sliding window lo'..=hi in amortised O(1).
 pub(crate) fn until(t: &[f64], phi: &[f64], psi: &[f64], i: Interval) -> Vec<f64> {
-    let n = t.len();
     let mut w = WindowCursor::new(t, i.a, i.b);
-    let mut out = Vec::with_capacity(n);
-    // Sliding min of φ over k+1..=lo'−1.
-    let mut dq = Wedge::new();
-    let mut pushed_a = 0usize;
-    let mut q = ClampQueue::new();
-    let mut pushed_b = 0usize;
-    for k in 0..n {
-        let (lo, end) = w.at(k);
-        let first = if lo == k && lo < end {
-            psi[k]
-        } else {
-            f64::NEG_INFINITY
-        };
-        let lo2 = lo.max(k + 1);
-        let rest = if lo2 < end {
-            while pushed_a < lo2 {
-                dq.push(phi, pushed_a, |x, y| x <= y);
-                pushed_a += 1;
-            }
-            dq.expire(k + 1);
-            let before = match dq.front() {
-                Some(j) if k + 1 < lo2 => phi[j],
-                _ => f64::INFINITY,
-            };
-            while pushed_b < end {
-                q.push(
-                    pushed_b,
-                    Clamp {
-                        alpha: psi[pushed_b],
-                        beta: phi[pushed_b],
-                    },
-                );
-                pushed_b += 1;
-            }
-            q.expire(lo2);
-            before.min(q.aggregate().alpha)
-        } else {
-            f64::NEG_INFINITY
-        };
-        out.push(first.max(rest));
-    }
-    out
+    windowed_until(psi, phi, 1, t.len(), |k| w.at(k))
 }

@@ -41,7 +41,7 @@
 //! over its sliding witness window in a two-stack queue ([`windowed_until`]), O(N) as well.
 
 use super::eval::{Atoms, Monitor, Node};
-use super::window::{Clamp, ClampQueue, Wedge};
+use super::window::{windowed_until, Wedge};
 use super::{MtlError, NamedSet};
 
 /// Sample-count tolerance when converting operator bounds to sample offsets.
@@ -386,7 +386,7 @@ impl<'m, 's> TubeFormula<'m, 's> {
         let (hold, from) = if tube { (&p1.l_lo, 0) } else { (&p1.s_lo, 1) };
         let last = |k: usize| k.saturating_add(wb).min(n);
         let s_lo = windowed_until(&p2.s_lo, hold, from, n + 1, |k| {
-            (k.saturating_add(wa), last(k))
+            (k.saturating_add(wa), last(k) + 1)
         });
         if !tube {
             return Bounds {
@@ -397,7 +397,7 @@ impl<'m, 's> TubeFormula<'m, 's> {
             };
         }
         let mut l_lo = windowed_until(&p2.s_lo, hold, from, ni, |k| {
-            ((k + 1).saturating_add(wa), last(k))
+            ((k + 1).saturating_add(wa), last(k) + 1)
         });
         if at_zero {
             l_lo.iter_mut()
@@ -412,68 +412,6 @@ impl<'m, 's> TubeFormula<'m, 's> {
             l_hi: up.l_hi,
         }
     }
-}
-
-/// For each start k < `starts` with witness window `window(k)` = (first, last) (inclusive, both
-/// non-decreasing in k): the largest over witnesses j in the window of min(ψ(j), min of φ(i) over
-/// k + `from` ≤ i ≤ j − 1), −∞ for an empty window. O(starts + window ends) in all, as
-/// [`super::eval`]'s until: with s = max(first, k + from), min distributes over max, so the value is
-/// min(min φ(k + from..s − 1), (f_s ∘ … ∘ f_last)(−∞)) for the clamp maps f_j(y) = max(ψ(j),
-/// min(φ(j), y)), plus ψ(k) when the window starts at k and the hold only after it (`from` = 1). Each
-/// value is a selection among ψ's and φ's entries by min and max, so it is the one a scan of every
-/// witness finds. φ past its end is never held (the last witness's map is applied to −∞).
-fn windowed_until(
-    psi: &[f64],
-    phi: &[f64],
-    from: usize,
-    starts: usize,
-    window: impl Fn(usize) -> (usize, usize),
-) -> Vec<f64> {
-    let mut out = Vec::with_capacity(starts);
-    // Sliding min of φ over k + from..s − 1, and the clamp maps of s..=last.
-    let (mut held, mut pushed_held) = (Wedge::new(), 0usize);
-    let (mut maps, mut pushed_maps) = (ClampQueue::new(), 0usize);
-    for k in 0..starts {
-        let (first, last) = window(k);
-        if first > last {
-            out.push(f64::NEG_INFINITY);
-            continue;
-        }
-        let at_start = if first < k + from {
-            psi[k]
-        } else {
-            f64::NEG_INFINITY
-        };
-        let s = first.max(k + from);
-        let rest = if s <= last {
-            while pushed_held < s {
-                held.push(phi, pushed_held, |x, y| x <= y);
-                pushed_held += 1;
-            }
-            held.expire(k + from);
-            let before = match held.front() {
-                Some(i) if k + from < s => phi[i],
-                _ => f64::INFINITY,
-            };
-            while pushed_maps <= last {
-                let beta = phi.get(pushed_maps).copied().unwrap_or(f64::INFINITY);
-                maps.push(
-                    pushed_maps,
-                    Clamp {
-                        alpha: psi[pushed_maps],
-                        beta,
-                    },
-                );
-                pushed_maps += 1;
-            }
-            maps.expire(s);
-            before.min(maps.aggregate().alpha)
-        } else {
-            f64::NEG_INFINITY
-        };
-        out.push(at_start.max(rest));
-    }
-    out
 }
 
 /// The atoms' nominal signals, in evaluation order.
@@ -548,7 +486,7 @@ fn range_ext(v: &[f64], ranges: impl Iterator<Item = (usize, usize)>, max: bool)
 
 #[cfg(test)]
 mod tests {
-    use super::windowed_until;
+    use super::super::window::windowed_until;
     use rand::{Rng, SeedableRng};
 
     /// The until by definition: every witness of every start scanned.
@@ -600,7 +538,10 @@ mod tests {
             let starts = if case % 3 == 0 { n } else { n + 1 };
             let shift = (case % 3 == 0) as usize;
             let window = |k: usize| ((k + shift).saturating_add(wa), k.saturating_add(wb).min(n));
-            let fast = windowed_until(&psi, &phi, from, starts, window);
+            let fast = windowed_until(&psi, &phi, from, starts, |k| {
+                let (first, last) = window(k);
+                (first, last + 1)
+            });
             let slow = scanned(&psi, &phi, from, starts, window);
             let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
             assert_eq!(

@@ -208,3 +208,65 @@ impl ClampQueue {
         }
     }
 }
+
+/// For each start k < `starts` with witness window `window(k)` = (first, end) (end exclusive, both
+/// non-decreasing in k, asked in order of k): the largest over witnesses j in the window of min(ψ(j), min of φ(i) over
+/// k + `from` ≤ i ≤ j − 1), −∞ for an empty window. O(starts + window ends) in all, as
+/// [`super::eval`]'s until and the tube's lower bound: with s = max(first, k + from), min distributes over max, so the value is
+/// min(min φ(k + from..s − 1), (f_s ∘ … ∘ f_{end−1})(−∞)) for the clamp maps f_j(y) = max(ψ(j),
+/// min(φ(j), y)), plus ψ(k) when the window starts at k and the hold only after it (`from` = 1). Each
+/// value is a selection among ψ's and φ's entries by min and max, so it is the one a scan of every
+/// witness finds. φ past its end is never held (the last witness's map is applied to −∞).
+pub(crate) fn windowed_until(
+    psi: &[f64],
+    phi: &[f64],
+    from: usize,
+    starts: usize,
+    mut window: impl FnMut(usize) -> (usize, usize),
+) -> Vec<f64> {
+    let mut out = Vec::with_capacity(starts);
+    // Sliding min of φ over k + from..s − 1, and the clamp maps of s..end.
+    let (mut held, mut pushed_held) = (Wedge::new(), 0usize);
+    let (mut maps, mut pushed_maps) = (ClampQueue::new(), 0usize);
+    for k in 0..starts {
+        let (first, end) = window(k);
+        if first >= end {
+            out.push(f64::NEG_INFINITY);
+            continue;
+        }
+        let at_start = if first < k + from {
+            psi[k]
+        } else {
+            f64::NEG_INFINITY
+        };
+        let s = first.max(k + from);
+        let rest = if s < end {
+            while pushed_held < s {
+                held.push(phi, pushed_held, |x, y| x <= y);
+                pushed_held += 1;
+            }
+            held.expire(k + from);
+            let before = match held.front() {
+                Some(i) if k + from < s => phi[i],
+                _ => f64::INFINITY,
+            };
+            while pushed_maps < end {
+                let beta = phi.get(pushed_maps).copied().unwrap_or(f64::INFINITY);
+                maps.push(
+                    pushed_maps,
+                    Clamp {
+                        alpha: psi[pushed_maps],
+                        beta,
+                    },
+                );
+                pushed_maps += 1;
+            }
+            maps.expire(s);
+            before.min(maps.aggregate().alpha)
+        } else {
+            f64::NEG_INFINITY
+        };
+        out.push(at_start.max(rest));
+    }
+    out
+}
